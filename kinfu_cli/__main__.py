@@ -1,0 +1,3 @@
+from kinfu_cli.cli import main
+
+main()

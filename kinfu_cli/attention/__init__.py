@@ -1,0 +1,1 @@
+"""Points of interest from a hand trajectory: GMM-AS and the ZVC baseline."""

@@ -1,0 +1,1 @@
+"""Sub-command modules; cli.py adds every module here that defines `command`."""

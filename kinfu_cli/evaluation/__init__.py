@@ -1,0 +1,1 @@
+"""Scoring against ground truth, with the papers' tables beside ours."""

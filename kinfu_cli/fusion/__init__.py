@@ -1,0 +1,1 @@
+"""KinectFusion-style TSDF volume that keeps unknown / empty / occupied per voxel."""

@@ -1,0 +1,87 @@
+"""The ternary voxel map (occupied / unknown / empty) shared by fusion, NBV and segmentation.
+
+File contract (`ternary.npz`, as ros_kinfu exports): array `ternary` int8, indexed [x, y, z],
+1 = occupied, 0 = unknown, -1 = empty; `origin` (3,) world position of the grid's minimum
+corner, so voxel (i, j, k) has its centre at origin + (i + 0.5, j + 0.5, k + 0.5) * voxel_size;
+`voxel_size` (metres).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from kinfu_cli.errors import VolumeError
+
+OCCUPIED = np.int8(1)
+UNKNOWN = np.int8(0)
+EMPTY = np.int8(-1)
+
+
+@dataclass
+class TernaryGrid:
+    """Labels (X, Y, Z) int8 in {1, 0, -1} on a regular grid."""
+
+    labels: np.ndarray
+    origin: np.ndarray
+    voxel_size: float
+
+    def __post_init__(self) -> None:
+        self.labels = np.asarray(self.labels, dtype=np.int8)
+        self.origin = np.asarray(self.origin, dtype=np.float64).reshape(3)
+        self.voxel_size = float(self.voxel_size)
+        if self.labels.ndim != 3:
+            raise VolumeError(f"ternary labels must be 3-D, got shape {self.labels.shape}")
+        if not self.voxel_size > 0:
+            raise VolumeError(f"voxel_size must be positive, got {self.voxel_size}")
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return tuple(int(s) for s in self.labels.shape)  # type: ignore[return-value]
+
+    def centers(self, idx: np.ndarray) -> np.ndarray:
+        """World centres of voxel indices (N, 3)."""
+        return self.origin + (np.asarray(idx, dtype=np.float64) + 0.5) * self.voxel_size
+
+    def index_of(self, points: np.ndarray) -> np.ndarray:
+        """Integer voxel indices (N, 3) of world points (may be out of range)."""
+        return np.floor((np.asarray(points, dtype=np.float64) - self.origin) / self.voxel_size).astype(np.int64)
+
+    def counts(self) -> dict[str, int]:
+        """Number of occupied / unknown / empty voxels."""
+        flat = self.labels.ravel()
+        occ = int(np.count_nonzero(flat == OCCUPIED))
+        emp = int(np.count_nonzero(flat == EMPTY))
+        return {"occupied": occ, "empty": emp, "unknown": int(flat.size - occ - emp)}
+
+
+def save_ternary(path: str | os.PathLike, grid: TernaryGrid) -> None:
+    """Write `ternary.npz` atomically (compressed: mostly-constant labels shrink a lot)."""
+    from kinfu_cli.io.atomic import atomic_path
+
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez_compressed(fh, ternary=grid.labels, origin=grid.origin,
+                                voxel_size=np.float64(grid.voxel_size))
+
+
+def load_ternary(path: str | os.PathLike) -> TernaryGrid:
+    """Read a `ternary.npz`; a fusion `volume.npz` is accepted too when fusion provides a loader."""
+    path = Path(path)
+    if not path.exists():
+        raise VolumeError(f"{path}: no such file")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            keys = set(data.files)
+            if "ternary" in keys:
+                return TernaryGrid(data["ternary"], data["origin"], float(data["voxel_size"]))
+    except (OSError, ValueError, EOFError) as exc:
+        raise VolumeError(f"{path}: not a readable .npz volume ({exc})") from None
+    try:
+        from kinfu_cli.fusion.volume import load_volume  # provided by the fusion module
+    except ImportError:
+        raise VolumeError(f"{path}: expected a ternary.npz with arrays 'ternary', 'origin', 'voxel_size'") from None
+    return load_volume(path).ternary_grid()

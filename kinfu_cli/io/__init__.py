@@ -1,0 +1,1 @@
+"""Reading and writing recordings, trajectories and result files."""

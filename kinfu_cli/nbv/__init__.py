@@ -1,0 +1,1 @@
+"""Next-best-view: candidate viewpoints, ray casting through the ternary map, gains."""

@@ -1,0 +1,25 @@
+"""tqdm progress bars on stderr, off with --quiet or when stderr is not a terminal."""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Iterable
+from typing import TypeVar
+
+from tqdm import tqdm
+
+T = TypeVar("T")
+
+
+def progress_enabled(quiet: bool = False) -> bool:
+    """True when a progress bar should be drawn."""
+    return not quiet and sys.stderr.isatty()
+
+
+def progress(iterable: Iterable[T], *, total: int | None = None, desc: str = "",
+             quiet: bool = False, unit: str = "it") -> Iterable[T]:
+    """Wrap an iterable in a tqdm bar on stderr (or return it unchanged when disabled)."""
+    if not progress_enabled(quiet):
+        return iterable
+    return tqdm(iterable, total=total, desc=desc, unit=unit, file=sys.stderr, leave=False,
+                dynamic_ncols=True)

@@ -1,0 +1,1 @@
+"""Plots (PNG) of volumes, trajectories and views."""

@@ -1,0 +1,1 @@
+"""Segments of the reconstruction, their saliency, and superquadric fits."""

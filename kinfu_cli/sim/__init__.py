@@ -1,0 +1,1 @@
+"""Synthetic tabletop scenes, a Kinect-like depth sensor and hand trajectories."""

@@ -1,0 +1,29 @@
+"""The CLI skeleton: help, version, one-line errors."""
+
+from click.testing import CliRunner
+
+from kinfu_cli.cli import cli
+
+
+def test_help_lists_commands_with_descriptions():
+    res = CliRunner().invoke(cli, ["--help"])
+    assert res.exit_code == 0
+    assert "Usage:" in res.output
+    for name, cmd in cli.commands.items():
+        assert name in res.output
+        assert cmd.get_short_help_str(), f"{name} has no one-line description"
+
+
+def test_each_subcommand_help_shows_an_example():
+    for name, cmd in cli.commands.items():
+        subs = cmd.commands.items() if hasattr(cmd, "commands") else [(None, cmd)]
+        for sub, _ in subs:
+            args = [name] + ([sub] if sub else []) + ["--help"]
+            res = CliRunner().invoke(cli, args)
+            assert res.exit_code == 0, args
+            assert "Example" in res.output, f"`kinfu {' '.join(args)}` shows no example"
+
+
+def test_unknown_command_is_a_usage_error():
+    res = CliRunner().invoke(cli, ["no-such-command"])
+    assert res.exit_code == 2
