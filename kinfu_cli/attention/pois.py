@@ -1,0 +1,153 @@
+"""Points of interest (POIs) and the pois.json file that `kinfu nbv --pois` and `kinfu fuse --clear-pois` read.
+
+pois.json::
+
+    {"pois": [{"id": 0, "position": [x, y, z], "time": s, "saliency": float, "radius": 0.2,
+               "gaussian": {"mean": [x, y, z, t], "covariance": 4x4, "weight": w} | null}],
+     "algorithm": "gmm-as" | "zvc", "parameters": {...}, "frame": str, "source": str}
+
+Positions in metres in `frame`; time in seconds on the trajectory's clock; `radius` is the region of
+interest S(POI) around the position (0.2 m in the paper). ZVC POIs have `"gaussian": null`; GMM-AS
+Gaussians are in (x, y, z, t) with t in seconds.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from kinfu_cli.errors import ConfigError, TrajectoryError
+
+DEFAULT_RADIUS = 0.2
+ALGORITHMS = ("gmm-as", "zvc")
+
+
+class PoiFileError(TrajectoryError):
+    """A pois.json file is missing or malformed."""
+
+
+@dataclass
+class Gaussian4:
+    """One component of the GMM on (x, y, z, t): mean (4,), covariance (4, 4), mixture weight."""
+
+    mean: np.ndarray
+    covariance: np.ndarray
+    weight: float
+
+    def to_dict(self) -> dict:
+        return {"mean": [float(v) for v in self.mean],
+                "covariance": [[float(v) for v in row] for row in self.covariance],
+                "weight": float(self.weight)}
+
+
+@dataclass
+class Poi:
+    """A point of interest: where the person acted. `position` (3,) metres, `time` seconds."""
+
+    id: int
+    position: np.ndarray
+    time: float
+    saliency: float
+    radius: float = DEFAULT_RADIUS
+    gaussian: Gaussian4 | None = None
+    extra: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.position = np.asarray(self.position, dtype=np.float64).reshape(3)
+
+    def to_dict(self) -> dict:
+        d = {"id": int(self.id), "position": [float(v) for v in self.position], "time": float(self.time),
+             "saliency": float(self.saliency), "radius": float(self.radius),
+             "gaussian": self.gaussian.to_dict() if self.gaussian is not None else None}
+        d.update(self.extra)
+        return d
+
+
+def pois_document(pois: list[Poi], algorithm: str, parameters: dict, frame: str = "", source: str = "") -> dict:
+    """The pois.json object for `pois` (see the module docstring)."""
+    if algorithm not in ALGORITHMS:
+        raise ConfigError(f"--algorithm: expected one of {', '.join(ALGORITHMS)}, got {algorithm!r}")
+    return {"pois": [p.to_dict() for p in pois], "algorithm": algorithm,
+            "parameters": dict(parameters), "frame": frame, "source": source}
+
+
+def write_pois(path: str | os.PathLike, pois: list[Poi], algorithm: str, parameters: dict,
+               frame: str = "", source: str = "") -> Path:
+    """Write pois.json atomically; returns the path."""
+    from kinfu_cli.io.atomic import write_json
+
+    return write_json(path, pois_document(pois, algorithm, parameters, frame, source))
+
+
+def read_pois_document(path: str | os.PathLike) -> dict:
+    """Load and check a pois.json file; returns the JSON object with validated "pois" entries."""
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise PoiFileError(f"{path}: no such POI file (expected pois.json from `kinfu poi`)") from None
+    except IsADirectoryError:
+        raise PoiFileError(f"{path}: is a folder, expected a pois.json file") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise PoiFileError(f"{path}: not valid JSON ({exc}), expected a pois.json file from `kinfu poi`") from None
+    if not isinstance(doc, dict) or "pois" not in doc:
+        raise PoiFileError(f"{path}: no \"pois\" key, expected {{\"pois\": [{{\"position\": [x, y, z], ...}}]}}")
+    if not isinstance(doc["pois"], list):
+        raise PoiFileError(f"{path}: \"pois\" is not a list")
+    return doc
+
+
+def _parse_poi(path: Path, i: int, d: object) -> Poi:
+    if not isinstance(d, dict):
+        raise PoiFileError(f"{path}: pois[{i}] is not an object")
+    pos = d.get("position")
+    try:
+        arr = np.asarray(pos, dtype=np.float64)
+    except (TypeError, ValueError):
+        arr = np.zeros(0)
+    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+        raise PoiFileError(f"{path}: pois[{i}].position is {pos!r}, expected [x, y, z] (three finite numbers)")
+    radius = d.get("radius", DEFAULT_RADIUS)
+    if not isinstance(radius, (int, float)) or not math.isfinite(radius) or radius <= 0:
+        raise PoiFileError(f"{path}: pois[{i}].radius is {radius!r}, expected a positive number of metres")
+    gaussian = None
+    g = d.get("gaussian")
+    if g is not None:
+        try:
+            mean = np.asarray(g["mean"], dtype=np.float64)
+            cov = np.asarray(g["covariance"], dtype=np.float64)
+            weight = float(g["weight"])
+        except (TypeError, KeyError, ValueError):
+            raise PoiFileError(f"{path}: pois[{i}].gaussian needs mean [4], covariance 4x4 and weight") from None
+        if mean.shape != (4,) or cov.shape != (4, 4):
+            raise PoiFileError(f"{path}: pois[{i}].gaussian needs mean [4] and covariance 4x4, "
+                               f"got {mean.shape} and {cov.shape}")
+        gaussian = Gaussian4(mean, cov, weight)
+    known = {"id", "position", "time", "saliency", "radius", "gaussian"}
+    try:
+        return Poi(id=int(d.get("id", i)), position=arr, time=float(d.get("time", float("nan"))),
+                   saliency=float(d.get("saliency", float("nan"))), radius=float(radius), gaussian=gaussian,
+                   extra={k: v for k, v in d.items() if k not in known})
+    except (TypeError, ValueError):
+        raise PoiFileError(f"{path}: pois[{i}] has a non-numeric id, time or saliency") from None
+
+
+def read_pois(path: str | os.PathLike) -> list[Poi]:
+    """Read the POIs of a pois.json file.
+
+    Raises PoiFileError (a TrajectoryError, so the CLI prints one line and exits 2) when the file is
+    missing, not JSON, has no "pois" list, or a POI has no finite [x, y, z] position.
+    """
+    path = Path(path)
+    doc = read_pois_document(path)
+    return [_parse_poi(path, i, d) for i, d in enumerate(doc["pois"])]
+
+
+def poi_positions(pois: list[Poi]) -> np.ndarray:
+    """(K, 3) positions of `pois`."""
+    return np.array([p.position for p in pois], dtype=np.float64).reshape(-1, 3)
