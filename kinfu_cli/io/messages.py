@@ -1,0 +1,239 @@
+"""Decode ROS messages into arrays: depth and colour images, camera intrinsics, poses and stamps.
+
+Works on messages decoded by rosbags (ROS 1 and ROS 2 field names) and by mcap-ros1-support
+(byte strings, `secs`/`nsecs` stamps). Depth comes out as float32 metres with 0 = invalid.
+"""
+
+from __future__ import annotations
+
+import struct
+
+import cv2
+import numpy as np
+
+from kinfu_cli.errors import RecordingError
+
+DEPTH_ENCODINGS = ("16UC1", "mono16", "32FC1")
+COLOR_ENCODINGS = ("rgb8", "bgr8", "rgba8", "bgra8", "mono8", "8UC3", "8UC1")
+_PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+# ------------------------------------------------------------------------------------------- stamps
+def time_to_ns(t: object) -> int:
+    """ROS time (builtin_interfaces Time, rospy/genpy Time) -> int nanoseconds."""
+    if hasattr(t, "nanosec"):
+        return int(t.sec) * 1_000_000_000 + int(t.nanosec)
+    if hasattr(t, "nsecs"):
+        return int(t.secs) * 1_000_000_000 + int(t.nsecs)
+    if hasattr(t, "to_nsec"):
+        return int(t.to_nsec())
+    if isinstance(t, (int, np.integer)):
+        return int(t)
+    raise RecordingError(f"cannot read a timestamp from {type(t).__name__}")
+
+
+def header_stamp_ns(msg: object) -> int | None:
+    """Header stamp of a message in ns, or None when it has no header or the stamp is zero."""
+    header = getattr(msg, "header", None)
+    if header is None:
+        return None
+    ns = time_to_ns(header.stamp)
+    return ns if ns > 0 else None
+
+
+def header_frame(msg: object) -> str:
+    header = getattr(msg, "header", None)
+    return str(getattr(header, "frame_id", "") or "") if header is not None else ""
+
+
+# ------------------------------------------------------------------------------------------- rotations
+def matrix_to_quat(R: np.ndarray) -> np.ndarray:
+    """3x3 rotation -> unit quaternion (x, y, z, w) with w >= 0."""
+    from scipy.spatial.transform import Rotation
+
+    q = Rotation.from_matrix(np.asarray(R, dtype=np.float64)).as_quat()
+    return -q if q[3] < 0 else q
+
+
+def quat_to_matrix(q: np.ndarray) -> np.ndarray:
+    """Quaternion (x, y, z, w), normalised here -> 3x3 rotation."""
+    q = np.asarray(q, dtype=np.float64)
+    n = np.linalg.norm(q)
+    if not np.isfinite(n) or n < 1e-12:
+        raise RecordingError(f"quaternion {q.tolist()} has zero or non-finite norm")
+    x, y, z, w = q / n
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def _xyz(v: object) -> list[float]:
+    return [float(v.x), float(v.y), float(v.z)]
+
+
+def _xyzw(q: object) -> list[float]:
+    return [float(q.x), float(q.y), float(q.z), float(q.w)]
+
+
+def transform_to_matrix(transform: object) -> np.ndarray:
+    """geometry_msgs/Transform -> 4x4."""
+    T = np.eye(4)
+    T[:3, :3] = quat_to_matrix(_xyzw(transform.rotation))
+    T[:3, 3] = _xyz(transform.translation)
+    return T
+
+
+def pose_to_matrix(pose: object) -> np.ndarray:
+    """geometry_msgs/Pose -> 4x4."""
+    T = np.eye(4)
+    T[:3, :3] = quat_to_matrix(_xyzw(pose.orientation))
+    T[:3, 3] = _xyz(pose.position)
+    return T
+
+
+POSE_TYPES = (
+    "geometry_msgs/msg/PoseStamped",
+    "geometry_msgs/msg/PoseWithCovarianceStamped",
+    "nav_msgs/msg/Odometry",
+    "geometry_msgs/msg/TransformStamped",
+)
+
+
+def pose_message_to_matrix(msg: object, msgtype: str) -> np.ndarray:
+    """4x4 pose from a PoseStamped, PoseWithCovarianceStamped, Odometry or TransformStamped message."""
+    name = normalize_msgtype(msgtype)
+    if name == "geometry_msgs/msg/PoseStamped":
+        return pose_to_matrix(msg.pose)
+    if name in ("geometry_msgs/msg/PoseWithCovarianceStamped", "nav_msgs/msg/Odometry"):
+        return pose_to_matrix(msg.pose.pose)
+    if name == "geometry_msgs/msg/TransformStamped":
+        return transform_to_matrix(msg.transform)
+    raise RecordingError(f"message type {msgtype}: expected one of {', '.join(POSE_TYPES)}")
+
+
+def normalize_msgtype(msgtype: str) -> str:
+    """'sensor_msgs/Image' or 'sensor_msgs/msg/Image' -> 'sensor_msgs/msg/Image'."""
+    parts = msgtype.split("/")
+    if len(parts) == 2:
+        return f"{parts[0]}/msg/{parts[1]}"
+    return msgtype
+
+
+# ------------------------------------------------------------------------------------------- images
+def _bytes(data: object) -> np.ndarray:
+    if isinstance(data, np.ndarray):
+        return data.view(np.uint8).reshape(-1) if data.dtype != np.uint8 else data.reshape(-1)
+    return np.frombuffer(bytes(data) if not isinstance(data, (bytes, bytearray, memoryview)) else data,
+                         dtype=np.uint8)
+
+
+def _raw_image(msg: object, dtype: np.dtype, channels: int, topic: str) -> np.ndarray:
+    """Image rows (honouring `step` padding and byte order) -> (H, W[, C]) array of dtype."""
+    dtype = np.dtype(dtype)
+    h, w, step = int(msg.height), int(msg.width), int(msg.step)
+    row = w * channels * dtype.itemsize
+    buf = _bytes(msg.data)
+    if step < row or buf.size < step * h:
+        raise RecordingError(f"{topic}: image data has {buf.size} bytes, expected {h} rows of {row} "
+                             f"(step {step}) for {w}x{h} {msg.encoding}")
+    rows = buf[: step * h].reshape(h, step)[:, :row]
+    arr = np.ascontiguousarray(rows).view(dtype.newbyteorder(">" if msg.is_bigendian else "<"))
+    arr = arr.astype(dtype, copy=False)
+    return arr.reshape(h, w, channels) if channels > 1 else arr.reshape(h, w)
+
+
+def is_compressed(msg: object) -> bool:
+    return hasattr(msg, "format") and not hasattr(msg, "encoding")
+
+
+def decode_depth(msg: object, topic: str = "depth") -> np.ndarray:
+    """sensor_msgs/Image (16UC1 mm, 32FC1 m) or compressedDepth CompressedImage -> float32 (H,W) metres.
+
+    Invalid readings (0, NaN, inf, negative, 65535 mm) become 0.
+    """
+    if is_compressed(msg):
+        return _decode_compressed_depth(msg, topic)
+    enc = str(msg.encoding)
+    if enc in ("16UC1", "mono16"):
+        mm = _raw_image(msg, np.uint16, 1, topic)
+        depth = mm.astype(np.float32) * np.float32(0.001)
+        depth[mm == 65535] = 0.0
+        return depth
+    if enc == "32FC1":
+        depth = _raw_image(msg, np.float32, 1, topic).copy()
+        depth[~np.isfinite(depth) | (depth < 0)] = 0.0
+        return depth
+    raise RecordingError(f"{topic}: depth encoding {enc!r} is not supported (expected 16UC1 in mm, 32FC1 in m "
+                         f"or a compressedDepth PNG)")
+
+
+def _decode_compressed_depth(msg: object, topic: str) -> np.ndarray:
+    fmt = str(msg.format)
+    if "compresseddepth" not in fmt.lower():
+        raise RecordingError(f"{topic}: compressed image format {fmt!r} is not depth (expected "
+                             f"'16UC1; compressedDepth png' or '32FC1; compressedDepth')")
+    if "rvl" in fmt.lower():
+        raise RecordingError(f"{topic}: compressedDepth format {fmt!r} (RVL) is not supported, expected png")
+    raw = _bytes(msg.data).tobytes()
+    start = raw.find(_PNG_MAGIC)
+    if start < 0:
+        raise RecordingError(f"{topic}: compressedDepth message holds no PNG data")
+    img = cv2.imdecode(np.frombuffer(raw[start:], dtype=np.uint8), cv2.IMREAD_UNCHANGED)
+    if img is None or img.ndim != 2 or img.dtype != np.uint16:
+        raise RecordingError(f"{topic}: compressedDepth PNG is not a 16-bit single-channel image")
+    enc = fmt.split(";")[0].strip()
+    if enc in ("16UC1", "mono16"):
+        depth = img.astype(np.float32) * np.float32(0.001)
+        depth[img == 65535] = 0.0
+        return depth
+    if enc == "32FC1":
+        if start < 12:
+            raise RecordingError(f"{topic}: 32FC1 compressedDepth lacks its 12-byte quantisation header")
+        _, a, b = struct.unpack("<iff", raw[start - 12:start])
+        inv = img.astype(np.float32)
+        depth = np.zeros(img.shape, np.float32)
+        ok = img != 0
+        depth[ok] = a / (inv[ok] - b)
+        depth[~np.isfinite(depth) | (depth < 0)] = 0.0
+        return depth
+    raise RecordingError(f"{topic}: compressedDepth encoding {enc!r} is not supported (expected 16UC1 or 32FC1)")
+
+
+def decode_color(msg: object, topic: str = "color") -> np.ndarray:
+    """sensor_msgs/Image (rgb8, bgr8, rgba8, bgra8, mono8) or jpeg/png CompressedImage -> uint8 (H,W,3) RGB."""
+    if is_compressed(msg):
+        fmt = str(msg.format)
+        if "compresseddepth" in fmt.lower():
+            raise RecordingError(f"{topic}: compressed format {fmt!r} is depth, expected a jpeg/png colour image")
+        img = cv2.imdecode(_bytes(msg.data), cv2.IMREAD_COLOR)
+        if img is None:
+            raise RecordingError(f"{topic}: compressed image (format {fmt!r}) could not be decoded as jpeg/png")
+        return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+    enc = str(msg.encoding)
+    if enc == "rgb8":
+        return _raw_image(msg, np.uint8, 3, topic).copy()
+    if enc in ("bgr8", "8UC3"):
+        return _raw_image(msg, np.uint8, 3, topic)[:, :, ::-1].copy()
+    if enc == "rgba8":
+        return _raw_image(msg, np.uint8, 4, topic)[:, :, :3].copy()
+    if enc == "bgra8":
+        return _raw_image(msg, np.uint8, 4, topic)[:, :, 2::-1].copy()
+    if enc in ("mono8", "8UC1"):
+        return np.repeat(_raw_image(msg, np.uint8, 1, topic)[:, :, None], 3, axis=2)
+    raise RecordingError(f"{topic}: colour encoding {enc!r} is not supported (expected one of "
+                         f"{', '.join(COLOR_ENCODINGS[:5])}, or jpeg/png CompressedImage)")
+
+
+def camera_info_K(msg: object, topic: str = "camera_info") -> tuple[np.ndarray, int, int]:
+    """sensor_msgs/CameraInfo -> (K 3x3 float64, width, height)."""
+    k = getattr(msg, "k", None)
+    if k is None:
+        k = getattr(msg, "K", None)
+    if k is None:
+        raise RecordingError(f"{topic}: message has no K matrix (expected sensor_msgs/CameraInfo)")
+    K = np.asarray(list(k) if not isinstance(k, np.ndarray) else k, dtype=np.float64).reshape(3, 3)
+    if K[0, 0] <= 0 or K[1, 1] <= 0 or not np.all(np.isfinite(K)):
+        raise RecordingError(f"{topic}: CameraInfo K has no valid focal lengths (fx={K[0, 0]}, fy={K[1, 1]})")
+    return K, int(msg.width), int(msg.height)
