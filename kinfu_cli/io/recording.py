@@ -1,0 +1,340 @@
+"""One streamed reader over MCAP, ROS 1 .bag and ROS 2 bag folders.
+
+`open_recording(path)` detects the container by its first bytes (not its name) and reads it with rosbags'
+AnyReader (ROS 1 bags, ROS 2 folders with sqlite3 or mcap storage, MCAP files with cdr messages) or with
+the mcap library plus mcap-ros1/ros2 decoders (MCAP files holding ROS 1 encoded messages). Messages are
+decoded one at a time while iterating, so memory does not grow with the length of the recording.
+
+Message types are reported in ROS 2 style, `pkg/msg/Name` (rosbags' convention), whatever the container.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import tempfile
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from kinfu_cli.errors import RecordingError
+from kinfu_cli.io.messages import normalize_msgtype
+
+_ROS1_MAGIC = b"#ROSBAG V2.0"
+_MCAP_MAGIC = b"\x89MCAP0\r\n"
+_SQLITE_MAGIC = b"SQLite format 3\x00"
+_KINDS = "a ROS 1 .bag, an MCAP file or a ROS 2 bag folder (metadata.yaml)"
+
+
+@dataclass
+class TopicInfo:
+    """One topic: message type(s), message count, first/last log stamps (ns) and mean rate (Hz)."""
+
+    name: str
+    msgtype: str
+    count: int
+    first_ns: int | None = None
+    last_ns: int | None = None
+    msgtypes: list[str] = field(default_factory=list)
+
+    @property
+    def rate_hz(self) -> float | None:
+        if self.count < 2 or self.first_ns is None or self.last_ns is None or self.last_ns <= self.first_ns:
+            return None
+        return (self.count - 1) / ((self.last_ns - self.first_ns) * 1e-9)
+
+    def as_dict(self) -> dict:
+        return {"name": self.name, "msgtype": self.msgtype, "msgtypes": self.msgtypes, "count": self.count,
+                "first_ns": self.first_ns, "last_ns": self.last_ns, "rate_hz": self.rate_hz}
+
+
+def detect_format(path: str | os.PathLike) -> str:
+    """'bag', 'mcap' or 'ros2' (a bag folder) from the file's first bytes; RecordingError otherwise."""
+    path = Path(path)
+    if not path.exists():
+        raise RecordingError(f"{path}: no such file or folder, expected {_KINDS}")
+    if path.is_dir():
+        if not (path / "metadata.yaml").is_file():
+            raise RecordingError(f"{path}: folder has no metadata.yaml, expected a ROS 2 bag folder")
+        return "ros2"
+    try:
+        with path.open("rb") as f:
+            head = f.read(16)
+    except OSError as exc:
+        raise RecordingError(f"{path}: cannot read ({exc.strerror})") from None
+    if not head:
+        raise RecordingError(f"{path}: empty file, expected {_KINDS}")
+    if head.startswith(_ROS1_MAGIC):
+        return "bag"
+    if head.startswith(_MCAP_MAGIC):
+        return "mcap"
+    if head.startswith(_SQLITE_MAGIC) and (path.parent / "metadata.yaml").is_file():
+        return "ros2"
+    raise RecordingError(f"{path}: not a recording (unknown header {head[:12]!r}), expected {_KINDS}")
+
+
+class Recording:
+    """An open recording. Use as a context manager, or call close()."""
+
+    def __init__(self, path: str | os.PathLike):
+        self.path = Path(path)
+        self.format = detect_format(self.path)
+        if self.format == "ros2" and self.path.is_file():
+            self.path = self.path.parent
+        self._stack = contextlib.ExitStack()
+        self._topics: dict[str, TopicInfo] | None = None
+        self._backend: _Backend
+        try:
+            if self.format == "mcap" and _mcap_needs_mcap_lib(self.path):
+                self._backend = _McapBackend(self.path, self._stack)
+            else:
+                self._backend = _RosbagsBackend(self.path, self.format, self._stack)
+        except BaseException:
+            self._stack.close()
+            raise
+
+    # context manager
+    def __enter__(self) -> "Recording":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self._stack.close()
+
+    def __repr__(self) -> str:
+        return f"Recording({str(self.path)!r}, format={self.format!r})"
+
+    # summary
+    @property
+    def topics(self) -> dict[str, TopicInfo]:
+        """Topic name -> TopicInfo, sorted by name. Stamps come from one pass over the message index/data."""
+        if self._topics is None:
+            self._topics = dict(sorted(self._backend.topic_infos().items()))
+        return self._topics
+
+    @property
+    def start_ns(self) -> int | None:
+        firsts = [t.first_ns for t in self.topics.values() if t.first_ns is not None]
+        return min(firsts) if firsts else None
+
+    @property
+    def end_ns(self) -> int | None:
+        lasts = [t.last_ns for t in self.topics.values() if t.last_ns is not None]
+        return max(lasts) if lasts else None
+
+    @property
+    def duration_s(self) -> float:
+        return 0.0 if self.start_ns is None else (self.end_ns - self.start_ns) * 1e-9
+
+    @property
+    def message_count(self) -> int:
+        return sum(t.count for t in self.topics.values())
+
+    def topics_of_type(self, *msgtypes: str) -> list[str]:
+        """Topics carrying any of `msgtypes` (either naming style)."""
+        want = {normalize_msgtype(m) for m in msgtypes}
+        return [name for name, info in self.topics.items() if want & set(info.msgtypes)]
+
+    def require_topic(self, topic: str, what: str = "topic") -> TopicInfo:
+        """TopicInfo of `topic` or RecordingError naming it and listing the available ones."""
+        info = self.topics.get(topic)
+        if info is None:
+            avail = ", ".join(self.topics) or "none"
+            raise RecordingError(f"{self.path}: {what} {topic!r} not found (available topics: {avail})")
+        return info
+
+    # messages
+    def typed_messages(self, topics: Iterable[str] | str | None = None, start_ns: int | None = None,
+                       end_ns: int | None = None) -> Iterator[tuple[str, str, int, object]]:
+        """Yield (topic, msgtype, log stamp ns, decoded message) in log-time order; end_ns is inclusive."""
+        if isinstance(topics, str):
+            topics = [topics]
+        if topics is not None:
+            topics = list(topics)
+            for t in topics:
+                self.require_topic(t)
+        yield from self._backend.messages(topics, start_ns, end_ns)
+
+    def messages(self, topics: Iterable[str] | str | None = None, start_ns: int | None = None,
+                 end_ns: int | None = None) -> Iterator[tuple[str, int, object]]:
+        """Yield (topic, log stamp ns, decoded message) in log-time order; end_ns is inclusive."""
+        for topic, _, stamp, msg in self.typed_messages(topics, start_ns, end_ns):
+            yield topic, stamp, msg
+
+    def first_message(self, topic: str) -> object | None:
+        for _, _, msg in self.messages([topic]):
+            return msg
+        return None
+
+
+def open_recording(path: str | os.PathLike) -> Recording:
+    """Open a ROS 1 .bag, MCAP file or ROS 2 bag folder; RecordingError naming the file when it cannot."""
+    return Recording(path)
+
+
+# ------------------------------------------------------------------------------------------- backends
+class _Backend:
+    def topic_infos(self) -> dict[str, TopicInfo]:
+        raise NotImplementedError
+
+    def messages(self, topics, start_ns, end_ns) -> Iterator[tuple[str, str, int, object]]:
+        raise NotImplementedError
+
+
+def _read_error(path: Path, exc: BaseException, kind: str) -> RecordingError:
+    text = " ".join(str(a) for a in exc.args) or type(exc).__name__
+    text = text.replace("\n", " ").strip()
+    if len(text) > 200:
+        text = text[:200] + "..."
+    return RecordingError(f"{path}: cannot read {kind} ({text}); the file may be truncated or corrupt")
+
+
+_KIND_NAMES = {"bag": "ROS 1 bag", "ros2": "ROS 2 bag", "mcap": "MCAP file"}
+
+
+class _RosbagsBackend(_Backend):
+    def __init__(self, path: Path, fmt: str, stack: contextlib.ExitStack):
+        from rosbags.highlevel import AnyReader
+
+        self.path = path
+        self.kind = _KIND_NAMES[fmt]
+        open_path = path
+        if fmt == "bag" and path.suffix != ".bag":  # AnyReader picks ROS 1 by the .bag suffix
+            tmp = Path(tempfile.mkdtemp(prefix="kinfu-bag-"))
+            stack.callback(shutil.rmtree, tmp, True)
+            open_path = tmp / (path.name + ".bag")
+            open_path.symlink_to(path.resolve())
+        try:
+            self.reader = AnyReader([open_path])
+            self.reader.open()
+        except Exception as exc:  # rosbags raises its own errors, struct/zstd errors, KeyError on bad schemas
+            raise _read_error(path, exc, self.kind) from None
+        stack.callback(self._close)
+
+    def _close(self) -> None:
+        with contextlib.suppress(Exception):
+            self.reader.close()
+
+    def topic_infos(self) -> dict[str, TopicInfo]:
+        from rosbags.rosbag1 import Reader as Reader1
+
+        infos: dict[str, TopicInfo] = {}
+        type_counts: dict[str, dict[str, int]] = {}
+        for conn in self.reader.connections:
+            mt = normalize_msgtype(conn.msgtype)
+            info = infos.setdefault(conn.topic, TopicInfo(conn.topic, mt, 0))
+            info.count += conn.msgcount
+            tc = type_counts.setdefault(conn.topic, {})
+            tc[mt] = tc.get(mt, 0) + conn.msgcount
+        for name, tc in type_counts.items():
+            infos[name].msgtypes = sorted(tc, key=lambda m: -tc[m])
+            infos[name].msgtype = infos[name].msgtypes[0]
+        # first/last stamps: from the ROS 1 index when there is one, else one pass over the raw records
+        reader = self.reader.readers[0]
+        if isinstance(reader, Reader1):
+            for conn in self.reader.connections:
+                idx = reader.indexes.get(conn.id) or []
+                if idx:
+                    _extend(infos[conn.topic], idx[0].time, idx[-1].time)
+        else:
+            try:
+                for conn, stamp, _ in self.reader.messages():
+                    _extend(infos[conn.topic], stamp, stamp)
+            except Exception as exc:
+                raise _read_error(self.path, exc, self.kind) from None
+        return infos
+
+    def messages(self, topics, start_ns, end_ns):
+        conns = self.reader.connections if topics is None else [c for c in self.reader.connections
+                                                               if c.topic in set(topics)]
+        if not conns:
+            return
+        stop = None if end_ns is None else int(end_ns) + 1
+        try:
+            gen = self.reader.messages(connections=conns, start=start_ns, stop=stop)
+            for conn, stamp, raw in gen:
+                try:
+                    msg = self.reader.deserialize(raw, conn.msgtype)
+                except Exception as exc:
+                    raise RecordingError(f"{self.path}: topic {conn.topic}: cannot decode a {conn.msgtype} "
+                                         f"message at t={stamp} ns ({exc})") from None
+                yield conn.topic, normalize_msgtype(conn.msgtype), stamp, msg
+        except RecordingError:
+            raise
+        except Exception as exc:
+            raise _read_error(self.path, exc, self.kind) from None
+
+
+def _extend(info: TopicInfo, first: int, last: int) -> None:
+    info.first_ns = first if info.first_ns is None else min(info.first_ns, first)
+    info.last_ns = last if info.last_ns is None else max(info.last_ns, last)
+
+
+def _mcap_needs_mcap_lib(path: Path) -> bool:
+    """True when an MCAP file holds messages rosbags cannot decode (ROS 1 encoding)."""
+    from mcap.reader import make_reader
+
+    try:
+        with path.open("rb") as f:
+            summary = make_reader(f).get_summary()
+    except Exception:
+        return False  # no summary: let rosbags report (or cope)
+    if summary is None:
+        return False
+    return any(ch.message_encoding not in ("cdr", "") for ch in summary.channels.values())
+
+
+class _McapBackend(_Backend):
+    """MCAP via the mcap library with ROS 1 and ROS 2 decoders (for ROS 1 encoded MCAP files)."""
+
+    def __init__(self, path: Path, stack: contextlib.ExitStack):
+        from mcap.reader import make_reader
+        from mcap_ros1.decoder import DecoderFactory as Ros1Decoder
+        from mcap_ros2.decoder import DecoderFactory as Ros2Decoder
+
+        self.path = path
+        try:
+            self.file = stack.enter_context(path.open("rb"))
+            self.reader = make_reader(self.file, decoder_factories=[Ros1Decoder(), Ros2Decoder()])
+            self.summary = self.reader.get_summary()
+        except Exception as exc:
+            raise _read_error(path, exc, "MCAP file") from None
+        if self.summary is None:
+            raise RecordingError(f"{path}: MCAP file has no summary section (written incompletely?)")
+
+    def topic_infos(self) -> dict[str, TopicInfo]:
+        s = self.summary
+        counts = s.statistics.channel_message_counts if s.statistics else {}
+        infos: dict[str, TopicInfo] = {}
+        type_counts: dict[str, dict[str, int]] = {}
+        for cid, ch in s.channels.items():
+            schema = s.schemas.get(ch.schema_id)
+            mt = normalize_msgtype(schema.name if schema else "")
+            n = int(counts.get(cid, 0))
+            info = infos.setdefault(ch.topic, TopicInfo(ch.topic, mt, 0))
+            info.count += n
+            tc = type_counts.setdefault(ch.topic, {})
+            tc[mt] = tc.get(mt, 0) + n
+        for name, tc in type_counts.items():
+            infos[name].msgtypes = sorted(tc, key=lambda m: -tc[m])
+            infos[name].msgtype = infos[name].msgtypes[0]
+        try:
+            for _, ch, msg in self.reader.iter_messages():
+                _extend(infos[ch.topic], msg.log_time, msg.log_time)
+        except Exception as exc:
+            raise _read_error(self.path, exc, "MCAP file") from None
+        return infos
+
+    def messages(self, topics, start_ns, end_ns):
+        stop = None if end_ns is None else int(end_ns) + 1
+        try:
+            for schema, ch, msg, decoded in self.reader.iter_decoded_messages(
+                    topics=topics, start_time=start_ns, end_time=stop, log_time_order=True):
+                yield ch.topic, normalize_msgtype(schema.name if schema else ""), msg.log_time, decoded
+        except RecordingError:
+            raise
+        except Exception as exc:
+            raise _read_error(self.path, exc, "MCAP file") from None

@@ -1,0 +1,287 @@
+"""A TF buffer: static and dynamic transforms, chain lookup between any two frames, interpolation.
+
+Each link is stored as `T_parent_child` (maps child coordinates into the parent frame), the convention of
+tf2's TransformStamped (header.frame_id = parent, child_frame_id = child). Between two samples of a dynamic
+link the translation is interpolated linearly and the rotation by slerp. `lookup_many` evaluates a whole
+array of stamps at once (vectorised numpy), `lookup` one stamp.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from kinfu_cli.errors import TransformError
+from kinfu_cli.io.messages import header_frame, matrix_to_quat, normalize_msgtype, time_to_ns
+
+TF_TYPES = ("tf2_msgs/msg/TFMessage", "tf/msg/tfMessage")
+
+
+@dataclass
+class _Link:
+    parent: str
+    static: bool
+    stamps: list[int] = field(default_factory=list)
+    trans: list[np.ndarray] = field(default_factory=list)
+    quats: list[np.ndarray] = field(default_factory=list)
+    _arrays: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+
+    def add(self, stamp_ns: int, trans: np.ndarray, quat: np.ndarray) -> None:
+        self.stamps.append(int(stamp_ns))
+        self.trans.append(trans)
+        self.quats.append(quat)
+        self._arrays = None
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Sorted stamps (N,), translations (N,3), quaternions xyzw (N,4); duplicate stamps keep the last."""
+        if self._arrays is None:
+            st = np.asarray(self.stamps, dtype=np.int64)
+            order = np.argsort(st, kind="stable")
+            st = st[order]
+            keep = np.ones(st.shape[0], bool)
+            keep[:-1] = st[1:] != st[:-1]  # last of each run of equal stamps
+            idx = order[keep]
+            self._arrays = (st[keep], np.asarray(self.trans)[idx], np.asarray(self.quats)[idx])
+        return self._arrays
+
+
+def _quat_to_matrices(q: np.ndarray) -> np.ndarray:
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    R = np.empty(q.shape[:-1] + (3, 3))
+    R[..., 0, 0] = 1 - 2 * (y * y + z * z)
+    R[..., 0, 1] = 2 * (x * y - z * w)
+    R[..., 0, 2] = 2 * (x * z + y * w)
+    R[..., 1, 0] = 2 * (x * y + z * w)
+    R[..., 1, 1] = 1 - 2 * (x * x + z * z)
+    R[..., 1, 2] = 2 * (y * z - x * w)
+    R[..., 2, 0] = 2 * (x * z - y * w)
+    R[..., 2, 1] = 2 * (y * z + x * w)
+    R[..., 2, 2] = 1 - 2 * (x * x + y * y)
+    return R
+
+
+def slerp(q0: np.ndarray, q1: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """Spherical linear interpolation of quaternions (N,4) at fractions a (N,); shortest arc."""
+    q0 = np.asarray(q0, dtype=np.float64)
+    q1 = np.asarray(q1, dtype=np.float64).copy()
+    a = np.asarray(a, dtype=np.float64)[..., None]
+    dot = np.sum(q0 * q1, axis=-1, keepdims=True)
+    q1 = np.where(dot < 0, -q1, q1)
+    dot = np.abs(dot)
+    theta = np.arccos(np.clip(dot, -1.0, 1.0))
+    sin_t = np.sin(theta)
+    small = sin_t < 1e-9
+    safe = np.where(small, 1.0, sin_t)
+    w0 = np.where(small, 1 - a, np.sin((1 - a) * theta) / safe)
+    w1 = np.where(small, a, np.sin(a * theta) / safe)
+    q = w0 * q0 + w1 * q1
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def _fmt_s(ns: int) -> str:
+    return f"{ns * 1e-9:.3f}"
+
+
+class TfBuffer:
+    """Static + dynamic TF links; `lookup(target, source, stamp_ns) -> T_target_source`."""
+
+    def __init__(self) -> None:
+        self._links: dict[str, _Link] = {}
+        self.parent_changes: list[tuple[str, str, str]] = []  # (child, old parent, new parent)
+
+    # ----------------------------------------------------------------------------------- filling
+    def add(self, parent: str, child: str, stamp_ns: int, T: np.ndarray, static: bool = False) -> None:
+        """Add T_parent_child at stamp_ns (ignored for static links)."""
+        T = np.asarray(T, dtype=np.float64)
+        if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+            raise TransformError(f"TF link {parent} -> {child}: transform is not a finite 4x4 matrix")
+        self.add_quat(parent, child, stamp_ns, T[:3, 3], matrix_to_quat(T[:3, :3]), static)
+
+    def add_quat(self, parent: str, child: str, stamp_ns: int, translation, quat_xyzw, static: bool = False) -> None:
+        """Add a link given as translation (3,) and quaternion (x, y, z, w)."""
+        parent, child = _strip(parent), _strip(child)
+        if not parent or not child or parent == child:
+            raise TransformError(f"TF link {parent!r} -> {child!r}: expected two different, non-empty frame names")
+        trans = np.asarray(translation, dtype=np.float64).reshape(3)
+        quat = np.asarray(quat_xyzw, dtype=np.float64).reshape(4)
+        norm = float(np.linalg.norm(quat))
+        if not (np.all(np.isfinite(trans)) and np.isfinite(norm) and norm > 1e-9):
+            raise TransformError(f"TF link {parent} -> {child}: non-finite translation or zero quaternion")
+        link = self._links.get(child)
+        if link is not None and link.parent != parent:
+            self.parent_changes.append((child, link.parent, parent))
+            link = None
+        if link is None or link.static != static:
+            link = _Link(parent, static)
+            self._links[child] = link
+        if static:
+            link.stamps, link.trans, link.quats, link._arrays = [], [], [], None
+        link.add(stamp_ns, trans, quat / norm)
+
+    def add_message(self, msg: object, static: bool = False) -> int:
+        """Add every TransformStamped of a tf2_msgs/TFMessage or tf/tfMessage; returns how many."""
+        n = 0
+        for tr in msg.transforms:
+            t, r = tr.transform.translation, tr.transform.rotation
+            self.add_quat(header_frame(tr), tr.child_frame_id, time_to_ns(tr.header.stamp),
+                          (t.x, t.y, t.z), (r.x, r.y, r.z, r.w), static=static)
+            n += 1
+        return n
+
+    @classmethod
+    def from_recording(cls, rec, topics: Iterable[str] | None = None) -> "TfBuffer":
+        """Read every TF topic (/tf, /tf_static and other topics of TF message types) of a Recording.
+
+        A topic whose name ends in 'tf_static' is static.
+        """
+        buf = cls()
+        if topics is None:
+            topics = [name for name, info in rec.topics.items()
+                      if any(normalize_msgtype(t) in TF_TYPES for t in info.msgtypes)]
+        topics = list(topics)
+        if not topics:
+            return buf
+        for topic, msgtype, _, msg in rec.typed_messages(topics):
+            if msgtype not in TF_TYPES:
+                continue
+            buf.add_message(msg, static=topic.rstrip("/").endswith("tf_static"))
+        return buf
+
+    # ----------------------------------------------------------------------------------- queries
+    def frames(self) -> list[str]:
+        names = set(self._links)
+        names.update(link.parent for link in self._links.values())
+        return sorted(names)
+
+    def tree(self) -> dict[str, str]:
+        """child -> parent for every link."""
+        return {child: link.parent for child, link in sorted(self._links.items())}
+
+    def is_static(self, child: str) -> bool:
+        return self._links[_strip(child)].static
+
+    def link_stamps(self, child: str) -> np.ndarray:
+        """Sorted stamps (ns) of the link parent(child) -> child."""
+        link = self._links.get(_strip(child))
+        if link is None:
+            raise TransformError(f"frame {child!r} has no parent link in the TF tree")
+        return link.arrays()[0]
+
+    def time_range(self, target: str, source: str) -> tuple[int, int] | None:
+        """[first, last] stamps (ns) over which lookup(target, source) works; None when all links are static."""
+        lo, hi = None, None
+        for child in self._path_links(_strip(target), _strip(source)):
+            link = self._links[child]
+            if link.static:
+                continue
+            st = link.arrays()[0]
+            lo = st[0] if lo is None else max(lo, st[0])
+            hi = st[-1] if hi is None else min(hi, st[-1])
+        return None if lo is None else (int(lo), int(hi))
+
+    def can_transform(self, target: str, source: str, stamp_ns: int | None = None) -> bool:
+        try:
+            self.lookup(target, source, stamp_ns)
+        except TransformError:
+            return False
+        return True
+
+    def lookup(self, target: str, source: str, stamp_ns: int | None = None,
+               tolerance_ns: int = 0) -> np.ndarray:
+        """T_target_source (4x4) at stamp_ns (None = the latest of each link)."""
+        stamps = None if stamp_ns is None else np.array([int(stamp_ns)], dtype=np.int64)
+        return self.lookup_many(target, source, stamps, tolerance_ns=tolerance_ns)[0]
+
+    def lookup_many(self, target: str, source: str, stamps_ns: np.ndarray | None,
+                    tolerance_ns: int = 0) -> np.ndarray:
+        """T_target_source for each stamp: (N,4,4). Stamps within tolerance_ns outside a link's range clamp."""
+        target, source = _strip(target), _strip(source)
+        n = 1 if stamps_ns is None else int(np.asarray(stamps_ns).reshape(-1).shape[0])
+        up_src, up_tgt = self._split_path(target, source)
+        T_anc_src = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
+        for child in up_src:  # source upwards: T_anc_src = T_parent_child @ T_anc_src
+            T_anc_src = self._edge(child, stamps_ns, n, tolerance_ns) @ T_anc_src
+        T_anc_tgt = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
+        for child in up_tgt:
+            T_anc_tgt = self._edge(child, stamps_ns, n, tolerance_ns) @ T_anc_tgt
+        return _inv(T_anc_tgt) @ T_anc_src
+
+    # ----------------------------------------------------------------------------------- internals
+    def _ancestors(self, frame: str) -> list[str]:
+        chain = [frame]
+        seen = {frame}
+        while chain[-1] in self._links:
+            parent = self._links[chain[-1]].parent
+            if parent in seen:
+                raise TransformError(f"TF tree has a loop through frame {parent!r}")
+            chain.append(parent)
+            seen.add(parent)
+        return chain
+
+    def _split_path(self, target: str, source: str) -> tuple[list[str], list[str]]:
+        known = set(self.frames())
+        for name, role in ((source, "source"), (target, "target")):
+            if name not in known:
+                avail = ", ".join(sorted(known)) or "none"
+                raise TransformError(f"TF lookup {target} <- {source}: {role} frame {name!r} is not in the TF tree "
+                                     f"(frames: {avail})")
+        a_src, a_tgt = self._ancestors(source), self._ancestors(target)
+        common = next((f for f in a_src if f in set(a_tgt)), None)
+        if common is None:
+            raise TransformError(f"TF lookup {target} <- {source}: no chain of links connects the two frames "
+                                 f"(roots {a_tgt[-1]!r} and {a_src[-1]!r})")
+        return a_src[: a_src.index(common)], a_tgt[: a_tgt.index(common)]
+
+    def _path_links(self, target: str, source: str) -> list[str]:
+        up_src, up_tgt = self._split_path(target, source)
+        return up_src + up_tgt
+
+    def _edge(self, child: str, stamps_ns: np.ndarray | None, n: int, tolerance_ns: int) -> np.ndarray:
+        link = self._links[child]
+        st, tr, qu = link.arrays()
+        if link.static or stamps_ns is None:
+            T = np.eye(4)
+            T[:3, :3] = _quat_to_matrices(qu[-1])
+            T[:3, 3] = tr[-1]
+            return np.broadcast_to(T, (n, 4, 4))
+        s = np.asarray(stamps_ns, dtype=np.int64).reshape(-1)
+        lo, hi = st[0], st[-1]
+        bad = (s < lo - tolerance_ns) | (s > hi + tolerance_ns)
+        if bad.any():
+            t = int(s[np.flatnonzero(bad)[0]])
+            raise TransformError(f"TF link {link.parent} -> {child}: time {_fmt_s(t)} s is outside the buffered "
+                                 f"range [{_fmt_s(int(lo))}, {_fmt_s(int(hi))}] s")
+        s = np.clip(s, lo, hi)
+        if st.shape[0] == 1:
+            trans, quat = np.repeat(tr, s.shape[0], 0), np.repeat(qu, s.shape[0], 0)
+        else:
+            i1 = np.clip(np.searchsorted(st, s, side="right"), 1, st.shape[0] - 1)
+            i0 = i1 - 1
+            a = (s - st[i0]).astype(np.float64) / (st[i1] - st[i0]).astype(np.float64)
+            a = np.clip(a, 0.0, 1.0)
+            trans = tr[i0] + a[:, None] * (tr[i1] - tr[i0])
+            quat = slerp(qu[i0], qu[i1], a)
+        T = np.zeros((s.shape[0], 4, 4))
+        T[:, :3, :3] = _quat_to_matrices(quat)
+        T[:, :3, 3] = trans
+        T[:, 3, 3] = 1.0
+        return T
+
+
+def _inv(T: np.ndarray) -> np.ndarray:
+    """Inverse of rigid transforms (...,4,4)."""
+    R = T[..., :3, :3]
+    out = np.zeros_like(T)
+    Rt = np.swapaxes(R, -1, -2)
+    out[..., :3, :3] = Rt
+    out[..., :3, 3] = -np.einsum("...ij,...j->...i", Rt, T[..., :3, 3])
+    out[..., 3, 3] = 1.0
+    return out
+
+
+def _strip(frame: str) -> str:
+    """tf2 frame ids have no leading slash; ROS 1 data often has one."""
+    return str(frame).lstrip("/")

@@ -1,0 +1,97 @@
+"""TfBuffer: slerp interpolation, chains through several frames, inverse direction, clear errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation, Slerp
+
+from kinfu_cli.errors import TransformError
+from kinfu_cli.io.tf_buffer import TfBuffer
+
+S = 1_000_000_000
+
+
+def _T(rotvec, t) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_rotvec(rotvec).as_matrix()
+    T[:3, 3] = t
+    return T
+
+
+def test_interpolation_is_linear_in_translation_and_slerp_in_rotation():
+    tf = TfBuffer()
+    T0, T1 = _T([0, 0, 0.2], [0, 0, 0]), _T([0.3, -0.4, 1.5], [1.0, 2.0, -4.0])
+    tf.add("world", "arm", 10 * S, T0)
+    tf.add("world", "arm", 12 * S, T1)
+    for a in (0.0, 0.25, 0.5, 0.9, 1.0):
+        got = tf.lookup("world", "arm", int(10 * S + a * 2 * S))
+        np.testing.assert_allclose(got[:3, 3], (1 - a) * T0[:3, 3] + a * T1[:3, 3], atol=1e-12)
+        ref = Slerp([0, 1], Rotation.from_matrix([T0[:3, :3], T1[:3, :3]]))([a]).as_matrix()[0]
+        np.testing.assert_allclose(got[:3, :3], ref, atol=1e-9)
+    # exact samples come back exactly, and many stamps at once agree with one at a time
+    stamps = np.array([10 * S, 11 * S, 12 * S])
+    many = tf.lookup_many("world", "arm", stamps)
+    for s, T in zip(stamps, many):
+        np.testing.assert_allclose(T, tf.lookup("world", "arm", int(s)), atol=1e-12)
+    np.testing.assert_allclose(many[0], T0, atol=1e-12)
+    np.testing.assert_allclose(many[2], T1, atol=1e-12)
+
+
+def test_slerp_takes_the_short_way_round():
+    tf = TfBuffer()
+    tf.add("a", "b", 0, _T([0, 0, np.deg2rad(170)], [0, 0, 0]))
+    tf.add("a", "b", 2 * S, _T([0, 0, np.deg2rad(-170)], [0, 0, 0]))
+    mid = tf.lookup("a", "b", S)
+    angle = np.rad2deg(Rotation.from_matrix(mid[:3, :3]).as_rotvec())
+    np.testing.assert_allclose(np.abs(angle[2]), 180.0, atol=1e-6)  # through 180, not through 0
+
+
+def test_chain_and_inverse_direction():
+    tf = TfBuffer()
+    links = [("world", "base", _T([0, 0, 0.5], [1, 0, 0])), ("base", "l1", _T([0.2, 0, 0], [0, 0, 0.3])),
+             ("l1", "wrist", _T([0, 0.4, 0], [0.1, 0.2, 0])), ("world", "table", _T([0, 0, -1], [0, 3, 0]))]
+    for p, c, T in links[:3]:
+        tf.add(p, c, 0, T)
+        tf.add(p, c, 4 * S, T)
+    tf.add("wrist", "camera", 0, _T([0.1, 0.1, 0.1], [0, 0, 0.05]), static=True)
+    tf.add(*links[3][:2], 0, links[3][2], static=True)
+    T_world_cam = links[0][2] @ links[1][2] @ links[2][2] @ _T([0.1, 0.1, 0.1], [0, 0, 0.05])
+    np.testing.assert_allclose(tf.lookup("world", "camera", 2 * S), T_world_cam, atol=1e-12)
+    np.testing.assert_allclose(tf.lookup("camera", "world", 2 * S), np.linalg.inv(T_world_cam), atol=1e-12)
+    # across branches: table <- camera goes up to world and down again
+    np.testing.assert_allclose(tf.lookup("table", "camera", S), np.linalg.inv(links[3][2]) @ T_world_cam, atol=1e-12)
+    np.testing.assert_allclose(tf.lookup("camera", "camera", S), np.eye(4), atol=0)
+    assert tf.tree() == {"base": "world", "l1": "base", "wrist": "l1", "camera": "wrist", "table": "world"}
+    assert tf.frames() == ["base", "camera", "l1", "table", "world", "wrist"]
+    assert tf.time_range("world", "camera") == (0, 4 * S)
+    assert tf.time_range("world", "table") is None  # static only
+
+
+def test_errors_name_frames_and_range():
+    tf = TfBuffer()
+    tf.add("world", "arm", 10 * S, np.eye(4))
+    tf.add("world", "arm", 20 * S, np.eye(4))
+    tf.add("odom", "robot", 0, np.eye(4), static=True)
+    with pytest.raises(TransformError, match=r"outside the buffered range \[10.000, 20.000\] s"):
+        tf.lookup("world", "arm", 25 * S)
+    with pytest.raises(TransformError, match=r"time 9.000 s"):
+        tf.lookup("arm", "world", 9 * S)
+    # a tolerance clamps to the end sample
+    np.testing.assert_allclose(tf.lookup("world", "arm", 20 * S + 10, tolerance_ns=100), np.eye(4))
+    with pytest.raises(TransformError, match="'hand' is not in the TF tree"):
+        tf.lookup("world", "hand", 15 * S)
+    with pytest.raises(TransformError, match="robot") as exc:
+        tf.lookup("world", "robot", 15 * S)
+    assert "world" in str(exc.value) and "no chain" in str(exc.value)
+    with pytest.raises(TransformError, match="4x4"):
+        tf.add("a", "b", 0, np.eye(3))
+
+
+def test_leading_slashes_and_duplicate_stamps():
+    tf = TfBuffer()
+    tf.add("/world", "/arm", S, _T([0, 0, 0], [1, 0, 0]))
+    tf.add("world", "arm", S, _T([0, 0, 0], [2, 0, 0]))  # same stamp: the later sample wins
+    tf.add("world", "arm", 2 * S, _T([0, 0, 0], [4, 0, 0]))
+    assert tf.link_stamps("arm").tolist() == [S, 2 * S]
+    np.testing.assert_allclose(tf.lookup("world", "arm", int(1.5 * S))[:3, 3], [3, 0, 0])
