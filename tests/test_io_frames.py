@@ -1,0 +1,181 @@
+"""Frame assembly and role detection on small recordings written by RecordingWriter (all three containers)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from kinfu_cli.errors import ConfigError, RecordingError, TransformError
+from kinfu_cli.io.frames import DROP_NO_POSE, FrameStats, iter_frames
+from kinfu_cli.io.recording import open_recording
+from kinfu_cli.io.roles import detect_roles
+from kinfu_cli.io.writers import RecordingWriter
+
+S = 1_000_000_000
+T0 = 1_600_000_000 * S
+W, H = 20, 16
+K = np.array([[30.0, 0, 9.5], [0, 30.0, 7.5], [0, 0, 1]])
+T_WORLD_BASE = np.eye(4)
+T_WORLD_BASE[:3, 3] = [0.0, 0.0, 0.7]
+T_WRIST_CAM = np.eye(4)
+T_WRIST_CAM[:3, :3] = Rotation.from_rotvec([0, 0, np.pi / 2]).as_matrix()
+T_WRIST_CAM[:3, 3] = [0.05, 0.0, 0.1]
+
+
+def T_base_wrist(t_s: float) -> np.ndarray:
+    """Constant angular and linear velocity: slerp + linear interpolation reproduce it exactly."""
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_rotvec(np.array([0.1, 0.5, 0.2]) * t_s).as_matrix()
+    T[:3, 3] = [0.3 + 0.1 * t_s, -0.2 * t_s, 0.5]
+    return T
+
+
+def depth_mm(i: int) -> np.ndarray:
+    d = (800 + 10 * i + np.arange(W * H).reshape(H, W)).astype(np.uint16)
+    d[0, :3] = 0  # invalid pixels stay invalid
+    return d
+
+
+def color(i: int) -> np.ndarray:
+    return np.full((H, W, 3), [i, 255 - i, 7], dtype=np.uint8)
+
+
+def make_recording(path, n=12, fps=30.0, color_offset_ns=4_000_000, tf_from=0.0, info=True, color_every=1,
+                   depth_encoding="16UC1", compressed=False, hand=False, info_size=(W, H)):
+    """A tiny arm-camera recording: TF world -> base (static) -> wrist (100 Hz) -> camera_optical (static)."""
+    with RecordingWriter(path) as w:
+        w.write_tf(T0, [("world", "base_link", T_WORLD_BASE), ("wrist", "camera_optical", T_WRIST_CAM)],
+                   static=True)
+        events = []
+        for k in range(int((n / fps + 0.2) * 100)):
+            t = tf_from + k / 100
+            events.append((T0 + int(round(t * S)), "tf", k))
+        for i in range(n):
+            t = T0 + int(round(i / fps * S)) + 50_000_000
+            events.append((t, "depth", i))
+            if i % color_every == 0:
+                events.append((t + color_offset_ns, "color", i))
+        for stamp, kind, i in sorted(events, key=lambda e: (e[0], e[1])):
+            if kind == "tf":
+                w.write_tf(stamp, [("base_link", "wrist", T_base_wrist((stamp - T0) / S))])
+                if hand:
+                    Th = np.eye(4)
+                    Th[:3, 3] = [0.1 * i / 100, 0.2, 0.3]
+                    w.write_pose("/hand/pose", stamp, "world", Th)
+            elif kind == "depth":
+                if compressed:
+                    w.write_compressed_depth("/camera/depth/image_raw/compressedDepth", stamp, "camera_optical",
+                                             depth_mm(i))
+                elif depth_encoding == "16UC1":
+                    w.write_image("/camera/depth/image_raw", stamp, "camera_optical", depth_mm(i), "16UC1")
+                elif depth_encoding == "32FC1":
+                    w.write_image("/camera/depth/image_raw", stamp, "camera_optical", depth_mm(i) / 1000.0,
+                                  "32FC1")
+                else:  # something we cannot read as depth
+                    w.write_image("/camera/depth/image_raw", stamp, "camera_optical",
+                                  depth_mm(i).astype(np.uint8), "mono8")
+                if info:
+                    w.write_camera_info("/camera/depth/camera_info", stamp, "camera_optical", K, *info_size)
+            else:
+                w.write_image("/camera/color/image_raw", stamp, "camera_optical", color(i), "rgb8")
+    return path
+
+
+def expected_pose(stamp_ns: int) -> np.ndarray:
+    return T_WORLD_BASE @ T_base_wrist((stamp_ns - T0) / S) @ T_WRIST_CAM
+
+
+@pytest.mark.parametrize("name", ["r.mcap", "r.bag", "r_ros2"])
+def test_frames_pair_depth_colour_intrinsics_and_pose(tmp_path, name):
+    path = make_recording(tmp_path / name)
+    with open_recording(path) as rec:
+        roles = detect_roles(rec)
+        assert roles.depth_topic == "/camera/depth/image_raw"
+        assert roles.color_topic == "/camera/color/image_raw"
+        assert roles.info_topic == "/camera/depth/camera_info"
+        assert roles.camera_frame == "camera_optical" and roles.world_frame == "world"
+        stats = FrameStats()
+        frames = list(iter_frames(rec, roles, stats=stats))
+    assert [f.index for f in frames] == list(range(12))
+    assert stats.used == 12 and stats.dropped_total == 0 and stats.without_color == 0
+    for i, f in enumerate(frames):
+        assert f.depth.dtype == np.float32 and f.depth.shape == (H, W)
+        np.testing.assert_array_equal(f.depth, depth_mm(i).astype(np.float32) * np.float32(0.001))
+        np.testing.assert_array_equal(f.color, color(i))  # the colour of the same instant, not a neighbour
+        np.testing.assert_array_equal(f.K, K)
+        np.testing.assert_allclose(f.T_world_camera, expected_pose(f.stamp_ns), atol=1e-9)
+
+
+def test_tolerance_drops_and_window(tmp_path):
+    # colour 8 ms after depth, every other frame only; TF starts 0.2 s late
+    path = make_recording(tmp_path / "r.mcap", n=15, color_offset_ns=8_000_000, color_every=2, tf_from=0.2)
+    with open_recording(path) as rec:
+        roles = detect_roles(rec)
+        stats = FrameStats()
+        frames = list(iter_frames(rec, roles, tolerance_s=0.005, stats=stats))
+        # depth at 0.05 + i/30 s; TF from 0.2 s (5 ms tolerance): frames 0..4 have no pose
+        assert stats.dropped == {DROP_NO_POSE: 5}
+        assert [f.index for f in frames] == list(range(5, 15))
+        assert all(f.color is None for f in frames)  # 8 ms > 5 ms tolerance
+        stats = FrameStats()
+        frames = list(iter_frames(rec, roles, tolerance_s=0.02, stats=stats))
+        # frame 4 (0.183 s) is now within the tolerance of the first TF sample (0.2 s)
+        assert [f.index for f in frames] == list(range(4, 15)) and stats.dropped == {DROP_NO_POSE: 4}
+        assert [f.color is not None for f in frames] == [i % 2 == 0 for i in range(4, 15)]
+        assert stats.without_color == 5  # odd frames: nearest colour is 25 ms away
+        for f in frames:
+            if f.color is not None:
+                np.testing.assert_array_equal(f.color, color(f.index))
+        # every other frame of a window; no pose needed
+        stats = FrameStats()
+        frames = list(iter_frames(rec, roles, pose_source="none", every=2, start_s=0.1, end_s=0.35,
+                                  stats=stats))
+        assert [f.T_world_camera for f in frames] == [None] * len(frames)
+        stamps = np.array([(f.stamp_ns - rec.start_ns) / S for f in frames])
+        assert np.all((stamps >= 0.1) & (stamps <= 0.35))
+        assert len(frames) == 4 and stats.depth_messages == 8 and stats.skipped == 4
+
+
+def test_pose_topic_source_and_compressed_depth(tmp_path):
+    path = make_recording(tmp_path / "r.bag", n=6, compressed=True, hand=True)
+    with open_recording(path) as rec:
+        roles = detect_roles(rec)
+        assert roles.depth_topic == "/camera/depth/image_raw/compressedDepth"
+        assert roles.hand_topic == "/hand/pose"
+        frames = list(iter_frames(rec, roles))
+        assert len(frames) == 6
+        np.testing.assert_array_equal(frames[3].depth, depth_mm(3).astype(np.float32) * np.float32(0.001))
+        # the hand topic as a "camera pose" topic: poses interpolate between its messages
+        frames = list(iter_frames(rec, roles, pose_source="topic", pose_topic="/hand/pose"))
+        for f in frames:
+            x = 0.1 * ((f.stamp_ns - T0) / S * 100) / 100
+            np.testing.assert_allclose(f.T_world_camera[:3, 3], [x, 0.2, 0.3], atol=1e-9)
+
+
+def test_32fc1_depth(tmp_path):
+    path = make_recording(tmp_path / "r_ros2", n=3, depth_encoding="32FC1")
+    with open_recording(path) as rec:
+        frames = list(iter_frames(rec, pose_source="none"))
+    np.testing.assert_allclose(frames[2].depth, depth_mm(2) / 1000.0, rtol=1e-7)
+
+
+def test_bad_recordings_raise_clear_errors(tmp_path):
+    with open_recording(make_recording(tmp_path / "noinfo.mcap", n=2, info=False)) as rec:
+        with pytest.raises(RecordingError, match="no sensor_msgs/CameraInfo topic for depth topic /camera/depth"):
+            list(iter_frames(rec))
+    with open_recording(make_recording(tmp_path / "size.mcap", n=2, info_size=(640, 480))) as rec:
+        with pytest.raises(RecordingError, match="20x16 but camera info /camera/depth/camera_info says 640x480"):
+            list(iter_frames(rec))
+    with open_recording(make_recording(tmp_path / "enc.mcap", n=2, depth_encoding="mono8")) as rec:
+        roles = detect_roles(rec, depth_topic="/camera/depth/image_raw")
+        with pytest.raises(RecordingError, match="/camera/depth/image_raw: depth encoding 'mono8' is not supported"):
+            list(iter_frames(rec, roles))
+    with open_recording(make_recording(tmp_path / "ok.mcap", n=2)) as rec:
+        with pytest.raises(RecordingError, match=r"depth topic '/nope' not found \(available topics: .*/tf"):
+            detect_roles(rec, depth_topic="/nope")
+        roles = detect_roles(rec, camera_frame="camera_ir")
+        with pytest.raises(TransformError, match="'camera_ir' is not in the TF tree"):
+            list(iter_frames(rec, roles))
+        with pytest.raises(ConfigError, match="--every"):
+            list(iter_frames(rec, every=0))
