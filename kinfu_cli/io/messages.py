@@ -113,6 +113,42 @@ def pose_message_to_matrix(msg: object, msgtype: str) -> np.ndarray:
     raise RecordingError(f"message type {msgtype}: expected one of {', '.join(POSE_TYPES)}")
 
 
+def pose_message_to_tq(msg: object, msgtype: str) -> tuple[tuple[float, float, float],
+                                                         tuple[float, float, float, float]]:
+    """(translation xyz, quaternion xyzw) of a pose message, without building a matrix (for batches)."""
+    name = normalize_msgtype(msgtype)
+    if name == "geometry_msgs/msg/PoseStamped":
+        p, q = msg.pose.position, msg.pose.orientation
+    elif name in ("geometry_msgs/msg/PoseWithCovarianceStamped", "nav_msgs/msg/Odometry"):
+        p, q = msg.pose.pose.position, msg.pose.pose.orientation
+    elif name == "geometry_msgs/msg/TransformStamped":
+        p, q = msg.transform.translation, msg.transform.rotation
+    else:
+        raise RecordingError(f"message type {msgtype}: expected one of {', '.join(POSE_TYPES)}")
+    return (p.x, p.y, p.z), (q.x, q.y, q.z, q.w)
+
+
+def quats_to_matrices(q: np.ndarray) -> np.ndarray:
+    """(..., 4) quaternions xyzw (normalised here) -> (..., 3, 3) rotations, vectorised."""
+    q = np.asarray(q, dtype=np.float64)
+    n = np.linalg.norm(q, axis=-1, keepdims=True)
+    if not np.all(np.isfinite(n)) or np.any(n < 1e-12):
+        raise RecordingError("a quaternion has zero or non-finite norm")
+    q = q / n
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    R = np.empty(q.shape[:-1] + (3, 3))
+    R[..., 0, 0] = 1 - 2 * (y * y + z * z)
+    R[..., 0, 1] = 2 * (x * y - z * w)
+    R[..., 0, 2] = 2 * (x * z + y * w)
+    R[..., 1, 0] = 2 * (x * y + z * w)
+    R[..., 1, 1] = 1 - 2 * (x * x + z * z)
+    R[..., 1, 2] = 2 * (y * z - x * w)
+    R[..., 2, 0] = 2 * (x * z - y * w)
+    R[..., 2, 1] = 2 * (y * z + x * w)
+    R[..., 2, 2] = 1 - 2 * (x * x + y * y)
+    return R
+
+
 def normalize_msgtype(msgtype: str) -> str:
     """'sensor_msgs/Image' or 'sensor_msgs/msg/Image' -> 'sensor_msgs/msg/Image'."""
     parts = msgtype.split("/")

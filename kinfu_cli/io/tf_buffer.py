@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from kinfu_cli.errors import TransformError
-from kinfu_cli.io.messages import header_frame, matrix_to_quat, normalize_msgtype, time_to_ns
+from kinfu_cli.io.messages import header_frame, matrix_to_quat, normalize_msgtype, quats_to_matrices, time_to_ns
 
 TF_TYPES = ("tf2_msgs/msg/TFMessage", "tf/msg/tfMessage")
 
@@ -48,19 +48,7 @@ class _Link:
 
 
 def _quat_to_matrices(q: np.ndarray) -> np.ndarray:
-    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    R = np.empty(q.shape[:-1] + (3, 3))
-    R[..., 0, 0] = 1 - 2 * (y * y + z * z)
-    R[..., 0, 1] = 2 * (x * y - z * w)
-    R[..., 0, 2] = 2 * (x * z + y * w)
-    R[..., 1, 0] = 2 * (x * y + z * w)
-    R[..., 1, 1] = 1 - 2 * (x * x + z * z)
-    R[..., 1, 2] = 2 * (y * z - x * w)
-    R[..., 2, 0] = 2 * (x * z - y * w)
-    R[..., 2, 1] = 2 * (y * z + x * w)
-    R[..., 2, 2] = 1 - 2 * (x * x + y * y)
-    return R
+    return quats_to_matrices(q)
 
 
 def slerp(q0: np.ndarray, q1: np.ndarray, a: np.ndarray) -> np.ndarray:

@@ -1,0 +1,148 @@
+"""Hand trajectories: from a pose topic, from a TF frame, or from a Polhemus `.traj` text file.
+
+`load_hand_trajectory(path)` returns a `Trajectory` (kinfu_cli/io/trajectory.py). From a recording, `t` is in
+seconds from the first sample and `t0_ns` is that sample's stamp (header stamps; log time where the header stamp
+is zero). Duplicate stamps keep the last sample, so `t` is strictly increasing.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from kinfu_cli.errors import RecordingError, TrajectoryError
+from kinfu_cli.io.messages import POSE_TYPES, header_frame, header_stamp_ns, pose_message_to_tq, quats_to_matrices
+from kinfu_cli.io.recording import Recording, open_recording
+from kinfu_cli.io.tf_buffer import TfBuffer
+from kinfu_cli.io.trajectory import Trajectory
+
+TEXT_SUFFIXES = (".traj",)
+
+
+def load_hand_trajectory(path: str | os.PathLike, hand_topic: str | None = None, hand_frame: str | None = None,
+                         world_frame: str | None = None) -> Trajectory:
+    """Hand trajectory from a recording (pose topic or TF frame) or a Polhemus `.traj` file.
+
+    hand_topic: a PoseStamped / PoseWithCovarianceStamped / Odometry / TransformStamped topic.
+    hand_frame: a TF frame; the trajectory is world_frame <- hand_frame at each stamp of the hand frame's link.
+    world_frame: frame to express the trajectory in (a pose topic in another frame is moved through TF).
+    With neither, the hand is detected by name (a pose topic named hand/wrist/tracker, or a TF frame named hand).
+    """
+    path = Path(path)
+    if path.suffix.lower() in TEXT_SUFFIXES:
+        from kinfu_cli.io.polhemus import read_polhemus  # the POI engineer's reader
+
+        return read_polhemus(path)
+    with open_recording(path) as rec:
+        return hand_trajectory_from_recording(rec, hand_topic, hand_frame, world_frame)
+
+
+def hand_trajectory_from_recording(rec: Recording, hand_topic: str | None = None, hand_frame: str | None = None,
+                                   world_frame: str | None = None) -> Trajectory:
+    """As load_hand_trajectory, on an open Recording."""
+    tf: TfBuffer | None = None
+    if hand_topic is None and hand_frame is None:
+        from kinfu_cli.io.roles import detect_roles
+
+        tf = TfBuffer.from_recording(rec)
+        roles = detect_roles(rec, world_frame=world_frame or "", tf=tf)
+        hand_topic, hand_frame = roles.hand_topic, roles.hand_frame
+        if hand_topic is None and hand_frame is None:
+            poses = ", ".join(rec.topics_of_type(*POSE_TYPES)) or "none"
+            raise RecordingError(f"{rec.path}: no hand pose topic or TF frame found (set --hand-topic or "
+                                 f"--hand-frame); pose topics: {poses}")
+    if hand_topic is not None:
+        return _from_topic(rec, hand_topic, world_frame, tf)
+    return _from_tf(rec, hand_frame, world_frame, tf)
+
+
+def _finish(stamps: np.ndarray, T: np.ndarray, frame: str, source: str, meta: dict) -> Trajectory:
+    if stamps.shape[0] == 0:
+        raise TrajectoryError(f"{source}: no samples")
+    order = np.argsort(stamps, kind="stable")
+    stamps, T = stamps[order], T[order]
+    keep = np.ones(stamps.shape[0], bool)
+    keep[:-1] = stamps[1:] != stamps[:-1]
+    meta = dict(meta, duplicates_dropped=int((~keep).sum()))
+    stamps, T = stamps[keep], T[keep]
+    t0 = int(stamps[0])
+    traj = Trajectory(t=(stamps - t0) * 1e-9, positions=T[:, :3, 3], rotations=T[:, :3, :3], frame=frame,
+                      source=source, t0_ns=t0, meta=meta)
+    return traj.validate(min_samples=1)
+
+
+def _from_topic(rec: Recording, topic: str, world_frame: str | None, tf: TfBuffer | None) -> Trajectory:
+    info = rec.require_topic(topic, "hand topic")
+    if not set(POSE_TYPES) & set(info.msgtypes):
+        raise RecordingError(f"{rec.path}: hand topic {topic} carries {info.msgtype}, expected one of "
+                             f"{', '.join(POSE_TYPES)}")
+    stamps, trans, quats, frame = [], [], [], ""
+    for _, msgtype, log_ns, msg in rec.typed_messages([topic]):
+        if msgtype not in POSE_TYPES:
+            continue
+        s = header_stamp_ns(msg)
+        stamps.append(s if s is not None else log_ns)
+        t, q = pose_message_to_tq(msg, msgtype)
+        trans.append(t)
+        quats.append(q)
+        frame = frame or header_frame(msg).lstrip("/")
+    source = f"{rec.path}:{topic}"
+    stamps_a = np.asarray(stamps, dtype=np.int64)
+    T = np.zeros((len(stamps), 4, 4))
+    if stamps:
+        T[:, :3, :3] = quats_to_matrices(np.asarray(quats, dtype=np.float64))
+        T[:, :3, 3] = np.asarray(trans, dtype=np.float64)
+        T[:, 3, 3] = 1.0
+    meta = {"topic": topic, "msgtype": info.msgtype}
+    if world_frame and frame and world_frame != frame:
+        tf = tf if tf is not None else TfBuffer.from_recording(rec)
+        rng = tf.time_range(world_frame, frame)
+        if rng is not None:  # samples before the first / after the last TF of the chain cannot be moved
+            ok = (stamps_a >= rng[0]) & (stamps_a <= rng[1])
+            meta["outside_tf_range"] = int((~ok).sum())
+            if not ok.any():
+                raise TrajectoryError(f"{source}: no sample lies within the TF range of {world_frame} <- {frame} "
+                                      f"[{rng[0] * 1e-9:.3f}, {rng[1] * 1e-9:.3f}] s")
+            stamps_a, T = stamps_a[ok], T[ok]
+        T = tf.lookup_many(world_frame, frame, stamps_a) @ T
+        meta["moved_from_frame"] = frame
+        frame = world_frame
+    return _finish(stamps_a, T, frame or (world_frame or ""), source, meta)
+
+
+def _from_tf(rec: Recording, hand_frame: str, world_frame: str | None, tf: TfBuffer | None) -> Trajectory:
+    tf = tf if tf is not None else TfBuffer.from_recording(rec)
+    hand_frame = hand_frame.lstrip("/")
+    if hand_frame not in tf.frames():
+        avail = ", ".join(tf.frames()) or "none"
+        raise RecordingError(f"{rec.path}: hand frame {hand_frame!r} is not in the TF tree (frames: {avail})")
+    tree = tf.tree()
+    if hand_frame not in tree:
+        raise RecordingError(f"{rec.path}: hand frame {hand_frame!r} is a TF root; expected a frame with a parent")
+    if not world_frame:
+        chain = chain_up(tree, hand_frame, None)
+        roots = [tree[chain[-1]]] if chain else []
+        world_frame = next((f for f in ("world", "map", "odom") if f in chain + roots), (chain + roots)[-1])
+    # sample at the stamps of the closest moving link on the way up (the hand's own link unless it is static)
+    moving = next((f for f in chain_up(tree, hand_frame, world_frame) if not tf.is_static(f)), None)
+    if moving is None:
+        raise TrajectoryError(f"{rec.path}: every TF link from {world_frame} to {hand_frame} is static; a hand "
+                              f"trajectory needs a moving frame")
+    stamps = tf.link_stamps(moving)
+    rng = tf.time_range(world_frame, hand_frame)
+    if rng is not None:  # other moving links on the chain may cover less time
+        stamps = stamps[(stamps >= rng[0]) & (stamps <= rng[1])]
+    T = tf.lookup_many(world_frame, hand_frame, stamps) if stamps.size else np.zeros((0, 4, 4))
+    source = f"{rec.path}:tf {world_frame}<-{hand_frame}"
+    return _finish(stamps, T, world_frame, source, {"hand_frame": hand_frame})
+
+
+def chain_up(tree: dict[str, str], frame: str, stop: str | None) -> list[str]:
+    """Frames from `frame` up to (not including) `stop` or the root; each has a link to its parent."""
+    out = []
+    while frame in tree and frame != stop and frame not in out:
+        out.append(frame)
+        frame = tree[frame]
+    return out
