@@ -174,3 +174,34 @@ def require(roles: Roles, field: str, rec, option: str) -> str:
         what = field.replace("_", " ")
         raise RecordingError(f"{rec.path}: no {what} found (set it with {option}); topics: {avail}")
     return value
+
+
+# ------------------------------------------------------------------------------------------- CLI options
+ROLE_OPTIONS = ("depth_topic", "color_topic", "info_topic", "camera_frame", "world_frame", "hand_topic",
+                "hand_frame")
+
+
+def role_options(func):
+    """click decorator adding --depth-topic, --color-topic, --info-topic, --camera-frame, --world-frame,
+    --hand-topic, --hand-frame (each default None = auto-detect). Pass the values to `detect_roles(rec, **kw)`
+    with `role_kwargs(kwargs)`."""
+    import click
+
+    helps = {
+        "depth_topic": "Depth image topic (sensor_msgs/Image 16UC1/32FC1 or compressedDepth) [auto].",
+        "color_topic": "Colour image topic (Image or jpeg/png CompressedImage) [auto].",
+        "info_topic": "sensor_msgs/CameraInfo topic of the depth camera [auto].",
+        "camera_frame": "TF frame of the depth camera [frame_id of the depth images].",
+        "world_frame": "TF frame poses are expressed in [world, map, odom or the TF root].",
+        "hand_topic": "Hand pose topic (PoseStamped, PoseWithCovarianceStamped, Odometry, TransformStamped) [auto].",
+        "hand_frame": "TF frame of the hand, when the hand comes as TF [auto].",
+    }
+    for name in reversed(ROLE_OPTIONS):
+        func = click.option(f"--{name.replace('_', '-')}", name, default=None, metavar="NAME",
+                            help=helps[name])(func)
+    return func
+
+
+def role_kwargs(kwargs: dict) -> dict:
+    """Pop the role options out of a command's kwargs (for detect_roles)."""
+    return {name: kwargs.pop(name, None) for name in ROLE_OPTIONS}

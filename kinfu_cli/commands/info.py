@@ -1,0 +1,138 @@
+"""`kinfu info`: what is in a recording — topics, types, counts, rates, time span, roles, TF tree."""
+
+from __future__ import annotations
+
+import json
+from datetime import datetime, timezone
+
+import click
+
+from kinfu_cli.io.recording import Recording, open_recording
+from kinfu_cli.io.roles import detect_roles, role_kwargs, role_options
+from kinfu_cli.io.tf_buffer import TfBuffer
+
+_FORMAT_NAMES = {"bag": "ROS 1 bag", "mcap": "MCAP", "ros2": "ROS 2 bag folder"}
+
+
+def recording_summary(path, **role_overrides) -> dict:
+    """Summary of a recording as a JSON-able dict (what `kinfu info --json` prints)."""
+    with open_recording(path) as rec:
+        return summarize(rec, **role_overrides)
+
+
+def summarize(rec: Recording, **role_overrides) -> dict:
+    tf = TfBuffer.from_recording(rec)
+    roles = detect_roles(rec, tf=tf, **role_overrides)
+    links = []
+    for child, parent in tf.tree().items():
+        stamps = tf.link_stamps(child)
+        static = tf.is_static(child)
+        rate = None
+        if not static and stamps.size > 1 and stamps[-1] > stamps[0]:
+            rate = (stamps.size - 1) / ((stamps[-1] - stamps[0]) * 1e-9)
+        links.append({"parent": parent, "child": child, "static": static,
+                      "samples": int(stamps.size), "rate_hz": rate})
+    storage = None
+    if rec.format == "ros2":
+        import yaml
+
+        try:
+            meta = yaml.safe_load((rec.path / "metadata.yaml").read_text())
+            storage = meta["rosbag2_bagfile_information"]["storage_identifier"]
+        except Exception:  # informative only
+            storage = None
+    return {
+        "path": str(rec.path),
+        "format": rec.format,
+        "storage": storage,
+        "size_bytes": _size(rec.path),
+        "start_ns": rec.start_ns,
+        "end_ns": rec.end_ns,
+        "duration_s": rec.duration_s,
+        "message_count": rec.message_count,
+        "topics": [t.as_dict() for t in rec.topics.values()],
+        "roles": roles.as_dict(),
+        "tf": {"frames": tf.frames(), "tree": tf.tree(), "links": links},
+    }
+
+
+def _size(path) -> int:
+    if path.is_dir():
+        return sum(p.stat().st_size for p in path.rglob("*") if p.is_file())
+    return path.stat().st_size
+
+
+def _when(ns: int | None) -> str:
+    if ns is None:
+        return "-"
+    return datetime.fromtimestamp(ns * 1e-9, tz=timezone.utc).strftime("%Y-%m-%d %H:%M:%S.%f")[:-3] + " UTC"
+
+
+def format_summary(s: dict) -> str:
+    """Human-readable text of a summary dict."""
+    lines = []
+    fmt = _FORMAT_NAMES[s["format"]] + (f" ({s['storage']} storage)" if s.get("storage") else "")
+    lines.append(f"recording: {s['path']}")
+    lines.append(f"format:    {fmt}, {s['size_bytes'] / 1e6:.2f} MB, {s['message_count']} messages")
+    lines.append(f"time span: {_when(s['start_ns'])} .. {_when(s['end_ns'])} ({s['duration_s']:.3f} s)")
+    lines.append("")
+    lines.append("topics:")
+    rows = [(t["name"], ", ".join(t["msgtypes"]) or t["msgtype"], str(t["count"]),
+             f"{t['rate_hz']:.2f} Hz" if t["rate_hz"] else "-") for t in s["topics"]]
+    widths = [max([len(r[i]) for r in rows] + [len(h)]) for i, h in enumerate(("topic", "type", "count", "rate"))]
+    lines.append("  " + "  ".join(h.ljust(w) if i < 2 else h.rjust(w)
+                                  for i, (h, w) in enumerate(zip(("topic", "type", "count", "rate"), widths))))
+    for r in rows:
+        lines.append("  " + "  ".join(v.ljust(w) if i < 2 else v.rjust(w) for i, (v, w) in enumerate(zip(r, widths))))
+    lines.append("")
+    lines.append("roles (detected; override with --depth-topic, --world-frame, ...):")
+    for k, v in s["roles"].items():
+        lines.append(f"  {k.replace('_', ' ') + ':':15s} {v if v is not None else '-'}")
+    lines.append("")
+    links = {l["child"]: l for l in s["tf"]["links"]}
+    if not s["tf"]["frames"]:
+        lines.append("TF tree: no /tf or /tf_static data")
+    else:
+        lines.append(f"TF tree ({len(s['tf']['frames'])} frames):")
+        children: dict[str, list[str]] = {}
+        for child, parent in s["tf"]["tree"].items():
+            children.setdefault(parent, []).append(child)
+        roots = sorted(f for f in s["tf"]["frames"] if f not in s["tf"]["tree"])
+
+        def walk(frame: str, depth: int) -> None:
+            link = links.get(frame)
+            if link is None:
+                note = ""
+            elif link["static"]:
+                note = "  (static)"
+            else:
+                rate = f", {link['rate_hz']:.1f} Hz" if link["rate_hz"] else ""
+                note = f"  ({link['samples']} samples{rate})"
+            lines.append("  " + "  " * depth + frame + note)
+            for c in sorted(children.get(frame, [])):
+                walk(c, depth + 1)
+
+        for root in roots:
+            walk(root, 0)
+    return "\n".join(lines)
+
+
+@click.command("info", short_help="Show topics, rates, time span, detected roles and TF tree of a recording.")
+@click.argument("recording", type=click.Path(exists=False))
+@click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON on stdout.")
+@role_options
+def command(recording: str, as_json: bool, **kwargs) -> None:
+    """Summarise RECORDING (MCAP file, ROS 1 .bag or ROS 2 bag folder): topics with message types, counts
+    and rates, the time span, the topics and frames detected for each role (depth, colour, camera info,
+    camera frame, world frame, hand) and the TF frame tree.
+
+    \b
+    Example:
+      kinfu info sample_data/tabletop/recording.mcap
+      kinfu info recording_ros2/ --json > summary.json
+    """
+    summary = recording_summary(recording, **role_kwargs(kwargs))
+    if as_json:
+        click.echo(json.dumps(summary, indent=2))
+    else:
+        click.echo(format_summary(summary))

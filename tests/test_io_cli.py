@@ -1,0 +1,101 @@
+"""`kinfu info` on real and written recordings, and one-line errors for bad input."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import pytest
+from click.testing import CliRunner
+from test_io_frames import make_recording
+
+from kinfu_cli.cli import cli
+
+
+def run(*args):
+    return CliRunner().invoke(cli, [str(a) for a in args])
+
+
+def one_line_error(res, *needles):
+    assert res.exit_code == 2, res.output
+    assert "Traceback" not in res.output
+    lines = [l for l in res.output.splitlines() if l.strip()]
+    assert len(lines) == 1 and lines[0].startswith("kinfu: error: "), res.output
+    for n in needles:
+        assert n in lines[0], (n, lines[0])
+    return lines[0]
+
+
+@pytest.mark.parametrize("name,topics,frames", [
+    ("tf_example.bag", {"/tf": 517, "/tf_static": 1}, 3),
+    ("tf_example", {"/tf": 517, "/tf_static": 1}, 3),
+    ("ROS_example.bag", {"groundtruth": 12765, "ORB-SLAM": 8362, "S-PTAM": 5439}, 0),
+    ("nav2_turtlebot.mcap", {"/tf": 5422, "/tf_static": 1, "/odom": 2639, "/amcl_pose": 135}, 34),
+    ("watercan.bag", {"/tf": 3532, "/euclidean_cluster_indices_decomposer/output00": 1}, 84),
+])
+def test_info_json_on_real_recordings(shared_data, name, topics, frames):
+    res = run("info", shared_data("ros-recordings", name), "--json")
+    assert res.exit_code == 0, res.output
+    s = json.loads(res.output)
+    assert {t["name"]: t["count"] for t in s["topics"]} == topics
+    assert s["message_count"] == sum(topics.values())
+    assert len(s["tf"]["frames"]) == frames
+    if name.startswith("tf_example"):
+        assert s["tf"]["tree"] == {"base_footprint": "odom", "base_link": "base_footprint"}
+        assert s["roles"]["world_frame"] == "odom"
+        assert 51.6 < s["duration_s"] < 51.7
+        link = next(l for l in s["tf"]["links"] if l["child"] == "base_footprint")
+        assert link["samples"] == 517 and not link["static"] and abs(link["rate_hz"] - 10.0) < 0.05
+    if name == "nav2_turtlebot.mcap":
+        assert s["format"] == "mcap" and s["tf"]["tree"]["odom"] == "map" and s["roles"]["world_frame"] == "map"
+    if name == "watercan.bag":
+        tf = next(t for t in s["topics"] if t["name"] == "/tf")
+        assert set(tf["msgtypes"]) == {"tf2_msgs/msg/TFMessage", "tf/msg/tfMessage"}
+
+
+def test_info_text_on_written_recording(tmp_path):
+    path = make_recording(tmp_path / "r.mcap", n=4, hand=True)
+    res = run("info", path)
+    assert res.exit_code == 0, res.output
+    out = res.output
+    assert "/camera/depth/image_raw" in out and "sensor_msgs/msg/Image" in out
+    assert "depth topic:    /camera/depth/image_raw" in out
+    assert "camera frame:   camera_optical" in out and "world frame:    world" in out
+    assert "hand topic:     /hand/pose" in out
+    # the tree: world -> base_link -> wrist -> camera_optical, indented by depth
+    assert "\n  world\n    base_link  (static)\n      wrist  (" in out
+    assert "        camera_optical  (static)" in out
+    # an override wins
+    res = run("info", path, "--json", "--world-frame", "base_link", "--color-topic", "/camera/depth/image_raw")
+    roles = json.loads(res.output)["roles"]
+    assert roles["world_frame"] == "base_link" and roles["color_topic"] == "/camera/depth/image_raw"
+
+
+def test_info_bad_input(tmp_path, shared_data):
+    empty = tmp_path / "empty.bag"
+    empty.write_bytes(b"")
+    one_line_error(run("info", empty), "empty.bag", "empty file", "expected")
+    text = tmp_path / "notes.bag"
+    text.write_text("not a bag\n")
+    one_line_error(run("info", text), "notes.bag", "not a recording")
+    src = shared_data("ros-recordings", "tf_example.bag")
+    trunc = tmp_path / "cut.bag"
+    trunc.write_bytes(src.read_bytes()[:20000])
+    one_line_error(run("info", trunc), "cut.bag", "truncated")
+    mcap = shared_data("ros-recordings", "nav2_turtlebot.mcap")
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(mcap.read_bytes()[: mcap.stat().st_size // 2])
+    one_line_error(run("info", cut), "cut.mcap", "truncated")
+    folder = tmp_path / "folder"
+    folder.mkdir()
+    one_line_error(run("info", folder), "folder", "metadata.yaml")
+    one_line_error(run("info", tmp_path / "missing.mcap"), "missing.mcap", "no such file")
+    ros2 = tmp_path / "ros2"
+    shutil.copytree(shared_data("ros-recordings", "tf_example"), ros2)
+    db = ros2 / "tf_example.db3"
+    db.chmod(0o644)
+    db.write_bytes(db.read_bytes()[:30000])
+    one_line_error(run("info", ros2), "ros2", "ROS 2 bag")
+    good = make_recording(tmp_path / "ok.bag", n=2)
+    line = one_line_error(run("info", good, "--depth-topic", "/camera/depth"), "ok.bag", "'/camera/depth' not found")
+    assert "/camera/depth/image_raw" in line  # lists what is there
