@@ -10,6 +10,9 @@ With `noise=True` the depth follows the Kinect v1 model of Nguyen, Izadi and Lov
   cannot see (occluded on the projector ray) has no depth — the dropouts on one side of every object;
 - edge dropouts: pixels next to a depth discontinuity are lost with probability `edge_dropout`;
 - grazing surfaces (theta > `max_incidence_deg`) are lost, plus iid random missing pixels (`missing_rate`);
+- disparity quantisation: the Kinect v1 measures disparity in 1/8 pixel steps of its 585 px IR camera, so depth
+  comes in steps of z^2 / (8 * 585 * baseline) (about 4 mm at 1.2 m, Khoshelham & Elberink 2012); the Gaussian part is
+  reduced so that noise + quantisation together keep the sigma_z above;
 - out of [min_range, max_range] is 0; depth is quantised to millimetres (what 16UC1 stores).
 
 Colour is the albedo of what each pixel sees (per object colour; wood stripes on the table, a checker on the floor)
@@ -71,7 +74,8 @@ class DepthSensor:
     def __init__(self, K: np.ndarray, width: int, height: int, min_range: float = 0.3, max_range: float = 4.0,
                  noise: bool = True, seed: int = 0, *, baseline: float = 0.075, lateral_px: float = 0.5,
                  edge_dropout: float = 0.5, missing_rate: float = 0.005, max_incidence_deg: float = 80.0,
-                 edge_jump: float = 0.03, color_noise: float = 2.0 / 255.0) -> None:
+                 edge_jump: float = 0.03, color_noise: float = 2.0 / 255.0,
+                 disparity_quantisation: bool = True, ir_focal: float = 585.0, subpixel: int = 8) -> None:
         K = np.asarray(K, dtype=np.float64)
         if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
             raise ConfigError(f"camera intrinsics: expected a 3x3 matrix with positive focal lengths, got {K.tolist()}")
@@ -91,6 +95,8 @@ class DepthSensor:
         self.max_incidence = np.deg2rad(float(max_incidence_deg))
         self.edge_jump = float(edge_jump)
         self.color_noise = float(color_noise)
+        self.disparity_quantisation = bool(disparity_quantisation)
+        self.bf = float(baseline) * float(ir_focal) * int(subpixel)  # depth = bf / (disparity in subpixel steps)
         self._rng = np.random.default_rng(self.seed)
         v, u = np.mgrid[0:self.height, 0:self.width]
         self._u = u.astype(np.float64)
@@ -151,9 +157,15 @@ class DepthSensor:
             idx = np.flatnonzero(ok.ravel())
             ok.ravel()[idx[occluded]] = False
 
-        # axial noise
+        # axial noise (+ disparity quantisation, which accounts for part of the model's variance)
         sigma = nguyen_axial_sigma(z, theta)
+        if self.disparity_quantisation and self.bf > 0:
+            step = z ** 2 / self.bf
+            sigma = np.sqrt(np.maximum(sigma ** 2 - step ** 2 / 12.0, 0.0))
         z = z + rng.normal(0.0, 1.0, z.shape) * sigma
+        if self.disparity_quantisation and self.bf > 0:
+            disp = np.maximum(np.round(self.bf / np.maximum(z, 1e-3)), 1.0)
+            z = np.where(ok, self.bf / disp, 0.0)
 
         # edge dropouts next to depth discontinuities (of the noise-free image)
         if self.edge_dropout > 0:

@@ -1,0 +1,400 @@
+"""The whole synthetic recording: initial scan, a person changes the table, views after the change.
+
+`make_scenario(seed, kind, ...)` builds everything in memory (scenes before/after, camera path and robot joint
+angles, hand trajectory, ground truth); frames are rendered on demand (`scenario.render(i)`, deterministic per frame).
+`write_recordings(scenario, [paths])` streams it into MCAP / ROS 1 bag / ROS 2 bag folders at once through
+`kinfu_cli.io.writers.RecordingWriter`; `write_ground_truth(scenario, folder)` writes the ground-truth files.
+
+Timeline (seconds after `t0_ns`): camera info, /tf_static at 0; scan frames at `frame_rate_hz` from 0.5 s; the hand
+trajectory starts 1 s after the last scan frame; the after-change views start 2 s after the hand left. /tf carries the
+arm's joint chain at 10 Hz and at every frame stamp (joint angles interpolated linearly between frames), so the camera
+pose at a frame stamp is exact.
+
+Topics: /camera/depth/image_raw (16UC1 mm) or /camera/depth/image_raw/compressedDepth (PNG, image_transport layout),
+/camera/color/image_raw (rgb8) or /camera/color/image_raw/compressed (jpeg/png), /camera/depth/camera_info, /tf,
+/tf_static, /hand/pose (geometry_msgs/PoseStamped in `world`). Depth and colour share the `camera_optical` frame.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from kinfu_cli.errors import ConfigError
+from kinfu_cli.io.trajectory import Trajectory
+from kinfu_cli.sim.hand import Action, HandChange, synth_hand_trajectory
+from kinfu_cli.sim.robot import CAMERA_FRAME, WORLD_FRAME, RobotArm, look_at
+from kinfu_cli.sim.scene import PALETTE, Scene, make_tabletop_scene, random_object
+from kinfu_cli.sim.sensor import DepthSensor, SensorFrame, kinect_v1_intrinsics
+
+KINDS = ("place", "remove", "pick-and-place")
+T0_NS = 1_767_225_600_000_000_000  # 2026-01-01T00:00:00Z: fixed, so recordings are reproducible
+
+DEPTH_TOPIC = "/camera/depth/image_raw"
+COLOR_TOPIC = "/camera/color/image_raw"
+INFO_TOPIC = "/camera/depth/camera_info"
+HAND_TOPIC = "/hand/pose"
+TF_RATE_HZ = 10.0
+
+
+@dataclass
+class CameraFrame:
+    """One depth+colour frame: index, stamp (ns), true camera-to-world pose, joint angles, phase (scan|after)."""
+
+    index: int
+    stamp_ns: int
+    T_world_camera: np.ndarray
+    q: np.ndarray
+    phase: str
+
+
+@dataclass
+class Scenario:
+    """A synthetic recording, in memory. `hand` has t in seconds after `t0_ns`; `changes` are the true scene
+    changes (object centres); `hand_changes` the wrist pauses that produced them."""
+
+    seed: int
+    kind: str
+    width: int
+    height: int
+    K: np.ndarray
+    sensor: DepthSensor
+    robot: RobotArm
+    scene_before: Scene
+    scene_after: Scene
+    frames: list[CameraFrame]
+    hand: Trajectory
+    hand_changes: list[HandChange]
+    changes: list[dict]
+    t0_ns: int = T0_NS
+    hand_rate_hz: float = 100.0
+    meta: dict = field(default_factory=dict)
+
+    @property
+    def end_ns(self) -> int:
+        return max(self.frames[-1].stamp_ns, self.t0_ns + int(round(self.hand.t[-1] * 1e9)))
+
+    def scene_for(self, frame: CameraFrame) -> Scene:
+        return self.scene_before if frame.phase == "scan" else self.scene_after
+
+    def render(self, i: int) -> SensorFrame:
+        """Frame i as the sensor sees it (noise seeded by the frame index, so any order gives the same images)."""
+        f = self.frames[i]
+        return self.sensor.render_frame(self.scene_for(f), f.T_world_camera, frame_seed=i)
+
+    def joint_angles_at(self, stamp_ns: np.ndarray) -> np.ndarray:
+        """Joint angles (N, 6) at the stamps, linear between frames, held before the first / after the last."""
+        ts = np.array([f.stamp_ns for f in self.frames], dtype=np.float64)
+        Q = np.array([f.q for f in self.frames])
+        s = np.asarray(stamp_ns, dtype=np.float64)
+        return np.stack([np.interp(s, ts, Q[:, j]) for j in range(Q.shape[1])], axis=1)
+
+
+def make_scenario(seed: int = 0, kind: str = "pick-and-place", width: int = 320, height: int = 240, frames: int = 36,
+                  n_objects: int = 4, noise: bool = True, hand_rate_hz: float = 100.0, frame_rate_hz: float = 5.0,
+                  after_fraction: float = 1 / 3) -> Scenario:
+    """Build a seeded scenario. kind: place | remove | pick-and-place. frames: total depth frames, `after_fraction`
+    of them after the change (at least 1 on each side)."""
+    if kind not in KINDS:
+        raise ConfigError(f"--scenario {kind!r}: expected one of {', '.join(KINDS)}")
+    if frames < 2:
+        raise ConfigError(f"--frames {frames}: expected at least 2 (scan and after the change)")
+    if width < 8 or height < 6 or width > 4096 or height > 4096:
+        raise ConfigError(f"--width/--height {width}x{height}: expected 8x6 to 4096x4096 pixels")
+    if not hand_rate_hz > 0 or not frame_rate_hz > 0:
+        raise ConfigError("--hand-rate and the frame rate must be positive")
+    if kind in ("remove", "pick-and-place") and n_objects < 1:
+        raise ConfigError(f"--scenario {kind} needs at least one object (--n-objects {n_objects})")
+    rng = np.random.default_rng([seed, 7])
+    scene = make_tabletop_scene(seed, n_objects)
+    table = scene.table
+    region = ((-0.42, 0.42), (-0.25, 0.25))  # where changes happen: well inside the table, seen by the arm
+
+    # ---- the change -----------------------------------------------------------------------------------
+    if kind == "place":
+        used = {o.shape for o in scene.objects}
+        shape = next((s for s in ("cone", "torus", "cylinder", "box", "sphere") if s not in used), "box")
+        used_c = [tuple(o.colour) for o in scene.objects]
+        colour = next((c for c in PALETTE if tuple(float(x) for x in c) not in used_c), PALETTE[0])
+        new = random_object(rng, f"obj{len(scene.objects) + 1}", shape, colour, table)
+        xy = scene.free_spot(rng, new.footprint_radius, region=region)
+        after = scene.with_change("placement", new, xy)
+        moved = [("placement", after.object(new.id))]
+    else:
+        candidates = [o for o in scene.objects if region[0][0] <= o.center[0] <= region[0][1]] or list(scene.objects)
+        obj = candidates[int(rng.integers(len(candidates)))]
+        if kind == "remove":
+            after = scene.with_change("removal", obj.id)
+            moved = [("removal", obj)]
+        else:
+            others = scene.with_change("removal", obj.id)
+            xy = others.free_spot(rng, obj.footprint_radius, region=region, avoid=obj.center[:2], min_dist=0.3)
+            after = scene.with_change("move", obj.id, position=xy)
+            moved = [("pick", obj), ("place", after.object(obj.id))]
+    hand_points = [_grasp_point(o) for _, o in moved]
+
+    # ---- camera path and arm --------------------------------------------------------------------------
+    robot = RobotArm()
+    n_after = max(1, int(round(frames * after_fraction)))
+    n_scan = frames - n_after
+    if n_scan < 1:
+        n_scan, n_after = 1, frames - 1
+    centre = np.array([table.center[0], table.center[1], table.top_z])
+    scan = [_reachable(robot, lambda r, k=k: _arc_pose(centre, k, n_scan, r, rng_for(seed, k), (20.0, 160.0),
+                                                         (42.0, 58.0)), 0.85) for k in range(n_scan)]
+    target = np.mean([o.center for _, o in moved], axis=0)
+    after_poses = [_reachable(robot, lambda r, k=k: _arc_pose(target, k, n_after, r, rng_for(seed, 1000 + k),
+                                                               (45.0, 135.0), (52.0, 64.0)), 0.7)
+                   for k in range(n_after)]
+    Q = robot.ik_path(scan + after_poses)
+
+    # ---- timeline ----------------------------------------------------------------------------------------
+    dt = 1.0 / frame_rate_hz
+    t_scan = 0.5 + dt * np.arange(n_scan)
+    hand_t0 = float(t_scan[-1] + 1.0)
+    traj, hand_changes = synth_hand_trajectory([Action(k, tuple(p)) for (k, _), p in zip(moved, hand_points)],
+                                               seed=seed, rate_hz=hand_rate_hz, table=table, t0=hand_t0)
+    t_after = traj.t[-1] + 2.0 + dt * np.arange(n_after)
+    stamps = np.concatenate([t_scan, t_after])
+    cam_frames = [CameraFrame(i, T0_NS + int(round(stamps[i] * 1e9)), T, Q[i], "scan" if i < n_scan else "after")
+                  for i, T in enumerate(scan + after_poses)]
+    # exact camera poses from the chain (the same numbers the TF tree yields)
+    for f in cam_frames:
+        f.T_world_camera = robot.fk(f.q)
+    traj = dataclasses.replace(traj, t0_ns=T0_NS, frame=WORLD_FRAME, source="kinfu synth hand")
+
+    changes = []
+    for (k, o), hc in zip(moved, hand_changes):
+        changes.append({"position": [float(c) for c in o.center], "kind": k, "time": float(hc.time),
+                        "stamp_ns": T0_NS + int(round(hc.time * 1e9)), "object": o.id,
+                        "hand_position": [float(c) for c in hc.position]})
+    K = kinect_v1_intrinsics(width, height)
+    sensor = DepthSensor(K, width, height, noise=noise, seed=seed)
+    return Scenario(seed, kind, width, height, K, sensor, robot, scene, after, cam_frames, traj, hand_changes,
+                    changes, T0_NS, hand_rate_hz,
+                    meta={"n_scan": n_scan, "n_after": n_after, "frame_rate_hz": frame_rate_hz, "noise": noise,
+                          "n_objects": n_objects})
+
+
+def rng_for(seed: int, k: int) -> np.random.Generator:
+    return np.random.default_rng([seed, 11, k])
+
+
+def _grasp_point(o) -> np.ndarray:
+    """Where the wrist is while grasping/releasing the object: above it, a little towards the person (-y)."""
+    h = o.size[2]
+    return np.array([o.center[0], o.center[1] - (0.5 * o.footprint_radius + 0.03), o.center[2] + 0.5 * h + 0.05])
+
+
+def _arc_pose(target: np.ndarray, k: int, n: int, radius: float, rng: np.random.Generator,
+              az_range: tuple[float, float], el_range: tuple[float, float]) -> np.ndarray:
+    s = k / max(n - 1, 1)
+    az = np.deg2rad(az_range[0] + (az_range[1] - az_range[0]) * s)
+    el = np.deg2rad(el_range[0] + (el_range[1] - el_range[0]) * (0.5 - 0.5 * np.cos(2 * np.pi * s)))
+    eye = target + radius * np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+    look = target + rng.normal(0.0, 0.02, 3) * np.array([1.0, 1.0, 0.5])
+    return look_at(eye, look)
+
+
+def _reachable(robot: RobotArm, pose_at_radius, radius: float) -> np.ndarray:
+    """The pose at `radius`, or closer in steps of 5 cm until the arm reaches it."""
+    r = radius
+    while True:
+        T = pose_at_radius(r)
+        try:
+            robot.ik(T)
+            return T
+        except ConfigError:
+            r -= 0.05
+            if r < 0.4:
+                raise
+
+
+# ---- writing -----------------------------------------------------------------------------------------------
+
+def write_recordings(scenario: Scenario, paths: list[str | os.PathLike], depth_format: str = "png",
+                     color_format: str = "jpeg", quiet: bool = True, compression: str | None = None,
+                     jpeg_quality: int = 75) -> list[Path]:
+    """Write the scenario into every path at once (container from the suffix: .mcap, .bag, else a ROS 2 folder).
+
+    depth_format: "png" (sensor_msgs/CompressedImage compressedDepth on .../compressedDepth) or "raw" (16UC1 Image).
+    color_format: "jpeg" or "png" (CompressedImage on .../compressed) or "raw" (rgb8 Image). Frames are rendered once.
+    compression: None or "zstd" (MCAP chunks, ROS 2 messages; bz2 chunks for .bag).
+    """
+    from contextlib import ExitStack
+
+    from kinfu_cli.io.writers import RecordingWriter
+    from kinfu_cli.progress import progress
+
+    if depth_format not in ("png", "raw"):
+        raise ConfigError(f"--depth-format {depth_format!r}: expected png or raw")
+    if not 1 <= int(jpeg_quality) <= 100:
+        raise ConfigError(f"--jpeg-quality {jpeg_quality}: expected 1..100")
+    if color_format not in ("jpeg", "png", "raw"):
+        raise ConfigError(f"--color-format {color_format!r}: expected jpeg, png or raw")
+    sc = scenario
+    events = _events(sc)
+    with ExitStack() as stack:
+        writers = [stack.enter_context(RecordingWriter(p, compression=_compression_for(p, compression)))
+                   for p in paths]
+        for ev in progress(events, total=len(events), desc="synth", quiet=quiet, unit="msg"):
+            stamp, what, arg = ev
+            if what == "static":
+                for w in writers:
+                    w.write_tf(stamp, sc.robot.static_transforms(), static=True)
+            elif what == "tf":
+                tfs = sc.robot.joint_transforms(arg)
+                for w in writers:
+                    w.write_tf(stamp, tfs)
+            elif what == "hand":
+                T = np.eye(4)
+                if sc.hand.rotations is not None:
+                    T[:3, :3] = sc.hand.rotations[arg]
+                T[:3, 3] = sc.hand.positions[arg]
+                for w in writers:
+                    w.write_pose(HAND_TOPIC, stamp, WORLD_FRAME, T)
+            elif what == "frame":
+                fr = sc.render(arg)
+                depth_mm = depth_to_mm(fr.depth)
+                for w in writers:
+                    w.write_camera_info(INFO_TOPIC, stamp, CAMERA_FRAME, sc.K, sc.width, sc.height)
+                    if depth_format == "png":
+                        w.write_compressed_depth(DEPTH_TOPIC + "/compressedDepth", stamp, CAMERA_FRAME, depth_mm)
+                    else:
+                        w.write_image(DEPTH_TOPIC, stamp, CAMERA_FRAME, depth_mm, "16UC1")
+                    if color_format == "raw":
+                        w.write_image(COLOR_TOPIC, stamp, CAMERA_FRAME, fr.color, "rgb8")
+                    else:
+                        w.write_compressed_image(COLOR_TOPIC + "/compressed", stamp, CAMERA_FRAME, fr.color,
+                                                 fmt=color_format, quality=jpeg_quality)
+    return [Path(p) for p in paths]
+
+
+def write_recording(scenario: Scenario, path: str | os.PathLike, **kwargs) -> Path:
+    """Write one container (see write_recordings)."""
+    return write_recordings(scenario, [path], **kwargs)[0]
+
+
+def _compression_for(path, compression: str | None) -> str | None:
+    if compression is None:
+        return None
+    suffix = Path(path).suffix.lower()
+    if suffix == ".bag":
+        return "bz2" if compression == "zstd" else compression
+    return compression
+
+
+def depth_to_mm(depth_m: np.ndarray) -> np.ndarray:
+    """float metres (0 invalid) -> uint16 millimetres (0 invalid), rounded."""
+    mm = np.round(np.asarray(depth_m, dtype=np.float64) * 1000.0)
+    return np.clip(mm, 0, 65535).astype(np.uint16)
+
+
+def _events(sc: Scenario) -> list[tuple[int, str, object]]:
+    """(stamp_ns, kind, argument) in time order: static TF, dynamic TF, hand poses, frames."""
+    order = {"static": 0, "tf": 1, "frame": 2, "hand": 3}
+    ev: list[tuple[int, str, object]] = [(sc.t0_ns, "static", None)]
+    frame_stamps = np.array([f.stamp_ns for f in sc.frames], dtype=np.int64)
+    grid = sc.t0_ns + np.arange(0.0, (sc.end_ns - sc.t0_ns) / 1e9 + 1e-9, 1.0 / TF_RATE_HZ) * 1e9
+    tf_stamps = np.unique(np.concatenate([grid.astype(np.int64), frame_stamps]))
+    Q = sc.joint_angles_at(tf_stamps)
+    for f in sc.frames:  # exact keyframe angles at frame stamps
+        Q[np.searchsorted(tf_stamps, f.stamp_ns)] = f.q
+    ev += [(int(s), "tf", q) for s, q in zip(tf_stamps, Q)]
+    ev += [(f.stamp_ns, "frame", f.index) for f in sc.frames]
+    hand_ns = sc.t0_ns + np.round(sc.hand.t * 1e9).astype(np.int64)
+    ev += [(int(s), "hand", i) for i, s in enumerate(hand_ns)]
+    ev.sort(key=lambda e: (e[0], order[e[1]]))
+    return ev
+
+
+def write_ground_truth(scenario: Scenario, folder: str | os.PathLike) -> Path:
+    """Write ground truth into `folder` (atomically, as a whole): scene_before.ply, scene_after.ply, objects/<id>.ply
+    + table.ply + floor.ply (after state), changes.json, camera_poses.txt, hand.traj (Polhemus format, 100 Hz)."""
+    from kinfu_cli.io.atomic import atomic_dir
+    from kinfu_cli.io.polhemus import write_polhemus
+    from kinfu_cli.sim.hand import resample
+
+    sc = scenario
+    with atomic_dir(folder) as tmp:
+        for name, scene in (("scene_before.ply", sc.scene_before), ("scene_after.ply", sc.scene_after)):
+            _write_mesh(tmp / name, scene.mesh())
+        (tmp / "objects").mkdir()
+        for o in sc.scene_after.present_objects:
+            m = o.mesh
+            m.paint_uniform_color(o.colour)
+            _write_mesh(tmp / "objects" / f"{o.id}.ply", m)
+        from kinfu_cli.sim.scene import FLOOR_COLOUR, TABLE_COLOUR
+
+        _write_mesh(tmp / "objects" / "table.ply", sc.scene_after.table.mesh().paint_uniform_color(TABLE_COLOUR))
+        _write_mesh(tmp / "objects" / "floor.ply", sc.scene_after.floor_mesh().paint_uniform_color(FLOOR_COLOUR))
+        (tmp / "changes.json").write_text(_json(ground_truth_json(sc)))
+        lines = ["# stamp_s (Unix seconds of the depth message) then the true T_world_camera, 16 numbers row-major"]
+        for f in sc.frames:
+            lines.append(f"{f.stamp_ns // 1_000_000_000}.{f.stamp_ns % 1_000_000_000:09d} "
+                         + " ".join(f"{v:.9f}" for v in f.T_world_camera.reshape(-1)))
+        (tmp / "camera_poses.txt").write_text("\n".join(lines) + "\n")
+        hand = sc.hand
+        if abs(sc.hand_rate_hz - 100.0) > 1e-9:
+            hand = resample(hand, 100.0)
+        write_polhemus(tmp / "hand.traj", hand)
+    return Path(folder)
+
+
+def ground_truth_json(sc: Scenario) -> dict:
+    before = {o.id: o for o in sc.scene_before.objects}
+    after = {o.id: o for o in sc.scene_after.objects}
+    objects = []
+    for oid in list(before) + [i for i in after if i not in before]:
+        b, a = before.get(oid), after.get(oid)
+        cur = a if a is not None else b
+        present_after = bool(a is not None and a.present)
+        d = {"id": oid, "shape": cur.shape,
+             "center": [float(c) for c in (cur.center if present_after or b is None else b.center)],
+             "size": [float(s) for s in cur.size], "params": dict(cur.params), "yaw": float(cur.yaw),
+             "colour": [float(c) for c in cur.colour], "label": sc.scene_after.label_of(oid),
+             "present_before": bool(b is not None and b.present), "present_after": present_after}
+        if b is not None and a is not None and b.center != a.center:
+            d["center_before"] = [float(c) for c in b.center]
+        objects.append(d)
+    return {
+        "changes": sc.changes,
+        "objects": objects,
+        "table": sc.scene_before.table.to_json(),
+        "camera": {"K": sc.K.tolist(), "width": sc.width, "height": sc.height, "frame": CAMERA_FRAME,
+                   "model": "kinect_v1 (fx = fy = 585 at 640x480)", "min_range": sc.sensor.min_range,
+                   "max_range": sc.sensor.max_range, "noise": sc.meta.get("noise", True)},
+        "seed": sc.seed,
+        "scenario": sc.kind,
+        "t0_ns": sc.t0_ns,
+        "frames": {"count": len(sc.frames), "scan": sc.meta.get("n_scan"), "after": sc.meta.get("n_after"),
+                   "rate_hz": sc.meta.get("frame_rate_hz"), "first_after": sc.meta.get("n_scan")},
+        "hand": {"topic": HAND_TOPIC, "frame": WORLD_FRAME, "rate_hz": sc.hand_rate_hz,
+                 "start_time": float(sc.hand.t[0]), "end_time": float(sc.hand.t[-1]),
+                 "traj_file": "hand.traj (100 Hz, t = start_time + i / 100)"},
+        "frames_tree": {"world_frame": WORLD_FRAME, "camera_frame": CAMERA_FRAME,
+                        "chain": ["world", "base_link", "link1", "link2", "link3", "link4", "link5", "link6",
+                                  "wrist", CAMERA_FRAME]},
+        "time_unit": "seconds after t0_ns (the recording starts at t0_ns)",
+    }
+
+
+def _json(obj) -> str:
+    import json
+
+    from kinfu_cli.io.atomic import _json_default
+
+    return json.dumps(obj, indent=2, default=_json_default) + "\n"
+
+
+def _write_mesh(path: Path, mesh) -> None:
+    import open3d as o3d
+
+    mesh.compute_vertex_normals()
+    if not o3d.io.write_triangle_mesh(str(path), mesh, write_ascii=False, compressed=False,
+                                      write_vertex_normals=False, print_progress=False):
+        raise ConfigError(f"{path}: could not write the mesh")

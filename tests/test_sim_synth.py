@@ -1,0 +1,140 @@
+"""The robot chain, the scenario and `kinfu synth`: files, determinism, round trip through every container."""
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from kinfu_cli.cli import cli
+from kinfu_cli.errors import ConfigError
+from kinfu_cli.sim.robot import RobotArm, look_at
+from kinfu_cli.sim.scenario import depth_to_mm, make_scenario
+
+SMALL = dict(width=64, height=48, frames=6)
+
+
+def test_robot_chain_reaches_the_scan_poses_exactly():
+    sc = make_scenario(3, "place", **SMALL)
+    robot = sc.robot
+    for f in sc.frames:
+        # composing the published transforms gives the camera pose
+        T = {}
+        for parent, child, M in robot.static_transforms() + robot.joint_transforms(f.q):
+            T[child] = (parent, M)
+        chain, frame = np.eye(4), "camera_optical"
+        while frame != "world":
+            parent, M = T[frame]
+            chain = M @ chain
+            frame = parent
+        assert np.abs(chain - f.T_world_camera).max() < 1e-12
+        assert np.abs(robot.fk(robot.ik(f.T_world_camera)) - f.T_world_camera).max() < 1e-9
+    with pytest.raises(ConfigError, match="out of the arm's reach"):
+        RobotArm().ik(look_at((3.0, -3.0, 2.0), (0.0, 0.0, 0.7)))
+
+
+@pytest.mark.parametrize("kind", ["place", "remove", "pick-and-place"])
+def test_scenarios_change_the_scene_where_the_hand_pauses(kind):
+    sc = make_scenario(1, kind, **SMALL)
+    n_changes = 2 if kind == "pick-and-place" else 1
+    assert len(sc.changes) == len(sc.hand_changes) == n_changes
+    before = {o.id: o for o in sc.scene_before.objects if o.present}
+    after = {o.id: o for o in sc.scene_after.objects if o.present}
+    if kind == "place":
+        assert len(after) == len(before) + 1
+    elif kind == "remove":
+        assert len(after) == len(before) - 1
+    else:
+        moved = [i for i in before if before[i].center != after[i].center]
+        assert len(moved) == 1 and np.linalg.norm(np.subtract(before[moved[0]].center, after[moved[0]].center)) > 0.3
+    for c, hc in zip(sc.changes, sc.hand_changes):
+        assert np.allclose(c["hand_position"], hc.position)
+        assert np.linalg.norm(np.subtract(c["hand_position"], c["position"])) < 0.2   # inside the POI radius
+        pause = (sc.hand.t >= hc.t_start) & (sc.hand.t <= hc.t_end)
+        assert np.linalg.norm(sc.hand.positions[pause] - hc.position, axis=1).max() < 0.02
+    scan = [f for f in sc.frames if f.phase == "scan"]
+    assert all(f.stamp_ns < sc.t0_ns + sc.hand.t[0] * 1e9 for f in scan)
+    assert all(f.stamp_ns > sc.t0_ns + sc.hand.t[-1] * 1e9 for f in sc.frames if f.phase == "after")
+    # the after-change views look at the change: its position projects inside the image
+    for f in sc.frames:
+        if f.phase == "after":
+            p = np.linalg.inv(f.T_world_camera) @ np.r_[np.mean([c["position"] for c in sc.changes], 0), 1.0]
+            u, v = (sc.K @ p[:3])[:2] / p[2]
+            assert p[2] > 0.3 and 0 <= u < sc.width and 0 <= v < sc.height
+
+
+def test_scenario_is_deterministic():
+    a, b = make_scenario(5, **SMALL), make_scenario(5, **SMALL)
+    for i in (0, len(a.frames) - 1):
+        fa, fb = a.render(i), b.render(i)
+        assert np.array_equal(fa.depth, fb.depth) and np.array_equal(fa.color, fb.color)
+    assert np.array_equal(a.hand.positions, b.hand.positions)
+    assert a.changes == b.changes
+
+
+def test_synth_writes_every_file_and_round_trips_through_each_container(tmp_path):
+    from kinfu_cli.io.frames import iter_frames
+    from kinfu_cli.io.hand import load_hand_trajectory
+    from kinfu_cli.io.polhemus import read_polhemus
+    from kinfu_cli.io.recording import open_recording
+
+    out = tmp_path / "synth"
+    res = CliRunner().invoke(cli, ["synth", "-o", str(out), "--width", "64", "--height", "48", "--frames", "6",
+                                   "--seed", "2", "--json", "-q"])
+    assert res.exit_code == 0, res.output
+    summary = json.loads(res.output)
+    gt = out / "ground_truth"
+    for name in ("recording.mcap", "recording.bag", "recording_ros2/metadata.yaml", "ground_truth/scene_before.ply",
+                 "ground_truth/scene_after.ply", "ground_truth/objects/table.ply", "ground_truth/changes.json",
+                 "ground_truth/camera_poses.txt", "ground_truth/hand.traj"):
+        assert (out / name).exists(), name
+    changes = json.loads((gt / "changes.json").read_text())
+    assert set(changes) >= {"changes", "objects", "table", "camera", "seed"} and changes["seed"] == 2
+    assert [c["kind"] for c in changes["changes"]] == ["pick", "place"]
+    for o in changes["objects"]:
+        assert (gt / "objects" / f"{o['id']}.ply").exists() == o["present_after"]
+    poses = np.loadtxt(gt / "camera_poses.txt")
+    assert poses.shape == (6, 17)
+    K = np.array(changes["camera"]["K"])
+
+    sc = make_scenario(2, "pick-and-place", **SMALL)   # the same scenario, rebuilt in memory
+    truth_mm = [depth_to_mm(sc.render(i).depth) for i in range(len(sc.frames))]
+    assert np.allclose(poses[:, 1:].reshape(-1, 4, 4), [f.T_world_camera for f in sc.frames], atol=1e-8)
+    for rec_path in summary["recordings"]:
+        with open_recording(rec_path) as rec:
+            frames = list(iter_frames(rec))
+        assert len(frames) == 6, rec_path
+        for f, row, mm in zip(frames, poses, truth_mm):
+            assert abs(f.stamp_ns / 1e9 - row[0]) < 1e-6
+            assert np.array_equal(np.round(f.depth * 1000).astype(np.uint16), mm), rec_path   # mm-exact
+            assert np.allclose(f.K, K, atol=1e-9)
+            assert np.abs(f.T_world_camera - row[1:].reshape(4, 4)).max() < 1e-8
+            assert f.color is not None and f.color.shape == (48, 64, 3)
+        hand = load_hand_trajectory(rec_path)
+        assert np.abs(hand.positions - sc.hand.positions).max() < 1e-9
+    traj = read_polhemus(gt / "hand.traj")
+    assert abs(traj.duration - sc.hand.duration) < 0.011
+    assert np.abs(traj.positions[0] - sc.hand.positions[0]).max() < 1e-5
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--formats", "mcap,zip"], "--formats"),
+    (["--frames", "1"], "--frames"),
+    (["--width", "4"], "--width"),
+    (["--n-objects", "40"], "--n-objects"),
+    (["--hand-rate", "0"], "--hand-rate"),
+])
+def test_bad_options_are_one_line_errors(tmp_path, args, message):
+    out = tmp_path / "o"
+    res = CliRunner().invoke(cli, ["synth", "-o", str(out), "-q"] + args)
+    assert res.exit_code == 2
+    assert res.output.strip().splitlines()[-1].startswith("kinfu: error: ") and message in res.output
+    assert "Traceback" not in res.output
+    assert not out.exists() or not any(out.iterdir())
+
+
+def test_output_that_is_a_file_is_an_error(tmp_path):
+    f = tmp_path / "file"
+    f.write_text("x")
+    res = CliRunner().invoke(cli, ["synth", "-o", str(f), "-q", "--frames", "2", "--width", "16", "--height", "12"])
+    assert res.exit_code == 2 and "is a file" in res.output and "Traceback" not in res.output
