@@ -151,6 +151,9 @@ class RecordingWriter:
                 for item in self._bag_dir.iterdir():  # bag files up into the folder that becomes `path`
                     os.replace(item, self._target / item.name)
                 self._bag_dir.rmdir()
+                umask = os.umask(0)
+                os.umask(umask)
+                self._target.chmod(0o777 & ~umask)  # mkdtemp made it 0700
         except BaseException as exc:
             try:
                 stack.__exit__(type(exc), exc, exc.__traceback__)
@@ -247,6 +250,17 @@ class RecordingWriter:
             header=self._header(topic, stamp_ns, frame_id),
             format=f"{enc}; {'png' if ext == '.png' else 'jpeg'} compressed {enc}",
             data=buf.reshape(-1).astype(np.uint8))
+        self._write(topic, "sensor_msgs/msg/CompressedImage", stamp_ns, msg)
+
+    def write_compressed_bytes(self, topic: str, stamp_ns: int, frame_id: str, data: bytes, fmt: str) -> None:
+        """sensor_msgs/CompressedImage from already-encoded jpeg/png bytes (no re-encoding, e.g. a data set's
+        own files). fmt: "jpeg" or "png"."""
+        fmt = "jpeg" if fmt.lower() in ("jpg", "jpeg") else fmt.lower()
+        if fmt not in ("jpeg", "png"):
+            raise ConfigError(f"{topic}: compressed format {fmt!r}: expected jpeg or png")
+        msg = self._type("sensor_msgs/msg/CompressedImage")(
+            header=self._header(topic, stamp_ns, frame_id), format=f"rgb8; {fmt} compressed bgr8",
+            data=np.frombuffer(bytes(data), dtype=np.uint8))
         self._write(topic, "sensor_msgs/msg/CompressedImage", stamp_ns, msg)
 
     def write_compressed_depth(self, topic: str, stamp_ns: int, frame_id: str, depth_uint16_mm: np.ndarray) -> None:

@@ -1,0 +1,318 @@
+"""RGB-D frame folders (7-Scenes / 3DMatch layout, TUM RGB-D layout) and their conversion into recordings.
+
+Layouts
+- 7-Scenes / 3DMatch: `frame-N.depth.png` (uint16 mm; 0 and 65535 = no measurement), `frame-N.color.png|jpg`,
+  `frame-N.pose.txt` (4x4 camera-to-world, metres), `camera-intrinsics.txt` or `intrinsics.K.txt` (3x3 K).
+  No stamps: frame N is at t = N / rate seconds (rate 30 Hz unless told).
+- TUM RGB-D: `depth.txt`, `rgb.txt` ("stamp path" lines), `groundtruth.txt` ("stamp tx ty tz qx qy qz qw",
+  camera-to-world). Depth PNGs hold 5000 units per metre; they are converted to millimetres (0.2 mm
+  rounding). K from an intrinsics file in the folder, the `intrinsics` argument, or the TUM camera named in
+  the folder name (freiburg1/2/3), else the TUM default 525/525/319.5/239.5.
+
+Recordings written by `import_folder` (names documented for users and tests):
+- `/camera/depth/image_raw` sensor_msgs/Image 16UC1 (mm), frame `camera_optical`
+- `/camera/depth/camera_info` sensor_msgs/CameraInfo (K, image size), frame `camera_optical`
+- `/camera/color/image_raw/compressed` sensor_msgs/CompressedImage with the data set's own jpeg/png bytes
+  (or `/camera/color/image_raw` rgb8 with color="raw"), frame `camera_optical` (colour of these data sets is
+  not registered to the depth camera: use it for texture only)
+- `/tf`: `world -> camera_optical` (T_world_camera), at each depth stamp (7-Scenes) or each ground-truth
+  sample around the frames (TUM). Rotations are projected onto the nearest rotation matrix (SVD): 7-Scenes
+  poses are orthonormal only to ~1e-4.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from kinfu_cli.errors import ConfigError, RecordingError
+
+WORLD_FRAME = "world"
+CAMERA_FRAME = "camera_optical"
+DEPTH_TOPIC = "/camera/depth/image_raw"
+INFO_TOPIC = "/camera/depth/camera_info"
+COLOR_TOPIC_RAW = "/camera/color/image_raw"
+COLOR_TOPIC_COMPRESSED = "/camera/color/image_raw/compressed"
+
+_FRAME_RE = re.compile(r"^frame-(\d+)\.depth\.png$")
+_INTRINSICS_FILES = ("camera-intrinsics.txt", "intrinsics.K.txt", "intrinsics.txt", "camera_intrinsics.txt")
+_TUM_K = {"freiburg1": (517.3, 516.5, 318.6, 255.3), "freiburg2": (520.9, 521.0, 325.1, 249.7),
+          "freiburg3": (535.4, 539.2, 320.1, 247.6)}
+_TUM_DEFAULT_K = (525.0, 525.0, 319.5, 239.5)
+
+
+@dataclass
+class FolderFrame:
+    """One frame of a folder: its number, stamp, files, and pose (None when the folder has none)."""
+
+    number: int
+    stamp_ns: int
+    depth_path: Path
+    color_path: Path | None
+    T_world_camera: np.ndarray | None
+
+
+@dataclass
+class RGBDFolder:
+    path: Path
+    layout: str  # "7scenes" or "tum"
+    frames: list[FolderFrame]
+    K: np.ndarray
+    depth_units_per_m: float  # 1000 (mm) or 5000 (TUM)
+    k_source: str
+    gt_stamps_ns: np.ndarray | None = None  # TUM ground truth, all samples
+    gt_poses: np.ndarray | None = None
+    notes: list[str] = field(default_factory=list)
+
+
+def nearest_rotation(R: np.ndarray) -> np.ndarray:
+    """The rotation matrix closest to R (Frobenius norm), by SVD."""
+    U, _, Vt = np.linalg.svd(R)
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
+    return U @ D @ Vt
+
+
+def _read_matrix(path: Path, shape: tuple[int, int], what: str) -> np.ndarray:
+    try:
+        M = np.loadtxt(path, dtype=np.float64, ndmin=2)
+    except (OSError, ValueError) as exc:
+        raise RecordingError(f"{path}: cannot read the {what} ({exc})") from None
+    if M.size != shape[0] * shape[1]:
+        raise RecordingError(f"{path}: {what} has {M.size} numbers, expected a {shape[0]}x{shape[1]} matrix")
+    return M.reshape(shape)
+
+
+def _read_K(folder: Path, intrinsics: tuple[float, float, float, float] | None) -> tuple[np.ndarray | None, str]:
+    if intrinsics is not None:
+        fx, fy, cx, cy = intrinsics
+        return np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]]), "--intrinsics"
+    for name in _INTRINSICS_FILES:
+        p = folder / name
+        if p.is_file():
+            K = _read_matrix(p, (3, 3), "intrinsics")
+            if K[0, 0] <= 0 or K[1, 1] <= 0:
+                raise RecordingError(f"{p}: intrinsics have no positive focal lengths")
+            return K, name
+    return None, ""
+
+
+def parse_intrinsics(text: str | None) -> tuple[float, float, float, float] | None:
+    """'fx,fy,cx,cy' -> tuple (ConfigError naming --intrinsics otherwise)."""
+    if text is None:
+        return None
+    try:
+        vals = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        vals = ()
+    if len(vals) != 4 or vals[0] <= 0 or vals[1] <= 0:
+        raise ConfigError(f"--intrinsics {text!r}: expected fx,fy,cx,cy with positive focal lengths")
+    return vals  # type: ignore[return-value]
+
+
+def parse_frames(text: str | None, n: int) -> slice:
+    """--frames: 'N' (first N), 'A:B' or 'A:B:S' (positions in the sorted frame list)."""
+    if text is None:
+        return slice(None)
+    try:
+        parts = [int(p) if p.strip() else None for p in text.split(":")]
+    except ValueError:
+        parts = []
+    if len(parts) == 1 and parts[0] is not None and parts[0] > 0:
+        return slice(0, parts[0])
+    if 2 <= len(parts) <= 3 and (len(parts) < 3 or parts[2] is None or parts[2] > 0):
+        return slice(*parts)
+    raise ConfigError(f"--frames {text!r}: expected N (first N frames), A:B or A:B:STEP")
+
+
+def scan_folder(path: str | os.PathLike, rate: float = 30.0,
+                intrinsics: tuple[float, float, float, float] | None = None) -> RGBDFolder:
+    """Find the layout, frames, intrinsics and poses of an RGB-D folder (RecordingError when none fits)."""
+    folder = Path(path)
+    if not folder.is_dir():
+        raise RecordingError(f"{folder}: not a folder, expected an RGB-D frame folder (7-Scenes or TUM layout)")
+    if rate <= 0:
+        raise ConfigError(f"--rate {rate}: expected a positive frame rate in Hz")
+    if (folder / "depth.txt").is_file():
+        return _scan_tum(folder, intrinsics)
+    depth_files = sorted((int(m.group(1)), p) for p in folder.iterdir() if (m := _FRAME_RE.match(p.name)))
+    if not depth_files:
+        raise RecordingError(f"{folder}: no frame-N.depth.png files and no depth.txt, expected a 7-Scenes/3DMatch "
+                             f"or TUM RGB-D folder")
+    K, k_source = _read_K(folder, intrinsics)
+    if K is None:
+        raise RecordingError(f"{folder}: no camera-intrinsics.txt or intrinsics.K.txt (3x3 K); give --intrinsics "
+                             f"fx,fy,cx,cy")
+    frames = []
+    notes = []
+    bad_poses = 0
+    for number, depth_path in depth_files:
+        stem = depth_path.name[: -len(".depth.png")]
+        color = next((folder / f"{stem}.color.{ext}" for ext in ("png", "jpg", "jpeg")
+                      if (folder / f"{stem}.color.{ext}").is_file()), None)
+        pose_path = folder / f"{stem}.pose.txt"
+        T = None
+        if pose_path.is_file():
+            T = _read_matrix(pose_path, (4, 4), "pose")
+            if not np.all(np.isfinite(T)):
+                T, bad_poses = None, bad_poses + 1
+        frames.append(FolderFrame(number, int(round(number / rate * 1e9)), depth_path, color, T))
+    if bad_poses:
+        notes.append(f"{bad_poses} frames have non-finite poses (no TF written for them)")
+    return RGBDFolder(folder, "7scenes", frames, K, 1000.0, k_source, notes=notes)
+
+
+def _read_list(path: Path, ncols: int) -> list[list[str]]:
+    rows = []
+    for i, line in enumerate(path.read_text().splitlines(), 1):
+        line = line.strip()
+        if not line or line.startswith("#"):
+            continue
+        parts = line.split()
+        if len(parts) < ncols:
+            raise RecordingError(f"{path}:{i}: expected {ncols} columns, got {len(parts)}")
+        rows.append(parts)
+    return rows
+
+
+def _stamp_ns(text: str, where: str) -> int:
+    try:
+        sec, _, frac = text.partition(".")
+        return int(sec) * 1_000_000_000 + int((frac + "000000000")[:9])
+    except ValueError:
+        raise RecordingError(f"{where}: timestamp {text!r} is not a number") from None
+
+
+def _scan_tum(folder: Path, intrinsics) -> RGBDFolder:
+    from kinfu_cli.io.messages import quats_to_matrices
+
+    depth_rows = _read_list(folder / "depth.txt", 2)
+    if not depth_rows:
+        raise RecordingError(f"{folder / 'depth.txt'}: no frames listed")
+    rgb = []
+    if (folder / "rgb.txt").is_file():
+        rgb = [(_stamp_ns(r[0], str(folder / "rgb.txt")), folder / r[1]) for r in _read_list(folder / "rgb.txt", 2)]
+    rgb_st = np.array([s for s, _ in rgb], dtype=np.int64)
+    gt_st = gt_T = None
+    if (folder / "groundtruth.txt").is_file():
+        rows = _read_list(folder / "groundtruth.txt", 8)
+        try:
+            vals = np.array([[float(v) for v in r[1:8]] for r in rows], dtype=np.float64)
+        except ValueError:
+            raise RecordingError(f"{folder / 'groundtruth.txt'}: expected 'stamp tx ty tz qx qy qz qw' numbers") from None
+        gt_st = np.array([_stamp_ns(r[0], str(folder / "groundtruth.txt")) for r in rows], dtype=np.int64)
+        order = np.argsort(gt_st, kind="stable")
+        gt_st, vals = gt_st[order], vals[order]
+        gt_T = np.tile(np.eye(4), (len(rows), 1, 1))
+        gt_T[:, :3, :3] = quats_to_matrices(vals[:, 3:7])
+        gt_T[:, :3, 3] = vals[:, :3]
+    K, k_source = _read_K(folder, intrinsics)
+    if K is None:
+        name = next((k for k in _TUM_K if k in str(folder.resolve()).lower()), None)
+        fx, fy, cx, cy = _TUM_K[name] if name else _TUM_DEFAULT_K
+        K = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]])
+        k_source = f"TUM {name} calibration" if name else "TUM default (525, 525, 319.5, 239.5)"
+    frames = []
+    for i, row in enumerate(depth_rows):
+        s = _stamp_ns(row[0], str(folder / "depth.txt"))
+        color = None
+        if rgb_st.size:
+            j = int(np.argmin(np.abs(rgb_st - s)))
+            color = rgb[j][1]
+        frames.append(FolderFrame(i, s, folder / row[1], color, None))
+    return RGBDFolder(folder, "tum", frames, K, 5000.0, k_source, gt_st, gt_T,
+                      notes=["TUM depth (1/5000 m) converted to millimetres"])
+
+
+def read_depth_mm(frame: FolderFrame, units_per_m: float) -> np.ndarray:
+    """The frame's depth PNG as uint16 millimetres (unchanged for mm data; rounded for TUM's 1/5000 m)."""
+    img = cv2.imread(str(frame.depth_path), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise RecordingError(f"{frame.depth_path}: cannot read the depth image (missing or not a PNG)")
+    if img.ndim != 2 or img.dtype != np.uint16:
+        raise RecordingError(f"{frame.depth_path}: depth must be a single-channel 16-bit PNG, got {img.dtype} "
+                             f"with shape {img.shape}")
+    if units_per_m == 1000.0:
+        return img
+    mm = np.rint(img.astype(np.float64) * (1000.0 / units_per_m))
+    return np.clip(mm, 0, 65535).astype(np.uint16)
+
+
+def import_folder(src: str | os.PathLike, out: str | os.PathLike, rate: float = 30.0, frames: str | None = None,
+                  color: str = "compressed", intrinsics: str | None = None, fmt: str | None = None,
+                  compress: bool = True, quiet: bool = True) -> dict:
+    """Convert an RGB-D folder into a recording at `out` (.mcap, .bag, or a ROS 2 bag folder); return a summary."""
+    from kinfu_cli.io.writers import RecordingWriter, format_for
+    from kinfu_cli.progress import progress
+
+    if color not in ("compressed", "raw", "none"):
+        raise ConfigError(f"--color {color!r}: expected compressed, raw or none")
+    folder = scan_folder(src, rate=rate, intrinsics=parse_intrinsics(intrinsics))
+    chosen = folder.frames[parse_frames(frames, len(folder.frames))]
+    if not chosen:
+        raise ConfigError(f"--frames {frames!r}: selects none of the {len(folder.frames)} frames of {folder.path}")
+    out = Path(out)
+    kind = format_for(out, fmt)
+    compression = ({"mcap": "zstd", "bag": "lz4", "ros2": None}[kind]) if compress else None
+    first = cv2.imread(str(chosen[0].depth_path), cv2.IMREAD_UNCHANGED)
+    if first is None:
+        raise RecordingError(f"{chosen[0].depth_path}: cannot read the depth image")
+    height, width = first.shape[:2]
+
+    # TF samples: each frame's pose (7-Scenes), or ground truth around the chosen frames (TUM)
+    tf_samples: list[tuple[int, np.ndarray]] = []
+    if folder.layout == "7scenes":
+        tf_samples = [(f.stamp_ns, f.T_world_camera) for f in chosen if f.T_world_camera is not None]
+    elif folder.gt_stamps_ns is not None:
+        lo, hi = chosen[0].stamp_ns - 100_000_000, chosen[-1].stamp_ns + 100_000_000
+        sel = np.flatnonzero((folder.gt_stamps_ns >= lo) & (folder.gt_stamps_ns <= hi))
+        tf_samples = [(int(folder.gt_stamps_ns[i]), folder.gt_poses[i]) for i in sel]
+    ortho = 0.0
+    fixed = []
+    for s, T in tf_samples:
+        T = T.copy()
+        ortho = max(ortho, float(np.abs(T[:3, :3] @ T[:3, :3].T - np.eye(3)).max()))
+        T[:3, :3] = nearest_rotation(T[:3, :3])
+        fixed.append((s, T))
+
+    events: list[tuple[int, int, object]] = [(s, 0, T) for s, T in fixed]
+    events += [(f.stamp_ns, 1, f) for f in chosen]
+    events.sort(key=lambda e: (e[0], e[1]))
+    color_topic = {"compressed": COLOR_TOPIC_COMPRESSED, "raw": COLOR_TOPIC_RAW, "none": None}[color]
+    n_color = 0
+    with RecordingWriter(out, fmt=kind, compression=compression) as w:
+        for stamp, kind_i, item in progress(events, total=len(events), desc="import", quiet=quiet):
+            if kind_i == 0:
+                w.write_tf(stamp, [(WORLD_FRAME, CAMERA_FRAME, item)])
+                continue
+            f: FolderFrame = item
+            depth = read_depth_mm(f, folder.depth_units_per_m)
+            if depth.shape != (height, width):
+                raise RecordingError(f"{f.depth_path}: depth is {depth.shape[1]}x{depth.shape[0]}, the first "
+                                     f"frame was {width}x{height}")
+            w.write_image(DEPTH_TOPIC, stamp, CAMERA_FRAME, depth, "16UC1")
+            w.write_camera_info(INFO_TOPIC, stamp, CAMERA_FRAME, folder.K, width, height)
+            if color_topic and f.color_path is not None:
+                if color == "compressed":
+                    ext = f.color_path.suffix.lower().lstrip(".")
+                    w.write_compressed_bytes(color_topic, stamp, CAMERA_FRAME, f.color_path.read_bytes(), ext)
+                else:
+                    bgr = cv2.imread(str(f.color_path), cv2.IMREAD_COLOR)
+                    if bgr is None:
+                        raise RecordingError(f"{f.color_path}: cannot read the colour image")
+                    w.write_image(color_topic, stamp, CAMERA_FRAME, cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), "rgb8")
+                n_color += 1
+    return {
+        "source": str(folder.path), "layout": folder.layout, "output": str(out), "format": kind,
+        "frames": len(chosen), "frames_in_folder": len(folder.frames), "color_frames": n_color,
+        "tf_samples": len(fixed), "width": width, "height": height, "K": folder.K.tolist(),
+        "K_source": folder.k_source, "max_rotation_orthonormality_error": ortho,
+        "first_stamp_ns": chosen[0].stamp_ns, "last_stamp_ns": chosen[-1].stamp_ns,
+        "topics": {"depth": DEPTH_TOPIC, "camera_info": INFO_TOPIC, "color": color_topic if n_color else None,
+                   "tf": f"/tf {WORLD_FRAME} -> {CAMERA_FRAME}"},
+        "notes": folder.notes,
+    }
