@@ -138,3 +138,40 @@ def test_output_that_is_a_file_is_an_error(tmp_path):
     f.write_text("x")
     res = CliRunner().invoke(cli, ["synth", "-o", str(f), "-q", "--frames", "2", "--width", "16", "--height", "12"])
     assert res.exit_code == 2 and "is a file" in res.output and "Traceback" not in res.output
+
+
+def test_committed_sample_data_is_what_the_generator_makes(sample_dir):
+    """sample_data/tabletop is reproducible from its README command (same ground truth, mm-exact depth)."""
+    from kinfu_cli.io.frames import iter_frames
+    from kinfu_cli.io.recording import open_recording
+    from kinfu_cli.sim.scenario import load_ground_truth
+
+    gt = load_ground_truth(sample_dir)
+    info = gt.info
+    sc = make_scenario(info["seed"], info["scenario"], width=gt.width, height=gt.height,
+                       frames=info["frames"]["count"])
+    assert np.allclose(gt.poses, [f.T_world_camera for f in sc.frames], atol=1e-8)
+    assert np.allclose(gt.change_positions, [c["position"] for c in sc.changes])
+    assert 5e6 > (sample_dir / "recording.mcap").stat().st_size
+    check = {0, info["frames"]["scan"], info["frames"]["count"] - 1}
+    with open_recording(sample_dir / "recording.mcap") as rec:
+        for f in iter_frames(rec):
+            if f.index in check:
+                assert np.array_equal(np.round(f.depth * 1000).astype(np.uint16), depth_to_mm(sc.render(f.index).depth))
+                check.discard(f.index)
+    assert not check
+    hand = gt.hand()
+    assert abs(hand.t[0] - sc.hand.t[0]) < 1e-9 and np.abs(hand.positions[0] - sc.hand.positions[0]).max() < 1e-5
+    after = gt.mesh("after")
+    assert len(after.triangles) > 1000 and set(gt.object_meshes()) >= {"table", "floor"}
+
+
+def test_load_ground_truth_errors(tmp_path):
+    from kinfu_cli.errors import RecordingError
+    from kinfu_cli.sim.scenario import load_ground_truth
+
+    with pytest.raises(RecordingError, match="no changes.json"):
+        load_ground_truth(tmp_path)
+    (tmp_path / "changes.json").write_text("{}")
+    with pytest.raises(RecordingError, match="not a kinfu synth changes.json"):
+        load_ground_truth(tmp_path)

@@ -398,3 +398,109 @@ def _write_mesh(path: Path, mesh) -> None:
     if not o3d.io.write_triangle_mesh(str(path), mesh, write_ascii=False, compressed=False,
                                       write_vertex_normals=False, print_progress=False):
         raise ConfigError(f"{path}: could not write the mesh")
+
+
+# ---- reading ground truth back ---------------------------------------------------------------------------------
+
+@dataclass
+class GroundTruth:
+    """A `kinfu synth` ground_truth/ folder, read back. Meshes are loaded on demand.
+
+    changes/objects/table/camera: as in changes.json; K (3,3), width, height; stamps_ns (N,) and poses (N,4,4) from
+    camera_poses.txt (true camera-to-world); info: the whole changes.json.
+    """
+
+    folder: Path
+    info: dict
+    K: np.ndarray
+    width: int
+    height: int
+    stamps_ns: np.ndarray
+    poses: np.ndarray
+
+    @property
+    def changes(self) -> list[dict]:
+        return self.info["changes"]
+
+    @property
+    def objects(self) -> list[dict]:
+        return self.info["objects"]
+
+    @property
+    def change_positions(self) -> np.ndarray:
+        """(M, 3) true change positions (object centres)."""
+        return np.array([c["position"] for c in self.changes], dtype=float).reshape(-1, 3)
+
+    def mesh(self, state: str = "after"):
+        """The true scene mesh, state "before" or "after" (open3d TriangleMesh with vertex colours)."""
+        if state not in ("before", "after"):
+            raise ConfigError(f"ground-truth state {state!r}: expected before or after")
+        return _read_mesh(self.folder / f"scene_{state}.ply")
+
+    def object_meshes(self) -> dict:
+        """{id: TriangleMesh} of the after state, including "table" and "floor"."""
+        return {p.stem: _read_mesh(p) for p in sorted((self.folder / "objects").glob("*.ply"))}
+
+    def hand(self) -> Trajectory:
+        """The hand trajectory from hand.traj, in `world`, t in seconds after t0_ns (as on /hand/pose)."""
+        from kinfu_cli.io.polhemus import read_polhemus
+
+        tr = read_polhemus(self.folder / "hand.traj")
+        start = float(self.info.get("hand", {}).get("start_time", 0.0))
+        return Trajectory(tr.t + start, tr.positions, tr.rotations, frame=WORLD_FRAME, source=str(tr.source),
+                          t0_ns=int(self.info.get("t0_ns", 0)), meta=dict(tr.meta))
+
+
+def load_ground_truth(folder: str | os.PathLike) -> GroundTruth:
+    """Read a ground_truth/ folder written by `kinfu synth` (or the recording folder holding it)."""
+    import json
+
+    from kinfu_cli.errors import RecordingError
+
+    folder = Path(folder)
+    if (folder / "ground_truth" / "changes.json").exists():
+        folder = folder / "ground_truth"
+    path = folder / "changes.json"
+    if not path.exists():
+        raise RecordingError(f"{folder}: no changes.json (expected a `kinfu synth` ground_truth folder)")
+    try:
+        info = json.loads(path.read_text())
+        cam = info["camera"]
+        K = np.asarray(cam["K"], dtype=float).reshape(3, 3)
+        width, height = int(cam["width"]), int(cam["height"])
+        for c in info["changes"]:
+            if np.asarray(c["position"], dtype=float).shape != (3,):
+                raise ValueError("a change position is not [x, y, z]")
+    except (ValueError, KeyError, TypeError) as exc:
+        raise RecordingError(f"{path}: not a kinfu synth changes.json ({exc})") from None
+    poses_path = folder / "camera_poses.txt"
+    if not poses_path.exists():
+        raise RecordingError(f"{folder}: no camera_poses.txt (expected a `kinfu synth` ground_truth folder)")
+    stamps, poses = [], []
+    for lineno, line in enumerate(poses_path.read_text().splitlines(), start=1):
+        if not line.strip() or line.lstrip().startswith("#"):
+            continue
+        parts = line.split()
+        try:
+            sec, _, frac = parts[0].partition(".")
+            stamp = int(sec) * 1_000_000_000 + int((frac + "000000000")[:9])
+            T = np.array([float(v) for v in parts[1:]]).reshape(4, 4)
+        except ValueError:
+            raise RecordingError(f"{poses_path}: line {lineno} is not 'stamp_s' and 16 numbers") from None
+        stamps.append(stamp)
+        poses.append(T)
+    return GroundTruth(folder, info, K, width, height, np.array(stamps, dtype=np.int64),
+                       np.array(poses, dtype=float).reshape(-1, 4, 4))
+
+
+def _read_mesh(path: Path):
+    import open3d as o3d
+
+    from kinfu_cli.errors import RecordingError
+
+    if not path.exists():
+        raise RecordingError(f"{path}: missing ground-truth mesh")
+    mesh = o3d.io.read_triangle_mesh(str(path))
+    if len(mesh.triangles) == 0:
+        raise RecordingError(f"{path}: not a triangle mesh (no triangles)")
+    return mesh
