@@ -175,3 +175,29 @@ def test_load_ground_truth_errors(tmp_path):
     (tmp_path / "changes.json").write_text("{}")
     with pytest.raises(RecordingError, match="not a kinfu synth changes.json"):
         load_ground_truth(tmp_path)
+
+
+def test_raw_images_and_30_hz_hand(tmp_path):
+    from kinfu_cli.io.frames import iter_frames
+    from kinfu_cli.io.hand import load_hand_trajectory
+    from kinfu_cli.io.polhemus import read_polhemus
+    from kinfu_cli.io.recording import open_recording
+
+    out = tmp_path / "raw"
+    res = CliRunner().invoke(cli, ["synth", "-o", str(out), "--formats", "bag", "--depth-format", "raw",
+                                   "--color-format", "raw", "--hand-rate", "30", "--scenario", "place",
+                                   "--width", "32", "--height", "24", "--frames", "3", "--seed", "4", "-q"])
+    assert res.exit_code == 0, res.output
+    assert not (out / "recording.mcap").exists() and (out / "recording.bag").exists()
+    sc = make_scenario(4, "place", width=32, height=24, frames=3, hand_rate_hz=30)
+    with open_recording(out / "recording.bag") as rec:
+        assert rec.topics["/camera/depth/image_raw"].count == 3
+        frames = list(iter_frames(rec))
+    for f in frames:
+        ref = sc.render(f.index)
+        assert np.array_equal(f.color, ref.color)                        # rgb8 is lossless
+        assert np.array_equal(np.round(f.depth * 1000).astype(np.uint16), depth_to_mm(ref.depth))
+    hand = load_hand_trajectory(out / "recording.bag")
+    assert np.allclose(np.diff(hand.t), 1 / 30, atol=1e-6)
+    traj = read_polhemus(out / "ground_truth" / "hand.traj")           # the .traj file is always 100 Hz
+    assert abs(len(traj) - (sc.hand.duration * 100 + 1)) <= 1
