@@ -85,3 +85,21 @@ def test_bad_actions_are_config_errors():
         synth_hand_trajectory([(0.0, 1.0)])
     with pytest.raises(ConfigError, match="rate"):
         synth_hand_trajectory([(0.0, 0.0, 0.8)], rate_hz=0)
+
+
+def test_random_tasks_on_a_large_table():
+    from kinfu_cli.sim.hand import random_task
+
+    table = Table(size=(2.0, 1.4), top_z=1.2)   # the Polhemus data set's table
+    for seed in range(5):
+        acts = random_task("pick-and-place", seed, table=table)
+        assert [a.kind for a in acts] == ["pick", "place"]
+        a, b = (np.asarray(x.position) for x in acts)
+        assert np.linalg.norm(a[:2] - b[:2]) >= 0.3 and table.contains_xy(np.stack([a[:2], b[:2]])).all()
+        assert 1.25 <= a[2] <= 1.4
+        traj, changes = synth_hand_trajectory(acts, seed=seed, table=table, noise_std=0.002)
+        assert [c.kind for c in changes] == ["pick", "place"]
+        assert not table.contains_xy(traj.positions[0, :2])
+    assert random_task("removal", 1) != random_task("removal", 2)
+    with pytest.raises(ConfigError, match="task kind"):
+        random_task("juggle")

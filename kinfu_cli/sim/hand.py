@@ -62,6 +62,30 @@ def pick_and_place(a: Sequence[float], b: Sequence[float]) -> list[Action]:
     return [Action("pick", tuple(float(x) for x in a)), Action("place", tuple(float(x) for x in b))]
 
 
+def random_task(kind: str, seed: int = 0, table: Table | None = None, min_separation: float = 0.3,
+                hand_height: tuple[float, float] = (0.05, 0.2)) -> list[Action]:
+    """Random action locations for one task on the table: kind "placement", "removal" (one action) or
+    "pick-and-place" (pick and place at least `min_separation` apart), the wrist `hand_height` above the top."""
+    table = table or Table()
+    rng = np.random.default_rng([seed, 3])
+    half = np.asarray(table.size) / 2 - 0.1
+
+    def spot() -> np.ndarray:
+        xy = np.asarray(table.center) + rng.uniform(-half, half)
+        return np.array([xy[0], xy[1], table.top_z + rng.uniform(*hand_height)])
+
+    if kind in ("placement", "removal"):
+        return [Action(kind, tuple(spot()))]
+    if kind == "pick-and-place":
+        a = spot()
+        for _ in range(1000):
+            b = spot()
+            if np.linalg.norm(b[:2] - a[:2]) >= min_separation:
+                return pick_and_place(a, b)
+        raise ConfigError(f"table {table.size} too small for a pick-and-place {min_separation} m apart")
+    raise ConfigError(f"task kind {kind!r}: expected placement, removal or pick-and-place")
+
+
 def min_jerk(tau: np.ndarray) -> np.ndarray:
     """Minimum-jerk profile s(tau) = 10 tau^3 - 15 tau^4 + 6 tau^5 for tau in [0, 1]."""
     tau = np.clip(tau, 0.0, 1.0)
