@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import shutil
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 from test_io_frames import make_recording
@@ -99,3 +100,48 @@ def test_info_bad_input(tmp_path, shared_data):
     good = make_recording(tmp_path / "ok.bag", n=2)
     line = one_line_error(run("info", good, "--depth-topic", "/camera/depth"), "ok.bag", "'/camera/depth' not found")
     assert "/camera/depth/image_raw" in line  # lists what is there
+
+
+def test_export_then_import_round_trip(tmp_path, sample_dir):
+    out = tmp_path / "frames"
+    res = run("export", sample_dir / "recording.bag", "-o", out, "--json", "-q")
+    assert res.exit_code == 0, res.output
+    s = json.loads(res.output)
+    assert s["frames"] == 36 and s["stats"]["dropped_total"] == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["frames"]
+    res = run("import", out, "-o", tmp_path / "again.mcap", "--rate", "5", "-q")
+    assert res.exit_code == 0, res.output
+    from kinfu_cli.io.frames import iter_frames
+    from kinfu_cli.io.recording import open_recording
+
+    with open_recording(sample_dir / "recording.bag") as a, open_recording(tmp_path / "again.mcap") as b:
+        fa, fb = list(iter_frames(a)), list(iter_frames(b))
+    assert len(fa) == len(fb) == 36
+    for x, y in zip(fa, fb):
+        np.testing.assert_array_equal(x.depth, y.depth)  # mm survive float32 metres -> PNG -> recording
+        np.testing.assert_array_equal(x.color, y.color)
+        np.testing.assert_array_equal(x.K, y.K)
+        np.testing.assert_allclose(x.T_world_camera, y.T_world_camera, atol=1e-12)
+
+
+def test_frame_errors_through_the_cli(tmp_path, shared_data):
+    good = make_recording(tmp_path / "good.mcap", n=2)
+    out = tmp_path / "out"
+    one_line_error(run("export", good, "-o", out, "--depth-topic", "/camera/depth/missing"),
+                   "good.mcap", "depth topic '/camera/depth/missing' not found", "/camera/depth/image_raw")
+    one_line_error(run("export", shared_data("ros-recordings", "tf_example.bag"), "-o", out),
+                   "tf_example.bag", "no depth image topic found", "--depth-topic")
+    one_line_error(run("export", make_recording(tmp_path / "enc.bag", n=2, depth_encoding="mono8"), "-o", out,
+                       "--depth-topic", "/camera/depth/image_raw"),
+                   "/camera/depth/image_raw", "depth encoding 'mono8' is not supported")
+    one_line_error(run("export", good, "-o", out, "--camera-frame", "camera_ir"),
+                   "camera_ir", "world", "not in the TF tree")
+    one_line_error(run("export", good, "-o", out, "--world-frame", "map"), "map", "camera_optical")
+    one_line_error(run("export", make_recording(tmp_path / "noinfo_ros2", n=2, info=False), "-o", out),
+                   "noinfo_ros2", "no sensor_msgs/CameraInfo topic", "/camera/depth/image_raw")
+    # TF starts after every frame: nothing to export is an error too, and names why
+    late = make_recording(tmp_path / "late.bag", n=3, tf_from=5.0)
+    one_line_error(run("export", late, "-o", out, "--tolerance", "0.01"), "late.bag", "no usable depth frame",
+                   "no camera pose")
+    assert not out.exists()
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temp folders either

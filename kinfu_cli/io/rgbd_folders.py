@@ -316,3 +316,54 @@ def import_folder(src: str | os.PathLike, out: str | os.PathLike, rate: float = 
                    "tf": f"/tf {WORLD_FRAME} -> {CAMERA_FRAME}"},
         "notes": folder.notes,
     }
+
+
+def export_frames(recording: str | os.PathLike, out: str | os.PathLike, roles_kw: dict | None = None,
+                  pose_source: str = "tf", pose_topic: str | None = None, tolerance_s: float = 0.05,
+                  start_s: float | None = None, end_s: float | None = None, every: int = 1,
+                  quiet: bool = True) -> dict:
+    """Write the assembled frames of a recording as a 7-Scenes-layout folder (the inverse of import_folder).
+
+    frame-N.depth.png (uint16 mm, 0 = invalid), frame-N.color.png (when paired), frame-N.pose.txt
+    (T_world_camera, when posed), camera-intrinsics.txt (K of the first frame), frames.json (stamps, stats,
+    roles). N is the depth message index. The folder appears only when every frame was written.
+    """
+    import json
+
+    from kinfu_cli.io.atomic import atomic_dir
+    from kinfu_cli.io.frames import FrameStats, iter_frames
+    from kinfu_cli.io.recording import open_recording
+    from kinfu_cli.io.roles import detect_roles
+    from kinfu_cli.progress import progress
+
+    stats = FrameStats()
+    listing = []
+    with open_recording(recording) as rec:
+        roles = detect_roles(rec, **(roles_kw or {}))
+        total = rec.topics[roles.depth_topic].count if roles.depth_topic in rec.topics else None
+        with atomic_dir(out) as tmp:
+            K0 = None
+            frames = iter_frames(rec, roles, pose_source=pose_source, pose_topic=pose_topic,
+                                 tolerance_s=tolerance_s, start_s=start_s, end_s=end_s, every=every, stats=stats)
+            for f in progress(frames, total=total, desc="export", quiet=quiet, unit="frame"):
+                stem = tmp / f"frame-{f.index:06d}"
+                mm = np.clip(np.rint(f.depth.astype(np.float64) * 1000.0), 0, 65535).astype(np.uint16)
+                if not cv2.imwrite(f"{stem}.depth.png", mm):
+                    raise RecordingError(f"{stem}.depth.png: cannot write")
+                if f.color is not None:
+                    cv2.imwrite(f"{stem}.color.png", cv2.cvtColor(f.color, cv2.COLOR_RGB2BGR))
+                if f.T_world_camera is not None:
+                    np.savetxt(f"{stem}.pose.txt", f.T_world_camera, fmt="%.17g")
+                if K0 is None:
+                    K0 = f.K
+                    np.savetxt(tmp / "camera-intrinsics.txt", K0, fmt="%.17g")
+                listing.append({"index": f.index, "stamp_ns": f.stamp_ns, "color": f.color is not None,
+                                "pose": f.T_world_camera is not None})
+            if not listing:
+                raise RecordingError(f"{rec.path}: no usable depth frame to export (dropped: "
+                                     f"{stats.dropped or 'none'}, depth messages: {stats.depth_messages})")
+            summary = {"recording": str(rec.path), "output": str(out), "roles": roles.as_dict(),
+                       "frames": len(listing), "stats": stats.as_dict(), "K": K0.tolist(),
+                       "list": listing}
+            (tmp / "frames.json").write_text(json.dumps(summary, indent=2) + "\n")
+    return summary
