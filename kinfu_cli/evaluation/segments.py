@@ -1,0 +1,168 @@
+"""Segmentation against ground-truth object labels (thesis ch. 4.3 protocol, adapted to clouds).
+
+- Boundary precision / recall at T_eval = 2 cm: B_N = points with a neighbour (closer than T_eval) of
+  another label; the boundary B = for each b in B_N the nearest point of another label (eq. 4.16). B
+  and the ground truth's B_GT are matched one-to-one, closest pairs first, pairs farther than T_eval
+  discarded; matches are true positives.
+- Object-level recall: a true object counts as found when one segment holds >= `cover` (80 %) of its
+  points and that object is the segment's majority (so one segment swallowing two objects finds
+  at most one of them).
+- Ground-truth labels for a cloud: nearest ground-truth mesh (`objects/<id>.ply`, `table.ply`) within
+  a distance, with open3d's RaycastingScene.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from kinfu_cli.errors import ConfigError
+
+
+def boundary_set(points: np.ndarray, labels: np.ndarray, t_eval: float = 0.02) -> np.ndarray:
+    """Indices of the boundary B (eq. 4.16) of a labelling."""
+    pts = np.asarray(points, dtype=np.float64)
+    lab = np.asarray(labels)
+    tree = cKDTree(pts)
+    pairs = tree.query_pairs(r=t_eval, output_type="ndarray")
+    if len(pairs) == 0:
+        return np.zeros(0, dtype=np.int64)
+    diff = lab[pairs[:, 0]] != lab[pairs[:, 1]]
+    p = pairs[diff]
+    if len(p) == 0:
+        return np.zeros(0, dtype=np.int64)
+    # nearest point of another label for each b in B_N: among its cross-label pairs, the closest
+    i = np.concatenate([p[:, 0], p[:, 1]])
+    j = np.concatenate([p[:, 1], p[:, 0]])
+    d = np.linalg.norm(pts[i] - pts[j], axis=1)
+    order = np.lexsort((d, i))
+    i, j = i[order], j[order]
+    first = np.r_[True, i[1:] != i[:-1]]
+    return np.unique(j[first])
+
+
+def match_boundaries(points: np.ndarray, b_pred: np.ndarray, b_gt: np.ndarray, t_eval: float = 0.02
+                     ) -> int:
+    """Number of one-to-one matches between two boundary index sets (closest pairs first, <= t_eval)."""
+    if len(b_pred) == 0 or len(b_gt) == 0:
+        return 0
+    A = cKDTree(points[b_pred])
+    B = cKDTree(points[b_gt])
+    sdm = A.sparse_distance_matrix(B, t_eval, output_type="ndarray")
+    if len(sdm) == 0:
+        return 0
+    sdm = np.sort(sdm, order="v")
+    used_a = np.zeros(len(b_pred), dtype=bool)
+    used_b = np.zeros(len(b_gt), dtype=bool)
+    tp = 0
+    for a, b in zip(sdm["i"], sdm["j"]):  # greedy assignment over candidate pairs (not over points/voxels)
+        if not used_a[a] and not used_b[b]:
+            used_a[a] = used_b[b] = True
+            tp += 1
+    return tp
+
+
+@dataclass
+class SegmentationScore:
+    boundary_precision: float
+    boundary_recall: float
+    boundary_pred: int
+    boundary_gt: int
+    object_recall: float
+    objects_found: int
+    objects_total: int
+    per_object: list
+
+    def to_json(self) -> dict:
+        return dict(self.__dict__)
+
+
+def score_segmentation(points: np.ndarray, labels: np.ndarray, gt_labels: np.ndarray, *, t_eval: float = 0.02,
+                       cover: float = 0.8, object_ids=None, min_object_points: int = 20,
+                       ignore_gt: int | None = None) -> SegmentationScore:
+    """Score predicted `labels` against `gt_labels` (same points). object_ids: true objects to count
+    (default: every gt label except 0 = table and -1 = unlabelled) with >= min_object_points points."""
+    pts = np.asarray(points, dtype=np.float64)
+    lab = np.asarray(labels)
+    gt = np.asarray(gt_labels)
+    if not (len(pts) == len(lab) == len(gt)):
+        raise ConfigError(f"score: {len(pts)} points, {len(lab)} labels, {len(gt)} ground-truth labels differ")
+    keep = np.ones(len(pts), dtype=bool) if ignore_gt is None else gt != ignore_gt
+    pts, lab, gt = pts[keep], lab[keep], gt[keep]
+    b_pred = boundary_set(pts, lab, t_eval)
+    b_gt = boundary_set(pts, gt, t_eval)
+    tp = match_boundaries(pts, b_pred, b_gt, t_eval)
+    prec = tp / len(b_pred) if len(b_pred) else 1.0
+    rec = tp / len(b_gt) if len(b_gt) else 1.0
+    if object_ids is None:
+        object_ids = [int(v) for v in np.unique(gt) if v not in (0, -1)]
+    # majority true object of each predicted segment
+    segs, seg_inv = np.unique(lab, return_inverse=True)
+    gts, gt_inv = np.unique(gt, return_inverse=True)
+    table = np.zeros((len(segs), len(gts)), dtype=np.int64)
+    np.add.at(table, (seg_inv.ravel(), gt_inv.ravel()), 1)
+    majority = gts[np.argmax(table, axis=1)]
+    per = []
+    found = 0
+    total = 0
+    for oid in object_ids:
+        col = np.flatnonzero(gts == oid)
+        if len(col) == 0 or table[:, col[0]].sum() < min_object_points:
+            continue
+        total += 1
+        c = table[:, col[0]]
+        best = int(np.argmax(c))
+        frac = float(c[best] / c.sum())
+        ok = frac >= cover and majority[best] == oid and segs[best] != -1
+        found += int(ok)
+        per.append({"object": int(oid), "points": int(c.sum()), "segment": int(segs[best]), "coverage": frac,
+                    "found": bool(ok)})
+    return SegmentationScore(float(prec), float(rec), int(len(b_pred)), int(len(b_gt)),
+                             float(found / total) if total else 1.0, found, total, per)
+
+
+def gt_labels_from_meshes(points: np.ndarray, meshes: dict[int, object], max_distance: float = 0.015
+                          ) -> np.ndarray:
+    """Label of the nearest ground-truth mesh per point (-1 beyond `max_distance`)."""
+    import open3d as o3d
+
+    pts = o3d.core.Tensor(np.asarray(points, dtype=np.float32))
+    ids = sorted(meshes)
+    dist = np.full((len(points), len(ids)), np.inf, dtype=np.float64)
+    for k, oid in enumerate(ids):
+        scene = o3d.t.geometry.RaycastingScene()
+        scene.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(meshes[oid]))
+        dist[:, k] = scene.compute_distance(pts).numpy()
+    best = np.argmin(dist, axis=1)
+    lab = np.asarray(ids)[best]
+    return np.where(dist[np.arange(len(points)), best] <= max_distance, lab, -1)
+
+
+def load_gt_meshes(ground_truth_dir: str | os.PathLike) -> tuple[dict[int, object], dict[int, str]]:
+    """Meshes of a synth ground-truth folder: `objects/table.ply` -> label 0, `objects/<id>.ply` -> labels
+    1.. in sorted order. Returns (label -> open3d mesh, label -> file stem)."""
+    import open3d as o3d
+
+    root = Path(ground_truth_dir)
+    folder = root / "objects" if (root / "objects").is_dir() else root
+    files = sorted(folder.glob("*.ply"))
+    if not files:
+        raise ConfigError(f"{folder}: no ground-truth meshes (*.ply) found")
+    meshes: dict[int, object] = {}
+    names: dict[int, str] = {}
+    nxt = 1
+    for f in files:
+        m = o3d.io.read_triangle_mesh(str(f))
+        if not len(m.triangles):
+            continue
+        if f.stem == "table":
+            lab = 0
+        else:
+            lab, nxt = nxt, nxt + 1
+        meshes[lab] = m
+        names[lab] = f.stem
+    return meshes, names

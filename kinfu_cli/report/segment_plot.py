@@ -1,0 +1,51 @@
+"""PNG renders for `kinfu segment --plot`: top and side views coloured by segment and by saliency,
+with each segment's id and saliency, and the fitted superquadrics' surfaces (their predicted back sides)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+
+def plot_segments(result, outdir: str | os.PathLike) -> dict[str, Path]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from kinfu_cli.io.atomic import atomic_path
+    from kinfu_cli.segmentation.pipeline import saliency_colors, segment_colors
+    from kinfu_cli.segmentation.superquadric import SuperquadricFit
+
+    out = Path(outdir)
+    seg = result.segmentation
+    pts = seg.points
+    files = {}
+    for name, col in (("segments.png", segment_colors(seg.labels)),
+                      ("saliency.png", saliency_colors(seg.labels, result.saliency))):
+        fig, axes = plt.subplots(1, 2, figsize=(13, 5.5))
+        for ax, (i, j, title) in zip(axes, ((0, 1, "top view (x, y)"), (0, 2, "side view (x, z)"))):
+            order = np.argsort(pts[:, 3 - i - j]) if (i, j) == (0, 2) else np.argsort(pts[:, 2])
+            ax.scatter(pts[order, i], pts[order, j], c=col[order], s=2, linewidths=0)
+            if name == "segments.png":
+                for s in result.saliency:
+                    fit = result.superquadrics.get(s.id)
+                    if isinstance(fit, SuperquadricFit):
+                        sp, _ = fit.superquadric.sample_surface(400, 0)
+                        ax.scatter(sp[:, i], sp[:, j], s=0.3, c="k", alpha=0.3, linewidths=0)
+            for s in result.saliency[:15]:
+                ax.annotate(f"{s.id}: {s.saliency:.2f}", (s.centroid[i], s.centroid[j]), fontsize=7)
+            ax.set_aspect("equal")
+            ax.set_title(title)
+            ax.set_xlabel("xyz"[i] + " (m)")
+            ax.set_ylabel("xyz"[j] + " (m)")
+        fig.suptitle("segments (superquadrics in black)" if name == "segments.png"
+                     else "saliency = isolation x roundness (viridis, 0..1)")
+        fig.tight_layout()
+        with atomic_path(out / name) as tmp:
+            fig.savefig(tmp, dpi=110)
+        plt.close(fig)
+        files[name] = out / name
+    return files
