@@ -1,0 +1,180 @@
+"""Fusion benchmark: kinfu TernaryVolume vs open3d UniformTSDFVolume on the same frames and grid.
+
+Run:  .venv/bin/python benchmarks/bench_fusion.py [--frames N] [--resolution 512] [--size 3.0] [--skip-7scenes]
+Prints, per data set: frames/s of both (integration only, same process, same frames), the speed ratio,
+and the share of voxels with the same ternary label (over the whole grid and over the voxels either
+volume observed). Then, in a fresh subprocess, the peak RSS of a 512^3 volume with colour.
+Not a test: the numbers go into the fusion report.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import json
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+SEVEN = REPO.parent / "shared" / "data" / "rgbd-7scenes-redkitchen"
+
+
+def synthetic_frames(n: int, width: int = 640, height: int = 480):
+    from kinfu_cli.fusion.synthetic import Renderer, default_K, orbit_poses
+
+    r = Renderer()
+    K = default_K(width, height)
+    out = []
+    for T in orbit_poses(n, radius=1.0, height=0.8, span_deg=120):
+        d, c = r.render(K, T, width, height)
+        out.append((d, c, K, T))
+    return out
+
+
+def seven_scenes_frames(n: int):
+    import cv2
+
+    K = np.loadtxt(SEVEN / "camera-intrinsics.txt")
+    out = []
+    for i in range(n):
+        p = SEVEN / f"frame-{i:06d}.depth.png"
+        if not p.exists():
+            break
+        raw = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
+        d = np.where((raw > 0) & (raw < 65535), raw.astype(np.float32) / 1000.0, 0).astype(np.float32)
+        c = cv2.cvtColor(cv2.imread(str(SEVEN / f"frame-{i:06d}.color.jpg")), cv2.COLOR_BGR2RGB)
+        T = np.loadtxt(SEVEN / f"frame-{i:06d}.pose.txt")
+        out.append((d, c, K, T))
+    return out
+
+
+def run_open3d(frames, origin, size, res, trunc, max_depth):
+    import open3d as o3d
+
+    vol = o3d.pipelines.integration.UniformTSDFVolume(
+        length=size, resolution=res, sdf_trunc=trunc,
+        color_type=o3d.pipelines.integration.TSDFVolumeColorType.RGB8, origin=np.asarray(origin, float).reshape(3, 1))
+    h, w = frames[0][0].shape
+    elapsed = 0.0
+    for d, c, K, T in frames:
+        intr = o3d.camera.PinholeCameraIntrinsic(w, h, K[0, 0], K[1, 1], K[0, 2], K[1, 2])
+        rgbd = o3d.geometry.RGBDImage.create_from_color_and_depth(
+            o3d.geometry.Image(np.ascontiguousarray(c)), o3d.geometry.Image(d), depth_scale=1.0,
+            depth_trunc=max_depth, convert_rgb_to_intensity=False)
+        t0 = time.perf_counter()
+        vol.integrate(rgbd, intr, np.linalg.inv(T))
+        elapsed += time.perf_counter() - t0
+    tw = np.asarray(vol.extract_volume_tsdf())  # (N, 2) float64, voxel x * res^2 + y * res + z
+    labels = np.zeros(tw.shape[0], dtype=np.int8)
+    known = tw[:, 1] > 0
+    labels[known & (tw[:, 0] <= 0)] = 1
+    labels[known & (tw[:, 0] > 0)] = -1
+    del tw, vol
+    gc.collect()
+    return len(frames) / elapsed, labels.reshape(res, res, res)
+
+
+def run_ours(frames, origin, size, res, trunc, max_depth):
+    from kinfu_cli.fusion.volume import TernaryVolume
+
+    # JIT warm-up (cached on disk after the first run) on a tiny grid
+    d, c, K, T = frames[0]
+    TernaryVolume(size=size, resolution=16, origin=origin, min_depth=0.0, max_depth=max_depth).integrate(d, K, T, c)
+    vol = TernaryVolume(size=size, resolution=res, origin=origin, truncation=trunc, min_depth=0.0,
+                        max_depth=max_depth, color=True)
+    t0 = time.perf_counter()
+    stats = None
+    for d, c, K, T in frames:
+        stats = vol.integrate(d, K, T, c)
+    elapsed = time.perf_counter() - t0
+    return len(frames) / elapsed, vol.labels(), vol, stats
+
+
+def compare(name, frames, res, size, trunc, max_depth):
+    from kinfu_cli.fusion.placement import default_origin
+
+    origin = default_origin([(d, K, T) for d, c, K, T in frames[:5]], size, max_depth=max_depth)
+    fps_o3d, lab_o3d = run_open3d(frames, origin, size, res, trunc, max_depth)
+    fps_ours, lab_ours, vol, stats = run_ours(frames, origin, size, res, trunc, max_depth)
+    same = lab_ours == lab_o3d
+    observed = (lab_ours != 0) | (lab_o3d != 0)
+    result = {
+        "data": name, "frames": len(frames), "image": list(frames[0][0].shape[::-1]), "resolution": res,
+        "size_m": size, "truncation_m": trunc,
+        "open3d_fps": round(fps_o3d, 2), "kinfu_fps": round(fps_ours, 2), "speedup": round(fps_ours / fps_o3d, 2),
+        "same_label_all": round(float(same.mean()) * 100, 3),
+        "same_label_observed": round(float(same[observed].mean()) * 100, 3),
+        "counts_kinfu": {k: int(np.count_nonzero(lab_ours == v)) for k, v in (("occupied", 1), ("empty", -1))},
+        "counts_open3d": {k: int(np.count_nonzero(lab_o3d == v)) for k, v in (("occupied", 1), ("empty", -1))},
+        "blocks_stored": vol.n_blocks_allocated, "kinfu_grid_MB": round(vol.memory_bytes() / 2**20, 1),
+        "last_frame": stats,
+    }
+    del lab_o3d, lab_ours, same, observed, vol
+    gc.collect()
+    return result
+
+
+def rss_child(res: int, size: float, n: int) -> None:
+    """Build a res^3 colour volume from the synthetic and 7-Scenes frames, read it out; print peak RSS."""
+    from kinfu_cli.fusion.placement import default_origin
+    from kinfu_cli.fusion.volume import TernaryVolume
+
+    frames = synthetic_frames(n)
+    origin = default_origin([(d, K, T) for d, c, K, T in frames[:5]], size)
+    vol = TernaryVolume(size=size, resolution=res, origin=origin, color=True)
+    base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    for d, c, K, T in frames:
+        vol.integrate(d, K, T, c)
+    del frames
+    lab = vol.labels()
+    mesh = vol.extract_mesh()
+    del lab, mesh
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    print(json.dumps({"resolution": res, "color": True, "peak_rss_MB": round(peak / 1024, 1),
+                      "rss_before_fusing_MB": round(base / 1024, 1), "blocks_stored": vol.n_blocks_allocated,
+                      "grid_MB": round(vol.memory_bytes() / 2**20, 1),
+                      "worst_case_grid_MB": round(vol.bytes_worst_case / 2**20, 1)}))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--frames", type=int, default=30, help="synthetic frames (7-Scenes uses up to 60)")
+    ap.add_argument("--resolution", type=int, default=512)
+    ap.add_argument("--size", type=float, default=3.0)
+    ap.add_argument("--truncation", type=float, default=0.03)
+    ap.add_argument("--max-depth", type=float, default=4.0)
+    ap.add_argument("--seven-frames", type=int, default=60, help="7-Scenes frames (0..N-1, at most 60)")
+    ap.add_argument("--skip-synthetic", action="store_true")
+    ap.add_argument("--skip-7scenes", action="store_true")
+    ap.add_argument("--skip-rss", action="store_true")
+    ap.add_argument("--rss-child", action="store_true", help=argparse.SUPPRESS)
+    a = ap.parse_args()
+    if a.rss_child:
+        rss_child(a.resolution, a.size, a.frames)
+        return
+    results = []
+    if not a.skip_synthetic:
+        results.append(compare("synthetic 640x480 tabletop", synthetic_frames(a.frames), a.resolution, a.size,
+                               a.truncation, a.max_depth))
+        print(json.dumps(results[-1]), flush=True)
+    if not a.skip_7scenes and SEVEN.exists():
+        frames = seven_scenes_frames(a.seven_frames)
+        results.append(compare(f"7-Scenes redkitchen 0-{len(frames) - 1}", frames, a.resolution, a.size,
+                               a.truncation, a.max_depth))
+        print(json.dumps(results[-1]), flush=True)
+    if not a.skip_rss:
+        out = subprocess.run([sys.executable, __file__, "--rss-child", "--resolution", str(a.resolution),
+                              "--size", str(a.size), "--frames", str(a.frames)],
+                             capture_output=True, text=True, check=True)
+        print(out.stdout.strip().splitlines()[-1], flush=True)
+
+
+if __name__ == "__main__":
+    main()

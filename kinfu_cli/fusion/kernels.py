@@ -1,0 +1,693 @@
+"""numba kernels behind TernaryVolume: block classification, integration, labels, ray casting.
+
+Storage (see volume.py): the grid is cut into 8x8x8 blocks. `block_idx[bx, by, bz]` is -1 for a block
+without voxel storage, else a row of the pools. A block without storage is uniform: `block_w == 0`
+means unknown (v = 0, w = 0), `block_w > 0` means every voxel is known-empty with v = 1 and w = block_w.
+Free space carved far in front of the surface therefore costs one byte per 512 voxels; only blocks
+near a surface, at the frustum border or next to invalid pixels get per-voxel storage.
+
+Pools: `pool_v` int16 (n, 512) holding v * V_SCALE, `pool_w` uint8 (n, 512), `pool_c` uint8 (n, 512, 3)
+(or (0, 512, 3) without colour). Voxel (lx, ly, lz) of a block is entry lx * 64 + ly * 8 + lz.
+
+Integration follows the projective voxel-centric rule (digest §1.2 eqs. 2.1-2.3, as open3d's
+UniformTSDFVolume): a voxel centre projecting onto pixel (u, v) with valid depth d gets
+sdf = (d - z) * |K^-1 (u, v, 1)| and, when sdf > -truncation, v' = (v w + min(1, sdf / trunc)) / (w + 1),
+w' = min(w + 1, max_weight).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+B = 8  # block edge in voxels
+B3 = B * B * B
+V_SCALE = 32767.0
+
+SKIP = 0
+CARVE = 1
+VOXEL = 2
+CARVE_VALID = 3  # sub-blocks: tsdf = 1 for every voxel that projects onto a valid pixel
+
+
+@njit(cache=True)
+def _depth_tiles(depth, tile):
+    """Per tile of `tile` x `tile` pixels: min valid depth (inf if none) and max valid depth (0 if none)."""
+    h, w = depth.shape
+    th = (h + tile - 1) // tile
+    tw = (w + tile - 1) // tile
+    tmin = np.full((th, tw), np.inf, dtype=np.float32)
+    tmax = np.zeros((th, tw), dtype=np.float32)
+    for v in range(h):
+        ty = v // tile
+        for u in range(w):
+            d = depth[v, u]
+            if d > 0.0:
+                tx = u // tile
+                if d < tmin[ty, tx]:
+                    tmin[ty, tx] = d
+                if d > tmax[ty, tx]:
+                    tmax[ty, tx] = d
+    return tmin, tmax
+
+
+@njit(cache=True)
+def _invalid_integral(depth):
+    """Summed-area table of invalid (d <= 0) pixels, shape (H + 1, W + 1)."""
+    h, w = depth.shape
+    s = np.zeros((h + 1, w + 1), dtype=np.int32)
+    for v in range(h):
+        row = 0
+        for u in range(w):
+            if not depth[v, u] > 0.0:
+                row += 1
+            s[v + 1, u + 1] = s[v, u + 1] + row
+    return s
+
+
+@njit(cache=True)
+def _classify_box(lo0, lo1, lo2, n, vs, T_cw, fx, fy, cx, cy, width, height, trunc, tmin, tmax, tile, inv_sat):
+    """SKIP / CARVE / VOXEL for the n^3 voxels whose centres start at (lo0, lo1, lo2).
+
+    Conservative: CARVE and SKIP are returned only when every voxel would get exactly that from the
+    per-voxel rule; anything uncertain is VOXEL.
+    """
+    th, tw = tmin.shape
+    ext = (n - 1) * vs
+    zmin = np.inf
+    zmax = -np.inf
+    umin = np.inf
+    umax = -np.inf
+    vmin = np.inf
+    vmax = -np.inf
+    behind = False
+    for c in range(8):
+        px = lo0 + ext * (c & 1)
+        py = lo1 + ext * ((c >> 1) & 1)
+        pz = lo2 + ext * ((c >> 2) & 1)
+        xc = T_cw[0, 0] * px + T_cw[0, 1] * py + T_cw[0, 2] * pz + T_cw[0, 3]
+        yc = T_cw[1, 0] * px + T_cw[1, 1] * py + T_cw[1, 2] * pz + T_cw[1, 3]
+        zc = T_cw[2, 0] * px + T_cw[2, 1] * py + T_cw[2, 2] * pz + T_cw[2, 3]
+        zmin = min(zmin, zc)
+        zmax = max(zmax, zc)
+        if zc <= 0.0:
+            behind = True
+        else:
+            uf = xc * fx / zc + cx + 0.5
+            vf = yc * fy / zc + cy + 0.5
+            umin = min(umin, uf)
+            umax = max(umax, uf)
+            vmin = min(vmin, vf)
+            vmax = max(vmax, vf)
+    if zmax <= 0.0:
+        return SKIP  # entirely behind the camera
+    if behind:
+        return VOXEL  # straddles the camera plane: exact per-voxel rule
+    if umax < 0.0001 or vmax < 0.0001 or umin >= width - 0.0001 or vmin >= height - 0.0001:
+        return SKIP  # outside the image
+    inside = umin >= 0.0001 and vmin >= 0.0001 and umax < width - 0.0001 and vmax < height - 0.0001
+    u0 = max(int(umin), 0)
+    u1 = min(int(umax), width - 1)
+    v0 = max(int(vmin), 0)
+    v1 = min(int(vmax), height - 1)
+    dmin = np.inf
+    dmax = 0.0
+    for ty in range(v0 // tile, min(v1 // tile + 1, th)):
+        for tx in range(u0 // tile, min(u1 // tile + 1, tw)):
+            if tmin[ty, tx] < dmin:
+                dmin = tmin[ty, tx]
+            if tmax[ty, tx] > dmax:
+                dmax = tmax[ty, tx]
+    if dmax <= 0.0:
+        return SKIP  # no valid depth under the box
+    if zmin >= dmax + trunc:
+        return SKIP  # entirely beyond the truncation band behind every observed point
+    if inside and dmin - zmax >= trunc:
+        ninv = inv_sat[v1 + 1, u1 + 1] - inv_sat[v0, u1 + 1] - inv_sat[v1 + 1, u0] + inv_sat[v0, u0]
+        return CARVE if ninv == 0 else CARVE_VALID
+    return VOXEL
+
+
+@njit(cache=True, parallel=True)
+def classify_blocks(nb, origin, vs, T_cw, fx, fy, cx, cy, width, height,
+                    trunc, tmin, tmax, tile, inv_sat, dmax_all):
+    """Class per block (flattened x-major): SKIP, CARVE (all voxels get tsdf = 1) or VOXEL (per-voxel)."""
+    nbx, nby, nbz = nb[0], nb[1], nb[2]
+    n = nbx * nby * nbz
+    cls = np.zeros(n, dtype=np.uint8)
+    # frustum side planes in the camera frame (inside: a . p >= -r), for a cheap bounding-sphere test
+    al = (-1.0 - cx) / fx
+    ar = (width + 1.0 - cx) / fx
+    at = (-1.0 - cy) / fy
+    ab = (height + 1.0 - cy) / fy
+    nl = math.sqrt(1.0 + al * al)
+    nr = math.sqrt(1.0 + ar * ar)
+    nt = math.sqrt(1.0 + at * at)
+    nbot = math.sqrt(1.0 + ab * ab)
+    half = 0.5 * (B - 1) * vs
+    rad = half * math.sqrt(3.0) + vs
+    for b in prange(n):
+        bx = b // (nby * nbz)
+        rem = b - bx * nby * nbz
+        by = rem // nbz
+        bz = rem - by * nbz
+        lo0 = origin[0] + (bx * B + 0.5) * vs
+        lo1 = origin[1] + (by * B + 0.5) * vs
+        lo2 = origin[2] + (bz * B + 0.5) * vs
+        px = lo0 + half
+        py = lo1 + half
+        pz = lo2 + half
+        xc = T_cw[0, 0] * px + T_cw[0, 1] * py + T_cw[0, 2] * pz + T_cw[0, 3]
+        yc = T_cw[1, 0] * px + T_cw[1, 1] * py + T_cw[1, 2] * pz + T_cw[1, 3]
+        zc = T_cw[2, 0] * px + T_cw[2, 1] * py + T_cw[2, 2] * pz + T_cw[2, 3]
+        if zc + rad <= 0.0 or zc - rad > dmax_all + trunc:
+            continue
+        if (xc - al * zc) / nl < -rad or (ar * zc - xc) / nr < -rad:
+            continue
+        if (yc - at * zc) / nt < -rad or (ab * zc - yc) / nbot < -rad:
+            continue
+        c = _classify_box(lo0, lo1, lo2, B, vs, T_cw, fx, fy, cx, cy, width, height, trunc,
+                          tmin, tmax, tile, inv_sat)
+        cls[b] = VOXEL if c == CARVE_VALID else c
+    return cls
+
+
+@njit(cache=True)
+def allocate_blocks(cls, block_idx_flat, block_w_flat, pool_v, pool_w, pool_c, n_used):
+    """Give per-voxel storage to VOXEL blocks that lack it (initialised from their uniform state)."""
+    has_color = pool_c.shape[0] > 0
+    for b in range(cls.shape[0]):
+        if cls[b] != VOXEL or block_idx_flat[b] >= 0:
+            continue
+        i = n_used
+        n_used += 1
+        block_idx_flat[b] = i
+        bw = block_w_flat[b]
+        fill = np.int16(V_SCALE) if bw > 0 else np.int16(0)
+        for k in range(B3):
+            pool_v[i, k] = fill
+            pool_w[i, k] = bw
+            if has_color:
+                pool_c[i, k, 0] = 0
+                pool_c[i, k, 1] = 0
+                pool_c[i, k, 2] = 0
+    return n_used
+
+
+@njit(cache=True)
+def _carve_voxels(pool_v, pool_w, i, k0, n, mw):
+    """tsdf = 1 update of the n^3 voxels of sub-box starting at local index k0 (n = 4 or 8) of pool row i."""
+    for a in range(n):
+        for b2 in range(n):
+            base = k0 + a * 64 + b2 * 8
+            for c in range(n):
+                k = base + c
+                w0 = np.int32(pool_w[i, k])
+                if pool_v[i, k] != 32767:
+                    v0 = pool_v[i, k] / V_SCALE
+                    pool_v[i, k] = np.int16(math.floor((v0 * w0 + 1.0) / (w0 + 1) * V_SCALE + 0.5))
+                if w0 < mw:
+                    pool_w[i, k] = np.uint8(w0 + 1)
+
+
+@njit(cache=True)
+def _voxelwise(pool_v, pool_w, pool_c, i, gx0, gy0, gz0, l0x, l0y, l0z, n, dims, origin, vs, T_cw,
+               fx, fy, cx, cy, depth, raylen, color, has_color, trunc, inv_trunc, mw):
+    """Exact projective update of the n^3 voxels starting at grid index (gx0, gy0, gz0) = local (l0x, l0y, l0z)."""
+    height, width = depth.shape
+    dzx = T_cw[0, 2] * vs
+    dzy = T_cw[1, 2] * vs
+    dzz = T_cw[2, 2] * vs
+    for a in range(n):
+        gx = gx0 + a
+        if gx >= dims[0]:
+            break
+        px = origin[0] + (gx + 0.5) * vs
+        for b2 in range(n):
+            gy = gy0 + b2
+            if gy >= dims[1]:
+                break
+            py = origin[1] + (gy + 0.5) * vs
+            pz = origin[2] + (gz0 + 0.5) * vs
+            xc = T_cw[0, 0] * px + T_cw[0, 1] * py + T_cw[0, 2] * pz + T_cw[0, 3]
+            yc = T_cw[1, 0] * px + T_cw[1, 1] * py + T_cw[1, 2] * pz + T_cw[1, 3]
+            zc = T_cw[2, 0] * px + T_cw[2, 1] * py + T_cw[2, 2] * pz + T_cw[2, 3]
+            kb = (l0x + a) * 64 + (l0y + b2) * 8 + l0z
+            for c in range(n):
+                if c > 0:
+                    xc += dzx
+                    yc += dzy
+                    zc += dzz
+                if gz0 + c >= dims[2]:
+                    break
+                if zc <= 0.0:
+                    continue
+                iz = 1.0 / zc
+                uf = xc * fx * iz + cx + 0.5
+                vf = yc * fy * iz + cy + 0.5
+                if not (uf >= 0.0001 and uf < width - 0.0001 and vf >= 0.0001 and vf < height - 0.0001):
+                    continue
+                u = int(uf)
+                v = int(vf)
+                d = depth[v, u]
+                if not d > 0.0:
+                    continue
+                sdf = (d - zc) * raylen[v, u]
+                if sdf <= -trunc:
+                    continue
+                t = min(1.0, sdf * inv_trunc)
+                k = kb + c
+                w0 = np.int32(pool_w[i, k])
+                v0 = pool_v[i, k] / V_SCALE
+                pool_v[i, k] = np.int16(math.floor((v0 * w0 + t) / (w0 + 1) * V_SCALE + 0.5))
+                if has_color and t < 1.0:
+                    # colour only near the surface; black = never coloured: take the sample, else a running
+                    # mean that forgets slowly
+                    fresh = pool_c[i, k, 0] == 0 and pool_c[i, k, 1] == 0 and pool_c[i, k, 2] == 0
+                    alpha = 1.0 if fresh else max(1.0 / (w0 + 1), 0.1)
+                    for ch in range(3):
+                        c0 = np.float32(pool_c[i, k, ch])
+                        cn = np.float32(color[v, u, ch])
+                        pool_c[i, k, ch] = np.uint8(min(255.0, c0 + alpha * (cn - c0) + 0.5))
+                if w0 < mw:
+                    pool_w[i, k] = np.uint8(w0 + 1)
+
+
+@njit(cache=True)
+def _carve_valid(pool_v, pool_w, i, gx0, gy0, gz0, l0x, l0y, l0z, n, dims, origin, vs, T_cw,
+                 fx, fy, cx, cy, depth, mw):
+    """tsdf = 1 update of the voxels of an n^3 sub-block (known to lie > truncation in front of every valid
+    reading under it) that project onto a valid pixel."""
+    height, width = depth.shape
+    dzx = T_cw[0, 2] * vs
+    dzy = T_cw[1, 2] * vs
+    dzz = T_cw[2, 2] * vs
+    for a in range(n):
+        gx = gx0 + a
+        if gx >= dims[0]:
+            break
+        px = origin[0] + (gx + 0.5) * vs
+        for b2 in range(n):
+            gy = gy0 + b2
+            if gy >= dims[1]:
+                break
+            py = origin[1] + (gy + 0.5) * vs
+            pz = origin[2] + (gz0 + 0.5) * vs
+            xc = T_cw[0, 0] * px + T_cw[0, 1] * py + T_cw[0, 2] * pz + T_cw[0, 3]
+            yc = T_cw[1, 0] * px + T_cw[1, 1] * py + T_cw[1, 2] * pz + T_cw[1, 3]
+            zc = T_cw[2, 0] * px + T_cw[2, 1] * py + T_cw[2, 2] * pz + T_cw[2, 3]
+            kb = (l0x + a) * 64 + (l0y + b2) * 8 + l0z
+            for c in range(n):
+                if c > 0:
+                    xc += dzx
+                    yc += dzy
+                    zc += dzz
+                if gz0 + c >= dims[2]:
+                    break
+                iz = 1.0 / zc
+                u = min(max(int(xc * fx * iz + cx + 0.5), 0), width - 1)
+                v = min(max(int(yc * fy * iz + cy + 0.5), 0), height - 1)
+                if not depth[v, u] > 0.0:
+                    continue
+                k = kb + c
+                w0 = np.int32(pool_w[i, k])
+                if pool_v[i, k] != 32767:
+                    v0 = pool_v[i, k] / V_SCALE
+                    pool_v[i, k] = np.int16(math.floor((v0 * w0 + 1.0) / (w0 + 1) * V_SCALE + 0.5))
+                if w0 < mw:
+                    pool_w[i, k] = np.uint8(w0 + 1)
+
+
+@njit(cache=True, parallel=True)
+def integrate_blocks(cls, nb, dims, block_idx_flat, block_w_flat, pool_v, pool_w, pool_c,
+                     origin, vs, T_cw, fx, fy, cx, cy, depth, raylen, color, trunc, max_w,
+                     tmin, tmax, tile, inv_sat, work):
+    """Apply one frame: CARVE blocks in bulk; VOXEL blocks are split in 4^3 sub-blocks, each carved in bulk,
+    skipped, or updated voxel by voxel."""
+    nby, nbz = nb[1], nb[2]
+    height, width = depth.shape
+    has_color = pool_c.shape[0] > 0 and color.shape[0] == height
+    inv_trunc = 1.0 / trunc
+    mw = np.int32(max_w)
+    S = B // 2
+    for j in prange(work.shape[0]):
+        b = work[j]
+        c = cls[b]
+        if c == SKIP:
+            continue
+        i = block_idx_flat[b]
+        if c == CARVE:
+            if i < 0:
+                w0 = np.int32(block_w_flat[b])
+                block_w_flat[b] = np.uint8(min(w0 + 1, mw))
+            else:
+                _carve_voxels(pool_v, pool_w, i, 0, B, mw)
+            continue
+        bx = b // (nby * nbz)
+        rem = b - bx * nby * nbz
+        by = rem // nbz
+        bz = rem - by * nbz
+        for sb in range(8):
+            sx = (sb & 1) * S
+            sy = ((sb >> 1) & 1) * S
+            sz = ((sb >> 2) & 1) * S
+            gx0 = bx * B + sx
+            gy0 = by * B + sy
+            gz0 = bz * B + sz
+            sc = _classify_box(origin[0] + (gx0 + 0.5) * vs, origin[1] + (gy0 + 0.5) * vs,
+                               origin[2] + (gz0 + 0.5) * vs, S, vs, T_cw, fx, fy, cx, cy, width, height,
+                               trunc, tmin, tmax, tile, inv_sat)
+            if sc == SKIP:
+                continue
+            if sc == CARVE and gx0 + S <= dims[0] and gy0 + S <= dims[1] and gz0 + S <= dims[2]:
+                _carve_voxels(pool_v, pool_w, i, sx * 64 + sy * 8 + sz, S, mw)
+                continue
+            if sc == CARVE_VALID:
+                _carve_valid(pool_v, pool_w, i, gx0, gy0, gz0, sx, sy, sz, S, dims, origin, vs, T_cw,
+                             fx, fy, cx, cy, depth, mw)
+                continue
+            _voxelwise(pool_v, pool_w, pool_c, i, gx0, gy0, gz0, sx, sy, sz, S, dims, origin, vs, T_cw,
+                       fx, fy, cx, cy, depth, raylen, color, has_color, trunc, inv_trunc, mw)
+
+
+@njit(cache=True, parallel=True)
+def labels_dense(nb, dims, block_idx, block_w, pool_v, pool_w):
+    """Ternary labels int8 [x, y, z]: 1 occupied (w > 0, v <= 0), 0 unknown (w = 0), -1 empty."""
+    out = np.zeros((dims[0], dims[1], dims[2]), dtype=np.int8)
+    nbx, nby, nbz = nb[0], nb[1], nb[2]
+    for bx in prange(nbx):
+        for by in range(nby):
+            for bz in range(nbz):
+                i = block_idx[bx, by, bz]
+                bw = block_w[bx, by, bz]
+                for lx in range(B):
+                    gx = bx * B + lx
+                    if gx >= dims[0]:
+                        break
+                    for ly in range(B):
+                        gy = by * B + ly
+                        if gy >= dims[1]:
+                            break
+                        for lz in range(B):
+                            gz = bz * B + lz
+                            if gz >= dims[2]:
+                                break
+                            if i < 0:
+                                out[gx, gy, gz] = -1 if bw > 0 else 0
+                            else:
+                                k = lx * 64 + ly * 8 + lz
+                                if pool_w[i, k] == 0:
+                                    out[gx, gy, gz] = 0
+                                elif pool_v[i, k] <= 0:
+                                    out[gx, gy, gz] = 1
+                                else:
+                                    out[gx, gy, gz] = -1
+    return out
+
+
+@njit(cache=True, parallel=True)
+def dense_box(lo, hi, block_idx, block_w, pool_v, pool_w, pool_c, want_color):
+    """Dense v (float32), w (uint8) and colour (uint8, or empty) over voxel box [lo, hi)."""
+    sx, sy, sz = hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]
+    tv = np.zeros((sx, sy, sz), dtype=np.float32)
+    tw = np.zeros((sx, sy, sz), dtype=np.uint8)
+    has_c = want_color and pool_c.shape[0] > 0
+    tc = np.zeros((sx if has_c else 0, sy, sz, 3), dtype=np.uint8)
+    for x in prange(sx):
+        gx = lo[0] + x
+        bx = gx // B
+        lx = gx - bx * B
+        for y in range(sy):
+            gy = lo[1] + y
+            by = gy // B
+            ly = gy - by * B
+            for z in range(sz):
+                gz = lo[2] + z
+                bz = gz // B
+                lz = gz - bz * B
+                i = block_idx[bx, by, bz]
+                if i < 0:
+                    bw = block_w[bx, by, bz]
+                    if bw > 0:
+                        tv[x, y, z] = 1.0
+                        tw[x, y, z] = bw
+                else:
+                    k = lx * 64 + ly * 8 + lz
+                    tv[x, y, z] = pool_v[i, k] / V_SCALE
+                    tw[x, y, z] = pool_w[i, k]
+                    if has_c:
+                        tc[x, y, z, 0] = pool_c[i, k, 0]
+                        tc[x, y, z, 1] = pool_c[i, k, 1]
+                        tc[x, y, z, 2] = pool_c[i, k, 2]
+    return tv, tw, tc
+
+
+@njit(cache=True)
+def sphere_blocks(nb, origin, vs, center, radius):
+    """Classify blocks against a sphere: 0 outside, 1 partly inside, 2 entirely inside (flattened)."""
+    nbx, nby, nbz = nb[0], nb[1], nb[2]
+    out = np.zeros(nbx * nby * nbz, dtype=np.uint8)
+    r2 = radius * radius
+    ext = (B - 1) * vs
+    for bx in range(nbx):
+        lo0 = origin[0] + (bx * B + 0.5) * vs
+        for by in range(nby):
+            lo1 = origin[1] + (by * B + 0.5) * vs
+            for bz in range(nbz):
+                lo2 = origin[2] + (bz * B + 0.5) * vs
+                # nearest point of the centre box to the sphere centre
+                dx = max(lo0 - center[0], 0.0, center[0] - (lo0 + ext))
+                dy = max(lo1 - center[1], 0.0, center[1] - (lo1 + ext))
+                dz = max(lo2 - center[2], 0.0, center[2] - (lo2 + ext))
+                if dx * dx + dy * dy + dz * dz >= r2:
+                    continue
+                fx = max(abs(lo0 - center[0]), abs(lo0 + ext - center[0]))
+                fy = max(abs(lo1 - center[1]), abs(lo1 + ext - center[1]))
+                fz = max(abs(lo2 - center[2]), abs(lo2 + ext - center[2]))
+                out[(bx * nby + by) * nbz + bz] = 2 if fx * fx + fy * fy + fz * fz < r2 else 1
+    return out
+
+
+@njit(cache=True, parallel=True)
+def clear_sphere_blocks(sph, nb, block_idx_flat, block_w_flat, pool_v, pool_w, origin, vs, center, radius):
+    """Set v = 0, w = 0 for voxel centres strictly inside the sphere (partial blocks must have storage)."""
+    nby, nbz = nb[1], nb[2]
+    r2 = radius * radius
+    for b in prange(sph.shape[0]):
+        s = sph[b]
+        if s == 0:
+            continue
+        i = block_idx_flat[b]
+        if i < 0:
+            if s == 2:
+                block_w_flat[b] = 0
+            continue
+        bx = b // (nby * nbz)
+        rem = b - bx * nby * nbz
+        by = rem // nbz
+        bz = rem - by * nbz
+        for lx in range(B):
+            dx = origin[0] + (bx * B + lx + 0.5) * vs - center[0]
+            for ly in range(B):
+                dy = origin[1] + (by * B + ly + 0.5) * vs - center[1]
+                for lz in range(B):
+                    dz = origin[2] + (bz * B + lz + 0.5) * vs - center[2]
+                    if dx * dx + dy * dy + dz * dz < r2:
+                        k = lx * 64 + ly * 8 + lz
+                        pool_v[i, k] = 0
+                        pool_w[i, k] = 0
+
+
+@njit(cache=True)
+def _sample(block_idx, block_w, pool_v, pool_w, dims, gx, gy, gz):
+    """(v, w) of voxel (gx, gy, gz); w = -1 outside the grid."""
+    if gx < 0 or gy < 0 or gz < 0 or gx >= dims[0] or gy >= dims[1] or gz >= dims[2]:
+        return 0.0, -1
+    bx = gx >> 3
+    by = gy >> 3
+    bz = gz >> 3
+    i = block_idx[bx, by, bz]
+    if i < 0:
+        bw = block_w[bx, by, bz]
+        return (1.0 if bw > 0 else 0.0), np.int32(bw)
+    k = (gx & 7) * 64 + (gy & 7) * 8 + (gz & 7)
+    return pool_v[i, k] / V_SCALE, np.int32(pool_w[i, k])
+
+
+@njit(cache=True)
+def _trilinear(block_idx, block_w, pool_v, pool_w, dims, gxf, gyf, gzf):
+    """Trilinear v at continuous voxel coordinates (voxel centres at integers); ok False if a corner is unknown."""
+    x0 = int(math.floor(gxf))
+    y0 = int(math.floor(gyf))
+    z0 = int(math.floor(gzf))
+    rx = gxf - x0
+    ry = gyf - y0
+    rz = gzf - z0
+    acc = 0.0
+    for c in range(8):
+        ox = c & 1
+        oy = (c >> 1) & 1
+        oz = (c >> 2) & 1
+        v, w = _sample(block_idx, block_w, pool_v, pool_w, dims, x0 + ox, y0 + oy, z0 + oz)
+        if w <= 0:
+            return 0.0, False
+        acc += v * (rx if ox else 1.0 - rx) * (ry if oy else 1.0 - ry) * (rz if oz else 1.0 - rz)
+    return acc, True
+
+
+@njit(cache=True, parallel=True)
+def raycast_kernel(dims, block_idx, block_w, pool_v, pool_w, origin, vs, trunc,
+                   T_wc, Kinv, width, height, tmin_ray, tmax_ray):
+    """Per pixel: first + to - zero crossing (or first occupied voxel) along the ray.
+
+    Returns depth (z in the camera frame, 0 = no hit), world vertices and world normals (NaN = no hit),
+    and state per pixel: 1 hit occupied, 0 stopped at nothing known / left through unknown, -1 left through
+    known-empty space only.
+    """
+    depth = np.zeros((height, width), dtype=np.float32)
+    verts = np.full((height, width, 3), np.nan, dtype=np.float32)
+    norms = np.full((height, width, 3), np.nan, dtype=np.float32)
+    state = np.zeros((height, width), dtype=np.int8)
+    ox = T_wc[0, 3]
+    oy = T_wc[1, 3]
+    oz = T_wc[2, 3]
+    inv_vs = 1.0 / vs
+    bmin0 = origin[0]
+    bmin1 = origin[1]
+    bmin2 = origin[2]
+    bmax0 = origin[0] + dims[0] * vs
+    bmax1 = origin[1] + dims[1] * vs
+    bmax2 = origin[2] + dims[2] * vs
+    for pv in prange(height):
+        for pu in range(width):
+            # ray direction in camera coordinates (z = 1), then world
+            xc = Kinv[0, 0] * pu + Kinv[0, 1] * pv + Kinv[0, 2]
+            yc = Kinv[1, 0] * pu + Kinv[1, 1] * pv + Kinv[1, 2]
+            zc = 1.0
+            nrm = math.sqrt(xc * xc + yc * yc + zc * zc)
+            dx = (T_wc[0, 0] * xc + T_wc[0, 1] * yc + T_wc[0, 2] * zc) / nrm
+            dy = (T_wc[1, 0] * xc + T_wc[1, 1] * yc + T_wc[1, 2] * zc) / nrm
+            dz = (T_wc[2, 0] * xc + T_wc[2, 1] * yc + T_wc[2, 2] * zc) / nrm
+            # clip to the grid box (slab method)
+            t0 = tmin_ray * nrm
+            t1 = tmax_ray * nrm
+            for ax in range(3):
+                o = ox if ax == 0 else (oy if ax == 1 else oz)
+                d = dx if ax == 0 else (dy if ax == 1 else dz)
+                lo = bmin0 if ax == 0 else (bmin1 if ax == 1 else bmin2)
+                hi = bmax0 if ax == 0 else (bmax1 if ax == 1 else bmax2)
+                if abs(d) < 1e-12:
+                    if o < lo or o > hi:
+                        t1 = -1.0
+                else:
+                    ta = (lo - o) / d
+                    tb = (hi - o) / d
+                    if ta > tb:
+                        ta, tb = tb, ta
+                    t0 = max(t0, ta)
+                    t1 = min(t1, tb)
+            if t1 <= t0:
+                continue
+            t = t0
+            prev_v = 0.0
+            prev_t = t0
+            prev_known = False
+            any_unknown = False
+            hit = False
+            while t < t1:
+                px = ox + dx * t
+                py = oy + dy * t
+                pz = oz + dz * t
+                gx = int((px - bmin0) * inv_vs)
+                gy = int((py - bmin1) * inv_vs)
+                gz = int((pz - bmin2) * inv_vs)
+                if gx < 0 or gy < 0 or gz < 0 or gx >= dims[0] or gy >= dims[1] or gz >= dims[2]:
+                    t += 0.5 * vs
+                    continue
+                i = block_idx[gx >> 3, gy >> 3, gz >> 3]
+                if i < 0:
+                    bw = block_w[gx >> 3, gy >> 3, gz >> 3]
+                    if bw == 0:
+                        any_unknown = True
+                        prev_known = False
+                    else:
+                        prev_known = True
+                        prev_v = 1.0
+                    prev_t = t
+                    # jump to the exit of this uniform block
+                    tex = t1
+                    for ax in range(3):
+                        d = dx if ax == 0 else (dy if ax == 1 else dz)
+                        g = gx if ax == 0 else (gy if ax == 1 else gz)
+                        o = ox if ax == 0 else (oy if ax == 1 else oz)
+                        lo = bmin0 if ax == 0 else (bmin1 if ax == 1 else bmin2)
+                        if d > 1e-12:
+                            tex = min(tex, (lo + ((g >> 3) + 1) * B * vs - o) / d)
+                        elif d < -1e-12:
+                            tex = min(tex, (lo + (g >> 3) * B * vs - o) / d)
+                    t = max(tex + 1e-5, t + 0.25 * vs)
+                    continue
+                k = (gx & 7) * 64 + (gy & 7) * 8 + (gz & 7)
+                w = pool_w[i, k]
+                v = pool_v[i, k] / V_SCALE
+                if w == 0:
+                    any_unknown = True
+                    prev_known = False
+                    prev_t = t
+                    t += 0.5 * vs
+                    continue
+                if v <= 0.0:
+                    th = t
+                    if prev_known and prev_v > 0.0:
+                        # refine with trilinear values where available
+                        a, oka = _trilinear(block_idx, block_w, pool_v, pool_w, dims,
+                                            (ox + dx * prev_t - bmin0) * inv_vs - 0.5,
+                                            (oy + dy * prev_t - bmin1) * inv_vs - 0.5,
+                                            (oz + dz * prev_t - bmin2) * inv_vs - 0.5)
+                        c, okc = _trilinear(block_idx, block_w, pool_v, pool_w, dims,
+                                            (px - bmin0) * inv_vs - 0.5, (py - bmin1) * inv_vs - 0.5,
+                                            (pz - bmin2) * inv_vs - 0.5)
+                        if oka and okc and a > 0.0 and c <= 0.0:
+                            th = prev_t + (t - prev_t) * a / (a - c)
+                        else:
+                            th = prev_t + (t - prev_t) * prev_v / (prev_v - v)
+                    hx = ox + dx * th
+                    hy = oy + dy * th
+                    hz = oz + dz * th
+                    depth[pv, pu] = th / nrm
+                    verts[pv, pu, 0] = hx
+                    verts[pv, pu, 1] = hy
+                    verts[pv, pu, 2] = hz
+                    # normal: central differences of trilinear v
+                    cxf = (hx - bmin0) * inv_vs - 0.5
+                    cyf = (hy - bmin1) * inv_vs - 0.5
+                    czf = (hz - bmin2) * inv_vs - 0.5
+                    gxp, o1 = _trilinear(block_idx, block_w, pool_v, pool_w, dims, cxf + 1.0, cyf, czf)
+                    gxm, o2 = _trilinear(block_idx, block_w, pool_v, pool_w, dims, cxf - 1.0, cyf, czf)
+                    gyp, o3 = _trilinear(block_idx, block_w, pool_v, pool_w, dims, cxf, cyf + 1.0, czf)
+                    gym, o4 = _trilinear(block_idx, block_w, pool_v, pool_w, dims, cxf, cyf - 1.0, czf)
+                    gzp, o5 = _trilinear(block_idx, block_w, pool_v, pool_w, dims, cxf, cyf, czf + 1.0)
+                    gzm, o6 = _trilinear(block_idx, block_w, pool_v, pool_w, dims, cxf, cyf, czf - 1.0)
+                    if o1 and o2 and o3 and o4 and o5 and o6:
+                        nx = gxp - gxm
+                        ny = gyp - gym
+                        nz = gzp - gzm
+                        nn = math.sqrt(nx * nx + ny * ny + nz * nz)
+                        if nn > 1e-9:
+                            if nx * dx + ny * dy + nz * dz > 0.0:
+                                nn = -nn
+                            norms[pv, pu, 0] = nx / nn
+                            norms[pv, pu, 1] = ny / nn
+                            norms[pv, pu, 2] = nz / nn
+                    state[pv, pu] = 1
+                    hit = True
+                    break
+                prev_known = True
+                prev_v = v
+                prev_t = t
+                t += max(0.5 * vs, 0.8 * v * trunc)
+            if not hit:
+                state[pv, pu] = 0 if any_unknown else -1
+    return depth, norms, verts, state

@@ -1,0 +1,113 @@
+"""Surface extraction from a TernaryVolume: marching cubes (scikit-image) over known voxels only.
+
+The grid is processed in chunks around blocks that hold per-voxel storage (the only places where a
+surface can be), so a 512^3 volume never becomes dense at once. A cube is meshed only when all its
+8 corners are known (w > 0), so no surface appears between observed and unknown space.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+CHUNK = 96  # voxels per chunk edge
+
+
+def _known_cubes_mask(known: np.ndarray) -> np.ndarray:
+    """skimage marches the cube whose maximum corner is (x, y, z) when mask[x, y, z]: require all 8 corners known."""
+    m = np.zeros_like(known)
+    k = known
+    m[1:, 1:, 1:] = (k[1:, 1:, 1:] & k[:-1, 1:, 1:] & k[1:, :-1, 1:] & k[1:, 1:, :-1]
+                     & k[:-1, :-1, 1:] & k[:-1, 1:, :-1] & k[1:, :-1, :-1] & k[:-1, :-1, :-1])
+    return m
+
+
+def surface_arrays(vol, lo=None, hi=None):
+    """Vertices (N, 3) world, faces (M, 3), vertex normals (N, 3, pointing into empty space) and colours
+    (N, 3) uint8 of the v = 0 surface inside the voxel box [lo, hi) (default: everywhere)."""
+    from skimage.measure import marching_cubes
+
+    box = vol.surface_block_box()
+    empty = (np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros((0, 3)), np.zeros((0, 3), np.uint8))
+    if box is None:
+        return empty
+    blo, bhi = box
+    if lo is not None:
+        blo = np.maximum(blo, np.asarray(lo, np.int64))
+    if hi is not None:
+        bhi = np.minimum(bhi, np.asarray(hi, np.int64))
+    if np.any(bhi - blo < 2):
+        return empty
+    B = 8
+    verts_all, faces_all, norms_all, cols_all = [], [], [], []
+    nv = 0
+    for x0 in range(int(blo[0]), int(bhi[0]) - 1, CHUNK):
+        for y0 in range(int(blo[1]), int(bhi[1]) - 1, CHUNK):
+            for z0 in range(int(blo[2]), int(bhi[2]) - 1, CHUNK):
+                c_lo = np.array([x0, y0, z0])
+                c_hi = np.minimum(c_lo + CHUNK + 1, bhi)
+                b0 = c_lo // B
+                b1 = (c_hi + B - 1) // B
+                if not np.any(vol.block_idx[b0[0]:b1[0], b0[1]:b1[1], b0[2]:b1[2]] >= 0):
+                    continue
+                tv, tw, tc = vol.tsdf_weights(c_lo, c_hi, color=True)
+                known = tw > 0
+                mask = _known_cubes_mask(known)
+                if not mask.any():
+                    continue
+                if not ((tv[known] > 0).any() and (tv[known] <= 0).any()):
+                    continue
+                try:
+                    v, f, n, _ = marching_cubes(tv, level=0.0, mask=mask, allow_degenerate=False)
+                except (RuntimeError, ValueError):
+                    continue
+                if len(f) == 0:
+                    continue
+                if tc.shape[0]:
+                    idx = np.clip(np.rint(v).astype(np.int64), 0, np.array(tv.shape) - 1)
+                    cols_all.append(tc[idx[:, 0], idx[:, 1], idx[:, 2]])
+                verts_all.append(vol.origin + (c_lo + v + 0.5) * vol.voxel_size)
+                faces_all.append(f + nv)
+                # skimage's normals follow the descending gradient; ours point up the gradient (into empty space)
+                norms_all.append(-n)
+                nv += len(v)
+    if not verts_all:
+        return empty
+    verts = np.concatenate(verts_all)
+    faces = np.concatenate(faces_all)
+    norms = np.concatenate(norms_all)
+    cols = np.concatenate(cols_all) if cols_all else np.full((len(verts), 3), 180, np.uint8)
+    return verts, faces, norms, cols
+
+
+def extract_mesh(vol, lo=None, hi=None):
+    """open3d TriangleMesh (vertex colours and normals) of the volume's surface, seams between chunks merged."""
+    import open3d as o3d
+
+    v, f, n, c = surface_arrays(vol, lo, hi)
+    mesh = o3d.geometry.TriangleMesh()
+    if len(f) == 0:
+        return mesh
+    # skimage orders faces so that their normals follow its (descending) gradient: flip to face empty space
+    mesh.vertices = o3d.utility.Vector3dVector(v)
+    mesh.triangles = o3d.utility.Vector3iVector(f[:, ::-1].astype(np.int32))
+    mesh.vertex_normals = o3d.utility.Vector3dVector(n)
+    mesh.vertex_colors = o3d.utility.Vector3dVector(c.astype(np.float64) / 255.0)
+    mesh.remove_duplicated_vertices()
+    mesh.remove_degenerate_triangles()
+    mesh.remove_unreferenced_vertices()
+    return mesh
+
+
+def extract_cloud(vol, lo=None, hi=None):
+    """open3d PointCloud of surface points (marching-cubes vertices, as ExtractSurfacePts) with colours and
+    normals pointing into empty space."""
+    import open3d as o3d
+
+    mesh = extract_mesh(vol, lo, hi)
+    pc = o3d.geometry.PointCloud()
+    if len(mesh.vertices) == 0:
+        return pc
+    pc.points = mesh.vertices
+    pc.colors = mesh.vertex_colors
+    pc.normals = mesh.vertex_normals
+    return pc

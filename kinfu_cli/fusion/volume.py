@@ -1,0 +1,419 @@
+"""TernaryVolume: a KinectFusion TSDF volume that knows unknown / empty / occupied for every voxel.
+
+Per voxel a truncated signed distance v in [-1, 1], a weight w in [0, max_weight] and (optionally) a
+colour. Ternary rule (digest §1.2, eq. 2.11): w = 0 unknown; w > 0 and v <= 0 occupied; w > 0 and v > 0
+empty. Free space in front of observed surfaces becomes known-empty (v = 1); interiors beyond the
+truncation band stay unknown.
+
+Storage is sparse by 8^3 blocks (see kernels.py): never-observed space costs one byte per block,
+carved free space too; only blocks near surfaces hold per-voxel v (int16), w (uint8) and colour.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from kinfu_cli.errors import ConfigError, VolumeError
+from kinfu_cli.fusion import kernels as kn
+from kinfu_cli.fusion.ternary import TernaryGrid
+
+FORMAT = "kinfu-volume"
+FORMAT_VERSION = 1
+BYTES_PER_VOXEL = 3  # v int16 + w uint8
+BYTES_PER_VOXEL_COLOR = 3
+
+
+def _triple(x, name: str, kind=float) -> tuple:
+    if np.isscalar(x):
+        t = (kind(x),) * 3
+    else:
+        t = tuple(kind(v) for v in x)
+        if len(t) != 3:
+            raise ConfigError(f"{name}: expected one value or three (x, y, z), got {len(t)}")
+    return t
+
+
+def _available_bytes() -> int:
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return 16 * 1024**3
+
+
+def check_rigid(T: np.ndarray, what: str = "T_world_camera") -> np.ndarray:
+    """Return T as float64 (4, 4) or raise VolumeError when it is not a finite rigid transform."""
+    T = np.asarray(T, dtype=np.float64)
+    if T.shape != (4, 4):
+        raise VolumeError(f"{what}: expected a 4x4 pose, got shape {T.shape}")
+    if not np.all(np.isfinite(T)):
+        raise VolumeError(f"{what}: pose is not finite (NaN or inf)")
+    R = T[:3, :3]
+    if (np.abs(R.T @ R - np.eye(3)).max() > 1e-3 or abs(np.linalg.det(R) - 1.0) > 1e-3
+            or np.abs(T[3] - [0, 0, 0, 1]).max() > 1e-9):
+        raise VolumeError(f"{what}: pose is not rigid (rotation not orthonormal with det +1, or last row "
+                          f"not [0 0 0 1])")
+    return T
+
+
+class TernaryVolume:
+    """A KinFu-style TSDF grid with free-space carving.
+
+    size: edge length(s) in metres (one value for a cube); resolution: voxels per axis (one value or three);
+    voxel_size: overrides resolution (resolution = ceil(size / voxel_size)); origin: world position of the
+    grid's minimum corner (default: grid centred on the world origin); truncation: M_v in metres;
+    max_weight: M_w; min_depth/max_depth: depth readings outside are ignored; color: keep RGB per voxel.
+    """
+
+    def __init__(self, size=(3.0, 3.0, 3.0), resolution=512, voxel_size: float | None = None,
+                 origin=None, truncation: float = 0.03, max_weight: int = 128,
+                 min_depth: float = 0.3, max_depth: float = 4.0, color: bool = True,
+                 _allocate: bool = True) -> None:
+        size = _triple(size, "size")
+        if not all(np.isfinite(s) and s > 0 for s in size):
+            raise ConfigError(f"size: expected positive lengths in metres, got {size}")
+        if voxel_size is not None:
+            voxel_size = float(voxel_size)
+            if not (np.isfinite(voxel_size) and voxel_size > 0):
+                raise ConfigError(f"voxel_size: expected a positive length in metres, got {voxel_size}")
+            dims = tuple(max(1, int(np.ceil(s / voxel_size - 1e-9))) for s in size)
+        else:
+            dims = _triple(resolution, "resolution", int)
+            if not all(d > 0 for d in dims):
+                raise ConfigError(f"resolution: expected positive voxel counts, got {dims}")
+            if len(set(np.round(np.array(size) / np.array(dims), 12))) != 1:
+                raise ConfigError(f"size {size} and resolution {dims} give non-cubic voxels; use --voxel-size")
+            voxel_size = size[0] / dims[0]
+        if not (np.isfinite(truncation) and truncation > 0):
+            raise ConfigError(f"truncation: expected a positive distance in metres, got {truncation}")
+        if not (1 <= int(max_weight) <= 255):
+            raise ConfigError(f"max_weight: expected 1..255, got {max_weight}")
+        if not (0 <= min_depth < max_depth):
+            raise ConfigError(f"min_depth/max_depth: expected 0 <= min < max, got {min_depth}, {max_depth}")
+        self.voxel_size = float(voxel_size)
+        self.shape = tuple(int(d) for d in dims)
+        if origin is None:
+            origin = -0.5 * np.array(self.shape) * self.voxel_size
+        self.origin = np.asarray(_triple(origin, "origin"), dtype=np.float64)
+        if not np.all(np.isfinite(self.origin)):
+            raise ConfigError(f"origin: expected finite x,y,z, got {tuple(self.origin)}")
+        self.truncation = float(truncation)
+        self.max_weight = int(max_weight)
+        self.min_depth = float(min_depth)
+        self.max_depth = float(max_depth)
+        self.color = bool(color)
+        self.nb = np.array([(d + kn.B - 1) // kn.B for d in self.shape], dtype=np.int64)
+        self._check_memory()
+        self._raylen_cache: dict = {}
+        self.frames_integrated = 0
+        if _allocate:
+            self.block_idx = np.full(tuple(self.nb), -1, dtype=np.int32)
+            self.block_w = np.zeros(tuple(self.nb), dtype=np.uint8)
+            self.n_used = 0
+            self._alloc_pools(1024)
+
+    # ------------------------------------------------------------------ storage
+    @property
+    def bytes_worst_case(self) -> int:
+        nblocks = int(np.prod(self.nb))
+        per = kn.B3 * (BYTES_PER_VOXEL + (BYTES_PER_VOXEL_COLOR if self.color else 0))
+        return nblocks * (per + 5)
+
+    def _check_memory(self) -> None:
+        need = self.bytes_worst_case
+        avail = _available_bytes()
+        if need > 0.8 * avail:
+            nx, ny, nz = self.shape
+            raise VolumeError(f"volume of {nx}x{ny}x{nz} voxels at {self.voxel_size * 1000:.2f} mm would need up to "
+                              f"{need / 1024**3:.1f} GB ({avail / 1024**3:.1f} GB available); use a coarser "
+                              f"--voxel-size or a smaller --size")
+
+    def _alloc_pools(self, cap: int) -> None:
+        self.pool_v = np.zeros((cap, kn.B3), dtype=np.int16)
+        self.pool_w = np.zeros((cap, kn.B3), dtype=np.uint8)
+        self.pool_c = np.zeros((cap if self.color else 0, kn.B3, 3), dtype=np.uint8)
+
+    def _ensure_capacity(self, need: int) -> None:
+        cap = self.pool_v.shape[0]
+        if need <= cap:
+            return
+        new = max(need, int(cap * 1.6) + 256)
+        new = min(new, int(np.prod(self.nb)))
+        new = max(new, need)
+        pv = np.zeros((new, kn.B3), dtype=np.int16)
+        pw = np.zeros((new, kn.B3), dtype=np.uint8)
+        pv[: self.n_used] = self.pool_v[: self.n_used]
+        pw[: self.n_used] = self.pool_w[: self.n_used]
+        if self.color:
+            pc = np.zeros((new, kn.B3, 3), dtype=np.uint8)
+            pc[: self.n_used] = self.pool_c[: self.n_used]
+            self.pool_c = pc
+        self.pool_v, self.pool_w = pv, pw
+
+    @property
+    def n_blocks_allocated(self) -> int:
+        return int(self.n_used)
+
+    def memory_bytes(self) -> int:
+        """Bytes held by the grid's arrays (block tables and pools)."""
+        return int(self.block_idx.nbytes + self.block_w.nbytes + self.pool_v.nbytes + self.pool_w.nbytes
+                   + self.pool_c.nbytes)
+
+    # ------------------------------------------------------------------ integration
+    def _raylen(self, K: np.ndarray, width: int, height: int) -> np.ndarray:
+        key = (tuple(np.round(K.ravel(), 9)), width, height)
+        r = self._raylen_cache.get(key)
+        if r is None:
+            u = (np.arange(width, dtype=np.float64) - K[0, 2]) / K[0, 0]
+            v = (np.arange(height, dtype=np.float64) - K[1, 2]) / K[1, 1]
+            r = np.sqrt(1.0 + u[None, :] ** 2 + v[:, None] ** 2).astype(np.float32)
+            self._raylen_cache = {key: r}
+        return r
+
+    def prepare_depth(self, depth: np.ndarray) -> np.ndarray:
+        """float32 depth with readings outside [min_depth, max_depth] (and NaN) set to 0."""
+        d = np.asarray(depth, dtype=np.float32)
+        if d.ndim != 2:
+            raise VolumeError(f"depth: expected a 2-D image in metres, got shape {d.shape}")
+        ok = np.isfinite(d) & (d >= self.min_depth) & (d <= self.max_depth)
+        return np.where(ok, d, np.float32(0)).astype(np.float32)
+
+    def integrate(self, depth: np.ndarray, K: np.ndarray, T_world_camera: np.ndarray,
+                  color: np.ndarray | None = None) -> dict:
+        """Fuse one depth image (metres, float32 (H, W); 0/NaN = no reading) taken from T_world_camera.
+
+        color: uint8 RGB (H, W, 3) registered to the depth image, or None. Returns counts of blocks
+        carved in bulk and updated voxel by voxel.
+        """
+        K = np.asarray(K, dtype=np.float64)
+        if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
+            raise VolumeError(f"K: expected finite 3x3 intrinsics with fx, fy > 0, got {K.tolist()}")
+        T = check_rigid(T_world_camera)
+        d = self.prepare_depth(depth)
+        h, w = d.shape
+        if not (0 <= K[0, 2] <= w and 0 <= K[1, 2] <= h):
+            raise VolumeError(f"depth image {w}x{h} does not match the intrinsics (principal point "
+                              f"{K[0, 2]:.1f}, {K[1, 2]:.1f} outside the image)")
+        if not np.any(d > 0):
+            raise VolumeError(f"depth image has no valid pixels in [{self.min_depth}, {self.max_depth}] m")
+        if color is not None and self.color:
+            color = np.asarray(color)
+            if color.ndim != 3 or color.shape[2] < 3:
+                raise VolumeError(f"color: expected an RGB image (H, W, 3), got shape {color.shape}")
+            if color.shape[:2] != (h, w):
+                import cv2
+
+                color = cv2.resize(np.ascontiguousarray(color[:, :, :3]), (w, h), interpolation=cv2.INTER_NEAREST)
+            col = np.ascontiguousarray(color[:, :, :3], dtype=np.uint8)
+        else:
+            col = np.zeros((0, 0, 3), dtype=np.uint8)
+        T_cw = np.linalg.inv(T)
+        fx, fy, cx, cy = float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])
+        tile = 8
+        tmin, tmax = kn._depth_tiles(d, tile)
+        inv_sat = kn._invalid_integral(d)
+        cls = kn.classify_blocks(self.nb, self.origin, self.voxel_size, T_cw, fx, fy, cx, cy, w, h,
+                                 self.truncation, tmin, tmax, tile, inv_sat, float(d.max()))
+        bidx = self.block_idx.reshape(-1)
+        bw = self.block_w.reshape(-1)
+        need_new = int(np.count_nonzero((cls == kn.VOXEL) & (bidx < 0)))
+        # blocks with work, in a fixed shuffled order so both threads get similar loads (numba splits
+        # the range statically, and busy blocks are spatially clustered)
+        work = np.flatnonzero(cls)
+        self._rng_perm(work)
+        tmin4, tmax4 = kn._depth_tiles(d, 4)
+        if need_new:
+            self._ensure_capacity(self.n_used + need_new)
+            self.n_used = kn.allocate_blocks(cls, bidx, bw, self.pool_v, self.pool_w, self.pool_c, self.n_used)
+        kn.integrate_blocks(cls, self.nb, np.array(self.shape, dtype=np.int64), bidx, bw, self.pool_v,
+                            self.pool_w, self.pool_c, self.origin, self.voxel_size, T_cw, fx, fy, cx, cy, d,
+                            self._raylen(K, w, h), col, self.truncation, self.max_weight, tmin4, tmax4, 4,
+                            inv_sat, work)
+        self.frames_integrated += 1
+        return {"blocks_carved": int(np.count_nonzero(cls == kn.CARVE)),
+                "blocks_voxelwise": int(np.count_nonzero(cls == kn.VOXEL)),
+                "blocks_allocated": int(self.n_used)}
+
+    @staticmethod
+    def _rng_perm(work: np.ndarray) -> None:
+        np.random.default_rng(12345).shuffle(work)
+
+    def clear_sphere(self, center, radius: float) -> None:
+        """Forget every voxel whose centre is inside the sphere (v = 0, w = 0: unknown), as ForgetAround."""
+        c = np.asarray(center, dtype=np.float64).reshape(3)
+        radius = float(radius)
+        if not (np.all(np.isfinite(c)) and np.isfinite(radius) and radius > 0):
+            raise ConfigError(f"clear sphere: expected finite centre and radius > 0, got {c.tolist()}, {radius}")
+        sph = kn.sphere_blocks(self.nb, self.origin, self.voxel_size, c, radius)
+        bidx = self.block_idx.reshape(-1)
+        bw = self.block_w.reshape(-1)
+        # partly covered uniform blocks that are known need per-voxel storage first
+        part = np.flatnonzero((sph == 1) & (bidx < 0) & (bw > 0))
+        if part.size:
+            cls = np.zeros_like(sph)
+            cls[part] = kn.VOXEL
+            self._ensure_capacity(self.n_used + part.size)
+            self.n_used = kn.allocate_blocks(cls, bidx, bw, self.pool_v, self.pool_w, self.pool_c, self.n_used)
+        kn.clear_sphere_blocks(sph, self.nb, bidx, bw, self.pool_v, self.pool_w, self.origin, self.voxel_size,
+                               c, radius)
+
+    # ------------------------------------------------------------------ read-out
+    def labels(self) -> np.ndarray:
+        """Ternary labels int8 [x, y, z]: 1 occupied, 0 unknown, -1 empty."""
+        return kn.labels_dense(self.nb, np.array(self.shape, dtype=np.int64), self.block_idx, self.block_w,
+                               self.pool_v, self.pool_w)
+
+    def ternary_grid(self) -> TernaryGrid:
+        return TernaryGrid(self.labels(), self.origin.copy(), self.voxel_size)
+
+    def _box(self, lo, hi) -> tuple[np.ndarray, np.ndarray]:
+        lo = np.zeros(3, np.int64) if lo is None else np.asarray(lo, dtype=np.int64).reshape(3)
+        hi = np.array(self.shape, np.int64) if hi is None else np.asarray(hi, dtype=np.int64).reshape(3)
+        lo = np.clip(lo, 0, self.shape)
+        hi = np.clip(hi, lo, self.shape)
+        return lo, hi
+
+    def tsdf_weights(self, lo=None, hi=None, color: bool = False):
+        """Dense (v float32, w uint8[, colour uint8 (..., 3)]) over the voxel box [lo, hi) (default: all).
+
+        Whole 512^3 grids cost 640 MB here; ask for sub-boxes where possible.
+        """
+        lo, hi = self._box(lo, hi)
+        tv, tw, tc = kn.dense_box(lo, hi, self.block_idx, self.block_w, self.pool_v, self.pool_w, self.pool_c,
+                                  bool(color))
+        return (tv, tw, tc) if color else (tv, tw)
+
+    def tsdf(self, lo=None, hi=None) -> np.ndarray:
+        """Dense v (float32 in [-1, 1]; 0 where unknown) over [lo, hi)."""
+        return self.tsdf_weights(lo, hi)[0]
+
+    def weights(self, lo=None, hi=None) -> np.ndarray:
+        """Dense w (uint8, 0 = unknown) over [lo, hi)."""
+        return self.tsdf_weights(lo, hi)[1]
+
+    def voxel_centers(self, idx: np.ndarray) -> np.ndarray:
+        return self.origin + (np.asarray(idx, dtype=np.float64) + 0.5) * self.voxel_size
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """World min and max corner of the grid."""
+        return self.origin.copy(), self.origin + np.array(self.shape) * self.voxel_size
+
+    def surface_block_box(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """Voxel box [lo, hi) around all blocks with per-voxel storage (where surfaces can be), or None."""
+        ib = np.argwhere(self.block_idx >= 0)
+        if ib.size == 0:
+            return None
+        lo = ib.min(axis=0) * kn.B
+        hi = np.minimum((ib.max(axis=0) + 1) * kn.B, self.shape)
+        return lo, hi
+
+    def raycast(self, K: np.ndarray, width: int, height: int, T_world_camera: np.ndarray,
+                min_depth: float | None = None, max_depth: float | None = None, return_state: bool = False):
+        """Ray cast the TSDF from a pose: (depth (H, W) float32 z in metres, 0 = no hit; normals (H, W, 3) world,
+        NaN = none; vertices (H, W, 3) world, NaN = none). With return_state also an int8 (H, W) map:
+        1 the ray hit an occupied surface, 0 it met unknown space, -1 it left the grid through empty space.
+        """
+        K = np.asarray(K, dtype=np.float64)
+        T = check_rigid(T_world_camera)
+        lo = self.min_depth if min_depth is None else float(min_depth)
+        hi = self.max_depth if max_depth is None else float(max_depth)
+        depth, normals, verts, state = kn.raycast_kernel(
+            np.array(self.shape, dtype=np.int64), self.block_idx, self.block_w, self.pool_v, self.pool_w,
+            self.origin, self.voxel_size, self.truncation, T, np.linalg.inv(K), int(width), int(height), lo, hi)
+        if return_state:
+            return depth, normals, verts, state
+        return depth, normals, verts
+
+    def extract_mesh(self, lo=None, hi=None):
+        """Coloured open3d TriangleMesh of the v = 0 surface (marching cubes, skimage) between known voxels,
+        optionally only inside the voxel box [lo, hi)."""
+        from kinfu_cli.fusion.mesh import extract_mesh
+
+        return extract_mesh(self, lo, hi)
+
+    def extract_cloud(self, lo=None, hi=None):
+        """Surface point cloud (open3d PointCloud with colours and normals): the mesh vertices."""
+        from kinfu_cli.fusion.mesh import extract_cloud
+
+        return extract_cloud(self, lo, hi)
+
+    def counts(self) -> dict[str, int]:
+        return self.ternary_grid().counts()
+
+    # ------------------------------------------------------------------ persistence
+    def meta(self) -> dict:
+        return {"format": FORMAT, "format_version": FORMAT_VERSION, "shape": list(self.shape),
+                "voxel_size": self.voxel_size, "origin": self.origin.tolist(), "truncation": self.truncation,
+                "max_weight": self.max_weight, "min_depth": self.min_depth, "max_depth": self.max_depth,
+                "color": self.color, "block": kn.B, "frames_integrated": self.frames_integrated}
+
+    def save(self, path: str | os.PathLike) -> Path:
+        """Write one .npz (metadata, block tables, used pool rows) atomically; `load_volume` reads it back."""
+        from kinfu_cli.io.atomic import atomic_path
+
+        n = self.n_used
+        with atomic_path(path) as tmp:
+            with open(tmp, "wb") as fh:
+                np.savez_compressed(fh, meta=np.array(json.dumps(self.meta())), block_idx=self.block_idx,
+                                    block_w=self.block_w, pool_v=self.pool_v[:n], pool_w=self.pool_w[:n],
+                                    pool_c=self.pool_c[:n] if self.color else self.pool_c[:0])
+        return Path(path)
+
+    def copy(self) -> "TernaryVolume":
+        other = TernaryVolume.__new__(TernaryVolume)
+        other.__dict__.update({k: (v.copy() if isinstance(v, np.ndarray) else v) for k, v in self.__dict__.items()})
+        other._raylen_cache = {}
+        return other
+
+    def __repr__(self) -> str:
+        nx, ny, nz = self.shape
+        return (f"TernaryVolume({nx}x{ny}x{nz}, voxel {self.voxel_size * 1000:.2f} mm, origin "
+                f"{np.round(self.origin, 3).tolist()}, {self.n_used} blocks stored)")
+
+
+def load_volume(path: str | os.PathLike) -> TernaryVolume:
+    """Read a volume written by TernaryVolume.save; VolumeError for missing, foreign or other-version files."""
+    path = Path(path)
+    if not path.exists():
+        raise VolumeError(f"{path}: no such volume file")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            if "meta" not in data.files:
+                raise VolumeError(f"{path}: not a kinfu volume.npz (no 'meta' array; a ternary.npz cannot be "
+                                  f"fused into)")
+            meta = json.loads(str(data["meta"]))
+            if meta.get("format") != FORMAT or meta.get("format_version") != FORMAT_VERSION:
+                raise VolumeError(f"{path}: volume format {meta.get('format')!r} version "
+                                  f"{meta.get('format_version')!r}, expected {FORMAT!r} version {FORMAT_VERSION}")
+            arrays = {k: data[k] for k in ("block_idx", "block_w", "pool_v", "pool_w", "pool_c")}
+    except VolumeError:
+        raise
+    except (OSError, ValueError, EOFError, KeyError, json.JSONDecodeError) as exc:
+        raise VolumeError(f"{path}: not a readable volume file ({exc})") from None
+    vol = TernaryVolume(size=[s * meta["voxel_size"] for s in meta["shape"]], voxel_size=meta["voxel_size"],
+                        origin=meta["origin"], truncation=meta["truncation"], max_weight=meta["max_weight"],
+                        min_depth=meta["min_depth"], max_depth=meta["max_depth"], color=meta["color"],
+                        _allocate=False)
+    if tuple(vol.shape) != tuple(meta["shape"]) or arrays["block_idx"].shape != tuple(vol.nb):
+        raise VolumeError(f"{path}: inconsistent volume file (shape {meta['shape']}, blocks "
+                          f"{arrays['block_idx'].shape})")
+    vol.block_idx = np.ascontiguousarray(arrays["block_idx"], dtype=np.int32)
+    vol.block_w = np.ascontiguousarray(arrays["block_w"], dtype=np.uint8)
+    n = int(arrays["pool_v"].shape[0])
+    vol.n_used = n
+    vol._alloc_pools(max(n, 1024))
+    vol.pool_v[:n] = arrays["pool_v"]
+    vol.pool_w[:n] = arrays["pool_w"]
+    if vol.color:
+        if arrays["pool_c"].shape[0] != n:
+            raise VolumeError(f"{path}: inconsistent colour pool ({arrays['pool_c'].shape[0]} rows, expected {n})")
+        vol.pool_c[:n] = arrays["pool_c"]
+    vol.frames_integrated = int(meta.get("frames_integrated", 0))
+    return vol
