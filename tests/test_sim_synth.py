@@ -201,3 +201,18 @@ def test_raw_images_and_30_hz_hand(tmp_path):
     assert np.allclose(np.diff(hand.t), 1 / 30, atol=1e-6)
     traj = read_polhemus(out / "ground_truth" / "hand.traj")           # the .traj file is always 100 Hz
     assert abs(len(traj) - (sc.hand.duration * 100 + 1)) <= 1
+
+
+def test_ground_truth_names_the_topics_written(tmp_path):
+    from kinfu_cli.io.recording import open_recording
+    from kinfu_cli.sim.scenario import load_ground_truth
+
+    for depth, color in (("png", "jpeg"), ("raw", "raw")):
+        out = tmp_path / depth
+        res = CliRunner().invoke(cli, ["synth", "-o", str(out), "--formats", "mcap", "--depth-format", depth,
+                                       "--color-format", color, "--width", "16", "--height", "12", "--frames", "2",
+                                       "-q"])
+        assert res.exit_code == 0, res.output
+        topics = load_ground_truth(out).info["topics"]
+        with open_recording(out / "recording.mcap") as rec:
+            assert set(rec.topics) == set(topics.values())

@@ -26,7 +26,7 @@ def run_synth(out: str | Path, seed: int = 0, width: int = 320, height: int = 24
               hand_rate: float = 100.0, frame_rate: float = 5.0, noise: bool = True, depth_format: str = "png",
               color_format: str = "jpeg", jpeg_quality: int = 75, quiet: bool = True) -> dict:
     """Build the scenario and write the containers and OUT/ground_truth/. Returns a summary (paths, counts)."""
-    from kinfu_cli.sim.scenario import make_scenario, write_ground_truth, write_recordings
+    from kinfu_cli.sim.scenario import make_scenario, recording_topics, write_ground_truth, write_recordings
 
     out = Path(out)
     if out.exists() and not out.is_dir():
@@ -36,7 +36,7 @@ def run_synth(out: str | Path, seed: int = 0, width: int = 320, height: int = 24
     paths = [out / FORMAT_NAMES[f] for f in formats]
     write_recordings(sc, paths, depth_format=depth_format, color_format=color_format, quiet=quiet,
                      jpeg_quality=jpeg_quality)
-    gt = write_ground_truth(sc, out / "ground_truth")
+    gt = write_ground_truth(sc, out / "ground_truth", topics=recording_topics(depth_format, color_format))
     for p in paths + [gt]:
         _relax_permissions(p)
     return {"recordings": [str(p) for p in paths], "ground_truth": str(gt), "frames": len(sc.frames),

@@ -312,7 +312,14 @@ def _events(sc: Scenario) -> list[tuple[int, str, object]]:
     return ev
 
 
-def write_ground_truth(scenario: Scenario, folder: str | os.PathLike) -> Path:
+def recording_topics(depth_format: str = "png", color_format: str = "jpeg") -> dict:
+    """Topic of each role in a recording written with these formats."""
+    return {"depth": DEPTH_TOPIC + ("/compressedDepth" if depth_format == "png" else ""),
+            "color": COLOR_TOPIC + ("" if color_format == "raw" else "/compressed"),
+            "camera_info": INFO_TOPIC, "hand": HAND_TOPIC, "tf": "/tf", "tf_static": "/tf_static"}
+
+
+def write_ground_truth(scenario: Scenario, folder: str | os.PathLike, topics: dict | None = None) -> Path:
     """Write ground truth into `folder` (atomically, as a whole): scene_before.ply, scene_after.ply, objects/<id>.ply
     + table.ply + floor.ply (after state), changes.json, camera_poses.txt, hand.traj (Polhemus format, 100 Hz)."""
     from kinfu_cli.io.atomic import atomic_dir
@@ -332,7 +339,7 @@ def write_ground_truth(scenario: Scenario, folder: str | os.PathLike) -> Path:
 
         _write_mesh(tmp / "objects" / "table.ply", sc.scene_after.table.mesh().paint_uniform_color(TABLE_COLOUR))
         _write_mesh(tmp / "objects" / "floor.ply", sc.scene_after.floor_mesh().paint_uniform_color(FLOOR_COLOUR))
-        (tmp / "changes.json").write_text(_json(ground_truth_json(sc)))
+        (tmp / "changes.json").write_text(_json(ground_truth_json(sc, topics)))
         lines = ["# stamp_s (Unix seconds of the depth message) then the true T_world_camera, 16 numbers row-major"]
         for f in sc.frames:
             lines.append(f"{f.stamp_ns // 1_000_000_000}.{f.stamp_ns % 1_000_000_000:09d} "
@@ -345,7 +352,7 @@ def write_ground_truth(scenario: Scenario, folder: str | os.PathLike) -> Path:
     return Path(folder)
 
 
-def ground_truth_json(sc: Scenario) -> dict:
+def ground_truth_json(sc: Scenario, topics: dict | None = None) -> dict:
     before = {o.id: o for o in sc.scene_before.objects}
     after = {o.id: o for o in sc.scene_after.objects}
     objects = []
@@ -379,6 +386,7 @@ def ground_truth_json(sc: Scenario) -> dict:
         "frames_tree": {"world_frame": WORLD_FRAME, "camera_frame": CAMERA_FRAME,
                         "chain": ["world", "base_link", "link1", "link2", "link3", "link4", "link5", "link6",
                                   "wrist", CAMERA_FRAME]},
+        "topics": topics or recording_topics(),
         "time_unit": "seconds after t0_ns (the recording starts at t0_ns)",
     }
 

@@ -20,7 +20,7 @@ with Lambert shading from a fixed light above the table, an ambient term and a l
 colour camera is registered to the depth camera (same intrinsics and pose, as the Kinect's registered mode).
 With `noise=False` depth is exact (float32 ray casting, no quantisation) and colour has no pixel noise.
 
-Everything is vectorised numpy + open3d C++ ray casting; a 640x480 frame takes tens of milliseconds.
+Ray casting is open3d C++, the noise model vectorised numpy, shading a numba kernel.
 """
 
 from __future__ import annotations
@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import open3d as o3d
+from numba import njit, prange
 
 from kinfu_cli.errors import ConfigError
 from kinfu_cli.sim.scene import LABEL_NONE, RaycastTarget, Scene
@@ -102,6 +103,7 @@ class DepthSensor:
         self._u = u.astype(np.float64)
         self._v = v.astype(np.float64)
         self._cache: tuple[int, RaycastTarget] | None = None
+        self._dcam: np.ndarray | None = None
 
     # ---- public -------------------------------------------------------------------------------------
     def render(self, scene_or_mesh, T_world_camera: np.ndarray, frame_seed: int | None = None
@@ -120,10 +122,9 @@ class DepthSensor:
         target = self._target(scene_or_mesh)
         rng = np.random.default_rng([self.seed, int(frame_seed)]) if frame_seed is not None else self._rng
         H, W = self.height, self.width
-        fx, fy, cx, cy = self.K[0, 0], self.K[1, 1], self.K[0, 2], self.K[1, 2]
 
         # noise-free cast through the pixel centres (colour, labels, true depth)
-        hit = self._cast(target, T, self._u, self._v)
+        hit = self._cast(target, T)
         true_depth = np.where(hit["valid"], hit["t"], 0.0)
         labels = np.where(hit["valid"], target.labels[np.minimum(hit["gid"], len(target.labels) - 1)], LABEL_NONE)
         color = self._shade(target, hit, rng)
@@ -144,13 +145,13 @@ class DepthSensor:
         ok = nh["valid"] & (z > 0)
 
         # incidence angle between the viewing ray and the surface normal
-        theta = nh["theta"]
+        theta = self._theta(nh)
         ok &= theta <= self.max_incidence
 
         # projector shadow: the projector at +baseline along camera x must see the point
         if self.baseline > 0 and np.any(ok):
             proj = T[:3, :3] @ np.array([self.baseline, 0.0, 0.0]) + T[:3, 3]
-            pts = nh["points"][ok]
+            pts = self._points(nh, ok)
             d = pts - proj
             rays = np.concatenate([np.broadcast_to(proj, d.shape), d], axis=1).astype(np.float32)
             occluded = target.scene.test_occlusions(o3d.core.Tensor(rays), tnear=0.0, tfar=0.995).numpy()
@@ -193,52 +194,94 @@ class DepthSensor:
         self._cache = (scene_or_mesh, target)  # keeps a reference, so the id cannot be reused
         return target
 
-    def _cast(self, target: RaycastTarget, T: np.ndarray, u: np.ndarray, v: np.ndarray) -> dict:
+    def _cast(self, target: RaycastTarget, T: np.ndarray, u: np.ndarray | None = None,
+              v: np.ndarray | None = None) -> dict:
+        """Cast one ray per pixel (through pixel centres, or through (u, v) when given).
+
+        Returns t (H,W) float64 optical-axis depth (0 = no hit), valid, gid, normals (H,W,3) float32,
+        dir (H,W,3) float64 world ray directions with camera-z component 1, prim, uv.
+        """
         K = self.K
-        d_cam = np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones_like(u)], axis=-1)
+        if u is None:
+            if self._dcam is None:
+                self._dcam = np.stack([(self._u - K[0, 2]) / K[0, 0], (self._v - K[1, 2]) / K[1, 1],
+                                       np.ones_like(self._u)], axis=-1)
+            d_cam = self._dcam
+        else:
+            d_cam = np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones_like(u)], axis=-1)
         d_world = d_cam @ T[:3, :3].T  # z component in camera = 1, so t_hit is the optical-axis depth
-        origin = np.broadcast_to(T[:3, 3], d_world.shape)
-        rays = np.concatenate([origin, d_world], axis=-1).astype(np.float32)
-        ans = target.scene.cast_rays(o3d.core.Tensor(rays))
-        t = ans["t_hit"].numpy().astype(np.float64)
-        gid = ans["geometry_ids"].numpy().astype(np.int64)
+        rays = np.empty(d_world.shape[:-1] + (6,), dtype=np.float32)
+        rays[..., :3] = T[:3, 3]
+        rays[..., 3:] = d_world
+        ans = target.scene.cast_rays(o3d.core.Tensor.from_numpy(rays))
+        t = ans["t_hit"].numpy()
+        gid = ans["geometry_ids"].numpy()
         valid = np.isfinite(t) & (gid != o3d.t.geometry.RaycastingScene.INVALID_ID)
-        t = np.where(valid, t, 0.0)
-        normals = ans["primitive_normals"].numpy().astype(np.float64)
-        dn = d_world / np.linalg.norm(d_world, axis=-1, keepdims=True)
-        cosang = np.abs(np.sum(normals * dn, axis=-1))
-        theta = np.arccos(np.clip(cosang, 0.0, 1.0))
-        points = T[:3, 3] + d_world * t[..., None]
-        return {"t": t, "gid": np.where(valid, gid, 0), "valid": valid, "normals": normals, "theta": theta,
-                "points": points, "dir": dn, "prim": ans["primitive_ids"].numpy(), "uv": ans["primitive_uvs"].numpy()}
+        return {"t": np.where(valid, t, 0.0).astype(np.float64), "gid": np.where(valid, gid, 0).astype(np.int64),
+                "valid": valid, "normals": ans["primitive_normals"].numpy(), "dir": d_world,
+                "prim": ans["primitive_ids"].numpy(), "uv": ans["primitive_uvs"].numpy(), "origin": T[:3, 3]}
+
+    @staticmethod
+    def _theta(hit: dict) -> np.ndarray:
+        """Angle (rad) between each pixel's ray and the surface normal it hit (0 where nothing was hit)."""
+        d = hit["dir"]
+        cos = np.abs(np.einsum("hwc,hwc->hw", hit["normals"].astype(np.float64), d)) / np.linalg.norm(d, axis=-1)
+        return np.where(hit["valid"], np.arccos(np.clip(cos, 0.0, 1.0)), 0.0)
+
+    @staticmethod
+    def _points(hit: dict, mask: np.ndarray) -> np.ndarray:
+        """World points (n, 3) hit by the pixels in mask."""
+        return hit["origin"] + hit["dir"][mask] * hit["t"][mask][:, None]
 
     def _shade(self, target: RaycastTarget, hit: dict, rng: np.random.Generator) -> np.ndarray:
-        valid, gid, pts = hit["valid"], hit["gid"], hit["points"]
-        albedo = target.albedo[gid].copy()
-        tex = target.textured[gid]
-        wood = valid & (tex == 1)
-        if np.any(wood):
-            stripes = 0.88 + 0.12 * np.sin(pts[..., 0] * 45.0 + 3.0 * np.sin(pts[..., 1] * 7.0))
-            albedo[wood] *= stripes[wood, None]
-        floor = valid & (tex == 2)
-        if np.any(floor):
-            chk = (np.floor(pts[..., 0] / 0.5) + np.floor(pts[..., 1] / 0.5)) % 2
-            albedo[floor] *= (0.8 + 0.2 * chk)[floor, None]
-        vc = valid & (tex == 3)
-        if np.any(vc):  # plain mesh with vertex colours: barycentric interpolation
-            vcol, tris = target.vertex_colours[0]
-            prim = hit["prim"][vc].astype(np.int64)
-            uv = hit["uv"][vc].astype(np.float64)
-            w = np.stack([1 - uv[:, 0] - uv[:, 1], uv[:, 0], uv[:, 1]], axis=1)
-            albedo[vc] = np.einsum("nk,nkc->nc", w, vcol[tris[prim]])
-        n = hit["normals"]
-        n = np.where(np.sum(n * hit["dir"], axis=-1, keepdims=True) > 0, -n, n)  # face the camera
-        lambert = np.clip(np.sum(n * LIGHT_DIR, axis=-1), 0.0, 1.0)
-        rgb = albedo * (0.35 + 0.65 * lambert)[..., None]
-        rgb = np.where(valid[..., None], rgb, BACKGROUND_RGB)
+        rgb = _shade_kernel(hit["valid"], hit["gid"], hit["t"], hit["dir"], hit["normals"],
+                            np.asarray(hit["origin"], dtype=np.float64), target.albedo.astype(np.float32),
+                            target.textured.astype(np.int32), LIGHT_DIR.astype(np.float32),
+                            BACKGROUND_RGB.astype(np.float32))
+        if target.vertex_colours:  # plain mesh with vertex colours: barycentric interpolation (x Lambert term)
+            vc = hit["valid"] & (target.textured[hit["gid"]] == 3)
+            if np.any(vc):
+                vcol, tris = target.vertex_colours[0]
+                prim = hit["prim"][vc].astype(np.int64)
+                uv = hit["uv"][vc].astype(np.float64)
+                w = np.stack([1 - uv[:, 0] - uv[:, 1], uv[:, 0], uv[:, 1]], axis=1)
+                albedo = np.einsum("nk,nkc->nc", w, vcol[tris[prim]])
+                rgb[vc] *= (albedo / target.albedo[0]).astype(np.float32)
         if self.noise and self.color_noise > 0:
-            rgb = rgb + rng.normal(0.0, self.color_noise, rgb.shape)
+            rgb += rng.standard_normal(rgb.shape, dtype=np.float32) * np.float32(self.color_noise)
         return np.clip(np.round(rgb * 255.0), 0, 255).astype(np.uint8)
+
+
+@njit(cache=True, parallel=True)
+def _shade_kernel(valid, gid, t, dirs, normals, origin, albedo_tab, tex_tab, light, background):  # pragma: no cover
+    """Albedo (with the table's wood stripes / the floor's checker) x (ambient + Lambert), float32 RGB (H, W, 3)."""
+    H, W = valid.shape
+    out = np.empty((H, W, 3), dtype=np.float32)
+    for r in prange(H):
+        for c in range(W):
+            if not valid[r, c]:
+                for k in range(3):
+                    out[r, c, k] = background[k]
+                continue
+            g = gid[r, c]
+            scale = 1.0
+            tex = tex_tab[g]
+            if tex == 1 or tex == 2:
+                px = origin[0] + dirs[r, c, 0] * t[r, c]
+                py = origin[1] + dirs[r, c, 1] * t[r, c]
+                if tex == 1:
+                    scale = 0.88 + 0.12 * np.sin(px * 45.0 + 3.0 * np.sin(py * 7.0))
+                else:
+                    scale = 0.8 + 0.2 * ((np.floor(px / 0.5) + np.floor(py / 0.5)) % 2)
+            nd = normals[r, c, 0] * dirs[r, c, 0] + normals[r, c, 1] * dirs[r, c, 1] + normals[r, c, 2] * dirs[r, c, 2]
+            nl = normals[r, c, 0] * light[0] + normals[r, c, 1] * light[1] + normals[r, c, 2] * light[2]
+            if nd > 0:  # the normal must face the camera
+                nl = -nl
+            lam = min(max(nl, 0.0), 1.0)
+            shade = scale * (0.35 + 0.65 * lam)
+            for k in range(3):
+                out[r, c, k] = albedo_tab[g, k] * shade
+    return out
 
 
 def mesh_target(mesh) -> RaycastTarget:
