@@ -216,3 +216,23 @@ def test_ground_truth_names_the_topics_written(tmp_path):
         topics = load_ground_truth(out).info["topics"]
         with open_recording(out / "recording.mcap") as rec:
             assert set(rec.topics) == set(topics.values())
+
+
+def test_rendering_the_ground_truth_mesh_matches_the_scene(sample_dir):
+    """What `kinfu eval nbv` does: render scene_after.ply (a plain mesh) instead of the Scene object."""
+    from kinfu_cli.sim.scenario import load_ground_truth
+    from kinfu_cli.sim.sensor import DepthSensor
+
+    gt = load_ground_truth(sample_dir)
+    sc = make_scenario(gt.info["seed"], gt.info["scenario"], width=80, height=60, frames=gt.info["frames"]["count"])
+    sensor = DepthSensor(sc.K, 80, 60, noise=False)
+    T = gt.poses[-1]
+    d_mesh, c_mesh = sensor.render(gt.mesh("after"), T)
+    d_scene, c_scene = DepthSensor(sc.K, 80, 60, noise=False).render(sc.scene_after, T)
+    both = (d_mesh > 0) & (d_scene > 0)
+    assert both.mean() > 0.95 and np.array_equal(d_mesh > 0, d_scene > 0)
+    assert np.abs(d_mesh[both] - d_scene[both]).max() < 1e-4
+    # vertex colours give the objects' colours (the table's wood texture is procedural, so compare objects only)
+    obj = sensor.render_frame(sc.scene_after, T).labels >= 3
+    assert obj.sum() > 20
+    assert np.abs(c_mesh[obj].astype(int) - c_scene[obj].astype(int)).mean() < 3
