@@ -25,6 +25,7 @@ Ray casting is open3d C++, the noise model vectorised numpy, shading a numba ker
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -33,6 +34,10 @@ from numba import njit, prange
 
 from kinfu_cli.errors import ConfigError
 from kinfu_cli.sim.scene import LABEL_NONE, RaycastTarget, Scene
+
+# numba probes the TBB threading layer at the first parallel call and warns when the installed TBB is too old;
+# it then falls back to OpenMP/workqueue, which is what we want: keep the CLI's stderr clean.
+warnings.filterwarnings("ignore", message="The TBB threading layer requires TBB version")
 
 LIGHT_DIR = np.array([0.3, -0.4, 1.0]) / np.linalg.norm([0.3, -0.4, 1.0])  # towards the light, world frame
 BACKGROUND_RGB = np.array([0.08, 0.08, 0.09])
