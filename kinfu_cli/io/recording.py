@@ -14,7 +14,7 @@ import contextlib
 import os
 import shutil
 import tempfile
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -29,20 +29,40 @@ _KINDS = "a ROS 1 .bag, an MCAP file or a ROS 2 bag folder (metadata.yaml)"
 
 @dataclass
 class TopicInfo:
-    """One topic: message type(s), message count, first/last log stamps (ns) and mean rate (Hz)."""
+    """One topic: message type(s), message count, first/last log stamps (ns) and mean rate (Hz).
+
+    first_ns / last_ns are read on first use (from the ROS 1 index at once; for MCAP and ROS 2 bags by one pass
+    over the raw records of the whole recording, without decoding), so opening a recording stays cheap.
+    """
 
     name: str
     msgtype: str
     count: int
-    first_ns: int | None = None
-    last_ns: int | None = None
     msgtypes: list[str] = field(default_factory=list)
+    _first: int | None = field(default=None, repr=False)
+    _last: int | None = field(default=None, repr=False)
+    _loader: Callable[[], None] | None = field(default=None, repr=False, compare=False)
+
+    def _ensure(self) -> None:
+        if self._loader is not None:
+            self._loader()
+
+    @property
+    def first_ns(self) -> int | None:
+        self._ensure()
+        return self._first
+
+    @property
+    def last_ns(self) -> int | None:
+        self._ensure()
+        return self._last
 
     @property
     def rate_hz(self) -> float | None:
-        if self.count < 2 or self.first_ns is None or self.last_ns is None or self.last_ns <= self.first_ns:
+        first, last = self.first_ns, self.last_ns
+        if self.count < 2 or first is None or last is None or last <= first:
             return None
-        return (self.count - 1) / ((self.last_ns - self.first_ns) * 1e-9)
+        return (self.count - 1) / ((last - first) * 1e-9)
 
     def as_dict(self) -> dict:
         return {"name": self.name, "msgtype": self.msgtype, "msgtypes": self.msgtypes, "count": self.count,
@@ -110,20 +130,29 @@ class Recording:
     # summary
     @property
     def topics(self) -> dict[str, TopicInfo]:
-        """Topic name -> TopicInfo, sorted by name. Stamps come from one pass over the message index/data."""
+        """Topic name -> TopicInfo, sorted by name (counts and types from the container's index/summary)."""
         if self._topics is None:
-            self._topics = dict(sorted(self._backend.topic_infos().items()))
+            infos = self._backend.topic_infos()
+            if not self._backend.stamps_known:
+                def load() -> None:
+                    for info in infos.values():
+                        info._loader = None
+                    self._backend.fill_stamps(infos)
+
+                for info in infos.values():
+                    info._loader = load
+            self._topics = dict(sorted(infos.items()))
         return self._topics
 
     @property
     def start_ns(self) -> int | None:
-        firsts = [t.first_ns for t in self.topics.values() if t.first_ns is not None]
-        return min(firsts) if firsts else None
+        """Log stamp (ns) of the earliest message; None for an empty recording."""
+        return self._backend.time_range()[0]
 
     @property
     def end_ns(self) -> int | None:
-        lasts = [t.last_ns for t in self.topics.values() if t.last_ns is not None]
-        return max(lasts) if lasts else None
+        """Log stamp (ns) of the latest message; None for an empty recording."""
+        return self._backend.time_range()[1]
 
     @property
     def duration_s(self) -> float:
@@ -177,7 +206,15 @@ def open_recording(path: str | os.PathLike) -> Recording:
 
 # ------------------------------------------------------------------------------------------- backends
 class _Backend:
+    stamps_known = False  # True when topic_infos() fills first/last stamps itself
+
     def topic_infos(self) -> dict[str, TopicInfo]:
+        raise NotImplementedError
+
+    def fill_stamps(self, infos: dict[str, TopicInfo]) -> None:
+        raise NotImplementedError
+
+    def time_range(self) -> tuple[int | None, int | None]:
         raise NotImplementedError
 
     def messages(self, topics, start_ns, end_ns) -> Iterator[tuple[str, str, int, object]]:
@@ -232,20 +269,35 @@ class _RosbagsBackend(_Backend):
         for name, tc in type_counts.items():
             infos[name].msgtypes = sorted(tc, key=lambda m: -tc[m])
             infos[name].msgtype = infos[name].msgtypes[0]
-        # first/last stamps: from the ROS 1 index when there is one, else one pass over the raw records
+        # first/last stamps: from the ROS 1 index at once; else one pass over the raw records, when asked for
         reader = self.reader.readers[0]
         if isinstance(reader, Reader1):
             for conn in self.reader.connections:
                 idx = reader.indexes.get(conn.id) or []
                 if idx:
                     _extend(infos[conn.topic], idx[0].time, idx[-1].time)
-        else:
-            try:
-                for conn, stamp, _ in self.reader.messages():
-                    _extend(infos[conn.topic], stamp, stamp)
-            except Exception as exc:
-                raise _read_error(self.path, exc, self.kind) from None
         return infos
+
+    @property
+    def stamps_known(self) -> bool:
+        from rosbags.rosbag1 import Reader as Reader1
+
+        return isinstance(self.reader.readers[0], Reader1)
+
+    def fill_stamps(self, infos: dict[str, TopicInfo]) -> None:
+        try:
+            for conn, stamp, _ in self.reader.messages():
+                _extend(infos[conn.topic], stamp, stamp)
+        except Exception as exc:
+            raise _read_error(self.path, exc, self.kind) from None
+
+    def time_range(self) -> tuple[int | None, int | None]:
+        if not self.reader.connections or sum(c.msgcount for c in self.reader.connections) == 0:
+            return None, None
+        try:
+            return int(self.reader.start_time), int(self.reader.end_time) - 1  # rosbags' end is exclusive
+        except Exception as exc:
+            raise _read_error(self.path, exc, self.kind) from None
 
     def messages(self, topics, start_ns, end_ns):
         conns = self.reader.connections if topics is None else [c for c in self.reader.connections
@@ -269,8 +321,8 @@ class _RosbagsBackend(_Backend):
 
 
 def _extend(info: TopicInfo, first: int, last: int) -> None:
-    info.first_ns = first if info.first_ns is None else min(info.first_ns, first)
-    info.last_ns = last if info.last_ns is None else max(info.last_ns, last)
+    info._first = first if info._first is None else min(info._first, first)
+    info._last = last if info._last is None else max(info._last, last)
 
 
 def _mcap_needs_mcap_lib(path: Path) -> bool:
@@ -321,12 +373,20 @@ class _McapBackend(_Backend):
         for name, tc in type_counts.items():
             infos[name].msgtypes = sorted(tc, key=lambda m: -tc[m])
             infos[name].msgtype = infos[name].msgtypes[0]
+        return infos
+
+    def fill_stamps(self, infos: dict[str, TopicInfo]) -> None:
         try:
-            for _, ch, msg in self.reader.iter_messages():
+            for _, ch, msg in self.reader.iter_messages(log_time_order=False):
                 _extend(infos[ch.topic], msg.log_time, msg.log_time)
         except Exception as exc:
             raise _read_error(self.path, exc, "MCAP file") from None
-        return infos
+
+    def time_range(self) -> tuple[int | None, int | None]:
+        st = self.summary.statistics
+        if st is None or st.message_count == 0:
+            return None, None
+        return int(st.message_start_time), int(st.message_end_time)
 
     def messages(self, topics, start_ns, end_ns):
         stop = None if end_ns is None else int(end_ns) + 1
