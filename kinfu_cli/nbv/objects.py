@@ -1,0 +1,246 @@
+"""Object-driven view planning, thesis ch. 3 Alg. 4 (Monica & Aleotti, Auton. Robots 2017).
+
+1. Contour points with view directions (kinfu_cli.nbv.contours).
+2. Per contour point 5 directions (its frontier normal and 4 more at `cone_deg` = 15 deg around it) x 8
+   rolls (45 deg) at `distance` = 0.8 m, looking at the point: 40 candidate poses.
+3. Segments of the surface with saliency (kinfu_cli.segmentation), most salient first.
+4. FindNear: a contour point belongs to the segment of its nearest surface point.
+5. The candidates of the current segment are scored by a `scorer(poses, center, radius) -> (V,)` on the
+   sphere around the segment's bounding sphere enlarged by `margin` = 0.2 m (default scorer: the NBV
+   module's count of rays ending on unknown voxels in that sphere); the best pose whose score exceeds
+   `score_threshold` is returned; otherwise the next segment is tried; otherwise no view.
+
+`plan_standard_views` is the baseline of thesis Table 3.1: no segmentation, every candidate scored on the
+whole environment. Both report how many candidates they ray-cast.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from kinfu_cli.errors import ConfigError
+from kinfu_cli.nbv.contours import Contours, extract_contours
+
+Scorer = Callable[[np.ndarray, np.ndarray, float], np.ndarray]
+
+
+def _look_at_rolls(positions: np.ndarray, targets: np.ndarray, rolls: np.ndarray) -> np.ndarray:
+    """(P * R, 4, 4) camera-to-world poses (optical frame: z forward, y down) for each position x roll."""
+    z = targets - positions
+    z /= np.linalg.norm(z, axis=1, keepdims=True)
+    up = np.array([0.0, 0.0, 1.0])
+    x = np.cross(z, up)
+    bad = np.linalg.norm(x, axis=1) < 1e-6
+    x[bad] = np.cross(z[bad], [1.0, 0.0, 0.0])
+    x /= np.linalg.norm(x, axis=1, keepdims=True)
+    y = np.cross(z, x)
+    c, s = np.cos(rolls), np.sin(rolls)
+    P, R = len(positions), len(rolls)
+    xr = c[None, :, None] * x[:, None, :] + s[None, :, None] * y[:, None, :]
+    yr = -s[None, :, None] * x[:, None, :] + c[None, :, None] * y[:, None, :]
+    T = np.zeros((P, R, 4, 4))
+    T[..., :3, 0] = xr
+    T[..., :3, 1] = yr
+    T[..., :3, 2] = z[:, None, :]
+    T[..., :3, 3] = positions[:, None, :]
+    T[..., 3, 3] = 1.0
+    return T.reshape(P * R, 4, 4)
+
+
+def contour_viewpoints(points: np.ndarray, directions: np.ndarray, *, distance: float = 0.8, cone_deg: float = 15.0,
+                       n_directions: int = 5, n_rolls: int = 8) -> tuple[np.ndarray, np.ndarray]:
+    """Candidate poses for contour points: (poses (M * n_directions * n_rolls, 4, 4), owner (same,) index of
+    the contour point). Direction 0 is the frontier normal; the others are tilted by `cone_deg` about it
+    at equal azimuths."""
+    if not distance > 0:
+        raise ConfigError(f"--view-distance: must be > 0 m, got {distance}")
+    if n_directions < 1 or n_rolls < 1:
+        raise ConfigError(f"--directions/--rolls: must be >= 1, got {n_directions}, {n_rolls}")
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    n = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    n = n / np.linalg.norm(n, axis=1, keepdims=True)
+    M = len(p)
+    if M == 0:
+        return np.zeros((0, 4, 4)), np.zeros(0, np.int64)
+    a = np.where(np.abs(n[:, 0:1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    u = np.cross(n, a)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    v = np.cross(n, u)
+    dirs = [n]
+    t = np.radians(cone_deg)
+    for k in range(n_directions - 1):
+        phi = 2 * np.pi * k / (n_directions - 1)
+        dirs.append(np.cos(t) * n + np.sin(t) * (np.cos(phi) * u + np.sin(phi) * v))
+    D = np.stack(dirs, axis=1).reshape(-1, 3)  # (M * nd, 3)
+    targets = np.repeat(p, n_directions, axis=0)
+    rolls = 2 * np.pi * np.arange(n_rolls) / n_rolls
+    poses = _look_at_rolls(targets + distance * D, targets, rolls)
+    owner = np.repeat(np.arange(M), n_directions * n_rolls)
+    return poses, owner
+
+
+def find_near(contour_points: np.ndarray, surface_points: np.ndarray, surface_labels: np.ndarray) -> np.ndarray:
+    """Segment label of each contour point = label of its nearest surface point (thesis FindNear)."""
+    if len(contour_points) == 0:
+        return np.zeros(0, np.int64)
+    _, i = cKDTree(surface_points).query(contour_points)
+    return np.asarray(surface_labels)[i]
+
+
+@dataclass
+class SegmentAttempt:
+    segment_id: int
+    saliency: float
+    center: list
+    radius: float
+    contour_points: int
+    candidates: int
+    best_score: float
+    accepted: bool
+
+
+@dataclass
+class ObjectPlan:
+    """Result of `plan_object_views`: `pose` (4x4 camera-to-world) or None when no view beats the threshold."""
+
+    pose: np.ndarray | None
+    score: float
+    segment_id: int | None
+    region_center: np.ndarray | None
+    region_radius: float | None
+    candidates_total: int  # every candidate pose generated (all contour points x 40)
+    candidates_evaluated: int  # poses actually ray-cast
+    attempts: list[SegmentAttempt] = field(default_factory=list)
+    ranked_poses: np.ndarray | None = None  # the chosen segment's poses, best first
+    ranked_scores: np.ndarray | None = None
+    timing: dict = field(default_factory=dict)
+
+    def to_json(self, top: int = 10) -> dict:
+        return {
+            "pose": None if self.pose is None else self.pose.tolist(), "score": self.score,
+            "segment_id": self.segment_id,
+            "region": None if self.region_center is None else {"center": self.region_center.tolist(),
+                                                               "radius": self.region_radius},
+            "candidates_total": self.candidates_total, "candidates_evaluated": self.candidates_evaluated,
+            "attempts": [a.__dict__ for a in self.attempts],
+            "views": [] if self.ranked_poses is None else [
+                {"pose": self.ranked_poses[i].tolist(), "score": float(self.ranked_scores[i])}
+                for i in range(min(top, len(self.ranked_poses)))],
+            "timing_s": self.timing,
+        }
+
+
+def nbv_scorer(grid, camera, gain: str = "unknown", table_z: float | None = None) -> Scorer:
+    """The NBV module's ray-casting score (rays ending on unknown voxels inside the region sphere)."""
+    from kinfu_cli.nbv.ranking import as_ray_volume, score_views
+
+    vol = as_ray_volume(grid)
+
+    def score(poses: np.ndarray, center: np.ndarray, radius: float) -> np.ndarray:
+        return np.asarray(score_views(vol, poses, camera, center, radius, gain, table_z=table_z).gain, dtype=float)
+
+    return score
+
+
+def plan_object_views(segments, contours: Contours, scorer: Scorer, *, score_threshold: float = 0.0,
+                      margin: float = 0.2, distance: float = 0.8, cone_deg: float = 15.0, n_directions: int = 5,
+                      n_rolls: int = 8, max_segments: int | None = None, exclude=None) -> ObjectPlan:
+    """Thesis Alg. 4 on precomputed `segments` (a kinfu_cli.segmentation.pipeline.SegmentResult) and
+    `contours`: the best pose of the most salient segment with score > score_threshold.
+
+    scorer(poses (V, 4, 4), center (3,), radius) -> scores (V,); exclude: (center, radius) spheres whose
+    candidates are skipped (views already taken). Returns an ObjectPlan with the number of candidates
+    generated and ray-cast.
+    """
+    t0 = time.perf_counter()
+    poses, owner = contour_viewpoints(contours.positions, contours.directions, distance=distance,
+                                      cone_deg=cone_deg, n_directions=n_directions, n_rolls=n_rolls)
+    seg = segments.segmentation
+    near = find_near(contours.positions, seg.points, seg.labels)
+    plan = ObjectPlan(None, 0.0, None, None, None, int(len(poses)), 0)
+    plan.timing["views_generation"] = time.perf_counter() - t0
+    t_eval = 0.0
+    for rank, s in enumerate(segments.saliency):
+        if max_segments is not None and rank >= max_segments:
+            break
+        cp = np.flatnonzero(near == s.id)
+        center = np.asarray(s.box.center, dtype=np.float64)
+        radius = float(s.bounding_radius + margin)
+        if len(cp) == 0:
+            plan.attempts.append(SegmentAttempt(s.id, s.saliency, center.tolist(), radius, 0, 0, 0.0, False))
+            continue
+        sel = np.flatnonzero(np.isin(owner, cp))
+        t = time.perf_counter()
+        scores = np.asarray(scorer(poses[sel], center, radius), dtype=float)
+        t_eval += time.perf_counter() - t
+        plan.candidates_evaluated += int(len(sel))
+        order = np.argsort(-scores, kind="stable")
+        best = float(scores[order[0]])
+        ok = best > score_threshold
+        plan.attempts.append(SegmentAttempt(s.id, s.saliency, center.tolist(), radius, int(len(cp)), int(len(sel)),
+                                            best, ok))
+        if ok:
+            plan.pose = poses[sel[order[0]]]
+            plan.score = best
+            plan.segment_id = s.id
+            plan.region_center = center
+            plan.region_radius = radius
+            plan.ranked_poses = poses[sel[order]]
+            plan.ranked_scores = scores[order]
+            break
+    plan.timing["views_evaluation"] = t_eval
+    plan.timing["total"] = time.perf_counter() - t0
+    return plan
+
+
+def plan_standard_views(contours: Contours, scorer: Scorer, region_center, region_radius: float, *,
+                        score_threshold: float = 0.0, distance: float = 0.8, cone_deg: float = 15.0,
+                        n_directions: int = 5, n_rolls: int = 8) -> ObjectPlan:
+    """The "standard" baseline: every contour candidate scored on the whole environment sphere."""
+    t0 = time.perf_counter()
+    poses, _ = contour_viewpoints(contours.positions, contours.directions, distance=distance, cone_deg=cone_deg,
+                                  n_directions=n_directions, n_rolls=n_rolls)
+    plan = ObjectPlan(None, 0.0, None, np.asarray(region_center, float), float(region_radius), int(len(poses)), 0)
+    if len(poses):
+        t = time.perf_counter()
+        scores = np.asarray(scorer(poses, np.asarray(region_center, float), float(region_radius)), dtype=float)
+        plan.timing["views_evaluation"] = time.perf_counter() - t
+        plan.candidates_evaluated = int(len(poses))
+        order = np.argsort(-scores, kind="stable")
+        plan.ranked_poses, plan.ranked_scores = poses[order], scores[order]
+        if scores[order[0]] > score_threshold:
+            plan.pose, plan.score = poses[order[0]], float(scores[order[0]])
+    plan.timing["total"] = time.perf_counter() - t0
+    return plan
+
+
+def plan_object_views_for_volume(volume, camera, *, scorer: Scorer | None = None, score_threshold: float = 0.0,
+                                 w_th: float = 5.0, segment_options=None, table_z: float | None = None,
+                                 **kwargs) -> ObjectPlan:
+    """Everything from a volume (fusion TernaryVolume or TernaryGrid): segments, contours, NBV scoring.
+
+    This is the entry point for `kinfu nbv --mode objects`. camera: a kinfu_cli.nbv.camera.CameraModel.
+    """
+    from kinfu_cli.segmentation.pipeline import SegmentOptions, analyse_volume
+
+    t0 = time.perf_counter()
+    opts = segment_options or SegmentOptions(superquadrics=False)
+    segments = analyse_volume(volume, opts)
+    t_seg = time.perf_counter() - t0
+    grid = volume.ternary_grid() if hasattr(volume, "ternary_grid") else volume
+    weights = None
+    if hasattr(volume, "weights") and hasattr(volume, "tsdf_weights"):
+        weights = None  # fusion labels already encode w > 0; W_th on the dense weights would cost 128 MB more
+    t = time.perf_counter()
+    contours = extract_contours(grid.labels, grid.origin, grid.voxel_size, weights=weights, w_th=w_th)
+    t_cont = time.perf_counter() - t
+    if scorer is None:
+        scorer = nbv_scorer(grid, camera, table_z=table_z)
+    plan = plan_object_views(segments, contours, scorer, score_threshold=score_threshold, **kwargs)
+    plan.timing.update({"segmentation": t_seg, "contours": t_cont, "total": time.perf_counter() - t0})
+    return plan
