@@ -107,7 +107,10 @@ def iter_frames(rec, roles: Roles | None = None, pose_source: str = "tf", pose_t
     if tolerance_s < 0:
         raise ConfigError(f"--tolerance {tolerance_s}: expected a value >= 0 seconds")
     stats = stats if stats is not None else FrameStats()
-    roles = roles if roles is not None else detect_roles(rec, tf=tf)
+    if roles is None:
+        if tf is None and pose_source == "tf":
+            tf = TfBuffer.from_recording(rec)
+        roles = detect_roles(rec, tf=tf)
     depth_topic = roles.depth_topic
     if depth_topic is None:
         avail = ", ".join(f"{n} ({i.msgtype})" for n, i in rec.topics.items()) or "none"
