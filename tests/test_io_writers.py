@@ -26,9 +26,9 @@ def _pose(i: int) -> np.ndarray:
     return T
 
 
-def _write(path, n=3):
+def _write(path, n=3, fmt=None, compression=None):
     stamps = [1_700_000_000_000_000_000 + i * 33_333_333 for i in range(n)]
-    with RecordingWriter(path) as w:
+    with RecordingWriter(path, fmt=fmt, compression=compression) as w:
         w.write_tf(stamps[0], [("wrist", "camera_optical", _pose(9))], static=True)
         for i, t in enumerate(stamps):
             w.write_image("/depth", t, "camera_optical", DEPTH_MM + i, "16UC1")
@@ -47,10 +47,13 @@ def _write(path, n=3):
     return stamps
 
 
-@pytest.mark.parametrize("name", ["rec.mcap", "rec.bag", "rec_ros2"])
-def test_round_trip_is_exact(tmp_path, name):
+@pytest.mark.parametrize("name,fmt,compression", [
+    ("rec.mcap", None, None), ("rec.bag", None, None), ("rec_ros2", None, None),
+    ("rec_mcap_folder", "ros2-mcap", None), ("z.mcap", None, "zstd"), ("z.bag", None, "lz4"),
+    ("z_ros2", None, "zstd"), ("z_mcap_folder", "ros2-mcap", "zstd")])
+def test_round_trip_is_exact(tmp_path, name, fmt, compression):
     path = tmp_path / name
-    stamps = _write(path)
+    stamps = _write(path, fmt=fmt, compression=compression)
     assert [p.name for p in tmp_path.iterdir()] == [name]  # no temp files left behind
     seen: dict[str, int] = {}
     with AnyReader([path]) as reader:

@@ -24,7 +24,7 @@ from kinfu_cli.errors import ConfigError, RecordingError
 from kinfu_cli.io.atomic import atomic_dir, atomic_path
 from kinfu_cli.io.messages import matrix_to_quat
 
-FORMATS = ("mcap", "bag", "ros2")
+FORMATS = ("mcap", "bag", "ros2", "ros2-mcap")  # ros2-mcap: a ROS 2 bag folder with mcap storage
 
 # Image encodings we write: numpy dtype and channel count.
 _IMAGE_ENCODINGS = {
@@ -42,7 +42,8 @@ _TFMESSAGE_ROS1 = "geometry_msgs/TransformStamped[] transforms\n"
 
 
 def format_for(path: str | os.PathLike, fmt: str | None = None) -> str:
-    """Container for `path`: 'mcap', 'bag' or 'ros2' (folder); `fmt` overrides the suffix."""
+    """Container for `path`: 'mcap', 'bag' or 'ros2' (sqlite3 folder); `fmt` overrides the suffix (and is the
+    only way to ask for 'ros2-mcap', a ROS 2 bag folder with mcap storage)."""
     if fmt is not None:
         if fmt not in FORMATS:
             raise ConfigError(f"recording format {fmt!r}: expected one of {', '.join(FORMATS)}")
@@ -121,11 +122,12 @@ class RecordingWriter:
                     # rosbags names the storage file after its folder: write tmp/<name>/, move it up at close
                     self._target = stack.enter_context(atomic_dir(self.path))
                     self._bag_dir = self._target / self.path.name
-                    writer = Writer2(self._bag_dir, version=9, storage_plugin=StoragePlugin.SQLITE3)
+                    plugin = StoragePlugin.MCAP if self.fmt == "ros2-mcap" else StoragePlugin.SQLITE3
+                    writer = Writer2(self._bag_dir, version=9, storage_plugin=plugin)
                 if self.compression:
                     if self.compression != "zstd":
                         raise ConfigError(f"compression {self.compression!r} for ROS 2 / MCAP: expected zstd")
-                    writer.set_compression(CompressionMode.STORAGE if self.fmt == "mcap"
+                    writer.set_compression(CompressionMode.STORAGE if self.fmt in ("mcap", "ros2-mcap")
                                            else CompressionMode.MESSAGE, CompressionFormat.ZSTD)
             writer.open()
         except BaseException as exc:
@@ -147,7 +149,7 @@ class RecordingWriter:
             self._writer.close()
             if self.fmt == "mcap":
                 os.replace(self._bag_dir / f"{self._bag_dir.name}.mcap", self._target)
-            elif self.fmt == "ros2":
+            elif self.fmt in ("ros2", "ros2-mcap"):  # a ROS 2 bag folder
                 for item in self._bag_dir.iterdir():  # bag files up into the folder that becomes `path`
                     os.replace(item, self._target / item.name)
                 self._bag_dir.rmdir()
