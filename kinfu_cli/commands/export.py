@@ -6,6 +6,7 @@ import json
 
 import click
 
+from kinfu_cli.io.frames import frame_kwargs, frame_options
 from kinfu_cli.io.rgbd_folders import export_frames
 from kinfu_cli.io.roles import role_kwargs, role_options
 
@@ -14,19 +15,11 @@ from kinfu_cli.io.roles import role_kwargs, role_options
 @click.argument("recording", type=click.Path(exists=False))
 @click.option("-o", "--out", "out", required=True, type=click.Path(file_okay=False),
               help="Output folder (7-Scenes layout: frame-N.depth.png, .color.png, .pose.txt, camera-intrinsics.txt).")
-@click.option("--pose-source", type=click.Choice(["tf", "topic", "none"]), default="tf", show_default=True,
-              help="Camera poses from TF (world frame <- camera frame), a pose topic, or none.")
-@click.option("--pose-topic", default=None, metavar="TOPIC", help="Camera pose topic for --pose-source topic.")
-@click.option("--tolerance", default=0.05, show_default=True, type=float,
-              help="Largest depth/colour stamp difference and pose extrapolation (s).")
-@click.option("--start", "start_s", default=None, type=float, help="Start, seconds from the recording start.")
-@click.option("--end", "end_s", default=None, type=float, help="End, seconds from the recording start.")
-@click.option("--every", default=1, show_default=True, type=int, help="Keep every n-th depth frame.")
+@frame_options
 @click.option("--json", "as_json", is_flag=True, help="Print the summary (stats, roles, frame list) as JSON.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
 @role_options
-def command(recording: str, out: str, pose_source: str, pose_topic: str | None, tolerance: float,
-            start_s: float | None, end_s: float | None, every: int, as_json: bool, quiet: bool, **kwargs) -> None:
+def command(recording: str, out: str, as_json: bool, quiet: bool, **kwargs) -> None:
     """Assemble the RGB-D frames of RECORDING (depth paired with the nearest colour image and the camera
     pose at the depth stamp) and write them as a frame folder that `kinfu import` and other RGB-D tools
     read. Depth is written in millimetres; frames.json lists stamps and the dropped frames by reason.
@@ -36,9 +29,8 @@ def command(recording: str, out: str, pose_source: str, pose_topic: str | None, 
       kinfu export sample_data/tabletop/recording.mcap -o tabletop_frames/
       kinfu export run.bag -o frames/ --every 5 --camera-frame camera_depth_optical_frame
     """
-    summary = export_frames(recording, out, roles_kw=role_kwargs(kwargs), pose_source=pose_source,
-                            pose_topic=pose_topic, tolerance_s=tolerance, start_s=start_s, end_s=end_s,
-                            every=every, quiet=quiet)
+    fk = frame_kwargs(kwargs)
+    summary = export_frames(recording, out, roles_kw=role_kwargs(kwargs), quiet=quiet, **fk)
     if as_json:
         click.echo(json.dumps(summary, indent=2))
         return
