@@ -61,12 +61,7 @@ def quat_to_matrix(q: np.ndarray) -> np.ndarray:
     n = np.linalg.norm(q)
     if not np.isfinite(n) or n < 1e-12:
         raise RecordingError(f"quaternion {q.tolist()} has zero or non-finite norm")
-    x, y, z, w = q / n
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
+    return quats_to_matrices(q)
 
 
 def _xyz(v: object) -> list[float]:

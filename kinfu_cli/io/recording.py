@@ -258,17 +258,7 @@ class _RosbagsBackend(_Backend):
     def topic_infos(self) -> dict[str, TopicInfo]:
         from rosbags.rosbag1 import Reader as Reader1
 
-        infos: dict[str, TopicInfo] = {}
-        type_counts: dict[str, dict[str, int]] = {}
-        for conn in self.reader.connections:
-            mt = normalize_msgtype(conn.msgtype)
-            info = infos.setdefault(conn.topic, TopicInfo(conn.topic, mt, 0))
-            info.count += conn.msgcount
-            tc = type_counts.setdefault(conn.topic, {})
-            tc[mt] = tc.get(mt, 0) + conn.msgcount
-        for name, tc in type_counts.items():
-            infos[name].msgtypes = sorted(tc, key=lambda m: -tc[m])
-            infos[name].msgtype = infos[name].msgtypes[0]
+        infos = _topic_infos((c.topic, c.msgtype, c.msgcount) for c in self.reader.connections)
         # first/last stamps: from the ROS 1 index at once; else one pass over the raw records, when asked for
         reader = self.reader.readers[0]
         if isinstance(reader, Reader1):
@@ -320,6 +310,22 @@ class _RosbagsBackend(_Backend):
             raise _read_error(self.path, exc, self.kind) from None
 
 
+def _topic_infos(connections: Iterable[tuple[str, str, int]]) -> dict[str, TopicInfo]:
+    """TopicInfos from (topic, msgtype, count) per connection; a topic's msgtype is its most frequent one."""
+    infos: dict[str, TopicInfo] = {}
+    type_counts: dict[str, dict[str, int]] = {}
+    for topic, msgtype, count in connections:
+        mt = normalize_msgtype(msgtype)
+        info = infos.setdefault(topic, TopicInfo(topic, mt, 0))
+        info.count += count
+        tc = type_counts.setdefault(topic, {})
+        tc[mt] = tc.get(mt, 0) + count
+    for name, tc in type_counts.items():
+        infos[name].msgtypes = sorted(tc, key=lambda m: -tc[m])
+        infos[name].msgtype = infos[name].msgtypes[0]
+    return infos
+
+
 def _extend(info: TopicInfo, first: int, last: int) -> None:
     info._first = first if info._first is None else min(info._first, first)
     info._last = last if info._last is None else max(info._last, last)
@@ -360,20 +366,8 @@ class _McapBackend(_Backend):
     def topic_infos(self) -> dict[str, TopicInfo]:
         s = self.summary
         counts = s.statistics.channel_message_counts if s.statistics else {}
-        infos: dict[str, TopicInfo] = {}
-        type_counts: dict[str, dict[str, int]] = {}
-        for cid, ch in s.channels.items():
-            schema = s.schemas.get(ch.schema_id)
-            mt = normalize_msgtype(schema.name if schema else "")
-            n = int(counts.get(cid, 0))
-            info = infos.setdefault(ch.topic, TopicInfo(ch.topic, mt, 0))
-            info.count += n
-            tc = type_counts.setdefault(ch.topic, {})
-            tc[mt] = tc.get(mt, 0) + n
-        for name, tc in type_counts.items():
-            infos[name].msgtypes = sorted(tc, key=lambda m: -tc[m])
-            infos[name].msgtype = infos[name].msgtypes[0]
-        return infos
+        return _topic_infos((ch.topic, s.schemas[ch.schema_id].name if ch.schema_id in s.schemas else "",
+                             int(counts.get(cid, 0))) for cid, ch in s.channels.items())
 
     def fill_stamps(self, infos: dict[str, TopicInfo]) -> None:
         try:

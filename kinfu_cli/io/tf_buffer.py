@@ -47,10 +47,6 @@ class _Link:
         return self._arrays
 
 
-def _quat_to_matrices(q: np.ndarray) -> np.ndarray:
-    return quats_to_matrices(q)
-
-
 def slerp(q0: np.ndarray, q1: np.ndarray, a: np.ndarray) -> np.ndarray:
     """Spherical linear interpolation of quaternions (N,4) at fractions a (N,); shortest arc."""
     q0 = np.asarray(q0, dtype=np.float64)
@@ -232,7 +228,7 @@ class TfBuffer:
         st, tr, qu = link.arrays()
         if link.static or stamps_ns is None:
             T = np.eye(4)
-            T[:3, :3] = _quat_to_matrices(qu[-1])
+            T[:3, :3] = quats_to_matrices(qu[-1])
             T[:3, 3] = tr[-1]
             return np.broadcast_to(T, (n, 4, 4))
         s = np.asarray(stamps_ns, dtype=np.int64).reshape(-1)
@@ -253,7 +249,7 @@ class TfBuffer:
             trans = tr[i0] + a[:, None] * (tr[i1] - tr[i0])
             quat = slerp(qu[i0], qu[i1], a)
         T = np.zeros((s.shape[0], 4, 4))
-        T[:, :3, :3] = _quat_to_matrices(quat)
+        T[:, :3, :3] = quats_to_matrices(quat)
         T[:, :3, 3] = trans
         T[:, 3, 3] = 1.0
         return T
