@@ -23,8 +23,9 @@ def backproject(depth: np.ndarray, K: np.ndarray, T_world_camera: np.ndarray, st
 
 
 def observed_center(frames: Iterable[tuple[np.ndarray, np.ndarray, np.ndarray]], min_depth: float = 0.0,
-                    max_depth: float = np.inf, low: float = 2.0, high: float = 98.0) -> np.ndarray:
-    """Centre of the robust (percentile low..high per axis) box of points seen in (depth, K, T) frames."""
+                    max_depth: float = np.inf, low: float = 50.0, high: float = 50.0) -> np.ndarray:
+    """Centre of the points seen in (depth, K, T) frames: per axis the mean of the low and high percentiles
+    (default the median, which stays on the observed scene when a floor or wall extends far away)."""
     pts = [backproject(d, K, T, min_depth=min_depth, max_depth=max_depth) for d, K, T in frames]
     pts = [p for p in pts if len(p)]
     if not pts:

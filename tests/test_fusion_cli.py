@@ -1,0 +1,114 @@
+"""`kinfu fuse` end to end on the sample recordings, and its one-line errors."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from kinfu_cli.cli import cli
+from kinfu_cli.fusion.ternary import load_ternary
+from kinfu_cli.fusion.volume import load_volume
+
+FAST = ["--voxel-size", "0.02", "--size", "2.0", "--quiet"]
+
+
+def run(args):
+    return CliRunner().invoke(cli, ["fuse", *args])
+
+
+@pytest.fixture(scope="module")
+def fused(sample_dir, tmp_path_factory):
+    out = tmp_path_factory.mktemp("fuse") / "out"
+    res = run([str(sample_dir / "recording.mcap"), "-o", str(out), *FAST, "--plot"])
+    assert res.exit_code == 0, res.output
+    return out
+
+
+def test_outputs_and_report_are_consistent(fused, sample_dir):
+    for name in ("mesh.ply", "cloud.ply", "volume.npz", "ternary.npz", "report.json", "slices_xy.png"):
+        assert (fused / name).stat().st_size > 0, name
+    report = json.loads((fused / "report.json").read_text())
+    grid = load_ternary(fused / "ternary.npz")
+    assert report["counts"] == grid.counts()
+    assert sum(report["counts"].values()) == int(np.prod(grid.shape)) == int(np.prod(report["grid"]["shape"]))
+    lines = (sample_dir / "ground_truth" / "camera_poses.txt").read_text().splitlines()
+    n_depth = len([ln for ln in lines if ln.strip() and not ln.startswith("#")])
+    f = report["frames"]
+    assert f["used"] + f["dropped_total"] + f["skipped_every"] == f["depth_messages"] == n_depth
+    assert report["pose_mode"] == "forced" and report["tracking"] is None
+    assert set(report["timing_s"]) >= {"read", "integrate", "extract", "write", "total"}
+    # the volume file continues where ternary.npz stopped
+    assert np.array_equal(load_volume(fused / "volume.npz").labels(), grid.labels)
+
+
+def test_table_and_objects_where_ground_truth_says(fused, sample_dir):
+    gt = json.loads((sample_dir / "ground_truth" / "changes.json").read_text())
+    grid = load_ternary(fused / "ternary.npz")
+    occ = np.argwhere(grid.labels == 1)
+    pts = grid.centers(occ)
+    table_z = -gt["table"]["plane"][3]
+    # most occupied voxels are on the table top (or the floor) plane
+    on_table = np.abs(pts[:, 2] - table_z) < 0.03
+    assert on_table.mean() > 0.2
+    # an object present at the end is occupied near its centre's top
+    for obj in gt["objects"]:
+        if obj.get("present_after"):
+            c = np.asarray(obj["center"])
+            near = np.linalg.norm(pts - c, axis=1) < max(obj["size"]) + 0.03
+            assert near.sum() > 5, obj["id"]
+
+
+def test_bag_gives_the_same_volume_as_mcap(fused, sample_dir, tmp_path):
+    out = tmp_path / "bag"
+    res = run([str(sample_dir / "recording.bag"), "-o", str(out), *FAST])
+    assert res.exit_code == 0, res.output
+    a = load_ternary(fused / "ternary.npz").labels
+    b = load_ternary(out / "ternary.npz").labels
+    assert (a == b).mean() > 0.999
+
+
+def test_continue_clear_and_json(fused, sample_dir, tmp_path):
+    out = tmp_path / "cont"
+    res = run([str(sample_dir / "recording.mcap"), "-o", str(out), "--init", str(fused / "volume.npz"),
+               "--start", "0", "--end", "1.0", "--clear-sphere", "0.0,0.0,0.75,0.15", "--json", "--quiet"])
+    assert res.exit_code == 0, res.output
+    report = json.loads(res.output)
+    assert report["grid"]["placement"].startswith("--init")
+    assert report["cleared_spheres"][0]["radius"] == 0.15
+    assert report["frames"]["used"] < json.loads((fused / "report.json").read_text())["frames"]["used"]
+
+
+@pytest.mark.parametrize("args, msg", [
+    (["--pose", "topic"], "--pose-topic"),
+    (["--voxel-size", "0.0005", "--size", "20"], "would need up to"),
+    (["--clear-sphere", "1,2,3"], "--clear-sphere"),
+    (["--voxel-size", "0.01", "--resolution", "64"], "not both"),
+    (["--init", "/nonexistent/volume.npz"], "no such volume"),
+    (["--every", "0"], "--every"),
+    (["--start", "5", "--end", "1"], "--start"),
+])
+def test_bad_options_exit_2_without_outputs(sample_dir, tmp_path, args, msg):
+    out = tmp_path / "out"
+    res = run([str(sample_dir / "recording.mcap"), "-o", str(out), "--quiet", *args])
+    assert res.exit_code == 2, res.output
+    assert "kinfu: error:" in res.output and msg in res.output
+    assert "Traceback" not in res.output
+    assert not out.exists() or not any(out.iterdir())
+
+
+def test_missing_recording_and_empty_depth(tmp_path):
+    out = tmp_path / "out"
+    res = run([str(tmp_path / "missing.mcap"), "-o", str(out), "--quiet"])
+    assert res.exit_code == 2 and "kinfu: error:" in res.output
+    assert not out.exists()
+
+
+def test_depth_range_excluding_everything_is_an_error(sample_dir, tmp_path):
+    out = tmp_path / "out"
+    res = run([str(sample_dir / "recording.mcap"), "-o", str(out), *FAST, "--min-depth", "3.5", "--max-depth", "4"])
+    assert res.exit_code == 2, res.output
+    assert "no usable depth frames" in res.output
+    assert not out.exists() or not any(out.iterdir())
