@@ -95,3 +95,19 @@ def test_leading_slashes_and_duplicate_stamps():
     tf.add("world", "arm", 2 * S, _T([0, 0, 0], [4, 0, 0]))
     assert tf.link_stamps("arm").tolist() == [S, 2 * S]
     np.testing.assert_allclose(tf.lookup("world", "arm", int(1.5 * S))[:3, 3], [3, 0, 0])
+
+
+def test_bad_transforms_in_messages_are_skipped_and_counted():
+    from types import SimpleNamespace as NS
+
+    def tr(parent, child, w):
+        return NS(header=NS(frame_id=parent, stamp=NS(sec=1, nanosec=0)), child_frame_id=child,
+                  transform=NS(translation=NS(x=1.0, y=2.0, z=3.0), rotation=NS(x=0.0, y=0.0, z=0.0, w=w)))
+
+    tf = TfBuffer()
+    n = tf.add_message(NS(transforms=[tr("world", "a", 1.0), tr("", "b", 1.0), tr("world", "c", 0.0),
+                                      tr("a", "a", 1.0)]))
+    assert n == 1 and tf.tree() == {"a": "world"}
+    assert sum(tf.rejected.values()) == 3
+    assert any("zero quaternion" in r for r in tf.rejected)
+    np.testing.assert_allclose(tf.lookup("world", "a", S)[:3, 3], [1, 2, 3])

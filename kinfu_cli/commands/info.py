@@ -52,7 +52,8 @@ def summarize(rec: Recording, **role_overrides) -> dict:
         "message_count": rec.message_count,
         "topics": [t.as_dict() for t in rec.topics.values()],
         "roles": roles.as_dict(),
-        "tf": {"frames": tf.frames(), "tree": tf.tree(), "links": links},
+        "tf": {"frames": tf.frames(), "tree": tf.tree(), "links": links, "rejected": dict(tf.rejected),
+               "parent_changes": [list(c) for c in tf.parent_changes]},
     }
 
 
@@ -114,6 +115,10 @@ def format_summary(s: dict) -> str:
 
         for root in roots:
             walk(root, 0)
+    for reason, n in s["tf"].get("rejected", {}).items():
+        lines.append(f"  skipped {n} transforms: {reason}")
+    for child, old, new in s["tf"].get("parent_changes", []):
+        lines.append(f"  note: {child} changed parent from {old} to {new} (the later link is kept)")
     return "\n".join(lines)
 
 

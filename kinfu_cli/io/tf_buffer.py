@@ -75,6 +75,7 @@ class TfBuffer:
     def __init__(self) -> None:
         self._links: dict[str, _Link] = {}
         self.parent_changes: list[tuple[str, str, str]] = []  # (child, old parent, new parent)
+        self.rejected: dict[str, int] = {}  # transforms from messages that were skipped, by reason
 
     # ----------------------------------------------------------------------------------- filling
     def add(self, parent: str, child: str, stamp_ns: int, T: np.ndarray, static: bool = False) -> None:
@@ -110,8 +111,13 @@ class TfBuffer:
         n = 0
         for tr in msg.transforms:
             t, r = tr.transform.translation, tr.transform.rotation
-            self.add_quat(header_frame(tr), tr.child_frame_id, time_to_ns(tr.header.stamp),
-                          (t.x, t.y, t.z), (r.x, r.y, r.z, r.w), static=static)
+            try:
+                self.add_quat(header_frame(tr), tr.child_frame_id, time_to_ns(tr.header.stamp),
+                              (t.x, t.y, t.z), (r.x, r.y, r.z, r.w), static=static)
+            except TransformError as exc:  # one bad transform in a recording does not spoil the others
+                reason = str(exc).split(": ", 1)[-1]
+                self.rejected[reason] = self.rejected.get(reason, 0) + 1
+                continue
             n += 1
         return n
 
