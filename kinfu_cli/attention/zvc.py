@@ -1,0 +1,136 @@
+"""ZVC-like baseline (Monica et al. RAS 2016, eqs. 14-15): POIs where the hand slows down locally.
+
+1. Mean filter of width 2B+1 on the positions (edges: the window shrinks to the available samples).
+2. Speed of sample j: ‖q_j − q_{j−1}‖ / (t_j − t_{j−1}).
+3. v̄_i(r) = mean speed over R_i(r), the contiguous run of samples around i that stays within r of q_i (eq. 15).
+4. Samples with v̄_i(r1)·ZVCTh < v̄_i(r2) are "slow"; each contiguous slow segment gives one POI at the
+   segment's average time index (position of the filtered trajectory there).
+
+The window search is a numba loop (cost O(N · window)), a few hundred µs per task.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from kinfu_cli.attention.pois import DEFAULT_RADIUS, Poi
+from kinfu_cli.errors import ConfigError
+from kinfu_cli.io.trajectory import Trajectory
+
+
+@njit(cache=True)
+def _window_mean_speed(q: np.ndarray, cum: np.ndarray, r: float) -> np.ndarray:
+    """v̄_i(r): mean of speed[j] (j = 1..N-1, speed[j] between j-1 and j) over the window R_i(r)."""
+    n = q.shape[0]
+    out = np.empty(n)
+    r2 = r * r
+    for i in range(n):
+        lo = i
+        while lo - 1 >= 0:
+            d = 0.0
+            for c in range(3):
+                e = q[lo - 1, c] - q[i, c]
+                d += e * e
+            if d >= r2:
+                break
+            lo -= 1
+        hi = i
+        while hi + 1 < n:
+            d = 0.0
+            for c in range(3):
+                e = q[hi + 1, c] - q[i, c]
+                d += e * e
+            if d >= r2:
+                break
+            hi += 1
+        # speeds defined for j >= 1; cum[k] = sum of speed[1..k]
+        a = max(lo, 1)
+        if hi >= a:
+            out[i] = (cum[hi] - cum[a - 1]) / (hi - a + 1)
+        else:  # single-sample window at i = 0: use the first speed
+            out[i] = cum[1] if n > 1 else 0.0
+    return out
+
+
+def mean_filter(positions: np.ndarray, half_width: int) -> np.ndarray:
+    """Centred moving average of width 2B+1; near the ends the window shrinks to the samples there."""
+    if half_width <= 0:
+        return positions.copy()
+    n = positions.shape[0]
+    cs = np.vstack([np.zeros((1, 3)), np.cumsum(positions, axis=0)])
+    idx = np.arange(n)
+    lo = np.maximum(idx - half_width, 0)
+    hi = np.minimum(idx + half_width, n - 1)
+    return (cs[hi + 1] - cs[lo]) / (hi - lo + 1)[:, None]
+
+
+class ZeroVelocityCrossing:
+    """ZVC-like POI detector (sklearn-style: parameters here, work in `fit`, results in `*_`).
+
+    Parameters (paper names):
+      half_width   B      mean-filter half width in samples (filter width 2B+1), paper B = 4.
+      threshold    ZVCTh  a sample is slow when v̄(r1)·ZVCTh < v̄(r2), paper 1.72.
+      r1, r2       r1, r2 inner and outer radii of eq. 15 in metres, paper 0.10 and 0.25.
+      radius       WS_r   radius written with each POI (region of interest), 0.2 m.
+      min_segment         drop slow segments shorter than this many samples (1 = keep all, the paper).
+
+    After `fit(traj)`: `pois_` (list of Poi, saliency = max v̄(r2)/v̄(r1) in the segment),
+    `slow_` (N,) bool mask, `speed_r1_`, `speed_r2_` (N,) m/s, `segments_` [(start, end)] inclusive.
+    """
+
+    algorithm = "zvc"
+
+    def __init__(self, half_width: int = 4, threshold: float = 1.72, r1: float = 0.10, r2: float = 0.25,
+                 radius: float = DEFAULT_RADIUS, min_segment: int = 1) -> None:
+        self.half_width = half_width
+        self.threshold = threshold
+        self.r1 = r1
+        self.r2 = r2
+        self.radius = radius
+        self.min_segment = min_segment
+
+    def get_params(self) -> dict:
+        return {"half_width": self.half_width, "threshold": self.threshold, "r1": self.r1, "r2": self.r2,
+                "radius": self.radius, "min_segment": self.min_segment}
+
+    def _check(self) -> None:
+        if int(self.half_width) != self.half_width or self.half_width < 0:
+            raise ConfigError(f"--zvc-half-width: expected an integer >= 0, got {self.half_width}")
+        if not (0 < self.r1 < self.r2):
+            raise ConfigError(f"--zvc-r1/--zvc-r2: expected 0 < r1 < r2 metres, got {self.r1}, {self.r2}")
+        if not self.threshold > 0:
+            raise ConfigError(f"--zvc-threshold: expected a positive multiplier, got {self.threshold}")
+        if not self.radius > 0:
+            raise ConfigError(f"--radius: expected a positive radius in metres, got {self.radius}")
+
+    def fit(self, traj: Trajectory) -> "ZeroVelocityCrossing":
+        self._check()
+        traj.validate(min_samples=2)
+        t = traj.t
+        q = np.ascontiguousarray(mean_filter(traj.positions, int(self.half_width)))
+        speed = np.zeros(len(t))
+        speed[1:] = np.linalg.norm(np.diff(q, axis=0), axis=1) / np.diff(t)
+        cum = np.cumsum(speed)
+        v1 = _window_mean_speed(q, cum, float(self.r1))
+        v2 = _window_mean_speed(q, cum, float(self.r2))
+        slow = v1 * self.threshold < v2
+        edges = np.diff(np.r_[0, slow.astype(np.int8), 0])
+        starts = np.flatnonzero(edges == 1)
+        ends = np.flatnonzero(edges == -1) - 1
+        pois = []
+        segments = []
+        for s, e in zip(starts, ends):
+            if e - s + 1 < self.min_segment:
+                continue
+            segments.append((int(s), int(e)))
+            mid = int(round((s + e) / 2.0))
+            ratio = float(np.max(v2[s:e + 1] / np.maximum(v1[s:e + 1], 1e-12)))
+            pois.append(Poi(id=len(pois), position=q[mid], time=float(t[mid]), saliency=ratio,
+                            radius=float(self.radius), gaussian=None,
+                            extra={"segment": [float(t[s]), float(t[e])]}))
+        self.speed_r1_, self.speed_r2_, self.slow_ = v1, v2, slow
+        self.segments_ = segments
+        self.filtered_ = q
+        self.pois_ = pois
+        return self

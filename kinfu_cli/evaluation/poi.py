@@ -1,0 +1,262 @@
+"""Scoring GMM-AS and ZVC against hand-labelled changes, as in Monica et al. RAS 2016 Sec. 6.2.
+
+Data set layout: every `*.traj` with a `*.traj.res` beside it is a task; tasks are grouped by their
+sub-folder (placements_removals, pick_and_place). A POI within `radius` (0.20 m) of a ground-truth
+change is a true positive, otherwise a false positive; a change with no POI within `radius` is a
+false negative. precision = tp / (tp + fp); recall = (changes - fn) / changes.
+
+Robustness settings (Tables 3 and 4):
+- speed multiplier m: the hand moves m times faster; the trajectory is re-timed t -> t / m and
+  resampled at the original rate by linear interpolation (m < 1 gives more samples, m > 1 fewer).
+  The paper's wording ("undersampling 1/2x, 1/4x; oversampling 2x, 4x") is ambiguous; resampling the
+  same path makes both directions a change of samples per metre of path, which is what matters.
+- noise std s (metres): white Gaussian noise on the positions, fixed seed per task (seed + CRC32 of
+  the file name), so runs are repeatable and independent of the worker order.
+
+Tasks run in a process pool (`workers`); each job returns counts and the detector's run time.
+"""
+
+from __future__ import annotations
+
+import os
+import statistics
+import time
+import zlib
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from kinfu_cli.errors import ConfigError, TrajectoryError
+from kinfu_cli.io.trajectory import Trajectory
+
+MATCH_RADIUS = 0.20
+
+#: Paper numbers (RAS 2016 Tables 2-4 = thesis Tables 2.2-2.4), percent (precision, recall).
+PAPER_TABLE2 = {
+    ("placements_removals", "zvc"): (96.4, 97.3), ("placements_removals", "gmm-as"): (95.4, 95.9),
+    ("pick_and_place", "zvc"): (94.5, 98.2), ("pick_and_place", "gmm-as"): (97.7, 97.3),
+}
+PAPER_TABLE3 = {  # speed multiplier -> algorithm -> (P, R)
+    0.25: {"zvc": (96.6, 93.0), "gmm-as": (98.0, 86.1)},
+    0.5: {"zvc": (95.7, 97.7), "gmm-as": (97.0, 95.9)},
+    1.0: {"zvc": (95.5, 97.7), "gmm-as": (96.6, 96.6)},
+    2.0: {"zvc": (95.7, 97.7), "gmm-as": (96.8, 92.5)},
+    4.0: {"zvc": (96.4, 97.7), "gmm-as": (97.0, 80.7)},
+}
+PAPER_TABLE4 = {  # noise std in metres -> algorithm -> (P, R)
+    0.001: {"zvc": (95.4, 97.7), "gmm-as": (97.5, 98.4)},
+    0.025: {"zvc": (95.1, 12.5), "gmm-as": (97.0, 80.2)},
+    0.05: {"zvc": (97.5, 0.5), "gmm-as": (98.6, 56.8)},
+}
+
+
+@dataclass(frozen=True)
+class Task:
+    group: str
+    name: str
+    traj_path: str
+    res_path: str
+
+
+def find_tasks(dataset_dir: str | os.PathLike) -> list[Task]:
+    """Every `*.traj` under `dataset_dir` with a `.traj.res` beside it, grouped by sub-folder."""
+    root = Path(dataset_dir)
+    if not root.is_dir():
+        raise TrajectoryError(f"{root}: no such data set folder (expected sub-folders of *.traj + *.traj.res)")
+    tasks = []
+    for p in sorted(root.rglob("*.traj")):
+        res = p.with_name(p.name + ".res")
+        if not res.exists():
+            continue
+        rel = p.parent.relative_to(root)
+        group = str(rel) if str(rel) != "." else root.name
+        tasks.append(Task(group, p.name, str(p), str(res)))
+    if not tasks:
+        raise TrajectoryError(f"{root}: no *.traj file with a *.traj.res beside it")
+    return tasks
+
+
+def score_pois(pois_xyz: np.ndarray, gt: np.ndarray, radius: float = MATCH_RADIUS) -> tuple[int, int, int]:
+    """(tp, fp, fn) for POI positions (K, 3) against ground-truth changes (M, 3)."""
+    p = np.asarray(pois_xyz, dtype=np.float64).reshape(-1, 3)
+    g = np.asarray(gt, dtype=np.float64).reshape(-1, 3)
+    if len(p) == 0:
+        return 0, 0, len(g)
+    if len(g) == 0:
+        return 0, len(p), 0
+    d = np.linalg.norm(p[:, None, :] - g[None, :, :], axis=2)
+    near = d < radius
+    tp = int(near.any(axis=1).sum())
+    return tp, len(p) - tp, int((~near.any(axis=0)).sum())
+
+
+def resample_speed(traj: Trajectory, speed: float) -> Trajectory:
+    """The same path performed `speed` times faster, resampled at the original sampling rate."""
+    if not speed > 0:
+        raise ConfigError(f"--speed: expected positive multipliers, got {speed}")
+    if speed == 1.0:
+        return traj
+    t = traj.t - traj.t[0]
+    dt = float(np.median(np.diff(t)))
+    new_t = np.arange(0.0, t[-1] / speed + 1e-12, dt)
+    src = np.minimum(new_t * speed, t[-1])
+    pos = np.column_stack([np.interp(src, t, traj.positions[:, i]) for i in range(3)])
+    return Trajectory(t=new_t + traj.t[0], positions=pos, frame=traj.frame, source=traj.source,
+                      t0_ns=traj.t0_ns, meta={**traj.meta, "speed": speed})
+
+
+def add_noise(traj: Trajectory, std: float, seed: int = 0) -> Trajectory:
+    """White Gaussian noise of `std` metres on every coordinate; the seed mixes in the file name."""
+    if std < 0:
+        raise ConfigError(f"--noise: expected standard deviations >= 0 metres, got {std}")
+    if std == 0:
+        return traj
+    rng = np.random.default_rng([seed, zlib.crc32(Path(traj.source).name.encode())])
+    pos = traj.positions + rng.normal(0.0, std, traj.positions.shape)
+    return Trajectory(t=traj.t.copy(), positions=pos, frame=traj.frame, source=traj.source,
+                      t0_ns=traj.t0_ns, meta={**traj.meta, "noise": std})
+
+
+def make_detector(algorithm: str, params: dict | None = None):
+    """A fresh GmmActivitySaliency or ZeroVelocityCrossing with `params` (constructor keywords)."""
+    params = dict(params or {})
+    if algorithm == "gmm-as":
+        from kinfu_cli.attention.gmm_as import GmmActivitySaliency
+
+        return GmmActivitySaliency(**params)
+    if algorithm == "zvc":
+        from kinfu_cli.attention.zvc import ZeroVelocityCrossing
+
+        return ZeroVelocityCrossing(**params)
+    raise ConfigError(f"--algorithm: expected gmm-as, zvc or both, got {algorithm!r}")
+
+
+def _run_job(job: tuple) -> list[dict]:
+    """One task under one (speed, noise) setting, every algorithm. Top level so it pickles."""
+    task, speed, noise, seed, algorithms, params = job
+    from kinfu_cli.io.polhemus import read_ground_truth, read_polhemus
+
+    traj = add_noise(resample_speed(read_polhemus(task.traj_path), speed), noise, seed)
+    gt = read_ground_truth(task.res_path)
+    out = []
+    for alg in algorithms:
+        det = make_detector(alg, params.get(alg))
+        t0 = time.perf_counter()
+        det.fit(traj)
+        secs = time.perf_counter() - t0
+        xyz = np.array([p.position for p in det.pois_]).reshape(-1, 3)
+        tp, fp, fn = score_pois(xyz, gt)
+        out.append({"algorithm": alg, "speed": speed, "noise": noise, "group": task.group, "task": task.name,
+                    "tp": tp, "fp": fp, "fn": fn, "changes": int(len(gt)), "pois": int(len(xyz)),
+                    "seconds": secs})
+    return out
+
+
+def _summary(rows: list[dict]) -> dict:
+    tp = sum(r["tp"] for r in rows)
+    fp = sum(r["fp"] for r in rows)
+    fn = sum(r["fn"] for r in rows)
+    ch = sum(r["changes"] for r in rows)
+    return {"precision": tp / (tp + fp) if tp + fp else 0.0, "recall": (ch - fn) / ch if ch else 0.0,
+            "tp": tp, "fp": fp, "fn": fn, "changes": ch, "tasks": len(rows)}
+
+
+def summarise(rows: list[dict]) -> list[dict]:
+    """One result object per (algorithm, speed, noise): groups, overall, seconds_per_task."""
+    keys = sorted({(r["algorithm"], r["speed"], r["noise"]) for r in rows}, key=lambda k: (k[0], k[2], k[1]))
+    results = []
+    for alg, speed, noise in keys:
+        sel = [r for r in rows if (r["algorithm"], r["speed"], r["noise"]) == (alg, speed, noise)]
+        groups = {g: _summary([r for r in sel if r["group"] == g]) for g in sorted({r["group"] for r in sel})}
+        secs = [r["seconds"] for r in sel]
+        results.append({"algorithm": alg, "speed": speed, "noise": noise, "groups": groups,
+                        "overall": _summary(sel),
+                        "seconds_per_task": {"median": statistics.median(secs), "max": max(secs)}})
+    return results
+
+
+def settings_for(speeds: list[float], noises: list[float]) -> list[tuple[float, float]]:
+    """Table 3 rows (each speed, no noise) then Table 4 rows (speed 1, each noise > 0)."""
+    out = [(float(s), 0.0) for s in speeds]
+    out += [(1.0, float(n)) for n in noises if n > 0]
+    seen = []
+    for s in out:
+        if s not in seen:
+            seen.append(s)
+    return seen
+
+
+def evaluate_dataset(dataset_dir: str | os.PathLike, algorithms: list[str], speeds: list[float] | None = None,
+                     noises: list[float] | None = None, workers: int = 1, params: dict | None = None,
+                     seed: int = 0, quiet: bool = True) -> tuple[list[dict], list[dict]]:
+    """Run every task under every setting; returns (summaries, per-task rows).
+
+    params: {"gmm-as": {...constructor kwargs...}, "zvc": {...}}.
+    """
+    from kinfu_cli.progress import progress
+
+    tasks = find_tasks(dataset_dir)
+    settings = settings_for(speeds or [1.0], noises or [])
+    for alg in algorithms:
+        make_detector(alg, (params or {}).get(alg))._check()  # bad options fail before any work
+    jobs = [(t, s, n, seed, list(algorithms), dict(params or {})) for s, n in settings for t in tasks]
+    rows: list[dict] = []
+    if workers <= 1 or len(jobs) < 4:
+        for job in progress(jobs, total=len(jobs), desc="eval poi", quiet=quiet, unit="task"):
+            rows.extend(_run_job(job))
+    else:
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            chunk = max(1, len(jobs) // (workers * 8))
+            for res in progress(pool.map(_run_job, jobs, chunksize=chunk), total=len(jobs), desc="eval poi",
+                                quiet=quiet, unit="task"):
+                rows.extend(res)
+    return summarise(rows), rows
+
+
+def _pr(p: float, r: float) -> str:
+    return f"{100 * p:5.1f} / {100 * r:5.1f}"
+
+
+def _ref(ref: tuple[float, float] | None) -> str:
+    return f"{ref[0]:5.1f} / {ref[1]:5.1f}" if ref else "    - /     -"
+
+
+def format_tables(results: list[dict]) -> str:
+    """The paper's Tables 2, 3 and 4 with our numbers beside theirs (precision / recall, %)."""
+    lines = []
+    base = [r for r in results if r["speed"] == 1.0 and r["noise"] == 0.0]
+    if base:
+        lines.append("Table 2 (speed 1, no noise): precision / recall %")
+        lines.append(f"{'tasks':<22}{'algorithm':<10}{'ours':>15}{'paper':>15}{'tp':>6}{'fp':>5}{'fn':>5}")
+        for r in base:
+            for g, s in r["groups"].items():
+                lines.append(f"{g:<22}{r['algorithm']:<10}{_pr(s['precision'], s['recall']):>15}"
+                             f"{_ref(PAPER_TABLE2.get((g, r['algorithm']))):>15}{s['tp']:>6}{s['fp']:>5}{s['fn']:>5}")
+            s = r["overall"]
+            lines.append(f"{'all':<22}{r['algorithm']:<10}{_pr(s['precision'], s['recall']):>15}{'':>15}"
+                         f"{s['tp']:>6}{s['fp']:>5}{s['fn']:>5}")
+        lines.append("")
+    speed_rows = [r for r in results if r["noise"] == 0.0]
+    if len({r["speed"] for r in speed_rows}) > 1:
+        lines.append("Table 3 (speed multiplier, all tasks): precision / recall %")
+        lines.append(f"{'speed':<8}{'algorithm':<10}{'ours':>15}{'paper':>15}")
+        for r in sorted(speed_rows, key=lambda r: (r["speed"], r["algorithm"])):
+            ref = PAPER_TABLE3.get(r["speed"], {}).get(r["algorithm"])
+            lines.append(f"{r['speed']:<8g}{r['algorithm']:<10}{_pr(r['overall']['precision'], r['overall']['recall']):>15}"
+                         f"{_ref(ref):>15}")
+        lines.append("")
+    noise_rows = [r for r in results if r["noise"] > 0.0]
+    if noise_rows:
+        lines.append("Table 4 (noise std, all tasks): precision / recall %")
+        lines.append(f"{'std cm':<8}{'algorithm':<10}{'ours':>15}{'paper':>15}")
+        for r in sorted(noise_rows, key=lambda r: (r["noise"], r["algorithm"])):
+            ref = next((v.get(r["algorithm"]) for k, v in PAPER_TABLE4.items() if abs(k - r["noise"]) < 1e-9), None)
+            lines.append(f"{100 * r['noise']:<8g}{r['algorithm']:<10}"
+                         f"{_pr(r['overall']['precision'], r['overall']['recall']):>15}{_ref(ref):>15}")
+        lines.append("")
+    lines.append("Run time per task (s): " + ", ".join(
+        f"{r['algorithm']} speed {r['speed']:g} noise {r['noise']:g}: median {r['seconds_per_task']['median']:.4f} "
+        f"max {r['seconds_per_task']['max']:.4f}" for r in results))
+    return "\n".join(lines)
