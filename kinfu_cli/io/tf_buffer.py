@@ -27,12 +27,14 @@ class _Link:
     trans: list[np.ndarray] = field(default_factory=list)
     quats: list[np.ndarray] = field(default_factory=list)
     _arrays: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    _last_T: np.ndarray | None = None  # matrix of the latest sample, cached
 
     def add(self, stamp_ns: int, trans: np.ndarray, quat: np.ndarray) -> None:
         self.stamps.append(int(stamp_ns))
         self.trans.append(trans)
         self.quats.append(quat)
         self._arrays = None
+        self._last_T = None
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Sorted stamps (N,), translations (N,3), quaternions xyzw (N,4); duplicate stamps keep the last."""
@@ -233,12 +235,16 @@ class TfBuffer:
         link = self._links[child]
         st, tr, qu = link.arrays()
         if link.static or stamps_ns is None:
-            T = np.eye(4)
-            T[:3, :3] = quats_to_matrices(qu[-1])
-            T[:3, 3] = tr[-1]
-            return np.broadcast_to(T, (n, 4, 4))
+            if link._last_T is None:
+                T = np.eye(4)
+                T[:3, :3] = quats_to_matrices(qu[-1])
+                T[:3, 3] = tr[-1]
+                link._last_T = T
+            return np.broadcast_to(link._last_T, (n, 4, 4))
         s = np.asarray(stamps_ns, dtype=np.int64).reshape(-1)
         lo, hi = st[0], st[-1]
+        if s.shape[0] == 1 and lo - tolerance_ns <= s[0] <= hi + tolerance_ns:
+            return _edge_one(st, tr, qu, int(s[0]))[None]
         bad = (s < lo - tolerance_ns) | (s > hi + tolerance_ns)
         if bad.any():
             t = int(s[np.flatnonzero(bad)[0]])
@@ -259,6 +265,38 @@ class TfBuffer:
         T[:, :3, 3] = trans
         T[:, 3, 3] = 1.0
         return T
+
+
+def _edge_one(st: np.ndarray, tr: np.ndarray, qu: np.ndarray, s: int) -> np.ndarray:
+    """One stamp of one link (within its range), in scalar arithmetic: the per-frame path of iter_frames."""
+    import bisect
+    import math
+
+    n = st.shape[0]
+    i1 = min(max(bisect.bisect_right(st, s), 1), n - 1) if n > 1 else 0
+    i0 = max(i1 - 1, 0)
+    span = int(st[i1]) - int(st[i0])
+    a = 0.0 if span <= 0 else min(max((s - int(st[i0])) / span, 0.0), 1.0)
+    t = tr[i0] + a * (tr[i1] - tr[i0])
+    q0, q1 = qu[i0].tolist(), qu[i1].tolist()
+    dot = sum(x * y for x, y in zip(q0, q1))
+    if dot < 0:
+        q1, dot = [-x for x in q1], -dot
+    if dot > 1.0 - 1e-12:
+        w0, w1 = 1.0 - a, a
+    else:
+        theta = math.acos(min(dot, 1.0))
+        sin_t = math.sin(theta)
+        w0, w1 = math.sin((1 - a) * theta) / sin_t, math.sin(a * theta) / sin_t
+    x, y, z, w = (w0 * u + w1 * v for u, v in zip(q0, q1))
+    norm = math.sqrt(x * x + y * y + z * z + w * w)
+    x, y, z, w = x / norm, y / norm, z / norm, w / norm
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w), t[0]],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w), t[1]],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y), t[2]],
+        [0.0, 0.0, 0.0, 1.0],
+    ])
 
 
 def _inv(T: np.ndarray) -> np.ndarray:
