@@ -1,0 +1,139 @@
+"""NBV ranking speed: the fast ray caster vs the fixed half-voxel-step reference marcher.
+
+Scene: a synthetic tabletop in a 3 m cube at 512^3 (5.86 mm voxels, the ros_kinfu volume): table top
+(occupied) over unknown space, boxes and cylinders with occupied shells and unknown insides, unobserved
+shadows, and the POI sphere (0.2 m) cleared to unknown as `kinfu nbv --clear` does. Views: the paper's
+960-pose viewing sphere (d = 0.8 m, 30/10/45 deg) at 640x480 (Kinect v1 intrinsics).
+
+The reference marches every pixel of a view (one thread, half-voxel steps); it runs on a subset of the
+views (--ref-views, spread over the sphere) and its time is extrapolated to 960 views. Per-view gains
+on that subset are compared with the fast path (both with shared roll rays and with exact per-view
+rays). Run: `.venv/bin/python benchmarks/bench_nbv.py [--size 512] [--ref-views 8]`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from kinfu_cli.fusion.ternary import EMPTY, OCCUPIED, UNKNOWN, TernaryGrid  # noqa: E402
+from kinfu_cli.nbv.camera import KINECT_V1, CameraModel  # noqa: E402
+from kinfu_cli.nbv.raycast import RayVolume, cast_views  # noqa: E402
+from kinfu_cli.nbv.ranking import forget_around  # noqa: E402
+from kinfu_cli.nbv.reference import reference_views  # noqa: E402
+from kinfu_cli.nbv.viewpoints import sphere_viewpoints  # noqa: E402
+
+
+def tabletop_grid(n: int = 512, size: float = 3.0, seed: int = 0) -> tuple[TernaryGrid, np.ndarray]:
+    """A tabletop ternary grid (n^3 over `size` metres, origin at (-size/2, -size/2, 0)) and a POI."""
+    vs = size / n
+    origin = np.array([-size / 2, -size / 2, 0.0])
+    lab = np.full((n, n, n), EMPTY, np.int8)
+    c = origin[0] + (np.arange(n) + 0.5) * vs  # same for x and y
+    zc = origin[2] + (np.arange(n) + 0.5) * vs
+    table_k = int(0.75 / vs)
+    lab[:, :, :table_k] = UNKNOWN
+    lab[:, :, table_k] = OCCUPIED
+    rng = np.random.default_rng(seed)
+    objects = [("box", (0.0, 0.0), (0.12, 0.08, 0.10))]
+    for _ in range(14):
+        xy = tuple(rng.uniform(-0.6, 0.6, 2))
+        objects.append((rng.choice(["box", "cyl"]), xy, tuple(rng.uniform(0.03, 0.12, 3))))
+    for kind, (x, y), (a, b, h) in objects:
+        i0, i1 = np.searchsorted(c, [x - a - vs, x + a + vs])
+        j0, j1 = np.searchsorted(c, [y - b - vs, y + b + vs])
+        k1 = np.searchsorted(zc, 0.75 + 2 * h)
+        X, Y = np.meshgrid(c[i0:i1] - x, c[j0:j1] - y, indexing="ij")
+        if kind == "box":
+            inner = (np.abs(X) < a - vs) & (np.abs(Y) < b - vs)
+            outer = (np.abs(X) < a) & (np.abs(Y) < b)
+        else:
+            r = np.hypot(X / a, Y / a)
+            inner, outer = r < 1 - vs / a, r < 1
+        sub = lab[i0:i1, j0:j1, table_k + 1:k1]
+        sub[outer] = OCCUPIED
+        sub[inner, :-1] = UNKNOWN
+        # an unobserved shadow behind the object (the sensor came from -x)
+        shadow = lab[i1:min(i1 + int(0.1 / vs), n), j0:j1, table_k + 1:k1 - 2]
+        shadow[shadow == EMPTY] = UNKNOWN
+    grid = TernaryGrid(lab, origin, vs)
+    poi = np.array([0.0, 0.0, 0.80])
+    forget_around(grid, poi, 0.2)
+    return grid, poi
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--size", type=int, default=512, help="voxels per side (default 512)")
+    ap.add_argument("--ref-views", type=int, default=8, help="views the reference marches (default 8)")
+    ap.add_argument("--gain-through", action="store_true", help="also time the through-unknown gains")
+    ap.add_argument("--json", type=Path, default=None, help="write the numbers to this JSON file")
+    a = ap.parse_args(argv)
+
+    t = time.perf_counter()
+    grid, poi = tabletop_grid(a.size)
+    t_build = time.perf_counter() - t
+    cam = CameraModel(**KINECT_V1, min_range=0.5, max_range=4.0)
+    poses = sphere_viewpoints(poi)
+    t = time.perf_counter()
+    vol = RayVolume.from_grid(grid)
+    t_prep = time.perf_counter() - t
+    cast_views(vol, poses[:2], CameraModel(50, 50, 15.5, 11.5, 32, 24), poi, 0.2)  # compile / warm up
+    cast_views(vol, poses[:2], CameraModel(50, 50, 15.5, 11.5, 32, 24), poi, 0.2, through=True)
+
+    def timed(**kw):
+        t0 = time.perf_counter()
+        r = cast_views(vol, poses, cam, poi, 0.2, **kw)
+        return r, time.perf_counter() - t0
+
+    fast, t_fast = timed()
+    exact, t_exact = timed(share_rolls=False)
+    full, t_full = timed(share_rolls=False, restrict=False)
+    sub = np.linspace(0, len(poses) - 1, a.ref_views).round().astype(int)
+    reference_views(vol, poses[:1], CameraModel(50, 50, 15.5, 11.5, 32, 24), poi, 0.2)  # compile
+    t0 = time.perf_counter()
+    ref_counts, ref_terms = reference_views(vol, poses[sub], cam, poi, 0.2)
+    t_ref_sub = time.perf_counter() - t0
+    t_ref = t_ref_sub / len(sub) * len(poses)
+
+    def rel_err(terms):
+        g, r = terms[sub, 0], ref_terms[:, 0]
+        return float(np.max(np.abs(g - r) / np.maximum(r, 1.0)))
+
+    res = {
+        "volume": f"{a.size}^3 ({grid.voxel_size * 1000:.2f} mm)", "views": len(poses),
+        "image": f"{cam.width}x{cam.height}", "threads": int(os.environ.get("NUMBA_NUM_THREADS", 0) or os.cpu_count()),
+        "build_scene_s": round(t_build, 2), "prepare_volume_s": round(t_prep, 3),
+        "fast_shared_rolls_s": round(t_fast, 3), "rays_cast_shared": int(fast.rays_cast),
+        "fast_exact_rays_s": round(t_exact, 3), "rays_cast_exact": int(exact.rays_cast),
+        "fast_full_image_s": round(t_full, 3), "rays_cast_full": int(full.rays_cast),
+        "reference_views_run": int(len(sub)), "reference_s_measured": round(t_ref_sub, 2),
+        "reference_s_extrapolated_960": round(t_ref, 1),
+        "speedup_shared_vs_reference": round(t_ref / t_fast, 1),
+        "speedup_exact_vs_reference": round(t_ref / t_exact, 1),
+        "speedup_full_image_vs_reference": round(t_ref / t_full, 1),
+        "max_rel_gain_err_shared": round(rel_err(fast.terms), 5),
+        "max_rel_gain_err_exact": round(rel_err(exact.terms), 5),
+        "max_rel_gain_err_full_image": round(rel_err(full.terms), 5),
+        "ref_gains_subset": ref_terms[:, 0].tolist(), "fast_gains_subset": fast.terms[sub, 0].tolist(),
+    }
+    if a.gain_through:
+        _, t_thr = timed(through=True)
+        res["fast_shared_rolls_through_s"] = round(t_thr, 3)
+    for k, v in res.items():
+        print(f"{k:34s} {v}")
+    if a.json:
+        a.json.write_text(json.dumps(res, indent=2) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,282 @@
+"""Rank candidate views of a region S (centre, radius) by gain: the paper's NextBestView (Alg. 2).
+
+`score_views` scores any candidate set for any region (the object-driven NBV calls it too);
+`rank_poi` does the paper's per-POI step: viewing sphere, rejection of impossible sensor positions,
+ranking, and the IncTh test that says whether S(POI) is considered reconstructed.
+`forget_around` is the paper's ForgetAround (S(POI) set to unknown).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from kinfu_cli.errors import ConfigError, VolumeError
+from kinfu_cli.fusion.ternary import EMPTY, OCCUPIED, UNKNOWN, TernaryGrid
+from kinfu_cli.nbv.camera import CameraModel
+from kinfu_cli.nbv.gains import all_gain_values, get_gain
+from kinfu_cli.nbv.raycast import RayVolume, cast_views
+from kinfu_cli.nbv.viewpoints import check_poses, rotation_to_quaternion, sphere_viewpoints
+
+REJECT_REASONS = ("below_table", "inside_occupied", "inside_unknown")
+
+
+@dataclass
+class ViewScores:
+    """Scores of V candidate views (camera-to-world `poses`) for one region.
+
+    gain (V,) of the chosen gain (0 for rejected views); gains: every gain computed; counts (V, 3) rays
+    ending on unknown / occupied / empty-exit among the `rays` (V,) pixels considered (those that can
+    reach the region unless restrict=False); reasons[i] is None for a valid view, else a REJECT_REASONS
+    entry.
+    """
+
+    poses: np.ndarray
+    gain_name: str
+    gain: np.ndarray
+    gains: dict[str, np.ndarray]
+    counts: np.ndarray
+    rays: np.ndarray
+    reasons: list[str | None]
+    rays_cast: int = 0
+    seconds: float = 0.0
+
+    @property
+    def valid(self) -> np.ndarray:
+        return np.array([r is None for r in self.reasons], dtype=bool)
+
+    def order(self) -> np.ndarray:
+        """Indices of the valid views, best first (ties keep candidate order)."""
+        idx = np.flatnonzero(self.valid)
+        return idx[np.argsort(-self.gain[idx], kind="stable")]
+
+    def rejected(self) -> dict[str, int]:
+        out = {r: 0 for r in REJECT_REASONS}
+        for r in self.reasons:
+            if r is not None:
+                out[r] = out.get(r, 0) + 1
+        return out
+
+    def view_dict(self, i: int) -> dict:
+        T = self.poses[i]
+        return {"index": int(i), "pose": T.tolist(), "position": T[:3, 3].tolist(),
+                "quaternion": rotation_to_quaternion(T[:3, :3]).tolist(), "gain": float(self.gain[i]),
+                "rays_unknown": int(self.counts[i, 0]), "rays_occupied": int(self.counts[i, 1]),
+                "rays_empty_exit": int(self.counts[i, 2]), "rays": int(self.rays[i]),
+                "gains": {k: float(v[i]) for k, v in self.gains.items()}}
+
+
+def as_ray_volume(volume: TernaryGrid | RayVolume) -> RayVolume:
+    return volume if isinstance(volume, RayVolume) else RayVolume.from_grid(volume)
+
+
+def reject_reasons(vol: RayVolume, poses: np.ndarray, *, table_z: float | None = None,
+                   clearance: float = 0.0) -> list[str | None]:
+    """Why each sensor position is impossible, or None: below the table plane, or inside (within
+    `clearance` metres of) an occupied or unknown voxel. Positions outside the volume are allowed."""
+    pos = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)[:, :3, 3]
+    worst = vol.label_at(pos)
+    if clearance > 0:
+        r = clearance
+        offs = np.array([[dx, dy, dz] for dx in (-r, 0, r) for dy in (-r, 0, r) for dz in (-r, 0, r)])
+        labs = vol.label_at((pos[:, None, :] + offs[None]).reshape(-1, 3)).reshape(len(pos), -1)
+        inside = vol.inside((pos[:, None, :] + offs[None]).reshape(-1, 3)).reshape(len(pos), -1)
+        occ = np.any((labs == OCCUPIED) & inside, axis=1)
+        unk = np.any((labs == UNKNOWN) & inside, axis=1)
+    else:
+        inside = vol.inside(pos)
+        occ = (worst == OCCUPIED) & inside
+        unk = (worst == UNKNOWN) & inside
+    out: list[str | None] = []
+    for i in range(len(pos)):
+        if table_z is not None and pos[i, 2] < table_z:
+            out.append("below_table")
+        elif occ[i]:
+            out.append("inside_occupied")
+        elif unk[i]:
+            out.append("inside_unknown")
+        else:
+            out.append(None)
+    return out
+
+
+def score_views(volume: TernaryGrid | RayVolume, poses, camera: CameraModel, region_center, region_radius: float,
+                gain: str = "unknown", *, table_z: float | None = None, clearance: float = 0.0,
+                restrict: bool = True, share_rolls: bool = True, all_gains: bool = False,
+                progress_cb=None) -> ViewScores:
+    """Score candidate views for the region S(region_center, region_radius).
+
+    volume: a TernaryGrid (or a prepared RayVolume, to reuse it across calls); poses (V, 4, 4)
+    camera-to-world; gain: a name from gains.GAINS; all_gains: also compute the through-unknown gains.
+    """
+    t_start = time.perf_counter()
+    g = get_gain(gain)
+    vol = as_ray_volume(volume)
+    poses = check_poses(poses)
+    center = np.asarray(region_center, dtype=np.float64).reshape(3)
+    if not (math.isfinite(region_radius) and region_radius > 0):
+        raise ConfigError(f"--poi-radius: expected a positive radius in metres, got {region_radius}")
+    reasons = reject_reasons(vol, poses, table_z=table_z, clearance=clearance)
+    valid = np.array([r is None for r in reasons], dtype=bool)
+    V = poses.shape[0]
+    through = g.through or all_gains
+    counts = np.zeros((V, 3), np.int64)
+    rays = np.zeros(V, np.int64)
+    terms = np.zeros((V, 4))
+    n_cast = 0
+    if valid.any():
+        res = cast_views(vol, poses[valid], camera, center, float(region_radius), through=through,
+                         restrict=restrict, share_rolls=share_rolls, progress_cb=progress_cb)
+        counts[valid], rays[valid], terms[valid] = res.counts, res.rays, res.terms
+        n_cast = res.rays_cast
+    if progress_cb is not None and (~valid).any():
+        progress_cb(int((~valid).sum()))
+    gains = all_gain_values(terms, through)
+    return ViewScores(poses, gain, gains[gain].copy(), gains, counts, rays, reasons, n_cast,
+                      time.perf_counter() - t_start)
+
+
+# ---------------------------------------------------------------------------------------------
+# Per-POI ranking (the paper's Alg. 1/2 step)
+
+
+@dataclass
+class PoiRanking:
+    """The ranked views of one POI; `reconstructed` when the best gain is below `inc_th`."""
+
+    poi_id: int
+    center: np.ndarray
+    radius: float
+    scores: ViewScores
+    inc_th: float
+    reconstructed: bool
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def best_gain(self) -> float:
+        o = self.scores.order()
+        return float(self.scores.gain[o[0]]) if o.size else 0.0
+
+    def to_dict(self, top: int | None = 10) -> dict:
+        order = self.scores.order()
+        if top:
+            order = order[:top]
+        valid = self.scores.valid
+        return {"id": self.poi_id, "position": self.center.tolist(), "radius": self.radius,
+                "gain": self.scores.gain_name, "inc_th": self.inc_th, "reconstructed": self.reconstructed,
+                "best_gain": self.best_gain, "candidates": int(len(self.scores.reasons)),
+                "valid": int(valid.sum()), "rejected": self.scores.rejected(),
+                "mean_rays": float(self.scores.rays[valid].mean()) if valid.any() else 0.0,
+                "rays_cast": int(self.scores.rays_cast), "seconds": round(self.scores.seconds, 4),
+                "views": [self.scores.view_dict(i) for i in order], **self.extra}
+
+
+def default_inc_th(scores: ViewScores, fraction: float = 0.01) -> float:
+    """IncTh when not given (the paper does not state it): `fraction` of the mean number of pixels
+    per valid view that can see S(POI) -- i.e. the POI is reconstructed when the best view would
+    reveal unknown space on less than 1 % of them (all gains are at most ~1-2 per ray)."""
+    v = scores.valid
+    return float(fraction * scores.rays[v].mean()) if v.any() else 0.0
+
+
+def rank_poi(volume: TernaryGrid | RayVolume, center, camera: CameraModel, *, poi_id: int = 0, radius: float = 0.2,
+             gain: str = "unknown", candidates: np.ndarray | None = None, sphere: dict | None = None,
+             inc_th: float | None = None, table_z: float | None = None, clearance: float = 0.0,
+             share_rolls: bool = True, progress_cb=None) -> PoiRanking:
+    """Score the viewing sphere (or `candidates`) around one POI and apply IncTh.
+
+    sphere: keyword arguments of `viewpoints.sphere_viewpoints` (radius 0.8 m, 30/10/45 deg steps).
+    """
+    center = np.asarray(center, dtype=np.float64).reshape(3)
+    poses = candidates if candidates is not None else sphere_viewpoints(center, **(sphere or {}))
+    scores = score_views(volume, poses, camera, center, radius, gain, table_z=table_z, clearance=clearance,
+                         share_rolls=share_rolls, progress_cb=progress_cb)
+    th = default_inc_th(scores) if inc_th is None else float(inc_th)
+    o = scores.order()
+    best = float(scores.gain[o[0]]) if o.size else 0.0
+    return PoiRanking(int(poi_id), center, float(radius), scores, th, bool(best < th))
+
+
+# ---------------------------------------------------------------------------------------------
+# Volume helpers
+
+
+def forget_around(grid: TernaryGrid, center, radius: float) -> int:
+    """ForgetAround: set every voxel whose centre is within `radius` of `center` to UNKNOWN, in place.
+    Returns the number of voxels that changed."""
+    c = np.asarray(center, dtype=np.float64).reshape(3)
+    vs = grid.voxel_size
+    lo = np.maximum(np.floor((c - radius - grid.origin) / vs).astype(int), 0)
+    hi = np.minimum(np.ceil((c + radius - grid.origin) / vs).astype(int) + 1, np.array(grid.shape))
+    if np.any(hi <= lo):
+        return 0
+    ax = [grid.origin[a] + (np.arange(lo[a], hi[a]) + 0.5) * vs - c[a] for a in range(3)]
+    d2 = ax[0][:, None, None] ** 2 + ax[1][None, :, None] ** 2 + ax[2][None, None, :] ** 2
+    sub = grid.labels[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]]
+    mask = (d2 <= radius * radius) & (sub != UNKNOWN)
+    sub[mask] = UNKNOWN
+    return int(mask.sum())
+
+
+def unknown_in_sphere(grid: TernaryGrid, center, radius: float) -> int:
+    """Number of unknown voxels whose centre is within `radius` of `center` (inside the volume)."""
+    c = np.asarray(center, dtype=np.float64).reshape(3)
+    vs = grid.voxel_size
+    lo = np.maximum(np.floor((c - radius - grid.origin) / vs).astype(int), 0)
+    hi = np.minimum(np.ceil((c + radius - grid.origin) / vs).astype(int) + 1, np.array(grid.shape))
+    if np.any(hi <= lo):
+        return 0
+    ax = [grid.origin[a] + (np.arange(lo[a], hi[a]) + 0.5) * vs - c[a] for a in range(3)]
+    d2 = ax[0][:, None, None] ** 2 + ax[1][None, :, None] ** 2 + ax[2][None, None, :] ** 2
+    sub = grid.labels[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]]
+    return int(np.count_nonzero((d2 <= radius * radius) & (sub == UNKNOWN)))
+
+
+def estimate_table_z(grid: TernaryGrid, min_fraction: float = 0.02) -> float | None:
+    """Height of the dominant upward-facing surface (occupied voxel with empty space right above):
+    the table top. None when no layer holds at least `min_fraction` of the grid's x-y cells."""
+    lab = grid.labels
+    if lab.shape[2] < 2:
+        return None
+    per_layer = np.zeros(lab.shape[2] - 1, np.int64)
+    for x0 in range(0, lab.shape[0], 64):  # slabs keep the temporaries small
+        sl = lab[x0:x0 + 64]
+        per_layer += np.count_nonzero((sl[:, :, :-1] == OCCUPIED) & (sl[:, :, 1:] == EMPTY), axis=(0, 1))
+    k = int(np.argmax(per_layer))
+    if per_layer[k] < min_fraction * lab.shape[0] * lab.shape[1]:
+        return None
+    return float(grid.origin[2] + (k + 1) * grid.voxel_size)
+
+
+def check_region_inside(grid: TernaryGrid, center, what: str) -> None:
+    """VolumeError unless `center` lies inside the grid's box."""
+    c = np.asarray(center, dtype=np.float64).reshape(3)
+    lo = grid.origin
+    hi = grid.origin + np.array(grid.shape) * grid.voxel_size
+    if np.any(c < lo) or np.any(c >= hi):
+        raise VolumeError(f"{what} at ({c[0]:.3f}, {c[1]:.3f}, {c[2]:.3f}) is outside the volume "
+                          f"[{lo[0]:.3f}..{hi[0]:.3f}] x [{lo[1]:.3f}..{hi[1]:.3f}] x [{lo[2]:.3f}..{hi[2]:.3f}] m")
+
+
+@dataclass
+class PoiSpec:
+    id: int
+    position: np.ndarray
+    radius: float
+
+
+def load_pois(path: str | os.PathLike, default_radius: float | None = None) -> list[PoiSpec]:
+    """POIs of a pois.json (via the POI module's reader); `default_radius` overrides each radius.
+    Raises a KinfuError naming the file when there are none."""
+    from kinfu_cli.attention.pois import read_pois
+
+    pois = read_pois(path)
+    if not pois:
+        raise ConfigError(f"{Path(path)}: no POIs in the file (nothing to plan views for)")
+    return [PoiSpec(int(p.id), np.asarray(p.position, dtype=np.float64),
+                    float(default_radius if default_radius is not None else p.radius)) for p in pois]

@@ -1,0 +1,522 @@
+"""Ray casting through the ternary map (numba): the paper's knowledge map and per-ray gain terms.
+
+A ray starts at the sensor, is clipped to the volume box and to `max_range`, and walks the voxels it
+crosses exactly (Amanatides & Woo 1987). It stops at the first voxel that is not EMPTY; the knowledge
+map records whether that voxel is UNKNOWN (class 0) or OCCUPIED (class 1); a ray that leaves the
+volume or reaches `max_range` through empty space only is EMPTY_EXIT (class 2). Blocks of
+`block` ^ 3 voxels that are all EMPTY are crossed in one step (a two-level occupancy pyramid), which
+makes free space nearly free.
+
+Per ray the kernel also returns the terms the gain functions sum (see `gains.py`), all restricted to
+voxels whose centre lies in the region S (centre, radius) and to hits at least `min_range` away:
+  0 unknown   1 if the ray stops on an unknown voxel in S (the paper's eq. 2.10)
+  1 distance  that hit weighted by 1 / t^2 (t in metres; depth noise grows with distance)
+  2 rear      1 if, walking on through unknown space, the ray meets an occupied voxel right after an
+              unknown voxel in S (the rear side of an already seen surface; Delmerico et al. 2018)
+  3 entropy   sum over unknown voxels in S crossed before the first occupied voxel of
+              P_visible * H(p_unknown), P_visible = (1 - p_unknown) ^ (unknown voxels before it)
+              (occlusion-aware entropy, Isler et al. ICRA 2016; known voxels carry no entropy)
+Terms 2 and 3 need the ray to continue through unknown space (`through=True`).
+
+Camera rays of views that differ only by a roll about the optical axis (the paper's 8 rolls at each
+sphere position) are cast once per position on the first view's pixel lattice; every view then looks
+up its pixels' nearest lattice ray (`share_rolls`, exact for a single view or a roll that maps the
+pixel grid onto itself). Only rays that can reach a voxel of S are cast when `restrict=True`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numba as nb
+import numpy as np
+from numba import njit, prange
+
+from kinfu_cli.fusion.ternary import TernaryGrid
+
+CLS_UNKNOWN = 0
+CLS_OCCUPIED = 1
+CLS_EMPTY_EXIT = 2
+N_TERMS = 4
+TERM_NAMES = ("unknown", "distance", "rear", "entropy")
+
+
+@dataclass
+class RayVolume:
+    """A TernaryGrid prepared for ray casting: C-contiguous labels plus the empty-block pyramid."""
+
+    labels: np.ndarray
+    origin: np.ndarray
+    voxel_size: float
+    block: int
+    block_empty: np.ndarray
+
+    @classmethod
+    def from_grid(cls, grid: TernaryGrid, block: int = 8) -> "RayVolume":
+        labels = np.ascontiguousarray(grid.labels, dtype=np.int8)
+        return cls(labels, np.asarray(grid.origin, dtype=np.float64), float(grid.voxel_size), int(block),
+                   _block_empty(labels, int(block)))
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return tuple(int(s) for s in self.labels.shape)  # type: ignore[return-value]
+
+    def label_at(self, points: np.ndarray) -> np.ndarray:
+        """Labels at world points (N, 3); points outside the volume read as EMPTY (-1), see `inside`."""
+        idx = np.floor((np.asarray(points, dtype=np.float64).reshape(-1, 3) - self.origin) / self.voxel_size)
+        idx = idx.astype(np.int64)
+        inside = np.all((idx >= 0) & (idx < np.array(self.shape)), axis=1)
+        out = np.full(idx.shape[0], -1, dtype=np.int8)
+        out[inside] = self.labels[idx[inside, 0], idx[inside, 1], idx[inside, 2]]
+        return out
+
+    def inside(self, points: np.ndarray) -> np.ndarray:
+        idx = np.floor((np.asarray(points, dtype=np.float64).reshape(-1, 3) - self.origin) / self.voxel_size)
+        return np.all((idx >= 0) & (idx < np.array(self.shape)), axis=1)
+
+
+@njit(cache=True, parallel=True)
+def _block_empty(labels, B):
+    nx, ny, nz = labels.shape
+    bx, by, bz = (nx + B - 1) // B, (ny + B - 1) // B, (nz + B - 1) // B
+    out = np.zeros((bx, by, bz), dtype=np.uint8)
+    for a in prange(bx):
+        for b in range(by):
+            for c in range(bz):
+                ok = 1
+                for i in range(a * B, min(a * B + B, nx)):
+                    for j in range(b * B, min(b * B + B, ny)):
+                        for k in range(c * B, min(c * B + B, nz)):
+                            if labels[i, j, k] != -1:
+                                ok = 0
+                                break
+                        if ok == 0:
+                            break
+                    if ok == 0:
+                        break
+                out[a, b, c] = ok
+    return out
+
+
+@njit(cache=True, inline="always")
+def _tmax_axis(lo, i, step, vs, p, d):
+    if step == 0:
+        return np.inf
+    return (lo + (i + (1 if step > 0 else 0)) * vs - p) / d
+
+
+@njit(cache=True)
+def _trace(labels, bempty, B, lo, vs, p, d, min_range, max_range, cen, r2, through, p_unknown, h_unknown,
+           vals):
+    """Walk one ray (p origin, d unit direction). Fills vals[0:4]; returns (class, t of the first hit)."""
+    n0, n1, n2 = labels.shape
+    shape = (n0, n1, n2)
+    t0 = 0.0
+    t1 = max_range
+    for a in range(3):
+        hi = lo[a] + shape[a] * vs
+        if abs(d[a]) < 1e-12:
+            if p[a] < lo[a] or p[a] > hi:
+                return CLS_EMPTY_EXIT, np.inf
+        else:
+            ta = (lo[a] - p[a]) / d[a]
+            tb = (hi - p[a]) / d[a]
+            if ta > tb:
+                ta, tb = tb, ta
+            t0 = max(t0, ta)
+            t1 = min(t1, tb)
+    if t0 >= t1:
+        return CLS_EMPTY_EXIT, np.inf
+    idx = np.empty(3, np.int64)
+    step = np.empty(3, np.int64)
+    tmax = np.empty(3, np.float64)
+    tdel = np.empty(3, np.float64)
+    for a in range(3):
+        q = (p[a] + t0 * d[a] - lo[a]) / vs
+        ia = int(math.floor(q))
+        idx[a] = min(max(ia, 0), shape[a] - 1)
+        if d[a] > 1e-12:
+            step[a] = 1
+            tdel[a] = vs / d[a]
+        elif d[a] < -1e-12:
+            step[a] = -1
+            tdel[a] = -vs / d[a]
+        else:
+            step[a] = 0
+            tdel[a] = np.inf
+        tmax[a] = _tmax_axis(lo[a], idx[a], step[a], vs, p[a], d[a])
+    tcur = t0
+    cls = CLS_EMPTY_EXIT
+    thit = np.inf
+    vis = 1.0
+    prev_unknown_in_s = False
+    while True:
+        i, j, k = idx[0], idx[1], idx[2]
+        if bempty[i // B, j // B, k // B] != 0:
+            # cross the whole empty block
+            tb = np.inf
+            ax = 0
+            for a in range(3):
+                if step[a] != 0:
+                    blk = idx[a] // B
+                    edge = (blk + 1) * B if step[a] > 0 else blk * B
+                    tt = (lo[a] + edge * vs - p[a]) / d[a]
+                    if tt < tb:
+                        tb = tt
+                        ax = a
+            if tb >= t1:
+                break
+            for a in range(3):
+                blk = idx[a] // B
+                if a == ax:
+                    idx[a] = (blk + 1) * B if step[a] > 0 else blk * B - 1
+                else:
+                    q = int(math.floor((p[a] + tb * d[a] - lo[a]) / vs))
+                    idx[a] = min(max(q, blk * B), min(blk * B + B, shape[a]) - 1)
+                if idx[a] < 0 or idx[a] >= shape[a]:
+                    return cls, thit
+                tmax[a] = _tmax_axis(lo[a], idx[a], step[a], vs, p[a], d[a])
+            tcur = tb
+            prev_unknown_in_s = False
+            continue
+        lab = labels[i, j, k]
+        if lab != -1:
+            in_s = False
+            dist2 = 0.0
+            if tcur >= min_range:
+                cx = lo[0] + (i + 0.5) * vs - cen[0]
+                cy = lo[1] + (j + 0.5) * vs - cen[1]
+                cz = lo[2] + (k + 0.5) * vs - cen[2]
+                dist2 = cx * cx + cy * cy + cz * cz
+                in_s = dist2 <= r2
+            if cls == CLS_EMPTY_EXIT:
+                thit = tcur
+                if lab == 0:
+                    cls = CLS_UNKNOWN
+                    if in_s:
+                        vals[0] = 1.0
+                        vals[1] = 1.0 / (tcur * tcur)
+                else:
+                    cls = CLS_OCCUPIED
+                if not through:
+                    return cls, thit
+            if lab == 0:
+                if in_s:
+                    vals[3] += vis * h_unknown
+                vis *= 1.0 - p_unknown
+                prev_unknown_in_s = in_s
+                if vis < 1e-7:
+                    return cls, thit
+            else:
+                if prev_unknown_in_s:
+                    vals[2] = 1.0
+                return cls, thit
+        else:
+            prev_unknown_in_s = False
+        # next voxel
+        ax = 0
+        if tmax[1] < tmax[ax]:
+            ax = 1
+        if tmax[2] < tmax[ax]:
+            ax = 2
+        tcur = tmax[ax]
+        if tcur >= t1:
+            break
+        idx[ax] += step[ax]
+        if idx[ax] < 0 or idx[ax] >= shape[ax]:
+            break
+        tmax[ax] += tdel[ax]
+    return cls, thit
+
+
+@njit(cache=True, parallel=True)
+def _cast_kernel(labels, bempty, B, lo, vs, origins, dirs, min_range, max_range, cen, radius, through,
+                 p_unknown, out_cls, out_t, out_vals):
+    n = dirs.shape[0]
+    r2 = radius * radius
+    h = 0.0
+    if 0.0 < p_unknown < 1.0:
+        h = -(p_unknown * math.log2(p_unknown) + (1 - p_unknown) * math.log2(1 - p_unknown))
+    for r in prange(n):
+        for c in range(N_TERMS):
+            out_vals[r, c] = 0.0
+        c_, t_ = _trace(labels, bempty, B, lo, vs, origins[r], dirs[r], min_range, max_range, cen, r2,
+                        through, p_unknown, h, out_vals[r])
+        out_cls[r] = c_
+        out_t[r] = t_
+
+
+@dataclass
+class RayResults:
+    """Per-ray knowledge map: cls (N,) int8 0 unknown / 1 occupied / 2 empty-exit, t (N,) distance of
+    the first non-empty voxel (inf for empty-exit), terms (N, 4) gain terms (see module docstring)."""
+
+    cls: np.ndarray
+    t: np.ndarray
+    terms: np.ndarray
+
+
+def cast_rays(vol: RayVolume, origins: np.ndarray, dirs: np.ndarray, *, min_range: float = 0.0,
+              max_range: float = np.inf, center=(0.0, 0.0, 0.0), radius: float = 0.0, through: bool = False,
+              p_unknown: float = 0.5) -> RayResults:
+    """Cast rays (origins (N, 3) or (3,), unit dirs (N, 3), world frame) through `vol`."""
+    dirs = np.ascontiguousarray(dirs, dtype=np.float64).reshape(-1, 3)
+    dirs = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+    origins = np.ascontiguousarray(np.broadcast_to(np.asarray(origins, dtype=np.float64), dirs.shape))
+    n = dirs.shape[0]
+    cls = np.empty(n, np.int8)
+    t = np.empty(n, np.float64)
+    terms = np.empty((n, N_TERMS), np.float64)
+    _cast_kernel(vol.labels, vol.block_empty, vol.block, vol.origin, vol.voxel_size, origins, dirs,
+                 float(min_range), float(min(max_range, 1e30)), np.asarray(center, dtype=np.float64).reshape(3),
+                 float(radius), bool(through), float(p_unknown), cls, t, terms)
+    return RayResults(cls, t, terms)
+
+
+def knowledge_map(vol: RayVolume, pose: np.ndarray, camera, *, center=(0.0, 0.0, 0.0), radius: float = 0.0,
+                  through: bool = False) -> RayResults:
+    """Cast every pixel of one view (camera-to-world `pose`); arrays reshape to (height, width)."""
+    pose = np.asarray(pose, dtype=np.float64)
+    cam = camera.widened()
+    dirs = cam.pixel_rays() @ pose[:3, :3].T
+    return cast_rays(vol, pose[:3, 3], dirs, min_range=cam.min_range, max_range=cam.max_range, center=center,
+                     radius=radius, through=through)
+
+
+# ---------------------------------------------------------------------------------------------
+# Batched views: rays of views sharing a sensor position and optical axis are cast once.
+
+
+@njit(cache=True)
+def _cone_bbox(ax, az, sin_a, f, c, size):
+    """Pixel interval [lo, hi] of one image axis reachable by a cone of half-angle asin(sin_a) whose
+    unit axis has components ax (along this image axis) and az (optical axis)."""
+    rho = math.sqrt(ax * ax + az * az)
+    if rho <= sin_a:
+        return 0, size - 1
+    th = math.atan2(ax, az)
+    beta = math.asin(sin_a / rho)
+    lo_t = th - beta
+    hi_t = th + beta
+    lim = math.pi / 2 - 1e-9
+    if hi_t <= -lim or lo_t >= lim:
+        return 0, -1
+    lo_p = 0 if lo_t <= -lim else int(math.floor(f * math.tan(lo_t) + c))
+    hi_p = size - 1 if hi_t >= lim else int(math.ceil(f * math.tan(hi_t) + c))
+    return max(lo_p, 0), min(hi_p, size - 1)
+
+
+@njit(cache=True, inline="always")
+def _pixel_cell(M, uu, vv, fx, fy, cx, cy, cb, cbn2, r2, check, lu0, lv0, LW, LH):
+    """Lattice cell (in the group's base view) of pixel (uu, vv) of a view with relative rotation M,
+    or -1 if its ray cannot reach S (when `check`)."""
+    x = (uu - cx) / fx
+    y = (vv - cy) / fy
+    dx = M[0, 0] * x + M[0, 1] * y + M[0, 2]
+    dy = M[1, 0] * x + M[1, 1] * y + M[1, 2]
+    dz = M[2, 0] * x + M[2, 1] * y + M[2, 2]
+    if check:
+        nrm2 = dx * dx + dy * dy + dz * dz
+        proj = cb[0] * dx + cb[1] * dy + cb[2] * dz
+        if proj <= 0 or cbn2 - proj * proj / nrm2 > r2:
+            return -1
+    if dz <= 1e-12:
+        return -1
+    lu = int(math.floor(fx * dx / dz + cx + 0.5)) - lu0
+    lv = int(math.floor(fy * dy / dz + cy + 0.5)) - lv0
+    if lu < 0 or lv < 0 or lu >= LW or lv >= LH:
+        return -1
+    return lv * LW + lu
+
+
+@njit(cache=True, parallel=True)
+def _mark(Ms, win, vgroup, glat, goff, gcb, gcheck, fx, fy, cx, cy, r2, cells, npix):
+    for m in prange(Ms.shape[0]):
+        g = vgroup[m]
+        cb = gcb[g]
+        cbn2 = cb[0] * cb[0] + cb[1] * cb[1] + cb[2] * cb[2]
+        cnt = 0
+        for vv in range(win[m, 1], win[m, 3] + 1):
+            for uu in range(win[m, 0], win[m, 2] + 1):
+                c = _pixel_cell(Ms[m], uu, vv, fx, fy, cx, cy, cb, cbn2, r2, gcheck[g], glat[g, 0], glat[g, 1],
+                                glat[g, 2], glat[g, 3])
+                if c >= 0:
+                    cells[goff[g] + c] = 0
+                    cnt += 1
+        npix[m] = cnt
+
+
+@njit(cache=True, parallel=True)
+def _count_cells(cells, goff, gsize, out):
+    for g in prange(goff.shape[0]):
+        n = 0
+        for c in range(goff[g], goff[g] + gsize[g]):
+            if cells[c] >= 0:
+                n += 1
+        out[g] = n
+
+
+@njit(cache=True, parallel=True)
+def _assign_rays(cells, goff, glat, ray_off, R0s, t0s, fx, fy, cx, cy, dirs, origins):
+    for g in prange(goff.shape[0]):
+        q = ray_off[g]
+        LW = glat[g, 2]
+        R0 = R0s[g]
+        for c in range(glat[g, 2] * glat[g, 3]):
+            if cells[goff[g] + c] >= 0:
+                cells[goff[g] + c] = q
+                x = (c % LW + glat[g, 0] - cx) / fx
+                y = (c // LW + glat[g, 1] - cy) / fy
+                nrm = math.sqrt(x * x + y * y + 1.0)
+                for a in range(3):
+                    dirs[q, a] = (R0[a, 0] * x + R0[a, 1] * y + R0[a, 2]) / nrm
+                    origins[q, a] = t0s[g, a]
+                q += 1
+
+
+@njit(cache=True, parallel=True)
+def _accumulate(Ms, win, vgroup, glat, goff, gcb, gcheck, fx, fy, cx, cy, r2, cells, cls, terms, out_counts,
+                out_terms):
+    for m in prange(Ms.shape[0]):
+        g = vgroup[m]
+        cb = gcb[g]
+        cbn2 = cb[0] * cb[0] + cb[1] * cb[1] + cb[2] * cb[2]
+        for a in range(3):
+            out_counts[m, a] = 0
+        for a in range(N_TERMS):
+            out_terms[m, a] = 0.0
+        for vv in range(win[m, 1], win[m, 3] + 1):
+            for uu in range(win[m, 0], win[m, 2] + 1):
+                c = _pixel_cell(Ms[m], uu, vv, fx, fy, cx, cy, cb, cbn2, r2, gcheck[g], glat[g, 0], glat[g, 1],
+                                glat[g, 2], glat[g, 3])
+                if c >= 0:
+                    q = cells[goff[g] + c]
+                    out_counts[m, cls[q]] += 1
+                    for a in range(N_TERMS):
+                        out_terms[m, a] += terms[q, a]
+
+
+@dataclass
+class ViewRays:
+    """Per-view sums over the pixels considered: counts (V, 3) of rays ending on unknown / occupied /
+    empty-exit, terms (V, 4) summed gain terms, rays (V,) pixels considered, rays_cast rays traced."""
+
+    counts: np.ndarray
+    terms: np.ndarray
+    rays: np.ndarray
+    rays_cast: int
+
+
+def group_views(poses: np.ndarray, tol: float = 1e-6) -> list[np.ndarray]:
+    """Indices of views that share sensor position and optical axis (they differ only by roll)."""
+    poses = np.asarray(poses, dtype=np.float64)
+    key = np.round(np.concatenate([poses[:, :3, 3], poses[:, :3, 2]], axis=1) / tol).astype(np.int64)
+    _, inv = np.unique(key, axis=0, return_inverse=True)
+    inv = inv.reshape(-1)
+    order = np.argsort(inv, kind="stable")
+    return np.split(order, np.flatnonzero(np.diff(inv[order])) + 1)
+
+
+def _pixel_window(R, t, cam, center, r_ext, restrict) -> tuple[int, int, int, int]:
+    """Pixel bbox (u0, v0, u1, v1) of one view that can see the sphere (center, r_ext)."""
+    W, H = cam.width, cam.height
+    if not restrict:
+        return 0, 0, W - 1, H - 1
+    c = R.T @ (center - t)
+    dist = float(np.linalg.norm(c))
+    if dist <= r_ext:
+        return 0, 0, W - 1, H - 1
+    a = c / dist
+    s = r_ext / dist
+    u0, u1 = _cone_bbox(a[0], a[2], s, cam.fx, cam.cx, W)
+    v0, v1 = _cone_bbox(a[1], a[2], s, cam.fy, cam.cy, H)
+    return u0, v0, u1, v1
+
+
+def cast_views(vol: RayVolume, poses: np.ndarray, camera, center, radius: float, *, through: bool = False,
+               restrict: bool = True, share_rolls: bool = True, p_unknown: float = 0.5,
+               batch_cells: int = 12_000_000, progress_cb=None) -> ViewRays:
+    """Cast the rays of every view (camera-to-world `poses` (V, 4, 4)) and sum them per view.
+
+    `restrict`: only pixels whose ray passes within radius + half a voxel diagonal of `center` (the
+    only ones that can add gain); the counts then cover those pixels. `share_rolls`: views that differ
+    only by roll reuse the first view's rays (nearest lattice ray). `progress_cb(n)` after each batch.
+    """
+    cam = camera.widened()
+    poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
+    V = poses.shape[0]
+    center = np.asarray(center, dtype=np.float64).reshape(3)
+    r_ext = float(radius) + vol.voxel_size * math.sqrt(3.0) / 2.0
+    out = ViewRays(np.zeros((V, 3), np.int64), np.zeros((V, N_TERMS)), np.zeros(V, np.int64), 0)
+    groups = group_views(poses) if share_rolls else [np.array([i]) for i in range(V)]
+    batch: list[tuple] = []
+    used = 0
+    for g in groups:
+        R0, t0 = poses[g[0], :3, :3], poses[g[0], :3, 3]
+        Ms = np.einsum("ji,njk->nik", R0, poses[g, :3, :3])
+        win = np.array([_pixel_window(poses[i, :3, :3], poses[i, :3, 3], cam, center, r_ext, restrict) for i in g],
+                       dtype=np.int64).reshape(-1, 4)
+        ok = (win[:, 2] >= win[:, 0]) & (win[:, 3] >= win[:, 1])
+        if not ok.any():
+            continue
+        # lattice window: the pixel windows' corners mapped into the base view (an affine map for a roll)
+        cu = np.stack([win[ok, 0], win[ok, 2], win[ok, 0], win[ok, 2]], axis=1).astype(np.float64)
+        cv = np.stack([win[ok, 1], win[ok, 1], win[ok, 3], win[ok, 3]], axis=1).astype(np.float64)
+        d = np.einsum("nij,nkj->nki", Ms[ok], np.stack([(cu - cam.cx) / cam.fx, (cv - cam.cy) / cam.fy,
+                                                          np.ones_like(cu)], axis=-1))
+        pu = cam.fx * d[..., 0] / d[..., 2] + cam.cx
+        pv = cam.fy * d[..., 1] / d[..., 2] + cam.cy
+        lu0, lv0 = int(np.floor(pu.min())) - 1, int(np.floor(pv.min())) - 1
+        LW, LH = int(np.ceil(pu.max())) + 2 - lu0, int(np.ceil(pv.max())) + 2 - lv0
+        cb = R0.T @ (center - t0)
+        check = bool(restrict and np.linalg.norm(cb) > r_ext)
+        batch.append((g[ok], Ms[ok], win[ok], (lu0, lv0, LW, LH), cb, check, R0, t0))
+        used += LW * LH
+        if used >= batch_cells:
+            _cast_batch(vol, cam, center, radius, r_ext, through, p_unknown, batch, out, progress_cb)
+            batch, used = [], 0
+    if batch:
+        _cast_batch(vol, cam, center, radius, r_ext, through, p_unknown, batch, out, progress_cb)
+    return out
+
+
+def _cast_batch(vol, cam, center, radius, r_ext, through, p_unknown, batch, out: ViewRays, progress_cb) -> None:
+    views = np.concatenate([b[0] for b in batch])
+    Ms = np.ascontiguousarray(np.concatenate([b[1] for b in batch]))
+    win = np.ascontiguousarray(np.concatenate([b[2] for b in batch]))
+    vgroup = np.concatenate([np.full(len(b[0]), i, np.int64) for i, b in enumerate(batch)])
+    glat = np.array([b[3] for b in batch], dtype=np.int64)
+    gsize = glat[:, 2] * glat[:, 3]
+    goff = np.concatenate([[0], np.cumsum(gsize)[:-1]]).astype(np.int64)
+    gcb = np.array([b[4] for b in batch], dtype=np.float64)
+    gcheck = np.array([b[5] for b in batch], dtype=np.bool_)
+    R0s = np.ascontiguousarray(np.array([b[6] for b in batch], dtype=np.float64))
+    t0s = np.ascontiguousarray(np.array([b[7] for b in batch], dtype=np.float64))
+    r2 = r_ext * r_ext
+    cells = np.full(int(gsize.sum()), -1, np.int32)
+    npix = np.zeros(len(views), np.int64)
+    _mark(Ms, win, vgroup, glat, goff, gcb, gcheck, cam.fx, cam.fy, cam.cx, cam.cy, r2, cells, npix)
+    gcount = np.zeros(len(batch), np.int64)
+    _count_cells(cells, goff, gsize, gcount)
+    ray_off = np.concatenate([[0], np.cumsum(gcount)[:-1]]).astype(np.int64)
+    n = int(gcount.sum())
+    dirs = np.empty((n, 3), np.float64)
+    origins = np.empty((n, 3), np.float64)
+    _assign_rays(cells, goff, glat, ray_off, R0s, t0s, cam.fx, cam.fy, cam.cx, cam.cy, dirs, origins)
+    cls = np.empty(n, np.int8)
+    tt = np.empty(n, np.float64)
+    tm = np.empty((n, N_TERMS), np.float64)
+    _cast_kernel(vol.labels, vol.block_empty, vol.block, vol.origin, vol.voxel_size, origins, dirs,
+                 cam.min_range, min(cam.max_range, 1e30), center, float(radius), bool(through), float(p_unknown),
+                 cls, tt, tm)
+    counts = np.zeros((len(views), 3), np.int64)
+    terms = np.zeros((len(views), N_TERMS), np.float64)
+    _accumulate(Ms, win, vgroup, glat, goff, gcb, gcheck, cam.fx, cam.fy, cam.cx, cam.cy, r2, cells, cls, tm,
+                counts, terms)
+    out.counts[views] = counts
+    out.terms[views] = terms
+    out.rays[views] = npix
+    out.rays_cast += n
+    if progress_cb:
+        progress_cb(len(views))

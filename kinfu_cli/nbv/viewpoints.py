@@ -1,0 +1,148 @@
+"""Candidate viewpoints: the paper's viewing sphere around a POI, and candidate pose files.
+
+Sphere sampling (Monica et al. RAS 2016, Sec. NBV): distance d = 0.8 m from the POI, longitude
+0-360 deg in 30 deg steps, latitude 0-90 deg in 10 deg steps (upper hemisphere, both ends included),
+roll about the optical axis 0-360 deg in 45 deg steps: 12 * 10 * 8 = 960 poses, each looking at the POI.
+
+Poses are 4x4 camera-to-world in the optical convention (z forward, y down). At roll 0 the image x
+axis is horizontal (east of the sphere's meridian) and y points down the meridian, so the image is
+upright for latitudes below 90 deg. Poses are ordered position-major (all rolls of one sphere
+position are consecutive), which lets the ray caster share the rays of the rolls.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from kinfu_cli.errors import ConfigError
+
+
+def _angles(start: float, stop: float, step: float, *, closed: bool, name: str) -> np.ndarray:
+    if not step > 0:
+        raise ConfigError(f"--{name}-step: expected a positive step in degrees, got {step}")
+    if stop < start:
+        raise ConfigError(f"--{name}-min/--{name}-max: expected min <= max, got {start} > {stop}")
+    n = int(np.floor((stop - start) / step + 1e-9))
+    vals = start + step * np.arange(n + 1)
+    if not closed and vals.size > 1 and np.isclose(vals[-1] - start, 360.0):
+        vals = vals[:-1]
+    return vals
+
+
+def sphere_viewpoints(center, radius: float = 0.8, lon_step: float = 30.0, lat_min: float = 0.0,
+                      lat_max: float = 90.0, lat_step: float = 10.0, roll_step: float = 45.0,
+                      lon_min: float = 0.0, lon_max: float = 360.0) -> np.ndarray:
+    """(N, 4, 4) camera-to-world poses on a sphere of `radius` around `center`, all looking at it.
+
+    Longitudes in [lon_min, lon_max) (360 excluded when the range is a full turn), latitudes in
+    [lat_min, lat_max] inclusive, rolls in [0, 360). Order: longitude, latitude, roll (roll fastest).
+    """
+    center = np.asarray(center, dtype=np.float64).reshape(3)
+    if not (np.isfinite(radius) and radius > 0):
+        raise ConfigError(f"--radius: expected a positive distance in metres, got {radius}")
+    if not (-90 <= lat_min <= lat_max <= 90):
+        raise ConfigError(f"--lat-min/--lat-max: expected -90 <= min <= max <= 90, got {lat_min}, {lat_max}")
+    lons = np.radians(_angles(lon_min, lon_max, lon_step, closed=False, name="lon"))
+    if lons.size > 1 and np.isclose(np.degrees(lons[-1]) - lon_min, 360.0):
+        lons = lons[:-1]
+    lats = np.radians(_angles(lat_min, lat_max, lat_step, closed=True, name="lat"))
+    rolls = np.radians(_angles(0.0, 360.0, roll_step, closed=False, name="roll"))
+    lon, lat, roll = (a.ravel() for a in np.meshgrid(lons, lats, rolls, indexing="ij"))
+    radial = np.stack([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)], axis=1)
+    z = -radial
+    x0 = np.stack([-np.sin(lon), np.cos(lon), np.zeros_like(lon)], axis=1)  # east, horizontal
+    y0 = np.cross(z, x0)
+    c, s = np.cos(roll)[:, None], np.sin(roll)[:, None]
+    x = c * x0 + s * y0
+    y = -s * x0 + c * y0
+    T = np.zeros((lon.size, 4, 4))
+    T[:, :3, 0], T[:, :3, 1], T[:, :3, 2] = x, y, z
+    T[:, :3, 3] = center + radius * radial
+    T[:, 3, 3] = 1.0
+    return T
+
+
+def look_at(position, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """4x4 camera-to-world pose at `position` looking at `target` with the image y axis pointing
+    away from `up` (upright image); a pose looking straight along `up` uses the world x axis."""
+    p = np.asarray(position, dtype=np.float64).reshape(3)
+    z = np.asarray(target, dtype=np.float64).reshape(3) - p
+    n = np.linalg.norm(z)
+    if not n > 0:
+        raise ConfigError("look_at: position and target coincide")
+    z /= n
+    up = np.asarray(up, dtype=np.float64)
+    x = np.cross(z, up)
+    if np.linalg.norm(x) < 1e-9:
+        x = np.cross(z, [1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.cross(z, [0.0, 1.0, 0.0])
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    T = np.eye(4)
+    T[:3, 0], T[:3, 1], T[:3, 2], T[:3, 3] = x, y, z, p
+    return T
+
+
+def check_poses(poses, source: str = "poses") -> np.ndarray:
+    """Validate (N, 4, 4) rigid camera-to-world poses; raises ConfigError naming `source`."""
+    arr = np.asarray(poses, dtype=np.float64)
+    if arr.ndim == 2 and arr.shape == (4, 4):
+        arr = arr[None]
+    if arr.ndim != 3 or arr.shape[1:] != (4, 4):
+        raise ConfigError(f"{source}: expected a list of 4x4 poses, got shape {arr.shape}")
+    if arr.shape[0] == 0:
+        raise ConfigError(f"{source}: no poses")
+    if not np.all(np.isfinite(arr)):
+        bad = int(np.flatnonzero(~np.isfinite(arr).all(axis=(1, 2)))[0])
+        raise ConfigError(f"{source}: pose {bad} is not finite")
+    R = arr[:, :3, :3]
+    err = np.abs(np.einsum("nji,njk->nik", R, R) - np.eye(3)).max(axis=(1, 2))
+    det = np.linalg.det(R)
+    bad = np.flatnonzero((err > 1e-4) | (det < 0) | np.any(np.abs(arr[:, 3] - [0, 0, 0, 1]) > 1e-9, axis=1))
+    if bad.size:
+        raise ConfigError(f"{source}: pose {int(bad[0])} is not a rigid transform (rotation not orthonormal "
+                          "or last row not [0 0 0 1])")
+    return arr
+
+
+def read_candidates(path: str | os.PathLike) -> np.ndarray:
+    """Read a candidate file: a JSON list of 4x4 camera-to-world poses, or {"poses": [...]}
+    (entries may also be objects with a "pose" key, as in views.json)."""
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: no such candidate file (--candidates)") from None
+    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{path}: not a JSON candidate file ({exc}); expected a list of 4x4 poses") from None
+    if isinstance(doc, dict):
+        doc = doc.get("poses", doc.get("candidates"))
+    if not isinstance(doc, list):
+        raise ConfigError(f"{path}: expected a JSON list of 4x4 poses or {{\"poses\": [...]}}")
+    doc = [d["pose"] if isinstance(d, dict) and "pose" in d else d for d in doc]
+    try:
+        arr = np.asarray(doc, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{path}: expected a list of 4x4 numeric poses") from None
+    return check_poses(arr, source=str(path))
+
+
+def write_candidates(path: str | os.PathLike, poses) -> Path:
+    """Write poses as {"poses": [4x4, ...]} atomically."""
+    from kinfu_cli.io.atomic import write_json
+
+    arr = check_poses(poses)
+    return write_json(path, {"poses": arr.tolist()})
+
+
+def rotation_to_quaternion(R) -> np.ndarray:
+    """(..., 3, 3) rotation matrices -> (..., 4) unit quaternions [x, y, z, w] with w >= 0."""
+    from scipy.spatial.transform import Rotation
+
+    R = np.asarray(R, dtype=np.float64)
+    q = Rotation.from_matrix(R.reshape(-1, 3, 3)).as_quat()
+    q[q[:, 3] < 0] *= -1
+    return q.reshape(R.shape[:-2] + (4,))
