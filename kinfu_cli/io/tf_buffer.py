@@ -8,6 +8,7 @@ array of stamps at once (vectorised numpy), `lookup` one stamp.
 
 from __future__ import annotations
 
+from array import array
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
@@ -21,31 +22,36 @@ TF_TYPES = ("tf2_msgs/msg/TFMessage", "tf/msg/tfMessage")
 
 @dataclass
 class _Link:
+    """One parent -> child link: samples in flat typed arrays (8 + 56 bytes each), sorted on first use."""
+
     parent: str
     static: bool
-    stamps: list[int] = field(default_factory=list)
-    trans: list[np.ndarray] = field(default_factory=list)
-    quats: list[np.ndarray] = field(default_factory=list)
+    stamps: array = field(default_factory=lambda: array("q"))
+    values: array = field(default_factory=lambda: array("d"))  # tx ty tz qx qy qz qw per sample
     _arrays: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
     _last_T: np.ndarray | None = None  # matrix of the latest sample, cached
 
-    def add(self, stamp_ns: int, trans: np.ndarray, quat: np.ndarray) -> None:
+    def add(self, stamp_ns: int, trans, quat) -> None:
         self.stamps.append(int(stamp_ns))
-        self.trans.append(trans)
-        self.quats.append(quat)
+        self.values.extend(trans)
+        self.values.extend(quat)
         self._arrays = None
         self._last_T = None
+
+    def clear(self) -> None:
+        self.stamps, self.values, self._arrays, self._last_T = array("q"), array("d"), None, None
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Sorted stamps (N,), translations (N,3), quaternions xyzw (N,4); duplicate stamps keep the last."""
         if self._arrays is None:
-            st = np.asarray(self.stamps, dtype=np.int64)
+            st = np.frombuffer(self.stamps, dtype=np.int64).copy()
+            vals = np.frombuffer(self.values, dtype=np.float64).reshape(-1, 7)
             order = np.argsort(st, kind="stable")
             st = st[order]
             keep = np.ones(st.shape[0], bool)
             keep[:-1] = st[1:] != st[:-1]  # last of each run of equal stamps
-            idx = order[keep]
-            self._arrays = (st[keep], np.asarray(self.trans)[idx], np.asarray(self.quats)[idx])
+            v = vals[order[keep]]
+            self._arrays = (st[keep], np.ascontiguousarray(v[:, :3]), np.ascontiguousarray(v[:, 3:]))
         return self._arrays
 
 
@@ -105,8 +111,8 @@ class TfBuffer:
             link = _Link(parent, static)
             self._links[child] = link
         if static:
-            link.stamps, link.trans, link.quats, link._arrays = [], [], [], None
-        link.add(stamp_ns, trans, quat / norm)
+            link.clear()
+        link.add(stamp_ns, trans.tolist(), (quat / norm).tolist())
 
     def add_message(self, msg: object, static: bool = False) -> int:
         """Add every TransformStamped of a tf2_msgs/TFMessage or tf/tfMessage; returns how many."""
