@@ -19,7 +19,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from kinfu_cli.errors import RecordingError
-from kinfu_cli.io.messages import normalize_msgtype
+from kinfu_cli.io.messages import camera_info_K, decode_color, decode_depth, normalize_msgtype
+
+__all__ = ["Recording", "TopicInfo", "open_recording", "detect_format", "decode_depth", "decode_color",
+           "camera_info_K"]
 
 _ROS1_MAGIC = b"#ROSBAG V2.0"
 _MCAP_MAGIC = b"\x89MCAP0\r\n"
