@@ -144,3 +144,19 @@ def test_import_bad_input(tmp_path, shared_data):
         one_line_error(run("import", bad, "-o", tmp_path / out, "--intrinsics", "600,600,320,240"),
                        "frame-000017.depth.png", "cannot read the depth image")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad", "empty"]
+
+
+def test_3dmatch_scene_with_sequence_folders(tmp_path, shared_data):
+    """3DMatch keeps camera-intrinsics.txt at the scene root and frames in seq-XX/ folders."""
+    src = shared_data("rgbd-7scenes-redkitchen")
+    scene = tmp_path / "scene"
+    seq = scene / "seq-01"
+    seq.mkdir(parents=True)
+    shutil.copy(src / "camera-intrinsics.txt", scene / "camera-intrinsics.txt")
+    for n in (0, 1):
+        for ext in ("depth.png", "color.jpg", "pose.txt"):
+            shutil.copy(src / f"frame-{n:06d}.{ext}", seq / f"frame-{n:06d}.{ext}")
+    one_line_error(run("import", scene, "-o", tmp_path / "x.mcap"), "sequence folders (seq-01)", "seq-01")
+    res = run("import", seq, "-o", tmp_path / "seq.mcap", "-q")
+    assert res.exit_code == 0, res.output
+    _check_folder(tmp_path / "seq.mcap", src, [0, 1], "jpg")

@@ -91,13 +91,12 @@ def _read_K(folder: Path, intrinsics: tuple[float, float, float, float] | None) 
     if intrinsics is not None:
         fx, fy, cx, cy = intrinsics
         return np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]]), "--intrinsics"
-    for name in _INTRINSICS_FILES:
-        p = folder / name
+    for p in [d / name for d in (folder, folder.parent) for name in _INTRINSICS_FILES]:  # 3DMatch: scene root
         if p.is_file():
             K = _read_matrix(p, (3, 3), "intrinsics")
             if K[0, 0] <= 0 or K[1, 1] <= 0:
                 raise RecordingError(f"{p}: intrinsics have no positive focal lengths")
-            return K, name
+            return K, str(p.relative_to(folder.parent)) if p.parent != folder else p.name
     return None, ""
 
 
@@ -141,6 +140,10 @@ def scan_folder(path: str | os.PathLike, rate: float = 30.0,
         return _scan_tum(folder, intrinsics)
     depth_files = sorted((int(m.group(1)), p) for p in folder.iterdir() if (m := _FRAME_RE.match(p.name)))
     if not depth_files:
+        seqs = sorted(p.name for p in folder.iterdir() if p.is_dir() and any(p.glob("frame-*.depth.png")))
+        if seqs:
+            raise RecordingError(f"{folder}: frames are in sequence folders ({', '.join(seqs)}); import one of "
+                                 f"them, e.g. {folder / seqs[0]}")
         raise RecordingError(f"{folder}: no frame-N.depth.png files and no depth.txt, expected a 7-Scenes/3DMatch "
                              f"or TUM RGB-D folder")
     K, k_source = _read_K(folder, intrinsics)
