@@ -248,7 +248,10 @@ class _RosbagsBackend(_Backend):
             open_path = tmp / (path.name + ".bag")
             open_path.symlink_to(path.resolve())
         try:
-            self.reader = AnyReader([open_path])
+            from rosbags.typesys import Stores, get_typestore
+
+            # ROS 2 bags before Iron store no message definitions: decode standard types with Humble's
+            self.reader = AnyReader([open_path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
             self.reader.open()
         except Exception as exc:  # rosbags raises its own errors, struct/zstd errors, KeyError on bad schemas
             raise _read_error(path, exc, self.kind) from None
