@@ -48,6 +48,8 @@ def _floats(value: str, name: str, n: tuple[int, ...]) -> tuple[float, ...]:
 @click.option("--start", type=float, default=None, help="Start time, seconds from the recording start.")
 @click.option("--end", type=float, default=None, help="End time, seconds from the recording start.")
 @click.option("--every", type=int, default=1, show_default=True, help="Use every N-th depth frame.")
+@click.option("--tolerance", type=float, default=0.05, show_default=True,
+              help="Largest depth/colour stamp difference, and how far a pose may be extrapolated (s).")
 @click.option("--bilateral", is_flag=True, help="Bilateral-filter the depth images first.")
 @click.option("--shadow-filter", is_flag=True, help="Remove Kinect V2 shadow and veil pixels (thesis 3.1.3).")
 @click.option("--no-color", is_flag=True, help="Do not keep colour per voxel.")
@@ -56,8 +58,8 @@ def _floats(value: str, name: str, n: tuple[int, ...]) -> tuple[float, ...]:
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @role_options
 def command(recording: Path, outdir: Path, voxel_size, resolution, size, origin, truncation, max_weight, min_depth,
-            max_depth, pose, pose_topic, init, clear_sphere, clear_pois, start, end, every, bilateral,
-            shadow_filter, no_color, plot, as_json, quiet, **kwargs) -> None:
+            max_depth, pose, pose_topic, init, clear_sphere, clear_pois, start, end, every, tolerance,
+            bilateral, shadow_filter, no_color, plot, as_json, quiet, **kwargs) -> None:
     """Fuse the depth frames of RECORDING (MCAP, ROS 1 .bag, ROS 2 bag folder) into a KinectFusion TSDF
     volume that keeps unknown / empty / occupied per voxel (Monica et al. 2016, eqs. 1-3): free space in
     front of surfaces becomes known-empty, interiors stay unknown. Writes OUTDIR/mesh.ply (coloured),
@@ -89,7 +91,7 @@ def command(recording: Path, outdir: Path, voxel_size, resolution, size, origin,
         min_depth=min_depth, max_depth=max_depth, pose=pose, pose_topic=pose_topic,
         init=str(init) if init else None,
         clear_spheres=[_floats(s, "--clear-sphere", (4,)) for s in clear_sphere],
-        clear_pois=str(clear_pois) if clear_pois else None, start=start, end=end, every=every,
+        clear_pois=str(clear_pois) if clear_pois else None, start=start, end=end, every=every, tolerance=tolerance,
         bilateral=bilateral, shadow_filter=shadow_filter, plot=plot, color=not no_color, quiet=quiet,
         roles=roles)
     report = fuse_recording(recording, outdir, opts)

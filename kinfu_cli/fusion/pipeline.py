@@ -43,6 +43,7 @@ class FuseOptions:
     start: float | None = None
     end: float | None = None
     every: int = 1
+    tolerance: float = 0.05
     bilateral: bool = False
     shadow_filter: bool = False
     shadow_baseline: float = 0.08
@@ -168,7 +169,8 @@ def fuse_recording(recording: str | Path, outdir: str | Path, opts: FuseOptions 
                 source_desc += " (first frame only)"
         stats = FrameStats()
         frames = iter_frames(rec, roles, pose_source=source, pose_topic=opts.pose_topic, start_s=opts.start,
-                             end_s=opts.end, every=opts.every, stats=stats, tf=tf)
+                             end_s=opts.end, every=opts.every, stats=stats, tf=tf,
+                             tolerance_s=opts.tolerance)
         frames = _timed_iter(frames, timer, "read")
         tracker = FrameToModelTracker() if mode in ("icp", "hint") else None
         track_log: list[dict] = []
@@ -210,8 +212,7 @@ def fuse_recording(recording: str | Path, outdir: str | Path, opts: FuseOptions 
                     res = tracker.track(vol, d, frame.K, prev_T)
                     timer.add("track", time.perf_counter() - t0)
                     T = res.T_world_camera
-                    track_log.append({"index": frame.index, "stamp_ns": frame.stamp_ns, "fitness": res.fitness,
-                                      "rmse": res.rmse, "lost": res.lost, "reason": res.reason})
+                    track_log.append(_track_entry(frame, res, T_given))
             else:  # hint
                 if prev_T is None and vol.frames_integrated == 0:
                     T = T_given
@@ -220,8 +221,7 @@ def fuse_recording(recording: str | Path, outdir: str | Path, opts: FuseOptions 
                     res = tracker.track(vol, d, frame.K, T_given)
                     timer.add("track", time.perf_counter() - t0)
                     T = res.T_world_camera
-                    track_log.append({"index": frame.index, "stamp_ns": frame.stamp_ns, "fitness": res.fitness,
-                                      "rmse": res.rmse, "lost": res.lost, "reason": res.reason})
+                    track_log.append(_track_entry(frame, res, T_given))
             t0 = time.perf_counter()
             try:
                 vol.integrate(d, frame.K, T, frame.color)
@@ -327,6 +327,16 @@ def fuse_recording(recording: str | Path, outdir: str | Path, opts: FuseOptions 
     }
     write_json(outdir / "report.json", report)
     return report
+
+
+def _track_entry(frame, res, T_given) -> dict:
+    e = {"index": frame.index, "stamp_ns": frame.stamp_ns, "fitness": round(res.fitness, 4),
+         "rmse": None if not np.isfinite(res.rmse) else round(res.rmse, 5), "lost": res.lost, "reason": res.reason,
+         "T_world_camera": np.round(res.T_world_camera, 6).tolist()}
+    if T_given is not None:
+        e["given_minus_tracked_m"] = round(float(np.linalg.norm(np.asarray(T_given)[:3, 3]
+                                                                - res.T_world_camera[:3, 3])), 5)
+    return e
 
 
 def _new_volume(opts: FuseOptions, origin) -> TernaryVolume:
