@@ -43,9 +43,9 @@ def _up(value: str) -> tuple[float, float, float] | None:
 @click.option("--normal-importance", type=float, default=1.0, show_default=True, help="Supervoxel normal weight.")
 @click.option("--adjacency-radius", type=float, default=0.018, show_default=True,
               help="Points closer than this connect supervoxels (m).")
-@click.option("--concavity-tolerance", type=float, default=10.0, show_default=True,
+@click.option("--concavity-tolerance", type=float, default=20.0, show_default=True,
               help="LCCP: concave edges flatter than this (deg) still merge.")
-@click.option("--sanity-angle", type=float, default=75.0, show_default=True, help="LCCP sanity criterion (deg).")
+@click.option("--sanity-angle", type=float, default=60.0, show_default=True, help="LCCP sanity criterion (deg).")
 @click.option("--min-segment-points", type=int, default=20, show_default=True,
               help="Smaller segments join a neighbour or are dropped.")
 @click.option("--plane-distance", type=float, default=0.01, show_default=True, help="Support plane RANSAC inlier distance (m).")

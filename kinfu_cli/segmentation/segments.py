@@ -3,8 +3,9 @@
 Thesis Alg. 4 line 4 uses PCL's VCCS supervoxels + LCCP (Stein et al. 2014). This is the same idea in
 numpy/scipy/open3d:
 
-1. Support plane: open3d RANSAC (`segment_plane`) on points whose normal is within `up_tolerance_deg`
-   of `up`; its inliers with a matching normal become segment 0 (kept as its own segment).
+1. Support plane: open3d RANSAC (`segment_plane`, up to `max_planes` rounds) on points whose normal is
+   within `up_tolerance_deg` of `up`; the highest plane holding >= `min_plane_fraction` of the points (the
+   table, not the floor) is the support; its inliers with a matching normal become segment 0.
 2. Supervoxels (VCCS-like): seeds on a `seed_resolution` grid, then a few k-means rounds where each point
    joins the closest of its 8 spatially nearest seeds under the VCCS distance
    D^2 = w_s |dx|^2 / R_seed^2 + w_n (1 - n_p . n_s); each supervoxel is then split into its
@@ -15,8 +16,8 @@ numpy/scipy/open3d:
    criterion against singular configurations), or when the normals differ by less than `concavity_tolerance_deg`
    (smooth surfaces); segments are the connected components over convex edges.
 5. Segments that stay within 2 x `plane_distance` of the support plane (its edges and sides) join it.
-6. Segments smaller than `min_segment_points` join their most-connected neighbour, or are dropped
-   (label -1) when isolated.
+6. Segments smaller than `min_segment_points` join their most-connected neighbour; isolated specks join
+   the support plane when at its level, a segment within `adjacency_radius`, or are dropped (label -1).
 """
 
 from __future__ import annotations
@@ -43,14 +44,15 @@ class SegmentationParams:
     normal_importance: float = 1.0  # alpha_n (thesis ch. 4: 0.5; no colour term here, so normals weigh more)
     kmeans_iterations: int = 3
     adjacency_radius: float = 0.018  # points closer than this connect their supervoxels (m)
-    concavity_tolerance_deg: float = 10.0  # LCCP beta_thresh
-    sanity_angle_deg: float = 75.0  # LCCP sanity criterion threshold (PCL: 60; stricter against straddling patches)
+    concavity_tolerance_deg: float = 20.0  # LCCP beta_thresh (PCL default 10; fused TSDF normals are noisier)
+    sanity_angle_deg: float = 60.0  # LCCP sanity criterion threshold (PCL default)
     min_segment_points: int = 20
     plane_distance: float = 0.01  # RANSAC inlier distance (m)
     plane_iterations: int = 1000
     up: tuple[float, float, float] | None = (0.0, 0.0, 1.0)  # expected support-plane normal; None = any
     up_tolerance_deg: float = 30.0
     min_plane_fraction: float = 0.1  # a support plane must hold this share of the points
+    max_planes: int = 3  # RANSAC rounds; the highest qualifying horizontal plane is the support
     seed: int = 0
 
     def validate(self) -> None:
@@ -102,24 +104,32 @@ def detect_support_plane(points: np.ndarray, normals: np.ndarray, params: Segmen
         return none
     idx = np.flatnonzero(cand)
     o3d.utility.random.seed(int(params.seed))
-    pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points[idx]))
-    model, _ = pc.segment_plane(distance_threshold=float(params.plane_distance), ransac_n=3,
-                                num_iterations=int(params.plane_iterations))
-    plane = np.asarray(model, dtype=np.float64)
-    plane /= np.linalg.norm(plane[:3])
-    if up is not None:
-        if abs(plane[:3] @ up) < cos_tol:
-            return none
-        if plane[:3] @ up < 0:
-            plane = -plane
-    else:  # orient towards the side with more points
-        if np.sum(points @ plane[:3] + plane[3] > params.plane_distance) < n / 2:
-            plane = -plane
-    dist = points @ plane[:3] + plane[3]
-    inl = (np.abs(dist) <= params.plane_distance) & (np.abs(normals @ plane[:3]) >= cos_tol)
-    if inl.sum() < params.min_plane_fraction * n:
+    best = None
+    remaining = idx
+    for _ in range(max(1, int(params.max_planes))):  # several horizontal planes (floor, table): take the highest
+        if len(remaining) < max(3, params.min_plane_fraction * n):
+            break
+        pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points[remaining]))
+        model, inl_idx = pc.segment_plane(distance_threshold=float(params.plane_distance), ransac_n=3,
+                                          num_iterations=int(params.plane_iterations))
+        plane = np.asarray(model, dtype=np.float64)
+        plane /= np.linalg.norm(plane[:3])
+        if up is not None:
+            if plane[:3] @ up < 0:
+                plane = -plane
+        elif np.sum(points @ plane[:3] + plane[3] > params.plane_distance) < n / 2:
+            plane = -plane  # no up given: orient towards the side with more points
+        dist = points @ plane[:3] + plane[3]
+        inl = (np.abs(dist) <= params.plane_distance) & (np.abs(normals @ plane[:3]) >= cos_tol)
+        ok = inl.sum() >= params.min_plane_fraction * n and (up is None or abs(plane[:3] @ up) >= cos_tol)
+        if ok:
+            height = -plane[3] if up is None else float(np.mean(points[inl] @ up))
+            if best is None or height > best[0]:
+                best = (height, plane, inl)
+        remaining = np.setdiff1d(remaining, remaining[np.asarray(inl_idx, dtype=np.int64)], assume_unique=True)
+    if best is None:
         return none
-    return plane, inl
+    return best[1], best[2]
 
 
 def supervoxels(points: np.ndarray, normals: np.ndarray, params: SegmentationParams) -> np.ndarray:
@@ -269,6 +279,19 @@ def segment_cloud(points: np.ndarray, normals: np.ndarray, params: SegmentationP
     out = np.full(len(rest), NOISE_LABEL, dtype=np.int64)
     out[valid] = rank[inv.ravel()] + 1
     labels[rest[keep_rest]] = out[keep_rest]
+    # leftover specks: on the support plane's level -> support; touching a segment -> that segment
+    drop = np.flatnonzero(labels == NOISE_LABEL)
+    if len(drop) and plane is not None:
+        h = pts[drop] @ plane[:3] + plane[3]
+        low = np.abs(h) < 2 * params.plane_distance
+        labels[drop[low]] = PLANE_LABEL
+        drop = drop[~low]
+    if len(drop):
+        lab_idx = np.flatnonzero(labels != NOISE_LABEL)
+        if len(lab_idx):
+            d, j = cKDTree(pts[lab_idx]).query(pts[drop], distance_upper_bound=params.adjacency_radius)
+            hit = np.isfinite(d)
+            labels[drop[hit]] = labels[lab_idx[j[hit]]]
     stats.update({"supervoxels": k, "adjacent_pairs": int(len(edges)), "convex_pairs": int(len(keep)),
-                  "segments": int(len(ids)), "dropped_points": int((~valid).sum())})
+                  "segments": int(len(ids)), "dropped_points": int(np.sum(labels == NOISE_LABEL))})
     return Segmentation(pts, nrm, labels, plane, sv_all, k, stats)
