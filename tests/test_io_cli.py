@@ -145,3 +145,15 @@ def test_frame_errors_through_the_cli(tmp_path, shared_data):
                    "no camera pose")
     assert not out.exists()
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temp folders either
+
+
+def test_info_frames_reports_dropped_frames(tmp_path):
+    path = make_recording(tmp_path / "late.mcap", n=15, tf_from=0.2)
+    res = run("info", path, "--frames", "--tolerance", "0.005", "--json")
+    assert res.exit_code == 0, res.output
+    fr = json.loads(res.output)["frames"]
+    assert fr["depth_messages"] == 15 and fr["used"] == 10
+    assert fr["dropped"] == {"no camera pose within the TF range": 5}
+    res = run("info", path, "--frames", "--tolerance", "0.005", "--every", "3")
+    assert "RGB-D frames: 3 usable of 15 depth messages (skipped 10, without colour 0)" in res.output
+    assert "dropped 2: no camera pose within the TF range" in res.output

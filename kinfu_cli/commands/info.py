@@ -7,6 +7,7 @@ from datetime import datetime, timezone
 
 import click
 
+from kinfu_cli.io.frames import frame_kwargs, frame_options
 from kinfu_cli.io.recording import Recording, open_recording
 from kinfu_cli.io.roles import detect_roles, role_kwargs, role_options
 from kinfu_cli.io.tf_buffer import TfBuffer
@@ -14,15 +15,30 @@ from kinfu_cli.io.tf_buffer import TfBuffer
 _FORMAT_NAMES = {"bag": "ROS 1 bag", "mcap": "MCAP", "ros2": "ROS 2 bag folder"}
 
 
-def recording_summary(path, **role_overrides) -> dict:
-    """Summary of a recording as a JSON-able dict (what `kinfu info --json` prints)."""
+def recording_summary(path, check_frames: dict | None = None, quiet: bool = True, **role_overrides) -> dict:
+    """Summary of a recording as a JSON-able dict (what `kinfu info --json` prints).
+
+    check_frames: iter_frames keyword arguments; when given, every frame is assembled and the summary gets
+    "frames": FrameStats (used, skipped, without colour, dropped by reason).
+    """
     with open_recording(path) as rec:
-        return summarize(rec, **role_overrides)
+        return summarize(rec, check_frames=check_frames, quiet=quiet, **role_overrides)
 
 
-def summarize(rec: Recording, **role_overrides) -> dict:
+def summarize(rec: Recording, check_frames: dict | None = None, quiet: bool = True, **role_overrides) -> dict:
     tf = TfBuffer.from_recording(rec)
     roles = detect_roles(rec, tf=tf, **role_overrides)
+    frames = None
+    if check_frames is not None:
+        from kinfu_cli.io.frames import FrameStats, iter_frames
+        from kinfu_cli.progress import progress
+
+        stats = FrameStats()
+        total = rec.topics[roles.depth_topic].count if roles.depth_topic in rec.topics else None
+        for _ in progress(iter_frames(rec, roles, tf=tf, stats=stats, **check_frames), total=total,
+                          desc="frames", quiet=quiet, unit="frame"):
+            pass
+        frames = stats.as_dict()
     links = []
     for child, parent in tf.tree().items():
         stamps = tf.link_stamps(child)
@@ -54,6 +70,7 @@ def summarize(rec: Recording, **role_overrides) -> dict:
         "roles": roles.as_dict(),
         "tf": {"frames": tf.frames(), "tree": tf.tree(), "links": links, "rejected": dict(tf.rejected),
                "parent_changes": [list(c) for c in tf.parent_changes]},
+        "frames": frames,
     }
 
 
@@ -119,14 +136,26 @@ def format_summary(s: dict) -> str:
         lines.append(f"  skipped {n} transforms: {reason}")
     for child, old, new in s["tf"].get("parent_changes", []):
         lines.append(f"  note: {child} changed parent from {old} to {new} (the later link is kept)")
+    fr = s.get("frames")
+    if fr is not None:
+        lines.append("")
+        lines.append(f"RGB-D frames: {fr['used']} usable of {fr['depth_messages']} depth messages "
+                     f"(skipped {fr['skipped']}, without colour {fr['without_color']})")
+        for reason, n in fr["dropped"].items():
+            lines.append(f"  dropped {n}: {reason}")
     return "\n".join(lines)
 
 
 @click.command("info", short_help="Show topics, rates, time span, detected roles and TF tree of a recording.")
 @click.argument("recording", type=click.Path(exists=False))
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON on stdout.")
+@click.option("--frames", "check", is_flag=True,
+              help="Also assemble every RGB-D frame (decodes all images) and report how many are usable and why "
+                   "the others are dropped; the frame options below apply.")
+@frame_options
+@click.option("-q", "--quiet", is_flag=True, help="No progress bar (with --frames).")
 @role_options
-def command(recording: str, as_json: bool, **kwargs) -> None:
+def command(recording: str, as_json: bool, check: bool, quiet: bool, **kwargs) -> None:
     """Summarise RECORDING (MCAP file, ROS 1 .bag or ROS 2 bag folder): topics with message types, counts
     and rates, the time span, the topics and frames detected for each role (depth, colour, camera info,
     camera frame, world frame, hand) and the TF frame tree.
@@ -135,8 +164,10 @@ def command(recording: str, as_json: bool, **kwargs) -> None:
     Example:
       kinfu info sample_data/tabletop/recording.mcap
       kinfu info recording_ros2/ --json > summary.json
+      kinfu info run.bag --frames --tolerance 0.02
     """
-    summary = recording_summary(recording, **role_kwargs(kwargs))
+    fk = frame_kwargs(kwargs)
+    summary = recording_summary(recording, check_frames=fk if check else None, quiet=quiet, **role_kwargs(kwargs))
     if as_json:
         click.echo(json.dumps(summary, indent=2))
     else:
