@@ -13,10 +13,17 @@ from kinfu_cli.io.recording import open_recording
 from kinfu_cli.io.tf_buffer import TfBuffer
 
 
+class _Raw(list):
+    """(stamp, T, frame_id) of every message of a pose topic; T built only for the samples looked at."""
+
+    def __getitem__(self, i):
+        mt, m = list.__getitem__(self, i)
+        return time_to_ns(m.header.stamp), pose_message_to_matrix(m, mt), m.header.frame_id
+
+
 def _raw(path, topic):
     with open_recording(path) as rec:
-        return [(time_to_ns(m.header.stamp), pose_message_to_matrix(m, mt), m.header.frame_id)
-                for _, mt, _, m in rec.typed_messages(topic)]
+        return _Raw((mt, m) for _, mt, _, m in rec.typed_messages(topic))
 
 
 def test_posestamped_topic_from_ros1_bag(shared_data):
