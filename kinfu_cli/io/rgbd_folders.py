@@ -369,4 +369,7 @@ def export_frames(recording: str | os.PathLike, out: str | os.PathLike, roles_kw
                        "frames": len(listing), "stats": stats.as_dict(), "K": K0.tolist(),
                        "list": listing}
             (tmp / "frames.json").write_text(json.dumps(summary, indent=2) + "\n")
+            umask = os.umask(0)
+            os.umask(umask)
+            tmp.chmod(0o777 & ~umask)  # mkdtemp made it 0700
     return summary
