@@ -86,6 +86,9 @@ def test_errors_name_frames_and_range():
     assert "world" in str(exc.value) and "no chain" in str(exc.value)
     with pytest.raises(TransformError, match="4x4"):
         tf.add("a", "b", 0, np.eye(3))
+    assert tf.connected("arm", "world") and not tf.connected("world", "robot") and not tf.connected("x", "world")
+    with pytest.raises(TransformError, match="no chain"):
+        tf.require_chain("robot", "arm")
 
 
 def test_leading_slashes_and_duplicate_stamps():

@@ -145,7 +145,7 @@ def iter_frames(rec, roles: Roles | None = None, pose_source: str = "tf", pose_t
             raise TransformError(f"{rec.path}: no TF world frame found for camera frame {camera!r} "
                                  f"(no /tf data?); set --world-frame or --pose-source none")
         try:
-            tf._split_path(world, camera)  # a missing link fails now, naming both frames
+            tf.require_chain(world, camera)  # a missing link fails now, naming both frames
         except TransformError as exc:
             raise TransformError(f"{rec.path}: {exc} (set --camera-frame / --world-frame)") from None
 

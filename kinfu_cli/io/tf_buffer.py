@@ -180,6 +180,18 @@ class TfBuffer:
             hi = st[-1] if hi is None else min(hi, st[-1])
         return None if lo is None else (int(lo), int(hi))
 
+    def require_chain(self, target: str, source: str) -> None:
+        """TransformError (naming both frames) unless a chain of links connects target and source."""
+        self._split_path(_strip(target), _strip(source))
+
+    def connected(self, target: str, source: str) -> bool:
+        """True when a chain of links connects the two frames (at some time)."""
+        try:
+            self.require_chain(target, source)
+        except TransformError:
+            return False
+        return True
+
     def can_transform(self, target: str, source: str, stamp_ns: int | None = None) -> bool:
         try:
             self.lookup(target, source, stamp_ns)
