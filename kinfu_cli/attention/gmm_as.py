@@ -12,39 +12,47 @@ Reading chosen here, and why (measured on the public subset only: users 1 and 4,
 1. Time scaling of the 4th coordinate. EM, the time-segment initialisation and BIC are all
    equivariant under scaling one coordinate: multiplying t by any constant gives the same mixture
    (the log-likelihood shifts by N·log(scale) for every K alike). The time unit (seconds, samples,
-   metres-per-mean-speed) therefore matters ONLY through the covariance regularisation. We use
-   normalised time τ = (t − t0) / duration (`time_scale="duration"`), so the result does not depend
-   on how fast the task was performed (Table 3's speed multipliers) — only on the path and on the
-   relative time spent along it. `time_scale` may also be a number (units per second) for the
-   literal reading (1.0 = seconds).
+   metres per mean speed) therefore matters ONLY through the covariance regularisation. We use
+   normalised time τ = (t − t0) / duration (`time_scale="duration"`) and resample each task to a
+   fixed `resample` = 300 samples (≈ 3 s at the tracker's 100 Hz, the median task length), so the
+   mixture depends on the path and on the relative time spent along it, not on how fast the task
+   was performed or on the tracker rate (Table 3's speed multipliers become a no-op by design).
+   `time_scale` may be a number (units per second; 1.0 = seconds) and `resample=0` keeps the raw
+   samples, for the literal reading.
 2. Covariance regularisation. Without a floor (sklearn's 1e-6) BIC keeps falling up to any Kmax on
-   these 100 Hz sub-millimetre tracks (smooth curves are modelled ever better by more, thinner
-   Gaussians), so the first minimum is never reached. A variance floor added to the diagonal at
-   every M-step, σ = 1 cm in space (tracker jitter + wrist tremor: below that scale a "still" hand is
-   noise) and σ_τ = 0.1 of the task duration in time, gives a BIC minimum at K ≈ 3-11 (median 5;
-   the paper's examples have 6 and 7) and Gaussians that span a whole action.
-3. "Marginalised over Cartesian coordinates" / the saliency. Taken literally (σ from the 3×3
-   spatial block, eq. 13), the still hand of an action makes a SMALL Gaussian and the long
-   transport Gaussians score higher: on users 1+4 the literal reading finds almost nothing
-   (pick-and-place P/R 3.8 % / 1.0 %, placements 0 % / 0 %, K up to Kmax without a floor; with the
-   floors above still ≤ 25 % recall). What does separate actions from transport, in every setting
-   we measured, is the other factor of eq. 13: the weight π·c*, i.e. the share of the task's samples
-   (time) the Gaussian explains relative to an average Gaussian. With time in the model each
-   Gaussian covers a comparable 4-D extent, so a Gaussian where the hand dwells (slow, changing
-   direction: the paper's own explanation of why actions are salient) takes many samples. Reading
-   the Cartesian coordinates as marginalised OUT (integrated away), the Gaussian's remaining
-   description is its time marginal, whose mass is π; so `saliency="weight"` (default) uses
-   s = π·c*. `saliency="literal"` keeps eq. 13 on the spatial block and `"conditional"` uses the
-   spatial covariance conditioned on t (motion not explained by a linear drift in time).
+   these sub-millimetre tracks (smooth curves are modelled ever better by more, thinner Gaussians),
+   so the "first local minimum" is never reached (K = Kmax on most tasks). A variance floor added to
+   the diagonal at every M-step — σ = 5 mm in space (tracker jitter + wrist tremor) and 0.1 of the
+   task duration in time — gives K ≈ 3-11, like the paper's examples (6 and 7). When the track is
+   noisier than the floor (estimated from second differences, robust MAD), the path is first
+   mean-filtered over ≈ (noise / floor)² samples (at most a tenth of the task) and the floor is raised
+   to the remaining noise (`noise_floor=1.0`; 0 disables both). This is what keeps recall at 2.5 and
+   5 cm of added noise (Table 4).
+3. "Eigenvalues of the covariance marginalised over Cartesian coordinates". Taken literally (σ =
+   sqrt of the eigenvalues of the 3×3 spatial block, eq. 13) the still hand of an action makes a
+   SMALL Gaussian and the long transport Gaussians score higher: the literal reading finds almost
+   nothing on users 1+4 (pick-and-place P/R 3.8 % / 1.0 %, placements 0 % / 0 %; ≤ 25 % recall with
+   any floor we tried). The reading that reproduces the paper is that the matrix the eigenvalues
+   come from is the Gaussian's PRECISION (inverse covariance, what an EM implementation keeps for the
+   E-step), restricted to its x, y, z block (`saliency="precision"`): then σ_i = 1/std along the
+   principal axes of the spatial part conditioned on t, s = σ1σ2σ3/(σ1+σ2+σ3)·π·c* =
+   π·c* / (s1s2 + s1s3 + s2s3) in terms of the standard deviations s_i, large for compact, heavy
+   Gaussians (the hand dwelling at an action) and small for long, narrow transport Gaussians —
+   exactly the paper's description of which Gaussians are salient, and the absolute value in
+   σ = sqrt|λ| is natural there. Evidence (users 1+4, same fits): literal ≤ 25 % recall;
+   weight only (π·c*) 79 % / 93 %; precision block 97 % / 94 % (pick-and-place / placements
+   recall at POITh 1.5, Λ = 2), with placements at their ceiling (below). `saliency` keeps
+   "literal", "weight" and "conditional" (covariance conditioned on t) for comparison.
 4. Thresholds. Tables 5 and 6 of the paper (thesis 2.5/2.6) print a "threshold" that equals
    1.5 × the mean of the AVAILABLE neighbours within Λ = 2 in all nine rows (e.g. Table 5 row 2:
    (s1 + s3 + s4)/3 × 1.5 = 0.040424), not (1/2Λ)·Σ × 2.5. So the worked examples used POITh = 1.5 and
    averaged only existing neighbours; that is our default (`poi_threshold=1.5`,
-   `threshold_mode="available"`). `threshold_mode="literal"` divides by 2Λ as printed in Alg. 3.
+   `threshold_mode="available"`). `threshold_mode="literal"` divides by 2Λ as printed in Alg. 3;
+   POITh = 2.5 (Table 2's caption) gives the same precision and ~2 points less recall here.
 
-Measured with these defaults (users 1+4): see `kinfu eval poi`; placements are capped at 93.75 %
-recall for ANY detector because 5 of the 80 labelled changes lie 0.21-0.27 m from every sample of
-their trajectory (spray-can tasks), beyond the 0.20 m match radius.
+Ceiling: placements cannot exceed 93.75 % recall for ANY detector on users 1+4, because 5 of the 80
+labelled changes (spray-can tasks) lie 0.21-0.27 m from every sample of their trajectory, beyond the
+0.20 m match radius; one pick-and-place label (user1_spray_can5) is 1.0 m from its trajectory.
 """
 
 from __future__ import annotations
@@ -56,7 +64,7 @@ from kinfu_cli.attention.pois import DEFAULT_RADIUS, Gaussian4, Poi
 from kinfu_cli.errors import ConfigError
 from kinfu_cli.io.trajectory import Trajectory
 
-SALIENCY_MODES = ("weight", "literal", "conditional")
+SALIENCY_MODES = ("precision", "literal", "weight", "conditional")
 THRESHOLD_MODES = ("available", "literal")
 SELECTION_MODES = ("first-minimum", "best")
 
@@ -89,9 +97,10 @@ class GmmActivitySaliency:
 
     def __init__(self, poi_threshold: float = 1.5, neighbours: int = 2, bic_threshold: float = 0.0,
                  max_components: int = 15, selection: str = "first-minimum", time_scale: str | float = "duration",
-                 reg_space: float = 0.01, reg_time: float = 0.1, saliency: str = "weight",
+                 reg_space: float = 0.005, reg_time: float = 0.1, saliency: str = "precision",
                  threshold_mode: str = "available", radius: float = DEFAULT_RADIUS, max_iter: int = 100,
-                 tol: float = 1e-4, min_samples_per_component: int = 8) -> None:
+                 tol: float = 1e-4, min_samples_per_component: int = 8, resample: int = 300,
+                 noise_floor: float = 1.0) -> None:
         self.poi_threshold = poi_threshold
         self.neighbours = neighbours
         self.bic_threshold = bic_threshold
@@ -106,12 +115,14 @@ class GmmActivitySaliency:
         self.max_iter = max_iter
         self.tol = tol
         self.min_samples_per_component = min_samples_per_component
+        self.resample = resample
+        self.noise_floor = noise_floor
 
     def get_params(self) -> dict:
         return {k: getattr(self, k) for k in (
             "poi_threshold", "neighbours", "bic_threshold", "max_components", "selection", "time_scale",
             "reg_space", "reg_time", "saliency", "threshold_mode", "radius", "max_iter", "tol",
-            "min_samples_per_component")}
+            "min_samples_per_component", "resample", "noise_floor")}
 
     def _check(self) -> None:
         if self.saliency not in SALIENCY_MODES:
@@ -139,17 +150,35 @@ class GmmActivitySaliency:
             raise ConfigError(f"--reg-space/--reg-time: expected >= 0, got {self.reg_space}, {self.reg_time}")
 
     # --- steps ---------------------------------------------------------------------------------
-    def _samples(self, traj: Trajectory) -> tuple[np.ndarray, float]:
+    def _samples(self, traj: Trajectory, smooth: int = 0) -> tuple[np.ndarray, float]:
         t = traj.t - traj.t[0]
+        pos = traj.positions
+        if smooth > 0:
+            from kinfu_cli.attention.zvc import mean_filter
+
+            pos = mean_filter(pos, smooth)
+        if self.resample and int(self.resample) >= 2:
+            tt = np.linspace(0.0, t[-1], int(self.resample))
+            pos = np.column_stack([np.interp(tt, t, pos[:, i]) for i in range(3)])
+            t = tt
         if self.time_scale == "duration":
             scale = 1.0 / max(float(t[-1]), 1e-12)
         else:
             scale = float(self.time_scale)
-        return np.column_stack([traj.positions, t * scale]), scale
+        return np.column_stack([pos, t * scale]), scale
 
-    def _select(self, x: np.ndarray) -> tuple[Mixture, dict]:
+    @staticmethod
+    def estimate_noise(positions: np.ndarray) -> float:
+        """White-noise std (m) from second differences: robust (MAD) and blind to smooth motion."""
+        if len(positions) < 5:
+            return 0.0
+        dd = positions[2:] - 2 * positions[1:-1] + positions[:-2]
+        mad = np.median(np.abs(dd - np.median(dd, axis=0)), axis=0) * 1.4826
+        return float(np.sqrt(np.mean(mad ** 2) / 6.0))
+
+    def _select(self, x: np.ndarray, reg_space: float) -> tuple[Mixture, dict]:
         n = x.shape[0]
-        reg = np.array([self.reg_space ** 2] * 3 + [self.reg_time ** 2], dtype=np.float64)
+        reg = np.array([reg_space ** 2] * 3 + [self.reg_time ** 2], dtype=np.float64)
         reg = np.maximum(reg, 1e-12)
         kmax = max(1, min(int(self.max_components), n // int(self.min_samples_per_component)))
         bics: dict[int, float] = {}
@@ -171,7 +200,9 @@ class GmmActivitySaliency:
         if self.saliency == "weight":
             return weights * k
         spatial = covs[:, :3, :3]
-        if self.saliency == "conditional":
+        if self.saliency == "precision":
+            spatial = np.linalg.inv(covs)[:, :3, :3]
+        elif self.saliency == "conditional":
             spatial = spatial - np.einsum("ki,kj->kij", covs[:, :3, 3], covs[:, :3, 3]) / covs[:, 3, 3][:, None, None]
         sig = np.sqrt(np.abs(np.linalg.eigvalsh(spatial)))
         return sig.prod(axis=1) / np.maximum(sig.sum(axis=1), 1e-300) * weights * k
@@ -189,8 +220,19 @@ class GmmActivitySaliency:
     def fit(self, traj: Trajectory) -> "GmmActivitySaliency":
         self._check()
         traj.validate(min_samples=2)
-        x, scale = self._samples(traj)
-        mix, bics = self._select(x)
+        reg_space = float(self.reg_space)
+        self.noise_ = noise = self.estimate_noise(traj.positions)
+        half = 0
+        if self.noise_floor and reg_space > 0 and noise > reg_space:
+            # white noise above the floor: average ~(noise/floor)^2 samples, at most a tenth of the task
+            width = min((noise / reg_space) ** 2, len(traj) / 10.0)
+            half = int(max(0, np.ceil((width - 1) / 2)))
+            noise = noise / np.sqrt(2 * half + 1)
+        self.smoothing_half_width_ = half
+        x, scale = self._samples(traj, half)
+        if self.noise_floor:
+            reg_space = max(reg_space, float(self.noise_floor) * noise)
+        mix, bics = self._select(x, reg_space)
         order = np.argsort(mix.means[:, 3])
         w, mu, cov = mix.weights[order], mix.means[order], mix.covariances[order]
         s = self._saliency(w, cov)
