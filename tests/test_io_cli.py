@@ -41,6 +41,7 @@ def test_info_json_on_real_recordings(shared_data, name, topics, frames):
     assert {t["name"]: t["count"] for t in s["topics"]} == topics
     assert s["message_count"] == sum(topics.values())
     assert len(s["tf"]["frames"]) == frames
+    assert s["storage"] == ("sqlite3" if name == "tf_example" else None)
     if name.startswith("tf_example"):
         assert s["tf"]["tree"] == {"base_footprint": "odom", "base_link": "base_footprint"}
         assert s["roles"]["world_frame"] == "odom"

@@ -50,10 +50,10 @@ def summarize(rec: Recording, check_frames: dict | None = None, quiet: bool = Tr
                       "samples": int(stamps.size), "rate_hz": rate})
     storage = None
     if rec.format == "ros2":
-        import yaml
+        from ruamel.yaml import YAML  # rosbags' own YAML library (PyYAML is not a dependency)
 
         try:
-            meta = yaml.safe_load((rec.path / "metadata.yaml").read_text())
+            meta = YAML(typ="safe").load((rec.path / "metadata.yaml").read_text())
             storage = meta["rosbag2_bagfile_information"]["storage_identifier"]
         except Exception:  # informative only
             storage = None
