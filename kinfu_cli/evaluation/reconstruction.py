@@ -1,0 +1,498 @@
+"""Reconstruction error of a fused surface against the true mesh: accuracy, completeness, volume coverage.
+
+Both directions, as the usual accuracy / completeness metrics:
+
+- accuracy: distance from every reconstructed mesh vertex (marching-cubes vertices are spaced about one voxel apart)
+  to the true mesh, with open3d's `RaycastingScene.compute_distance` (one vectorised call). Vertices outside the
+  evaluation region (the box around the observed true surface, grown by `region_margin`) are left out and counted.
+- completeness: the true surface is sampled uniformly (one point per `spacing`^2 of area, area-weighted over the
+  triangles). The region the camera observed is the set of samples that are *visible* from at least one true
+  camera pose of the recording (`camera_poses.txt`): the sample projects into the image, lies within the sensor's
+  range, and its depth agrees (within `visibility_tolerance`) with the true mesh's depth rendered at that pixel (a
+  z-buffer test, one open3d ray cast per frame, back faces never count). Only samples inside the reconstruction's
+  extent count: its volume grid, or for a bare mesh its bounding box grown by `region_margin`. Completeness = share
+  of those samples within `threshold` (default 1 cm) of the reconstruction; precision = share of the evaluated
+  vertices within `threshold` of the truth; F-score their harmonic mean.
+- volume coverage (when the volume is known): counts of unknown / empty / occupied voxels and the share of the true
+  surface (visible samples, and all samples inside the grid) whose voxel is known (w > 0).
+
+Which poses belong to a state: "before" = the initial-scan frames (`frames.scan` of changes.json), "after" = all
+frames (the after-change views look at the changed region; the rest of the table is the same in both states).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from kinfu_cli.errors import ConfigError, RecordingError, VolumeError
+
+DEFAULT_THRESHOLD = 0.01  # m: completeness / precision distance
+DEFAULT_SPACING = 0.005  # m: true-surface sample spacing
+MAX_SAMPLES = 3_000_000
+STATES = ("after", "before")
+MESH_SUFFIXES = (".ply", ".obj", ".stl", ".off", ".gltf", ".glb")
+
+
+# ---------------------------------------------------------------------------------------------- statistics
+@dataclass
+class DistanceStats:
+    """Summary of a set of distances (metres)."""
+
+    count: int
+    mean: float
+    median: float
+    rms: float
+    p95: float
+    max: float
+
+    @classmethod
+    def of(cls, d: np.ndarray) -> "DistanceStats":
+        d = np.asarray(d, dtype=np.float64).ravel()
+        if d.size == 0:
+            nan = float("nan")
+            return cls(0, nan, nan, nan, nan, nan)
+        return cls(int(d.size), float(d.mean()), float(np.median(d)), float(np.sqrt(np.mean(d * d))),
+                   float(np.percentile(d, 95)), float(d.max()))
+
+    def to_json(self) -> dict:
+        return {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in self.__dict__.items()}
+
+
+# ---------------------------------------------------------------------------------------------- inputs
+@dataclass
+class Reconstruction:
+    """What `kinfu eval fusion` scores: a mesh (vertices, triangles; triangles may be empty for a cloud) and,
+    when the input is a `kinfu fuse` folder holding volume.npz, the volume."""
+
+    vertices: np.ndarray
+    triangles: np.ndarray
+    source: Path
+    volume: object | None = None
+    volume_path: Path | None = None
+
+    @property
+    def is_cloud(self) -> bool:
+        return len(self.triangles) == 0
+
+
+def read_mesh_arrays(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
+    """(vertices (N, 3) float64, triangles (M, 3) int64) of a mesh or point-cloud file; VolumeError when it is
+    missing, unreadable or has no vertices."""
+    import open3d as o3d
+
+    path = Path(path)
+    if not path.is_file():
+        raise VolumeError(f"{path}: no such mesh file")
+    if path.suffix.lower() not in MESH_SUFFIXES:
+        raise VolumeError(f"{path}: expected a mesh file ({', '.join(MESH_SUFFIXES)}) or a `kinfu fuse` output folder")
+    with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):  # we report problems ourselves
+        mesh = o3d.io.read_triangle_mesh(str(path))
+        v = np.asarray(mesh.vertices, dtype=np.float64)
+        f = np.asarray(mesh.triangles, dtype=np.int64).reshape(-1, 3)
+        if len(v) == 0 and path.suffix.lower() == ".ply" and path.stat().st_size > 0:
+            v = np.asarray(o3d.io.read_point_cloud(str(path)).points, dtype=np.float64)
+    if len(v) == 0:
+        raise VolumeError(f"{path}: mesh has no vertices (empty reconstruction or not a mesh file)")
+    if not np.all(np.isfinite(v)):
+        raise VolumeError(f"{path}: mesh has non-finite vertex coordinates")
+    return v, f
+
+
+def load_reconstruction(path: str | os.PathLike, use_volume: bool = True) -> Reconstruction:
+    """A mesh file, or a `kinfu fuse` output folder (mesh.ply, and volume.npz when present)."""
+    path = Path(path)
+    if path.is_dir():
+        mesh_path = path / "mesh.ply"
+        if not mesh_path.exists():
+            raise VolumeError(f"{path}: no mesh.ply in this folder (expected a `kinfu fuse` output folder or a "
+                              f"mesh file)")
+        v, f = read_mesh_arrays(mesh_path)
+        vol, vol_path = None, None
+        if use_volume and (path / "volume.npz").exists():
+            from kinfu_cli.fusion.volume import load_volume
+
+            vol_path = path / "volume.npz"
+            vol = load_volume(vol_path)
+        return Reconstruction(v, f, mesh_path, vol, vol_path)
+    if not path.exists():
+        raise VolumeError(f"{path}: no such mesh file or `kinfu fuse` output folder")
+    v, f = read_mesh_arrays(path)
+    return Reconstruction(v, f, path)
+
+
+def state_frames(gt, state: str) -> np.ndarray:
+    """Indices of the ground-truth camera poses that saw the scene in `state` (see module docstring)."""
+    if state not in STATES:
+        raise ConfigError(f"--state {state!r}: expected one of {', '.join(STATES)}")
+    n = len(gt.poses)
+    if n == 0:
+        raise RecordingError(f"{gt.folder}/camera_poses.txt: no camera poses")
+    scan = gt.info.get("frames", {}).get("scan")
+    if state == "before":
+        n_scan = n if scan is None else int(scan)
+        return np.arange(min(max(n_scan, 1), n))
+    return np.arange(n)
+
+
+# ---------------------------------------------------------------------------------------------- geometry
+def _raycasting_scene(vertices: np.ndarray, triangles: np.ndarray):
+    import open3d as o3d
+
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(np.ascontiguousarray(vertices, dtype=np.float32)),
+                        o3d.core.Tensor(np.ascontiguousarray(triangles, dtype=np.uint32)))
+    return scene
+
+
+def point_to_mesh_distance(points: np.ndarray, vertices: np.ndarray, triangles: np.ndarray, scene=None
+                           ) -> np.ndarray:
+    """Unsigned distance (N,) from each point to the mesh surface (open3d RaycastingScene.compute_distance)."""
+    import open3d as o3d
+
+    pts = np.ascontiguousarray(points, dtype=np.float32).reshape(-1, 3)
+    if len(pts) == 0:
+        return np.zeros(0)
+    scene = scene if scene is not None else _raycasting_scene(vertices, triangles)
+    return scene.compute_distance(o3d.core.Tensor(pts)).numpy().astype(np.float64)
+
+
+def distance_to_reconstruction(points: np.ndarray, rec: Reconstruction) -> np.ndarray:
+    """Distance of points to the reconstructed surface (to its triangles; to its points for a cloud)."""
+    if rec.is_cloud:
+        from scipy.spatial import cKDTree
+
+        return cKDTree(rec.vertices).query(np.asarray(points, dtype=np.float64), workers=-1)[0]
+    return point_to_mesh_distance(points, rec.vertices, rec.triangles)
+
+
+def sample_surface(vertices: np.ndarray, triangles: np.ndarray, spacing: float = DEFAULT_SPACING,
+                   seed: int = 0, max_samples: int = MAX_SAMPLES) -> tuple[np.ndarray, np.ndarray]:
+    """Uniform random points on a mesh, one per spacing^2 of area on average (area-weighted triangle choice,
+    uniform barycentric coordinates; at most max_samples, the spacing grows instead), and the unit normal of the
+    triangle each lies on (winding order: outward for the ground-truth meshes)."""
+    if not spacing > 0:
+        raise ConfigError(f"--spacing: expected a positive distance in metres, got {spacing}")
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(triangles, dtype=np.int64)
+    a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
+    cr = np.cross(b - a, c - a)
+    area2 = np.linalg.norm(cr, axis=1)
+    total = 0.5 * float(area2.sum())
+    if total <= 0:
+        return np.zeros((0, 3)), np.zeros((0, 3))
+    n = int(min(max_samples, max(1, round(total / spacing**2))))
+    rng = np.random.default_rng(seed)
+    tri = rng.choice(len(f), size=n, p=area2 / area2.sum())
+    r1, r2 = rng.random(n), rng.random(n)
+    s = np.sqrt(r1)
+    w0, w1, w2 = 1 - s, s * (1 - r2), s * r2
+    pts = w0[:, None] * a[tri] + w1[:, None] * b[tri] + w2[:, None] * c[tri]
+    normals = cr[tri] / np.maximum(area2[tri], 1e-30)[:, None]
+    return pts, normals
+
+
+def render_depth(scene, K: np.ndarray, width: int, height: int, T_world_camera: np.ndarray) -> np.ndarray:
+    """Optical-axis depth (H, W) of a RaycastingScene seen from a pinhole camera (inf = no hit)."""
+    import open3d as o3d
+
+    u, v = np.meshgrid(np.arange(width, dtype=np.float64), np.arange(height, dtype=np.float64))
+    d_cam = np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones_like(u)], axis=-1)
+    rays = np.empty((height, width, 6), dtype=np.float32)
+    rays[..., :3] = T_world_camera[:3, 3]
+    rays[..., 3:] = d_cam @ T_world_camera[:3, :3].T  # camera-z component 1: t_hit is the optical-axis depth
+    return scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy()
+
+
+def visible_mask(points: np.ndarray, normals: np.ndarray, scene, poses: np.ndarray, K: np.ndarray, width: int,
+                 height: int, min_depth: float = 0.3, max_depth: float = 4.0, tolerance: float = 0.005
+                 ) -> np.ndarray:
+    """Which surface points (on the mesh held by `scene`, with their outward normals) are seen from at least one
+    pose: facing the camera, projecting into the image with depth in [min_depth, max_depth], and not hidden: the
+    true depth rendered at their pixel is >= their depth - (tolerance + the depth change across one pixel on a
+    surface that steep, capped at 10 pixels' worth)."""
+    pts = np.asarray(points, dtype=np.float64)
+    nrm = np.asarray(normals, dtype=np.float64)
+    seen = np.zeros(len(pts), dtype=bool)
+    K = np.asarray(K, dtype=np.float64)
+    pix = 1.0 / min(K[0, 0], K[1, 1])
+    x, y, z = (np.ascontiguousarray(pts[:, i]) for i in range(3))
+    for T in np.asarray(poses, dtype=np.float64):
+        R, t = T[:3, :3], T[:3, 3]
+        dx, dy, dz = x - t[0], y - t[1], z - t[2]
+        # column by column: numpy's (N,3) @ (3,3) is several times slower
+        zc = dx * R[0, 2] + dy * R[1, 2] + dz * R[2, 2]
+        ok = (zc >= min_depth) & (zc <= max_depth)
+        cosv = -(dx * nrm[:, 0] + dy * nrm[:, 1] + dz * nrm[:, 2])  # normal . (camera - point), unnormalised
+        ok &= cosv > 0
+        idx = np.flatnonzero(ok)
+        if idx.size == 0:
+            continue
+        zi = zc[idx]
+        xc = dx[idx] * R[0, 0] + dy[idx] * R[1, 0] + dz[idx] * R[2, 0]
+        yc = dx[idx] * R[0, 1] + dy[idx] * R[1, 1] + dz[idx] * R[2, 1]
+        u = np.rint(K[0, 0] * xc / zi + K[0, 2]).astype(np.int64)
+        v = np.rint(K[1, 1] * yc / zi + K[1, 2]).astype(np.int64)
+        inside = (u >= 0) & (u < width) & (v >= 0) & (v < height)
+        idx, zi, u, v = idx[inside], zi[inside], u[inside], v[inside]
+        if idx.size == 0:
+            continue
+        depth = render_depth(scene, K, width, height, T)
+        dist = np.sqrt(dx[idx] ** 2 + dy[idx] ** 2 + dz[idx] ** 2)
+        cos = np.clip(cosv[idx] / dist, 1e-3, 1.0)
+        slope = np.minimum(np.sqrt(1.0 - cos**2) / cos, 10.0)
+        allow = tolerance + pix * zi * slope
+        seen[idx[depth[v, u] >= zi - allow]] = True
+    return seen
+
+
+# ---------------------------------------------------------------------------------------------- scoring
+@dataclass
+class ReconstructionScore:
+    accuracy: DistanceStats
+    completeness_distances: DistanceStats
+    threshold: float
+    precision: float  # share of evaluated reconstructed vertices within threshold of the truth
+    completeness: float  # share of observed true-surface samples within threshold of the reconstruction
+    fscore: float
+    vertices_total: int
+    vertices_outside_region: int
+    samples_observed: int
+    samples_total: int
+    spacing: float
+    region: tuple
+    frames: int
+    coverage: dict | None = None
+    notes: list = field(default_factory=list)
+
+    def to_json(self) -> dict:
+        out = {"accuracy": self.accuracy.to_json(), "completeness_distances": self.completeness_distances.to_json(),
+               "threshold": self.threshold, "precision": self.precision, "completeness": self.completeness,
+               "fscore": self.fscore, "vertices_total": self.vertices_total,
+               "vertices_outside_region": self.vertices_outside_region, "samples_observed": self.samples_observed,
+               "samples_total": self.samples_total, "spacing": self.spacing,
+               "region": {"min": list(self.region[0]), "max": list(self.region[1])}, "frames": self.frames,
+               "observed_region": "true-surface samples visible (z-buffer test) from the ground-truth camera poses "
+                                  "of the state, within the sensor range, inside "
+                                  + ("the volume grid" if self.coverage else "the reconstruction's bounding box "
+                                     "(grown by the region margin)")}
+        if self.coverage is not None:
+            out["volume"] = self.coverage
+        if self.notes:
+            out["notes"] = list(self.notes)
+        return out
+
+
+def volume_coverage(volume, samples_visible: np.ndarray, samples_in_grid: np.ndarray) -> dict:
+    """Label counts of the volume and the share of true-surface samples whose voxel is known (w > 0)."""
+    from kinfu_cli.fusion.ternary import UNKNOWN
+
+    grid = volume.ternary_grid()
+    counts = grid.counts()
+
+    def known_share(p: np.ndarray) -> float | None:
+        if len(p) == 0:
+            return None
+        idx = grid.index_of(p)
+        idx = np.clip(idx, 0, np.array(grid.shape) - 1)
+        return float(np.mean(grid.labels[idx[:, 0], idx[:, 1], idx[:, 2]] != UNKNOWN))
+
+    total = int(sum(counts.values()))
+    return {"shape": list(grid.shape), "voxel_size": grid.voxel_size, "origin": grid.origin.tolist(),
+            "counts": counts, "unknown_share": counts["unknown"] / total if total else None,
+            "visible_surface_known_share": known_share(samples_visible),
+            "surface_in_grid_known_share": known_share(samples_in_grid),
+            "surface_samples_in_grid": int(len(samples_in_grid))}
+
+
+def _in_box(p: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    return np.all((p >= lo) & (p <= hi), axis=1)
+
+
+@dataclass
+class ObservedSurface:
+    """True-surface samples of one state: `observed` (visible from the state's camera poses and inside
+    `bounds`), `in_bounds` (all samples inside bounds), how many were drawn in all, and the settings."""
+
+    observed: np.ndarray
+    in_bounds: np.ndarray
+    total: int
+    frames: int
+    spacing: float
+    bounds: tuple
+
+
+def observed_surface(gt, state: str, bounds: tuple, spacing: float = DEFAULT_SPACING,
+                     visibility_tolerance: float = 0.005, seed: int = 0, scene=None) -> ObservedSurface:
+    """Sample the true `state` mesh uniformly and keep what the state's camera poses saw (module docstring)
+    inside the box bounds = (lo, hi)."""
+    mesh = gt.mesh(state)
+    tv = np.asarray(mesh.vertices, dtype=np.float64)
+    tf = np.asarray(mesh.triangles, dtype=np.int64)
+    scene = scene if scene is not None else _raycasting_scene(tv, tf)
+    frames = state_frames(gt, state)
+    cam = gt.info.get("camera", {})
+    samples, normals = sample_surface(tv, tf, spacing, seed=seed)
+    lo, hi = (np.asarray(b, dtype=np.float64) for b in bounds)
+    keep = _in_box(samples, lo, hi)
+    seen = visible_mask(samples[keep], normals[keep], scene, gt.poses[frames], gt.K, gt.width, gt.height,
+                        float(cam.get("min_range", 0.3)), float(cam.get("max_range", 4.0)), visibility_tolerance)
+    return ObservedSurface(samples[keep][seen], samples[keep], int(len(samples)), int(len(frames)), float(spacing),
+                           (lo, hi))
+
+
+def reconstruction_bounds(rec: Reconstruction, margin: float = 0.05) -> tuple[np.ndarray, np.ndarray]:
+    """Where the reconstruction could have surface: its volume's grid, else its bounding box grown by margin."""
+    if rec.volume is not None:
+        return rec.volume.bounds()
+    return rec.vertices.min(axis=0) - margin, rec.vertices.max(axis=0) + margin
+
+
+def score_reconstruction(rec: Reconstruction, gt, state: str = "after", threshold: float = DEFAULT_THRESHOLD,
+                         spacing: float = DEFAULT_SPACING, region_margin: float = 0.05,
+                         visibility_tolerance: float = 0.005, seed: int = 0,
+                         surface: ObservedSurface | None = None) -> ReconstructionScore:
+    """Accuracy / completeness (and volume coverage when rec has a volume) of rec against gt's `state` mesh.
+    surface: a precomputed `observed_surface(gt, state, reconstruction_bounds(rec), ...)` (to score several
+    reconstructions of the same extent against one truth)."""
+    if not threshold > 0:
+        raise ConfigError(f"--threshold: expected a positive distance in metres, got {threshold}")
+    if not region_margin >= 0:
+        raise ConfigError(f"region margin: expected a distance >= 0 m, got {region_margin}")
+    mesh = gt.mesh(state)
+    tv = np.asarray(mesh.vertices, dtype=np.float64)
+    tf = np.asarray(mesh.triangles, dtype=np.int64)
+    scene = _raycasting_scene(tv, tf)
+    if surface is None:
+        surface = observed_surface(gt, state, reconstruction_bounds(rec, region_margin), spacing,
+                                   visibility_tolerance, seed, scene)
+    observed = surface.observed
+    notes = []
+    if len(observed) == 0:
+        raise RecordingError(f"{gt.folder}: no part of the true {state} surface is visible from the camera poses"
+                             + (" inside the volume grid" if rec.volume is not None else " near the reconstruction"))
+    lo = observed.min(axis=0) - region_margin
+    hi = observed.max(axis=0) + region_margin
+    inside = _in_box(rec.vertices, lo, hi)
+    if not inside.any():
+        raise VolumeError(f"{rec.source}: no reconstructed vertex lies in the observed region "
+                          f"{np.round(lo, 2).tolist()}..{np.round(hi, 2).tolist()} (wrong frame or units?)")
+    acc = point_to_mesh_distance(rec.vertices[inside], tv, tf, scene)
+    comp = distance_to_reconstruction(observed, rec)
+    precision = float(np.mean(acc <= threshold))
+    completeness = float(np.mean(comp <= threshold))
+    f = 2 * precision * completeness / (precision + completeness) if precision + completeness > 0 else 0.0
+    if rec.is_cloud:
+        notes.append("reconstruction has no triangles: completeness uses distances to its points")
+    coverage = None
+    if rec.volume is not None:
+        coverage = volume_coverage(rec.volume, observed, surface.in_bounds)
+    return ReconstructionScore(DistanceStats.of(acc), DistanceStats.of(comp), float(threshold), precision,
+                               completeness, float(f), int(len(rec.vertices)), int(np.count_nonzero(~inside)),
+                               int(len(observed)), surface.total, surface.spacing, (lo.tolist(), hi.tolist()),
+                               surface.frames, coverage, notes)
+
+
+def report_json_of(path: str | os.PathLike) -> dict | None:
+    """The report.json beside a `kinfu fuse` output, if any (for provenance in the results)."""
+    p = Path(path)
+    p = p / "report.json" if p.is_dir() else p.parent / "report.json"
+    if not p.exists():
+        return None
+    try:
+        return json.loads(p.read_text())
+    except (OSError, ValueError):
+        return None
+
+
+# ---------------------------------------------------------------------------------------------- the whole evaluation
+def evaluate_fusion(path, ground_truth, state: str = "after", threshold: float = 0.01, spacing: float = 0.005,
+                    margin: float = 0.02, min_height: float = 0.005, footprint: str = "rect", use_volume: bool = True,
+                    seed: int = 0, quiet: bool = True) -> dict:
+    """Score a `kinfu fuse` output folder (mesh.ply [+ volume.npz]) or a mesh file against a `kinfu synth`
+    ground-truth folder; returns the results document that `kinfu eval fusion` prints and writes."""
+    from kinfu_cli.evaluation.object_measures import PAPER_TABLE_1, object_measures
+    from kinfu_cli.progress import progress
+    from kinfu_cli.sim.scenario import load_ground_truth
+
+    t0 = time.perf_counter()
+    gt = rec = score = measures = None
+    for step in progress(["ground truth", "reconstruction", "distances", "objects"], total=4, desc="eval fusion",
+                         quiet=quiet):
+        if step == "ground truth":
+            gt = load_ground_truth(ground_truth)
+            state_frames(gt, state)  # checks --state and the poses before the heavy work
+        elif step == "reconstruction":
+            rec = load_reconstruction(path, use_volume=use_volume)
+        elif step == "distances":
+            score = score_reconstruction(rec, gt, state, threshold=threshold, spacing=spacing, seed=seed)
+        else:
+            measures = object_measures(rec.vertices, gt, state, margin=margin, min_height=min_height,
+                                       footprint=footprint)
+    report = report_json_of(path)
+    tracking = (report or {}).get("pose_mode") or "as fused"
+    doc = {
+        "input": {"reconstruction": str(rec.source), "volume": str(rec.volume_path) if rec.volume_path else None,
+                  "vertices": int(len(rec.vertices)), "triangles": int(len(rec.triangles)),
+                  "ground_truth": str(gt.folder), "state": state, "pose_mode": tracking},
+        "reconstruction": score.to_json(),
+        "objects": measures.to_json(),
+        "table_1": PAPER_TABLE_1 + [{"scenario": "this run", "tracking": tracking, "mean_abs": measures.mean_abs,
+                                     "std": measures.std}],
+        "seconds": time.perf_counter() - t0,
+    }
+    return doc
+
+
+def _mm(x) -> str:
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return "   -  "
+    return f"{x * 1000:6.1f}"
+
+
+def format_fusion_tables(doc: dict) -> str:
+    """The human-readable tables (millimetres; Table 1 in metres like the paper)."""
+    r = doc["reconstruction"]
+    a, c = r["accuracy"], r["completeness_distances"]
+    lines = [f"kinfu eval fusion: {doc['input']['reconstruction']} vs {doc['input']['ground_truth']} "
+             f"({doc['input']['state']} state, {r['frames']} true camera poses)", "",
+             "Reconstruction error (mm)      mean  median     RMS     p95     max       n",
+             f"  accuracy (recon -> true) {_mm(a['mean'])}  {_mm(a['median'])}  {_mm(a['rms'])}  {_mm(a['p95'])}  "
+             f"{_mm(a['max'])}  {a['count']:6d}",
+             f"  completeness (true -> rec){_mm(c['mean'])}  {_mm(c['median'])}  {_mm(c['rms'])}  {_mm(c['p95'])}  "
+             f"{_mm(c['max'])}  {c['count']:6d}",
+             f"  within {r['threshold'] * 1000:.0f} mm: precision {r['precision']:.3f}  completeness "
+             f"{r['completeness']:.3f}  F-score {r['fscore']:.3f}  (observed true surface: {r['samples_observed']} "
+             f"samples every ~{r['spacing'] * 1000:.0f} mm)"]
+    v = r.get("volume")
+    if v:
+        cnt = v["counts"]
+        share = v["visible_surface_known_share"]
+        lines += ["", f"Volume {'x'.join(map(str, v['shape']))} at {v['voxel_size'] * 1000:.2f} mm: occupied "
+                      f"{cnt['occupied']}, empty {cnt['empty']}, unknown {cnt['unknown']} "
+                      f"({v['unknown_share'] * 100:.1f} % unknown)",
+                  f"  true surface observed (voxel known): {share * 100 if share is not None else float('nan'):.1f} % "
+                  f"of the visible surface, {(v['surface_in_grid_known_share'] or 0) * 100:.1f} % of all true "
+                  f"surface in the grid"]
+    o = doc["objects"]
+    lines += ["", "Objects (mm)   shape      points   height true/err    major true/err    minor true/err"]
+    for row in o["objects"]:
+        t, e = row["true"], row["error"] or {}
+        lines.append(f"  {row['id']:<12} {row['shape']:<9} {row['points']:6d}   {_mm(t['height'])} {_mm(e.get('height'))}"
+                     f"    {_mm(t['major'])} {_mm(e.get('major'))}    {_mm(t['minor'])} {_mm(e.get('minor'))}"
+                     + ("   (not measured)" if row["error"] is None else ""))
+    pl = o["table_plane"]
+    lines.append(f"  table plane fit: tilt {pl['tilt_deg']:.2f} deg, offset {pl['offset'] * 1000:+.1f} mm")
+    lines += ["", "Table 1 (Monica et al. RAS 2016): 3D object reconstruction errors (height, major and minor axis)",
+              "  scenario   tracking              mean abs. (m)   st. dev. (m)"]
+    for row in doc["table_1"]:
+        ma = "-" if row["mean_abs"] is None or not math.isfinite(row["mean_abs"]) else f"{row['mean_abs']:.3f}"
+        sd = "-" if row["std"] is None or not math.isfinite(row["std"]) else f"{row['std']:.3f}"
+        lines.append(f"  {str(row['scenario']):<10} {row['tracking']:<21} {ma:>13}   {sd:>12}")
+    return "\n".join(lines)
