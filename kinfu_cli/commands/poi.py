@@ -1,0 +1,135 @@
+"""`kinfu poi`: points of interest (where the person acted) from the hand trajectory, GMM-AS or ZVC."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+from kinfu_cli.errors import ConfigError
+
+
+def _time_scale(value: str) -> str | float:
+    if value.strip().lower() == "duration":
+        return "duration"
+    try:
+        return float(value)
+    except ValueError:
+        raise ConfigError(f"--time-scale: expected 'duration' or units per second, got {value!r}") from None
+
+
+def detector_options(f):
+    """The GMM-AS and ZVC parameters as options (shared by `kinfu poi` and `kinfu eval poi`)."""
+    opts = [
+        click.option("--poi-threshold", default=1.5, show_default=True, type=float,
+                     help="GMM-AS POITh: saliency must exceed this x the neighbours' mean (paper Table 2: 2.5; "
+                          "Tables 5-6: 1.5)."),
+        click.option("--neighbours", default=2, show_default=True, type=int, help="GMM-AS Lambda: neighbours each side."),
+        click.option("--bic-threshold", default=0.0, show_default=True, type=float,
+                     help="GMM-AS BICTh: stop when BIC > min BIC + this."),
+        click.option("--max-components", default=15, show_default=True, type=int, help="GMM-AS Kmax."),
+        click.option("--selection", default="first-minimum", show_default=True,
+                     type=click.Choice(["first-minimum", "best"]), help="GMM-AS: first BIC minimum or best of 1..Kmax."),
+        click.option("--time-scale", default="duration", show_default=True,
+                     help="GMM-AS 4th coordinate: 'duration' (t normalised to 0..1) or units per second (1 = s)."),
+        click.option("--reg-space", default=0.005, show_default=True, type=float,
+                     help="GMM-AS spatial std floor (m) added to covariances."),
+        click.option("--reg-time", default=0.1, show_default=True, type=float,
+                     help="GMM-AS time std floor, in --time-scale units."),
+        click.option("--saliency", default="precision", show_default=True,
+                     type=click.Choice(["precision", "literal", "weight", "conditional"]),
+                     help="GMM-AS saliency reading (see kinfu_cli/attention/gmm_as.py; 'literal' = eq. 13 on "
+                          "the spatial covariance)."),
+        click.option("--threshold-mode", default="available", show_default=True,
+                     type=click.Choice(["available", "literal"]),
+                     help="GMM-AS: mean of existing neighbours, or sum / 2 Lambda as printed in Alg. 3."),
+        click.option("--resample", default=300, show_default=True, type=int,
+                     help="GMM-AS: resample each trajectory to this many samples (0 = raw samples)."),
+        click.option("--noise-floor", default=1.0, show_default=True, type=float,
+                     help="GMM-AS: raise the floor to this x the estimated sensor noise, denoising first (0 = off)."),
+        click.option("--zvc-half-width", default=4, show_default=True, type=int, help="ZVC B (filter width 2B+1)."),
+        click.option("--zvc-threshold", default=1.72, show_default=True, type=float, help="ZVC ZVCTh."),
+        click.option("--zvc-r1", default=0.10, show_default=True, type=float, help="ZVC inner radius r1 (m)."),
+        click.option("--zvc-r2", default=0.25, show_default=True, type=float, help="ZVC outer radius r2 (m)."),
+        click.option("--radius", default=0.2, show_default=True, type=float, help="Region radius of each POI (m)."),
+    ]
+    for opt in reversed(opts):
+        f = opt(f)
+    return f
+
+
+def detector_params(kw: dict) -> dict:
+    """{"gmm-as": {...}, "zvc": {...}} constructor keywords from the parsed options (removed from kw)."""
+    g = {k: kw.pop(k) for k in ("poi_threshold", "neighbours", "bic_threshold", "max_components", "selection",
+                                "reg_space", "reg_time", "saliency", "threshold_mode", "resample", "noise_floor")}
+    g["time_scale"] = _time_scale(kw.pop("time_scale"))
+    radius = kw.pop("radius")
+    g["radius"] = radius
+    z = {"half_width": kw.pop("zvc_half_width"), "threshold": kw.pop("zvc_threshold"), "r1": kw.pop("zvc_r1"),
+         "r2": kw.pop("zvc_r2"), "radius": radius}
+    return {"gmm-as": g, "zvc": z}
+
+
+def load_trajectory(path: Path, hand_topic: str | None, hand_frame: str | None, world_frame: str | None):
+    """A `.traj` file or the hand trajectory of a recording (via the IO layer)."""
+    from kinfu_cli.io.hand import load_hand_trajectory
+
+    return load_hand_trajectory(path, hand_topic=hand_topic, hand_frame=hand_frame, world_frame=world_frame)
+
+
+@click.command("poi", short_help="Points of interest from the hand trajectory (GMM-AS or ZVC).")
+@click.argument("source", metavar="RECORDING_OR_TRAJ", type=click.Path(path_type=Path))
+@click.option("--algorithm", default="gmm-as", show_default=True, type=click.Choice(["gmm-as", "zvc"]),
+              help="Detector.")
+@click.option("--hand-topic", default=None, help="Pose topic of the hand [default: detected by name].")
+@click.option("--hand-frame", default=None, help="TF frame of the hand (instead of a topic).")
+@click.option("--world-frame", default=None, help="Frame to express the trajectory and POIs in.")
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=Path("pois.json"),
+              show_default=True, help="pois.json to write (read by kinfu nbv --pois and kinfu fuse --clear-pois).")
+@click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="PNG: trajectory, Gaussians coloured by saliency (or ZVC slow segments) and the POIs.")
+@click.option("--json", "as_json", is_flag=True, help="Print the pois.json object on stdout.")
+@click.option("--quiet", is_flag=True, help="No progress output.")
+@detector_options
+def command(source, algorithm, hand_topic, hand_frame, world_frame, output, plot, as_json, quiet, **kw):
+    """Find where the person acted (placed, removed, picked an object) from the wrist trajectory.
+
+    GMM-AS (Monica et al. 2016, Alg. 3) fits a Gaussian mixture on (x, y, z, t), picks the number of
+    Gaussians by BIC, and marks the Gaussians much more salient than their neighbours; ZVC marks
+    where the hand is much slower locally than around it. Input: a Polhemus `.traj` file or a
+    recording (MCAP, ROS 1 .bag, ROS 2 folder) with a hand pose topic or TF frame. Writes pois.json:
+    position, time, saliency, region radius and (GMM-AS) the Gaussian of each POI.
+
+    \b
+    Example:
+      kinfu poi recording.mcap -o out/pois.json --plot out/pois.png
+      kinfu poi user1_cup0.traj --algorithm zvc --json
+      kinfu poi recording.bag --hand-topic /hand/pose --poi-threshold 2.5 --saliency literal
+    """
+    from kinfu_cli.attention.pois import pois_document
+    from kinfu_cli.evaluation.poi import make_detector
+    from kinfu_cli.io.atomic import write_json
+
+    params = detector_params(kw)[algorithm]
+    det = make_detector(algorithm, params)
+    det._check()
+    traj = load_trajectory(source, hand_topic, hand_frame, world_frame)
+    det.fit(traj)
+    recorded = dict(det.get_params())
+    if algorithm == "gmm-as":
+        recorded["n_components"] = det.n_components_
+    doc = pois_document(det.pois_, algorithm, recorded, frame=traj.frame, source=str(source))
+    write_json(output, doc)
+    if plot is not None:
+        from kinfu_cli.report.poi_plot import plot_pois
+
+        plot_pois(plot, traj, det, title=f"{Path(str(source)).name} ({algorithm})")
+    if as_json:
+        click.echo(json.dumps(doc, indent=2))
+    elif not quiet:
+        extra = f", K = {det.n_components_} Gaussians" if algorithm == "gmm-as" else ""
+        click.echo(f"{len(det.pois_)} POI(s) from {len(traj)} samples ({algorithm}{extra}) -> {output}")
+        for p in det.pois_:
+            x, y, z = p.position
+            click.echo(f"  #{p.id}: ({x:.3f}, {y:.3f}, {z:.3f}) m at t = {p.time:.2f} s, saliency {p.saliency:.4g}")
