@@ -19,8 +19,17 @@ from __future__ import annotations
 
 import math
 
+import os
+
+import numba
 import numpy as np
 from numba import njit, prange
+
+# The GNU OpenMP layer spins at every fork/join; on a machine shared with other processes a descheduled
+# spinning thread makes each small parallel kernel cost tens of milliseconds. numba's own workqueue
+# pool does not spin. (Honours an explicit NUMBA_THREADING_LAYER.)
+if "NUMBA_THREADING_LAYER" not in os.environ:
+    numba.config.THREADING_LAYER = "workqueue"
 
 B = 8  # block edge in voxels
 B3 = B * B * B
@@ -409,38 +418,50 @@ def labels_dense(nb, dims, block_idx, block_w, pool_v, pool_w):
 
 @njit(cache=True, parallel=True)
 def dense_box(lo, hi, block_idx, block_w, pool_v, pool_w, pool_c, want_color):
-    """Dense v (float32), w (uint8) and colour (uint8, or empty) over voxel box [lo, hi)."""
+    """Dense v (float32), w (uint8) and colour (uint8, or empty) over voxel box [lo, hi), copied block by block."""
     sx, sy, sz = hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]
     tv = np.zeros((sx, sy, sz), dtype=np.float32)
     tw = np.zeros((sx, sy, sz), dtype=np.uint8)
     has_c = want_color and pool_c.shape[0] > 0
     tc = np.zeros((sx if has_c else 0, sy, sz, 3), dtype=np.uint8)
-    for x in prange(sx):
-        gx = lo[0] + x
-        bx = gx // B
-        lx = gx - bx * B
-        for y in range(sy):
-            gy = lo[1] + y
-            by = gy // B
-            ly = gy - by * B
-            for z in range(sz):
-                gz = lo[2] + z
-                bz = gz // B
-                lz = gz - bz * B
+    if sx <= 0 or sy <= 0 or sz <= 0:
+        return tv, tw, tc
+    bx0 = lo[0] // B
+    bx1 = (hi[0] - 1) // B + 1
+    by0 = lo[1] // B
+    by1 = (hi[1] - 1) // B + 1
+    bz0 = lo[2] // B
+    bz1 = (hi[2] - 1) // B + 1
+    for bx in prange(bx0, bx1):
+        x0 = max(bx * B, lo[0])
+        x1 = min(bx * B + B, hi[0])
+        for by in range(by0, by1):
+            y0 = max(by * B, lo[1])
+            y1 = min(by * B + B, hi[1])
+            for bz in range(bz0, bz1):
+                z0 = max(bz * B, lo[2])
+                z1 = min(bz * B + B, hi[2])
                 i = block_idx[bx, by, bz]
                 if i < 0:
                     bw = block_w[bx, by, bz]
                     if bw > 0:
-                        tv[x, y, z] = 1.0
-                        tw[x, y, z] = bw
-                else:
-                    k = lx * 64 + ly * 8 + lz
-                    tv[x, y, z] = pool_v[i, k] / V_SCALE
-                    tw[x, y, z] = pool_w[i, k]
-                    if has_c:
-                        tc[x, y, z, 0] = pool_c[i, k, 0]
-                        tc[x, y, z, 1] = pool_c[i, k, 1]
-                        tc[x, y, z, 2] = pool_c[i, k, 2]
+                        for gx in range(x0, x1):
+                            for gy in range(y0, y1):
+                                for gz in range(z0, z1):
+                                    tv[gx - lo[0], gy - lo[1], gz - lo[2]] = 1.0
+                                    tw[gx - lo[0], gy - lo[1], gz - lo[2]] = bw
+                    continue
+                for gx in range(x0, x1):
+                    for gy in range(y0, y1):
+                        kb = (gx - bx * B) * 64 + (gy - by * B) * 8 - bz * B
+                        for gz in range(z0, z1):
+                            k = kb + gz
+                            tv[gx - lo[0], gy - lo[1], gz - lo[2]] = pool_v[i, k] / V_SCALE
+                            tw[gx - lo[0], gy - lo[1], gz - lo[2]] = pool_w[i, k]
+                            if has_c:
+                                tc[gx - lo[0], gy - lo[1], gz - lo[2], 0] = pool_c[i, k, 0]
+                                tc[gx - lo[0], gy - lo[1], gz - lo[2], 1] = pool_c[i, k, 1]
+                                tc[gx - lo[0], gy - lo[1], gz - lo[2], 2] = pool_c[i, k, 2]
     return tv, tw, tc
 
 
@@ -691,3 +712,21 @@ def raycast_kernel(dims, block_idx, block_w, pool_v, pool_w, origin, vs, trunc,
             if not hit:
                 state[pv, pu] = 0 if any_unknown else -1
     return depth, norms, verts, state
+
+
+@njit(cache=True, parallel=True)
+def occupied_blocks(block_idx, pool_v, pool_w):
+    """Per block: True when it stores a known voxel with v <= 0 (only such blocks can hold a surface)."""
+    nbx, nby, nbz = block_idx.shape
+    out = np.zeros((nbx, nby, nbz), dtype=np.bool_)
+    for bx in prange(nbx):
+        for by in range(nby):
+            for bz in range(nbz):
+                i = block_idx[bx, by, bz]
+                if i < 0:
+                    continue
+                for k in range(B3):
+                    if pool_w[i, k] > 0 and pool_v[i, k] <= 0:
+                        out[bx, by, bz] = True
+                        break
+    return out

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-CHUNK = 96  # voxels per chunk edge
+CHUNK = 48  # voxels per chunk edge (chunks without surface blocks are skipped)
 
 
 def _known_cubes_mask(known: np.ndarray) -> np.ndarray:
@@ -26,11 +26,13 @@ def surface_arrays(vol, lo=None, hi=None):
     (N, 3) uint8 of the v = 0 surface inside the voxel box [lo, hi) (default: everywhere)."""
     from skimage.measure import marching_cubes
 
-    box = vol.surface_block_box()
     empty = (np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros((0, 3)), np.zeros((0, 3), np.uint8))
-    if box is None:
+    sblocks = vol.surface_blocks()
+    ib = np.argwhere(sblocks)
+    if ib.size == 0:
         return empty
-    blo, bhi = box
+    blo = ib.min(axis=0) * 8
+    bhi = np.minimum((ib.max(axis=0) + 1) * 8, vol.shape)
     if lo is not None:
         blo = np.maximum(blo, np.asarray(lo, np.int64))
     if hi is not None:
@@ -47,7 +49,7 @@ def surface_arrays(vol, lo=None, hi=None):
                 c_hi = np.minimum(c_lo + CHUNK + 1, bhi)
                 b0 = c_lo // B
                 b1 = (c_hi + B - 1) // B
-                if not np.any(vol.block_idx[b0[0]:b1[0], b0[1]:b1[1], b0[2]:b1[2]] >= 0):
+                if not np.any(sblocks[b0[0]:b1[0], b0[1]:b1[1], b0[2]:b1[2]]):
                     continue
                 tv, tw, tc = vol.tsdf_weights(c_lo, c_hi, color=True)
                 known = tw > 0
