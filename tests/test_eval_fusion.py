@@ -221,3 +221,36 @@ def test_bad_input_is_one_line_exit_2(case, gt, fused_dir, tmp_path):
     assert "Traceback" not in res.output
     assert not out.exists()
     assert not list(tmp_path.glob(".res.*"))
+
+
+def test_zbuffer_visibility_agrees_with_exact_occlusion_rays(gt):
+    """visible_mask (one rendered depth image per pose) vs casting a ray from the camera to every sample."""
+    import open3d as o3d
+
+    from kinfu_cli.evaluation.reconstruction import _raycasting_scene, sample_surface, visible_mask
+
+    m = gt.mesh("before")
+    v, f = np.asarray(m.vertices), np.asarray(m.triangles)
+    scene = _raycasting_scene(v, f)
+    pts, nrm = sample_surface(v, f, spacing=0.01, seed=1)
+    keep = np.all(np.abs(pts[:, :2]) < 1.0, axis=1)  # the table and the floor around it
+    pts, nrm = pts[keep], nrm[keep]
+    poses = gt.poses[:24:3]
+    approx = visible_mask(pts, nrm, scene, poses, gt.K, gt.width, gt.height)
+    exact = np.zeros(len(pts), dtype=bool)
+    for T in poses:
+        pc = (pts - T[:3, 3]) @ T[:3, :3]
+        z = pc[:, 2]
+        u = np.rint(gt.K[0, 0] * pc[:, 0] / z + gt.K[0, 2])
+        w = np.rint(gt.K[1, 1] * pc[:, 1] / z + gt.K[1, 2])
+        ok = (z >= 0.3) & (z <= 4.0) & (u >= 0) & (u < gt.width) & (w >= 0) & (w < gt.height)
+        ok &= np.einsum("ij,ij->i", nrm, T[:3, 3] - pts) > 0
+        d = pts[ok] - T[:3, 3]
+        rays = np.hstack([np.broadcast_to(T[:3, 3], d.shape), d]).astype(np.float32)
+        tfar = 1.0 - 0.002 / np.linalg.norm(d, axis=1)  # stop 2 mm short of the sample itself
+        hit = scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy()
+        exact[np.flatnonzero(ok)[hit >= tfar]] = True
+    assert exact.sum() > 5000
+    agree = np.mean(approx == exact)
+    assert agree >= 0.995, agree  # measured 0.999
+    assert np.mean(approx[exact]) >= 0.99  # what is truly visible is found (measured 0.997)

@@ -183,13 +183,15 @@ class ObjectMeasuresResult:
     plane: np.ndarray
     plane_truth: np.ndarray
     mean_abs: float
-    std: float
+    std: float | None
     per_measure: dict
     settings: dict = field(default_factory=dict)
 
     def to_json(self) -> dict:
         tilt = float(np.degrees(np.arccos(np.clip(abs(self.plane[:3] @ self.plane_truth[:3]), 0, 1))))
-        return {"objects": self.objects, "mean_abs": self.mean_abs, "std": self.std, "per_measure": self.per_measure,
+        measured = sum(1 for o in self.objects if o["error"] is not None)
+        return {"objects": self.objects, "objects_measured": measured, "objects_total": len(self.objects),
+                "mean_abs": self.mean_abs, "std": self.std, "per_measure": self.per_measure,
                 "table_plane": {"fitted": self.plane.tolist(), "true": self.plane_truth.tolist(),
                                 "tilt_deg": tilt, "offset": float(self.plane[3] - self.plane_truth[3])},
                 "paper_table_1": PAPER_TABLE_1, "settings": self.settings}

@@ -412,6 +412,10 @@ def report_json_of(path: str | os.PathLike) -> dict | None:
 
 
 # ---------------------------------------------------------------------------------------------- the whole evaluation
+POSE_MODE_LABELS = {"forced": "robot kinematics (forced)", "icp": "egomotion (icp)",
+                    "hint": "icp, kinematics hint", "topic": "pose topic"}
+
+
 def evaluate_fusion(path, ground_truth, state: str = "after", threshold: float = 0.01, spacing: float = 0.005,
                     margin: float = 0.02, min_height: float = 0.005, footprint: str = "rect", use_volume: bool = True,
                     seed: int = 0, quiet: bool = True) -> dict:
@@ -421,6 +425,12 @@ def evaluate_fusion(path, ground_truth, state: str = "after", threshold: float =
     from kinfu_cli.progress import progress
     from kinfu_cli.sim.scenario import load_ground_truth
 
+    for name, val in (("--threshold", threshold), ("--spacing", spacing)):
+        if not (isinstance(val, (int, float)) and math.isfinite(val) and val > 0):
+            raise ConfigError(f"{name}: expected a positive distance in metres, got {val}")
+    for name, val in (("--margin", margin), ("--min-height", min_height)):
+        if not (isinstance(val, (int, float)) and math.isfinite(val) and val >= 0):
+            raise ConfigError(f"{name}: expected a distance >= 0 m, got {val}")
     t0 = time.perf_counter()
     gt = rec = score = measures = None
     for step in progress(["ground truth", "reconstruction", "distances", "objects"], total=4, desc="eval fusion",
@@ -436,18 +446,34 @@ def evaluate_fusion(path, ground_truth, state: str = "after", threshold: float =
             measures = object_measures(rec.vertices, gt, state, margin=margin, min_height=min_height,
                                        footprint=footprint)
     report = report_json_of(path)
-    tracking = (report or {}).get("pose_mode") or "as fused"
+    mode = (report or {}).get("pose_mode")
+    tracking = POSE_MODE_LABELS.get(mode, mode or "as fused")
+    objs = measures.to_json()
     doc = {
         "input": {"reconstruction": str(rec.source), "volume": str(rec.volume_path) if rec.volume_path else None,
                   "vertices": int(len(rec.vertices)), "triangles": int(len(rec.triangles)),
                   "ground_truth": str(gt.folder), "state": state, "pose_mode": tracking},
         "reconstruction": score.to_json(),
-        "objects": measures.to_json(),
-        "table_1": PAPER_TABLE_1 + [{"scenario": "this run", "tracking": tracking, "mean_abs": measures.mean_abs,
-                                     "std": measures.std}],
+        "objects": objs,
+        "table_1": PAPER_TABLE_1 + [{"scenario": "this run", "tracking": tracking, "mean_abs": objs["mean_abs"],
+                                     "std": objs["std"], "objects_measured": objs["objects_measured"],
+                                     "objects_total": objs["objects_total"]}],
         "seconds": time.perf_counter() - t0,
     }
-    return doc
+    return _finite(doc)
+
+
+def _finite(obj):
+    """NaN / inf -> None throughout (strict JSON)."""
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if math.isfinite(obj) else None
+    if isinstance(obj, np.integer):
+        return int(obj)
+    return obj
 
 
 def _mm(x) -> str:
@@ -490,9 +516,11 @@ def format_fusion_tables(doc: dict) -> str:
     pl = o["table_plane"]
     lines.append(f"  table plane fit: tilt {pl['tilt_deg']:.2f} deg, offset {pl['offset'] * 1000:+.1f} mm")
     lines += ["", "Table 1 (Monica et al. RAS 2016): 3D object reconstruction errors (height, major and minor axis)",
-              "  scenario   tracking              mean abs. (m)   st. dev. (m)"]
+              "  scenario   tracking                   mean abs. (m)   st. dev. (m)"]
     for row in doc["table_1"]:
         ma = "-" if row["mean_abs"] is None or not math.isfinite(row["mean_abs"]) else f"{row['mean_abs']:.3f}"
         sd = "-" if row["std"] is None or not math.isfinite(row["std"]) else f"{row['std']:.3f}"
-        lines.append(f"  {str(row['scenario']):<10} {row['tracking']:<21} {ma:>13}   {sd:>12}")
+        n = (f"   ({row['objects_measured']}/{row['objects_total']} objects measured)"
+             if "objects_measured" in row else "")
+        lines.append(f"  {str(row['scenario']):<10} {row['tracking']:<26} {ma:>13}   {sd:>12}{n}")
     return "\n".join(lines)
