@@ -160,10 +160,20 @@ def bench_object_planning(seed: int = 0) -> dict:
             "standard_score": std.score}
 
 
+def bench_closed_loop(seed: int = 0, views: int = 5) -> dict:
+    from kinfu_cli.evaluation.objects_loop import compare_strategies
+
+    return compare_strategies(seed, views=views, log=lambda name, d: print(name, json.dumps(d), flush=True))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--quick", action="store_true", help="fewer fits/scenes, no 512^3 run")
+    ap.add_argument("--quick", action="store_true", help="fewer fits/scenes, no 512^3 run, no closed loop")
+    ap.add_argument("--loop-only", action="store_true", help="only the closed-loop comparison")
     args = ap.parse_args()
+    if args.loop_only:
+        print(json.dumps(bench_closed_loop(0), indent=2))
+        return
     out = {"superquadric": bench_superquadric(15 if args.quick else 30)}
     print(json.dumps(out, indent=2), flush=True)
     out["scenes"] = bench_scenes([0] if args.quick else [0, 1, 2, 3, 4, 5])
@@ -173,6 +183,8 @@ def main() -> None:
     if not args.quick:
         out["segment_512"] = bench_segment_512(0)
         print(json.dumps(out["segment_512"], indent=2), flush=True)
+        out["closed_loop"] = bench_closed_loop(0)
+        print(json.dumps(out["closed_loop"], indent=2), flush=True)
 
 
 if __name__ == "__main__":
