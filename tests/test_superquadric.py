@@ -86,3 +86,28 @@ def test_degenerate_segments_raise_clear_errors():
         fit_superquadric(line, outlier_filter=False)
     with pytest.raises(SegmentError, match="finite"):
         fit_superquadric(np.full((20, 3), np.nan))
+
+
+def test_multi_superquadric_splits_a_t_shape_but_not_a_box():
+    from kinfu_cli.segmentation.multi_superquadric import fit_multi_superquadric
+
+    rng = np.random.default_rng(0)
+
+    def box(half, center, n):
+        sq = Superquadric(np.array(half), np.array([0.1, 0.1]), np.array(center), np.eye(3))
+        return sq, sq.sample_surface(n, rng)[0]
+
+    handle, ph = box([0.015, 0.015, 0.10], [0, 0, 0.10], 3000)
+    head, pk = box([0.06, 0.02, 0.02], [0, 0, 0.22], 2000)
+    pts = np.vstack([ph[head.inside_outside(ph) > 1], pk[handle.inside_outside(pk) > 1]])
+    pts += rng.normal(scale=0.002, size=pts.shape)
+    single = fit_superquadric(pts)
+    multi = fit_multi_superquadric(pts)
+    assert len(multi.parts) >= 2 and len(multi.planes) == len(multi.parts) - 1
+    # every part fits its points better than the single superquadric fits the whole T
+    assert max(p.residual for p in multi.parts) < single.residual
+    # one part is the lower handle: about 3 x 3 cm across
+    dims = sorted((np.sort(2 * p.superquadric.size) for p in multi.parts), key=lambda d: d[1])
+    assert np.allclose(dims[0][:2], 0.03, atol=0.006)
+    _, pb = box([0.05, 0.03, 0.04], [0, 0, 0], 3000)
+    assert len(fit_multi_superquadric(pb + rng.normal(scale=0.002, size=pb.shape)).parts) == 1

@@ -57,6 +57,11 @@ def _up(value: str) -> tuple[float, float, float] | None:
 @click.option("--sq-exponent-bounds", default="0.1,1.9", show_default=True, help="Bounds 'lo,hi' of e1, e2.")
 @click.option("--sq-cost", type=click.Choice(["volume", "radial"]), default="volume", show_default=True,
               help="Superquadric residual: thesis eq. 7.2 (volume) or radial distance.")
+@click.option("--multi-sq", is_flag=True, help="Split poorly fitted segments into several superquadrics (ch. 8).")
+@click.option("--msq-trigger", type=float, default=0.005, show_default=True,
+              help="Single-fit RMS residual (m) above which --multi-sq splits.")
+@click.option("--msq-height", type=int, default=3, show_default=True, help="Superquadric tree height H.")
+@click.option("--msq-mu", type=float, default=0.03, show_default=True, help="Dimension difference mu (m).")
 @click.option("--seed", type=int, default=0, show_default=True, help="RANSAC / subsampling seed.")
 @click.option("--plot", is_flag=True, help="Also write segments.png and saliency.png.")
 @click.option("--json", "as_json", is_flag=True, help="Print segments.json to stdout.")
@@ -64,7 +69,8 @@ def _up(value: str) -> tuple[float, float, float] | None:
 def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution, spatial_importance,
             normal_importance, adjacency_radius, concavity_tolerance, sanity_angle, min_segment_points,
             plane_distance, up, up_tolerance, isolation_threshold, no_superquadrics, sq_max_points,
-            sq_exponent_bounds, sq_cost, seed, plot, as_json, quiet) -> None:
+            sq_exponent_bounds, sq_cost, multi_sq, msq_trigger, msq_height, msq_mu, seed, plot, as_json,
+            quiet) -> None:
     """Segment the surface of VOLUME (a fusion volume.npz or a ternary.npz): support plane, supervoxels
     merged across convex boundaries (LCCP idea), saliency = isolation x roundness (thesis eq. 3.12) and a
     superquadric per segment (Vezzani ch. 7). Writes OUTDIR/segments.ply (coloured by segment),
@@ -82,6 +88,10 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
 
     if resolution <= 0:
         raise ConfigError(f"--resolution: must be > 0 m, got {resolution}")
+    if not 0 <= msq_height <= 6:
+        raise ConfigError(f"--msq-height: expected 0..6, got {msq_height}")
+    if not msq_mu > 0:
+        raise ConfigError(f"--msq-mu: must be > 0 m, got {msq_mu}")
     if sq_max_points < 10:
         raise ConfigError(f"--sq-max-points: must be >= 10, got {sq_max_points}")
     params = SegmentationParams(seed_resolution=seed_resolution, spatial_importance=spatial_importance,
@@ -93,6 +103,7 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
     opts = SegmentOptions(resolution=resolution, min_weight=min_weight, isolation_threshold=isolation_threshold,
                           superquadrics=not no_superquadrics, sq_max_points=sq_max_points,
                           sq_exponent_bounds=_pair(sq_exponent_bounds, "--sq-exponent-bounds"), sq_cost=sq_cost,
+                          multi_sq=multi_sq, msq_trigger=msq_trigger, msq_height=msq_height, msq_mu=msq_mu,
                           segmentation=params)
     t0 = time.perf_counter()
     steps = progress(["load", "segment", "write"], total=3, desc="segment", quiet=quiet)

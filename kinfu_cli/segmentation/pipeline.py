@@ -31,6 +31,10 @@ class SegmentOptions:
     sq_exponent_bounds: tuple[float, float] = (0.1, 1.9)
     sq_cost: str = "volume"
     sq_min_points: int = 30
+    multi_sq: bool = False  # thesis ch. 8 split for segments whose single fit is poor
+    msq_trigger: float = 0.005  # single-superquadric RMS residual (m) above which the split is tried
+    msq_height: int = 3
+    msq_mu: float = 0.03
     segmentation: SegmentationParams = field(default_factory=SegmentationParams)
 
 
@@ -42,6 +46,7 @@ class SegmentResult:
     superquadrics: dict[int, SuperquadricFit | str]  # fit, or the reason there is none
     timing: dict[str, float]
     options: SegmentOptions
+    multi: dict = field(default_factory=dict)  # segment id -> MultiSuperquadric (with options.multi_sq)
 
     def most_salient(self) -> SegmentSaliency | None:
         return self.saliency[0] if self.saliency else None
@@ -60,6 +65,7 @@ class SegmentResult:
                 "isolation": s.isolation, "roundness": s.roundness, "saliency": s.saliency,
                 "superquadric": sq.to_json() if isinstance(sq, SuperquadricFit) else None,
                 **({"superquadric_error": sq} if isinstance(sq, str) else {}),
+                **({"multi_superquadric": self.multi[s.id].to_json()} if s.id in self.multi else {}),
             })
         if len(plane_pts):
             from kinfu_cli.segmentation.saliency import oriented_box
@@ -99,7 +105,22 @@ def analyse_cloud(points: np.ndarray, normals: np.ndarray, options: SegmentOptio
             except SegmentError as exc:
                 fits[s.id] = str(exc)
     timing["superquadrics"] = time.perf_counter() - t
-    return SegmentResult(SurfaceCloud(seg.points, seg.normals), seg, sal, fits, timing, options)
+    multi = {}
+    if options.superquadrics and options.multi_sq:
+        from kinfu_cli.segmentation.multi_superquadric import fit_multi_superquadric
+
+        t = time.perf_counter()
+        for sid, fit in fits.items():
+            if isinstance(fit, SuperquadricFit) and fit.residual > options.msq_trigger:
+                try:
+                    multi[sid] = fit_multi_superquadric(
+                        seg.points[seg.labels == sid], height=options.msq_height, mu=options.msq_mu,
+                        min_points=options.sq_min_points, max_points=options.sq_max_points,
+                        exponent_bounds=options.sq_exponent_bounds, cost=options.sq_cost)
+                except SegmentError:
+                    pass
+        timing["multi_superquadrics"] = time.perf_counter() - t
+    return SegmentResult(SurfaceCloud(seg.points, seg.normals), seg, sal, fits, timing, options, multi)
 
 
 def analyse_volume(volume, options: SegmentOptions | None = None) -> SegmentResult:
