@@ -99,7 +99,7 @@ def test_empty_block_skipping_matches_plain_traversal():
     g = TernaryGrid(lab, [-0.3, 0.1, 0.0], 0.015)
     fast = RayVolume.from_grid(g, block=8)
     plain = RayVolume.from_grid(g, block=1)
-    plain.block_empty[:] = 0  # no skipping at all
+    plain.block_dist[:] = 0  # no skipping at all
     o = np.array([-0.5, 0.05, 0.7])
     dirs = rng.normal(size=(4000, 3)) + [1.5, 1.0, -1.0]
     a = cast_rays(fast, o, dirs, center=[0.0, 0.4, 0.3], radius=0.25, through=True)

@@ -44,19 +44,29 @@ TERM_NAMES = ("unknown", "distance", "rear", "entropy")
 
 @dataclass
 class RayVolume:
-    """A TernaryGrid prepared for ray casting: C-contiguous labels plus the empty-block pyramid."""
+    """A TernaryGrid prepared for ray casting: C-contiguous labels plus, per block of `block`^3 voxels,
+    `block_dist`: 0 if the block holds a non-empty voxel, else the chessboard distance (in blocks) to the
+    nearest such block, so the cube of (2 d - 1)^3 blocks around it is all EMPTY and a ray can cross it
+    in one step."""
 
     labels: np.ndarray
     origin: np.ndarray
     voxel_size: float
     block: int
-    block_empty: np.ndarray
+    block_dist: np.ndarray
 
     @classmethod
     def from_grid(cls, grid: TernaryGrid, block: int = 8) -> "RayVolume":
+        from scipy.ndimage import distance_transform_cdt
+
         labels = np.ascontiguousarray(grid.labels, dtype=np.int8)
+        empty = _block_empty(labels, int(block))
+        if empty.all():
+            dist = np.full(empty.shape, 255, np.uint8)
+        else:
+            dist = np.minimum(distance_transform_cdt(empty, metric="chessboard"), 255).astype(np.uint8)
         return cls(labels, np.asarray(grid.origin, dtype=np.float64), float(grid.voxel_size), int(block),
-                   _block_empty(labels, int(block)))
+                   np.ascontiguousarray(dist))
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -100,133 +110,188 @@ def _block_empty(labels, B):
 
 
 @njit(cache=True, inline="always")
-def _tmax_axis(lo, i, step, vs, p, d):
-    if step == 0:
-        return np.inf
-    return (lo + (i + (1 if step > 0 else 0)) * vs - p) / d
+def _next_boundary(lo, i, step, vs, p, inv):
+    """t at which the ray leaves voxel i along one axis (inf when it does not move along it)."""
+    if step > 0:
+        return (lo + (i + 1) * vs - p) * inv
+    if step < 0:
+        return (lo + i * vs - p) * inv
+    return np.inf
+
+
+@njit(cache=True, inline="always")
+def _clampi(v, a, b):
+    return a if v < a else (b if v > b else v)
 
 
 @njit(cache=True)
-def _trace(labels, bempty, B, lo, vs, p, d, min_range, max_range, cen, r2, through, p_unknown, h_unknown,
-           vals):
+def _trace(labels, bdist, B, lo, vs, p, d, min_range, max_range, cen, r2, through, p_unknown, h_unknown, vals):
     """Walk one ray (p origin, d unit direction). Fills vals[0:4]; returns (class, t of the first hit)."""
     n0, n1, n2 = labels.shape
-    shape = (n0, n1, n2)
+    px, py, pz = p[0], p[1], p[2]
+    dx, dy, dz = d[0], d[1], d[2]
+    lx, ly, lz = lo[0], lo[1], lo[2]
+    # clip to the volume box and the range
     t0 = 0.0
     t1 = max_range
-    for a in range(3):
-        hi = lo[a] + shape[a] * vs
-        if abs(d[a]) < 1e-12:
-            if p[a] < lo[a] or p[a] > hi:
-                return CLS_EMPTY_EXIT, np.inf
-        else:
-            ta = (lo[a] - p[a]) / d[a]
-            tb = (hi - p[a]) / d[a]
-            if ta > tb:
-                ta, tb = tb, ta
-            t0 = max(t0, ta)
-            t1 = min(t1, tb)
+    eps = 1e-12
+    if abs(dx) < eps:
+        if px < lx or px > lx + n0 * vs:
+            return CLS_EMPTY_EXIT, np.inf
+        ivx = np.inf
+    else:
+        ivx = 1.0 / dx
+        ta, tb = (lx - px) * ivx, (lx + n0 * vs - px) * ivx
+        t0 = max(t0, min(ta, tb))
+        t1 = min(t1, max(ta, tb))
+    if abs(dy) < eps:
+        if py < ly or py > ly + n1 * vs:
+            return CLS_EMPTY_EXIT, np.inf
+        ivy = np.inf
+    else:
+        ivy = 1.0 / dy
+        ta, tb = (ly - py) * ivy, (ly + n1 * vs - py) * ivy
+        t0 = max(t0, min(ta, tb))
+        t1 = min(t1, max(ta, tb))
+    if abs(dz) < eps:
+        if pz < lz or pz > lz + n2 * vs:
+            return CLS_EMPTY_EXIT, np.inf
+        ivz = np.inf
+    else:
+        ivz = 1.0 / dz
+        ta, tb = (lz - pz) * ivz, (lz + n2 * vs - pz) * ivz
+        t0 = max(t0, min(ta, tb))
+        t1 = min(t1, max(ta, tb))
     if t0 >= t1:
         return CLS_EMPTY_EXIT, np.inf
-    idx = np.empty(3, np.int64)
-    step = np.empty(3, np.int64)
-    tmax = np.empty(3, np.float64)
-    tdel = np.empty(3, np.float64)
-    for a in range(3):
-        q = (p[a] + t0 * d[a] - lo[a]) / vs
-        ia = int(math.floor(q))
-        idx[a] = min(max(ia, 0), shape[a] - 1)
-        if d[a] > 1e-12:
-            step[a] = 1
-            tdel[a] = vs / d[a]
-        elif d[a] < -1e-12:
-            step[a] = -1
-            tdel[a] = -vs / d[a]
-        else:
-            step[a] = 0
-            tdel[a] = np.inf
-        tmax[a] = _tmax_axis(lo[a], idx[a], step[a], vs, p[a], d[a])
+    sx = 1 if dx > eps else (-1 if dx < -eps else 0)
+    sy = 1 if dy > eps else (-1 if dy < -eps else 0)
+    sz = 1 if dz > eps else (-1 if dz < -eps else 0)
+    tdx = abs(vs * ivx) if sx != 0 else np.inf
+    tdy = abs(vs * ivy) if sy != 0 else np.inf
+    tdz = abs(vs * ivz) if sz != 0 else np.inf
+    ix = _clampi(int(math.floor((px + t0 * dx - lx) / vs)), 0, n0 - 1)
+    iy = _clampi(int(math.floor((py + t0 * dy - ly) / vs)), 0, n1 - 1)
+    iz = _clampi(int(math.floor((pz + t0 * dz - lz) / vs)), 0, n2 - 1)
+    tmx = _next_boundary(lx, ix, sx, vs, px, ivx)
+    tmy = _next_boundary(ly, iy, sy, vs, py, ivy)
+    tmz = _next_boundary(lz, iz, sz, vs, pz, ivz)
     tcur = t0
     cls = CLS_EMPTY_EXIT
     thit = np.inf
     vis = 1.0
     prev_unknown_in_s = False
+    bvs = B * vs
     while True:
-        i, j, k = idx[0], idx[1], idx[2]
-        if bempty[i // B, j // B, k // B] != 0:
-            # cross the whole empty block
-            tb = np.inf
-            ax = 0
-            for a in range(3):
-                if step[a] != 0:
-                    blk = idx[a] // B
-                    edge = (blk + 1) * B if step[a] > 0 else blk * B
-                    tt = (lo[a] + edge * vs - p[a]) / d[a]
-                    if tt < tb:
-                        tb = tt
-                        ax = a
-            if tb >= t1:
+        bx, by, bz = ix // B, iy // B, iz // B
+        D = bdist[bx, by, bz]
+        if D > 0:
+            # the cube of blocks [b - D + 1, b + D - 1] is empty: leave it in one step
+            D1 = D - 1
+            ex = np.inf
+            if sx > 0:
+                ex = (lx + min((bx + D1 + 1) * B, n0) * vs - px) * ivx
+            elif sx < 0:
+                ex = (lx + max((bx - D1) * B, 0) * vs - px) * ivx
+            ey = np.inf
+            if sy > 0:
+                ey = (ly + min((by + D1 + 1) * B, n1) * vs - py) * ivy
+            elif sy < 0:
+                ey = (ly + max((by - D1) * B, 0) * vs - py) * ivy
+            ez = np.inf
+            if sz > 0:
+                ez = (lz + min((bz + D1 + 1) * B, n2) * vs - pz) * ivz
+            elif sz < 0:
+                ez = (lz + max((bz - D1) * B, 0) * vs - pz) * ivz
+            te = min(ex, min(ey, ez))
+            if te >= t1:
                 break
-            for a in range(3):
-                blk = idx[a] // B
-                if a == ax:
-                    idx[a] = (blk + 1) * B if step[a] > 0 else blk * B - 1
-                else:
-                    q = int(math.floor((p[a] + tb * d[a] - lo[a]) / vs))
-                    idx[a] = min(max(q, blk * B), min(blk * B + B, shape[a]) - 1)
-                if idx[a] < 0 or idx[a] >= shape[a]:
-                    return cls, thit
-                tmax[a] = _tmax_axis(lo[a], idx[a], step[a], vs, p[a], d[a])
-            tcur = tb
+            # voxel just past the cube's face; the other coordinates from the position (kept in the cube)
+            if ex <= ey and ex <= ez:
+                ix = (bx + D1 + 1) * B if sx > 0 else (bx - D1) * B - 1
+                iy = _clampi(int(math.floor((py + te * dy - ly) / vs)), max((by - D1) * B, 0),
+                             min((by + D1 + 1) * B, n1) - 1)
+                iz = _clampi(int(math.floor((pz + te * dz - lz) / vs)), max((bz - D1) * B, 0),
+                             min((bz + D1 + 1) * B, n2) - 1)
+            elif ey <= ez:
+                iy = (by + D1 + 1) * B if sy > 0 else (by - D1) * B - 1
+                ix = _clampi(int(math.floor((px + te * dx - lx) / vs)), max((bx - D1) * B, 0),
+                             min((bx + D1 + 1) * B, n0) - 1)
+                iz = _clampi(int(math.floor((pz + te * dz - lz) / vs)), max((bz - D1) * B, 0),
+                             min((bz + D1 + 1) * B, n2) - 1)
+            else:
+                iz = (bz + D1 + 1) * B if sz > 0 else (bz - D1) * B - 1
+                ix = _clampi(int(math.floor((px + te * dx - lx) / vs)), max((bx - D1) * B, 0),
+                             min((bx + D1 + 1) * B, n0) - 1)
+                iy = _clampi(int(math.floor((py + te * dy - ly) / vs)), max((by - D1) * B, 0),
+                             min((by + D1 + 1) * B, n1) - 1)
+            if ix < 0 or ix >= n0 or iy < 0 or iy >= n1 or iz < 0 or iz >= n2:
+                break
+            tmx = _next_boundary(lx, ix, sx, vs, px, ivx)
+            tmy = _next_boundary(ly, iy, sy, vs, py, ivy)
+            tmz = _next_boundary(lz, iz, sz, vs, pz, ivz)
+            tcur = te
             prev_unknown_in_s = False
             continue
-        lab = labels[i, j, k]
-        if lab != -1:
-            in_s = False
-            dist2 = 0.0
-            if tcur >= min_range:
-                cx = lo[0] + (i + 0.5) * vs - cen[0]
-                cy = lo[1] + (j + 0.5) * vs - cen[1]
-                cz = lo[2] + (k + 0.5) * vs - cen[2]
-                dist2 = cx * cx + cy * cy + cz * cz
-                in_s = dist2 <= r2
-            if cls == CLS_EMPTY_EXIT:
-                thit = tcur
+        # walk voxel by voxel through this non-empty block
+        bx1, by1, bz1 = bx, by, bz
+        while True:
+            lab = labels[ix, iy, iz]
+            if lab != -1:
+                in_s = False
+                dist2 = 0.0
+                if tcur >= min_range:
+                    qx = lx + (ix + 0.5) * vs - cen[0]
+                    qy = ly + (iy + 0.5) * vs - cen[1]
+                    qz = lz + (iz + 0.5) * vs - cen[2]
+                    dist2 = qx * qx + qy * qy + qz * qz
+                    in_s = dist2 <= r2
+                if cls == CLS_EMPTY_EXIT:
+                    thit = tcur
+                    if lab == 0:
+                        cls = CLS_UNKNOWN
+                        if in_s:
+                            vals[0] = 1.0
+                            vals[1] = 1.0 / (tcur * tcur)
+                    else:
+                        cls = CLS_OCCUPIED
+                    if not through:
+                        return cls, thit
                 if lab == 0:
-                    cls = CLS_UNKNOWN
                     if in_s:
-                        vals[0] = 1.0
-                        vals[1] = 1.0 / (tcur * tcur)
+                        vals[3] += vis * h_unknown
+                    vis *= 1.0 - p_unknown
+                    prev_unknown_in_s = in_s
+                    if vis < 1e-7:
+                        return cls, thit
                 else:
-                    cls = CLS_OCCUPIED
-                if not through:
-                    return cls, thit
-            if lab == 0:
-                if in_s:
-                    vals[3] += vis * h_unknown
-                vis *= 1.0 - p_unknown
-                prev_unknown_in_s = in_s
-                if vis < 1e-7:
+                    if prev_unknown_in_s:
+                        vals[2] = 1.0
                     return cls, thit
             else:
-                if prev_unknown_in_s:
-                    vals[2] = 1.0
+                prev_unknown_in_s = False
+            if tmx <= tmy and tmx <= tmz:
+                tcur = tmx
+                ix += sx
+                tmx += tdx
+                if ix < 0 or ix >= n0:
+                    return cls, thit
+            elif tmy <= tmz:
+                tcur = tmy
+                iy += sy
+                tmy += tdy
+                if iy < 0 or iy >= n1:
+                    return cls, thit
+            else:
+                tcur = tmz
+                iz += sz
+                tmz += tdz
+                if iz < 0 or iz >= n2:
+                    return cls, thit
+            if tcur >= t1:
                 return cls, thit
-        else:
-            prev_unknown_in_s = False
-        # next voxel
-        ax = 0
-        if tmax[1] < tmax[ax]:
-            ax = 1
-        if tmax[2] < tmax[ax]:
-            ax = 2
-        tcur = tmax[ax]
-        if tcur >= t1:
-            break
-        idx[ax] += step[ax]
-        if idx[ax] < 0 or idx[ax] >= shape[ax]:
-            break
-        tmax[ax] += tdel[ax]
+            if ix // B != bx1 or iy // B != by1 or iz // B != bz1:
+                break
     return cls, thit
 
 
@@ -268,7 +333,7 @@ def cast_rays(vol: RayVolume, origins: np.ndarray, dirs: np.ndarray, *, min_rang
     cls = np.empty(n, np.int8)
     t = np.empty(n, np.float64)
     terms = np.empty((n, N_TERMS), np.float64)
-    _cast_kernel(vol.labels, vol.block_empty, vol.block, vol.origin, vol.voxel_size, origins, dirs,
+    _cast_kernel(vol.labels, vol.block_dist, vol.block, vol.origin, vol.voxel_size, origins, dirs,
                  float(min_range), float(min(max_range, 1e30)), np.asarray(center, dtype=np.float64).reshape(3),
                  float(radius), bool(through), float(p_unknown), cls, t, terms)
     return RayResults(cls, t, terms)
@@ -307,54 +372,28 @@ def _cone_bbox(ax, az, sin_a, f, c, size):
     return max(lo_p, 0), min(hi_p, size - 1)
 
 
-@njit(cache=True, inline="always")
-def _pixel_cell(M, uu, vv, fx, fy, cx, cy, cb, cbn2, r2, check, lu0, lv0, LW, LH):
-    """Lattice cell (in the group's base view) of pixel (uu, vv) of a view with relative rotation M,
-    or -1 if its ray cannot reach S (when `check`)."""
-    x = (uu - cx) / fx
-    y = (vv - cy) / fy
-    dx = M[0, 0] * x + M[0, 1] * y + M[0, 2]
-    dy = M[1, 0] * x + M[1, 1] * y + M[1, 2]
-    dz = M[2, 0] * x + M[2, 1] * y + M[2, 2]
-    if check:
-        nrm2 = dx * dx + dy * dy + dz * dz
-        proj = cb[0] * dx + cb[1] * dy + cb[2] * dz
-        if proj <= 0 or cbn2 - proj * proj / nrm2 > r2:
-            return -1
-    if dz <= 1e-12:
-        return -1
-    lu = int(math.floor(fx * dx / dz + cx + 0.5)) - lu0
-    lv = int(math.floor(fy * dy / dz + cy + 0.5)) - lv0
-    if lu < 0 or lv < 0 or lu >= LW or lv >= LH:
-        return -1
-    return lv * LW + lu
-
-
 @njit(cache=True, parallel=True)
-def _mark(Ms, win, vgroup, glat, goff, gcb, gcheck, fx, fy, cx, cy, r2, cells, npix):
-    for m in prange(Ms.shape[0]):
-        g = vgroup[m]
+def _mark_lattice(glat, goff, gcb, gcheck, fx, fy, cx, cy, r2, cells, gcount):
+    """Per group: lattice cells whose ray (in the base view) can reach S get 0, others -1; count them."""
+    for g in prange(goff.shape[0]):
+        lu0, lv0, LW, LH = glat[g, 0], glat[g, 1], glat[g, 2], glat[g, 3]
         cb = gcb[g]
         cbn2 = cb[0] * cb[0] + cb[1] * cb[1] + cb[2] * cb[2]
-        cnt = 0
-        for vv in range(win[m, 1], win[m, 3] + 1):
-            for uu in range(win[m, 0], win[m, 2] + 1):
-                c = _pixel_cell(Ms[m], uu, vv, fx, fy, cx, cy, cb, cbn2, r2, gcheck[g], glat[g, 0], glat[g, 1],
-                                glat[g, 2], glat[g, 3])
-                if c >= 0:
-                    cells[goff[g] + c] = 0
-                    cnt += 1
-        npix[m] = cnt
-
-
-@njit(cache=True, parallel=True)
-def _count_cells(cells, goff, gsize, out):
-    for g in prange(goff.shape[0]):
         n = 0
-        for c in range(goff[g], goff[g] + gsize[g]):
-            if cells[c] >= 0:
+        for c in range(LW * LH):
+            ok = True
+            if gcheck[g]:
+                x = (c % LW + lu0 - cx) / fx
+                y = (c // LW + lv0 - cy) / fy
+                proj = cb[0] * x + cb[1] * y + cb[2]
+                if proj <= 0 or cbn2 - proj * proj / (x * x + y * y + 1.0) > r2:
+                    ok = False
+            if ok:
+                cells[goff[g] + c] = 0
                 n += 1
-        out[g] = n
+            else:
+                cells[goff[g] + c] = -1
+        gcount[g] = n
 
 
 @njit(cache=True, parallel=True)
@@ -376,25 +415,49 @@ def _assign_rays(cells, goff, glat, ray_off, R0s, t0s, fx, fy, cx, cy, dirs, ori
 
 
 @njit(cache=True, parallel=True)
-def _accumulate(Ms, win, vgroup, glat, goff, gcb, gcheck, fx, fy, cx, cy, r2, cells, cls, terms, out_counts,
-                out_terms):
+def _accumulate(Ms, win, vgroup, glat, goff, fx, fy, cx, cy, cells, cls, terms, out_counts, out_terms, npix):
+    """Sum, per view, the results of the lattice rays nearest to its pixels (pixels inside its window)."""
     for m in prange(Ms.shape[0]):
         g = vgroup[m]
-        cb = gcb[g]
-        cbn2 = cb[0] * cb[0] + cb[1] * cb[1] + cb[2] * cb[2]
-        for a in range(3):
-            out_counts[m, a] = 0
-        for a in range(N_TERMS):
-            out_terms[m, a] = 0.0
+        M = Ms[m]
+        lu0, lv0, LW, LH = glat[g, 0], glat[g, 1], glat[g, 2], glat[g, 3]
+        off = goff[g]
+        c0 = c1 = c2 = 0
+        t0 = t1 = t2 = t3 = 0.0
+        n = 0
+        du0, du1, du2 = M[0, 0] / fx, M[1, 0] / fx, M[2, 0] / fx  # change of the ray per pixel along u
         for vv in range(win[m, 1], win[m, 3] + 1):
+            y = (vv - cy) / fy
+            x = (win[m, 0] - cx) / fx
+            dx = M[0, 0] * x + M[0, 1] * y + M[0, 2]
+            dy = M[1, 0] * x + M[1, 1] * y + M[1, 2]
+            dz = M[2, 0] * x + M[2, 1] * y + M[2, 2]
             for uu in range(win[m, 0], win[m, 2] + 1):
-                c = _pixel_cell(Ms[m], uu, vv, fx, fy, cx, cy, cb, cbn2, r2, gcheck[g], glat[g, 0], glat[g, 1],
-                                glat[g, 2], glat[g, 3])
-                if c >= 0:
-                    q = cells[goff[g] + c]
-                    out_counts[m, cls[q]] += 1
-                    for a in range(N_TERMS):
-                        out_terms[m, a] += terms[q, a]
+                if dz > 1e-12:
+                    iz = 1.0 / dz
+                    lu = int(math.floor(fx * dx * iz + cx + 0.5)) - lu0
+                    lv = int(math.floor(fy * dy * iz + cy + 0.5)) - lv0
+                    if lu >= 0 and lv >= 0 and lu < LW and lv < LH:
+                        q = cells[off + lv * LW + lu]
+                        if q >= 0:
+                            n += 1
+                            k = cls[q]
+                            if k == 0:
+                                c0 += 1
+                            elif k == 1:
+                                c1 += 1
+                            else:
+                                c2 += 1
+                            t0 += terms[q, 0]
+                            t1 += terms[q, 1]
+                            t2 += terms[q, 2]
+                            t3 += terms[q, 3]
+                dx += du0
+                dy += du1
+                dz += du2
+        out_counts[m, 0], out_counts[m, 1], out_counts[m, 2] = c0, c1, c2
+        out_terms[m, 0], out_terms[m, 1], out_terms[m, 2], out_terms[m, 3] = t0, t1, t2, t3
+        npix[m] = n
 
 
 @dataclass
@@ -458,6 +521,8 @@ def cast_views(vol: RayVolume, poses: np.ndarray, camera, center, radius: float,
         win = np.array([_pixel_window(poses[i, :3, :3], poses[i, :3, 3], cam, center, r_ext, restrict) for i in g],
                        dtype=np.int64).reshape(-1, 4)
         ok = (win[:, 2] >= win[:, 0]) & (win[:, 3] >= win[:, 1])
+        if progress_cb and not ok.all():
+            progress_cb(int((~ok).sum()))
         if not ok.any():
             continue
         # lattice window: the pixel windows' corners mapped into the base view (an affine map for a roll)
@@ -494,11 +559,9 @@ def _cast_batch(vol, cam, center, radius, r_ext, through, p_unknown, batch, out:
     R0s = np.ascontiguousarray(np.array([b[6] for b in batch], dtype=np.float64))
     t0s = np.ascontiguousarray(np.array([b[7] for b in batch], dtype=np.float64))
     r2 = r_ext * r_ext
-    cells = np.full(int(gsize.sum()), -1, np.int32)
-    npix = np.zeros(len(views), np.int64)
-    _mark(Ms, win, vgroup, glat, goff, gcb, gcheck, cam.fx, cam.fy, cam.cx, cam.cy, r2, cells, npix)
+    cells = np.empty(int(gsize.sum()), np.int32)
     gcount = np.zeros(len(batch), np.int64)
-    _count_cells(cells, goff, gsize, gcount)
+    _mark_lattice(glat, goff, gcb, gcheck, cam.fx, cam.fy, cam.cx, cam.cy, r2, cells, gcount)
     ray_off = np.concatenate([[0], np.cumsum(gcount)[:-1]]).astype(np.int64)
     n = int(gcount.sum())
     dirs = np.empty((n, 3), np.float64)
@@ -507,13 +570,13 @@ def _cast_batch(vol, cam, center, radius, r_ext, through, p_unknown, batch, out:
     cls = np.empty(n, np.int8)
     tt = np.empty(n, np.float64)
     tm = np.empty((n, N_TERMS), np.float64)
-    _cast_kernel(vol.labels, vol.block_empty, vol.block, vol.origin, vol.voxel_size, origins, dirs,
+    _cast_kernel(vol.labels, vol.block_dist, vol.block, vol.origin, vol.voxel_size, origins, dirs,
                  cam.min_range, min(cam.max_range, 1e30), center, float(radius), bool(through), float(p_unknown),
                  cls, tt, tm)
     counts = np.zeros((len(views), 3), np.int64)
     terms = np.zeros((len(views), N_TERMS), np.float64)
-    _accumulate(Ms, win, vgroup, glat, goff, gcb, gcheck, cam.fx, cam.fy, cam.cx, cam.cy, r2, cells, cls, tm,
-                counts, terms)
+    npix = np.zeros(len(views), np.int64)
+    _accumulate(Ms, win, vgroup, glat, goff, cam.fx, cam.fy, cam.cx, cam.cy, cells, cls, tm, counts, terms, npix)
     out.counts[views] = counts
     out.terms[views] = terms
     out.rays[views] = npix
