@@ -151,8 +151,12 @@ def test_after_state_shows_the_unfused_move(rec, gt):
     res = object_measures(rec.vertices, gt, "after")
     rows = {r["id"]: r for r in res.objects}
     moved = [o["id"] for o in gt.objects if "center_before" in o]
-    assert moved and all(rows[i]["error"] is None for i in moved)
+    assert moved
+    for i in moved:  # absent there: too few points to measure, or only a low skirt of table noise
+        r = rows[i]
+        assert r["error"] is None or r["measured"]["height"] < 0.5 * r["true"]["height"], r
     assert all(rows[i]["error"] is not None for i in rows if i not in moved)
+    assert all(abs(rows[i]["error"]["height"]) <= 0.01 for i in rows if i not in moved)
 
 
 def test_footprint_axes_of_a_rotated_rectangle():
@@ -179,6 +183,10 @@ def test_cli_json_and_results_file(fused_dir, gt, tmp_path):
     assert doc["reconstruction"]["volume"]["counts"]["unknown"] > 0
     assert doc["table_1"][-1]["scenario"] == "this run"
     assert doc["table_1"][-1]["mean_abs"] == pytest.approx(doc["objects"]["mean_abs"])
+    assert doc["table_1"][-1]["objects_measured"] == doc["table_1"][-1]["objects_total"] == 4
+    # each object was seen from the scan arc, none all around except the box (measured: 100 / 82 / 71 / 90 %)
+    shares = [o["surface_seen_share"] for o in doc["objects"]["objects"]]
+    assert all(0.5 < s <= 1.0 for s in shares) and min(shares) < 0.9
     text = format_fusion_tables(doc)
     assert "robot kinematics" in text and "this run" in text and "completeness" in text
 

@@ -197,6 +197,13 @@ class ObjectMeasuresResult:
                 "paper_table_1": PAPER_TABLE_1, "settings": self.settings}
 
 
+def _seen_share(o: GroundTruthObject, plane: np.ndarray, samples: np.ndarray, seen: np.ndarray) -> float | None:
+    """Share of the true-surface samples on this object (in its box, >= 2 mm above the table) that were seen."""
+    s = np.asarray(samples, dtype=np.float64)
+    on = o.in_box(s, 0.002) & (s @ plane[:3] + plane[3] >= 0.002)
+    return float(np.mean(np.asarray(seen)[on])) if on.any() else None
+
+
 def _std(v) -> float | None:
     """Sample standard deviation of the signed errors (the paper's st. dev. exceeds its mean abs. error, so it is
     not the spread of the absolute values); 0 for one value, None for none."""
@@ -206,9 +213,14 @@ def _std(v) -> float | None:
     return float(np.std(v, ddof=1)) if v.size > 1 else 0.0
 
 
-def object_measures(points: np.ndarray, gt, state: str = "after", margin: float = 0.02, min_height: float = 0.01,
-                    footprint: str = "rect", min_points: int = 20) -> ObjectMeasuresResult:
-    """Table 1 measures of every object present in `state`, from the reconstructed points (mesh vertices)."""
+def object_measures(points: np.ndarray, gt, state: str = "after", margin: float = 0.02, min_height: float = 0.005,
+                    footprint: str = "rect", min_points: int = 20, surface: tuple | None = None
+                    ) -> ObjectMeasuresResult:
+    """Table 1 measures of every object present in `state`, from the reconstructed points (mesh vertices).
+
+    surface: optional (samples (N, 3), seen (N,) bool) of the true surface (reconstruction.observed_surface); each
+    object row then gets `surface_seen_share`, the share of its true surface (bottom excluded) the cameras saw.
+    """
     if not margin >= 0:
         raise ConfigError(f"--margin: expected a distance >= 0 m, got {margin}")
     if not min_height >= 0:
@@ -225,6 +237,8 @@ def object_measures(points: np.ndarray, gt, state: str = "after", margin: float 
         sel = o.in_box(pts, margin, margin_z=margin + VERTICAL_SLACK) & (height > min_height)
         true = measure(o.vertices[(o.vertices @ truth_plane[:3] + truth_plane[3]) > -1e-6], truth_plane, footprint)
         row = {"id": o.id, "shape": o.shape, "points": int(np.count_nonzero(sel)), "true": true}
+        if surface is not None:
+            row["surface_seen_share"] = _seen_share(o, truth_plane, *surface)
         if row["points"] >= min_points:
             got = measure(pts[sel], plane, footprint)
             row["measured"] = got

@@ -317,15 +317,20 @@ def _in_box(p: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
 
 @dataclass
 class ObservedSurface:
-    """True-surface samples of one state: `observed` (visible from the state's camera poses and inside
-    `bounds`), `in_bounds` (all samples inside bounds), how many were drawn in all, and the settings."""
+    """True-surface samples of one state: `in_bounds` (the samples inside `bounds`), `seen` (which of them are
+    visible from the state's camera poses), how many were drawn in all, and the settings."""
 
-    observed: np.ndarray
     in_bounds: np.ndarray
+    seen: np.ndarray
     total: int
     frames: int
     spacing: float
     bounds: tuple
+
+    @property
+    def observed(self) -> np.ndarray:
+        """The samples the cameras saw (inside bounds)."""
+        return self.in_bounds[self.seen]
 
 
 def observed_surface(gt, state: str, bounds: tuple, spacing: float = DEFAULT_SPACING,
@@ -343,8 +348,7 @@ def observed_surface(gt, state: str, bounds: tuple, spacing: float = DEFAULT_SPA
     keep = _in_box(samples, lo, hi)
     seen = visible_mask(samples[keep], normals[keep], scene, gt.poses[frames], gt.K, gt.width, gt.height,
                         float(cam.get("min_range", 0.3)), float(cam.get("max_range", 4.0)), visibility_tolerance)
-    return ObservedSurface(samples[keep][seen], samples[keep], int(len(samples)), int(len(frames)), float(spacing),
-                           (lo, hi))
+    return ObservedSurface(samples[keep], seen, int(len(samples)), int(len(frames)), float(spacing), (lo, hi))
 
 
 def reconstruction_bounds(rec: Reconstruction, margin: float = 0.05) -> tuple[np.ndarray, np.ndarray]:
@@ -432,7 +436,7 @@ def evaluate_fusion(path, ground_truth, state: str = "after", threshold: float =
         if not (isinstance(val, (int, float)) and math.isfinite(val) and val >= 0):
             raise ConfigError(f"{name}: expected a distance >= 0 m, got {val}")
     t0 = time.perf_counter()
-    gt = rec = score = measures = None
+    gt = rec = score = measures = surface = None
     for step in progress(["ground truth", "reconstruction", "distances", "objects"], total=4, desc="eval fusion",
                          quiet=quiet):
         if step == "ground truth":
@@ -441,10 +445,12 @@ def evaluate_fusion(path, ground_truth, state: str = "after", threshold: float =
         elif step == "reconstruction":
             rec = load_reconstruction(path, use_volume=use_volume)
         elif step == "distances":
-            score = score_reconstruction(rec, gt, state, threshold=threshold, spacing=spacing, seed=seed)
+            surface = observed_surface(gt, state, reconstruction_bounds(rec), spacing, seed=seed)
+            score = score_reconstruction(rec, gt, state, threshold=threshold, spacing=spacing, seed=seed,
+                                         surface=surface)
         else:
             measures = object_measures(rec.vertices, gt, state, margin=margin, min_height=min_height,
-                                       footprint=footprint)
+                                       footprint=footprint, surface=(surface.in_bounds, surface.seen))
     report = report_json_of(path)
     mode = (report or {}).get("pose_mode")
     tracking = POSE_MODE_LABELS.get(mode, mode or "as fused")
@@ -507,12 +513,15 @@ def format_fusion_tables(doc: dict) -> str:
                   f"of the visible surface, {(v['surface_in_grid_known_share'] or 0) * 100:.1f} % of all true "
                   f"surface in the grid"]
     o = doc["objects"]
-    lines += ["", "Objects (mm)   shape      points   height true/err    major true/err    minor true/err"]
+    lines += ["", "Objects (mm)   shape      points   height true/err    major true/err    minor true/err   seen"]
     for row in o["objects"]:
         t, e = row["true"], row["error"] or {}
+        seen = row.get("surface_seen_share")
         lines.append(f"  {row['id']:<12} {row['shape']:<9} {row['points']:6d}   {_mm(t['height'])} {_mm(e.get('height'))}"
                      f"    {_mm(t['major'])} {_mm(e.get('major'))}    {_mm(t['minor'])} {_mm(e.get('minor'))}"
+                     + (f"   {seen * 100:3.0f} %" if seen is not None else "      -")
                      + ("   (not measured)" if row["error"] is None else ""))
+    lines.append("  (seen: share of the object's true surface, bottom excluded, visible from the true camera poses)")
     pl = o["table_plane"]
     lines.append(f"  table plane fit: tilt {pl['tilt_deg']:.2f} deg, offset {pl['offset'] * 1000:+.1f} mm")
     lines += ["", "Table 1 (Monica et al. RAS 2016): 3D object reconstruction errors (height, major and minor axis)",
