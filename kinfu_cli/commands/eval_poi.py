@@ -47,7 +47,8 @@ def command(dataset_dir, algorithm, speed, noise, seed, workers, as_json, quiet,
 
     --json prints, for a single (algorithm, speed, noise) setting, one object
     {"algorithm", "speed", "noise", "groups": {"<subfolder>": {"precision", "recall", "tp", "fp", "fn",
-    "changes", "tasks"}}, "overall": {...}, "seconds_per_task": {"median", "max"}}; for several
+    "changes", "tasks"}}, "overall": {...}, "seconds_per_task": {"median", "max", "cpu_median", "cpu_max"}};
+    for several
     settings, {"results": [one such object per setting]} (Table 3 rows, then Table 4 rows, per
     algorithm).
 
