@@ -262,3 +262,32 @@ def test_zbuffer_visibility_agrees_with_exact_occlusion_rays(gt):
     agree = np.mean(approx == exact)
     assert agree >= 0.995, agree  # measured 0.999
     assert np.mean(approx[exact]) >= 0.99  # what is truly visible is found (measured 0.997)
+
+
+def test_fused_time_window_selects_the_true_poses(gt):
+    from kinfu_cli.evaluation.reconstruction import fused_window, state_frames
+
+    n_scan = gt.info["frames"]["scan"]
+    assert len(state_frames(gt, "before")) == n_scan
+    assert len(state_frames(gt, "after")) == len(gt.poses)
+    # the scan ends at 0.5 + 23 / 5 = 5.1 s, the after views start after the hand left (> 11 s)
+    assert list(state_frames(gt, "after", (None, 5.5))) == list(range(n_scan))
+    assert list(state_frames(gt, "after", (6.0, None))) == list(range(n_scan, len(gt.poses)))
+    assert len(state_frames(gt, "before", (6.0, None))) == 0
+    assert fused_window({"frames": {"start_s": None, "end_s": 5.5}}) == (None, 5.5)
+    assert fused_window({"frames": {"start_s": None, "end_s": None}}) is None
+
+
+def test_window_without_poses_of_the_state_is_refused(fused_dir, gt, tmp_path):
+    import shutil
+
+    out_dir = tmp_path / "fuse_late"
+    out_dir.mkdir()
+    shutil.copy(fused_dir / "mesh.ply", out_dir / "mesh.ply")
+    (out_dir / "report.json").write_text(json.dumps({"pose_mode": "forced", "frames": {"start_s": 6.0,
+                                                                                        "end_s": None}}))
+    res = CliRunner().invoke(cli, ["eval", "fusion", str(out_dir), "--ground-truth", str(gt.folder), "--state",
+                                   "before", "-o", str(tmp_path / "r.json"), "--quiet"])
+    assert res.exit_code == 2
+    assert "holds no ground-truth camera pose" in res.stderr and len(res.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "r.json").exists()

@@ -17,7 +17,9 @@ Both directions, as the usual accuracy / completeness metrics:
   surface (visible samples, and all samples inside the grid) whose voxel is known (w > 0).
 
 Which poses belong to a state: "before" = the initial-scan frames (`frames.scan` of changes.json), "after" = all
-frames (the after-change views look at the changed region; the rest of the table is the same in both states).
+frames (the after-change views look at the changed region; the rest of the table is the same in both states). When
+the input is a `kinfu fuse` folder whose report.json records a time window (--start / --end), only the poses inside
+it count: the observed region is what the fused frames saw.
 """
 
 from __future__ import annotations
@@ -127,18 +129,39 @@ def load_reconstruction(path: str | os.PathLike, use_volume: bool = True) -> Rec
     return Reconstruction(v, f, path)
 
 
-def state_frames(gt, state: str) -> np.ndarray:
-    """Indices of the ground-truth camera poses that saw the scene in `state` (see module docstring)."""
+def state_frames(gt, state: str, window: tuple | None = None) -> np.ndarray:
+    """Indices of the ground-truth camera poses that saw the scene in `state` (see module docstring), and, with
+    window = (start_s, end_s) in seconds after the recording start (either may be None), only those whose stamp
+    is inside it (the frames a `kinfu fuse --start/--end` run used)."""
     if state not in STATES:
         raise ConfigError(f"--state {state!r}: expected one of {', '.join(STATES)}")
     n = len(gt.poses)
     if n == 0:
         raise RecordingError(f"{gt.folder}/camera_poses.txt: no camera poses")
     scan = gt.info.get("frames", {}).get("scan")
+    idx = np.arange(n)
     if state == "before":
         n_scan = n if scan is None else int(scan)
-        return np.arange(min(max(n_scan, 1), n))
-    return np.arange(n)
+        idx = idx[: min(max(n_scan, 1), n)]
+    if window is not None:
+        t = (gt.stamps_ns[idx] - int(gt.info.get("t0_ns", gt.stamps_ns[0]))) * 1e-9
+        lo, hi = window
+        keep = np.ones(len(idx), dtype=bool)
+        if lo is not None:
+            keep &= t >= float(lo) - 1e-6
+        if hi is not None:
+            keep &= t <= float(hi) + 1e-6
+        idx = idx[keep]
+    return idx
+
+
+def fused_window(report: dict | None) -> tuple | None:
+    """(start_s, end_s) of the frames a `kinfu fuse` run used (its report.json "frames"), or None."""
+    fr = (report or {}).get("frames") or {}
+    lo, hi = fr.get("start_s"), fr.get("end_s")
+    if lo is None and hi is None:
+        return None
+    return lo, hi
 
 
 # ---------------------------------------------------------------------------------------------- geometry
@@ -334,14 +357,17 @@ class ObservedSurface:
 
 
 def observed_surface(gt, state: str, bounds: tuple, spacing: float = DEFAULT_SPACING,
-                     visibility_tolerance: float = 0.005, seed: int = 0, scene=None) -> ObservedSurface:
-    """Sample the true `state` mesh uniformly and keep what the state's camera poses saw (module docstring)
-    inside the box bounds = (lo, hi)."""
+                     visibility_tolerance: float = 0.005, seed: int = 0, scene=None,
+                     frames: np.ndarray | None = None) -> ObservedSurface:
+    """Sample the true `state` mesh uniformly and keep what the state's camera poses (or the given pose indices)
+    saw (module docstring) inside the box bounds = (lo, hi)."""
     mesh = gt.mesh(state)
     tv = np.asarray(mesh.vertices, dtype=np.float64)
     tf = np.asarray(mesh.triangles, dtype=np.int64)
     scene = scene if scene is not None else _raycasting_scene(tv, tf)
-    frames = state_frames(gt, state)
+    frames = state_frames(gt, state) if frames is None else np.asarray(frames, dtype=np.int64)
+    if len(frames) == 0:
+        raise RecordingError(f"{gt.folder}: no ground-truth camera pose of the {state} state was used")
     cam = gt.info.get("camera", {})
     samples, normals = sample_surface(tv, tf, spacing, seed=seed)
     lo, hi = (np.asarray(b, dtype=np.float64) for b in bounds)
@@ -436,29 +462,34 @@ def evaluate_fusion(path, ground_truth, state: str = "after", threshold: float =
         if not (isinstance(val, (int, float)) and math.isfinite(val) and val >= 0):
             raise ConfigError(f"{name}: expected a distance >= 0 m, got {val}")
     t0 = time.perf_counter()
-    gt = rec = score = measures = surface = None
+    gt = rec = score = measures = surface = frames = None
+    report = report_json_of(path)
+    window = fused_window(report)
     for step in progress(["ground truth", "reconstruction", "distances", "objects"], total=4, desc="eval fusion",
                          quiet=quiet):
         if step == "ground truth":
             gt = load_ground_truth(ground_truth)
-            state_frames(gt, state)  # checks --state and the poses before the heavy work
+            frames = state_frames(gt, state, window)  # checks --state and the poses before the heavy work
+            if len(frames) == 0:
+                raise ConfigError(f"{path}: the fused time window {window} s holds no ground-truth camera pose of "
+                                  f"the {state} state (use --state after?)")
         elif step == "reconstruction":
             rec = load_reconstruction(path, use_volume=use_volume)
         elif step == "distances":
-            surface = observed_surface(gt, state, reconstruction_bounds(rec), spacing, seed=seed)
+            surface = observed_surface(gt, state, reconstruction_bounds(rec), spacing, seed=seed, frames=frames)
             score = score_reconstruction(rec, gt, state, threshold=threshold, spacing=spacing, seed=seed,
                                          surface=surface)
         else:
             measures = object_measures(rec.vertices, gt, state, margin=margin, min_height=min_height,
                                        footprint=footprint, surface=(surface.in_bounds, surface.seen))
-    report = report_json_of(path)
     mode = (report or {}).get("pose_mode")
     tracking = POSE_MODE_LABELS.get(mode, mode or "as fused")
     objs = measures.to_json()
     doc = {
         "input": {"reconstruction": str(rec.source), "volume": str(rec.volume_path) if rec.volume_path else None,
                   "vertices": int(len(rec.vertices)), "triangles": int(len(rec.triangles)),
-                  "ground_truth": str(gt.folder), "state": state, "pose_mode": tracking},
+                  "ground_truth": str(gt.folder), "state": state, "pose_mode": tracking,
+                  "fused_window_s": list(window) if window else None},
         "reconstruction": score.to_json(),
         "objects": objs,
         "table_1": PAPER_TABLE_1 + [{"scenario": "this run", "tracking": tracking, "mean_abs": objs["mean_abs"],
