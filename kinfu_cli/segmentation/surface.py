@@ -131,18 +131,48 @@ def surface_from_labels(labels: np.ndarray, origin, voxel_size: float, *, resolu
 def surface_from_volume(volume, *, min_weight: float = 1.0, resolution: float | None = 0.01) -> SurfaceCloud:
     """From a fusion `TernaryVolume` (TSDF of the box around its surface blocks) or a `TernaryGrid` (labels)."""
     if hasattr(volume, "surface_block_box") and hasattr(volume, "tsdf_weights"):
-        box = volume.surface_block_box()
-        if box is None:
-            raise VolumeError("volume has no observed surface (no allocated blocks): nothing to segment")
-        lo, hi = (np.asarray(b, dtype=np.int64) for b in box)
-        v, w = volume.tsdf_weights(lo, hi)
-        origin = np.asarray(volume.origin, dtype=np.float64) + lo * float(volume.voxel_size)
-        return surface_from_tsdf(v, w, origin, volume.voxel_size, min_weight=min_weight, resolution=resolution)
+        return _surface_from_blocks(volume, min_weight, resolution)
     if hasattr(volume, "tsdf") and hasattr(volume, "weights"):
         return surface_from_tsdf(volume.tsdf(), volume.weights(), volume.origin, volume.voxel_size,
                                  min_weight=min_weight, resolution=resolution)
     labels = volume.labels() if callable(getattr(volume, "labels", None)) else volume.labels
     return surface_from_labels(labels, volume.origin, volume.voxel_size, resolution=resolution)
+
+
+def _surface_from_blocks(volume, min_weight: float, resolution: float | None, chunk: int = 64) -> SurfaceCloud:
+    """Marching cubes chunk by chunk over the box around the volume's surface blocks, skipping chunks
+    without allocated blocks (free space carved per block costs nothing here)."""
+    box = volume.surface_block_box()
+    if box is None:
+        raise VolumeError("volume has no observed surface (no allocated blocks): nothing to segment")
+    lo, hi = (np.asarray(b, dtype=np.int64) for b in box)
+    block_idx = getattr(volume, "block_idx", None)
+    bsize = int(np.ceil(np.array(volume.shape)[0] / block_idx.shape[0])) if block_idx is not None else 0
+    origin = np.asarray(volume.origin, dtype=np.float64)
+    vs = float(volume.voxel_size)
+    pts, nrm = [], []
+    for x0 in range(int(lo[0]), int(hi[0]), chunk):
+        for y0 in range(int(lo[1]), int(hi[1]), chunk):
+            for z0 in range(int(lo[2]), int(hi[2]), chunk):
+                c0 = np.array([x0, y0, z0])
+                c1 = np.minimum(c0 + chunk + 1, hi)  # one voxel of overlap: no crossing is lost
+                if block_idx is not None:
+                    b0, b1 = c0 // bsize, -(-c1 // bsize)
+                    if not (block_idx[b0[0]:b1[0], b0[1]:b1[1], b0[2]:b1[2]] >= 0).any():
+                        continue
+                v, w = volume.tsdf_weights(c0, c1)
+                if min(v.shape) < 2:
+                    continue
+                try:
+                    part = surface_from_tsdf(v, w, origin + c0 * vs, vs, min_weight=min_weight, resolution=None)
+                except VolumeError:
+                    continue
+                pts.append(part.points)
+                nrm.append(part.normals)
+    if not pts:
+        raise VolumeError("volume has no surface (no zero crossing between occupied and empty voxels)")
+    cloud = SurfaceCloud(np.concatenate(pts), np.concatenate(nrm))
+    return downsample(cloud, resolution) if resolution else cloud
 
 
 def downsample(cloud: SurfaceCloud, resolution: float) -> SurfaceCloud:
