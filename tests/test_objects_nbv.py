@@ -134,6 +134,13 @@ def test_object_plan_with_the_nbv_ray_caster(planned):
     assert plan.pose is not None and plan.score > 0
     assert plan.candidates_evaluated < plan.candidates_total
     assert ranking is not None
+    # the one-call entry point `kinfu nbv --mode objects` uses gives the same plan
+    from kinfu_cli.nbv.objects import plan_object_views_for_volume
+
+    again = plan_object_views_for_volume(grid, cam, score_threshold=0.0)
+    assert again.segment_id == plan.segment_id and again.score == plan.score
+    doc = again.to_json(top=3)
+    assert len(doc["pose"]) == 4 and len(doc["views"]) == 3 and doc["candidates_evaluated"] == plan.candidates_evaluated
 
 
 @pytest.mark.slow
