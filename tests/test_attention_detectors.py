@@ -202,4 +202,18 @@ def test_cli_poi_on_the_sample_recording(sample_dir, tmp_path):
     hand = np.array([c.get("hand_position", c["position"]) for c in doc["changes"]])
     pos = np.array([p["position"] for p in json.loads(out.read_text())["pois"]]).reshape(-1, 3)
     assert len(pos) >= len(hand)
-    assert np.linalg.norm(pos[:, None] - hand[None], axis=2).min(axis=0).max() < 0.2
+    assert np.linalg.norm(pos[:, None] - hand[None], axis=2).min(axis=0).max() < 0.05
+    # absolute stamps of the POIs fall inside the pauses of the changes (within 0.3 s)
+    stamps = sorted(p["stamp_ns"] for p in json.loads(out.read_text())["pois"])
+    for c in doc["changes"]:
+        assert min(abs(s - c["stamp_ns"]) for s in stamps) < 0.3e9
+
+
+def test_cli_poi_literal_reading_is_selectable(pnp_traj, tmp_path):
+    src, _ = pnp_traj
+    out = tmp_path / "lit.json"
+    res = CliRunner().invoke(cli, ["poi", str(src), "--literal", "-o", str(out), "--quiet"])
+    assert res.exit_code == 0, res.output
+    params = json.loads(out.read_text())["parameters"]
+    assert params["saliency"] == "literal" and params["poi_threshold"] == 2.5 and params["resample"] == 0
+    assert params["threshold_mode"] == "literal" and params["time_scale"] == 1.0

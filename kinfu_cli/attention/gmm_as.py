@@ -118,6 +118,16 @@ class GmmActivitySaliency:
         self.resample = resample
         self.noise_floor = noise_floor
 
+    #: The paper read literally: raw samples, t in seconds, sklearn's 1e-6 variance floor (σ = 1 mm),
+    #: eq. 13 on the spatial covariance, POITh 2.5 and Σ/2Λ as printed in Alg. 3.
+    LITERAL = {"saliency": "literal", "resample": 0, "time_scale": 1.0, "reg_space": 1e-3, "reg_time": 1e-3,
+               "noise_floor": 0.0, "poi_threshold": 2.5, "threshold_mode": "literal"}
+
+    @classmethod
+    def literal(cls, **overrides) -> "GmmActivitySaliency":
+        """A detector configured as the literal reading of the paper (for comparison)."""
+        return cls(**{**cls.LITERAL, **overrides})
+
     def get_params(self) -> dict:
         return {k: getattr(self, k) for k in (
             "poi_threshold", "neighbours", "bic_threshold", "max_components", "selection", "time_scale",

@@ -8,7 +8,8 @@ pois.json::
 
 Positions in metres in `frame`; time in seconds on the trajectory's clock; `radius` is the region of
 interest S(POI) around the position (0.2 m in the paper). ZVC POIs have `"gaussian": null`; GMM-AS
-Gaussians are in (x, y, z, t) with t in seconds.
+Gaussians are in (x, y, z, t) with t in seconds. Optional extra keys per POI: "stamp_ns" (absolute
+time, when the trajectory came from a recording), "component"/"threshold" (GMM-AS), "segment" (ZVC).
 """
 
 from __future__ import annotations

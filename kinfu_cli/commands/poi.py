@@ -48,6 +48,9 @@ def detector_options(f):
                      help="GMM-AS: resample each trajectory to this many samples (0 = raw samples)."),
         click.option("--noise-floor", default=1.0, show_default=True, type=float,
                      help="GMM-AS: raise the floor to this x the estimated sensor noise, denoising first (0 = off)."),
+        click.option("--literal", is_flag=True,
+                     help="GMM-AS as the paper reads literally (raw samples, t in s, 1 mm floor, eq. 13 on the "
+                          "spatial covariance, POITh 2.5, sum / 2 Lambda); overrides the GMM-AS options above."),
         click.option("--zvc-half-width", default=4, show_default=True, type=int, help="ZVC B (filter width 2B+1)."),
         click.option("--zvc-threshold", default=1.72, show_default=True, type=float, help="ZVC ZVCTh."),
         click.option("--zvc-r1", default=0.10, show_default=True, type=float, help="ZVC inner radius r1 (m)."),
@@ -64,6 +67,10 @@ def detector_params(kw: dict) -> dict:
     g = {k: kw.pop(k) for k in ("poi_threshold", "neighbours", "bic_threshold", "max_components", "selection",
                                 "reg_space", "reg_time", "saliency", "threshold_mode", "resample", "noise_floor")}
     g["time_scale"] = _time_scale(kw.pop("time_scale"))
+    if kw.pop("literal"):
+        from kinfu_cli.attention.gmm_as import GmmActivitySaliency
+
+        g.update(GmmActivitySaliency.LITERAL)
     radius = kw.pop("radius")
     g["radius"] = radius
     z = {"half_width": kw.pop("zvc_half_width"), "threshold": kw.pop("zvc_threshold"), "r1": kw.pop("zvc_r1"),
@@ -105,7 +112,8 @@ def command(source, algorithm, hand_topic, hand_frame, world_frame, output, plot
     Example:
       kinfu poi recording.mcap -o out/pois.json --plot out/pois.png
       kinfu poi user1_cup0.traj --algorithm zvc --json
-      kinfu poi recording.bag --hand-topic /hand/pose --poi-threshold 2.5 --saliency literal
+      kinfu poi recording.bag --hand-topic /hand/pose --poi-threshold 2.5
+      kinfu poi user1_cup0.traj --literal --plot literal.png
     """
     from kinfu_cli.attention.pois import pois_document
     from kinfu_cli.evaluation.poi import make_detector
@@ -116,6 +124,9 @@ def command(source, algorithm, hand_topic, hand_frame, world_frame, output, plot
     det._check()
     traj = load_trajectory(source, hand_topic, hand_frame, world_frame)
     det.fit(traj)
+    if traj.t0_ns:
+        for p in det.pois_:
+            p.extra["stamp_ns"] = int(traj.t0_ns + round(p.time * 1e9))
     recorded = dict(det.get_params())
     if algorithm == "gmm-as":
         recorded["n_components"] = det.n_components_
