@@ -31,9 +31,15 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numba
 import numpy as np
+from numba import njit, prange
 
 from kinfu_cli.errors import ConfigError, RecordingError, VolumeError
+
+# numba's workqueue pool does not spin at fork/join (see kinfu_cli/fusion/kernels.py); honours an explicit setting
+if "NUMBA_THREADING_LAYER" not in os.environ:
+    numba.config.THREADING_LAYER = "workqueue"
 
 DEFAULT_THRESHOLD = 0.01  # m: completeness / precision distance
 DEFAULT_SPACING = 0.005  # m: true-surface sample spacing
@@ -234,44 +240,86 @@ def render_depth(scene, K: np.ndarray, width: int, height: int, T_world_camera: 
 
 
 def visible_mask(points: np.ndarray, normals: np.ndarray, scene, poses: np.ndarray, K: np.ndarray, width: int,
-                 height: int, min_depth: float = 0.3, max_depth: float = 4.0, tolerance: float = 0.005
-                 ) -> np.ndarray:
+                 height: int, min_depth: float = 0.3, max_depth: float = 4.0, tolerance: float = 0.005,
+                 chunk: int = 16) -> np.ndarray:
     """Which surface points (on the mesh held by `scene`, with their outward normals) are seen from at least one
     pose: facing the camera, projecting into the image with depth in [min_depth, max_depth], and not hidden: the
     true depth rendered at their pixel is >= their depth - (tolerance + the depth change across one pixel on a
-    surface that steep, capped at 10 pixels' worth)."""
+    surface that steep, capped at 10 pixels' worth). Depth images are rendered `chunk` poses at a time (open3d),
+    the per-point tests run in a numba kernel."""
+    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    nrm = np.ascontiguousarray(normals, dtype=np.float64).reshape(-1, 3)
+    poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
+    K = np.asarray(K, dtype=np.float64)
+    seen = np.zeros(len(pts), dtype=np.bool_)
+    pix = 1.0 / min(K[0, 0], K[1, 1])
+    for c0 in range(0, len(poses), max(1, int(chunk))):
+        Ts = poses[c0:c0 + max(1, int(chunk))]
+        depths = np.stack([render_depth(scene, K, width, height, T) for T in Ts]).astype(np.float32)
+        _visible_kernel(pts, nrm, np.ascontiguousarray(Ts[:, :3, :3]), np.ascontiguousarray(Ts[:, :3, 3]), depths,
+                        float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2]), float(min_depth),
+                        float(max_depth), float(tolerance), pix, seen)
+    return seen
+
+
+@njit(cache=True, parallel=True)
+def _visible_kernel(pts, nrm, Rs, ts, depths, fx, fy, cx, cy, min_depth, max_depth, tol, pix, seen):  # pragma: no cover
+    n = pts.shape[0]
+    nf, h, w = depths.shape
+    for i in prange(n):
+        if seen[i]:
+            continue
+        for f in range(nf):
+            dx = pts[i, 0] - ts[f, 0]
+            dy = pts[i, 1] - ts[f, 1]
+            dz = pts[i, 2] - ts[f, 2]
+            zc = dx * Rs[f, 0, 2] + dy * Rs[f, 1, 2] + dz * Rs[f, 2, 2]
+            if zc < min_depth or zc > max_depth:
+                continue
+            cosv = -(dx * nrm[i, 0] + dy * nrm[i, 1] + dz * nrm[i, 2])  # normal . (camera - point)
+            if cosv <= 0.0:
+                continue
+            xc = dx * Rs[f, 0, 0] + dy * Rs[f, 1, 0] + dz * Rs[f, 2, 0]
+            yc = dx * Rs[f, 0, 1] + dy * Rs[f, 1, 1] + dz * Rs[f, 2, 1]
+            u = int(math.floor(fx * xc / zc + cx + 0.5))
+            v = int(math.floor(fy * yc / zc + cy + 0.5))
+            if u < 0 or u >= w or v < 0 or v >= h:
+                continue
+            dist = math.sqrt(dx * dx + dy * dy + dz * dz)
+            cos = min(max(cosv / dist, 1e-3), 1.0)
+            slope = min(math.sqrt(max(1.0 - cos * cos, 0.0)) / cos, 10.0)
+            if depths[f, v, u] >= zc - (tol + pix * zc * slope):
+                seen[i] = True
+                break
+
+
+def visible_mask_exact(points: np.ndarray, normals: np.ndarray, scene, poses: np.ndarray, K: np.ndarray,
+                       width: int, height: int, min_depth: float = 0.3, max_depth: float = 4.0,
+                       stop_short: float = 0.002) -> np.ndarray:
+    """Reference for visible_mask: the same image / range / facing tests, then one ray from the camera centre to
+    every candidate point (open3d cast_rays); visible when nothing is hit before `stop_short` of the point.
+    Exact but casts a ray per point and pose (see benchmarks/bench_eval_fusion.py)."""
+    import open3d as o3d
+
     pts = np.asarray(points, dtype=np.float64)
     nrm = np.asarray(normals, dtype=np.float64)
-    seen = np.zeros(len(pts), dtype=bool)
     K = np.asarray(K, dtype=np.float64)
-    pix = 1.0 / min(K[0, 0], K[1, 1])
-    x, y, z = (np.ascontiguousarray(pts[:, i]) for i in range(3))
+    seen = np.zeros(len(pts), dtype=bool)
     for T in np.asarray(poses, dtype=np.float64):
-        R, t = T[:3, :3], T[:3, 3]
-        dx, dy, dz = x - t[0], y - t[1], z - t[2]
-        # column by column: numpy's (N,3) @ (3,3) is several times slower
-        zc = dx * R[0, 2] + dy * R[1, 2] + dz * R[2, 2]
-        ok = (zc >= min_depth) & (zc <= max_depth)
-        cosv = -(dx * nrm[:, 0] + dy * nrm[:, 1] + dz * nrm[:, 2])  # normal . (camera - point), unnormalised
-        ok &= cosv > 0
+        d = pts - T[:3, 3]
+        pc = d @ T[:3, :3]
+        z = pc[:, 2]
+        zs = np.where(z > 0, z, 1.0)
+        u = np.rint(K[0, 0] * pc[:, 0] / zs + K[0, 2])
+        v = np.rint(K[1, 1] * pc[:, 1] / zs + K[1, 2])
+        ok = (z >= min_depth) & (z <= max_depth) & (u >= 0) & (u < width) & (v >= 0) & (v < height)
+        ok &= np.einsum("ij,ij->i", nrm, -d) > 0
         idx = np.flatnonzero(ok)
         if idx.size == 0:
             continue
-        zi = zc[idx]
-        xc = dx[idx] * R[0, 0] + dy[idx] * R[1, 0] + dz[idx] * R[2, 0]
-        yc = dx[idx] * R[0, 1] + dy[idx] * R[1, 1] + dz[idx] * R[2, 1]
-        u = np.rint(K[0, 0] * xc / zi + K[0, 2]).astype(np.int64)
-        v = np.rint(K[1, 1] * yc / zi + K[1, 2]).astype(np.int64)
-        inside = (u >= 0) & (u < width) & (v >= 0) & (v < height)
-        idx, zi, u, v = idx[inside], zi[inside], u[inside], v[inside]
-        if idx.size == 0:
-            continue
-        depth = render_depth(scene, K, width, height, T)
-        dist = np.sqrt(dx[idx] ** 2 + dy[idx] ** 2 + dz[idx] ** 2)
-        cos = np.clip(cosv[idx] / dist, 1e-3, 1.0)
-        slope = np.minimum(np.sqrt(1.0 - cos**2) / cos, 10.0)
-        allow = tolerance + pix * zi * slope
-        seen[idx[depth[v, u] >= zi - allow]] = True
+        rays = np.hstack([np.broadcast_to(T[:3, 3], (idx.size, 3)), d[idx]]).astype(np.float32)
+        t_hit = scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy()
+        seen[idx[t_hit >= 1.0 - stop_short / np.linalg.norm(d[idx], axis=1)]] = True
     return seen
 
 
