@@ -279,3 +279,24 @@ def test_window_without_poses_of_the_state_is_refused(fused_dir, gt, tmp_path):
     assert res.exit_code == 2
     assert "holds no ground-truth camera pose" in res.stderr and len(res.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "r.json").exists()
+
+
+def test_object_truth_without_its_mesh_is_cut_from_the_scene(gt, tmp_path):
+    """A removed object has no objects/<id>.ply: its truth comes from the scene mesh inside its box; for the
+    moved cone both ways must give the same measures."""
+    import shutil
+
+    from kinfu_cli.evaluation.object_measures import ground_truth_objects, measure, table_plane_truth
+
+    copy = tmp_path / "gt"
+    shutil.copytree(gt.folder, copy)
+    moved = next(o["id"] for o in gt.objects if "center_before" in o)
+    (copy / "objects" / f"{moved}.ply").unlink()
+    plane = table_plane_truth(gt)
+    a = {o.id: measure(o.vertices, plane) for o in ground_truth_objects(gt, "before")}
+    b = {o.id: measure(o.vertices, plane) for o in ground_truth_objects(load_ground_truth(copy), "before")}
+    assert a.keys() == b.keys()
+    for key in ("height", "major", "minor"):
+        assert abs(a[moved][key] - b[moved][key]) < 1e-6
+    size = np.array(next(o["size"] for o in gt.objects if o["id"] == moved))
+    assert abs(a[moved]["height"] - size[2]) < 1e-6
