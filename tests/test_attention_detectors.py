@@ -217,3 +217,21 @@ def test_cli_poi_literal_reading_is_selectable(pnp_traj, tmp_path):
     params = json.loads(out.read_text())["parameters"]
     assert params["saliency"] == "literal" and params["poi_threshold"] == 2.5 and params["resample"] == 0
     assert params["threshold_mode"] == "literal" and params["time_scale"] == 1.0
+
+
+def test_tracking_gap_is_not_taken_for_dwell():
+    """A 3 s dropout during a transport must not become a POI (gaps are shortened before the fit)."""
+    traj, changes = synth_hand_trajectory(random_task("placement", seed=3), seed=3)
+    ref = GmmActivitySaliency().fit(traj)
+    # remove the samples of the first transport (0.2-0.6 of the way to the pause) and shift the rest by 3 s
+    t0, t1 = traj.t[0], changes[0].t_start
+    a, b = t0 + 0.2 * (t1 - t0), t0 + 0.6 * (t1 - t0)
+    keep = (traj.t < a) | (traj.t > b)
+    t = traj.t[keep] + np.where(traj.t[keep] > b, 3.0, 0.0)
+    gap = Trajectory(t=t, positions=traj.positions[keep])
+    det = GmmActivitySaliency().fit(gap)
+    to_gt, to_poi = _dists(det.pois_, changes)
+    assert len(det.pois_) == len(ref.pois_) == 1
+    assert to_gt.max() < 0.05 and to_poi.max() < 0.05
+    # POI time on the trajectory's clock (after the gap: shifted by the 3 s)
+    assert changes[0].t_start + 3.0 - 0.5 <= det.pois_[0].time <= changes[0].t_end + 3.0 + 0.5

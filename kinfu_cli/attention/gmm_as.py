@@ -69,6 +69,8 @@ from kinfu_cli.io.trajectory import Trajectory
 SALIENCY_MODES = ("precision", "literal", "weight", "conditional")
 THRESHOLD_MODES = ("available", "literal")
 SELECTION_MODES = ("first-minimum", "best")
+#: A sample gap longer than this many median periods is a tracking dropout, not dwell time.
+GAP_FACTOR = 5.0
 
 
 class GmmActivitySaliency:
@@ -171,6 +173,11 @@ class GmmActivitySaliency:
     def _samples(self, traj: Trajectory, smooth: int = 0) -> tuple[np.ndarray, float]:
         t = traj.t - traj.t[0]
         pos = traj.positions
+        dt = np.diff(t)
+        if len(dt) and dt.max() > GAP_FACTOR * np.median(dt):
+            # tracking gaps carry no dwell information: shorten each to GAP_FACTOR sample periods
+            t = np.r_[0.0, np.cumsum(np.minimum(dt, GAP_FACTOR * np.median(dt)))]
+        self._clock = (t, traj.t - traj.t[0])  # (model clock, trajectory clock), both from 0
         if smooth > 0:
             from kinfu_cli.attention.zvc import mean_filter
 
@@ -257,9 +264,12 @@ class GmmActivitySaliency:
         th = self._thresholds(s)
         # Gaussians back in (x, y, z, t seconds) on the trajectory's clock
         to_sec = np.array([1.0, 1.0, 1.0, 1.0 / scale])
-        gaussians = [Gaussian4(mean=mu[j] * to_sec + np.array([0, 0, 0, traj.t[0]]),
-                               covariance=cov[j] * np.outer(to_sec, to_sec), weight=float(w[j]))
-                     for j in range(len(w))]
+        clock, real = self._clock
+        gaussians = []
+        for j in range(len(w)):
+            mean = mu[j] * to_sec
+            mean[3] = traj.t[0] + float(np.interp(mean[3], clock, real))  # undo gap shortening
+            gaussians.append(Gaussian4(mean=mean, covariance=cov[j] * np.outer(to_sec, to_sec), weight=float(w[j])))
         pois = []
         for g in range(1, len(w) - 1):
             if s[g] > th[g]:
