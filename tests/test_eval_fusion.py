@@ -173,11 +173,21 @@ def test_footprint_axes_of_a_rotated_rectangle():
     assert abs(major - 0.15) < 2e-3 and abs(minor - 0.04) < 2e-3
 
 
-def test_cli_json_and_results_file(fused_dir, gt, tmp_path):
+def test_cli_json_and_results_file(fused_dir, gt, tmp_path, score):
+    import open3d as o3d
+
     out = tmp_path / "res.json"
+    err_mesh = tmp_path / "error.ply"
     res = CliRunner().invoke(cli, ["eval", "fusion", str(fused_dir), "--ground-truth", str(gt.folder), "--state",
-                                   "before", "--spacing", str(SPACING), "--json", "-o", str(out), "--quiet"])
+                                   "before", "--spacing", str(SPACING), "--json", "-o", str(out), "--quiet",
+                                   "--error-mesh", str(err_mesh)])
     assert res.exit_code == 0, res.output
+    em = o3d.io.read_triangle_mesh(str(err_mesh))
+    cols = np.asarray(em.vertex_colors)
+    assert len(cols) == score.vertices_total
+    d = score.vertex_distances
+    # 'turbo': red channel high for large errors, low (dark blue) for small ones
+    assert cols[d > 0.015, 0].mean() > 0.5 > cols[d < 0.001, 0].mean()
     doc = json.loads(res.stdout)
     assert json.loads(out.read_text())["objects"] == doc["objects"]
     assert doc["input"]["state"] == "before"

@@ -26,13 +26,16 @@ group = "eval"
 @click.option("--footprint", type=click.Choice(["rect", "pca"]), default="rect", show_default=True,
               help="Footprint axes: minimum-area rectangle or principal-axis extents.")
 @click.option("--no-volume", is_flag=True, help="Ignore OUTDIR/volume.npz (no voxel counts).")
+@click.option("--error-mesh", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Also write the reconstruction coloured by its error (blue 0 .. red 2 x threshold; grey: not "
+                   "evaluated) as this .ply.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write the results as JSON here.")
 @click.option("--json", "as_json", is_flag=True, help="Print the results JSON to stdout instead of tables.")
 @click.option("--quiet", is_flag=True, help="No progress output.")
 def command(reconstruction: Path, ground_truth: Path, state: str, threshold: float, spacing: float, margin: float,
-            min_height: float, footprint: str, no_volume: bool, output: Path | None, as_json: bool,
-            quiet: bool) -> None:
+            min_height: float, footprint: str, no_volume: bool, error_mesh: Path | None, output: Path | None,
+            as_json: bool, quiet: bool) -> None:
     """Score a fused reconstruction against ground truth. OUTDIR_OR_MESH is a `kinfu fuse` output folder
     (mesh.ply, and volume.npz when present) or a mesh file in the ground truth's world frame.
 
@@ -47,13 +50,14 @@ def command(reconstruction: Path, ground_truth: Path, state: str, threshold: flo
       kinfu fuse sample_data/tabletop/recording.mcap -o out/scan --end 5.5
       kinfu eval fusion out/scan --ground-truth sample_data/tabletop/ground_truth --state before
       kinfu eval fusion out/all/mesh.ply --ground-truth sample_data/tabletop --json -o fusion_eval.json
+      kinfu eval fusion out/scan --ground-truth sample_data/tabletop --error-mesh out/scan_error.ply
     """
     from kinfu_cli.evaluation.reconstruction import evaluate_fusion, format_fusion_tables
     from kinfu_cli.io.atomic import write_json
 
     doc = evaluate_fusion(reconstruction, ground_truth, state=state, threshold=threshold, spacing=spacing,
                           margin=margin, min_height=min_height, footprint=footprint, use_volume=not no_volume,
-                          quiet=quiet)
+                          quiet=quiet, error_mesh=error_mesh)
     if output is not None:
         write_json(output, doc)
     if as_json:
@@ -62,3 +66,5 @@ def command(reconstruction: Path, ground_truth: Path, state: str, threshold: flo
         click.echo(format_fusion_tables(doc))
         if output is not None:
             click.echo(f"\nresults -> {output}")
+        if error_mesh is not None:
+            click.echo(f"error-coloured mesh -> {error_mesh}")

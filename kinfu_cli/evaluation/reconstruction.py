@@ -341,6 +341,7 @@ class ReconstructionScore:
     frames: int
     coverage: dict | None = None
     notes: list = field(default_factory=list)
+    vertex_distances: np.ndarray | None = field(default=None, repr=False)  # per vertex, NaN outside the region
 
     def to_json(self) -> dict:
         out = {"accuracy": self.accuracy.to_json(), "completeness_distances": self.completeness_distances.to_json(),
@@ -471,10 +472,39 @@ def score_reconstruction(rec: Reconstruction, gt, state: str = "after", threshol
     coverage = None
     if rec.volume is not None:
         coverage = volume_coverage(rec.volume, observed, surface.in_bounds)
+    per_vertex = np.full(len(rec.vertices), np.nan)
+    per_vertex[inside] = acc
     return ReconstructionScore(DistanceStats.of(acc), DistanceStats.of(comp), float(threshold), precision,
                                completeness, float(f), int(len(rec.vertices)), int(np.count_nonzero(~inside)),
                                int(len(observed)), surface.total, surface.spacing, (lo.tolist(), hi.tolist()),
-                               surface.frames, coverage, notes)
+                               surface.frames, coverage, notes, per_vertex)
+
+
+def write_error_mesh(path: str | os.PathLike, rec: Reconstruction, distances: np.ndarray, vmax: float) -> Path:
+    """The reconstruction with vertex colours by distance to the truth (matplotlib 'turbo': dark blue 0 .. dark
+    red >= vmax; grey where not evaluated), written atomically (PLY/OBJ/... by suffix)."""
+    import open3d as o3d
+    from matplotlib import colormaps
+
+    from kinfu_cli.io.atomic import atomic_path
+
+    d = np.asarray(distances, dtype=np.float64)
+    cols = colormaps["turbo"](np.clip(np.nan_to_num(d, nan=0.0) / vmax, 0.0, 1.0))[:, :3]
+    cols[~np.isfinite(d)] = 0.6
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        if rec.is_cloud:
+            geo = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(rec.vertices))
+            geo.colors = o3d.utility.Vector3dVector(cols)
+            ok = o3d.io.write_point_cloud(str(tmp), geo)
+        else:
+            geo = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(rec.vertices),
+                                            o3d.utility.Vector3iVector(rec.triangles.astype(np.int32)))
+            geo.vertex_colors = o3d.utility.Vector3dVector(cols)
+            ok = o3d.io.write_triangle_mesh(str(tmp), geo)
+        if not ok:
+            raise ConfigError(f"--error-mesh {path}: open3d could not write this file type (use .ply)")
+    return path
 
 
 def report_json_of(path: str | os.PathLike) -> dict | None:
@@ -496,9 +526,10 @@ POSE_MODE_LABELS = {"forced": "robot kinematics (forced)", "icp": "egomotion (ic
 
 def evaluate_fusion(path, ground_truth, state: str = "after", threshold: float = 0.01, spacing: float = 0.005,
                     margin: float = 0.02, min_height: float = 0.005, footprint: str = "rect", use_volume: bool = True,
-                    seed: int = 0, quiet: bool = True) -> dict:
+                    seed: int = 0, quiet: bool = True, error_mesh: str | os.PathLike | None = None) -> dict:
     """Score a `kinfu fuse` output folder (mesh.ply [+ volume.npz]) or a mesh file against a `kinfu synth`
-    ground-truth folder; returns the results document that `kinfu eval fusion` prints and writes."""
+    ground-truth folder; returns the results document that `kinfu eval fusion` prints and writes. error_mesh: also
+    write the reconstruction coloured by its distance to the truth (0 .. 2 x threshold) there."""
     from kinfu_cli.evaluation.object_measures import PAPER_TABLE_1, object_measures
     from kinfu_cli.progress import progress
     from kinfu_cli.sim.scenario import load_ground_truth
@@ -530,6 +561,8 @@ def evaluate_fusion(path, ground_truth, state: str = "after", threshold: float =
         else:
             measures = object_measures(rec.vertices, gt, state, margin=margin, min_height=min_height,
                                        footprint=footprint, surface=(surface.in_bounds, surface.seen))
+    if error_mesh is not None:
+        write_error_mesh(error_mesh, rec, score.vertex_distances, 2.0 * threshold)
     mode = (report or {}).get("pose_mode")
     tracking = POSE_MODE_LABELS.get(mode, mode or "as fused")
     objs = measures.to_json()
@@ -537,7 +570,8 @@ def evaluate_fusion(path, ground_truth, state: str = "after", threshold: float =
         "input": {"reconstruction": str(rec.source), "volume": str(rec.volume_path) if rec.volume_path else None,
                   "vertices": int(len(rec.vertices)), "triangles": int(len(rec.triangles)),
                   "ground_truth": str(gt.folder), "state": state, "pose_mode": tracking,
-                  "fused_window_s": list(window) if window else None},
+                  "fused_window_s": list(window) if window else None,
+                  "error_mesh": str(error_mesh) if error_mesh is not None else None},
         "reconstruction": score.to_json(),
         "objects": objs,
         "table_1": PAPER_TABLE_1 + [{"scenario": "this run", "tracking": tracking, "mean_abs": objs["mean_abs"],
