@@ -76,9 +76,10 @@ def as_ray_volume(volume: TernaryGrid | RayVolume) -> RayVolume:
 
 
 def reject_reasons(vol: RayVolume, poses: np.ndarray, *, table_z: float | None = None,
-                   clearance: float = 0.0) -> list[str | None]:
+                   clearance: float = 0.0, reject_unknown: bool = True) -> list[str | None]:
     """Why each sensor position is impossible, or None: below the table plane, or inside (within
-    `clearance` metres of) an occupied or unknown voxel. Positions outside the volume are allowed."""
+    `clearance` metres of) an occupied or (when `reject_unknown`, as the paper's planner) an unknown
+    voxel. Positions outside the volume are allowed."""
     pos = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)[:, :3, 3]
     worst = vol.label_at(pos)
     if clearance > 0:
@@ -98,7 +99,7 @@ def reject_reasons(vol: RayVolume, poses: np.ndarray, *, table_z: float | None =
             out.append("below_table")
         elif occ[i]:
             out.append("inside_occupied")
-        elif unk[i]:
+        elif unk[i] and reject_unknown:
             out.append("inside_unknown")
         else:
             out.append(None)
@@ -107,12 +108,13 @@ def reject_reasons(vol: RayVolume, poses: np.ndarray, *, table_z: float | None =
 
 def score_views(volume: TernaryGrid | RayVolume, poses, camera: CameraModel, region_center, region_radius: float,
                 gain: str = "unknown", *, table_z: float | None = None, clearance: float = 0.0,
-                restrict: bool = True, share_rolls: bool = True, all_gains: bool = False,
-                progress_cb=None) -> ViewScores:
+                reject_unknown: bool = True, optimistic: bool = False, restrict: bool = True,
+                share_rolls: bool = True, all_gains: bool = False, progress_cb=None) -> ViewScores:
     """Score candidate views for the region S(region_center, region_radius).
 
     volume: a TernaryGrid (or a prepared RayVolume, to reuse it across calls); poses (V, 4, 4)
-    camera-to-world; gain: a name from gains.GAINS; all_gains: also compute the through-unknown gains.
+    camera-to-world; gain: a name from gains.GAINS; all_gains: also compute the through-unknown gains;
+    optimistic: unknown voxels outside the region do not stop rays (the paper: they do).
     """
     t_start = time.perf_counter()
     g = get_gain(gain)
@@ -121,7 +123,7 @@ def score_views(volume: TernaryGrid | RayVolume, poses, camera: CameraModel, reg
     center = np.asarray(region_center, dtype=np.float64).reshape(3)
     if not (math.isfinite(region_radius) and region_radius > 0):
         raise ConfigError(f"--poi-radius: expected a positive radius in metres, got {region_radius}")
-    reasons = reject_reasons(vol, poses, table_z=table_z, clearance=clearance)
+    reasons = reject_reasons(vol, poses, table_z=table_z, clearance=clearance, reject_unknown=reject_unknown)
     valid = np.array([r is None for r in reasons], dtype=bool)
     V = poses.shape[0]
     through = g.through or all_gains
@@ -131,7 +133,7 @@ def score_views(volume: TernaryGrid | RayVolume, poses, camera: CameraModel, reg
     n_cast = 0
     if valid.any():
         res = cast_views(vol, poses[valid], camera, center, float(region_radius), through=through,
-                         restrict=restrict, share_rolls=share_rolls, progress_cb=progress_cb)
+                         optimistic=optimistic, restrict=restrict, share_rolls=share_rolls, progress_cb=progress_cb)
         counts[valid], rays[valid], terms[valid] = res.counts, res.rays, res.terms
         n_cast = res.rays_cast
     if progress_cb is not None and (~valid).any():

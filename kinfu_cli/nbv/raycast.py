@@ -125,7 +125,8 @@ def _clampi(v, a, b):
 
 
 @njit(cache=True)
-def _trace(labels, bdist, B, lo, vs, p, d, min_range, max_range, cen, r2, through, p_unknown, h_unknown, vals):
+def _trace(labels, bdist, B, lo, vs, p, d, min_range, max_range, cen, r2, through, optimistic, p_unknown, h_unknown,
+           vals):
     """Walk one ray (p origin, d unit direction). Fills vals[0:4]; returns (class, t of the first hit)."""
     n0, n1, n2 = labels.shape
     px, py, pz = p[0], p[1], p[2]
@@ -237,15 +238,18 @@ def _trace(labels, bdist, B, lo, vs, p, d, min_range, max_range, cen, r2, throug
         bx1, by1, bz1 = bx, by, bz
         while True:
             lab = labels[ix, iy, iz]
+            in_s = False
+            dist2 = 0.0
             if lab != -1:
-                in_s = False
-                dist2 = 0.0
                 if tcur >= min_range:
                     qx = lx + (ix + 0.5) * vs - cen[0]
                     qy = ly + (iy + 0.5) * vs - cen[1]
                     qz = lz + (iz + 0.5) * vs - cen[2]
                     dist2 = qx * qx + qy * qy + qz * qz
                     in_s = dist2 <= r2
+                if optimistic and lab == 0 and not in_s:
+                    lab = -1  # unknown outside S: assumed free, the ray goes on
+            if lab != -1:
                 if cls == CLS_EMPTY_EXIT:
                     thit = tcur
                     if lab == 0:
@@ -297,7 +301,7 @@ def _trace(labels, bdist, B, lo, vs, p, d, min_range, max_range, cen, r2, throug
 
 @njit(cache=True, parallel=True)
 def _cast_kernel(labels, bempty, B, lo, vs, origins, dirs, min_range, max_range, cen, radius, through,
-                 p_unknown, out_cls, out_t, out_vals):
+                 optimistic, p_unknown, out_cls, out_t, out_vals):
     n = dirs.shape[0]
     r2 = radius * radius
     h = 0.0
@@ -307,7 +311,7 @@ def _cast_kernel(labels, bempty, B, lo, vs, origins, dirs, min_range, max_range,
         for c in range(N_TERMS):
             out_vals[r, c] = 0.0
         c_, t_ = _trace(labels, bempty, B, lo, vs, origins[r], dirs[r], min_range, max_range, cen, r2,
-                        through, p_unknown, h, out_vals[r])
+                        through, optimistic, p_unknown, h, out_vals[r])
         out_cls[r] = c_
         out_t[r] = t_
 
@@ -324,8 +328,9 @@ class RayResults:
 
 def cast_rays(vol: RayVolume, origins: np.ndarray, dirs: np.ndarray, *, min_range: float = 0.0,
               max_range: float = np.inf, center=(0.0, 0.0, 0.0), radius: float = 0.0, through: bool = False,
-              p_unknown: float = 0.5) -> RayResults:
-    """Cast rays (origins (N, 3) or (3,), unit dirs (N, 3), world frame) through `vol`."""
+              optimistic: bool = False, p_unknown: float = 0.5) -> RayResults:
+    """Cast rays (origins (N, 3) or (3,), unit dirs (N, 3), world frame) through `vol`. `optimistic`:
+    unknown voxels outside S are taken as free (rays stop only on occupied voxels or unknown ones in S)."""
     dirs = np.ascontiguousarray(dirs, dtype=np.float64).reshape(-1, 3)
     dirs = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
     origins = np.ascontiguousarray(np.broadcast_to(np.asarray(origins, dtype=np.float64), dirs.shape))
@@ -335,7 +340,7 @@ def cast_rays(vol: RayVolume, origins: np.ndarray, dirs: np.ndarray, *, min_rang
     terms = np.empty((n, N_TERMS), np.float64)
     _cast_kernel(vol.labels, vol.block_dist, vol.block, vol.origin, vol.voxel_size, origins, dirs,
                  float(min_range), float(min(max_range, 1e30)), np.asarray(center, dtype=np.float64).reshape(3),
-                 float(radius), bool(through), float(p_unknown), cls, t, terms)
+                 float(radius), bool(through), bool(optimistic), float(p_unknown), cls, t, terms)
     return RayResults(cls, t, terms)
 
 
@@ -498,13 +503,14 @@ def _pixel_window(R, t, cam, center, r_ext, restrict) -> tuple[int, int, int, in
 
 
 def cast_views(vol: RayVolume, poses: np.ndarray, camera, center, radius: float, *, through: bool = False,
-               restrict: bool = True, share_rolls: bool = True, p_unknown: float = 0.5,
+               optimistic: bool = False, restrict: bool = True, share_rolls: bool = True, p_unknown: float = 0.5,
                batch_cells: int = 12_000_000, progress_cb=None) -> ViewRays:
     """Cast the rays of every view (camera-to-world `poses` (V, 4, 4)) and sum them per view.
 
     `restrict`: only pixels whose ray passes within radius + half a voxel diagonal of `center` (the
     only ones that can add gain); the counts then cover those pixels. `share_rolls`: views that differ
-    only by roll reuse the first view's rays (nearest lattice ray). `progress_cb(n)` after each batch.
+    only by roll reuse the first view's rays (nearest lattice ray). `optimistic`: unknown voxels
+    outside S do not stop rays (see `cast_rays`). `progress_cb(n)` after each batch.
     """
     cam = camera.widened()
     poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
@@ -539,14 +545,15 @@ def cast_views(vol: RayVolume, poses: np.ndarray, camera, center, radius: float,
         batch.append((g[ok], Ms[ok], win[ok], (lu0, lv0, LW, LH), cb, check, R0, t0))
         used += LW * LH
         if used >= batch_cells:
-            _cast_batch(vol, cam, center, radius, r_ext, through, p_unknown, batch, out, progress_cb)
+            _cast_batch(vol, cam, center, radius, r_ext, (through, optimistic), p_unknown, batch, out, progress_cb)
             batch, used = [], 0
     if batch:
-        _cast_batch(vol, cam, center, radius, r_ext, through, p_unknown, batch, out, progress_cb)
+        _cast_batch(vol, cam, center, radius, r_ext, (through, optimistic), p_unknown, batch, out, progress_cb)
     return out
 
 
-def _cast_batch(vol, cam, center, radius, r_ext, through, p_unknown, batch, out: ViewRays, progress_cb) -> None:
+def _cast_batch(vol, cam, center, radius, r_ext, flags, p_unknown, batch, out: ViewRays, progress_cb) -> None:
+    through, optimistic = flags
     views = np.concatenate([b[0] for b in batch])
     Ms = np.ascontiguousarray(np.concatenate([b[1] for b in batch]))
     win = np.ascontiguousarray(np.concatenate([b[2] for b in batch]))
@@ -571,8 +578,8 @@ def _cast_batch(vol, cam, center, radius, r_ext, through, p_unknown, batch, out:
     tt = np.empty(n, np.float64)
     tm = np.empty((n, N_TERMS), np.float64)
     _cast_kernel(vol.labels, vol.block_dist, vol.block, vol.origin, vol.voxel_size, origins, dirs,
-                 cam.min_range, min(cam.max_range, 1e30), center, float(radius), bool(through), float(p_unknown),
-                 cls, tt, tm)
+                 cam.min_range, min(cam.max_range, 1e30), center, float(radius), bool(through), bool(optimistic),
+                 float(p_unknown), cls, tt, tm)
     counts = np.zeros((len(views), 3), np.int64)
     terms = np.zeros((len(views), N_TERMS), np.float64)
     npix = np.zeros(len(views), np.int64)

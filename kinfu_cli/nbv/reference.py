@@ -18,7 +18,7 @@ from kinfu_cli.nbv.raycast import CLS_EMPTY_EXIT, CLS_OCCUPIED, CLS_UNKNOWN, N_T
 
 
 @njit(cache=True)
-def _march(labels, lo, vs, p, d, min_range, max_range, cen, r2, through, p_unknown, h_unknown, vals):
+def _march(labels, lo, vs, p, d, min_range, max_range, cen, r2, through, optimistic, p_unknown, h_unknown, vals):
     n0, n1, n2 = labels.shape
     t0 = 0.0
     t1 = max_range
@@ -48,17 +48,19 @@ def _march(labels, lo, vs, p, d, min_range, max_range, cen, r2, through, p_unkno
         if i != pi or j != pj or k != pk:
             pi, pj, pk = i, j, k
             lab = labels[i, j, k]
+            in_s = False
+            dist2 = 0.0
+            if lab != -1 and t >= min_range:
+                cx = lo[0] + (i + 0.5) * vs - cen[0]
+                cy = lo[1] + (j + 0.5) * vs - cen[1]
+                cz = lo[2] + (k + 0.5) * vs - cen[2]
+                dist2 = cx * cx + cy * cy + cz * cz
+                in_s = dist2 <= r2
+            if optimistic and lab == 0 and not in_s:
+                lab = -1
             if lab == -1:
                 prev_unknown_in_s = False
             else:
-                in_s = False
-                dist2 = 0.0
-                if t >= min_range:
-                    cx = lo[0] + (i + 0.5) * vs - cen[0]
-                    cy = lo[1] + (j + 0.5) * vs - cen[1]
-                    cz = lo[2] + (k + 0.5) * vs - cen[2]
-                    dist2 = cx * cx + cy * cy + cz * cz
-                    in_s = dist2 <= r2
                 if cls == CLS_EMPTY_EXIT:
                     if lab == 0:
                         cls = CLS_UNKNOWN
@@ -86,7 +88,7 @@ def _march(labels, lo, vs, p, d, min_range, max_range, cen, r2, through, p_unkno
 
 @njit(cache=True)
 def _reference_view(labels, lo, vs, R, o, fx, fy, cx, cy, W, H, min_range, max_range, cen, radius, through,
-                    p_unknown, counts, terms):
+                    optimistic, p_unknown, counts, terms):
     r2 = radius * radius
     h = 0.0
     if 0.0 < p_unknown < 1.0:
@@ -102,14 +104,14 @@ def _reference_view(labels, lo, vs, R, o, fx, fy, cx, cy, W, H, min_range, max_r
                 d[a] = (R[a, 0] * x + R[a, 1] * y + R[a, 2]) / nrm
             for a in range(N_TERMS):
                 vals[a] = 0.0
-            c = _march(labels, lo, vs, o, d, min_range, max_range, cen, r2, through, p_unknown, h, vals)
+            c = _march(labels, lo, vs, o, d, min_range, max_range, cen, r2, through, optimistic, p_unknown, h, vals)
             counts[c] += 1
             for a in range(N_TERMS):
                 terms[a] += vals[a]
 
 
 def reference_views(vol: RayVolume, poses: np.ndarray, camera, center, radius: float, *, through: bool = False,
-                    p_unknown: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+                    optimistic: bool = False, p_unknown: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
     """Full-image fixed-step marching of each view: counts (V, 3) unknown/occupied/empty-exit over all
     pixels and summed gain terms (V, 4), as `raycast.cast_views` returns them."""
     cam = camera.widened()
@@ -121,5 +123,5 @@ def reference_views(vol: RayVolume, poses: np.ndarray, camera, center, radius: f
         _reference_view(vol.labels, vol.origin, vol.voxel_size, np.ascontiguousarray(T[:3, :3]),
                         np.ascontiguousarray(T[:3, 3]), cam.fx, cam.fy, cam.cx, cam.cy, cam.width, cam.height,
                         cam.min_range, min(cam.max_range, 1e30), cen, float(radius), bool(through),
-                        float(p_unknown), counts[i], terms[i])
+                        bool(optimistic), float(p_unknown), counts[i], terms[i])
     return counts, terms

@@ -1,0 +1,505 @@
+"""`kinfu eval nbv`: the paper's Algorithm 1 in simulation, against random views and a fixed scan.
+
+Given a `kinfu synth` ground truth (scene_before.ply, scene_after.ply, changes.json, camera_poses.txt,
+hand.traj) or any mesh file:
+
+1. initial scan: the recording's scan poses render the BEFORE scene with the simulated Kinect
+   (`sim.sensor.DepthSensor`) and are fused into a ternary TSDF volume (`fusion.volume.TernaryVolume`);
+2. the scene changes (the AFTER mesh is rendered from now on);
+3. POIs from the simulated hand trajectory with GMM-AS (`attention.gmm_as`), or the true changes;
+4. ForgetAround: every POI sphere is cleared to unknown;
+5. per POI, per strategy, up to N views: rank the viewing sphere (`nbv.ranking.score_views`; by
+   default `optimistic`: the initial scan leaves most of the space around the table unseen, and with
+   the paper's rule those unknown voxels outside S(POI) would stop every ray from an unseen side;
+   sensor positions in unknown space are allowed, the simulated arm has no planner),
+   move there, oscillate +-`oscillation` deg about the camera's horizontal axis, fuse, re-rank.
+   ``poi`` takes the best view not yet attempted and stops when the best gain < IncTh (Alg. 1);
+   ``random`` takes a random valid candidate; ``fixed`` a predefined ring of views (latitude 40 deg,
+   evenly spread longitudes), both for the same number of views. KFOVP fuses only at the views;
+   KFOM also along the straight path between consecutive views (every `path_step` metres).
+
+Reported: unknown voxels in each POI sphere after every view (the paper's Fig. 20), views until
+IncTh, the final reconstruction error inside the POI spheres against the true after-change mesh
+(accuracy: reconstructed surface to truth; completeness: true surface within `threshold` of the
+reconstruction), and the time per stage.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from kinfu_cli.errors import ConfigError, RecordingError
+from kinfu_cli.nbv.ranking import default_inc_th, score_views, unknown_in_sphere
+from kinfu_cli.nbv.viewpoints import sphere_viewpoints
+
+STRATEGIES = ("poi", "random", "fixed")
+MODES = ("kfovp", "kfom")
+
+
+@dataclass
+class LoopConfig:
+    """Closed-loop parameters. voxel_size: the simulation volume (coarser than 512^3 by default);
+    width/height: sensor image (default: the scene's camera); sphere: viewing-sphere kwargs."""
+
+    strategies: tuple[str, ...] = STRATEGIES
+    modes: tuple[str, ...] = ("kfovp",)
+    views: int = 5
+    voxel_size: float = 0.01
+    gain: str = "unknown"
+    inc_th: float | None = None
+    poi_radius: float = 0.2
+    pois_from: str = "gmm-as"
+    oscillation_deg: float = 5.0
+    path_step: float = 0.1
+    scan_every: int = 1
+    width: int | None = None
+    height: int | None = None
+    noise: bool = True
+    seed: int = 0
+    threshold: float = 0.01
+    sphere: dict = field(default_factory=dict)
+    poi: tuple[float, float, float] | None = None
+    room: float = 5.0
+    reject_unknown: bool = False
+    optimistic: bool = True
+
+    def check(self) -> None:
+        for s in self.strategies:
+            if s not in STRATEGIES:
+                raise ConfigError(f"--strategy: expected some of {', '.join(STRATEGIES)}, got {s!r}")
+        for m in self.modes:
+            if m not in MODES:
+                raise ConfigError(f"--mode: expected kfovp, kfom or both, got {m!r}")
+        if self.views < 1:
+            raise ConfigError(f"--views: expected at least 1, got {self.views}")
+        if not (0.002 <= self.voxel_size <= 0.1):
+            raise ConfigError(f"--voxel-size: expected 0.002 to 0.1 m, got {self.voxel_size}")
+        if self.pois_from not in ("gmm-as", "truth"):
+            raise ConfigError(f"--pois-from: expected gmm-as or truth, got {self.pois_from!r}")
+        if self.scan_every < 1:
+            raise ConfigError(f"--scan-every: expected at least 1, got {self.scan_every}")
+
+
+@dataclass
+class SimScene:
+    """What the loop needs from a scene: meshes before/after, camera, initial-scan poses, hand, truth."""
+
+    name: str
+    before: object
+    after: object
+    K: np.ndarray
+    width: int
+    height: int
+    scan_poses: np.ndarray
+    hand: object | None
+    changes: np.ndarray
+    table_z: float | None
+    box_lo: np.ndarray
+    box_hi: np.ndarray
+    render_before: object = None
+    render_after: object = None
+
+
+def load_scene(path: str | os.PathLike, cfg: LoopConfig) -> SimScene:
+    """A `kinfu synth` ground-truth folder (or the recording folder holding it), or a mesh file."""
+    path = Path(path)
+    if not path.exists():
+        raise RecordingError(f"{path}: no such scene (expected a kinfu synth ground_truth folder or a mesh file)")
+    if path.is_dir():
+        from kinfu_cli.sim.scenario import load_ground_truth
+
+        gt = load_ground_truth(path)
+        table = gt.info.get("table", {})
+        cx, cy = table.get("center", [0.0, 0.0])
+        sx, sy = table.get("size", [1.2, 0.8])
+        tz = float(table.get("top_z", 0.7))
+        lo = np.array([cx - sx / 2 - 0.3, cy - sy / 2 - 0.3, tz - 0.3])
+        hi = np.array([cx + sx / 2 + 0.3, cy + sy / 2 + 0.3, tz + 0.9])
+        n_scan = int(gt.info.get("frames", {}).get("scan") or len(gt.poses))
+        return SimScene(gt.folder.name, gt.mesh("before"), gt.mesh("after"), gt.K, gt.width, gt.height,
+                        gt.poses[:n_scan:cfg.scan_every], gt.hand(), gt.change_positions, tz, lo, hi)
+    import open3d as o3d
+
+    mesh = o3d.io.read_triangle_mesh(str(path))
+    if len(mesh.triangles) == 0:
+        raise RecordingError(f"{path}: not a triangle mesh (no triangles)")
+    if cfg.poi is None:
+        raise ConfigError(f"{path}: a bare mesh has no hand trajectory; give --poi X Y Z")
+    from kinfu_cli.nbv.viewpoints import sphere_viewpoints
+    from kinfu_cli.sim.sensor import kinect_v1_intrinsics
+
+    bb = mesh.get_axis_aligned_bounding_box()
+    lo, hi = np.asarray(bb.min_bound) - 0.3, np.asarray(bb.max_bound) + 0.3
+    centre = (np.asarray(bb.min_bound) + np.asarray(bb.max_bound)) / 2
+    scan = sphere_viewpoints(centre, radius=float(np.linalg.norm(hi - lo)) / 2 + 0.3, lon_step=45, lat_min=30,
+                             lat_max=30, roll_step=360)
+    K = kinect_v1_intrinsics(320, 240)
+    poi = np.asarray(cfg.poi, dtype=float).reshape(1, 3)
+    return SimScene(path.stem, mesh, mesh, K, 320, 240, scan, None, poi, None, lo, hi)
+
+
+def _with_room(mesh, centre: np.ndarray, size: float):
+    """`mesh` plus the walls, floor and ceiling of a size x size x 3 m room around `centre` (rendering only):
+    in the paper's lab every ray ends on something, and KinFu only carves along rays with a depth reading."""
+    import open3d as o3d
+
+    room = o3d.geometry.TriangleMesh.create_box(size, size, 3.0)
+    room.translate([centre[0] - size / 2, centre[1] - size / 2, -0.01])
+    room.paint_uniform_color([0.8, 0.8, 0.75])
+    out = o3d.geometry.TriangleMesh(mesh)
+    if not out.has_vertex_colors():
+        out.paint_uniform_color([0.6, 0.6, 0.6])
+    return out + room
+
+
+def _scaled_K(K: np.ndarray, w0: int, h0: int, w: int, h: int) -> np.ndarray:
+    """K for the image resized from w0 x h0 to w x h (pixel-centre convention)."""
+    K = np.array(K, dtype=float)
+    if (w, h) == (w0, h0):
+        return K
+    sx, sy = w / w0, h / h0
+    K[0, 0] *= sx
+    K[1, 1] *= sy
+    K[0, 2] = (K[0, 2] + 0.5) * sx - 0.5
+    K[1, 2] = (K[1, 2] + 0.5) * sy - 0.5
+    return K
+
+
+def _tilt(T: np.ndarray, deg: float) -> np.ndarray:
+    """T rotated by `deg` about its own x (horizontal image) axis."""
+    a = math.radians(deg)
+    R = np.array([[1, 0, 0], [0, math.cos(a), -math.sin(a)], [0, math.sin(a), math.cos(a)]])
+    out = T.copy()
+    out[:3, :3] = T[:3, :3] @ R
+    return out
+
+
+def _path(T0: np.ndarray, T1: np.ndarray, step: float) -> list[np.ndarray]:
+    """Poses strictly between T0 and T1 on the straight line (slerped orientation), every `step` m."""
+    from scipy.spatial.transform import Rotation, Slerp
+
+    dist = float(np.linalg.norm(T1[:3, 3] - T0[:3, 3]))
+    n = int(dist // step)
+    if n < 1:
+        return []
+    s = Slerp([0.0, 1.0], Rotation.from_matrix(np.stack([T0[:3, :3], T1[:3, :3]])))
+    out = []
+    for k in range(1, n + 1):
+        f = k / (n + 1)
+        T = np.eye(4)
+        T[:3, :3] = s([f]).as_matrix()[0]
+        T[:3, 3] = (1 - f) * T0[:3, 3] + f * T1[:3, 3]
+        out.append(T)
+    return out
+
+
+class _Timer:
+    def __init__(self) -> None:
+        self.t: dict[str, float] = {}
+
+    def add(self, key: str, dt: float) -> None:
+        self.t[key] = self.t.get(key, 0.0) + dt
+
+
+def run_loop(scene_path: str | os.PathLike, cfg: LoopConfig, quiet: bool = True) -> dict:
+    """Run the closed loop; returns the result document (see the module docstring)."""
+    from kinfu_cli.fusion.volume import TernaryVolume
+    from kinfu_cli.nbv.camera import CameraModel
+    from kinfu_cli.nbv.gains import get_gain
+    from kinfu_cli.progress import progress
+    from kinfu_cli.sim.sensor import DepthSensor
+
+    cfg.check()
+    get_gain(cfg.gain)
+    timer = _Timer()
+    t0 = time.perf_counter()
+    sc = load_scene(scene_path, cfg)
+    centre = (sc.box_lo + sc.box_hi) / 2
+    sc.render_before = _with_room(sc.before, centre, cfg.room) if cfg.room > 0 else sc.before
+    sc.render_after = _with_room(sc.after, centre, cfg.room) if cfg.room > 0 else sc.after
+    w = cfg.width or sc.width
+    h = cfg.height or sc.height
+    K = _scaled_K(sc.K, sc.width, sc.height, w, h)
+    sensor = DepthSensor(K, w, h, noise=cfg.noise, seed=cfg.seed)
+    cam = CameraModel(K[0, 0], K[1, 1], K[0, 2], K[1, 2], w, h, min_range=sensor.min_range,
+                      max_range=sensor.max_range, vfov_extra_deg=cfg.oscillation_deg)
+    timer.add("load", time.perf_counter() - t0)
+
+    # 1. initial scan of the scene before the change
+    t = time.perf_counter()
+    size = sc.box_hi - sc.box_lo
+    base = TernaryVolume(size=tuple(size), voxel_size=cfg.voxel_size, origin=tuple(sc.box_lo),
+                         min_depth=sensor.min_range, max_depth=sensor.max_range, color=False)
+    n_int = 0
+    for i, T in enumerate(progress(sc.scan_poses, total=len(sc.scan_poses), desc="initial scan", quiet=quiet)):
+        depth, _ = sensor.render(sc.render_before, T, frame_seed=i)
+        if np.any(depth > 0):
+            base.integrate(depth, K, T)
+            n_int += 1
+    if n_int == 0:
+        raise RecordingError(f"{scene_path}: the initial scan saw nothing (no valid depth in {len(sc.scan_poses)} views)")
+    timer.add("initial_scan", time.perf_counter() - t)
+
+    # 2-3. the change happened; POIs from the hand trajectory
+    t = time.perf_counter()
+    pois = _find_pois(sc, cfg)
+    inside = [p for p in pois if np.all(p >= base.origin) and np.all(p < base.origin + np.array(base.shape) * base.voxel_size)]
+    if not inside:
+        raise ConfigError(f"{scene_path}: no POI inside the simulated volume ({len(pois)} found by {cfg.pois_from})")
+    pois = np.array(inside)
+    timer.add("pois", time.perf_counter() - t)
+
+    # 4. ForgetAround
+    t = time.perf_counter()
+    for p in pois:
+        base.clear_sphere(p, cfg.poi_radius)
+    timer.add("clear", time.perf_counter() - t)
+
+    sphere = dict(cfg.sphere)
+    table_z = sc.table_z
+    runs = {}
+    for mode in cfg.modes:
+        for strat in cfg.strategies:
+            name = strat if len(cfg.modes) == 1 else f"{strat}-{mode}"
+            runs[name] = _run_strategy(strat, mode, base.copy(), pois, sc, cfg, sensor, K, cam, sphere, table_z,
+                                       timer)
+    doc = {
+        "scene": str(scene_path), "config": _cfg_doc(cfg), "camera": cam.to_dict(),
+        "volume": {"shape": list(base.shape), "voxel_size": base.voxel_size, "origin": base.origin.tolist()},
+        "initial_scan_views": int(n_int),
+        "pois": [{"id": i, "position": p.tolist(),
+                  "distance_to_nearest_change": float(np.min(np.linalg.norm(sc.changes - p, axis=1)))
+                  if len(sc.changes) else None} for i, p in enumerate(pois)],
+        "strategies": runs,
+        "time_s": {k: round(v, 3) for k, v in timer.t.items()},
+    }
+    doc["time_s"]["total"] = round(time.perf_counter() - t0, 3)
+    return doc
+
+
+def _cfg_doc(cfg: LoopConfig) -> dict:
+    d = asdict(cfg)
+    d["strategies"] = list(cfg.strategies)
+    d["modes"] = list(cfg.modes)
+    return d
+
+
+def _find_pois(sc: SimScene, cfg: LoopConfig) -> np.ndarray:
+    if cfg.pois_from == "truth" or sc.hand is None:
+        return np.asarray(sc.changes, dtype=float).reshape(-1, 3)
+    from kinfu_cli.attention.gmm_as import GmmActivitySaliency
+
+    det = GmmActivitySaliency(radius=cfg.poi_radius).fit(sc.hand)
+    return np.array([p.position for p in det.pois_], dtype=float).reshape(-1, 3)
+
+
+def _fixed_ring(cands: np.ndarray, center: np.ndarray, n: int) -> list[int]:
+    """Candidate indices of a predefined ring: latitude nearest 40 deg, roll 0, n evenly spread longitudes."""
+    rel = cands[:, :3, 3] - center
+    lat = np.degrees(np.arcsin(np.clip(rel[:, 2] / np.linalg.norm(rel, axis=1), -1, 1)))
+    lon = np.degrees(np.arctan2(rel[:, 1], rel[:, 0])) % 360
+    best_lat = lat[np.argmin(np.abs(lat - 40))]
+    ring = np.flatnonzero(np.isclose(lat, best_lat))
+    out = []
+    for k in range(n):
+        target = (360.0 * k / n) % 360
+        dl = np.abs((lon[ring] - target + 180) % 360 - 180)
+        cand = ring[np.argsort(dl, kind="stable")]
+        cand = [c for c in cand if c not in out]
+        if cand:
+            out.append(int(cand[0]))
+    return out
+
+
+def _run_strategy(strat, mode, vol, pois, sc, cfg, sensor, K, cam, sphere, table_z, timer) -> dict:
+    """One strategy in one mode from the cleared volume `vol` (modified in place)."""
+    rng = np.random.default_rng(cfg.seed + 1)
+    T_cur = sc.scan_poses[-1].copy()
+    unknown: dict[int, list[int]] = {}
+    gains: dict[int, list[float]] = {}
+    until: dict[int, int | None] = {}
+    taken: dict[int, int] = {}
+    frames = 0
+    per_view_s = []
+    for pid, p in enumerate(pois):
+        cands = sphere_viewpoints(p, **sphere)
+        attempted: set[int] = set()
+        fixed = _fixed_ring(cands, p, cfg.views) if strat == "fixed" else []
+        grid = vol.ternary_grid()
+        unknown[pid] = [unknown_in_sphere(grid, p, cfg.poi_radius)]
+        gains[pid] = []
+        until[pid] = None
+        th = cfg.inc_th
+        for step in range(cfg.views):
+            tv = time.perf_counter()
+            t = time.perf_counter()
+            s = score_views(grid, cands, cam, p, cfg.poi_radius, cfg.gain, table_z=table_z,
+                            reject_unknown=cfg.reject_unknown, optimistic=cfg.optimistic)
+            if th is None:
+                th = default_inc_th(s)
+            order = [int(i) for i in s.order() if int(i) not in attempted]
+            best_gain = float(s.gain[order[0]]) if order else 0.0
+            timer.add("rank", time.perf_counter() - t)
+            gains[pid].append(best_gain)
+            if best_gain < th and until[pid] is None:
+                until[pid] = step
+            if strat == "poi":
+                if best_gain < th or not order:
+                    break
+                pick = order[0]
+            elif strat == "random":
+                valid = [i for i in np.flatnonzero(s.valid) if int(i) not in attempted]
+                if not valid:
+                    break
+                pick = int(rng.choice(valid))
+            else:
+                if step >= len(fixed):
+                    break
+                pick = fixed[step]
+            # a view is attempted with all its rolls (rolls only matter for the robot's IK)
+            T_goal = cands[pick]
+            same = np.linalg.norm(cands[:, :3, 3] - T_goal[:3, 3], axis=1) < 1e-6
+            attempted.update(int(i) for i in np.flatnonzero(same))
+            poses = _path(T_cur, T_goal, cfg.path_step) if mode == "kfom" else []
+            osc = cfg.oscillation_deg
+            poses += [T_goal] if osc <= 0 else [_tilt(T_goal, -osc), T_goal, _tilt(T_goal, osc)]
+            for T in poses:
+                t = time.perf_counter()
+                depth, _ = sensor.render(sc.render_after, T, frame_seed=10_000 + frames)
+                timer.add("render", time.perf_counter() - t)
+                t = time.perf_counter()
+                if np.any(depth > 0):
+                    vol.integrate(depth, K, T)
+                timer.add("integrate", time.perf_counter() - t)
+                frames += 1
+            T_cur = T_goal
+            t = time.perf_counter()
+            grid = vol.ternary_grid()
+            unknown[pid].append(unknown_in_sphere(grid, p, cfg.poi_radius))
+            timer.add("measure", time.perf_counter() - t)
+            per_view_s.append(time.perf_counter() - tv)
+        taken[pid] = len(unknown[pid]) - 1
+        if until[pid] is None:  # IncTh after the last view?
+            s = score_views(grid, cands, cam, p, cfg.poi_radius, cfg.gain, table_z=table_z,
+                            reject_unknown=cfg.reject_unknown, optimistic=cfg.optimistic)
+            o = [int(i) for i in s.order() if int(i) not in attempted]
+            if (float(s.gain[o[0]]) if o else 0.0) < th:
+                until[pid] = taken[pid]
+    t = time.perf_counter()
+    err = reconstruction_error(vol, sc.after, pois, cfg.poi_radius, cfg.threshold)
+    timer.add("error", time.perf_counter() - t)
+    return {"strategy": strat, "mode": mode, "unknown": {str(k): v for k, v in unknown.items()},
+            "best_gain": {str(k): v for k, v in gains.items()},
+            "views_taken": {str(k): v for k, v in taken.items()},
+            "views_until_incth": {str(k): v for k, v in until.items()},
+            "inc_th": th, "frames_fused": frames,
+            "final_unknown": int(sum(v[-1] for v in unknown.values())),
+            "initial_unknown": int(sum(v[0] for v in unknown.values())),
+            "seconds_per_view": round(float(np.mean(per_view_s)), 3) if per_view_s else 0.0,
+            "error": err}
+
+
+def reconstruction_error(vol, true_mesh, pois: np.ndarray, radius: float, threshold: float) -> dict:
+    """Accuracy and completeness of the fused surface inside the POI spheres vs the true mesh."""
+    from kinfu_cli.evaluation.reconstruction import point_to_mesh_distance
+
+    tv = np.asarray(true_mesh.vertices, dtype=np.float64)
+    tt = np.asarray(true_mesh.triangles, dtype=np.int64)
+    rec = vol.extract_mesh()
+    rv = np.asarray(rec.vertices, dtype=np.float64)
+    rt = np.asarray(rec.triangles, dtype=np.int64)
+
+    def in_spheres(x):
+        if len(x) == 0:
+            return np.zeros(0, bool)
+        return np.min(np.linalg.norm(x[:, None, :] - pois[None], axis=2), axis=1) < radius
+
+    out: dict = {"threshold_m": threshold}
+    sel = rv[in_spheres(rv)] if len(rv) else rv
+    if len(sel):
+        d = point_to_mesh_distance(sel, tv, tt)
+        out.update(accuracy_mean_m=float(np.mean(d)), accuracy_median_m=float(np.median(d)),
+                   precision=float(np.mean(d < threshold)), vertices=int(len(sel)))
+    else:
+        out.update(accuracy_mean_m=None, accuracy_median_m=None, precision=None, vertices=0)
+    samples = _sample_surface(true_mesh, pois, radius)
+    samples = samples[in_spheres(samples)]
+    if len(samples) and len(rt):
+        d = point_to_mesh_distance(samples, rv, rt)
+        out.update(completeness=float(np.mean(d < threshold)), true_samples=int(len(samples)))
+    else:
+        out.update(completeness=0.0 if len(samples) else None, true_samples=int(len(samples)))
+    return out
+
+
+def _sample_surface(mesh, pois: np.ndarray, radius: float, spacing: float = 0.004) -> np.ndarray:
+    """Area-uniform samples (about one per spacing^2) of the triangles near the POI spheres."""
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    t = np.asarray(mesh.triangles, dtype=np.int64)
+    a, b, c = v[t[:, 0]], v[t[:, 1]], v[t[:, 2]]
+    cen = (a + b + c) / 3
+    reach = np.max(np.linalg.norm(np.stack([a, b, c]) - cen, axis=2), axis=0)
+    near = np.min(np.linalg.norm(cen[:, None, :] - pois[None], axis=2), axis=1) < radius + reach
+    a, b, c = a[near], b[near], c[near]
+    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    n = min(int(area.sum() / spacing ** 2) + 1, 400_000)
+    if not len(area) or area.sum() <= 0:
+        return np.zeros((0, 3))
+    rng = np.random.default_rng(0)
+    idx = rng.choice(len(area), size=n, p=area / area.sum())
+    r1, r2 = rng.random(n), rng.random(n)
+    s1 = np.sqrt(r1)
+    return (1 - s1)[:, None] * a[idx] + (s1 * (1 - r2))[:, None] * b[idx] + (s1 * r2)[:, None] * c[idx]
+
+
+def result_table(doc: dict) -> list[str]:
+    """The per-strategy table (unknown voxels in the POI spheres after each view, like the paper's Fig. 20)."""
+    runs = doc["strategies"]
+    nmax = max((len(v) for r in runs.values() for v in r["unknown"].values()), default=1)
+    head = f"{'strategy':14s} " + " ".join(f"{'v' + str(i):>7s}" for i in range(nmax)) + \
+        "  until-IncTh  accuracy  complete  s/view"
+    lines = ["unknown voxels in the POI spheres after each view (sum over POIs; v0 = after ForgetAround)", head]
+    for name, r in runs.items():
+        series = [list(v) + [v[-1]] * (nmax - len(v)) for v in r["unknown"].values()]
+        tot = np.sum(np.array(series), axis=0)
+        until = [u for u in r["views_until_incth"].values()]
+        ut = "/".join("-" if u is None else str(u) for u in until)
+        e = r["error"]
+        acc = "-" if e.get("accuracy_mean_m") is None else f"{e['accuracy_mean_m'] * 1000:.1f}mm"
+        comp = "-" if e.get("completeness") is None else f"{e['completeness']:.3f}"
+        lines.append(f"{name:14s} " + " ".join(f"{int(x):7d}" for x in tot) +
+                     f"  {ut:>11s}  {acc:>8s}  {comp:>8s}  {r['seconds_per_view']:6.2f}")
+    lines.append("time per stage (s): " + ", ".join(f"{k} {v:.2f}" for k, v in doc["time_s"].items()))
+    return lines
+
+
+def plot_loop(path: str | os.PathLike, doc: dict) -> None:
+    """PNG: unknown voxels in each POI sphere vs views, one line per strategy (the paper's Fig. 20)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from kinfu_cli.io.atomic import atomic_path
+
+    pois = [str(p["id"]) for p in doc["pois"]]
+    fig, axes = plt.subplots(1, len(pois), figsize=(5 * len(pois), 3.8), squeeze=False)
+    for ax, pid in zip(axes[0], pois):
+        for name, r in doc["strategies"].items():
+            v = r["unknown"].get(pid, [])
+            ax.plot(range(len(v)), v, marker="o", label=name)
+        ax.set_xlabel("views")
+        ax.set_ylabel("unknown voxels in S(POI)")
+        ax.set_title(f"POI {pid}")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=90)
+    plt.close(fig)
