@@ -16,11 +16,13 @@ import numpy as np
 
 
 def compare_strategies(seed: int = 0, *, views: int = 5, scan_frames: int = 8, score_px: int = 160,
-                       resolution: int = 256, size: float = 1.6, near_distance: float = 0.05, log=None) -> dict:
+                       resolution: int = 256, size: float = 1.6, near_distance: float = 0.05,
+                       score_fraction: float = 0.01, strategies=("objects", "standard"), log=None) -> dict:
     """Thesis Fig. 3.17 / Table 3.1 in simulation: from a short one-sided scan, take `views` NBVs with the
     object-driven and the standard strategy (each view rendered with the synth sensor and fused), counting
     unknown voxels within 5 cm of the true object surfaces after each view, candidate views ray-cast and
-    planning time. Views are scored with a `score_px`-wide image of the same field of view (both strategies)."""
+    planning time. Views are scored with a `score_px`-wide image of the same field of view (both strategies);
+    ScoreTH (not given in the thesis) is `score_fraction` of that image's pixels."""
     import open3d as o3d
 
     from kinfu_cli.fusion.volume import TernaryVolume
@@ -60,7 +62,9 @@ def compare_strategies(seed: int = 0, *, views: int = 5, scan_frames: int = 8, s
                       cy=(sc.K[1, 2] + 0.5) * s - 0.5, width=score_px, height=int(round(sc.height * s)),
                       min_range=0.3)
     out = {"near_voxels": int(len(near)), "unknown_near_initial": unknown_near(base)}
-    for strategy in ("objects", "standard"):
+    score_th = score_fraction * cam.width * cam.height
+    out["score_threshold"] = score_th
+    for strategy in strategies:
         vol = base.copy()
         curve, cast, secs, scores = [], [], [], []
         for v in range(views):
@@ -70,11 +74,12 @@ def compare_strategies(seed: int = 0, *, views: int = 5, scan_frames: int = 8, s
             contours = extract_contours(grid.labels, grid.origin, grid.voxel_size)
             if strategy == "objects":
                 segs = analyse_volume(vol, SegmentOptions(superquadrics=False))
-                plan = plan_object_views(segs, contours, scorer)
+                plan = plan_object_views(segs, contours, scorer, score_threshold=score_th)
             else:
                 env_c = grid.origin + np.array(grid.shape) * grid.voxel_size / 2
                 plan = plan_standard_views(contours, scorer, env_c,
-                                           float(np.linalg.norm(np.array(grid.shape) * grid.voxel_size) / 2))
+                                           float(np.linalg.norm(np.array(grid.shape) * grid.voxel_size) / 2),
+                                           score_threshold=score_th)
             secs.append(time.perf_counter() - t)
             cast.append(plan.candidates_evaluated)
             if plan.pose is None:
@@ -88,6 +93,8 @@ def compare_strategies(seed: int = 0, *, views: int = 5, scan_frames: int = 8, s
                          "planning_seconds_total": float(sum(secs)), "scores": scores}
         if log is not None:
             log(strategy, out[strategy])
+    if "objects" not in out or "standard" not in out:
+        return out
     o, st = out["objects"], out["standard"]
     # same unknown-voxel reduction near objects: views the object strategy needs to reach the standard's end
     target = st["unknown_near_after_each_view"][-1] if st["unknown_near_after_each_view"] else out["unknown_near_initial"]
