@@ -233,11 +233,10 @@ def plan_object_views_for_volume(volume, camera, *, scorer: Scorer | None = None
     segments = analyse_volume(volume, opts)
     t_seg = time.perf_counter() - t0
     grid = volume.ternary_grid() if hasattr(volume, "ternary_grid") else volume
-    weights = None
-    if hasattr(volume, "weights") and hasattr(volume, "tsdf_weights"):
-        weights = None  # fusion labels already encode w > 0; W_th on the dense weights would cost 128 MB more
     t = time.perf_counter()
-    contours = extract_contours(grid.labels, grid.origin, grid.voxel_size, weights=weights, w_th=w_th)
+    # contours from the ternary labels (known = w > 0, the fusion ternary rule); pass dense weights to
+    # extract_contours directly to apply a larger W_th
+    contours = extract_contours(grid.labels, grid.origin, grid.voxel_size, w_th=w_th)
     t_cont = time.perf_counter() - t
     if scorer is None:
         scorer = nbv_scorer(grid, camera, table_z=table_z)
