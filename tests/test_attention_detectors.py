@@ -171,7 +171,7 @@ def test_cli_poi_zvc_json_stdout(pnp_traj, tmp_path):
     assert res.exit_code == 0, res.output
     doc = json.loads(res.output)
     assert doc["algorithm"] == "zvc" and all(p["gaussian"] is None for p in doc["pois"])
-    assert doc["parameters"]["threshold"] == 1.72 and doc["parameters"]["half_width"] == 4
+    assert doc["parameters"]["threshold"] == 1.5 and doc["parameters"]["half_width"] == 4
 
 
 @pytest.mark.parametrize("args, expect", [
@@ -217,6 +217,8 @@ def test_cli_poi_literal_reading_is_selectable(pnp_traj, tmp_path):
     params = json.loads(out.read_text())["parameters"]
     assert params["saliency"] == "literal" and params["poi_threshold"] == 2.5 and params["resample"] == 0
     assert params["threshold_mode"] == "literal" and params["time_scale"] == 1.0
+    res = CliRunner().invoke(cli, ["poi", str(src), "--literal", "--algorithm", "zvc", "-o", str(out), "--quiet"])
+    assert res.exit_code == 0 and json.loads(out.read_text())["parameters"]["threshold"] == 1.72
 
 
 def test_tracking_gap_is_not_taken_for_dwell():

@@ -131,9 +131,9 @@ def test_real_subset_regression(shared_data):
     assert g["pick_and_place"]["precision"] >= 0.98 and g["pick_and_place"]["recall"] >= 0.97
     assert g["placements_removals"]["precision"] >= 0.93 and g["placements_removals"]["recall"] >= 0.9375
     assert by["gmm-as"]["overall"]["precision"] >= 0.96 and by["gmm-as"]["overall"]["recall"] >= 0.96
-    z = by["zvc"]["groups"]  # the paper's parameters: high precision, recall well below the paper's
-    assert z["pick_and_place"]["precision"] >= 0.97 and z["pick_and_place"]["recall"] >= 0.45
-    assert z["placements_removals"]["precision"] >= 0.93 and z["placements_removals"]["recall"] >= 0.65
+    z = by["zvc"]["groups"]  # ZVCTh 1.5 (re-calibrated on users 1+4)
+    assert z["pick_and_place"]["precision"] >= 0.97 and z["pick_and_place"]["recall"] >= 0.98
+    assert z["placements_removals"]["precision"] >= 0.92 and z["placements_removals"]["recall"] >= 0.9375
     # the placements ceiling
     from kinfu_cli.io.polhemus import read_ground_truth, read_polhemus
 
