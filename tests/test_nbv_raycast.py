@@ -174,3 +174,22 @@ def test_shared_rolls_are_exact_for_half_turns_of_a_centred_camera():
     b = cast_views(vol, poses, cam, poi, 0.2, share_rolls=False)
     assert np.array_equal(a.counts, b.counts) and np.allclose(a.terms, b.terms)
     assert a.rays_cast < 0.6 * b.rays_cast
+
+
+def test_optimistic_rays_pass_unknown_outside_the_region_and_match_the_reference():
+    g = empty_grid()
+    g.labels[10:14, :, :] = UNKNOWN  # an unseen slab between the sensor and the region
+    g.labels[28:36, 28:36, 28:36] = UNKNOWN  # the region's unknown box (0.16 m)
+    vol = RayVolume.from_grid(g)
+    center = np.array([0.64, 0.64, 0.64])
+    o = np.array([0.05, 0.64, 0.64])
+    d = np.array([[1.0, 0.0, 0.0]])
+    paper = cast_rays(vol, o, d, center=center, radius=0.1)
+    opt = cast_rays(vol, o, d, center=center, radius=0.1, optimistic=True)
+    assert paper.cls[0] == CLS_UNKNOWN and paper.terms[0, 0] == 0.0  # stopped by the slab
+    assert opt.cls[0] == CLS_UNKNOWN and opt.terms[0, 0] == 1.0 and opt.t[0] == pytest.approx(0.51)
+    T = look_at([0.05, 0.6, 0.7], center)
+    ref_c, ref_t = reference_views(vol, T[None], CAM, center, 0.15, optimistic=True)
+    fast = cast_views(vol, T[None], CAM, center, 0.15, optimistic=True)
+    assert ref_t[0, 0] > 200 and abs(fast.terms[0, 0] - ref_t[0, 0]) <= 0.03 * ref_t[0, 0]
+    assert cast_views(vol, T[None], CAM, center, 0.15).terms[0, 0] == 0  # the paper's rule: the slab hides it

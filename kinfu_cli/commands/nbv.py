@@ -61,12 +61,14 @@ def _table_z_option(value: str):
               help="Reject sensor positions below this height: auto (table top found in the volume), none, or metres.")
 @click.option("--clearance", default=0.0, show_default=True, type=float,
               help="Reject sensor positions within this distance (m) of occupied/unknown voxels.")
+@click.option("--optimistic", is_flag=True,
+              help="Unknown voxels outside S(POI) do not stop rays (the paper: the first unknown voxel stops a ray).")
 @click.option("--exact-rolls", is_flag=True, help="Cast every view's own rays (no sharing between rolls; slower).")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @click.option("--json", "as_json", is_flag=True, help="Print the result JSON on stdout.")
 def command(volume, pois_path, clear, gain, top, output, plot, candidates, radius, lon_step, lat_min, lat_max,
             lat_step, roll_step, poi_radius, fx, fy, cx, cy, width, height, camera_info, min_range, max_range,
-            vfov_extra, inc_th, table_z, clearance, exact_rolls, quiet, as_json):
+            vfov_extra, inc_th, table_z, clearance, optimistic, exact_rolls, quiet, as_json):
     """Rank candidate views around each POI by the information gain inside S(POI).
 
     Ray casts each candidate (the paper's viewing sphere: d = 0.8 m, longitude 30 deg, latitude
@@ -90,7 +92,7 @@ def command(volume, pois_path, clear, gain, top, output, plot, candidates, radiu
                       sphere=dict(radius=radius, lon_step=lon_step, lat_min=lat_min, lat_max=lat_max,
                                   lat_step=lat_step, roll_step=roll_step),
                       poi_radius=poi_radius, inc_th=inc_th, table_z=_table_z_option(table_z), clearance=clearance,
-                      share_rolls=not exact_rolls)
+                      share_rolls=not exact_rolls, optimistic=optimistic)
     doc, grid, rankings = run_nbv(volume, pois_path, cam, opts, quiet=quiet)
     if plot is not None:
         from kinfu_cli.report.nbv_plot import plot_nbv

@@ -189,7 +189,8 @@ def default_inc_th(scores: ViewScores, fraction: float = 0.01) -> float:
 def rank_poi(volume: TernaryGrid | RayVolume, center, camera: CameraModel, *, poi_id: int = 0, radius: float = 0.2,
              gain: str = "unknown", candidates: np.ndarray | None = None, sphere: dict | None = None,
              inc_th: float | None = None, table_z: float | None = None, clearance: float = 0.0,
-             share_rolls: bool = True, progress_cb=None) -> PoiRanking:
+             share_rolls: bool = True, optimistic: bool = False, reject_unknown: bool = True,
+             progress_cb=None) -> PoiRanking:
     """Score the viewing sphere (or `candidates`) around one POI and apply IncTh.
 
     sphere: keyword arguments of `viewpoints.sphere_viewpoints` (radius 0.8 m, 30/10/45 deg steps).
@@ -197,7 +198,8 @@ def rank_poi(volume: TernaryGrid | RayVolume, center, camera: CameraModel, *, po
     center = np.asarray(center, dtype=np.float64).reshape(3)
     poses = candidates if candidates is not None else sphere_viewpoints(center, **(sphere or {}))
     scores = score_views(volume, poses, camera, center, radius, gain, table_z=table_z, clearance=clearance,
-                         share_rolls=share_rolls, progress_cb=progress_cb)
+                         share_rolls=share_rolls, optimistic=optimistic, reject_unknown=reject_unknown,
+                         progress_cb=progress_cb)
     th = default_inc_th(scores) if inc_th is None else float(inc_th)
     o = scores.order()
     best = float(scores.gain[o[0]]) if o.size else 0.0

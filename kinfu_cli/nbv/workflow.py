@@ -29,6 +29,7 @@ class NbvOptions:
     table_z: str | float | None = "auto"
     clearance: float = 0.0
     share_rolls: bool = True
+    optimistic: bool = False
 
 
 def resolve_table_z(grid: TernaryGrid, table_z) -> float | None:
@@ -77,7 +78,8 @@ def run_nbv(volume_path: str | os.PathLike, pois_path: str | os.PathLike, camera
         for p, poses in zip(pois, per_poi):
             r = rank_poi(vol, p.position, camera, poi_id=p.id, radius=p.radius, gain=opts.gain, candidates=poses,
                          inc_th=opts.inc_th, table_z=table_z, clearance=opts.clearance,
-                         share_rolls=opts.share_rolls, progress_cb=bar.update if bar is not None else None)
+                         share_rolls=opts.share_rolls, optimistic=opts.optimistic,
+                         progress_cb=bar.update if bar is not None else None)
             if opts.clear:
                 r.extra["cleared_voxels"] = cleared[p.id]
             rankings.append(r)
@@ -89,7 +91,7 @@ def run_nbv(volume_path: str | os.PathLike, pois_path: str | os.PathLike, camera
         "gain_unit": get_gain(opts.gain).unit, "cleared": bool(opts.clear),
         "candidates": str(opts.candidates) if opts.candidates is not None else {"sphere": _sphere_doc(opts.sphere)},
         "camera": camera.to_dict(), "table_z": table_z, "clearance": opts.clearance,
-        "share_rolls": opts.share_rolls,
+        "share_rolls": opts.share_rolls, "optimistic": opts.optimistic,
         "voxel_size": grid.voxel_size, "shape": list(grid.shape),
         "pois": [r.to_dict(top=opts.top) for r in rankings],
     }
