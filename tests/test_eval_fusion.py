@@ -118,6 +118,14 @@ def test_object_measures_of_forced_pose_scan(rec, gt):
     assert res.to_json()["paper_table_1"][1]["tracking"] == "robot kinematics"
 
 
+def test_objects_only_mesh_falls_back_to_the_true_table_plane(rec, gt):
+    above = rec.vertices[rec.vertices[:, 2] > gt.info["table"]["top_z"] + 0.01]
+    res = object_measures(above, gt, "before")
+    assert res.settings["table_plane"].startswith("true")
+    assert np.allclose(res.plane, res.plane_truth)
+    assert all(abs(r["error"]["height"]) <= 0.01 for r in res.objects)
+
+
 def test_mesh_offset_2cm_along_normals_gives_2cm_error(rec, gt, surface, score):
     moved = Reconstruction(rec.vertices + 0.02 * _vertex_normals(rec), rec.triangles, rec.source)
     s = score_reconstruction(moved, gt, "before", surface=surface)

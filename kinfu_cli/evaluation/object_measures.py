@@ -3,7 +3,8 @@ the table plane and the major / minor axis of its footprint on the table, recons
 
 Reconstruction side (points = reconstructed mesh vertices):
 1. table plane: RANSAC plane (open3d `segment_plane`, then a least-squares refit on its inliers) through the points
-   near the true table top (within `band` of it, inside the table outline, outside every object's box), normal up;
+   near the true table top (within `band` of it, inside the table outline, outside every object's box), normal up
+   (the true plane, said so in the results, when fewer than 50 such points exist);
 2. an object's points: inside its true oriented box (changes.json centre / size / yaw) grown by `margin`
    horizontally and by `margin` + 5 cm up and down, and more than `min_height` above the fitted plane (so table
    points are left out);
@@ -192,7 +193,8 @@ class ObjectMeasuresResult:
         measured = sum(1 for o in self.objects if o["error"] is not None)
         return {"objects": self.objects, "objects_measured": measured, "objects_total": len(self.objects),
                 "mean_abs": self.mean_abs, "std": self.std, "per_measure": self.per_measure,
-                "table_plane": {"fitted": self.plane.tolist(), "true": self.plane_truth.tolist(),
+                "table_plane": {"source": self.settings.get("table_plane", "fitted"),
+                                "fitted": self.plane.tolist(), "true": self.plane_truth.tolist(),
                                 "tilt_deg": tilt, "offset": float(self.plane[3] - self.plane_truth[3])},
                 "paper_table_1": PAPER_TABLE_1, "settings": self.settings}
 
@@ -230,7 +232,11 @@ def object_measures(points: np.ndarray, gt, state: str = "after", margin: float 
     pts = np.asarray(points, dtype=np.float64)
     objects = ground_truth_objects(gt, state)
     truth_plane = table_plane_truth(gt)
-    plane = fit_table_plane(pts, gt, objects)
+    plane_source = "fitted"
+    try:
+        plane = fit_table_plane(pts, gt, objects)
+    except RecordingError:
+        plane, plane_source = truth_plane.copy(), "true (too few reconstructed table points to fit one)"
     height = pts @ plane[:3] + plane[3]
     rows, errs = [], {m: [] for m in MEASURES}
     for o in objects:
@@ -256,4 +262,4 @@ def object_measures(points: np.ndarray, gt, state: str = "after", margin: float 
     return ObjectMeasuresResult(rows, plane, truth_plane, float(np.abs(pooled).mean()) if pooled.size else float("nan"),
                                 _std(pooled), per_measure,
                                 {"margin": margin, "min_height": min_height, "footprint": footprint,
-                                 "state": state})
+                                 "state": state, "table_plane": plane_source})

@@ -636,7 +636,10 @@ def format_fusion_tables(doc: dict) -> str:
                      + ("   (not measured)" if row["error"] is None else ""))
     lines.append("  (seen: share of the object's true surface, bottom excluded, visible from the true camera poses)")
     pl = o["table_plane"]
-    lines.append(f"  table plane fit: tilt {pl['tilt_deg']:.2f} deg, offset {pl['offset'] * 1000:+.1f} mm")
+    if pl.get("source", "fitted") == "fitted":
+        lines.append(f"  table plane fit: tilt {pl['tilt_deg']:.2f} deg, offset {pl['offset'] * 1000:+.1f} mm")
+    else:
+        lines.append(f"  table plane: {pl['source']}")
     lines += ["", "Table 1 (Monica et al. RAS 2016): 3D object reconstruction errors (height, major and minor axis)",
               "  scenario   tracking                   mean abs. (m)   st. dev. (m)"]
     for row in doc["table_1"]:
