@@ -65,7 +65,7 @@ def _partially_seen_scene():
 
 def _frustum_scorer(grid: TernaryGrid, hfov_deg: float = 30.0):
     """Test scorer without occlusion: unknown voxels of the sphere inside the view cone."""
-    unk = grid.centers(np.argwhere(grid.labels == 0))
+    unk = grid.centers(np.argwhere(grid.labels == 0)[::7])  # every 7th unknown voxel: a cheap proxy count
 
     def score(poses, center, radius):
         pts = unk[np.linalg.norm(unk - center, axis=1) < radius]
