@@ -1,12 +1,22 @@
-"""`make demo`: run the pipeline as far as it exists on the bundled sample recording.
+"""`make demo`: the whole pipeline on the bundled sample recording, the paper's way round.
 
-Each stage is a real `kinfu` sub-command run in-process; a stage whose command is not
-registered yet is reported as not available, never faked.
+1. `kinfu info` — what is in the recording.
+2. `kinfu fuse --end T_hand_in` — the initial scan, before the person acts.
+3. `kinfu poi` — points of interest from the hand trajectory (analysed when the hand has left).
+4. `kinfu nbv --clear` — ForgetAround the POIs in the scan volume and rank views around them.
+5. `kinfu fuse --init scan --clear-pois --start T_hand_out` — forget the POI spheres, fuse the
+   views taken after the change (without the clearing KinFu keeps the old surface).
+6. `kinfu segment` — segments, saliency and superquadrics of the updated scene.
+7. `kinfu eval fusion` / `kinfu eval nbv` — scores against the generator's ground truth.
+
+Every stage is a real `kinfu` sub-command run in-process; a stage whose command does not exist is
+reported as not available, never faked. Exit status 1 when a stage fails.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from pathlib import Path
@@ -19,54 +29,105 @@ from kinfu_cli.cli import cli
 def _run(args: list[str]) -> tuple[int, str]:
     res = CliRunner().invoke(cli, args, catch_exceptions=True)
     out = res.output
-    if res.exception and not isinstance(res.exception, SystemExit):
+    if res.exception is not None and not isinstance(res.exception, SystemExit):
         out += f"\n{type(res.exception).__name__}: {res.exception}"
     return res.exit_code, out
 
 
+def hand_window(recording: Path) -> tuple[float, float]:
+    """Seconds from the recording start at which the hand trajectory starts and ends."""
+    from kinfu_cli.io.hand import load_hand_trajectory
+    from kinfu_cli.io.recording import open_recording
+
+    with open_recording(recording) as rec:
+        start_ns = rec.start_ns
+    traj = load_hand_trajectory(recording)
+    offset = (traj.t0_ns - start_ns) / 1e9
+    return offset + float(traj.t[0]), offset + float(traj.t[-1])
+
+
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--data", default="sample_data")
-    ap.add_argument("--out", default="out/demo")
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--data", default="sample_data", help="folder holding tabletop/recording.mcap")
+    ap.add_argument("--out", default="out/demo", help="output folder")
     a = ap.parse_args(argv)
     data, out = Path(a.data), Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     rec = data / "tabletop" / "recording.mcap"
-    if not rec.exists():
-        print(f"demo: {rec} not found (run `kinfu synth -o {data}/tabletop`)", file=sys.stderr)
-        return 2
     gt = data / "tabletop" / "ground_truth"
-    fuse_dir, seg_dir = out / "fuse", out / "segment"
+    if not rec.exists():
+        print(f"demo: {rec} not found (make it with `kinfu synth -o {data}/tabletop`)", file=sys.stderr)
+        return 2
+    t_in, t_out = hand_window(rec)
+    scan, fused, seg = out / "scan", out / "fuse", out / "segment"
+    pois, views = out / "pois.json", out / "views.json"
     stages = [
         ("info", ["info", str(rec), "--json"], out / "info.json"),
-        ("fuse", ["fuse", str(rec), "-o", str(fuse_dir), "--quiet"], fuse_dir),
-        ("poi", ["poi", str(rec), "-o", str(out / "pois.json")], out / "pois.json"),
-        ("segment", ["segment", str(fuse_dir / "volume.npz"), "-o", str(seg_dir)], seg_dir),
-        ("nbv", ["nbv", str(fuse_dir / "volume.npz"), "--pois", str(out / "pois.json"), "--clear",
-                 "-o", str(out / "views.json"), "--quiet"], out / "views.json"),
-        ("eval", ["eval", "nbv", str(gt), "--views", "3", "--quiet"], None),
+        ("fuse scan", ["fuse", str(rec), "-o", str(scan), "--end", f"{t_in:.3f}", "--quiet", "--plot"], scan),
+        ("poi", ["poi", str(rec), "-o", str(pois), "--plot", str(out / "pois.png")], pois),
+        ("nbv", ["nbv", str(scan / "volume.npz"), "--pois", str(pois), "--clear", "--top", "5",
+                 "-o", str(views), "--plot", str(out / "views.png"), "--quiet"], views),
+        ("fuse after", ["fuse", str(rec), "-o", str(fused), "--init", str(scan / "volume.npz"),
+                        "--clear-pois", str(pois), "--start", f"{t_out:.3f}", "--quiet"], fused),
+        ("segment", ["segment", str(fused / "volume.npz"), "-o", str(seg), "--plot", "--quiet"], seg),
+        ("eval fusion", ["eval", "fusion", str(fused), "--ground-truth", str(gt), "--state", "after",
+                         "-o", str(out / "eval_fusion.json"), "--quiet"], out / "eval_fusion.json"),
+        ("eval nbv", ["eval", "nbv", str(gt), "--views", "3", "--strategy", "poi,random",
+                      "-o", str(out / "eval_nbv.json"), "--plot", str(out / "eval_nbv.png"), "--quiet"],
+         out / "eval_nbv.json"),
     ]
     available = set(cli.commands)
+    evals = set(getattr(cli.commands.get("eval"), "commands", {}))
+    print(f"kinfu demo on {rec} (hand in the workspace {t_in:.2f}-{t_out:.2f} s)")
     failed = 0
-    print(f"kinfu demo on {rec}")
+    tables: list[str] = []
     for name, args, output in stages:
-        if args[0] not in available:
-            print(f"  {name:8s} not available yet")
+        if args[0] not in available or (args[0] == "eval" and args[1] not in evals):
+            print(f"  {name:12s} not available yet")
             continue
         t0 = time.perf_counter()
         code, text = _run(args)
         dt = time.perf_counter() - t0
         if name == "info" and code == 0:
             (out / "info.json").write_text(text)
-        status = "ok" if code == 0 else f"FAILED (exit {code})"
-        print(f"  {name:8s} {status:10s} {dt:6.1f} s  -> {output if output else '(table below)'}")
+        print(f"  {name:12s} {'ok' if code == 0 else f'FAILED (exit {code})':10s} {dt:6.1f} s  -> {output}")
         if code != 0:
             failed += 1
             print("    " + text.strip().replace("\n", "\n    "))
-        elif name == "eval":
-            print("    " + text.strip().replace("\n", "\n    "))
-    print(f"outputs in {out}/")
+        elif name.startswith("eval") or name == "poi":
+            tables.append(f"--- {name}\n{text.strip()}")
+    summary = _summary(out)
+    if summary:
+        print("\nSummary\n  " + "\n  ".join(summary))
+    for t in tables:
+        print("\n" + t)
+    print(f"\nall outputs in {out}/")
     return 1 if failed else 0
+
+
+def _summary(out: Path) -> list[str]:
+    lines = []
+    for name in ("scan", "fuse"):
+        rep = out / name / "report.json"
+        if rep.exists():
+            r = json.loads(rep.read_text())
+            c = r.get("counts", {})
+            lines.append(f"{name:5s}: {r['frames']['used']} frames, occupied {c.get('occupied')}, "
+                         f"empty {c.get('empty')}, unknown {c.get('unknown')} voxels; mesh {out / name / 'mesh.ply'}")
+    if (out / "views.json").exists():
+        v = json.loads((out / "views.json").read_text())
+        for p in v.get("pois", []):
+            best = (p.get("views") or [{}])[0]
+            pos = best.get("position")
+            if pos is not None:
+                lines.append(f"POI {p.get('id')}: best view at ({pos[0]:.2f}, {pos[1]:.2f}, {pos[2]:.2f}) m, gain "
+                             f"{best.get('gain')}")
+    if (out / "segment" / "segments.json").exists():
+        s = json.loads((out / "segment" / "segments.json").read_text())["segments"]
+        top = max(s, key=lambda x: x.get("saliency") or 0.0, default=None)
+        if top is not None:
+            lines.append(f"segments: {len(s)}; most salient #{top['id']} saliency {top['saliency']:.3f}")
+    return lines
 
 
 if __name__ == "__main__":
