@@ -92,13 +92,17 @@ def main(argv: list[str] | None = None) -> int:
     cast_views(vol, poses[:2], CameraModel(50, 50, 15.5, 11.5, 32, 24), poi, 0.2)  # compile / warm up
     cast_views(vol, poses[:2], CameraModel(50, 50, 15.5, 11.5, 32, 24), poi, 0.2, through=True)
 
+    cpu: dict[str, float] = {}
+
     def timed(**kw):
-        best, r = np.inf, None
+        best, r, c_best = np.inf, None, np.inf
         for _ in range(max(a.repeat, 1)):
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             r = cast_views(vol, poses, cam, poi, 0.2, **kw)
             best = min(best, time.perf_counter() - t0)
-        print(f"  fast {kw or 'shared rolls'}: {best:.3f} s, {r.rays_cast} rays", flush=True)
+            c_best = min(c_best, time.process_time() - c0)
+        cpu[str(kw)] = c_best
+        print(f"  fast {kw or 'shared rolls'}: {best:.3f} s wall, {c_best:.3f} s CPU, {r.rays_cast} rays", flush=True)
         return r, best
 
     fast, t_fast = timed()
@@ -106,11 +110,13 @@ def main(argv: list[str] | None = None) -> int:
     full, t_full = timed(share_rolls=False, restrict=False) if a.full else (None, None)
     sub = np.linspace(0, len(poses) - 1, a.ref_views).round().astype(int)
     reference_views(vol, poses[:1], CameraModel(50, 50, 15.5, 11.5, 32, 24), poi, 0.2)  # compile
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     ref_counts, ref_terms = reference_views(vol, poses[sub], cam, poi, 0.2)
     t_ref_sub = time.perf_counter() - t0
+    c_ref_sub = time.process_time() - c0
     t_ref = t_ref_sub / len(sub) * len(poses)
-    print(f"  reference: {t_ref_sub:.2f} s for {len(sub)} views", flush=True)
+    c_ref = c_ref_sub / len(sub) * len(poses)
+    print(f"  reference: {t_ref_sub:.2f} s wall, {c_ref_sub:.2f} s CPU for {len(sub)} views", flush=True)
 
     def rel_err(terms):
         g, r = terms[sub, 0], ref_terms[:, 0]
@@ -120,13 +126,16 @@ def main(argv: list[str] | None = None) -> int:
         "volume": f"{a.size}^3 ({grid.voxel_size * 1000:.2f} mm)", "views": len(poses),
         "image": f"{cam.width}x{cam.height}", "threads": int(os.environ.get("NUMBA_NUM_THREADS", 0) or os.cpu_count()),
         "build_scene_s": round(t_build, 2), "prepare_volume_s": round(t_prep, 3),
-        "fast_shared_rolls_s": round(t_fast, 3), "rays_cast_shared": int(fast.rays_cast),
+        "load_average_1min": round(os.getloadavg()[0], 2),
+        "fast_shared_rolls_s": round(t_fast, 3), "fast_shared_rolls_cpu_s": round(cpu["{}"], 3),
+        "rays_cast_shared": int(fast.rays_cast),
         "fast_exact_rays_s": round(t_exact, 3), "rays_cast_exact": int(exact.rays_cast),
 
         "reference_views_run": int(len(sub)), "reference_s_measured": round(t_ref_sub, 2),
-        "reference_s_extrapolated_960": round(t_ref, 1),
+        "reference_s_extrapolated_960": round(t_ref, 1), "reference_cpu_s_extrapolated_960": round(c_ref, 1),
         "speedup_shared_vs_reference": round(t_ref / t_fast, 1),
         "speedup_exact_vs_reference": round(t_ref / t_exact, 1),
+        "cpu_ratio_shared_vs_reference": round(c_ref / cpu["{}"], 1),
 
         "max_rel_gain_err_shared": round(rel_err(fast.terms), 5),
         "max_rel_gain_err_exact": round(rel_err(exact.terms), 5),

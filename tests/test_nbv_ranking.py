@@ -188,3 +188,13 @@ def test_cli_camera_info_without_camera_info_topic_is_an_error(shared_data, tmp_
     res = CliRunner().invoke(cli, ["nbv", str(vol), "--pois", str(pois), "--camera-info", str(bag), "--quiet"])
     assert res.exit_code == 2
     assert "kinfu: error:" in res.output and "CameraInfo" in res.output and "tf_example.bag" in res.output
+
+
+def test_cli_intrinsics_from_the_recordings_camera_info(scene_files, sample_dir):
+    vol, pois, _ = scene_files
+    args = ["nbv", str(vol), "--pois", str(pois), "--json", "--lon-step", "90", "--lat-step", "45",
+            "--roll-step", "180", "--quiet", "--vfov-extra", "0"]
+    res = CliRunner().invoke(cli, args + ["--camera-info", str(sample_dir / "recording.mcap")])
+    assert res.exit_code == 0, res.output
+    cam = json.loads(res.output)["camera"]
+    assert (cam["fx"], cam["cx"], cam["width"], cam["height"]) == (292.5, 159.5, 320, 240)

@@ -113,32 +113,22 @@ def camera_from_options(fx: float | None = None, fy: float | None = None, cx: fl
 
 
 def intrinsics_from_recording(path: str | os.PathLike) -> dict:
-    """fx, fy, cx, cy, width, height from the first sensor_msgs/CameraInfo of a recording
-    (MCAP, ROS 1 .bag or ROS 2 bag folder), read with rosbags' AnyReader."""
+    """fx, fy, cx, cy, width, height from the first sensor_msgs/CameraInfo of a recording (MCAP, ROS 1
+    .bag or ROS 2 bag folder, read with the project's recording reader); the depth camera's if several."""
+    from kinfu_cli.io.messages import camera_info_K
+    from kinfu_cli.io.recording import open_recording
+
     path = Path(path)
     if not path.exists():
         raise RecordingError(f"{path}: no such recording (--camera-info)")
-    try:
-        from rosbags.highlevel import AnyReader
-        from rosbags.typesys import Stores, get_typestore
-    except ImportError as exc:  # pragma: no cover - rosbags is a dependency
-        raise RecordingError(f"{path}: cannot read recordings ({exc})") from None
-    typestore = get_typestore(Stores.ROS2_HUMBLE)
-    try:
-        with AnyReader([path], default_typestore=typestore) as reader:
-            conns = [c for c in reader.connections if c.msgtype.endswith("CameraInfo")]
-            if not conns:
-                raise RecordingError(f"{path}: no sensor_msgs/CameraInfo topic; intrinsics missing "
-                                     "(give --fx --fy --cx --cy)")
-            depth = [c for c in conns if "depth" in c.topic] or conns
-            for conn, _t, raw in reader.messages(connections=depth[:1]):
-                msg = reader.deserialize(raw, conn.msgtype)
-                k = np.asarray(getattr(msg, "k", getattr(msg, "K", None)), dtype=np.float64).reshape(-1)
-                if k.size != 9 or not (k[0] > 0 and k[4] > 0):
-                    raise RecordingError(f"{path}: topic {conn.topic}: CameraInfo has no intrinsics (K is zero)")
-                return dict(fx=k[0], fy=k[4], cx=k[2], cy=k[5], width=int(msg.width), height=int(msg.height))
-    except RecordingError:
-        raise
-    except Exception as exc:  # rosbags raises several reader errors; report them on one line
-        raise RecordingError(f"{path}: cannot read CameraInfo ({type(exc).__name__}: {exc})") from None
-    raise RecordingError(f"{path}: topic {depth[0].topic} has no messages; intrinsics missing")
+    with open_recording(path) as rec:
+        topics = rec.topics_of_type("sensor_msgs/msg/CameraInfo")
+        if not topics:
+            raise RecordingError(f"{path}: no sensor_msgs/CameraInfo topic; intrinsics missing "
+                                 "(give --fx --fy --cx --cy)")
+        topic = ([t for t in topics if "depth" in t] or topics)[0]
+        msg = rec.first_message(topic)
+        if msg is None:
+            raise RecordingError(f"{path}: topic {topic} has no messages; intrinsics missing")
+        K, w, h = camera_info_K(msg, f"{path}: {topic}")
+    return dict(fx=float(K[0, 0]), fy=float(K[1, 1]), cx=float(K[0, 2]), cy=float(K[1, 2]), width=w, height=h)
