@@ -47,7 +47,7 @@ def test_cli_eval_nbv_writes_table_json_and_plot(sample_dir, tmp_path):
                                    "--lon-step", "90", "--lat-step", "45", "--roll-step", "180", "--no-noise",
                                    "--quiet", "-o", str(out), "--plot", str(png)])
     assert res.exit_code == 0, res.output
-    assert "unknown voxels in the POI spheres" in res.output and "fixed" in res.output
+    assert "unknown voxels in each POI sphere" in res.output and "fixed" in res.output
     doc = json.loads(out.read_text())
     series = list(doc["strategies"]["fixed"]["unknown"].values())
     assert all(len(s) == 2 and s[1] < s[0] for s in series)

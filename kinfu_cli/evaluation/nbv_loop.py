@@ -459,22 +459,26 @@ def _sample_surface(mesh, pois: np.ndarray, radius: float, spacing: float = 0.00
 
 
 def result_table(doc: dict) -> list[str]:
-    """The per-strategy table (unknown voxels in the POI spheres after each view, like the paper's Fig. 20)."""
+    """Unknown voxels in each POI sphere after each view (the paper's Fig. 20 as a table), one row per
+    strategy and POI, with views until IncTh, and the final error of each strategy."""
     runs = doc["strategies"]
     nmax = max((len(v) for r in runs.values() for v in r["unknown"].values()), default=1)
-    head = f"{'strategy':14s} " + " ".join(f"{'v' + str(i):>7s}" for i in range(nmax)) + \
-        "  until-IncTh  accuracy  complete  s/view"
-    lines = ["unknown voxels in the POI spheres after each view (sum over POIs; v0 = after ForgetAround)", head]
+    lines = ["unknown voxels in each POI sphere after each view (v0 = before the first view of that POI)",
+             f"{'strategy':14s} {'POI':>3s} " + " ".join(f"{'v' + str(i):>7s}" for i in range(nmax)) + "  until-IncTh"]
     for name, r in runs.items():
-        series = [list(v) + [v[-1]] * (nmax - len(v)) for v in r["unknown"].values()]
-        tot = np.sum(np.array(series), axis=0)
-        until = [u for u in r["views_until_incth"].values()]
-        ut = "/".join("-" if u is None else str(u) for u in until)
+        for pid, v in r["unknown"].items():
+            u = r["views_until_incth"].get(pid)
+            cells = " ".join(f"{int(x):7d}" for x in v) + " " * (8 * (nmax - len(v)))
+            lines.append(f"{name:14s} {pid:>3s} {cells}  {'-' if u is None else u:>11}")
+    lines.append(f"{'strategy':14s} {'views':>5s} {'frames':>6s} {'accuracy':>9s} {'precision':>9s} "
+                 f"{'complete':>8s} {'s/view':>6s}")
+    for name, r in runs.items():
         e = r["error"]
         acc = "-" if e.get("accuracy_mean_m") is None else f"{e['accuracy_mean_m'] * 1000:.1f}mm"
+        prec = "-" if e.get("precision") is None else f"{e['precision']:.3f}"
         comp = "-" if e.get("completeness") is None else f"{e['completeness']:.3f}"
-        lines.append(f"{name:14s} " + " ".join(f"{int(x):7d}" for x in tot) +
-                     f"  {ut:>11s}  {acc:>8s}  {comp:>8s}  {r['seconds_per_view']:6.2f}")
+        lines.append(f"{name:14s} {sum(r['views_taken'].values()):5d} {r['frames_fused']:6d} {acc:>9s} {prec:>9s} "
+                     f"{comp:>8s} {r['seconds_per_view']:6.2f}")
     lines.append("time per stage (s): " + ", ".join(f"{k} {v:.2f}" for k, v in doc["time_s"].items()))
     return lines
 
