@@ -61,9 +61,10 @@ def test_table_and_objects_where_ground_truth_says(fused, sample_dir):
             assert near.sum() > 5, obj["id"]
 
 
-def test_bag_gives_the_same_volume_as_mcap(fused, sample_dir, tmp_path):
+@pytest.mark.parametrize("name", ["recording.bag", "recording_ros2"])
+def test_bag_and_ros2_give_the_same_volume_as_mcap(fused, sample_dir, tmp_path, name):
     out = tmp_path / "bag"
-    res = run([str(sample_dir / "recording.bag"), "-o", str(out), *FAST])
+    res = run([str(sample_dir / name), "-o", str(out), *FAST])
     assert res.exit_code == 0, res.output
     a = load_ternary(fused / "ternary.npz").labels
     b = load_ternary(out / "ternary.npz").labels
@@ -142,3 +143,16 @@ def test_imported_7scenes_fuses_forced_and_icp(shared_data, tmp_path):
     b = load_ternary(icp / "ternary.npz").labels
     seen = (a != 0) | (b != 0)
     assert (a == b)[seen].mean() > 0.9
+
+
+def test_hint_mode_tracks_close_to_the_tf_poses(sample_dir, tmp_path):
+    out = tmp_path / "hint"
+    res = run([str(sample_dir / "recording.mcap"), "-o", str(out), "--voxel-size", "0.01", "--size", "2.0",
+               "--quiet", "--pose", "hint", "--every", "3"])
+    assert res.exit_code == 0, res.output
+    r = json.loads((out / "report.json").read_text())
+    t = r["tracking"]
+    assert r["pose_mode"] == "hint" and len(t["frames"]) == r["frames"]["used"] - 1
+    # the synthetic TF poses are exact: ICP started there stays within a centimetre
+    dev = [f["given_minus_tracked_m"] for f in t["frames"] if not f["lost"]]
+    assert len(dev) >= 0.8 * len(t["frames"]) and np.median(dev) < 0.01

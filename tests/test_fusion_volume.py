@@ -225,3 +225,22 @@ def test_volume_from_another_version_is_refused(fused, tmp_path):
         load_volume(q)
     with pytest.raises(VolumeError, match="no such volume"):
         load_volume(tmp_path / "missing.npz")
+
+
+def test_raycast_stop_at_unknown_reports_first_non_empty_voxel(fused, frames):
+    """NBV ray casting: every ray ends on occupied (1), on unknown (0, vertex at the unknown voxel), or leaves
+    the grid through empty space (-1); the end voxel has exactly that label."""
+    d, c, K, T = frames[3]
+    depth, normals, verts, state = fused.raycast(K, W, H, T, return_state=True, stop_at_unknown=True)
+    grid = fused.ternary_grid()
+    assert (state == 0).sum() > 100 and (state == 1).sum() > 1000
+    unk = np.argwhere(state == 0)
+    idx = grid.index_of(verts[unk[:, 0], unk[:, 1]])
+    ok = np.all((idx >= 0) & (idx < grid.shape), axis=1)
+    assert ok.mean() > 0.99
+    assert np.all(grid.labels[tuple(idx[ok].T)] == 0)
+    # a surface hit with the unknown stop is the same hit as without it, where both hit
+    depth2, _, _, state2 = fused.raycast(K, W, H, T, return_state=True)
+    both = (state == 1) & (state2 == 1)
+    assert both.sum() > 0.9 * (state == 1).sum()
+    assert np.allclose(depth[both], depth2[both])

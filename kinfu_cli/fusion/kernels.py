@@ -223,7 +223,7 @@ def _carve_voxels(pool_v, pool_w, i, k0, n, mw):
 
 @njit(cache=True)
 def _voxelwise(pool_v, pool_w, pool_c, i, gx0, gy0, gz0, l0x, l0y, l0z, n, dims, origin, vs, T_cw,
-               fx, fy, cx, cy, depth, raylen, color, has_color, trunc, inv_trunc, mw):
+               fx, fy, cx, cy, depth, raylen, color, has_color, trunc, inv_trunc, mw, recip):
     """Exact projective update of the n^3 voxels starting at grid index (gx0, gy0, gz0) = local (l0x, l0y, l0z)."""
     height, width = depth.shape
     dzx = T_cw[0, 2] * vs
@@ -269,11 +269,11 @@ def _voxelwise(pool_v, pool_w, pool_c, i, gx0, gy0, gz0, l0x, l0y, l0z, n, dims,
                 t = min(1.0, sdf * inv_trunc)
                 k = kb + c
                 w0 = np.int32(pool_w[i, k])
-                v0 = pool_v[i, k] / V_SCALE
-                pool_v[i, k] = np.int16(math.floor((v0 * w0 + t) / (w0 + 1) * V_SCALE + 0.5))
-                if has_color and t < 1.0:
-                    # colour only near the surface; black = never coloured: take the sample, else a running
-                    # mean that forgets slowly
+                # v' = (v w + t) / (w + 1), in int16 units (v * V_SCALE), with a reciprocal table
+                pool_v[i, k] = np.int16(math.floor((pool_v[i, k] * w0 + t * V_SCALE) * recip[w0] + 0.5))
+                if has_color and abs(t) < 0.5:
+                    # colour only next to the surface (marching-cubes vertices take the nearest voxel's);
+                    # black = never coloured: take the sample, else a running mean that forgets slowly
                     fresh = pool_c[i, k, 0] == 0 and pool_c[i, k, 1] == 0 and pool_c[i, k, 2] == 0
                     alpha = 1.0 if fresh else max(1.0 / (w0 + 1), 0.1)
                     for ch in range(3):
@@ -340,6 +340,9 @@ def integrate_blocks(cls, nb, dims, block_idx_flat, block_w_flat, pool_v, pool_w
     has_color = pool_c.shape[0] > 0 and color.shape[0] == height
     inv_trunc = 1.0 / trunc
     mw = np.int32(max_w)
+    recip = np.empty(257, dtype=np.float64)
+    for q in range(257):
+        recip[q] = 1.0 / (q + 1)
     S = B // 2
     for j in prange(work.shape[0]):
         b = work[j]
@@ -378,7 +381,7 @@ def integrate_blocks(cls, nb, dims, block_idx_flat, block_w_flat, pool_v, pool_w
                              fx, fy, cx, cy, depth, mw)
                 continue
             _voxelwise(pool_v, pool_w, pool_c, i, gx0, gy0, gz0, sx, sy, sz, S, dims, origin, vs, T_cw,
-                       fx, fy, cx, cy, depth, raylen, color, has_color, trunc, inv_trunc, mw)
+                       fx, fy, cx, cy, depth, raylen, color, has_color, trunc, inv_trunc, mw, recip)
 
 
 @njit(cache=True, parallel=True)
@@ -560,12 +563,13 @@ def _trilinear(block_idx, block_w, pool_v, pool_w, dims, gxf, gyf, gzf):
 
 @njit(cache=True, parallel=True)
 def raycast_kernel(dims, block_idx, block_w, pool_v, pool_w, origin, vs, trunc,
-                   T_wc, Kinv, width, height, tmin_ray, tmax_ray):
+                   T_wc, Kinv, width, height, tmin_ray, tmax_ray, stop_unknown):
     """Per pixel: first + to - zero crossing (or first occupied voxel) along the ray.
 
     Returns depth (z in the camera frame, 0 = no hit), world vertices and world normals (NaN = no hit),
-    and state per pixel: 1 hit occupied, 0 stopped at nothing known / left through unknown, -1 left through
-    known-empty space only.
+    and state per pixel: 1 hit occupied, 0 met unknown space, -1 left through known-empty space only.
+    With stop_unknown the ray also stops at the first unknown voxel (NBV: the first non-empty voxel), whose
+    position is returned as the vertex (depth and normal stay 0 / NaN).
     """
     depth = np.zeros((height, width), dtype=np.float32)
     verts = np.full((height, width, 3), np.nan, dtype=np.float32)
@@ -610,6 +614,7 @@ def raycast_kernel(dims, block_idx, block_w, pool_v, pool_w, origin, vs, trunc,
                     t0 = max(t0, ta)
                     t1 = min(t1, tb)
             if t1 <= t0:
+                state[pv, pu] = -1  # the ray misses the grid: nothing unknown on it
                 continue
             t = t0
             prev_v = 0.0
@@ -633,6 +638,11 @@ def raycast_kernel(dims, block_idx, block_w, pool_v, pool_w, origin, vs, trunc,
                     if bw == 0:
                         any_unknown = True
                         prev_known = False
+                        if stop_unknown:
+                            verts[pv, pu, 0] = px
+                            verts[pv, pu, 1] = py
+                            verts[pv, pu, 2] = pz
+                            break
                     else:
                         prev_known = True
                         prev_v = 1.0
@@ -656,6 +666,11 @@ def raycast_kernel(dims, block_idx, block_w, pool_v, pool_w, origin, vs, trunc,
                 if w == 0:
                     any_unknown = True
                     prev_known = False
+                    if stop_unknown:
+                        verts[pv, pu, 0] = px
+                        verts[pv, pu, 1] = py
+                        verts[pv, pu, 2] = pz
+                        break
                     prev_t = t
                     t += 0.5 * vs
                     continue
@@ -691,10 +706,20 @@ def raycast_kernel(dims, block_idx, block_w, pool_v, pool_w, origin, vs, trunc,
                     gym, o4 = _trilinear(block_idx, block_w, pool_v, pool_w, dims, cxf, cyf - 1.0, czf)
                     gzp, o5 = _trilinear(block_idx, block_w, pool_v, pool_w, dims, cxf, cyf, czf + 1.0)
                     gzm, o6 = _trilinear(block_idx, block_w, pool_v, pool_w, dims, cxf, cyf, czf - 1.0)
-                    if o1 and o2 and o3 and o4 and o5 and o6:
-                        nx = gxp - gxm
-                        ny = gyp - gym
-                        nz = gzp - gzm
+                    # central differences; where one side is unknown (thin band, coarse voxels) a one-sided
+                    # difference against the hit point (v = 0 there)
+                    ok_n = (o1 or o2) and (o3 or o4) and (o5 or o6)
+                    if ok_n:
+                        gxp = gxp if o1 else 0.0
+                        gxm = gxm if o2 else 0.0
+                        gyp = gyp if o3 else 0.0
+                        gym = gym if o4 else 0.0
+                        gzp = gzp if o5 else 0.0
+                        gzm = gzm if o6 else 0.0
+                    if ok_n:
+                        nx = (gxp - gxm) * (0.5 if (o1 and o2) else 1.0)
+                        ny = (gyp - gym) * (0.5 if (o3 and o4) else 1.0)
+                        nz = (gzp - gzm) * (0.5 if (o5 and o6) else 1.0)
                         nn = math.sqrt(nx * nx + ny * ny + nz * nz)
                         if nn > 1e-9:
                             if nx * dx + ny * dy + nz * dz > 0.0:

@@ -325,10 +325,13 @@ class TernaryVolume:
         return lo, hi
 
     def raycast(self, K: np.ndarray, width: int, height: int, T_world_camera: np.ndarray,
-                min_depth: float | None = None, max_depth: float | None = None, return_state: bool = False):
+                min_depth: float | None = None, max_depth: float | None = None, return_state: bool = False,
+                stop_at_unknown: bool = False):
         """Ray cast the TSDF from a pose: (depth (H, W) float32 z in metres, 0 = no hit; normals (H, W, 3) world,
         NaN = none; vertices (H, W, 3) world, NaN = none). With return_state also an int8 (H, W) map:
         1 the ray hit an occupied surface, 0 it met unknown space, -1 it left the grid through empty space.
+        stop_at_unknown (next-best view): rays also stop at the first unknown voxel, whose position is the
+        vertex of those pixels (state 0), so each ray reports the first non-empty voxel and its state.
         """
         K = np.asarray(K, dtype=np.float64)
         T = check_rigid(T_world_camera)
@@ -336,7 +339,8 @@ class TernaryVolume:
         hi = self.max_depth if max_depth is None else float(max_depth)
         depth, normals, verts, state = kn.raycast_kernel(
             np.array(self.shape, dtype=np.int64), self.block_idx, self.block_w, self.pool_v, self.pool_w,
-            self.origin, self.voxel_size, self.truncation, T, np.linalg.inv(K), int(width), int(height), lo, hi)
+            self.origin, self.voxel_size, self.truncation, T, np.linalg.inv(K), int(width), int(height), lo, hi,
+            bool(stop_at_unknown))
         if return_state:
             return depth, normals, verts, state
         return depth, normals, verts
