@@ -193,3 +193,7 @@ def test_optimistic_rays_pass_unknown_outside_the_region_and_match_the_reference
     fast = cast_views(vol, T[None], CAM, center, 0.15, optimistic=True)
     assert ref_t[0, 0] > 200 and abs(fast.terms[0, 0] - ref_t[0, 0]) <= 0.03 * ref_t[0, 0]
     assert cast_views(vol, T[None], CAM, center, 0.15).terms[0, 0] == 0  # the paper's rule: the slab hides it
+    # the distance field that also skips far unknown blocks gives exactly the same rays
+    skip = cast_views(vol.optimistic_for(center, 0.15), T[None], CAM, center, 0.15, optimistic=True, through=True)
+    plain = cast_views(vol, T[None], CAM, center, 0.15, optimistic=True, through=True)
+    assert np.array_equal(skip.counts, plain.counts) and np.allclose(skip.terms, plain.terms)

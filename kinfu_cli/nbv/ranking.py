@@ -132,7 +132,8 @@ def score_views(volume: TernaryGrid | RayVolume, poses, camera: CameraModel, reg
     terms = np.zeros((V, 4))
     n_cast = 0
     if valid.any():
-        res = cast_views(vol, poses[valid], camera, center, float(region_radius), through=through,
+        cast_vol = vol.optimistic_for(center, float(region_radius)) if optimistic else vol
+        res = cast_views(cast_vol, poses[valid], camera, center, float(region_radius), through=through,
                          optimistic=optimistic, restrict=restrict, share_rolls=share_rolls, progress_cb=progress_cb)
         counts[valid], rays[valid], terms[valid] = res.counts, res.rays, res.terms
         n_cast = res.rays_cast

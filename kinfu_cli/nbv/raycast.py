@@ -56,20 +56,20 @@ class RayVolume:
 
     @classmethod
     def from_grid(cls, grid: TernaryGrid, block: int = 8) -> "RayVolume":
-        from scipy.ndimage import distance_transform_cdt
-
         labels = np.ascontiguousarray(grid.labels, dtype=np.int8)
-        empty = _block_empty(labels, int(block))
-        if empty.all():
-            dist = np.full(empty.shape, 255, np.uint8)
-        else:
-            dist = np.minimum(distance_transform_cdt(empty, metric="chessboard"), 255).astype(np.uint8)
         return cls(labels, np.asarray(grid.origin, dtype=np.float64), float(grid.voxel_size), int(block),
-                   np.ascontiguousarray(dist))
+                   _chessboard(_block_empty(labels, int(block))))
 
     @property
     def shape(self) -> tuple[int, int, int]:
         return tuple(int(s) for s in self.labels.shape)  # type: ignore[return-value]
+
+    def optimistic_for(self, center, radius: float) -> "RayVolume":
+        """The same volume with a distance field in which blocks holding only EMPTY voxels or UNKNOWN
+        voxels far from the region (centre, radius) count as free: what optimistic rays may skip."""
+        free = _block_free_outside(self.labels, self.block, self.origin, self.voxel_size,
+                                   np.asarray(center, dtype=np.float64).reshape(3), float(radius))
+        return RayVolume(self.labels, self.origin, self.voxel_size, self.block, _chessboard(free))
 
     def label_at(self, points: np.ndarray) -> np.ndarray:
         """Labels at world points (N, 3); points outside the volume read as EMPTY (-1), see `inside`."""
@@ -83,6 +83,55 @@ class RayVolume:
     def inside(self, points: np.ndarray) -> np.ndarray:
         idx = np.floor((np.asarray(points, dtype=np.float64).reshape(-1, 3) - self.origin) / self.voxel_size)
         return np.all((idx >= 0) & (idx < np.array(self.shape)), axis=1)
+
+
+def _chessboard(free: np.ndarray) -> np.ndarray:
+    """Per block: 0 where not free, else the chessboard distance (in blocks, capped at 255) to the
+    nearest block that is not free."""
+    from scipy.ndimage import distance_transform_cdt
+
+    if free.all():
+        return np.full(free.shape, 255, np.uint8)
+    return np.ascontiguousarray(np.minimum(distance_transform_cdt(free, metric="chessboard"), 255).astype(np.uint8))
+
+
+@njit(cache=True, inline="always")
+def _gap(q, lo_a, hi_a):
+    """Squared distance from q to the interval [lo_a, hi_a]."""
+    e = lo_a - q if q < lo_a else (q - hi_a if q > hi_a else 0.0)
+    return e * e
+
+
+@njit(cache=True, parallel=True)
+def _block_free_outside(labels, B, lo, vs, cen, radius):
+    """1 for blocks whose voxels are all EMPTY, or EMPTY/UNKNOWN with the block box farther than
+    radius + a voxel diagonal from `cen`."""
+    nx, ny, nz = labels.shape
+    bx, by, bz = (nx + B - 1) // B, (ny + B - 1) // B, (nz + B - 1) // B
+    out = np.zeros((bx, by, bz), dtype=np.uint8)
+    r = radius + vs * 1.7320508
+    for a in prange(bx):
+        for b in range(by):
+            for c in range(bz):
+                # distance from the centre to the block's box
+                d2 = (_gap(cen[0], lo[0] + a * B * vs, lo[0] + min(a * B + B, nx) * vs)
+                      + _gap(cen[1], lo[1] + b * B * vs, lo[1] + min(b * B + B, ny) * vs)
+                      + _gap(cen[2], lo[2] + c * B * vs, lo[2] + min(c * B + B, nz) * vs))
+                far = d2 > r * r
+                ok = 1
+                for i in range(a * B, min(a * B + B, nx)):
+                    for j in range(b * B, min(b * B + B, ny)):
+                        for k in range(c * B, min(c * B + B, nz)):
+                            v = labels[i, j, k]
+                            if v == 1 or (v == 0 and not far):
+                                ok = 0
+                                break
+                        if ok == 0:
+                            break
+                    if ok == 0:
+                        break
+                out[a, b, c] = ok
+    return out
 
 
 @njit(cache=True, parallel=True)
