@@ -4,7 +4,8 @@ Run:  .venv/bin/python benchmarks/bench_fusion.py [--frames N] [--resolution 512
 Prints, per data set: frames/s of both (integration only, same process, same frames, the two volumes
 fed alternately frame by frame so that load from other processes hits both alike), the speed ratio,
 and the share of voxels with the same ternary label (over the whole grid and over the voxels either
-volume observed). Then, in a fresh subprocess, the peak RSS of a 512^3 volume with colour.
+volume observed). Then, in fresh subprocesses, the peak RSS (VmHWM) of a 512^3 volume with colour fusing
+the 7-Scenes frames and reading them out (labels, mesh, save), as it comes and with every block stored.
 Not a test: the numbers go into the fusion report.
 """
 
@@ -130,23 +131,34 @@ def _peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
-def rss_child(res: int, size: float, n: int) -> None:
-    """Build a res^3 colour volume from the synthetic and 7-Scenes frames, read it out; print peak RSS."""
+def rss_child(res: int, size: float, n: int, worst: bool = False) -> None:
+    """Build a res^3 colour volume from the 7-Scenes frames (synthetic ones without the data), read it out
+    (labels, mesh, save); print peak RSS. With worst: every block gets per-voxel storage first."""
+    import tempfile
+
+    from kinfu_cli.fusion import kernels as kn
     from kinfu_cli.fusion.placement import default_origin
     from kinfu_cli.fusion.volume import TernaryVolume
 
-    frames = synthetic_frames(n)
+    frames = seven_scenes_frames(60) if SEVEN.exists() else synthetic_frames(n)
     origin = default_origin([(d, K, T) for d, c, K, T in frames[:5]], size)
     vol = TernaryVolume(size=size, resolution=res, origin=origin, color=True)
     base = _peak_rss_mb()
+    if worst:
+        cls = np.full(int(np.prod(vol.nb)), kn.VOXEL, dtype=np.uint8)
+        vol._ensure_capacity(cls.size)
+        vol.n_used = kn.allocate_blocks(cls, vol.block_idx.reshape(-1), vol.block_w.reshape(-1), vol.pool_v,
+                                        vol.pool_w, vol.pool_c, vol.n_used)
     for d, c, K, T in frames:
         vol.integrate(d, K, T, c)
     del frames
     lab = vol.labels()
     mesh = vol.extract_mesh()
+    with tempfile.TemporaryDirectory() as tmp:
+        vol.save(Path(tmp) / "volume.npz")
     del lab, mesh
     peak = _peak_rss_mb()
-    print(json.dumps({"resolution": res, "color": True, "peak_rss_MB": round(peak, 1),
+    print(json.dumps({"resolution": res, "color": True, "all_blocks_stored": worst, "peak_rss_MB": round(peak, 1),
                       "rss_before_fusing_MB": round(base, 1), "blocks_stored": vol.n_blocks_allocated,
                       "grid_MB": round(vol.memory_bytes() / 2**20, 1),
                       "worst_case_grid_MB": round(vol.bytes_worst_case / 2**20, 1)}))
@@ -164,9 +176,10 @@ def main() -> None:
     ap.add_argument("--skip-7scenes", action="store_true")
     ap.add_argument("--skip-rss", action="store_true")
     ap.add_argument("--rss-child", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--rss-worst", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args()
     if a.rss_child:
-        rss_child(a.resolution, a.size, a.frames)
+        rss_child(a.resolution, a.size, a.frames, a.rss_worst)
         return
     results = []
     if not a.skip_synthetic:
@@ -179,10 +192,11 @@ def main() -> None:
                                a.truncation, a.max_depth))
         print(json.dumps(results[-1]), flush=True)
     if not a.skip_rss:
-        out = subprocess.run([sys.executable, __file__, "--rss-child", "--resolution", str(a.resolution),
-                              "--size", str(a.size), "--frames", str(a.frames)],
-                             capture_output=True, text=True, check=True)
-        print(out.stdout.strip().splitlines()[-1], flush=True)
+        for extra in ([], ["--rss-worst"]):
+            out = subprocess.run([sys.executable, __file__, "--rss-child", "--resolution", str(a.resolution),
+                                  "--size", str(a.size), "--frames", str(a.frames), *extra],
+                                 capture_output=True, text=True, check=True)
+            print(out.stdout.strip().splitlines()[-1], flush=True)
 
 
 if __name__ == "__main__":

@@ -133,7 +133,9 @@ def _classify_box(lo0, lo1, lo2, n, vs, T_cw, fx, fy, cx, cy, width, height, tru
         return SKIP  # no valid depth under the box
     if zmin >= dmax + trunc:
         return SKIP  # entirely beyond the truncation band behind every observed point
-    if inside and dmin - zmax >= trunc:
+    if dmin - zmax >= trunc:
+        if not inside:
+            return CARVE_VALID  # partly outside the image: carve the voxels that land on a valid pixel
         ninv = inv_sat[v1 + 1, u1 + 1] - inv_sat[v0, u1 + 1] - inv_sat[v1 + 1, u0] + inv_sat[v0, u0]
         return CARVE if ninv == 0 else CARVE_VALID
     return VOXEL
@@ -266,9 +268,16 @@ def _voxelwise(pool_v, pool_w, pool_c, i, gx0, gy0, gz0, l0x, l0y, l0z, n, dims,
                 sdf = (d - zc) * raylen[v, u]
                 if sdf <= -trunc:
                     continue
-                t = min(1.0, sdf * inv_trunc)
                 k = kb + c
                 w0 = np.int32(pool_w[i, k])
+                if sdf >= trunc:
+                    # free space: tsdf = 1; v stays exactly 1 when it is 1 already
+                    if pool_v[i, k] != 32767:
+                        pool_v[i, k] = np.int16(math.floor((pool_v[i, k] * w0 + V_SCALE) * recip[w0] + 0.5))
+                    if w0 < mw:
+                        pool_w[i, k] = np.uint8(w0 + 1)
+                    continue
+                t = sdf * inv_trunc
                 # v' = (v w + t) / (w + 1), in int16 units (v * V_SCALE), with a reciprocal table
                 pool_v[i, k] = np.int16(math.floor((pool_v[i, k] * w0 + t * V_SCALE) * recip[w0] + 0.5))
                 if has_color and abs(t) < 0.5:
@@ -288,7 +297,7 @@ def _voxelwise(pool_v, pool_w, pool_c, i, gx0, gy0, gz0, l0x, l0y, l0z, n, dims,
 def _carve_valid(pool_v, pool_w, i, gx0, gy0, gz0, l0x, l0y, l0z, n, dims, origin, vs, T_cw,
                  fx, fy, cx, cy, depth, mw):
     """tsdf = 1 update of the voxels of an n^3 sub-block (known to lie > truncation in front of every valid
-    reading under it) that project onto a valid pixel."""
+    reading under it) that project onto a valid pixel inside the image."""
     height, width = depth.shape
     dzx = T_cw[0, 2] * vs
     dzy = T_cw[1, 2] * vs
@@ -315,9 +324,15 @@ def _carve_valid(pool_v, pool_w, i, gx0, gy0, gz0, l0x, l0y, l0z, n, dims, origi
                     zc += dzz
                 if gz0 + c >= dims[2]:
                     break
+                if zc <= 0.0:
+                    continue
                 iz = 1.0 / zc
-                u = min(max(int(xc * fx * iz + cx + 0.5), 0), width - 1)
-                v = min(max(int(yc * fy * iz + cy + 0.5), 0), height - 1)
+                uf = xc * fx * iz + cx + 0.5
+                vf = yc * fy * iz + cy + 0.5
+                if not (uf >= 0.0001 and uf < width - 0.0001 and vf >= 0.0001 and vf < height - 0.0001):
+                    continue
+                u = int(uf)
+                v = int(vf)
                 if not depth[v, u] > 0.0:
                     continue
                 k = kb + c
