@@ -69,3 +69,16 @@ def test_cli_eval_nbv_missing_scene(tmp_path):
     (tmp_path / "empty").mkdir()
     res = CliRunner().invoke(cli, ["eval", "nbv", str(tmp_path / "empty"), "--quiet"])
     assert res.exit_code == 2 and "changes.json" in res.output
+
+
+def test_cli_eval_nbv_on_a_bare_mesh_needs_a_poi(sample_dir, tmp_path):
+    mesh = sample_dir / "ground_truth" / "scene_after.ply"
+    small = ["--views", "1", "--voxel-size", "0.03", "--width", "80", "--height", "60", "--lon-step", "90",
+             "--lat-step", "45", "--roll-step", "180", "--no-noise", "--quiet", "--strategy", "poi"]
+    res = CliRunner().invoke(cli, ["eval", "nbv", str(mesh)] + small)
+    assert res.exit_code == 2 and "--poi" in res.output
+    out = tmp_path / "m.json"
+    res = CliRunner().invoke(cli, ["eval", "nbv", str(mesh), "--poi", "0.36", "-0.15", "0.80", "-o", str(out)] + small)
+    assert res.exit_code == 0, res.output
+    series = json.loads(out.read_text())["strategies"]["poi"]["unknown"]["0"]
+    assert len(series) == 2 and series[1] < 0.5 * series[0]
