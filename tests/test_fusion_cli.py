@@ -156,3 +156,23 @@ def test_hint_mode_tracks_close_to_the_tf_poses(sample_dir, tmp_path):
     # the synthetic TF poses are exact: ICP started there stays within a centimetre
     dev = [f["given_minus_tracked_m"] for f in t["frames"] if not f["lost"]]
     assert len(dev) >= 0.8 * len(t["frames"]) and np.median(dev) < 0.01
+
+
+def test_clear_pois_forgets_spheres_after_fusing(sample_dir, tmp_path):
+    pois = tmp_path / "pois.json"
+    center, radius = [0.03, 0.14, 0.77], 0.12  # around obj1 on the table
+    pois.write_text(json.dumps({"pois": [{"position": center, "radius": radius}]}))
+    out = tmp_path / "out"
+    res = run([str(sample_dir / "recording.mcap"), "-o", str(out), *FAST, "--clear-pois", str(pois)])
+    assert res.exit_code == 0, res.output
+    grid = load_ternary(out / "ternary.npz")
+    idx = np.indices(grid.shape).reshape(3, -1).T
+    d = np.linalg.norm(grid.centers(idx) - center, axis=1).reshape(grid.shape)
+    assert np.all(grid.labels[d < radius] == 0)
+    assert np.count_nonzero(grid.labels[(d > radius + 0.04) & (d < radius + 0.15)] == 1) > 20
+    r = json.loads((out / "report.json").read_text())
+    assert r["cleared_spheres"][0]["radius"] == radius
+    bad = tmp_path / "bad.json"
+    bad.write_text("{\"pois\": [{\"position\": [1, 2]}]}")
+    res = run([str(sample_dir / "recording.mcap"), "-o", str(tmp_path / "o2"), *FAST, "--clear-pois", str(bad)])
+    assert res.exit_code == 2 and "position" in res.output and not (tmp_path / "o2").exists()

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from kinfu_cli.fusion.synthetic import Renderer, default_K, orbit_poses
 from kinfu_cli.fusion.tracking import FrameToModelTracker, ate_rmse

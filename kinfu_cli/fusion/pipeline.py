@@ -177,7 +177,6 @@ def fuse_recording(recording: str | Path, outdir: str | Path, opts: FuseOptions 
         buffered: list = []
         used = 0
         filter_drops: dict[str, int] = {}
-        first_T_icp = None
         prev_T = None
         min_d = opts.min_depth
         max_d = opts.max_depth
@@ -197,7 +196,7 @@ def fuse_recording(recording: str | Path, outdir: str | Path, opts: FuseOptions 
             return d
 
         def fuse_one(frame, d):
-            nonlocal used, prev_T, first_T_icp
+            nonlocal used, prev_T
             T_given = frame.T_world_camera
             if T_given is not None and not np.all(np.isfinite(T_given)):
                 raise VolumeError(f"{rec.path}: frame {frame.index} (stamp {frame.stamp_ns} ns): camera pose is "
