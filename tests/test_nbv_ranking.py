@@ -200,3 +200,38 @@ def test_cli_intrinsics_from_the_recordings_camera_info(scene_files, sample_dir)
     assert res.exit_code == 0, res.output
     cam = json.loads(res.output)["camera"]
     assert (cam["fx"], cam["cx"], cam["width"], cam["height"]) == (292.5, 159.5, 320, 240)
+
+
+def test_cli_objects_mode_plans_views_at_the_contours_of_a_salient_segment(tmp_path):
+    from kinfu_cli.segmentation.synthetic import primitives_tsdf, tabletop_primitives
+
+    origin, vs, shape = np.array([-0.7, -0.5, 0.6]), 0.01, (140, 100, 45)
+    prims = tabletop_primitives(3, n_objects=3, stacked=False)
+    tsdf, w = primitives_tsdf(prims, origin, vs, shape, box_min=(-0.7, -0.5, 0.6), box_max=(0.7, 0.5, 1.05))
+    labels = np.where(w == 0, 0, np.where(tsdf <= 0, 1, -1)).astype(np.int8)
+    c = origin + (np.indices(shape).transpose(1, 2, 3, 0) + 0.5) * vs
+    for p in prims[1:]:  # the back of every object unseen
+        back = (c[..., 1] > p.center[1]) & (np.hypot(c[..., 0] - p.center[0], c[..., 1] - p.center[1])
+                                            < np.hypot(p.half[0], p.half[1]) + 0.06) & (c[..., 2] > 0.7)
+        labels[back] = 0
+    vol = tmp_path / "ternary.npz"
+    save_ternary(vol, TernaryGrid(labels, origin, vs))
+    res = CliRunner().invoke(cli, ["nbv", str(vol), "--mode", "objects", "--json", "--top", "3", "--fx", "120",
+                                   "--fy", "120", "--cx", "79.5", "--cy", "59.5", "--width", "160", "--height", "120",
+                                   "--min-range", "0.3", "--quiet"])
+    assert res.exit_code == 0, res.output
+    doc = json.loads(res.output)
+    assert doc["mode"] == "objects" and doc["pose"] is not None and doc["score"] > 0
+    assert doc["candidates_evaluated"] < doc["candidates_total"]
+    gains = [v["gain"] for v in doc["views"]]
+    assert len(gains) == 3 and gains == sorted(gains, reverse=True) and len(doc["views"][0]["quaternion"]) == 4
+    res = CliRunner().invoke(cli, ["nbv", str(vol), "--quiet"])
+    assert res.exit_code == 2 and "--pois: required" in res.output
+
+
+def test_table_height_is_the_highest_large_upward_surface_not_the_floor():
+    g, _ = box_scene(with_occluder=False)
+    g.labels[:, :, 5] = OCCUPIED  # a floor at z = 0.10..0.12, larger than the table below
+    g.labels[:, :, 6:20] = EMPTY
+    g.labels[:40, :, 20] = EMPTY  # the table covers only half of the floor
+    assert estimate_table_z(g) == pytest.approx(0.42)

@@ -23,8 +23,11 @@ def _table_z_option(value: str):
 
 @click.command("nbv", short_help="Rank next-best views around each POI by information gain.")
 @click.argument("volume", type=click.Path(path_type=Path))
-@click.option("--pois", "pois_path", required=True, type=click.Path(path_type=Path),
-              help="pois.json from `kinfu poi`.")
+@click.option("--pois", "pois_path", default=None, type=click.Path(path_type=Path),
+              help="pois.json from `kinfu poi` (needed with --mode poi).")
+@click.option("--mode", default="poi", show_default=True, type=click.Choice(["poi", "objects"]),
+              help="poi: viewing sphere around each POI (RAS 2016); objects: object-driven views at the "
+                   "contours of the most salient segment (thesis Alg. 4).")
 @click.option("--clear", is_flag=True, help="First set every POI sphere to unknown (the paper's ForgetAround).")
 @click.option("--gain", default="unknown", show_default=True,
               type=click.Choice(["unknown", "distance", "rear", "entropy"]), help="Gain function.")
@@ -66,7 +69,7 @@ def _table_z_option(value: str):
 @click.option("--exact-rolls", is_flag=True, help="Cast every view's own rays (no sharing between rolls; slower).")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @click.option("--json", "as_json", is_flag=True, help="Print the result JSON on stdout.")
-def command(volume, pois_path, clear, gain, top, output, plot, candidates, radius, lon_step, lat_min, lat_max,
+def command(volume, pois_path, mode, clear, gain, top, output, plot, candidates, radius, lon_step, lat_min, lat_max,
             lat_step, roll_step, poi_radius, fx, fy, cx, cy, width, height, camera_info, min_range, max_range,
             vfov_extra, inc_th, table_z, clearance, optimistic, exact_rolls, quiet, as_json):
     """Rank candidate views around each POI by the information gain inside S(POI).
@@ -76,18 +79,28 @@ def command(volume, pois_path, clear, gain, top, output, plot, candidates, radiu
     at the first occupied or unknown voxel. Sensor positions inside occupied/unknown space or below
     the table are rejected with a reason. Output per POI: views sorted by gain with pose (4x4
     camera-to-world), position, quaternion (x, y, z, w), gain and ray counts; IncTh says whether the
-    POI is considered reconstructed.
+    POI is considered reconstructed. With --mode objects no POIs are needed: the views come from
+    the contours of the most salient segment (thesis Alg. 4; --inc-th is its score threshold).
 
     \b
     Example:
       kinfu nbv out/fuse/volume.npz --pois out/pois.json --clear -o out/views.json --plot out/views.png
       kinfu nbv volume.npz --pois pois.json --gain entropy --top 5 --json
+      kinfu nbv volume.npz --mode objects -o views.json
     """
     from kinfu_cli.nbv.camera import camera_from_options
-    from kinfu_cli.nbv.workflow import NbvOptions, run_nbv, summary_lines
+    from kinfu_cli.nbv.workflow import NbvOptions, objects_summary_lines, run_nbv, run_objects, summary_lines
 
     t0 = time.perf_counter()
     cam = camera_from_options(fx, fy, cx, cy, width, height, camera_info, min_range, max_range, vfov_extra)
+    if mode == "objects":
+        doc = run_objects(volume, cam, gain=gain, table_z=_table_z_option(table_z),
+                          score_threshold=0.0 if inc_th is None else inc_th, top=top)
+        doc["seconds"] = round(time.perf_counter() - t0, 3)
+        _emit(doc, output, as_json, objects_summary_lines)
+        return
+    if pois_path is None:
+        raise ConfigError("--pois: required with --mode poi (a pois.json from `kinfu poi`)")
     opts = NbvOptions(gain=gain, clear=clear, top=top, candidates=candidates,
                       sphere=dict(radius=radius, lon_step=lon_step, lat_min=lat_min, lat_max=lat_max,
                                   lat_step=lat_step, roll_step=roll_step),
@@ -100,6 +113,10 @@ def command(volume, pois_path, clear, gain, top, output, plot, candidates, radiu
         plot_nbv(plot, grid, rankings, top=min(top or 5, 5))
         doc["plot"] = str(plot)
     doc["seconds"] = round(time.perf_counter() - t0, 3)
+    _emit(doc, output, as_json, summary_lines)
+
+
+def _emit(doc: dict, output, as_json: bool, lines_of) -> None:
     if output is not None:
         from kinfu_cli.io.atomic import write_json
 
@@ -107,9 +124,9 @@ def command(volume, pois_path, clear, gain, top, output, plot, candidates, radiu
     if as_json:
         import json
 
-        click.echo(json.dumps(doc, indent=2))
+        click.echo(json.dumps(doc, indent=2, default=float))
     else:
-        for line in summary_lines(doc):
+        for line in lines_of(doc):
             click.echo(line)
         if output is not None:
             click.echo(f"wrote {output}")

@@ -242,9 +242,11 @@ def unknown_in_sphere(grid: TernaryGrid, center, radius: float) -> int:
     return int(np.count_nonzero((d2 <= radius * radius) & (sub == UNKNOWN)))
 
 
-def estimate_table_z(grid: TernaryGrid, min_fraction: float = 0.02) -> float | None:
-    """Height of the dominant upward-facing surface (occupied voxel with empty space right above):
-    the table top. None when no layer holds at least `min_fraction` of the grid's x-y cells."""
+def estimate_table_z(grid: TernaryGrid, min_fraction: float = 0.02, relative: float = 0.25) -> float | None:
+    """Height of the table top: the HIGHEST large upward-facing surface (occupied voxels with empty
+    space right above), so a floor seen below the table does not win. A layer counts as large when it
+    (with its two neighbours) holds at least `min_fraction` of the grid's x-y cells and `relative` of
+    the largest such layer. None when there is none."""
     lab = grid.labels
     if lab.shape[2] < 2:
         return None
@@ -252,9 +254,14 @@ def estimate_table_z(grid: TernaryGrid, min_fraction: float = 0.02) -> float | N
     for x0 in range(0, lab.shape[0], 64):  # slabs keep the temporaries small
         sl = lab[x0:x0 + 64]
         per_layer += np.count_nonzero((sl[:, :, :-1] == OCCUPIED) & (sl[:, :, 1:] == EMPTY), axis=(0, 1))
-    k = int(np.argmax(per_layer))
-    if per_layer[k] < min_fraction * lab.shape[0] * lab.shape[1]:
+    smooth = np.convolve(per_layer, np.ones(3, np.int64), mode="same")
+    need = max(min_fraction * lab.shape[0] * lab.shape[1], relative * smooth.max())
+    big = np.flatnonzero(smooth >= need) if smooth.max() > 0 else np.zeros(0, int)
+    if big.size == 0:
         return None
+    top = int(big.max())
+    lo = max(top - 2, 0)
+    k = lo + int(np.argmax(per_layer[lo:top + 1]))
     return float(grid.origin[2] + (k + 1) * grid.voxel_size)
 
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from kinfu_cli.errors import ConfigError
 from kinfu_cli.fusion.ternary import TernaryGrid, load_ternary
 from kinfu_cli.nbv.camera import CameraModel
@@ -120,3 +122,42 @@ def summary_lines(doc: dict) -> list[str]:
                          f"{v['rays_empty_exit']:11d}  ({px:.3f}, {py:.3f}, {pz:.3f})")
     return lines
 
+
+
+def run_objects(volume_path: str | os.PathLike, camera: CameraModel, *, gain: str = "unknown", table_z="auto",
+                score_threshold: float = 0.0, top: int = 10) -> dict:
+    """`kinfu nbv --mode objects`: the object-driven planner (thesis Alg. 4, kinfu_cli.nbv.objects) scored
+    with this module's ray caster; returns the views.json document."""
+    from kinfu_cli.nbv.objects import nbv_scorer, plan_object_views_for_volume
+    from kinfu_cli.nbv.viewpoints import rotation_to_quaternion
+    from kinfu_cli.segmentation.pipeline import load_segment_input
+
+    get_gain(gain)
+    volume = load_segment_input(volume_path)
+    grid = volume.ternary_grid() if hasattr(volume, "ternary_grid") else volume
+    tz = resolve_table_z(grid, table_z)
+    plan = plan_object_views_for_volume(volume, camera, scorer=nbv_scorer(grid, camera, gain=gain, table_z=tz),
+                                        score_threshold=score_threshold, table_z=tz)
+    doc = plan.to_json(top=top or 10**9)
+    for v in doc["views"]:
+        T = np.asarray(v["pose"])
+        v.update(position=T[:3, 3].tolist(), quaternion=rotation_to_quaternion(T[:3, :3]).tolist(), gain=v["score"])
+    return {"mode": "objects", "volume": str(volume_path), "gain": gain, "gain_unit": get_gain(gain).unit,
+            "camera": camera.to_dict(), "table_z": tz, "voxel_size": grid.voxel_size, "shape": list(grid.shape),
+            "score_threshold": score_threshold, **doc}
+
+
+def objects_summary_lines(doc: dict) -> list[str]:
+    if doc["pose"] is None:
+        return [f"no view scores above {doc['score_threshold']} on any segment ({len(doc['attempts'])} tried): "
+                "the objects are considered reconstructed"]
+    r = doc["region"]
+    c = r["center"]
+    lines = [f"segment {doc['segment_id']} (region centre ({c[0]:.3f}, {c[1]:.3f}, {c[2]:.3f}), r={r['radius']:.2f} m):"
+             f" best {doc['gain']} gain {doc['score']:.1f}; {doc['candidates_evaluated']} of "
+             f"{doc['candidates_total']} candidates ray-cast",
+             "  rank      gain  position"]
+    for i, v in enumerate(doc["views"][:10]):
+        px, py, pz = v["position"]
+        lines.append(f"  {i + 1:4d} {v['gain']:9.1f}  ({px:.3f}, {py:.3f}, {pz:.3f})")
+    return lines
