@@ -143,11 +143,19 @@ def _classify_box(lo0, lo1, lo2, n, vs, T_cw, fx, fy, cx, cy, width, height, tru
 
 @njit(cache=True, parallel=True)
 def classify_blocks(nb, origin, vs, T_cw, fx, fy, cx, cy, width, height,
-                    trunc, tmin, tmax, tile, inv_sat, dmax_all):
-    """Class per block (flattened x-major): SKIP, CARVE (all voxels get tsdf = 1) or VOXEL (per-voxel)."""
+                    trunc, tmin, tmax, tile, inv_sat, dmax_all, b_lo, b_hi):
+    """Class per block (flattened x-major): SKIP, CARVE (all voxels get tsdf = 1) or VOXEL (per-voxel).
+
+    Only blocks in [b_lo, b_hi) (the viewing frustum's bounding box, in blocks) are looked at.
+    """
     nbx, nby, nbz = nb[0], nb[1], nb[2]
     n = nbx * nby * nbz
     cls = np.zeros(n, dtype=np.uint8)
+    rx = b_hi[0] - b_lo[0]
+    ry = b_hi[1] - b_lo[1]
+    rz = b_hi[2] - b_lo[2]
+    if rx <= 0 or ry <= 0 or rz <= 0:
+        return cls
     # frustum side planes in the camera frame (inside: a . p >= -r), for a cheap bounding-sphere test
     al = (-1.0 - cx) / fx
     ar = (width + 1.0 - cx) / fx
@@ -159,11 +167,15 @@ def classify_blocks(nb, origin, vs, T_cw, fx, fy, cx, cy, width, height,
     nbot = math.sqrt(1.0 + ab * ab)
     half = 0.5 * (B - 1) * vs
     rad = half * math.sqrt(3.0) + vs
-    for b in prange(n):
-        bx = b // (nby * nbz)
-        rem = b - bx * nby * nbz
-        by = rem // nbz
-        bz = rem - by * nbz
+    for j in prange(rx * ry * rz):
+        bx = j // (ry * rz)
+        rem = j - bx * ry * rz
+        by = rem // rz
+        bz = rem - by * rz
+        bx += b_lo[0]
+        by += b_lo[1]
+        bz += b_lo[2]
+        b = (bx * nby + by) * nbz + bz
         lo0 = origin[0] + (bx * B + 0.5) * vs
         lo1 = origin[1] + (by * B + 0.5) * vs
         lo2 = origin[2] + (bz * B + 0.5) * vs
@@ -225,7 +237,7 @@ def _carve_voxels(pool_v, pool_w, i, k0, n, mw):
 
 @njit(cache=True)
 def _voxelwise(pool_v, pool_w, pool_c, i, gx0, gy0, gz0, l0x, l0y, l0z, n, dims, origin, vs, T_cw,
-               fx, fy, cx, cy, depth, raylen, color, has_color, trunc, inv_trunc, mw, recip):
+               fx, fy, cx, cy, depth, raylen, color, has_color, trunc, inv_trunc, mw, recip, color_band):
     """Exact projective update of the n^3 voxels starting at grid index (gx0, gy0, gz0) = local (l0x, l0y, l0z)."""
     height, width = depth.shape
     dzx = T_cw[0, 2] * vs
@@ -280,8 +292,7 @@ def _voxelwise(pool_v, pool_w, pool_c, i, gx0, gy0, gz0, l0x, l0y, l0z, n, dims,
                 t = sdf * inv_trunc
                 # v' = (v w + t) / (w + 1), in int16 units (v * V_SCALE), with a reciprocal table
                 pool_v[i, k] = np.int16(math.floor((pool_v[i, k] * w0 + t * V_SCALE) * recip[w0] + 0.5))
-                if has_color and abs(t) < 0.5:
-                    # colour only next to the surface (marching-cubes vertices take the nearest voxel's);
+                if has_color and abs(t) < color_band:
                     # black = never coloured: take the sample, else a running mean that forgets slowly
                     fresh = pool_c[i, k, 0] == 0 and pool_c[i, k, 1] == 0 and pool_c[i, k, 2] == 0
                     alpha = 1.0 if fresh else max(1.0 / (w0 + 1), 0.1)
@@ -355,6 +366,8 @@ def integrate_blocks(cls, nb, dims, block_idx_flat, block_w_flat, pool_v, pool_w
     has_color = pool_c.shape[0] > 0 and color.shape[0] == height
     inv_trunc = 1.0 / trunc
     mw = np.int32(max_w)
+    # colour the voxels within about a voxel of the surface: marching-cubes vertices take the nearest one's
+    color_band = min(1.0, 1.2 * vs / trunc)
     recip = np.empty(257, dtype=np.float64)
     for q in range(257):
         recip[q] = 1.0 / (q + 1)
@@ -396,7 +409,7 @@ def integrate_blocks(cls, nb, dims, block_idx_flat, block_w_flat, pool_v, pool_w
                              fx, fy, cx, cy, depth, mw)
                 continue
             _voxelwise(pool_v, pool_w, pool_c, i, gx0, gy0, gz0, sx, sy, sz, S, dims, origin, vs, T_cw,
-                       fx, fy, cx, cy, depth, raylen, color, has_color, trunc, inv_trunc, mw, recip)
+                       fx, fy, cx, cy, depth, raylen, color, has_color, trunc, inv_trunc, mw, recip, color_band)
 
 
 @njit(cache=True, parallel=True)

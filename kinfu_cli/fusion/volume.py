@@ -219,8 +219,9 @@ class TernaryVolume:
         tile = 8
         tmin, tmax = kn._depth_tiles(d, tile)
         inv_sat = kn._invalid_integral(d)
+        b_lo, b_hi = self._frustum_blocks(T, K, w, h, float(d.max()) + self.truncation)
         cls = kn.classify_blocks(self.nb, self.origin, self.voxel_size, T_cw, fx, fy, cx, cy, w, h,
-                                 self.truncation, tmin, tmax, tile, inv_sat, float(d.max()))
+                                 self.truncation, tmin, tmax, tile, inv_sat, float(d.max()), b_lo, b_hi)
         bidx = self.block_idx.reshape(-1)
         bw = self.block_w.reshape(-1)
         need_new = int(np.count_nonzero((cls == kn.VOXEL) & (bidx < 0)))
@@ -240,6 +241,16 @@ class TernaryVolume:
         return {"blocks_carved": int(np.count_nonzero(cls == kn.CARVE)),
                 "blocks_voxelwise": int(np.count_nonzero(cls == kn.VOXEL)),
                 "blocks_allocated": int(self.n_used)}
+
+    def _frustum_blocks(self, T: np.ndarray, K: np.ndarray, w: int, h: int, far: float):
+        """Block index box [lo, hi) holding the viewing frustum up to depth `far` (one block of margin)."""
+        corners = np.array([[-1, -1], [w + 1, -1], [-1, h + 1], [w + 1, h + 1]], dtype=np.float64)
+        rays = np.stack([(corners[:, 0] - K[0, 2]) / K[0, 0], (corners[:, 1] - K[1, 2]) / K[1, 1],
+                         np.ones(4)], axis=1) * far
+        pts = np.vstack([np.zeros(3), rays]) @ T[:3, :3].T + T[:3, 3]
+        lo = np.floor((pts.min(axis=0) - self.origin) / (self.voxel_size * kn.B)).astype(np.int64) - 1
+        hi = np.floor((pts.max(axis=0) - self.origin) / (self.voxel_size * kn.B)).astype(np.int64) + 2
+        return np.clip(lo, 0, self.nb), np.clip(hi, 0, self.nb)
 
     @staticmethod
     def _rng_perm(work: np.ndarray) -> None:
