@@ -55,6 +55,18 @@ def test_mesh_within_one_voxel_of_truth(fused, renderer):
     assert np.percentile(dist, 95) <= 2 * VS
 
 
+def test_mesh_faces_face_empty_space(fused):
+    """Triangle winding (right-hand normal) agrees with the vertex normals, which point into empty space."""
+    mesh = fused.extract_mesh()
+    v, t = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
+    face_n = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+    vert_n = np.asarray(mesh.vertex_normals)[t].sum(axis=1)
+    agree = np.einsum("ij,ij->i", face_n, vert_n) > 0
+    assert agree.mean() > 0.98, f"only {agree.mean():.1%} of faces face empty space"
+    up = np.abs(face_n[:, 2]) > 0.9 * np.linalg.norm(face_n, axis=1)  # table top and box lids face +z
+    assert np.mean(face_n[up, 2] > 0) > 0.98
+
+
 def test_object_measures_within_1cm(fused, renderer):
     """Paper Table 1 measures for each box: height, and major/minor axes of the footprint (the minimum-area
     rectangle around the side vertices between 20 % and 80 % of the height, away from edge artefacts)."""

@@ -89,9 +89,10 @@ def extract_mesh(vol, lo=None, hi=None):
     mesh = o3d.geometry.TriangleMesh()
     if len(f) == 0:
         return mesh
-    # skimage orders faces so that their normals follow its (descending) gradient: flip to face empty space
+    # skimage's winding already makes the faces' right-hand normals point into empty space (up the TSDF
+    # gradient), the same way as the vertex normals: keep it, so viewers show the outside of surfaces
     mesh.vertices = o3d.utility.Vector3dVector(v)
-    mesh.triangles = o3d.utility.Vector3iVector(f[:, ::-1].astype(np.int32))
+    mesh.triangles = o3d.utility.Vector3iVector(f.astype(np.int32))
     mesh.vertex_normals = o3d.utility.Vector3dVector(n)
     mesh.vertex_colors = o3d.utility.Vector3dVector(c.astype(np.float64) / 255.0)
     mesh.remove_duplicated_vertices()
