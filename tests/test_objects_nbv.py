@@ -143,17 +143,15 @@ def test_object_plan_with_the_nbv_ray_caster(planned):
     assert len(doc["pose"]) == 4 and len(doc["views"]) == 3 and doc["candidates_evaluated"] == plan.candidates_evaluated
 
 
-@pytest.mark.slow
-def test_closed_loop_objects_need_3_9x_fewer_cast_views_for_the_same_reduction():
-    """Thesis Table 3.1 / Fig. 3.17 in simulation (2 views, small scoring image to keep it short)."""
+def test_closed_loop_object_views_keep_revealing_voxels_near_objects_on_another_scene():
+    """The object-driven loop on a generated scene (seed 2, not the sample): no stall, few candidates cast.
+    The comparison against the standard strategy is in tests/test_eval_nbv_objects.py."""
     pytest.importorskip("kinfu_cli.nbv.ranking")
     from kinfu_cli.evaluation.objects_loop import compare_strategies
 
-    r = compare_strategies(0, views=2, score_px=80, resolution=256)
-    obj, std = r["objects"], r["standard"]
-    curve = [r["unknown_near_initial"]] + obj["unknown_near_after_each_view"]
-    assert all(b < a for a, b in zip(curve, curve[1:]))  # every object-driven view reveals voxels near objects
-    eq = r["equal_reduction"]
-    assert eq is not None, r  # the object strategy reaches the standard strategy's reduction
-    assert eq["cast_ratio"] >= 3.9, eq
-    assert r["cast_ratio_standard_over_objects"] >= 3.9
+    r = compare_strategies(2, views=5, strategies=("objects",))
+    obj = r["strategies"]["objects"]
+    curve = obj["unknown_near"]
+    assert len(curve) >= 4 and all(b < a for a, b in zip(curve, curve[1:])), curve
+    assert curve[-1] < 0.1 * curve[0]
+    assert max(obj["candidates_cast"]) <= 1000 and len(set(obj["segments"])) >= 2

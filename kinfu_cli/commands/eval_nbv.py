@@ -9,10 +9,12 @@ import click
 group = "eval"
 
 
-@click.command("nbv", short_help="Closed attention loop in simulation: NBV views vs random and fixed scans.")
+@click.command("nbv", short_help="Closed NBV loop in simulation: POI views vs random/fixed, objects vs standard.")
 @click.argument("scene", type=click.Path(path_type=Path))
 @click.option("--strategy", "strategies", default="poi,random,fixed", show_default=True,
-              help="Comma-separated strategies: poi (Alg. 1 NBV), random, fixed (ring at 40 deg latitude).")
+              help="Comma-separated strategies: poi (Alg. 1 NBV), random, fixed (ring at 40 deg latitude); or "
+                   "the POI-free whole-scene exploration: objects (most salient segment first, thesis Alg. 4), "
+                   "standard (every contour view scored on the whole volume).")
 @click.option("--views", default=5, show_default=True, type=int, help="View budget per POI.")
 @click.option("--mode", default="kfovp", show_default=True, type=click.Choice(["kfovp", "kfom", "both"]),
               help="KFOVP: fuse at views only; KFOM: also along the straight path between views.")
@@ -36,6 +38,14 @@ group = "eval"
 @click.option("--lon-step", default=30.0, show_default=True, type=float, help="Viewing sphere longitude step (deg).")
 @click.option("--lat-step", default=10.0, show_default=True, type=float, help="Viewing sphere latitude step (deg).")
 @click.option("--roll-step", default=45.0, show_default=True, type=float, help="Viewing sphere roll step (deg).")
+@click.option("--scan-frames", default=8, show_default=True, type=int,
+              help="objects/standard: initial scan = the first N scan poses (one side of the table).")
+@click.option("--near-margin", default=0.2, show_default=True, type=float,
+              help="objects/standard: 'near objects' = inside a true object's bounding sphere + this (m).")
+@click.option("--score-width", default=160, show_default=True, type=int,
+              help="objects/standard: width of the image views are scored with (same field of view).")
+@click.option("--reject-unknown", is_flag=True,
+              help="Candidate views with the sensor in unknown space score 0 (the paper's robot); default: allowed.")
 @click.option("--no-noise", is_flag=True, help="Render exact depth (no Kinect noise model).")
 @click.option("--seed", default=0, show_default=True, type=int, help="Noise and random-strategy seed.")
 @click.option("-o", "--output", type=click.Path(path_type=Path), default=None, help="Write the result JSON here.")
@@ -44,8 +54,8 @@ group = "eval"
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @click.option("--json", "as_json", is_flag=True, help="Print the result JSON on stdout.")
 def command(scene, strategies, views, mode, voxel_size, gain, inc_th, poi_radius, pois_from, poi, optimistic,
-            oscillation, width, height, scan_every, lon_step, lat_step, roll_step, no_noise, seed, output, plot,
-            quiet, as_json):
+            oscillation, width, height, scan_every, lon_step, lat_step, roll_step, scan_frames, near_margin,
+            score_width, reject_unknown, no_noise, seed, output, plot, quiet, as_json):
     """Run the paper's Algorithm 1 on a simulated scene and compare view strategies.
 
     SCENE is a `kinfu synth` ground_truth folder (or the recording folder holding it) or a mesh file
@@ -55,10 +65,16 @@ def command(scene, strategies, views, mode, voxel_size, gain, inc_th, poi_radius
     sphere after each view, views until IncTh, the final reconstruction error against the true
     after-change mesh and the time per stage, for each strategy.
 
+    With --strategy objects,standard (POI-free exploration, thesis ch. 3): from a short initial scan of
+    the scene, each strategy takes up to --views views; reported per strategy: unknown voxels near the
+    true objects after each view, candidate views ray-cast and planning time, and how many candidates
+    each needed for the same reduction.
+
     \b
     Example:
       kinfu eval nbv sample_data/tabletop/ground_truth --views 4 --plot out/nbv_loop.png
       kinfu eval nbv sample_data/tabletop --strategy poi,random --mode both --voxel-size 0.015 --json
+      kinfu eval nbv sample_data/tabletop --strategy objects,standard --width 160 --height 120
     """
     import json
 
@@ -70,7 +86,8 @@ def command(scene, strategies, views, mode, voxel_size, gain, inc_th, poi_radius
                      pois_from=pois_from, oscillation_deg=oscillation, scan_every=scan_every, width=width,
                      height=height, noise=not no_noise, seed=seed, optimistic=optimistic,
                      sphere=dict(lon_step=lon_step, lat_step=lat_step, roll_step=roll_step),
-                     poi=tuple(poi) if poi else None)
+                     poi=tuple(poi) if poi else None, scan_frames=scan_frames, near_margin=near_margin,
+                     score_width=score_width, reject_unknown=reject_unknown)
     doc = run_loop(scene, cfg, quiet=quiet)
     if plot is not None:
         plot_loop(plot, doc)

@@ -38,7 +38,8 @@ from kinfu_cli.errors import ConfigError, RecordingError
 from kinfu_cli.nbv.ranking import default_inc_th, score_views, unknown_in_sphere
 from kinfu_cli.nbv.viewpoints import sphere_viewpoints
 
-STRATEGIES = ("poi", "random", "fixed")
+EXPLORE = ("objects", "standard")
+STRATEGIES = ("poi", "random", "fixed") + EXPLORE
 MODES = ("kfovp", "kfom")
 
 
@@ -68,6 +69,13 @@ class LoopConfig:
     room: float = 5.0
     reject_unknown: bool = False
     optimistic: bool = True
+    # POI-free exploration (strategies objects / standard)
+    scan_frames: int = 8
+    near_margin: float = 0.2
+    score_width: int = 160
+    score_fraction: float = 0.01
+    exclude_shift: float = 0.05
+    exclude_turn_deg: float = 10.0
 
     def check(self) -> None:
         for s in self.strategies:
@@ -76,6 +84,10 @@ class LoopConfig:
         for m in self.modes:
             if m not in MODES:
                 raise ConfigError(f"--mode: expected kfovp, kfom or both, got {m!r}")
+        explore = [s in EXPLORE for s in self.strategies]
+        if any(explore) and not all(explore):
+            raise ConfigError("--strategy: objects and standard (POI-free exploration) cannot be mixed with "
+                              f"poi, random or fixed, got {','.join(self.strategies)}")
         if self.views < 1:
             raise ConfigError(f"--views: expected at least 1, got {self.views}")
         if not (0.002 <= self.voxel_size <= 0.1):
@@ -84,6 +96,12 @@ class LoopConfig:
             raise ConfigError(f"--pois-from: expected gmm-as or truth, got {self.pois_from!r}")
         if self.scan_every < 1:
             raise ConfigError(f"--scan-every: expected at least 1, got {self.scan_every}")
+        if self.scan_frames < 1:
+            raise ConfigError(f"--scan-frames: expected at least 1, got {self.scan_frames}")
+        if self.score_width < 8:
+            raise ConfigError(f"--score-width: expected at least 8 pixels, got {self.score_width}")
+        if not self.near_margin >= 0:
+            raise ConfigError(f"--near-margin: expected a distance >= 0 m, got {self.near_margin}")
 
 
 @dataclass
@@ -104,6 +122,7 @@ class SimScene:
     box_hi: np.ndarray
     render_before: object = None
     render_after: object = None
+    object_spheres: np.ndarray | None = None  # (n, 4): centre and radius of each true object present after
 
 
 def load_scene(path: str | os.PathLike, cfg: LoopConfig) -> SimScene:
@@ -122,8 +141,11 @@ def load_scene(path: str | os.PathLike, cfg: LoopConfig) -> SimScene:
         lo = np.array([cx - sx / 2 - 0.3, cy - sy / 2 - 0.3, tz - 0.3])
         hi = np.array([cx + sx / 2 + 0.3, cy + sy / 2 + 0.3, tz + 0.9])
         n_scan = int(gt.info.get("frames", {}).get("scan") or len(gt.poses))
+        present = {o["id"] for o in gt.objects if o.get("present_after", True)}
+        spheres = bounding_spheres([m for k, m in gt.object_meshes().items() if k in present])
         return SimScene(gt.folder.name, gt.mesh("before"), gt.mesh("after"), gt.K, gt.width, gt.height,
-                        gt.poses[:n_scan:cfg.scan_every], gt.hand(), gt.change_positions, tz, lo, hi)
+                        gt.poses[:n_scan:cfg.scan_every], gt.hand(), gt.change_positions, tz, lo, hi,
+                        object_spheres=spheres)
     import open3d as o3d
 
     mesh = o3d.io.read_triangle_mesh(str(path))
@@ -142,6 +164,34 @@ def load_scene(path: str | os.PathLike, cfg: LoopConfig) -> SimScene:
     K = kinect_v1_intrinsics(320, 240)
     poi = np.asarray(cfg.poi, dtype=float).reshape(1, 3)
     return SimScene(path.stem, mesh, mesh, K, 320, 240, scan, None, poi, None, lo, hi)
+
+
+def bounding_spheres(meshes) -> np.ndarray:
+    """(n, 4) centre (of the axis-aligned box) and radius (farthest vertex) of each mesh."""
+    out = []
+    for m in meshes:
+        v = np.asarray(m.vertices, dtype=np.float64)
+        if len(v):
+            c = (v.min(axis=0) + v.max(axis=0)) / 2
+            out.append([*c, float(np.max(np.linalg.norm(v - c, axis=1)))])
+    return np.array(out, dtype=np.float64).reshape(-1, 4)
+
+
+def scene_from_scenario(seed: int = 0, **kwargs) -> SimScene:
+    """A SimScene from `kinfu_cli.sim.scenario.make_scenario(seed, **kwargs)` (no files needed)."""
+    from kinfu_cli.sim.scenario import make_scenario
+
+    sc = make_scenario(seed, **kwargs)
+    t = sc.scene_before.table
+    cx, cy = t.center[0], t.center[1]
+    sx, sy = t.size[0], t.size[1]
+    tz = float(t.top_z)
+    lo = np.array([cx - sx / 2 - 0.3, cy - sy / 2 - 0.3, tz - 0.3])
+    hi = np.array([cx + sx / 2 + 0.3, cy + sy / 2 + 0.3, tz + 0.9])
+    scan = np.array([f.T_world_camera for f in sc.frames if f.phase == "scan"])
+    return SimScene(f"scenario-{seed}", sc.scene_before.mesh(), sc.scene_after.mesh(), sc.K, sc.width, sc.height,
+                    scan, sc.hand, np.array([c["position"] for c in sc.changes if "position" in c]).reshape(-1, 3),
+                    tz, lo, hi, object_spheres=bounding_spheres([o.mesh for o in sc.scene_after.present_objects]))
 
 
 def _with_room(mesh, centre: np.ndarray, size: float):
@@ -210,25 +260,17 @@ class _Timer:
 def run_loop(scene_path: str | os.PathLike, cfg: LoopConfig, quiet: bool = True) -> dict:
     """Run the closed loop; returns the result document (see the module docstring)."""
     from kinfu_cli.fusion.volume import TernaryVolume
-    from kinfu_cli.nbv.camera import CameraModel
     from kinfu_cli.nbv.gains import get_gain
     from kinfu_cli.progress import progress
-    from kinfu_cli.sim.sensor import DepthSensor
 
     cfg.check()
     get_gain(cfg.gain)
+    if cfg.strategies and all(s in EXPLORE for s in cfg.strategies):
+        return run_exploration(load_scene(scene_path, cfg), cfg, quiet=quiet, scene_name=str(scene_path))
     timer = _Timer()
     t0 = time.perf_counter()
     sc = load_scene(scene_path, cfg)
-    centre = (sc.box_lo + sc.box_hi) / 2
-    sc.render_before = _with_room(sc.before, centre, cfg.room) if cfg.room > 0 else sc.before
-    sc.render_after = _with_room(sc.after, centre, cfg.room) if cfg.room > 0 else sc.after
-    w = cfg.width or sc.width
-    h = cfg.height or sc.height
-    K = _scaled_K(sc.K, sc.width, sc.height, w, h)
-    sensor = DepthSensor(K, w, h, noise=cfg.noise, seed=cfg.seed)
-    cam = CameraModel(K[0, 0], K[1, 1], K[0, 2], K[1, 2], w, h, min_range=sensor.min_range,
-                      max_range=sensor.max_range, vfov_extra_deg=cfg.oscillation_deg)
+    sensor, K, cam = _sensor_setup(sc, cfg)
     timer.add("load", time.perf_counter() - t0)
 
     # 1. initial scan of the scene before the change
@@ -317,6 +359,194 @@ def _fixed_ring(cands: np.ndarray, center: np.ndarray, n: int) -> list[int]:
     return out
 
 
+def _take_view(vol, T_cur, T_goal, mode, sc, cfg, sensor, K, timer, frames: int) -> int:
+    """Move to T_goal (KFOM: fusing along the straight path), oscillate, render the after scene, fuse.
+    Returns the updated count of frames fused."""
+    poses = _path(T_cur, T_goal, cfg.path_step) if mode == "kfom" else []
+    osc = cfg.oscillation_deg
+    poses += [T_goal] if osc <= 0 else [_tilt(T_goal, -osc), T_goal, _tilt(T_goal, osc)]
+    for T in poses:
+        t = time.perf_counter()
+        depth, _ = sensor.render(sc.render_after, T, frame_seed=10_000 + frames)
+        timer.add("render", time.perf_counter() - t)
+        t = time.perf_counter()
+        if np.any(depth > 0):
+            vol.integrate(depth, K, T)
+        timer.add("integrate", time.perf_counter() - t)
+        frames += 1
+    return frames
+
+
+def _sensor_setup(sc: SimScene, cfg: LoopConfig):
+    """Room-enclosed render meshes, the simulated sensor and the NBV camera model (same image, same ranges)."""
+    from kinfu_cli.nbv.camera import CameraModel
+    from kinfu_cli.sim.sensor import DepthSensor
+
+    centre = (sc.box_lo + sc.box_hi) / 2
+    sc.render_before = _with_room(sc.before, centre, cfg.room) if cfg.room > 0 else sc.before
+    sc.render_after = _with_room(sc.after, centre, cfg.room) if cfg.room > 0 else sc.after
+    w = cfg.width or sc.width
+    h = cfg.height or sc.height
+    K = _scaled_K(sc.K, sc.width, sc.height, w, h)
+    sensor = DepthSensor(K, w, h, noise=cfg.noise, seed=cfg.seed)
+    cam = CameraModel(K[0, 0], K[1, 1], K[0, 2], K[1, 2], w, h, min_range=sensor.min_range,
+                      max_range=sensor.max_range, vfov_extra_deg=cfg.oscillation_deg)
+    return sensor, K, cam
+
+
+def near_object_voxels(grid, spheres: np.ndarray, margin: float, table_z: float | None = None) -> np.ndarray:
+    """(N, 3) voxel indices whose centres lie inside some true object's bounding sphere enlarged by `margin`
+    (the thesis scores unknown voxels there), above the table top when `table_z` is given."""
+    shape = np.array(grid.shape)
+    found = []
+    for c, r in zip(spheres[:, :3], spheres[:, 3] + margin):
+        lo = np.clip(grid.index_of((c - r)[None])[0], 0, shape)
+        hi = np.clip(grid.index_of((c + r)[None])[0] + 1, 0, shape)
+        if np.any(hi <= lo):
+            continue
+        idx = np.stack(np.meshgrid(*[np.arange(a, b) for a, b in zip(lo, hi)], indexing="ij"), -1).reshape(-1, 3)
+        cen = grid.centers(idx)
+        keep = np.linalg.norm(cen - c, axis=1) <= r
+        if table_z is not None:
+            keep &= cen[:, 2] > table_z
+        found.append(np.ravel_multi_index(tuple(idx[keep].T), grid.shape))
+    if not found:
+        return np.zeros((0, 3), np.int64)
+    return np.stack(np.unravel_index(np.unique(np.concatenate(found)), grid.shape), -1)
+
+
+def run_exploration(sc: SimScene, cfg: LoopConfig, quiet: bool = True, scene_name: str | None = None,
+                    log=None) -> dict:
+    """POI-free whole-scene exploration (thesis ch. 3, Table 3.1 / Fig. 3.17): from a short initial scan
+    (the first `scan_frames` scan poses, one side of the table) each strategy of `cfg.strategies` takes up to
+    `views` NBVs, each rendered with the simulated Kinect and fused as in the POI loop. ``objects``: contour
+    viewpoints of the most salient segment scored on its bounding sphere + 0.2 m (thesis Alg. 4);
+    ``standard``: every contour viewpoint scored on the whole volume. Both skip views already taken (within
+    `exclude_shift` m and `exclude_turn_deg`), score with the same ray caster on a `score_width`-wide image
+    of the sensor's field of view and ranges, and stop when the best score < `score_fraction` of its pixels.
+    Measured after each view: unknown voxels inside the true objects' bounding spheres + `near_margin`."""
+    from kinfu_cli.fusion.volume import TernaryVolume
+    from kinfu_cli.nbv.camera import CameraModel
+    from kinfu_cli.nbv.contours import extract_contours
+    from kinfu_cli.nbv.objects import nbv_scorer, plan_object_views, plan_standard_views
+    from kinfu_cli.progress import progress
+    from kinfu_cli.segmentation.pipeline import SegmentOptions, analyse_volume
+
+    if sc.object_spheres is None or len(sc.object_spheres) == 0:
+        raise ConfigError(f"{scene_name or sc.name}: --strategy objects/standard needs the true objects of a kinfu "
+                          "synth ground_truth folder (objects/*.ply); a bare mesh has none")
+    timer = _Timer()
+    t0 = time.perf_counter()
+    sensor, K, cam = _sensor_setup(sc, cfg)
+    s = min(1.0, cfg.score_width / cam.width)
+    sw, sh = max(int(round(cam.width * s)), 8), max(int(round(cam.height * s)), 6)
+    Ks = _scaled_K(K, cam.width, cam.height, sw, sh)
+    score_cam = CameraModel(Ks[0, 0], Ks[1, 1], Ks[0, 2], Ks[1, 2], sw, sh, min_range=cam.min_range, max_range=cam.max_range,
+                            vfov_extra_deg=cam.vfov_extra_deg)
+    score_th = cfg.score_fraction * score_cam.width * score_cam.height
+    size = sc.box_hi - sc.box_lo
+    base = TernaryVolume(size=tuple(size), voxel_size=cfg.voxel_size, origin=tuple(sc.box_lo),
+                         min_depth=sensor.min_range, max_depth=sensor.max_range, color=False)
+    scan = sc.scan_poses[:cfg.scan_frames]
+    n_int = 0
+    t = time.perf_counter()
+    for i, T in enumerate(progress(scan, total=len(scan), desc="initial scan", quiet=quiet)):
+        depth, _ = sensor.render(sc.render_after, T, frame_seed=i)
+        if np.any(depth > 0):
+            base.integrate(depth, K, T)
+            n_int += 1
+    if n_int == 0:
+        raise RecordingError(f"{scene_name or sc.name}: the initial scan saw nothing ({len(scan)} views)")
+    timer.add("initial_scan", time.perf_counter() - t)
+    grid0 = base.ternary_grid()
+    near = near_object_voxels(grid0, sc.object_spheres, cfg.near_margin, sc.table_z)
+    near_t = tuple(near.T)
+
+    def unknown_near(v) -> int:
+        return int(np.sum(v.ternary_grid().labels[near_t] == 0))
+
+    u0 = unknown_near(base)
+    env_c = grid0.origin + np.array(grid0.shape) * grid0.voxel_size / 2
+    env_r = float(np.linalg.norm(np.array(grid0.shape) * grid0.voxel_size) / 2)
+    runs = {}
+    for strat in cfg.strategies:
+        vol = base.copy()
+        T_cur = scan[-1].copy()
+        taken: list[np.ndarray] = []
+        curve, cast, secs, scores, segs, frames = [u0], [], [], [], [], 0
+        for _ in progress(range(cfg.views), total=cfg.views, desc=strat, quiet=quiet):
+            t = time.perf_counter()
+            grid = vol.ternary_grid()
+            scorer = nbv_scorer(grid, score_cam, cfg.gain, table_z=sc.table_z, reject_unknown=cfg.reject_unknown,
+                                optimistic=cfg.optimistic)
+            contours = extract_contours(grid.labels, grid.origin, grid.voxel_size)
+            ex = dict(exclude=np.array(taken).reshape(-1, 4, 4), exclude_shift=cfg.exclude_shift,
+                      exclude_turn_deg=cfg.exclude_turn_deg, score_threshold=score_th)
+            if strat == "objects":
+                plan = plan_object_views(analyse_volume(vol, SegmentOptions(superquadrics=False)), contours, scorer,
+                                         **ex)
+            else:
+                plan = plan_standard_views(contours, scorer, env_c, env_r, **ex)
+            secs.append(time.perf_counter() - t)
+            timer.add("plan", secs[-1])
+            cast.append(int(plan.candidates_evaluated))
+            if plan.pose is None:
+                break
+            scores.append(float(plan.score))
+            segs.append(plan.segment_id)
+            frames = _take_view(vol, T_cur, plan.pose, "kfovp", sc, cfg, sensor, K, timer, frames)
+            T_cur = plan.pose
+            taken.append(plan.pose)
+            t = time.perf_counter()
+            curve.append(unknown_near(vol))
+            timer.add("measure", time.perf_counter() - t)
+        runs[strat] = {"strategy": strat, "unknown_near": curve, "candidates_cast": cast,
+                       "candidates_cast_total": int(sum(cast)), "planning_seconds": [round(x, 3) for x in secs],
+                       "planning_seconds_total": round(float(sum(secs)), 3), "scores": scores,
+                       "segments": segs, "views_taken": len(curve) - 1, "frames_fused": frames,
+                       "poses": [T.tolist() for T in taken]}
+        if log is not None:
+            log(strat, runs[strat])
+    doc = {"scene": scene_name or sc.name, "kind": "exploration", "config": _cfg_doc(cfg),
+           "camera": cam.to_dict(), "score_camera": score_cam.to_dict(), "score_threshold": score_th,
+           "volume": {"shape": list(base.shape), "voxel_size": base.voxel_size, "origin": base.origin.tolist()},
+           "initial_scan_views": int(n_int),
+           "near_objects": {"spheres": sc.object_spheres.tolist(), "margin_m": cfg.near_margin,
+                            "voxels": int(len(near)), "unknown_initial": u0},
+           "strategies": runs}
+    doc.update(compare_exploration(runs))
+    doc["time_s"] = {k: round(v, 3) for k, v in timer.t.items()}
+    doc["time_s"]["total"] = round(time.perf_counter() - t0, 3)
+    return doc
+
+
+def compare_exploration(runs: dict) -> dict:
+    """Object-driven vs standard (thesis Table 3.1): candidate views ray-cast by each to reach the SAME
+    unknown-voxel count near objects -- the level both reached (the larger of the two final counts), each
+    strategy's cost counted up to its first view at or below it -- plus totals over all views."""
+    if "objects" not in runs or "standard" not in runs:
+        return {}
+    o, st = runs["objects"], runs["standard"]
+    target = max(o["unknown_near"][-1], st["unknown_near"][-1])
+
+    def reach(r):
+        k = next((i for i, u in enumerate(r["unknown_near"]) if u <= target), 0)
+        return k, int(sum(r["candidates_cast"][:k])), float(sum(r["planning_seconds"][:k]))
+
+    (ko, co, so), (ks, cs, ss) = reach(o), reach(st)
+    u0 = o["unknown_near"][0]
+    out = {"equal_reduction": {
+        "unknown_near": int(target), "reduction": int(u0 - target),
+        "reduction_fraction": (u0 - target) / u0 if u0 else 0.0,
+        "objects_views": ko, "objects_cast": co, "objects_planning_s": round(so, 3),
+        "standard_views": ks, "standard_cast": cs, "standard_planning_s": round(ss, 3),
+        "cast_ratio": cs / co if co else None, "time_ratio": ss / so if so > 0 else None}}
+    out["reduction"] = {name: int(r["unknown_near"][0] - r["unknown_near"][-1]) for name, r in runs.items()}
+    out["cast_ratio_standard_over_objects"] = st["candidates_cast_total"] / max(o["candidates_cast_total"], 1)
+    out["time_ratio_standard_over_objects"] = st["planning_seconds_total"] / max(o["planning_seconds_total"], 1e-9)
+    return out
+
+
 def _run_strategy(strat, mode, vol, pois, sc, cfg, sensor, K, cam, sphere, table_z, timer) -> dict:
     """One strategy in one mode from the cleared volume `vol` (modified in place)."""
     rng = np.random.default_rng(cfg.seed + 1)
@@ -366,18 +596,7 @@ def _run_strategy(strat, mode, vol, pois, sc, cfg, sensor, K, cam, sphere, table
             T_goal = cands[pick]
             same = np.linalg.norm(cands[:, :3, 3] - T_goal[:3, 3], axis=1) < 1e-6
             attempted.update(int(i) for i in np.flatnonzero(same))
-            poses = _path(T_cur, T_goal, cfg.path_step) if mode == "kfom" else []
-            osc = cfg.oscillation_deg
-            poses += [T_goal] if osc <= 0 else [_tilt(T_goal, -osc), T_goal, _tilt(T_goal, osc)]
-            for T in poses:
-                t = time.perf_counter()
-                depth, _ = sensor.render(sc.render_after, T, frame_seed=10_000 + frames)
-                timer.add("render", time.perf_counter() - t)
-                t = time.perf_counter()
-                if np.any(depth > 0):
-                    vol.integrate(depth, K, T)
-                timer.add("integrate", time.perf_counter() - t)
-                frames += 1
+            frames = _take_view(vol, T_cur, T_goal, mode, sc, cfg, sensor, K, timer, frames)
             T_cur = T_goal
             t = time.perf_counter()
             grid = vol.ternary_grid()
@@ -458,9 +677,40 @@ def _sample_surface(mesh, pois: np.ndarray, radius: float, spacing: float = 0.00
     return (1 - s1)[:, None] * a[idx] + (s1 * (1 - r2))[:, None] * b[idx] + (s1 * r2)[:, None] * c[idx]
 
 
+def exploration_table(doc: dict) -> list[str]:
+    """The `run_exploration` result as text: unknown voxels near objects after each view, candidate views
+    ray-cast and planning time per view, and the object-driven vs standard comparison."""
+    runs = doc["strategies"]
+    near = doc["near_objects"]
+    nmax = max((len(r["unknown_near"]) for r in runs.values()), default=1)
+    lines = [f"unknown voxels near objects (true bounding spheres + {near['margin_m']:g} m, {near['voxels']} voxels) "
+             "after each view (v0 = after the initial scan)",
+             f"{'strategy':10s} " + " ".join(f"{'v' + str(i):>7s}" for i in range(nmax)) + "  reduction"]
+    for name, r in runs.items():
+        u = r["unknown_near"]
+        cells = " ".join(f"{int(x):7d}" for x in u) + " " * (8 * (nmax - len(u)))
+        lines.append(f"{name:10s} {cells}  {(u[0] - u[-1]) / u[0] if u[0] else 0.0:9.1%}")
+    lines.append("candidate views ray-cast per view (planning seconds)")
+    for name, r in runs.items():
+        cells = " ".join(f"{c}({t:.1f}s)" for c, t in zip(r["candidates_cast"], r["planning_seconds"]))
+        lines.append(f"{name:10s} {cells}  total {r['candidates_cast_total']} ({r['planning_seconds_total']:.1f} s)")
+    eq = doc.get("equal_reduction")
+    if eq:
+        ratio = "-" if eq["cast_ratio"] is None else f"{eq['cast_ratio']:.1f}x"
+        tr = "-" if eq["time_ratio"] is None else f"{eq['time_ratio']:.1f}x"
+        lines.append(f"same reduction ({eq['reduction_fraction']:.1%}, down to {eq['unknown_near']} unknown): "
+                     f"objects {eq['objects_views']} views / {eq['objects_cast']} cast, standard "
+                     f"{eq['standard_views']} views / {eq['standard_cast']} cast: {ratio} fewer cast views, "
+                     f"{tr} less planning time")
+    lines.append("time per stage (s): " + ", ".join(f"{k} {v:.2f}" for k, v in doc["time_s"].items()))
+    return lines
+
+
 def result_table(doc: dict) -> list[str]:
     """Unknown voxels in each POI sphere after each view (the paper's Fig. 20 as a table), one row per
     strategy and POI, with views until IncTh, and the final error of each strategy."""
+    if doc.get("kind") == "exploration":
+        return exploration_table(doc)
     runs = doc["strategies"]
     nmax = max((len(v) for r in runs.values() for v in r["unknown"].values()), default=1)
     lines = ["unknown voxels in each POI sphere after each view (v0 = before the first view of that POI)",
@@ -492,6 +742,20 @@ def plot_loop(path: str | os.PathLike, doc: dict) -> None:
 
     from kinfu_cli.io.atomic import atomic_path
 
+    if doc.get("kind") == "exploration":
+        fig, ax = plt.subplots(figsize=(5.5, 3.8))
+        for name, r in doc["strategies"].items():
+            ax.plot(range(len(r["unknown_near"])), r["unknown_near"], marker="o",
+                    label=f"{name} ({r['candidates_cast_total']} cast)")
+        ax.set_xlabel("views")
+        ax.set_ylabel("unknown voxels near objects")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=90)
+        plt.close(fig)
+        return
     pois = [str(p["id"]) for p in doc["pois"]]
     fig, axes = plt.subplots(1, len(pois), figsize=(5 * len(pois), 3.8), squeeze=False)
     for ax, pid in zip(axes[0], pois):

@@ -135,31 +135,51 @@ class ObjectPlan:
         }
 
 
-def nbv_scorer(grid, camera, gain: str = "unknown", table_z: float | None = None) -> Scorer:
-    """The NBV module's ray-casting score (rays ending on unknown voxels inside the region sphere)."""
+def nbv_scorer(grid, camera, gain: str = "unknown", table_z: float | None = None, *, reject_unknown: bool = True,
+               optimistic: bool = False) -> Scorer:
+    """The NBV module's ray-casting score (rays ending on unknown voxels inside the region sphere).
+    reject_unknown: a sensor position in unknown space scores 0 (the paper; a simulated arm without a motion
+    planner may pass False); optimistic: unknown voxels outside the region do not stop rays."""
     from kinfu_cli.nbv.ranking import as_ray_volume, score_views
 
     vol = as_ray_volume(grid)
 
     def score(poses: np.ndarray, center: np.ndarray, radius: float) -> np.ndarray:
-        return np.asarray(score_views(vol, poses, camera, center, radius, gain, table_z=table_z).gain, dtype=float)
+        return np.asarray(score_views(vol, poses, camera, center, radius, gain, table_z=table_z,
+                                      reject_unknown=reject_unknown, optimistic=optimistic).gain, dtype=float)
 
     return score
 
 
+def not_attempted(poses: np.ndarray, taken, *, shift: float = 0.05, turn_deg: float = 10.0) -> np.ndarray:
+    """(V,) bool: candidate poses that are NOT within `shift` metres and `turn_deg` degrees (optical axis; the
+    roll is ignored) of any pose in `taken` (K, 4, 4) -- the thesis skips viewpoints already attempted."""
+    poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
+    keep = np.ones(len(poses), dtype=bool)
+    if taken is None or len(taken) == 0 or len(poses) == 0:
+        return keep
+    taken = np.asarray(taken, dtype=np.float64).reshape(-1, 4, 4)
+    d = np.linalg.norm(poses[:, None, :3, 3] - taken[None, :, :3, 3], axis=2)
+    c = np.einsum("vi,ki->vk", poses[:, :3, 2], taken[:, :3, 2])
+    near = (d < shift) & (c > np.cos(np.radians(turn_deg)))
+    return ~near.any(axis=1)
+
+
 def plan_object_views(segments, contours: Contours, scorer: Scorer, *, score_threshold: float = 0.0,
                       margin: float = 0.2, distance: float = 0.8, cone_deg: float = 15.0, n_directions: int = 5,
-                      n_rolls: int = 8, max_segments: int | None = None, exclude=None) -> ObjectPlan:
+                      n_rolls: int = 8, max_segments: int | None = None, exclude=None,
+                      exclude_shift: float = 0.05, exclude_turn_deg: float = 10.0) -> ObjectPlan:
     """Thesis Alg. 4 on precomputed `segments` (a kinfu_cli.segmentation.pipeline.SegmentResult) and
     `contours`: the best pose of the most salient segment with score > score_threshold.
 
-    scorer(poses (V, 4, 4), center (3,), radius) -> scores (V,); exclude: (center, radius) spheres whose
-    candidates are skipped (views already taken). Returns an ObjectPlan with the number of candidates
-    generated and ray-cast.
+    scorer(poses (V, 4, 4), center (3,), radius) -> scores (V,); exclude: poses (K, 4, 4) already taken:
+    candidates within `exclude_shift` m and `exclude_turn_deg` of one are neither cast nor chosen. Returns an
+    ObjectPlan with the number of candidates generated and ray-cast.
     """
     t0 = time.perf_counter()
     poses, owner = contour_viewpoints(contours.positions, contours.directions, distance=distance,
                                       cone_deg=cone_deg, n_directions=n_directions, n_rolls=n_rolls)
+    free = not_attempted(poses, exclude, shift=exclude_shift, turn_deg=exclude_turn_deg)
     seg = segments.segmentation
     near = find_near(contours.positions, seg.points, seg.labels)
     plan = ObjectPlan(None, 0.0, None, None, None, int(len(poses)), 0)
@@ -174,7 +194,11 @@ def plan_object_views(segments, contours: Contours, scorer: Scorer, *, score_thr
         if len(cp) == 0:
             plan.attempts.append(SegmentAttempt(s.id, s.saliency, center.tolist(), radius, 0, 0, 0.0, False))
             continue
-        sel = np.flatnonzero(np.isin(owner, cp))
+        sel = np.flatnonzero(np.isin(owner, cp) & free)
+        if len(sel) == 0:
+            plan.attempts.append(SegmentAttempt(s.id, s.saliency, center.tolist(), radius, int(len(cp)), 0, 0.0,
+                                                False))
+            continue
         t = time.perf_counter()
         scores = np.asarray(scorer(poses[sel], center, radius), dtype=float)
         t_eval += time.perf_counter() - t
@@ -200,11 +224,14 @@ def plan_object_views(segments, contours: Contours, scorer: Scorer, *, score_thr
 
 def plan_standard_views(contours: Contours, scorer: Scorer, region_center, region_radius: float, *,
                         score_threshold: float = 0.0, distance: float = 0.8, cone_deg: float = 15.0,
-                        n_directions: int = 5, n_rolls: int = 8) -> ObjectPlan:
-    """The "standard" baseline: every contour candidate scored on the whole environment sphere."""
+                        n_directions: int = 5, n_rolls: int = 8, exclude=None, exclude_shift: float = 0.05,
+                        exclude_turn_deg: float = 10.0) -> ObjectPlan:
+    """The "standard" baseline: every contour candidate scored on the whole environment sphere
+    (candidates near an `exclude` pose, already taken, are skipped as in `plan_object_views`)."""
     t0 = time.perf_counter()
     poses, _ = contour_viewpoints(contours.positions, contours.directions, distance=distance, cone_deg=cone_deg,
                                   n_directions=n_directions, n_rolls=n_rolls)
+    poses = poses[not_attempted(poses, exclude, shift=exclude_shift, turn_deg=exclude_turn_deg)]
     plan = ObjectPlan(None, 0.0, None, np.asarray(region_center, float), float(region_radius), int(len(poses)), 0)
     if len(poses):
         t = time.perf_counter()
