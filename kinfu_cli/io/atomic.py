@@ -12,6 +12,16 @@ from pathlib import Path
 from kinfu_cli.errors import KinfuError
 
 
+def _ensure_parent(final: Path) -> Path:
+    """The folder `final` goes in, created if needed (a one-line KinfuError when it cannot be)."""
+    parent = final.parent if str(final.parent) else Path(".")
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise KinfuError(f"{parent}: cannot create output folder ({exc.strerror})") from None
+    return parent
+
+
 @contextlib.contextmanager
 def atomic_path(final: str | os.PathLike, suffix: str | None = None) -> Iterator[Path]:
     """Yield a temporary path beside `final`; rename it to `final` only if the block succeeds.
@@ -19,11 +29,7 @@ def atomic_path(final: str | os.PathLike, suffix: str | None = None) -> Iterator
     The temporary name keeps the final suffix (writers such as open3d pick the format by it).
     """
     final = Path(final)
-    parent = final.parent if str(final.parent) else Path(".")
-    try:
-        parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise KinfuError(f"{parent}: cannot create output folder ({exc.strerror})") from None
+    parent = _ensure_parent(final)
     suffix = final.suffix if suffix is None else suffix
     fd, tmp = tempfile.mkstemp(prefix=f".{final.stem}.", suffix=f".part{suffix}", dir=parent)
     os.close(fd)
@@ -51,11 +57,7 @@ def atomic_dir(final: str | os.PathLike) -> Iterator[Path]:
     For outputs that are folders (ROS 2 bags, result folders with several files).
     """
     final = Path(final)
-    parent = final.parent if str(final.parent) else Path(".")
-    try:
-        parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise KinfuError(f"{parent}: cannot create output folder ({exc.strerror})") from None
+    parent = _ensure_parent(final)
     tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".part", dir=parent))
     os.chmod(tmp, 0o777 & ~_umask())
     try:

@@ -211,35 +211,37 @@ def rank_poi(volume: TernaryGrid | RayVolume, center, camera: CameraModel, *, po
 # Volume helpers
 
 
-def forget_around(grid: TernaryGrid, center, radius: float) -> int:
-    """ForgetAround: set every voxel whose centre is within `radius` of `center` to UNKNOWN, in place.
-    Returns the number of voxels that changed."""
+def _sphere_block(grid: TernaryGrid, center, radius: float):
+    """The labels sub-array around a sphere (a view) and the mask of its voxels whose centre is inside,
+    or (None, None) when the sphere misses the volume."""
     c = np.asarray(center, dtype=np.float64).reshape(3)
     vs = grid.voxel_size
     lo = np.maximum(np.floor((c - radius - grid.origin) / vs).astype(int), 0)
     hi = np.minimum(np.ceil((c + radius - grid.origin) / vs).astype(int) + 1, np.array(grid.shape))
     if np.any(hi <= lo):
-        return 0
+        return None, None
     ax = [grid.origin[a] + (np.arange(lo[a], hi[a]) + 0.5) * vs - c[a] for a in range(3)]
     d2 = ax[0][:, None, None] ** 2 + ax[1][None, :, None] ** 2 + ax[2][None, None, :] ** 2
-    sub = grid.labels[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]]
-    mask = (d2 <= radius * radius) & (sub != UNKNOWN)
+    return grid.labels[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]], d2 <= radius * radius
+
+
+def forget_around(grid: TernaryGrid, center, radius: float) -> int:
+    """ForgetAround: set every voxel whose centre is within `radius` of `center` to UNKNOWN, in place.
+    Returns the number of voxels that changed."""
+    sub, inside = _sphere_block(grid, center, radius)
+    if sub is None:
+        return 0
+    mask = inside & (sub != UNKNOWN)
     sub[mask] = UNKNOWN
     return int(mask.sum())
 
 
 def unknown_in_sphere(grid: TernaryGrid, center, radius: float) -> int:
     """Number of unknown voxels whose centre is within `radius` of `center` (inside the volume)."""
-    c = np.asarray(center, dtype=np.float64).reshape(3)
-    vs = grid.voxel_size
-    lo = np.maximum(np.floor((c - radius - grid.origin) / vs).astype(int), 0)
-    hi = np.minimum(np.ceil((c + radius - grid.origin) / vs).astype(int) + 1, np.array(grid.shape))
-    if np.any(hi <= lo):
+    sub, inside = _sphere_block(grid, center, radius)
+    if sub is None:
         return 0
-    ax = [grid.origin[a] + (np.arange(lo[a], hi[a]) + 0.5) * vs - c[a] for a in range(3)]
-    d2 = ax[0][:, None, None] ** 2 + ax[1][None, :, None] ** 2 + ax[2][None, None, :] ** 2
-    sub = grid.labels[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]]
-    return int(np.count_nonzero((d2 <= radius * radius) & (sub == UNKNOWN)))
+    return int(np.count_nonzero(inside & (sub == UNKNOWN)))
 
 
 def estimate_table_z(grid: TernaryGrid, min_fraction: float = 0.02, relative: float = 0.25) -> float | None:
