@@ -22,6 +22,23 @@ Reported: unknown voxels in each POI sphere after every view (the paper's Fig. 2
 IncTh, the final reconstruction error inside the POI spheres against the true after-change mesh
 (accuracy: reconstructed surface to truth; completeness: true surface within `threshold` of the
 reconstruction), and the time per stage.
+
+``objects`` / ``standard`` (`run_exploration`, thesis ch. 3 Table 3.1 / Fig. 3.17) are POI-free: from a
+short one-sided scan (no change, no ForgetAround) each takes views through the same `_take_view` path and
+the same ray caster; ``objects`` plans with `nbv.objects.plan_object_views` (most salient segment's
+contour viewpoints, scored on its bounding sphere + 0.2 m), ``standard`` with `plan_standard_views`
+(every contour viewpoint scored on the whole volume). Reported: unknown voxels inside the true objects'
+bounding spheres + `near_margin` after each view, candidate views ray-cast and planning time per view,
+and the candidates each strategy needed to reach the same unknown count (`compare_exploration`).
+
+Why the earlier object-driven loop stalled (measured, see the report of the objects-loop task): it rendered
+the scene without surroundings, so rays into the void returned no depth and carved nothing while the
+ray caster counted them as revealing unknown voxels (the chosen view scored ~1,300 rays and changed
+~300 voxels); it also rejected candidates with the sensor in unknown space (after a one-sided scan that
+is most of them) and stopped rays at unknown voxels outside the segment's sphere. Here the scene is
+rendered inside a room (`room`), candidates in unknown space are allowed (`reject_unknown`, the simulated
+arm has no planner) and rays pass unknown space outside the region (`optimistic`); views within
+`exclude_shift` / `exclude_turn_deg` of one already taken are skipped, as the paper skips attempted views.
 """
 
 from __future__ import annotations
