@@ -42,7 +42,7 @@ group = "eval"
               help="objects/standard: initial scan = the first N scan poses (one side of the table).")
 @click.option("--near-margin", default=0.2, show_default=True, type=float,
               help="objects/standard: 'near objects' = inside a true object's bounding sphere + this (m).")
-@click.option("--score-width", default=160, show_default=True, type=int,
+@click.option("--score-width", default=80, show_default=True, type=int,
               help="objects/standard: width of the image views are scored with (same field of view).")
 @click.option("--reject-unknown", is_flag=True,
               help="Candidate views with the sensor in unknown space score 0 (the paper's robot); default: allowed.")

@@ -89,7 +89,7 @@ class LoopConfig:
     # POI-free exploration (strategies objects / standard)
     scan_frames: int = 8
     near_margin: float = 0.2
-    score_width: int = 160
+    score_width: int = 80
     score_fraction: float = 0.01
     exclude_shift: float = 0.05
     exclude_turn_deg: float = 10.0
