@@ -76,14 +76,78 @@ def _invalid_integral(depth):
     return s
 
 
+PYR_LEVELS = 5  # min/max squares of 1, 2, 4, 8, 16 pixels
+
+
+@njit(cache=True, parallel=True)
+def depth_pyramid(depth, pm):
+    """Sparse table of valid depth: pm[k, v, u, 0] / pm[k, v, u, 1] = min / max valid depth over the pixel
+    square [v, v + 2^k) x [u, u + 2^k) (clipped to the image); inf / 0 where it holds no valid pixel. Any
+    pixel rectangle's exact min / max then costs a few look-ups (overlapping squares), see _range_minmax.
+    Min and max sit side by side so that one look-up touches one cache line. Written into pm, an array of
+    shape (levels, H, W, 2) float32 (reused from frame to frame: no fresh pages to fault in)."""
+    h, w = depth.shape
+    levels = pm.shape[0]
+    for v in prange(h):
+        for u in range(w):
+            d = depth[v, u]
+            if d > 0.0:
+                pm[0, v, u, 0] = d
+                pm[0, v, u, 1] = d
+            else:
+                pm[0, v, u, 0] = np.inf
+                pm[0, v, u, 1] = 0.0
+    for k in range(1, levels):
+        s = 1 << (k - 1)
+        for v in prange(h):
+            v2 = min(v + s, h - 1)
+            for u in range(w):
+                u2 = min(u + s, w - 1)
+                pm[k, v, u, 0] = min(min(pm[k - 1, v, u, 0], pm[k - 1, v, u2, 0]),
+                                     min(pm[k - 1, v2, u, 0], pm[k - 1, v2, u2, 0]))
+                pm[k, v, u, 1] = max(max(pm[k - 1, v, u, 1], pm[k - 1, v, u2, 1]),
+                                     max(pm[k - 1, v2, u, 1], pm[k - 1, v2, u2, 1]))
+    return pm
+
+
 @njit(cache=True)
-def _classify_box(lo0, lo1, lo2, n, vs, T_cw, fx, fy, cx, cy, width, height, trunc, tmin, tmax, tile, inv_sat):
+def _range_minmax(pm, u0, u1, v0, v1):
+    """Exact min / max valid depth over pixels [u0, u1] x [v0, v1] (inclusive, inside the image)."""
+    side = min(u1 - u0 + 1, v1 - v0 + 1)
+    k = 0
+    while k + 1 < pm.shape[0] and (2 << k) <= side:
+        k += 1
+    s = 1 << k
+    dmin = np.inf
+    dmax = 0.0
+    y = v0
+    while True:
+        yy = min(y, v1 + 1 - s)
+        x = u0
+        while True:
+            xx = min(x, u1 + 1 - s)
+            a = pm[k, yy, xx, 0]
+            if a < dmin:
+                dmin = a
+            b2 = pm[k, yy, xx, 1]
+            if b2 > dmax:
+                dmax = b2
+            if xx + s > u1:
+                break
+            x += s
+        if yy + s > v1:
+            break
+        y += s
+    return dmin, dmax
+
+
+@njit(cache=True)
+def _classify_box(lo0, lo1, lo2, n, vs, T_cw, fx, fy, cx, cy, width, height, trunc, pm, inv_sat):
     """SKIP / CARVE / VOXEL for the n^3 voxels whose centres start at (lo0, lo1, lo2).
 
     Conservative: CARVE and SKIP are returned only when every voxel would get exactly that from the
     per-voxel rule; anything uncertain is VOXEL.
     """
-    th, tw = tmin.shape
     ext = (n - 1) * vs
     zmin = np.inf
     zmax = -np.inf
@@ -121,14 +185,7 @@ def _classify_box(lo0, lo1, lo2, n, vs, T_cw, fx, fy, cx, cy, width, height, tru
     u1 = min(int(umax), width - 1)
     v0 = max(int(vmin), 0)
     v1 = min(int(vmax), height - 1)
-    dmin = np.inf
-    dmax = 0.0
-    for ty in range(v0 // tile, min(v1 // tile + 1, th)):
-        for tx in range(u0 // tile, min(u1 // tile + 1, tw)):
-            if tmin[ty, tx] < dmin:
-                dmin = tmin[ty, tx]
-            if tmax[ty, tx] > dmax:
-                dmax = tmax[ty, tx]
+    dmin, dmax = _range_minmax(pm, u0, u1, v0, v1)
     if dmax <= 0.0:
         return SKIP  # no valid depth under the box
     if zmin >= dmax + trunc:
@@ -143,7 +200,7 @@ def _classify_box(lo0, lo1, lo2, n, vs, T_cw, fx, fy, cx, cy, width, height, tru
 
 @njit(cache=True, parallel=True)
 def classify_blocks(nb, origin, vs, T_cw, fx, fy, cx, cy, width, height,
-                    trunc, tmin, tmax, tile, inv_sat, dmax_all, b_lo, b_hi):
+                    trunc, pm, inv_sat, dmax_all, b_lo, b_hi):
     """Class per block (flattened x-major): SKIP, CARVE (all voxels get tsdf = 1) or VOXEL (per-voxel).
 
     Only blocks in [b_lo, b_hi) (the viewing frustum's bounding box, in blocks) are looked at.
@@ -192,7 +249,7 @@ def classify_blocks(nb, origin, vs, T_cw, fx, fy, cx, cy, width, height,
         if (yc - at * zc) / nt < -rad or (ab * zc - yc) / nbot < -rad:
             continue
         c = _classify_box(lo0, lo1, lo2, B, vs, T_cw, fx, fy, cx, cy, width, height, trunc,
-                          tmin, tmax, tile, inv_sat)
+                          pm, inv_sat)
         cls[b] = VOXEL if c == CARVE_VALID else c
     return cls
 
@@ -220,7 +277,7 @@ def allocate_blocks(cls, block_idx_flat, block_w_flat, pool_v, pool_w, pool_c, n
 
 
 @njit(cache=True)
-def _carve_voxels(pool_v, pool_w, i, k0, n, mw):
+def _carve_voxels(pool_v, pool_w, i, k0, n, mw, recip):
     """tsdf = 1 update of the n^3 voxels of sub-box starting at local index k0 (n = 4 or 8) of pool row i."""
     for a in range(n):
         for b2 in range(n):
@@ -229,8 +286,7 @@ def _carve_voxels(pool_v, pool_w, i, k0, n, mw):
                 k = base + c
                 w0 = np.int32(pool_w[i, k])
                 if pool_v[i, k] != 32767:
-                    v0 = pool_v[i, k] / V_SCALE
-                    pool_v[i, k] = np.int16(math.floor((v0 * w0 + 1.0) / (w0 + 1) * V_SCALE + 0.5))
+                    pool_v[i, k] = np.int16(math.floor((pool_v[i, k] * w0 + V_SCALE) * recip[w0] + 0.5))
                 if w0 < mw:
                     pool_w[i, k] = np.uint8(w0 + 1)
 
@@ -358,7 +414,7 @@ def _carve_valid(pool_v, pool_w, i, gx0, gy0, gz0, l0x, l0y, l0z, n, dims, origi
 @njit(cache=True, parallel=True)
 def integrate_blocks(cls, nb, dims, block_idx_flat, block_w_flat, pool_v, pool_w, pool_c,
                      origin, vs, T_cw, fx, fy, cx, cy, depth, raylen, color, trunc, max_w,
-                     tmin, tmax, tile, inv_sat, work):
+                     pm, inv_sat, work):
     """Apply one frame: CARVE blocks in bulk; VOXEL blocks are split in 4^3 sub-blocks, each carved in bulk,
     skipped, or updated voxel by voxel."""
     nby, nbz = nb[1], nb[2]
@@ -383,7 +439,7 @@ def integrate_blocks(cls, nb, dims, block_idx_flat, block_w_flat, pool_v, pool_w
                 w0 = np.int32(block_w_flat[b])
                 block_w_flat[b] = np.uint8(min(w0 + 1, mw))
             else:
-                _carve_voxels(pool_v, pool_w, i, 0, B, mw)
+                _carve_voxels(pool_v, pool_w, i, 0, B, mw, recip)
             continue
         bx = b // (nby * nbz)
         rem = b - bx * nby * nbz
@@ -398,11 +454,11 @@ def integrate_blocks(cls, nb, dims, block_idx_flat, block_w_flat, pool_v, pool_w
             gz0 = bz * B + sz
             sc = _classify_box(origin[0] + (gx0 + 0.5) * vs, origin[1] + (gy0 + 0.5) * vs,
                                origin[2] + (gz0 + 0.5) * vs, S, vs, T_cw, fx, fy, cx, cy, width, height,
-                               trunc, tmin, tmax, tile, inv_sat)
+                               trunc, pm, inv_sat)
             if sc == SKIP:
                 continue
             if sc == CARVE and gx0 + S <= dims[0] and gy0 + S <= dims[1] and gz0 + S <= dims[2]:
-                _carve_voxels(pool_v, pool_w, i, sx * 64 + sy * 8 + sz, S, mw)
+                _carve_voxels(pool_v, pool_w, i, sx * 64 + sy * 8 + sz, S, mw, recip)
                 continue
             if sc == CARVE_VALID:
                 _carve_valid(pool_v, pool_w, i, gx0, gy0, gz0, sx, sy, sz, S, dims, origin, vs, T_cw,

@@ -216,26 +216,23 @@ class TernaryVolume:
             col = np.zeros((0, 0, 3), dtype=np.uint8)
         T_cw = np.linalg.inv(T)
         fx, fy, cx, cy = float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])
-        tile = 8
-        tmin, tmax = kn._depth_tiles(d, tile)
+        pm = self._pyramid_buffer(h, w)
+        kn.depth_pyramid(d, pm)
         inv_sat = kn._invalid_integral(d)
-        b_lo, b_hi = self._frustum_blocks(T, K, w, h, float(d.max()) + self.truncation)
+        dmax_all = float(d.max())
+        b_lo, b_hi = self._frustum_blocks(T, K, w, h, dmax_all + self.truncation)
         cls = kn.classify_blocks(self.nb, self.origin, self.voxel_size, T_cw, fx, fy, cx, cy, w, h,
-                                 self.truncation, tmin, tmax, tile, inv_sat, float(d.max()), b_lo, b_hi)
+                                 self.truncation, pm, inv_sat, dmax_all, b_lo, b_hi)
         bidx = self.block_idx.reshape(-1)
         bw = self.block_w.reshape(-1)
         need_new = int(np.count_nonzero((cls == kn.VOXEL) & (bidx < 0)))
-        # blocks with work, in a fixed shuffled order so both threads get similar loads (numba splits
-        # the range statically, and busy blocks are spatially clustered)
-        work = np.flatnonzero(cls)
-        self._rng_perm(work)
-        tmin4, tmax4 = kn._depth_tiles(d, 4)
+        work = self._work_order(np.flatnonzero(cls))
         if need_new:
             self._ensure_capacity(self.n_used + need_new)
             self.n_used = kn.allocate_blocks(cls, bidx, bw, self.pool_v, self.pool_w, self.pool_c, self.n_used)
         kn.integrate_blocks(cls, self.nb, np.array(self.shape, dtype=np.int64), bidx, bw, self.pool_v,
                             self.pool_w, self.pool_c, self.origin, self.voxel_size, T_cw, fx, fy, cx, cy, d,
-                            self._raylen(K, w, h), col, self.truncation, self.max_weight, tmin4, tmax4, 4,
+                            self._raylen(K, w, h), col, self.truncation, self.max_weight, pm,
                             inv_sat, work)
         self.frames_integrated += 1
         return {"blocks_carved": int(np.count_nonzero(cls == kn.CARVE)),
@@ -252,9 +249,25 @@ class TernaryVolume:
         hi = np.floor((pts.max(axis=0) - self.origin) / (self.voxel_size * kn.B)).astype(np.int64) + 2
         return np.clip(lo, 0, self.nb), np.clip(hi, 0, self.nb)
 
+    def _pyramid_buffer(self, h: int, w: int) -> np.ndarray:
+        buf = getattr(self, "_pm", None)
+        if buf is None or buf.shape[1:3] != (h, w):
+            buf = np.empty((kn.PYR_LEVELS, h, w, 2), dtype=np.float32)
+            self._pm = buf
+        return buf
+
     @staticmethod
-    def _rng_perm(work: np.ndarray) -> None:
-        np.random.default_rng(12345).shuffle(work)
+    def _work_order(work: np.ndarray, chunk: int = 256) -> np.ndarray:
+        """Blocks with work, in runs of `chunk` neighbouring blocks (pool rows and depth pixels stay in cache)
+        whose order is shuffled with a fixed seed, so that numba's static split gives both threads similar
+        loads (busy blocks are spatially clustered)."""
+        n = work.shape[0]
+        if n <= chunk:
+            return work
+        starts = np.arange(0, n, chunk)
+        np.random.default_rng(12345).shuffle(starts)
+        idx = (starts[:, None] + np.arange(chunk)[None, :]).ravel()
+        return work[idx[idx < n]]
 
     def clear_sphere(self, center, radius: float) -> None:
         """Forget every voxel whose centre is inside the sphere (v = 0, w = 0: unknown), as ForgetAround."""
