@@ -18,7 +18,8 @@ from kinfu_cli.nbv.raycast import CLS_EMPTY_EXIT, CLS_OCCUPIED, CLS_UNKNOWN, N_T
 
 
 @njit(cache=True)
-def _march(labels, lo, vs, p, d, min_range, max_range, cen, r2, through, optimistic, p_unknown, h_unknown, vals):
+def _march(labels, lo, vs, p, d, min_range, max_range, cen, r2, through, optimistic, p_unknown, h_unknown, vals,
+           step):
     n0, n1, n2 = labels.shape
     t0 = 0.0
     t1 = max_range
@@ -35,7 +36,7 @@ def _march(labels, lo, vs, p, d, min_range, max_range, cen, r2, through, optimis
                 ta, tb = tb, ta
             t0 = max(t0, ta)
             t1 = min(t1, tb)
-    h = 0.5 * vs
+    h = step * vs
     cls = CLS_EMPTY_EXIT
     vis = 1.0
     prev_unknown_in_s = False
@@ -88,7 +89,7 @@ def _march(labels, lo, vs, p, d, min_range, max_range, cen, r2, through, optimis
 
 @njit(cache=True)
 def _reference_view(labels, lo, vs, R, o, fx, fy, cx, cy, W, H, min_range, max_range, cen, radius, through,
-                    optimistic, p_unknown, counts, terms):
+                    optimistic, p_unknown, step, counts, terms):
     r2 = radius * radius
     h = 0.0
     if 0.0 < p_unknown < 1.0:
@@ -104,16 +105,19 @@ def _reference_view(labels, lo, vs, R, o, fx, fy, cx, cy, W, H, min_range, max_r
                 d[a] = (R[a, 0] * x + R[a, 1] * y + R[a, 2]) / nrm
             for a in range(N_TERMS):
                 vals[a] = 0.0
-            c = _march(labels, lo, vs, o, d, min_range, max_range, cen, r2, through, optimistic, p_unknown, h, vals)
+            c = _march(labels, lo, vs, o, d, min_range, max_range, cen, r2, through, optimistic, p_unknown, h, vals,
+                       step)
             counts[c] += 1
             for a in range(N_TERMS):
                 terms[a] += vals[a]
 
 
 def reference_views(vol: RayVolume, poses: np.ndarray, camera, center, radius: float, *, through: bool = False,
-                    optimistic: bool = False, p_unknown: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+                    optimistic: bool = False, p_unknown: float = 0.5,
+                    step: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
     """Full-image fixed-step marching of each view: counts (V, 3) unknown/occupied/empty-exit over all
-    pixels and summed gain terms (V, 4), as `raycast.cast_views` returns them."""
+    pixels and summed gain terms (V, 4), as `raycast.cast_views` returns them. `step` is the marching step
+    in voxels (half a voxel, the paper's NBV-CPU-step; smaller steps converge to exact traversal)."""
     cam = camera.widened()
     poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
     counts = np.zeros((poses.shape[0], 3), np.int64)
@@ -123,5 +127,5 @@ def reference_views(vol: RayVolume, poses: np.ndarray, camera, center, radius: f
         _reference_view(vol.labels, vol.origin, vol.voxel_size, np.ascontiguousarray(T[:3, :3]),
                         np.ascontiguousarray(T[:3, 3]), cam.fx, cam.fy, cam.cx, cam.cy, cam.width, cam.height,
                         cam.min_range, min(cam.max_range, 1e30), cen, float(radius), bool(through),
-                        bool(optimistic), float(p_unknown), counts[i], terms[i])
+                        bool(optimistic), float(p_unknown), float(step), counts[i], terms[i])
     return counts, terms
