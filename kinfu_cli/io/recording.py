@@ -17,6 +17,7 @@ import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Protocol
 
 from kinfu_cli.errors import RecordingError
 from kinfu_cli.io.messages import camera_info_K, decode_color, decode_depth, normalize_msgtype
@@ -208,20 +209,18 @@ def open_recording(path: str | os.PathLike) -> Recording:
 
 
 # ------------------------------------------------------------------------------------------- backends
-class _Backend:
+class _Backend(Protocol):
+    """What a container backend (rosbags AnyReader, mcap) provides to Recording."""
+
     stamps_known = False  # True when topic_infos() fills first/last stamps itself
 
-    def topic_infos(self) -> dict[str, TopicInfo]:
-        raise NotImplementedError
+    def topic_infos(self) -> dict[str, TopicInfo]: ...
 
-    def fill_stamps(self, infos: dict[str, TopicInfo]) -> None:
-        raise NotImplementedError
+    def fill_stamps(self, infos: dict[str, TopicInfo]) -> None: ...
 
-    def time_range(self) -> tuple[int | None, int | None]:
-        raise NotImplementedError
+    def time_range(self) -> tuple[int | None, int | None]: ...
 
-    def messages(self, topics, start_ns, end_ns) -> Iterator[tuple[str, str, int, object]]:
-        raise NotImplementedError
+    def messages(self, topics, start_ns, end_ns) -> Iterator[tuple[str, str, int, object]]: ...
 
 
 def _read_error(path: Path, exc: BaseException, kind: str) -> RecordingError:
