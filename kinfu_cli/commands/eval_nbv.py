@@ -6,6 +6,8 @@ from pathlib import Path
 
 import click
 
+from kinfu_cli.commands._output import emit
+
 group = "eval"
 
 
@@ -76,8 +78,6 @@ def command(scene, strategies, views, mode, voxel_size, gain, inc_th, poi_radius
       kinfu eval nbv sample_data/tabletop --strategy poi,random --mode both --voxel-size 0.015 --json
       kinfu eval nbv sample_data/tabletop --strategy objects,standard --width 160 --height 120
     """
-    import json
-
     from kinfu_cli.evaluation.nbv_loop import LoopConfig, plot_loop, result_table, run_loop
 
     modes = ("kfovp", "kfom") if mode == "both" else (mode,)
@@ -92,14 +92,4 @@ def command(scene, strategies, views, mode, voxel_size, gain, inc_th, poi_radius
     if plot is not None:
         plot_loop(plot, doc)
         doc["plot"] = str(plot)
-    if output is not None:
-        from kinfu_cli.io.atomic import write_json
-
-        write_json(output, doc)
-    if as_json:
-        click.echo(json.dumps(doc, indent=2, default=float))
-    else:
-        for line in result_table(doc):
-            click.echo(line)
-        if output is not None:
-            click.echo(f"wrote {output}")
+    emit(doc, output, as_json, result_table)

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-import sys
 import time
 from pathlib import Path
 
 import click
+
+from kinfu_cli.commands._output import emit
 
 from kinfu_cli.errors import ConfigError
 
@@ -97,7 +98,7 @@ def command(volume, pois_path, mode, clear, gain, top, output, plot, candidates,
         doc = run_objects(volume, cam, gain=gain, table_z=_table_z_option(table_z),
                           score_threshold=0.0 if inc_th is None else inc_th, top=top)
         doc["seconds"] = round(time.perf_counter() - t0, 3)
-        _emit(doc, output, as_json, objects_summary_lines)
+        emit(doc, output, as_json, objects_summary_lines)
         return
     if pois_path is None:
         raise ConfigError("--pois: required with --mode poi (a pois.json from `kinfu poi`)")
@@ -113,21 +114,4 @@ def command(volume, pois_path, mode, clear, gain, top, output, plot, candidates,
         plot_nbv(plot, grid, rankings, top=min(top or 5, 5))
         doc["plot"] = str(plot)
     doc["seconds"] = round(time.perf_counter() - t0, 3)
-    _emit(doc, output, as_json, summary_lines)
-
-
-def _emit(doc: dict, output, as_json: bool, lines_of) -> None:
-    if output is not None:
-        from kinfu_cli.io.atomic import write_json
-
-        write_json(output, doc)
-    if as_json:
-        import json
-
-        click.echo(json.dumps(doc, indent=2, default=float))
-    else:
-        for line in lines_of(doc):
-            click.echo(line)
-        if output is not None:
-            click.echo(f"wrote {output}")
-    sys.stdout.flush()
+    emit(doc, output, as_json, summary_lines)

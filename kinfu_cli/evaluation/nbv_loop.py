@@ -266,6 +266,25 @@ def _path(T0: np.ndarray, T1: np.ndarray, step: float) -> list[np.ndarray]:
     return out
 
 
+def _initial_scan(sc: SimScene, cfg: LoopConfig, sensor, K: np.ndarray, poses, mesh, name: str, quiet: bool):
+    """Render and fuse the initial scan over the scene box -> (volume, views that saw something);
+    RecordingError when none did."""
+    from kinfu_cli.fusion.volume import TernaryVolume
+    from kinfu_cli.progress import progress
+
+    vol = TernaryVolume(size=tuple(sc.box_hi - sc.box_lo), voxel_size=cfg.voxel_size, origin=tuple(sc.box_lo),
+                        min_depth=sensor.min_range, max_depth=sensor.max_range, color=False)
+    n_int = 0
+    for i, T in enumerate(progress(poses, total=len(poses), desc="initial scan", quiet=quiet)):
+        depth, _ = sensor.render(mesh, T, frame_seed=i)
+        if np.any(depth > 0):
+            vol.integrate(depth, K, T)
+            n_int += 1
+    if n_int == 0:
+        raise RecordingError(f"{name}: the initial scan saw nothing (no valid depth in {len(poses)} views)")
+    return vol, n_int
+
+
 class _Timer:
     def __init__(self) -> None:
         self.t: dict[str, float] = {}
@@ -276,9 +295,7 @@ class _Timer:
 
 def run_loop(scene_path: str | os.PathLike, cfg: LoopConfig, quiet: bool = True) -> dict:
     """Run the closed loop; returns the result document (see the module docstring)."""
-    from kinfu_cli.fusion.volume import TernaryVolume
     from kinfu_cli.nbv.gains import get_gain
-    from kinfu_cli.progress import progress
 
     cfg.check()
     get_gain(cfg.gain)
@@ -292,17 +309,7 @@ def run_loop(scene_path: str | os.PathLike, cfg: LoopConfig, quiet: bool = True)
 
     # 1. initial scan of the scene before the change
     t = time.perf_counter()
-    size = sc.box_hi - sc.box_lo
-    base = TernaryVolume(size=tuple(size), voxel_size=cfg.voxel_size, origin=tuple(sc.box_lo),
-                         min_depth=sensor.min_range, max_depth=sensor.max_range, color=False)
-    n_int = 0
-    for i, T in enumerate(progress(sc.scan_poses, total=len(sc.scan_poses), desc="initial scan", quiet=quiet)):
-        depth, _ = sensor.render(sc.render_before, T, frame_seed=i)
-        if np.any(depth > 0):
-            base.integrate(depth, K, T)
-            n_int += 1
-    if n_int == 0:
-        raise RecordingError(f"{scene_path}: the initial scan saw nothing (no valid depth in {len(sc.scan_poses)} views)")
+    base, n_int = _initial_scan(sc, cfg, sensor, K, sc.scan_poses, sc.render_before, str(scene_path), quiet)
     timer.add("initial_scan", time.perf_counter() - t)
 
     # 2-3. the change happened; POIs from the hand trajectory
@@ -442,7 +449,6 @@ def run_exploration(sc: SimScene, cfg: LoopConfig, quiet: bool = True, scene_nam
     `exclude_shift` m and `exclude_turn_deg`), score with the same ray caster on a `score_width`-wide image
     of the sensor's field of view and ranges, and stop when the best score < `score_fraction` of its pixels.
     Measured after each view: unknown voxels inside the true objects' bounding spheres + `near_margin`."""
-    from kinfu_cli.fusion.volume import TernaryVolume
     from kinfu_cli.nbv.camera import CameraModel
     from kinfu_cli.nbv.contours import extract_contours
     from kinfu_cli.nbv.objects import nbv_scorer, plan_object_views, plan_standard_views
@@ -461,19 +467,9 @@ def run_exploration(sc: SimScene, cfg: LoopConfig, quiet: bool = True, scene_nam
     score_cam = CameraModel(Ks[0, 0], Ks[1, 1], Ks[0, 2], Ks[1, 2], sw, sh, min_range=cam.min_range, max_range=cam.max_range,
                             vfov_extra_deg=cam.vfov_extra_deg)
     score_th = cfg.score_fraction * score_cam.width * score_cam.height
-    size = sc.box_hi - sc.box_lo
-    base = TernaryVolume(size=tuple(size), voxel_size=cfg.voxel_size, origin=tuple(sc.box_lo),
-                         min_depth=sensor.min_range, max_depth=sensor.max_range, color=False)
-    scan = sc.scan_poses[:cfg.scan_frames]
-    n_int = 0
     t = time.perf_counter()
-    for i, T in enumerate(progress(scan, total=len(scan), desc="initial scan", quiet=quiet)):
-        depth, _ = sensor.render(sc.render_after, T, frame_seed=i)
-        if np.any(depth > 0):
-            base.integrate(depth, K, T)
-            n_int += 1
-    if n_int == 0:
-        raise RecordingError(f"{scene_name or sc.name}: the initial scan saw nothing ({len(scan)} views)")
+    scan = sc.scan_poses[:cfg.scan_frames]
+    base, n_int = _initial_scan(sc, cfg, sensor, K, scan, sc.render_after, scene_name or sc.name, quiet)
     timer.add("initial_scan", time.perf_counter() - t)
     grid0 = base.ternary_grid()
     near = near_object_voxels(grid0, sc.object_spheres, cfg.near_margin, sc.table_z)

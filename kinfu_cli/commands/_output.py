@@ -1,0 +1,25 @@
+"""How commands hand results over: a JSON file (-o), JSON on stdout (--json) or a printed table."""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections.abc import Callable, Iterable
+
+import click
+
+
+def emit(doc: dict, output, as_json: bool, lines_of: Callable[[dict], Iterable[str]]) -> None:
+    """Write `doc` atomically to `output` when given; print it as JSON or as the lines `lines_of` makes."""
+    if output is not None:
+        from kinfu_cli.io.atomic import write_json
+
+        write_json(output, doc)
+    if as_json:
+        click.echo(json.dumps(doc, indent=2, default=float))
+    else:
+        for line in lines_of(doc):
+            click.echo(line)
+        if output is not None:
+            click.echo(f"wrote {output}")
+    sys.stdout.flush()
