@@ -138,8 +138,7 @@ def fuse_recording(recording: str | Path, outdir: str | Path, opts: FuseOptions 
             vol.clear_sphere(s["center"], s["radius"])
     else:
         # validate the grid options now (and refuse impossible sizes) before reading anything
-        probe = _new_volume(opts, origin=(0.0, 0.0, 0.0))
-        del probe
+        _new_volume(opts, origin=(0.0, 0.0, 0.0))
 
     with open_recording(recording) as rec:
         tf = TfBuffer.from_recording(rec)

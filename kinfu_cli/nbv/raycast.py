@@ -230,7 +230,6 @@ def _trace(labels, bdist, B, lo, vs, p, d, min_range, max_range, cen, r2, throug
     thit = np.inf
     vis = 1.0
     prev_unknown_in_s = False
-    bvs = B * vs
     while True:
         bx, by, bz = ix // B, iy // B, iz // B
         D = bdist[bx, by, bz]
