@@ -202,24 +202,15 @@ def fuse_recording(recording: str | Path, outdir: str | Path, opts: FuseOptions 
                                   f"not finite (NaN or inf)")
             if mode in ("forced", "topic"):
                 T = T_given
-            elif mode == "icp":
-                if prev_T is None:
-                    T = T_given if T_given is not None else np.eye(4)
-                else:
-                    t0 = time.perf_counter()
-                    res = tracker.track(vol, d, frame.K, prev_T)
-                    timer.add("track", time.perf_counter() - t0)
-                    T = res.T_world_camera
-                    track_log.append(_track_entry(frame, res, T_given))
-            else:  # hint
-                if prev_T is None and vol.frames_integrated == 0:
-                    T = T_given
-                else:
-                    t0 = time.perf_counter()
-                    res = tracker.track(vol, d, frame.K, T_given)
-                    timer.add("track", time.perf_counter() - t0)
-                    T = res.T_world_camera
-                    track_log.append(_track_entry(frame, res, T_given))
+            elif prev_T is None and (mode == "icp" or vol.frames_integrated == 0):
+                # the first frame anchors the model: its given pose (identity when icp has none)
+                T = T_given if T_given is not None or mode == "hint" else np.eye(4)
+            else:  # icp tracks from the previous pose, hint from the given one
+                t0 = time.perf_counter()
+                res = tracker.track(vol, d, frame.K, prev_T if mode == "icp" else T_given)
+                timer.add("track", time.perf_counter() - t0)
+                T = res.T_world_camera
+                track_log.append(_track_entry(frame, res, T_given))
             t0 = time.perf_counter()
             try:
                 vol.integrate(d, frame.K, T, frame.color)
