@@ -13,6 +13,11 @@ Integration follows the projective voxel-centric rule (digest §1.2 eqs. 2.1-2.3
 UniformTSDFVolume): a voxel centre projecting onto pixel (u, v) with valid depth d gets
 sdf = (d - z) * |K^-1 (u, v, 1)| and, when sdf > -truncation, v' = (v w + min(1, sdf / trunc)) / (w + 1),
 w' = min(w + 1, max_weight).
+
+Per frame: classify_blocks sorts the blocks of the frustum into SKIP (behind every reading or outside the
+image), CARVE (more than the truncation in front of every valid reading under it: tsdf = 1 for all voxels,
+a weight step for a uniform block) and VOXEL; VOXEL blocks get storage and the per-voxel rule, written as
+flat branch-free loops over the block's 512 voxels that LLVM vectorises (_update_block).
 """
 
 from __future__ import annotations
@@ -38,28 +43,7 @@ V_SCALE = 32767.0
 SKIP = 0
 CARVE = 1
 VOXEL = 2
-CARVE_VALID = 3  # sub-blocks: tsdf = 1 for every voxel that projects onto a valid pixel
-
-
-@njit(cache=True)
-def _depth_tiles(depth, tile):
-    """Per tile of `tile` x `tile` pixels: min valid depth (inf if none) and max valid depth (0 if none)."""
-    h, w = depth.shape
-    th = (h + tile - 1) // tile
-    tw = (w + tile - 1) // tile
-    tmin = np.full((th, tw), np.inf, dtype=np.float32)
-    tmax = np.zeros((th, tw), dtype=np.float32)
-    for v in range(h):
-        ty = v // tile
-        for u in range(w):
-            d = depth[v, u]
-            if d > 0.0:
-                tx = u // tile
-                if d < tmin[ty, tx]:
-                    tmin[ty, tx] = d
-                if d > tmax[ty, tx]:
-                    tmax[ty, tx] = d
-    return tmin, tmax
+CARVE_VALID = 3  # _classify_box only: in free space, but some pixels under it have no reading (-> VOXEL)
 
 
 @njit(cache=True)
@@ -141,7 +125,7 @@ def _range_minmax(pm, u0, u1, v0, v1):
     return dmin, dmax
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _classify_box(lo0, lo1, lo2, n, vs, T_cw, fx, fy, cx, cy, width, height, trunc, pm, inv_sat):
     """SKIP / CARVE / VOXEL for the n^3 voxels whose centres start at (lo0, lo1, lo2).
 
@@ -198,59 +182,83 @@ def _classify_box(lo0, lo1, lo2, n, vs, T_cw, fx, fy, cx, cy, width, height, tru
     return VOXEL
 
 
-@njit(cache=True, parallel=True)
+SUPER = 4  # classify_blocks looks at 4^3-block super-blocks first
+
+
+@njit(cache=True, error_model="numpy")
+def _box_class(bx, by, bz, nblk, origin, vs, T_cw, fx, fy, cx, cy, width, height, trunc, pm, inv_sat,
+               planes, far):
+    """_classify_box for the cube of nblk^3 blocks starting at block (bx, by, bz), after a cheap bounding-sphere
+    test against the frustum's side planes and depth range (planes: (4, 3) rows a, c, norm with a point
+    inside when (a x_c + c z_c) / norm >= -radius)."""
+    n = nblk * B
+    lo0 = origin[0] + (bx * B + 0.5) * vs
+    lo1 = origin[1] + (by * B + 0.5) * vs
+    lo2 = origin[2] + (bz * B + 0.5) * vs
+    half = 0.5 * (n - 1) * vs
+    rad = half * math.sqrt(3.0) + vs
+    px = lo0 + half
+    py = lo1 + half
+    pz = lo2 + half
+    xc = T_cw[0, 0] * px + T_cw[0, 1] * py + T_cw[0, 2] * pz + T_cw[0, 3]
+    yc = T_cw[1, 0] * px + T_cw[1, 1] * py + T_cw[1, 2] * pz + T_cw[1, 3]
+    zc = T_cw[2, 0] * px + T_cw[2, 1] * py + T_cw[2, 2] * pz + T_cw[2, 3]
+    if zc + rad <= 0.0 or zc - rad > far:
+        return SKIP
+    for q in range(4):
+        s = xc if q < 2 else yc
+        if (planes[q, 0] * s + planes[q, 1] * zc) / planes[q, 2] < -rad:
+            return SKIP
+    return _classify_box(lo0, lo1, lo2, n, vs, T_cw, fx, fy, cx, cy, width, height, trunc, pm, inv_sat)
+
+
+@njit(cache=True, parallel=True, error_model="numpy")
 def classify_blocks(nb, origin, vs, T_cw, fx, fy, cx, cy, width, height,
                     trunc, pm, inv_sat, dmax_all, b_lo, b_hi):
     """Class per block (flattened x-major): SKIP, CARVE (all voxels get tsdf = 1) or VOXEL (per-voxel).
 
-    Only blocks in [b_lo, b_hi) (the viewing frustum's bounding box, in blocks) are looked at.
+    Only blocks in [b_lo, b_hi) (the viewing frustum's bounding box, in blocks) are looked at, a super-block of
+    SUPER^3 blocks at a time: most super-blocks lie behind the surfaces or outside the image (SKIP) or wholly
+    in free space (CARVE) and settle all their blocks with one test.
     """
     nbx, nby, nbz = nb[0], nb[1], nb[2]
-    n = nbx * nby * nbz
-    cls = np.zeros(n, dtype=np.uint8)
-    rx = b_hi[0] - b_lo[0]
-    ry = b_hi[1] - b_lo[1]
-    rz = b_hi[2] - b_lo[2]
-    if rx <= 0 or ry <= 0 or rz <= 0:
+    cls = np.zeros(nbx * nby * nbz, dtype=np.uint8)
+    s_lo = b_lo // SUPER
+    rx = (b_hi[0] + SUPER - 1) // SUPER - s_lo[0]
+    ry = (b_hi[1] + SUPER - 1) // SUPER - s_lo[1]
+    rz = (b_hi[2] + SUPER - 1) // SUPER - s_lo[2]
+    if b_hi[0] <= b_lo[0] or b_hi[1] <= b_lo[1] or b_hi[2] <= b_lo[2]:
         return cls
-    # frustum side planes in the camera frame (inside: a . p >= -r), for a cheap bounding-sphere test
-    al = (-1.0 - cx) / fx
-    ar = (width + 1.0 - cx) / fx
-    at = (-1.0 - cy) / fy
-    ab = (height + 1.0 - cy) / fy
-    nl = math.sqrt(1.0 + al * al)
-    nr = math.sqrt(1.0 + ar * ar)
-    nt = math.sqrt(1.0 + at * at)
-    nbot = math.sqrt(1.0 + ab * ab)
-    half = 0.5 * (B - 1) * vs
-    rad = half * math.sqrt(3.0) + vs
+    # frustum side planes (left, right: x; top, bottom: y), one pixel outside the image
+    planes = np.empty((4, 3))
+    edges = ((-1.0 - cx) / fx, (width + 1.0 - cx) / fx, (-1.0 - cy) / fy, (height + 1.0 - cy) / fy)
+    for q in range(4):
+        sign = 1.0 if q % 2 == 0 else -1.0
+        planes[q, 0] = sign
+        planes[q, 1] = -sign * edges[q]
+        planes[q, 2] = math.sqrt(1.0 + edges[q] * edges[q])
+    far = dmax_all + trunc
     for j in prange(rx * ry * rz):
-        bx = j // (ry * rz)
-        rem = j - bx * ry * rz
-        by = rem // rz
-        bz = rem - by * rz
-        bx += b_lo[0]
-        by += b_lo[1]
-        bz += b_lo[2]
-        b = (bx * nby + by) * nbz + bz
-        lo0 = origin[0] + (bx * B + 0.5) * vs
-        lo1 = origin[1] + (by * B + 0.5) * vs
-        lo2 = origin[2] + (bz * B + 0.5) * vs
-        px = lo0 + half
-        py = lo1 + half
-        pz = lo2 + half
-        xc = T_cw[0, 0] * px + T_cw[0, 1] * py + T_cw[0, 2] * pz + T_cw[0, 3]
-        yc = T_cw[1, 0] * px + T_cw[1, 1] * py + T_cw[1, 2] * pz + T_cw[1, 3]
-        zc = T_cw[2, 0] * px + T_cw[2, 1] * py + T_cw[2, 2] * pz + T_cw[2, 3]
-        if zc + rad <= 0.0 or zc - rad > dmax_all + trunc:
+        sx = j // (ry * rz)
+        rem = j - sx * ry * rz
+        sy = rem // rz
+        sz = rem - sy * rz
+        bx0 = (sx + s_lo[0]) * SUPER
+        by0 = (sy + s_lo[1]) * SUPER
+        bz0 = (sz + s_lo[2]) * SUPER
+        sc = _box_class(bx0, by0, bz0, SUPER, origin, vs, T_cw, fx, fy, cx, cy, width, height, trunc, pm,
+                        inv_sat, planes, far)
+        if sc == SKIP:
             continue
-        if (xc - al * zc) / nl < -rad or (ar * zc - xc) / nr < -rad:
-            continue
-        if (yc - at * zc) / nt < -rad or (ab * zc - yc) / nbot < -rad:
-            continue
-        c = _classify_box(lo0, lo1, lo2, B, vs, T_cw, fx, fy, cx, cy, width, height, trunc,
-                          pm, inv_sat)
-        cls[b] = VOXEL if c == CARVE_VALID else c
+        for bx in range(max(bx0, b_lo[0]), min(bx0 + SUPER, b_hi[0])):
+            for by in range(max(by0, b_lo[1]), min(by0 + SUPER, b_hi[1])):
+                for bz in range(max(bz0, b_lo[2]), min(bz0 + SUPER, b_hi[2])):
+                    if sc == CARVE:
+                        c = CARVE
+                    else:
+                        c = _box_class(bx, by, bz, 1, origin, vs, T_cw, fx, fy, cx, cy, width, height, trunc,
+                                       pm, inv_sat, planes, far)
+                    cls[(bx * nby + by) * nbz + bz] = VOXEL if c == CARVE_VALID else c
     return cls
 
 
@@ -276,196 +284,152 @@ def allocate_blocks(cls, block_idx_flat, block_w_flat, pool_v, pool_w, pool_c, n
     return n_used
 
 
-@njit(cache=True)
-def _carve_voxels(pool_v, pool_w, i, k0, n, mw, recip):
-    """tsdf = 1 update of the n^3 voxels of sub-box starting at local index k0 (n = 4 or 8) of pool row i."""
-    for a in range(n):
-        for b2 in range(n):
-            base = k0 + a * 64 + b2 * 8
-            for c in range(n):
-                k = base + c
-                w0 = np.int32(pool_w[i, k])
-                if pool_v[i, k] != 32767:
-                    pool_v[i, k] = np.int16(math.floor((pool_v[i, k] * w0 + V_SCALE) * recip[w0] + 0.5))
-                if w0 < mw:
-                    pool_w[i, k] = np.uint8(w0 + 1)
+@njit(cache=True, error_model="numpy")
+def _carve_voxels(pool_v, pool_w, i, mw):
+    """tsdf = 1 update of all voxels of pool row i (a block known to lie in free space)."""
+    half = np.float32(0.5)
+    scale = np.float32(V_SCALE)
+    for k in range(B3):
+        w0 = np.int32(pool_w[i, k])
+        v0 = np.float32(pool_v[i, k])
+        pool_v[i, k] = np.int16(np.floor((v0 * np.float32(w0) + scale) / np.float32(w0 + 1) + half))
+        pool_w[i, k] = np.uint8(min(w0 + 1, mw))
 
 
-@njit(cache=True)
-def _voxelwise(pool_v, pool_w, pool_c, i, gx0, gy0, gz0, l0x, l0y, l0z, n, dims, origin, vs, T_cw,
-               fx, fy, cx, cy, depth, raylen, color, has_color, trunc, inv_trunc, mw, recip, color_band):
-    """Exact projective update of the n^3 voxels starting at grid index (gx0, gy0, gz0) = local (l0x, l0y, l0z)."""
-    height, width = depth.shape
-    dzx = T_cw[0, 2] * vs
-    dzy = T_cw[1, 2] * vs
-    dzz = T_cw[2, 2] * vs
-    for a in range(n):
-        gx = gx0 + a
-        if gx >= dims[0]:
-            break
-        px = origin[0] + (gx + 0.5) * vs
-        for b2 in range(n):
-            gy = gy0 + b2
-            if gy >= dims[1]:
-                break
-            py = origin[1] + (gy + 0.5) * vs
-            pz = origin[2] + (gz0 + 0.5) * vs
-            xc = T_cw[0, 0] * px + T_cw[0, 1] * py + T_cw[0, 2] * pz + T_cw[0, 3]
-            yc = T_cw[1, 0] * px + T_cw[1, 1] * py + T_cw[1, 2] * pz + T_cw[1, 3]
-            zc = T_cw[2, 0] * px + T_cw[2, 1] * py + T_cw[2, 2] * pz + T_cw[2, 3]
-            kb = (l0x + a) * 64 + (l0y + b2) * 8 + l0z
-            for c in range(n):
-                if c > 0:
-                    xc += dzx
-                    yc += dzy
-                    zc += dzz
-                if gz0 + c >= dims[2]:
-                    break
-                if zc <= 0.0:
-                    continue
-                iz = 1.0 / zc
-                uf = xc * fx * iz + cx + 0.5
-                vf = yc * fy * iz + cy + 0.5
-                if not (uf >= 0.0001 and uf < width - 0.0001 and vf >= 0.0001 and vf < height - 0.0001):
-                    continue
-                u = int(uf)
-                v = int(vf)
-                d = depth[v, u]
-                if not d > 0.0:
-                    continue
-                sdf = (d - zc) * raylen[v, u]
-                if sdf <= -trunc:
-                    continue
-                k = kb + c
-                w0 = np.int32(pool_w[i, k])
-                if sdf >= trunc:
-                    # free space: tsdf = 1; v stays exactly 1 when it is 1 already
-                    if pool_v[i, k] != 32767:
-                        pool_v[i, k] = np.int16(math.floor((pool_v[i, k] * w0 + V_SCALE) * recip[w0] + 0.5))
-                    if w0 < mw:
-                        pool_w[i, k] = np.uint8(w0 + 1)
-                    continue
-                t = sdf * inv_trunc
-                # v' = (v w + t) / (w + 1), in int16 units (v * V_SCALE), with a reciprocal table
-                pool_v[i, k] = np.int16(math.floor((pool_v[i, k] * w0 + t * V_SCALE) * recip[w0] + 0.5))
-                if has_color and abs(t) < color_band:
-                    # black = never coloured: take the sample, else a running mean that forgets slowly
-                    fresh = pool_c[i, k, 0] == 0 and pool_c[i, k, 1] == 0 and pool_c[i, k, 2] == 0
-                    alpha = 1.0 if fresh else max(1.0 / (w0 + 1), 0.1)
-                    for ch in range(3):
-                        c0 = np.float32(pool_c[i, k, ch])
-                        cn = np.float32(color[v, u, ch])
-                        pool_c[i, k, ch] = np.uint8(min(255.0, c0 + alpha * (cn - c0) + 0.5))
-                if w0 < mw:
-                    pool_w[i, k] = np.uint8(w0 + 1)
+@njit(cache=True, error_model="numpy")
+def _update_block(pool_v, pool_w, pool_c, i, p0, ex, ey, ez, nx, ny, nz, fx, fy, cx, cy, width, height,
+                  depth_rl, color_f, has_color, trunc, mw, color_band, pix, zz, sdf):
+    """Projective update of every voxel of stored block i, as three flat loops over its 512 voxels.
+
+    p0: camera-frame position of voxel (0, 0, 0); ex / ey / ez: camera-frame step per local x / y / z; nx, ny,
+    nz: voxels of the block inside the grid. depth_rl: per pixel (depth, ray length) with depth -inf where
+    there is no reading, so one comparison (sdf > -trunc) rejects invalid pixels too. The projection and the
+    update loops have no branches and LLVM vectorises them; only the pixel look-up in between is scalar
+    (gathers are slower than scalar loads on current x86). error_model="numpy": 1 / z is not checked for
+    zero (a voxel at z = 0 fails the z > 0 test anyway), which is what lets the loops vectorise.
+    """
+    one = np.float32(1.0)
+    half = np.float32(0.5)
+    zero = np.float32(0.0)
+    scale = np.float32(V_SCALE)
+    lo = np.float32(0.0001)
+    wlim = np.float32(width) - lo
+    hlim = np.float32(height) - lo
+    for k in range(B3):
+        ix = k >> 6
+        iy = (k >> 3) & 7
+        iz = k & 7
+        lx = np.float32(ix)
+        ly = np.float32(iy)
+        lz = np.float32(iz)
+        xc = p0[0] + lx * ex[0] + ly * ey[0] + lz * ez[0]
+        yc = p0[1] + lx * ex[1] + ly * ey[1] + lz * ez[1]
+        zc = p0[2] + lx * ex[2] + ly * ey[2] + lz * ez[2]
+        rz = one / zc
+        uf = xc * fx * rz + cx + half
+        vf = yc * fy * rz + cy + half
+        ok = ((zc > zero) & (uf >= lo) & (uf < wlim) & (vf >= lo) & (vf < hlim)
+              & (ix < nx) & (iy < ny) & (iz < nz))
+        p = np.int32(vf) * width + np.int32(uf)
+        pix[k] = p if ok else np.int32(-1)
+        zz[k] = zc
+    for k in range(B3):
+        p = pix[k]
+        sdf[k] = (depth_rl[p, 0] - zz[k]) * depth_rl[p, 1] if p >= 0 else -np.inf
+    ntrunc = np.float32(-trunc)
+    inv_trunc = np.float32(1.0 / trunc)
+    any_color = False
+    for k in range(B3):
+        s = sdf[k]
+        ok = s > ntrunc
+        t = min(one, s * inv_trunc)
+        sdf[k] = t
+        w0 = np.int32(pool_w[i, k])
+        v0 = np.float32(pool_v[i, k])
+        # v' = (v w + t) / (w + 1) in int16 units (v * V_SCALE); w' = min(w + 1, M_w)
+        vn = np.int16(np.floor((v0 * np.float32(w0) + t * scale) / np.float32(w0 + 1) + half))
+        pool_v[i, k] = vn if ok else pool_v[i, k]
+        pool_w[i, k] = np.uint8(min(w0 + 1, mw)) if ok else pool_w[i, k]
+        any_color = any_color | (ok & (abs(t) < color_band))
+    if not (has_color and any_color):
+        return
+    for k in range(B3):
+        p = pix[k]
+        t = sdf[k]
+        if p < 0 or not (t > -one and abs(t) < color_band):
+            continue
+        # black = never coloured: take the sample, else a running mean that forgets slowly
+        fresh = pool_c[i, k, 0] == 0 and pool_c[i, k, 1] == 0 and pool_c[i, k, 2] == 0
+        alpha = one if fresh else max(one / np.float32(pool_w[i, k]), np.float32(0.1))
+        for ch in range(3):
+            c0 = np.float32(pool_c[i, k, ch])
+            cn = np.float32(color_f[p, ch])
+            pool_c[i, k, ch] = np.uint8(min(np.float32(255.0), c0 + alpha * (cn - c0) + half))
 
 
-@njit(cache=True)
-def _carve_valid(pool_v, pool_w, i, gx0, gy0, gz0, l0x, l0y, l0z, n, dims, origin, vs, T_cw,
-                 fx, fy, cx, cy, depth, mw):
-    """tsdf = 1 update of the voxels of an n^3 sub-block (known to lie > truncation in front of every valid
-    reading under it) that project onto a valid pixel inside the image."""
-    height, width = depth.shape
-    dzx = T_cw[0, 2] * vs
-    dzy = T_cw[1, 2] * vs
-    dzz = T_cw[2, 2] * vs
-    for a in range(n):
-        gx = gx0 + a
-        if gx >= dims[0]:
-            break
-        px = origin[0] + (gx + 0.5) * vs
-        for b2 in range(n):
-            gy = gy0 + b2
-            if gy >= dims[1]:
-                break
-            py = origin[1] + (gy + 0.5) * vs
-            pz = origin[2] + (gz0 + 0.5) * vs
-            xc = T_cw[0, 0] * px + T_cw[0, 1] * py + T_cw[0, 2] * pz + T_cw[0, 3]
-            yc = T_cw[1, 0] * px + T_cw[1, 1] * py + T_cw[1, 2] * pz + T_cw[1, 3]
-            zc = T_cw[2, 0] * px + T_cw[2, 1] * py + T_cw[2, 2] * pz + T_cw[2, 3]
-            kb = (l0x + a) * 64 + (l0y + b2) * 8 + l0z
-            for c in range(n):
-                if c > 0:
-                    xc += dzx
-                    yc += dzy
-                    zc += dzz
-                if gz0 + c >= dims[2]:
-                    break
-                if zc <= 0.0:
-                    continue
-                iz = 1.0 / zc
-                uf = xc * fx * iz + cx + 0.5
-                vf = yc * fy * iz + cy + 0.5
-                if not (uf >= 0.0001 and uf < width - 0.0001 and vf >= 0.0001 and vf < height - 0.0001):
-                    continue
-                u = int(uf)
-                v = int(vf)
-                if not depth[v, u] > 0.0:
-                    continue
-                k = kb + c
-                w0 = np.int32(pool_w[i, k])
-                if pool_v[i, k] != 32767:
-                    v0 = pool_v[i, k] / V_SCALE
-                    pool_v[i, k] = np.int16(math.floor((v0 * w0 + 1.0) / (w0 + 1) * V_SCALE + 0.5))
-                if w0 < mw:
-                    pool_w[i, k] = np.uint8(w0 + 1)
+@njit(cache=True, parallel=True)
+def depth_and_raylen(depth, raylen):
+    """(H * W, 2) float32: depth (-inf where there is no reading) and ray length |K^-1 (u, v, 1)| per pixel."""
+    h, w = depth.shape
+    out = np.empty((h * w, 2), dtype=np.float32)
+    for v in prange(h):
+        for u in range(w):
+            d = depth[v, u]
+            out[v * w + u, 0] = d if d > 0.0 else -np.inf
+            out[v * w + u, 1] = raylen[v, u]
+    return out
 
 
 @njit(cache=True, parallel=True)
 def integrate_blocks(cls, nb, dims, block_idx_flat, block_w_flat, pool_v, pool_w, pool_c,
-                     origin, vs, T_cw, fx, fy, cx, cy, depth, raylen, color, trunc, max_w,
-                     pm, inv_sat, work):
-    """Apply one frame: CARVE blocks in bulk; VOXEL blocks are split in 4^3 sub-blocks, each carved in bulk,
-    skipped, or updated voxel by voxel."""
+                     origin, vs, T_cw, fx, fy, cx, cy, width, height, depth_rl, color, trunc, max_w, work):
+    """Apply one frame: CARVE blocks in bulk (a weight step for uniform blocks, tsdf = 1 for stored ones);
+    VOXEL blocks voxel by voxel (_update_block). `work` lists the blocks to visit; it is cut into one run per
+    worker task, each with its own scratch rows."""
     nby, nbz = nb[1], nb[2]
-    height, width = depth.shape
-    has_color = pool_c.shape[0] > 0 and color.shape[0] == height
-    inv_trunc = 1.0 / trunc
+    has_color = pool_c.shape[0] > 0 and color.shape[0] == height * width
     mw = np.int32(max_w)
     # colour the voxels within about a voxel of the surface: marching-cubes vertices take the nearest one's
-    color_band = min(1.0, 1.2 * vs / trunc)
-    recip = np.empty(257, dtype=np.float64)
-    for q in range(257):
-        recip[q] = 1.0 / (q + 1)
-    S = B // 2
-    for j in prange(work.shape[0]):
-        b = work[j]
-        c = cls[b]
-        if c == SKIP:
-            continue
-        i = block_idx_flat[b]
-        if c == CARVE:
-            if i < 0:
-                w0 = np.int32(block_w_flat[b])
-                block_w_flat[b] = np.uint8(min(w0 + 1, mw))
-            else:
-                _carve_voxels(pool_v, pool_w, i, 0, B, mw, recip)
-            continue
-        bx = b // (nby * nbz)
-        rem = b - bx * nby * nbz
-        by = rem // nbz
-        bz = rem - by * nbz
-        for sb in range(8):
-            sx = (sb & 1) * S
-            sy = ((sb >> 1) & 1) * S
-            sz = ((sb >> 2) & 1) * S
-            gx0 = bx * B + sx
-            gy0 = by * B + sy
-            gz0 = bz * B + sz
-            sc = _classify_box(origin[0] + (gx0 + 0.5) * vs, origin[1] + (gy0 + 0.5) * vs,
-                               origin[2] + (gz0 + 0.5) * vs, S, vs, T_cw, fx, fy, cx, cy, width, height,
-                               trunc, pm, inv_sat)
-            if sc == SKIP:
+    color_band = np.float32(min(1.0, 1.2 * vs / trunc))
+    ex = np.empty(3, dtype=np.float32)
+    ey = np.empty(3, dtype=np.float32)
+    ez = np.empty(3, dtype=np.float32)
+    for r in range(3):
+        ex[r] = T_cw[r, 0] * vs
+        ey[r] = T_cw[r, 1] * vs
+        ez[r] = T_cw[r, 2] * vs
+    fx32, fy32, cx32, cy32 = np.float32(fx), np.float32(fy), np.float32(cx), np.float32(cy)
+    n = work.shape[0]
+    nrun = min(n, 64)
+    for r in prange(nrun):
+        pix = np.empty(B3, dtype=np.int32)
+        zz = np.empty(B3, dtype=np.float32)
+        sdf = np.empty(B3, dtype=np.float32)
+        p0 = np.empty(3, dtype=np.float32)
+        for j in range(r * n // nrun, (r + 1) * n // nrun):
+            b = work[j]
+            c = cls[b]
+            if c == SKIP:
                 continue
-            if sc == CARVE and gx0 + S <= dims[0] and gy0 + S <= dims[1] and gz0 + S <= dims[2]:
-                _carve_voxels(pool_v, pool_w, i, sx * 64 + sy * 8 + sz, S, mw, recip)
+            i = block_idx_flat[b]
+            if c == CARVE:
+                if i < 0:
+                    block_w_flat[b] = np.uint8(min(np.int32(block_w_flat[b]) + 1, mw))
+                else:
+                    _carve_voxels(pool_v, pool_w, i, mw)
                 continue
-            if sc == CARVE_VALID:
-                _carve_valid(pool_v, pool_w, i, gx0, gy0, gz0, sx, sy, sz, S, dims, origin, vs, T_cw,
-                             fx, fy, cx, cy, depth, mw)
-                continue
-            _voxelwise(pool_v, pool_w, pool_c, i, gx0, gy0, gz0, sx, sy, sz, S, dims, origin, vs, T_cw,
-                       fx, fy, cx, cy, depth, raylen, color, has_color, trunc, inv_trunc, mw, recip, color_band)
+            bx = b // (nby * nbz)
+            rem = b - bx * nby * nbz
+            by = rem // nbz
+            bz = rem - by * nbz
+            px = origin[0] + (bx * B + 0.5) * vs
+            py = origin[1] + (by * B + 0.5) * vs
+            pz = origin[2] + (bz * B + 0.5) * vs
+            for q in range(3):
+                p0[q] = np.float32(T_cw[q, 0] * px + T_cw[q, 1] * py + T_cw[q, 2] * pz + T_cw[q, 3])
+            _update_block(pool_v, pool_w, pool_c, i, p0, ex, ey, ez, min(B, dims[0] - bx * B),
+                          min(B, dims[1] - by * B), min(B, dims[2] - bz * B), fx32, fy32, cx32, cy32, width,
+                          height, depth_rl, color, has_color, trunc, mw, color_band, pix, zz, sdf)
 
 
 @njit(cache=True, parallel=True)

@@ -231,9 +231,9 @@ class TernaryVolume:
             self._ensure_capacity(self.n_used + need_new)
             self.n_used = kn.allocate_blocks(cls, bidx, bw, self.pool_v, self.pool_w, self.pool_c, self.n_used)
         kn.integrate_blocks(cls, self.nb, np.array(self.shape, dtype=np.int64), bidx, bw, self.pool_v,
-                            self.pool_w, self.pool_c, self.origin, self.voxel_size, T_cw, fx, fy, cx, cy, d,
-                            self._raylen(K, w, h), col, self.truncation, self.max_weight, pm,
-                            inv_sat, work)
+                            self.pool_w, self.pool_c, self.origin, self.voxel_size, T_cw, fx, fy, cx, cy, w, h,
+                            kn.depth_and_raylen(d, self._raylen(K, w, h)), col.reshape(-1, 3), self.truncation,
+                            self.max_weight, work)
         self.frames_integrated += 1
         return {"blocks_carved": int(np.count_nonzero(cls == kn.CARVE)),
                 "blocks_voxelwise": int(np.count_nonzero(cls == kn.VOXEL)),
