@@ -24,24 +24,30 @@ def parse_formats(text: str) -> list[str]:
 def run_synth(out: str | Path, seed: int = 0, width: int = 320, height: int = 240, frames: int = 36,
               formats: list[str] = ("mcap", "bag", "ros2"), scenario: str = "pick-and-place", n_objects: int = 4,
               hand_rate: float = 100.0, frame_rate: float = 5.0, noise: bool = True, depth_format: str = "png",
-              color_format: str = "jpeg", jpeg_quality: int = 75, quiet: bool = True) -> dict:
-    """Build the scenario and write the containers and OUT/ground_truth/. Returns a summary (paths, counts)."""
-    from kinfu_cli.sim.scenario import make_scenario, recording_topics, write_ground_truth, write_recordings
+              color_format: str = "jpeg", jpeg_quality: int = 75, quiet: bool = True,
+              camera_pose_topic: str | None = None) -> dict:
+    """Build the scenario and write the containers and OUT/ground_truth/. Returns a summary (paths, counts).
+    camera_pose_topic: also write the true camera poses (PoseStamped in `world`) on this topic."""
+    from kinfu_cli.sim.scenario import (check_camera_pose_topic, make_scenario, recording_topics, write_ground_truth,
+                                        write_recordings)
 
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise ConfigError(f"-o {out}: exists and is not a folder")
+    check_camera_pose_topic(camera_pose_topic, depth_format, color_format)
     sc = make_scenario(seed=seed, kind=scenario, width=width, height=height, frames=frames, n_objects=n_objects,
                        noise=noise, hand_rate_hz=hand_rate, frame_rate_hz=frame_rate)
     paths = [out / FORMAT_NAMES[f] for f in formats]
     write_recordings(sc, paths, depth_format=depth_format, color_format=color_format, quiet=quiet,
-                     jpeg_quality=jpeg_quality)
-    gt = write_ground_truth(sc, out / "ground_truth", topics=recording_topics(depth_format, color_format))
+                     jpeg_quality=jpeg_quality, camera_pose_topic=camera_pose_topic)
+    gt = write_ground_truth(sc, out / "ground_truth",
+                            topics=recording_topics(depth_format, color_format, camera_pose_topic))
     for p in paths + [gt]:
         _relax_permissions(p)
     return {"recordings": [str(p) for p in paths], "ground_truth": str(gt), "frames": len(sc.frames),
             "scan_frames": sc.meta["n_scan"], "after_frames": sc.meta["n_after"], "hand_samples": len(sc.hand),
-            "changes": sc.changes, "seed": seed, "scenario": scenario, "width": width, "height": height}
+            "changes": sc.changes, "seed": seed, "scenario": scenario, "width": width, "height": height,
+            "camera_pose_topic": camera_pose_topic}
 
 
 def _relax_permissions(path: Path) -> None:
@@ -75,10 +81,13 @@ def _relax_permissions(path: Path) -> None:
 @click.option("--color-format", type=click.Choice(["jpeg", "png", "raw"]), default="jpeg", show_default=True,
               help="jpeg/png: CompressedImage; raw: rgb8 Image.")
 @click.option("--jpeg-quality", default=75, show_default=True, type=int, help="JPEG quality of the colour images.")
+@click.option("--camera-pose-topic", default=None, metavar="TOPIC",
+              help="Also write the true camera pose (PoseStamped, frame world, the depth optical frame) on TOPIC "
+                   "at every depth frame stamp, for `kinfu fuse --pose topic` [none].")
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON summary on stdout.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
 def command(out, seed, width, height, frames, formats, scenario, n_objects, hand_rate, frame_rate, noise,
-            depth_format, color_format, jpeg_quality, as_json, quiet):
+            depth_format, color_format, jpeg_quality, camera_pose_topic, as_json, quiet):
     """Write a synthetic tabletop recording and its ground truth.
 
     A table with boxes, cylinders, spheres and meshes; a 6-joint arm carries a Kinect-like camera (TF chain
@@ -87,12 +96,14 @@ def command(out, seed, width, height, frames, formats, scenario, n_objects, hand
     Depth is ray cast with open3d plus the Kinect v1 noise model (Nguyen et al. 2012), stored as 16UC1 mm
     (compressedDepth PNG by default). OUT/ground_truth/ holds scene_before.ply, scene_after.ply,
     objects/<id>.ply (+ table.ply, floor.ply), changes.json, camera_poses.txt and hand.traj. Seeded and
-    deterministic.
+    deterministic. With --camera-pose-topic TOPIC the recordings also carry the true camera poses as
+    geometry_msgs/PoseStamped (frame world) at every depth frame stamp, for `kinfu fuse --pose topic`.
 
     \b
     Example:
       kinfu synth -o sample_data/tabletop
       kinfu synth -o /tmp/small --width 64 --height 48 --frames 6 --formats mcap --scenario place
+      kinfu synth -o /tmp/posed --camera-pose-topic /camera/pose
     """
     if frames < 2:
         raise ConfigError(f"--frames {frames}: expected at least 2 (scan and after the change)")
@@ -109,7 +120,7 @@ def command(out, seed, width, height, frames, formats, scenario, n_objects, hand
     summary = run_synth(out, seed=seed, width=width, height=height, frames=frames, formats=parse_formats(formats),
                         scenario=scenario, n_objects=n_objects, hand_rate=hand_rate, frame_rate=frame_rate,
                         noise=noise, depth_format=depth_format, color_format=color_format,
-                        jpeg_quality=jpeg_quality, quiet=quiet)
+                        jpeg_quality=jpeg_quality, quiet=quiet, camera_pose_topic=camera_pose_topic)
     if as_json:
         click.echo(json.dumps(summary, indent=2))
     else:

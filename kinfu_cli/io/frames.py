@@ -15,8 +15,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from kinfu_cli.errors import ConfigError, RecordingError, TransformError
-from kinfu_cli.io.messages import (camera_info_K, decode_color, decode_depth, header_frame, header_stamp_ns,
-                                   pose_message_to_matrix)
+from kinfu_cli.io.messages import (POSE_TYPES, camera_info_K, decode_color, decode_depth, header_frame,
+                                   header_stamp_ns, normalize_msgtype, pose_message_to_matrix)
 from kinfu_cli.io.roles import Roles, detect_roles
 from kinfu_cli.io.tf_buffer import TfBuffer
 
@@ -73,7 +73,11 @@ class _PosePath:
     """Camera poses from a pose topic (PoseStamped, Odometry, ...), interpolated like a TF link."""
 
     def __init__(self, rec, topic: str, tolerance_ns: int):
-        rec.require_topic(topic, "pose topic")
+        info = rec.require_topic(topic, "pose topic")
+        wrong = [t for t in (info.msgtypes or [info.msgtype]) if normalize_msgtype(t) not in POSE_TYPES]
+        if wrong:
+            raise RecordingError(f"{rec.path}: pose topic {topic} carries {', '.join(wrong)}; expected one of "
+                                 f"{', '.join(POSE_TYPES)}")
         self.tf = TfBuffer()
         self.frame = None
         for _, msgtype, log_ns, msg in rec.typed_messages([topic]):

@@ -13,6 +13,8 @@ pose at a frame stamp is exact.
 Topics: /camera/depth/image_raw (16UC1 mm) or /camera/depth/image_raw/compressedDepth (PNG, image_transport layout),
 /camera/color/image_raw (rgb8) or /camera/color/image_raw/compressed (jpeg/png), /camera/depth/camera_info, /tf,
 /tf_static, /hand/pose (geometry_msgs/PoseStamped in `world`). Depth and colour share the `camera_optical` frame.
+Optionally (`camera_pose_topic`) a geometry_msgs/PoseStamped topic with the pose of `camera_optical` in `world` at
+every depth frame stamp (the pose the TF chain gives there), for `kinfu fuse --pose topic`.
 """
 
 from __future__ import annotations
@@ -218,12 +220,14 @@ def _reachable(robot: RobotArm, pose_at_radius, radius: float) -> np.ndarray:
 
 def write_recordings(scenario: Scenario, paths: list[str | os.PathLike], depth_format: str = "png",
                      color_format: str = "jpeg", quiet: bool = True, compression: str | None = None,
-                     jpeg_quality: int = 75) -> list[Path]:
+                     jpeg_quality: int = 75, camera_pose_topic: str | None = None) -> list[Path]:
     """Write the scenario into every path at once (container from the suffix: .mcap, .bag, else a ROS 2 folder).
 
     depth_format: "png" (sensor_msgs/CompressedImage compressedDepth on .../compressedDepth) or "raw" (16UC1 Image).
     color_format: "jpeg" or "png" (CompressedImage on .../compressed) or "raw" (rgb8 Image). Frames are rendered once.
     compression: None or "zstd" (MCAP chunks, ROS 2 messages; bz2 chunks for .bag).
+    camera_pose_topic: also write geometry_msgs/PoseStamped (frame `world`) on this topic at every depth frame
+    stamp: the true pose of the camera optical frame in `world` (T_world_camera, as the TF chain gives it).
     """
     from contextlib import ExitStack
 
@@ -236,6 +240,7 @@ def write_recordings(scenario: Scenario, paths: list[str | os.PathLike], depth_f
         raise ConfigError(f"--jpeg-quality {jpeg_quality}: expected 1..100")
     if color_format not in ("jpeg", "png", "raw"):
         raise ConfigError(f"--color-format {color_format!r}: expected jpeg, png or raw")
+    check_camera_pose_topic(camera_pose_topic, depth_format, color_format)
     sc = scenario
     events = _events(sc)
     with ExitStack() as stack:
@@ -261,6 +266,8 @@ def write_recordings(scenario: Scenario, paths: list[str | os.PathLike], depth_f
                 fr = sc.render(arg)
                 depth_mm = depth_to_mm(fr.depth)
                 for w in writers:
+                    if camera_pose_topic:
+                        w.write_pose(camera_pose_topic, stamp, WORLD_FRAME, sc.frames[arg].T_world_camera)
                     w.write_camera_info(INFO_TOPIC, stamp, CAMERA_FRAME, sc.K, sc.width, sc.height)
                     if depth_format == "png":
                         w.write_compressed_depth(DEPTH_TOPIC + "/compressedDepth", stamp, CAMERA_FRAME, depth_mm)
@@ -312,11 +319,27 @@ def _events(sc: Scenario) -> list[tuple[int, str, object]]:
     return ev
 
 
-def recording_topics(depth_format: str = "png", color_format: str = "jpeg") -> dict:
-    """Topic of each role in a recording written with these formats."""
-    return {"depth": DEPTH_TOPIC + ("/compressedDepth" if depth_format == "png" else ""),
-            "color": COLOR_TOPIC + ("" if color_format == "raw" else "/compressed"),
-            "camera_info": INFO_TOPIC, "hand": HAND_TOPIC, "tf": "/tf", "tf_static": "/tf_static"}
+def recording_topics(depth_format: str = "png", color_format: str = "jpeg",
+                     camera_pose_topic: str | None = None) -> dict:
+    """Topic of each role in a recording written with these formats ("camera_pose" only when one is written)."""
+    topics = {"depth": DEPTH_TOPIC + ("/compressedDepth" if depth_format == "png" else ""),
+              "color": COLOR_TOPIC + ("" if color_format == "raw" else "/compressed"),
+              "camera_info": INFO_TOPIC, "hand": HAND_TOPIC, "tf": "/tf", "tf_static": "/tf_static"}
+    if camera_pose_topic:
+        topics["camera_pose"] = camera_pose_topic
+    return topics
+
+
+def check_camera_pose_topic(topic: str | None, depth_format: str = "png", color_format: str = "jpeg") -> None:
+    """ConfigError naming --camera-pose-topic unless it is None or an absolute topic name of its own."""
+    if topic is None:
+        return
+    taken = set(recording_topics(depth_format, color_format).values())
+    if not topic.startswith("/") or len(topic) < 2 or any(c.isspace() for c in topic) or topic.endswith("/"):
+        raise ConfigError(f"--camera-pose-topic {topic!r}: expected an absolute topic name such as /camera/pose")
+    if topic in taken:
+        raise ConfigError(f"--camera-pose-topic {topic}: already used by the recording (topics: "
+                          f"{', '.join(sorted(taken))})")
 
 
 def write_ground_truth(scenario: Scenario, folder: str | os.PathLike, topics: dict | None = None) -> Path:
