@@ -50,6 +50,9 @@ def _floats(value: str, name: str, n: tuple[int, ...]) -> tuple[float, ...]:
 @click.option("--every", type=int, default=1, show_default=True, help="Use every N-th depth frame.")
 @click.option("--tolerance", type=float, default=0.05, show_default=True,
               help="Largest depth/colour stamp difference, and how far a pose may be extrapolated (s).")
+@click.option("--fill-gaps", type=click.IntRange(min=0), default=2, show_default=True, metavar="N",
+              help="Fill invalid runs of up to N pixels along a row or column between two readings that agree "
+                   "within 3 % (lines of no reading some sensors leave); 0 turns it off.")
 @click.option("--bilateral", is_flag=True, help="Bilateral-filter the depth images first.")
 @click.option("--shadow-filter", is_flag=True, help="Remove Kinect V2 shadow and veil pixels (thesis 3.1.3).")
 @click.option("--no-color", is_flag=True, help="Do not keep colour per voxel.")
@@ -58,7 +61,7 @@ def _floats(value: str, name: str, n: tuple[int, ...]) -> tuple[float, ...]:
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @role_options
 def command(recording: Path, outdir: Path, voxel_size, resolution, size, origin, truncation, max_weight, min_depth,
-            max_depth, pose, pose_topic, init, clear_sphere, clear_pois, start, end, every, tolerance,
+            max_depth, pose, pose_topic, init, clear_sphere, clear_pois, start, end, every, tolerance, fill_gaps,
             bilateral, shadow_filter, no_color, plot, as_json, quiet, **kwargs) -> None:
     """Fuse the depth frames of RECORDING (MCAP, ROS 1 .bag, ROS 2 bag folder) into a KinectFusion TSDF
     volume that keeps unknown / empty / occupied per voxel (Monica et al. 2016, eqs. 1-3): free space in
@@ -92,8 +95,8 @@ def command(recording: Path, outdir: Path, voxel_size, resolution, size, origin,
         init=str(init) if init else None,
         clear_spheres=[_floats(s, "--clear-sphere", (4,)) for s in clear_sphere],
         clear_pois=str(clear_pois) if clear_pois else None, start=start, end=end, every=every, tolerance=tolerance,
-        bilateral=bilateral, shadow_filter=shadow_filter, plot=plot, color=not no_color, quiet=quiet,
-        roles=roles)
+        fill_gaps=fill_gaps, bilateral=bilateral, shadow_filter=shadow_filter, plot=plot, color=not no_color,
+        quiet=quiet, roles=roles)
     report = fuse_recording(recording, outdir, opts)
     if as_json:
         click.echo(json.dumps(report, indent=2, default=str))

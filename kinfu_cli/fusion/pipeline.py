@@ -44,6 +44,7 @@ class FuseOptions:
     end: float | None = None
     every: int = 1
     tolerance: float = 0.05
+    fill_gaps: int = 2  # fill invalid runs of up to this many pixels between agreeing readings (0: off)
     bilateral: bool = False
     shadow_filter: bool = False
     shadow_baseline: float = 0.08
@@ -176,13 +177,18 @@ def fuse_recording(recording: str | Path, outdir: str | Path, opts: FuseOptions 
         buffered: list = []
         used = 0
         filter_drops: dict[str, int] = {}
+        gap_pixels = 0
         prev_T = None
         min_d = opts.min_depth
         max_d = opts.max_depth
 
         def prepare(frame):
+            nonlocal gap_pixels
             t0 = time.perf_counter()
             d = filters.range_filter(frame.depth, min_d, max_d)
+            if opts.fill_gaps:
+                d, n = filters.fill_gaps(d, opts.fill_gaps)
+                gap_pixels += n
             if opts.bilateral:
                 d = filters.bilateral(d)
             if opts.shadow_filter:
@@ -305,7 +311,8 @@ def fuse_recording(recording: str | Path, outdir: str | Path, opts: FuseOptions 
                  "max_weight": vol.max_weight, "min_depth": min_d, "max_depth": max_d, "placement": placement,
                  "blocks_stored": vol.n_blocks_allocated, "memory_MB": round(vol.memory_bytes() / 2**20, 1),
                  "frames_in_volume": vol.frames_integrated},
-        "filters": {"range": [min_d, max_d], "bilateral": opts.bilateral, "shadow_veil": opts.shadow_filter},
+        "filters": {"range": [min_d, max_d], "fill_gaps": opts.fill_gaps, "gap_pixels_filled": gap_pixels,
+                    "bilateral": opts.bilateral, "shadow_veil": opts.shadow_filter},
         "cleared_spheres": spheres,
         "counts": counts,
         "bounding_box": {"occupied": occ_box, "observed": obs_box},
