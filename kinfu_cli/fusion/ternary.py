@@ -60,12 +60,9 @@ class TernaryGrid:
 
 def save_ternary(path: str | os.PathLike, grid: TernaryGrid) -> None:
     """Write `ternary.npz` atomically (compressed: mostly-constant labels shrink a lot)."""
-    from kinfu_cli.io.atomic import atomic_path
+    from kinfu_cli.io.atomic import write_npz
 
-    with atomic_path(path) as tmp:
-        with open(tmp, "wb") as fh:
-            np.savez_compressed(fh, ternary=grid.labels, origin=grid.origin,
-                                voxel_size=np.float64(grid.voxel_size))
+    write_npz(path, {"ternary": grid.labels, "origin": grid.origin, "voxel_size": np.float64(grid.voxel_size)})
 
 
 def load_ternary(path: str | os.PathLike) -> TernaryGrid:

@@ -394,15 +394,12 @@ class TernaryVolume:
 
     def save(self, path: str | os.PathLike) -> Path:
         """Write one .npz (metadata, block tables, used pool rows) atomically; `load_volume` reads it back."""
-        from kinfu_cli.io.atomic import atomic_path
+        from kinfu_cli.io.atomic import write_npz
 
         n = self.n_used
-        arrays = {"meta": np.array(json.dumps(self.meta())), "block_idx": self.block_idx, "block_w": self.block_w,
-                  "pool_v": self.pool_v[:n], "pool_w": self.pool_w[:n],
-                  "pool_c": self.pool_c[:n] if self.color else self.pool_c[:0]}
-        with atomic_path(path) as tmp:
-            _savez_fast(tmp, arrays)
-        return Path(path)
+        return write_npz(path, {"meta": np.array(json.dumps(self.meta())), "block_idx": self.block_idx,
+                                "block_w": self.block_w, "pool_v": self.pool_v[:n], "pool_w": self.pool_w[:n],
+                                "pool_c": self.pool_c[:n] if self.color else self.pool_c[:0]})
 
     def copy(self) -> "TernaryVolume":
         other = TernaryVolume.__new__(TernaryVolume)
@@ -414,17 +411,6 @@ class TernaryVolume:
         nx, ny, nz = self.shape
         return (f"TernaryVolume({nx}x{ny}x{nz}, voxel {self.voxel_size * 1000:.2f} mm, origin "
                 f"{np.round(self.origin, 3).tolist()}, {self.n_used} blocks stored)")
-
-
-def _savez_fast(path: Path, arrays: dict) -> None:
-    """Like np.savez_compressed (np.load reads it) but with zlib level 1: several times faster, nearly as small
-    for these mostly-constant arrays."""
-    import zipfile
-
-    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=1) as zf:
-        for name, arr in arrays.items():
-            with zf.open(name + ".npy", "w", force_zip64=True) as fh:
-                np.lib.format.write_array(fh, np.asanyarray(arr), allow_pickle=False)
 
 
 def load_volume(path: str | os.PathLike) -> TernaryVolume:

@@ -86,6 +86,22 @@ def write_json(final: str | os.PathLike, obj: object) -> Path:
     return final
 
 
+def write_npz(final: str | os.PathLike, arrays: dict) -> Path:
+    """Write `arrays` as one .npz atomically (np.load reads it), compressed with zlib level 1: several times
+    faster than np.savez_compressed's level 6, and nearly as small for mostly-constant volumes."""
+    import zipfile
+
+    import numpy as np
+
+    final = Path(final)
+    with atomic_path(final) as tmp:
+        with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=1) as zf:
+            for name, arr in arrays.items():
+                with zf.open(name + ".npy", "w", force_zip64=True) as fh:
+                    np.lib.format.write_array(fh, np.asanyarray(arr), allow_pickle=False)
+    return final
+
+
 def _json_default(obj: object) -> object:
     import numpy as np
 
