@@ -313,3 +313,27 @@ def test_block_sparse_update_equals_dense_reference(frames):
     both = same_w & (w > 0)
     dv = np.abs(v[both] - v_ref[both])
     assert np.quantile(dv, 0.999) < 2e-4 and dv.mean() < 1e-5
+
+
+def test_block_sparse_update_equals_dense_reference_in_open_space():
+    """Large free space (a wall 1.6-2.0 m away, seen from two poses): whole super-blocks are carved in bulk."""
+    K = default_K(W, H)
+    v, u = np.mgrid[0:H, 0:W]
+    wall = (1.6 + 0.4 * u / W + 0.1 * v / H).astype(np.float32)  # a slanted wall
+    wall[100:130, 150:200] = 0  # a blob without readings
+    T1 = np.eye(4)
+    T2 = np.eye(4)
+    T2[:3, :3] = np.array([[np.cos(0.1), 0, np.sin(0.1)], [0, 1, 0], [-np.sin(0.1), 0, np.cos(0.1)]])
+    T2[:3, 3] = [0.05, 0.02, -0.03]
+    frames = [(wall, K, T1), (wall, K, T2)]
+    shape, origin, trunc, max_w = (150, 110, 190), np.array([-0.75, -0.55, 0.3]), 0.03, 128
+    vol = TernaryVolume(size=np.array(shape) * 0.01, voxel_size=0.01, origin=origin, truncation=trunc,
+                        max_weight=max_w, min_depth=0.0, color=False)
+    stats = [vol.integrate(d, K, T) for d, K, T in frames]
+    assert sum(s["blocks_carved"] for s in stats) > 2000
+    v_ref, w_ref = _dense_reference(shape, origin, 0.01, trunc, max_w, frames)
+    vv, ww = vol.tsdf_weights()
+    assert (w_ref > 0).mean() > 0.3
+    assert (ww == w_ref).mean() > 0.9999
+    both = (ww == w_ref) & (ww > 0)
+    assert np.abs(vv[both] - v_ref[both]).max() < 2e-4
