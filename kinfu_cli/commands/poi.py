@@ -91,6 +91,40 @@ def load_trajectory(path: Path, hand_topic: str | None, hand_frame: str | None, 
     return load_hand_trajectory(path, hand_topic=hand_topic, hand_frame=hand_frame, world_frame=world_frame)
 
 
+def detect_tasks(traj, algorithm: str, params: dict, workspace=None, max_gap_s: float | None = 2.0,
+                 min_duration_s: float | None = None, quiet: bool = True):
+    """Split `traj` into tasks (attention/tasks.py) and run a fresh detector on each.
+
+    Returns (tasks, detectors, pois): POIs concatenated in task order, ids renumbered 0.., each with
+    extra "task" (and "stamp_ns" when the trajectory has absolute stamps).
+    """
+    from kinfu_cli.attention.tasks import MIN_DURATION_S, require_tasks, split_tasks
+    from kinfu_cli.evaluation.poi import make_detector
+    from kinfu_cli.progress import progress
+
+    min_duration_s = MIN_DURATION_S if min_duration_s is None else min_duration_s
+    make_detector(algorithm, params)._check()  # bad detector options fail before any work
+    tasks = split_tasks(traj, workspace, max_gap_s=max_gap_s, min_duration_s=min_duration_s)
+    require_tasks(tasks, traj, workspace, max_gap_s, min_duration_s)
+    detectors, pois = [], []
+    for task in progress(tasks, total=len(tasks), desc="poi", quiet=quiet or len(tasks) < 2, unit="task"):
+        det = make_detector(algorithm, params).fit(task.trajectory)
+        for p in det.pois_:
+            p.id = len(pois)
+            if traj.t0_ns:
+                p.extra["stamp_ns"] = int(traj.t0_ns + round(p.time * 1e9))
+            p.extra["task"] = task.index
+            pois.append(p)
+        detectors.append(det)
+    return tasks, detectors, pois
+
+
+def _min_task(value: float) -> float:
+    if not value >= 0:
+        raise ConfigError(f"--min-task: expected seconds >= 0, got {value}")
+    return value
+
+
 @click.command("poi", short_help="Points of interest from the hand trajectory (GMM-AS or ZVC).")
 @click.argument("source", metavar="RECORDING_OR_TRAJ", type=click.Path(path_type=Path))
 @click.option("--algorithm", default="gmm-as", show_default=True, type=click.Choice(["gmm-as", "zvc"]),
@@ -98,14 +132,23 @@ def load_trajectory(path: Path, hand_topic: str | None, hand_frame: str | None, 
 @click.option("--hand-topic", default=None, help="Pose topic of the hand [default: detected by name].")
 @click.option("--hand-frame", default=None, help="TF frame of the hand (instead of a topic).")
 @click.option("--world-frame", default=None, help="Frame to express the trajectory and POIs in.")
+@click.option("--workspace", default=None, metavar="X0,Y0,Z0,X1,Y1,Z1",
+              help="Workspace box (metres, trajectory frame): a task is a run of samples inside it; each task "
+                   "is analysed on its own, as the paper's recorder does [default: everywhere].")
+@click.option("--split-gap", default=2.0, show_default=True, type=float, metavar="SECONDS",
+              help="Also start a new task after a pause in the samples longer than this (0 = never).")
+@click.option("--min-task", default=0.5, show_default=True, type=float, metavar="SECONDS",
+              help="Drop runs shorter than this (hand crossing a corner of the box, tracker glitches).")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=Path("pois.json"),
               show_default=True, help="pois.json to write (read by kinfu nbv --pois and kinfu fuse --clear-pois).")
 @click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="PNG: trajectory, Gaussians coloured by saliency (or ZVC slow segments) and the POIs.")
+              help="PNG: trajectory, Gaussians coloured by saliency (or ZVC slow segments) and the POIs; "
+                   "with several tasks, the tasks in colour and their time spans.")
 @click.option("--json", "as_json", is_flag=True, help="Print the pois.json object on stdout.")
 @click.option("--quiet", is_flag=True, help="No progress output.")
 @detector_options
-def command(source, algorithm, hand_topic, hand_frame, world_frame, output, plot, as_json, quiet, **kw):
+def command(source, algorithm, hand_topic, hand_frame, world_frame, workspace, split_gap, min_task, output, plot,
+            as_json, quiet, **kw):
     """Find where the person acted (placed, removed, picked an object) from the wrist trajectory.
 
     GMM-AS (Monica et al. 2016, Alg. 3) fits a Gaussian mixture on (x, y, z, t), picks the number of
@@ -114,39 +157,72 @@ def command(source, algorithm, hand_topic, hand_frame, world_frame, output, plot
     recording (MCAP, ROS 1 .bag, ROS 2 folder) with a hand pose topic or TF frame. Writes pois.json:
     position, time, saliency, region radius and (GMM-AS) the Gaussian of each POI.
 
+    A long stream is first cut into tasks, as the paper's recorder does: runs of samples inside
+    --workspace, split at pauses longer than --split-gap; each task goes through the detector on its
+    own. pois.json then also lists the tasks (index, t_start, t_end, samples, n_pois) and each POI
+    its task.
+
     \b
     Example:
       kinfu poi recording.mcap -o out/pois.json --plot out/pois.png
       kinfu poi user1_cup0.traj --algorithm zvc --json
       kinfu poi recording.bag --hand-topic /hand/pose --poi-threshold 2.5
+      kinfu poi session.mcap --workspace -0.5,-0.8,0.7,0.6,0.4,1.3 --split-gap 1
       kinfu poi user1_cup0.traj --literal --plot literal.png
     """
     from kinfu_cli.attention.pois import pois_document
-    from kinfu_cli.evaluation.poi import make_detector
+    from kinfu_cli.attention.tasks import parse_workspace
     from kinfu_cli.io.atomic import write_json
 
     params = detector_params(kw)[algorithm]
-    det = make_detector(algorithm, params)
-    det._check()
+    box = parse_workspace(workspace)
+    if not split_gap >= 0:
+        raise ConfigError(f"--split-gap: expected seconds >= 0 (0 = never split on pauses), got {split_gap}")
+    _min_task(min_task)
+    from kinfu_cli.evaluation.poi import make_detector
+
+    make_detector(algorithm, params)._check()
     traj = load_trajectory(source, hand_topic, hand_frame, world_frame)
-    det.fit(traj)
-    if traj.t0_ns:
-        for p in det.pois_:
-            p.extra["stamp_ns"] = int(traj.t0_ns + round(p.time * 1e9))
-    recorded = dict(det.get_params())
+    tasks, detectors, pois = detect_tasks(traj, algorithm, params, box, split_gap, min_task, quiet=quiet)
+    recorded = dict(detectors[0].get_params())
     if algorithm == "gmm-as":
-        recorded["n_components"] = det.n_components_
-    doc = pois_document(det.pois_, algorithm, recorded, frame=traj.frame, source=str(source))
+        recorded["n_components"] = int(sum(d.n_components_ for d in detectors))  # per task in "tasks"
+    doc = pois_document(pois, algorithm, recorded, frame=traj.frame, source=str(source))
+    entries = []
+    for task, det in zip(tasks, detectors):
+        e = task.to_dict()
+        e["n_pois"] = len(det.pois_)
+        if algorithm == "gmm-as":
+            e["n_components"] = int(det.n_components_)
+        entries.append(e)
+    doc["tasks"] = entries
+    doc["tasks_dropped"] = tasks.dropped
+    doc["task_split"] = {"workspace": list(box) if box else None, "split_gap": float(split_gap),
+                         "min_task": float(min_task)}
     write_json(output, doc)
     if plot is not None:
-        from kinfu_cli.report.poi_plot import plot_pois
+        from kinfu_cli.report.poi_plot import plot_pois, plot_task_pois
 
-        plot_pois(plot, traj, det, title=f"{Path(str(source)).name} ({algorithm})")
+        title = f"{Path(str(source)).name} ({algorithm})"
+        if len(tasks) == 1 and tasks[0].samples == len(traj):
+            plot_pois(plot, traj, detectors[0], title=title)
+        else:
+            plot_task_pois(plot, traj, tasks, detectors, workspace=box, title=title)
     if as_json:
         click.echo(json.dumps(doc, indent=2))
     elif not quiet:
-        extra = f", K = {det.n_components_} Gaussians" if algorithm == "gmm-as" else ""
-        click.echo(f"{len(det.pois_)} POI(s) from {len(traj)} samples ({algorithm}{extra}) -> {output}")
-        for p in det.pois_:
+        if len(detectors) == 1 and not tasks.dropped:
+            extra = f", K = {detectors[0].n_components_} Gaussians" if algorithm == "gmm-as" else ""
+            click.echo(f"{len(pois)} POI(s) from {len(traj)} samples ({algorithm}{extra}) -> {output}")
+        else:
+            dropped = f", {tasks.dropped} short run(s) dropped" if tasks.dropped else ""
+            click.echo(f"{len(pois)} POI(s) in {len(tasks)} task(s) from {len(traj)} samples ({algorithm}{dropped})"
+                       f" -> {output}")
+            for e in entries:
+                k = f", K = {e['n_components']}" if algorithm == "gmm-as" else ""
+                click.echo(f"  task {e['index']}: t = {e['t_start']:.2f} .. {e['t_end']:.2f} s, {e['samples']} samples"
+                           f"{k}, {e['n_pois']} POI(s)")
+        for p in pois:
             x, y, z = p.position
-            click.echo(f"  #{p.id}: ({x:.3f}, {y:.3f}, {z:.3f}) m at t = {p.time:.2f} s, saliency {p.saliency:.4g}")
+            click.echo(f"  #{p.id}: ({x:.3f}, {y:.3f}, {z:.3f}) m at t = {p.time:.2f} s, saliency {p.saliency:.4g}"
+                       + (f", task {p.extra['task']}" if len(tasks) > 1 else ""))

@@ -92,3 +92,60 @@ def plot_pois(path: str | os.PathLike, traj: Trajectory, detector, title: str = 
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110)
     plt.close(fig)
+
+
+def plot_task_pois(path: str | os.PathLike, traj: Trajectory, tasks, detectors, workspace=None,
+                   title: str = "") -> None:
+    """Figure for a stream cut into tasks (attention/tasks.py): the trajectory with each task in its own
+    colour (samples outside every task in grey), the workspace box and the POIs (3-D, left); x, y, z
+    over time with the task spans shaded and the POI times marked (right). Written atomically."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from kinfu_cli.io.atomic import atomic_path
+
+    fig = plt.figure(figsize=(13, 5.5))
+    ax = fig.add_subplot(1, 2, 1, projection="3d")
+    ax2 = fig.add_subplot(1, 2, 2)
+    p = traj.positions
+    t = traj.t
+    cmap = matplotlib.colormaps["tab10"]
+    ax.plot(p[:, 0], p[:, 1], p[:, 2], color="0.75", lw=0.5)
+    for axis, c in zip(range(3), ("0.1", "0.4", "0.65")):  # greys: colours belong to the tasks
+        ax2.plot(t, p[:, axis], color=c, lw=0.8, label="xyz"[axis])
+    for task, det in zip(tasks, detectors):
+        col = cmap(task.index % 10)
+        q = task.trajectory.positions
+        ax.plot(q[:, 0], q[:, 1], q[:, 2], color=col, lw=1.0)
+        ax2.axvspan(task.t_start, task.t_end, color=col, alpha=0.15)
+        ax2.text(task.t_start, 1.0, f"task {task.index}", transform=ax2.get_xaxis_transform(), fontsize=7,
+                 va="bottom", color=col)
+        for poi in det.pois_:
+            ax.scatter(*poi.position, marker="*", s=160, color=col, edgecolors="k", depthshade=False)
+            x, y, z = _ellipsoid(poi.position, np.eye(3) * poi.radius ** 2, n=12)
+            ax.plot_wireframe(x, y, z, color=col, linewidth=0.3, alpha=0.4)
+            ax2.axvline(poi.time, color=col, lw=1.2, ls="--")
+    if workspace is not None:
+        w = np.asarray(workspace, dtype=np.float64)
+        corners = np.array([[w[3 if i & 1 else 0], w[4 if i & 2 else 1], w[5 if i & 4 else 2]]
+                            for i in range(8)])
+        for a in range(8):
+            for b in (1, 2, 4):
+                if not a & b:
+                    ax.plot(*corners[[a, a | b]].T, color="k", lw=0.6, ls=":")
+    n_pois = sum(len(d.pois_) for d in detectors)
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_zlabel("z (m)")
+    _equal_axes(ax, p)
+    ax.set_title(title or (traj.source or "hand trajectory"), fontsize=9)
+    ax2.set_xlabel("time (s)")
+    ax2.set_ylabel("position (m)")
+    ax2.set_title(f"{len(tasks)} task(s) (shaded), {n_pois} POI(s) (dashed)", pad=14)
+    ax2.legend(loc="lower right", fontsize=8)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110)
+    plt.close(fig)

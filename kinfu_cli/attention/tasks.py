@@ -1,0 +1,172 @@
+"""Cut a long hand stream into tasks, as the paper's recorder does, before POI detection.
+
+Monica et al. RAS 2016 §4.4/§6: "Task trajectories are automatically recorded when the user hand is
+inside the bounding box of the workspace ... When the hand exits the bounding box, the trajectory is
+analyzed." GMM-AS normalises time by the task duration, resamples every task to a fixed number of
+samples and floors the time std at 0.1 × duration (attention/gmm_as.py), so it must see ONE task at
+a time: fed minutes of stream with several actions, the actions blur into a few Gaussians.
+
+A task is a maximal run of samples inside the workspace box (axis-aligned, the trajectory's frame,
+metres, bounds inclusive; None = everywhere) with no pause between consecutive samples longer than
+`max_gap_s` (a tracker that stops streaming while the hand is away). Runs shorter than
+`min_duration_s` or `min_samples` (the hand crossing a corner of the box, tracker glitches) are
+dropped and counted. Each Task keeps its samples as a Trajectory on the SAME clock (t, t0_ns) as
+the input, so POI times and stamps of a task read like those of the whole stream.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from kinfu_cli.errors import ConfigError
+from kinfu_cli.io.trajectory import Trajectory
+
+#: Default minimum task: real tasks last 0.9 s and more (hand-polhemus); a hand crossing a corner of
+#: the box or a tracker glitch lasts a fraction of that.
+MIN_DURATION_S = 0.5
+MIN_SAMPLES = 5
+
+
+@dataclass
+class Task:
+    """One task: samples [start, stop) of the input trajectory (`stop` exclusive)."""
+
+    index: int
+    start: int
+    stop: int
+    t_start: float
+    t_end: float
+    trajectory: Trajectory = field(repr=False)
+
+    @property
+    def samples(self) -> int:
+        return self.stop - self.start
+
+    @property
+    def duration(self) -> float:
+        return self.t_end - self.t_start
+
+    def to_dict(self) -> dict:
+        """JSON entry (t on the input trajectory's clock, seconds; `last_sample` inclusive)."""
+        d = {"index": int(self.index), "t_start": float(self.t_start), "t_end": float(self.t_end),
+             "samples": int(self.samples), "first_sample": int(self.start), "last_sample": int(self.stop - 1)}
+        t0 = self.trajectory.t0_ns
+        if t0:
+            d["stamp_ns_start"] = int(t0 + round(self.t_start * 1e9))
+            d["stamp_ns_end"] = int(t0 + round(self.t_end * 1e9))
+        return d
+
+
+class TaskList(list):
+    """The tasks found (a list of Task) plus what was left out.
+
+    dropped: runs removed as too short; inside: samples inside the workspace (all of them without one).
+    """
+
+    def __init__(self, tasks=(), dropped: int = 0, inside: int = 0) -> None:
+        super().__init__(tasks)
+        self.dropped = int(dropped)
+        self.inside = int(inside)
+
+
+def parse_workspace(text: str | None) -> tuple[float, ...] | None:
+    """'x0,y0,z0,x1,y1,z1' (metres) -> 6 floats, or None for None/'' ; ConfigError naming --workspace."""
+    if text is None or not str(text).strip():
+        return None
+    parts = [p for p in str(text).replace(" ", ",").split(",") if p]
+    try:
+        vals = tuple(float(p) for p in parts)
+    except ValueError:
+        vals = ()
+    if len(vals) != 6 or not all(math.isfinite(v) for v in vals):
+        raise ConfigError(f"--workspace: expected six numbers x0,y0,z0,x1,y1,z1 (metres), got {text!r}")
+    return check_workspace(vals)
+
+
+def check_workspace(workspace) -> tuple[float, ...] | None:
+    """Validate a (x0, y0, z0, x1, y1, z1) box (None passes); ConfigError naming --workspace."""
+    if workspace is None:
+        return None
+    try:
+        w = np.asarray(workspace, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        w = np.zeros(0)
+    if w.shape != (6,) or not np.all(np.isfinite(w)):
+        raise ConfigError(f"--workspace: expected six finite numbers x0,y0,z0,x1,y1,z1 (metres), got {workspace!r}")
+    if not np.all(w[:3] < w[3:]):
+        raise ConfigError(f"--workspace: expected x0 < x1, y0 < y1, z0 < z1 (min corner first), "
+                          f"got {','.join(f'{v:g}' for v in w)}")
+    return tuple(float(v) for v in w)
+
+
+def _check_limits(max_gap_s, min_duration_s, min_samples) -> None:
+    if max_gap_s is not None and not (isinstance(max_gap_s, (int, float)) and max_gap_s >= 0):
+        raise ConfigError(f"--split-gap: expected seconds >= 0 (0 = never split on pauses), got {max_gap_s!r}")
+    if not (isinstance(min_duration_s, (int, float)) and min_duration_s >= 0):
+        raise ConfigError(f"--min-task: expected seconds >= 0, got {min_duration_s!r}")
+    if int(min_samples) != min_samples or min_samples < 1:
+        raise ConfigError(f"split_tasks: min_samples must be an integer >= 1, got {min_samples!r}")
+
+
+def inside_workspace(positions: np.ndarray, workspace) -> np.ndarray:
+    """(N,) bool: positions (N, 3) inside the box (bounds inclusive); all True for None."""
+    p = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    if workspace is None:
+        return np.ones(len(p), bool)
+    w = np.asarray(workspace, dtype=np.float64)
+    return np.all((p >= w[:3]) & (p <= w[3:]), axis=1)
+
+
+def split_tasks(traj: Trajectory, workspace=None, max_gap_s: float | None = 2.0,
+                min_duration_s: float = MIN_DURATION_S, min_samples: int = MIN_SAMPLES) -> TaskList:
+    """Tasks of `traj`: maximal runs inside `workspace` without a pause longer than `max_gap_s`.
+
+    workspace: (x0, y0, z0, x1, y1, z1) metres in traj.frame, or None (everywhere).
+    max_gap_s: split where consecutive samples are more than this apart; 0 or None = never.
+    Runs lasting less than `min_duration_s` (t_end - t_start) or with fewer than `min_samples`
+    samples are dropped (counted in `.dropped`). Returns a TaskList (index 0.. in time order).
+    """
+    workspace = check_workspace(workspace)
+    _check_limits(max_gap_s, min_duration_s, min_samples)
+    n = len(traj)
+    inside = inside_workspace(traj.positions, workspace)
+    if n == 0:
+        return TaskList()
+    brk = np.zeros(max(n - 1, 0), bool)  # brk[i]: a run cannot continue from sample i to i + 1
+    if max_gap_s:
+        brk |= np.diff(traj.t) > max_gap_s
+    inn = inside.astype(np.int8)
+    starts = np.flatnonzero(inside & np.r_[True, brk | (inn[:-1] == 0)])
+    stops = np.flatnonzero(inside & np.r_[brk | (inn[1:] == 0), True]) + 1
+    dur = traj.t[stops - 1] - traj.t[starts] if len(starts) else np.zeros(0)
+    keep = (stops - starts >= min_samples) & (dur >= min_duration_s)
+    tasks = TaskList(dropped=int((~keep).sum()), inside=int(inside.sum()))
+    for a, b in zip(starts[keep], stops[keep]):
+        sub = Trajectory(t=traj.t[a:b], positions=traj.positions[a:b],
+                         rotations=None if traj.rotations is None else traj.rotations[a:b],
+                         frame=traj.frame, source=traj.source, t0_ns=traj.t0_ns,
+                         meta={**traj.meta, "task": len(tasks), "task_samples": [int(a), int(b)]})
+        tasks.append(Task(index=len(tasks), start=int(a), stop=int(b), t_start=float(traj.t[a]),
+                          t_end=float(traj.t[b - 1]), trajectory=sub))
+    return tasks
+
+
+def require_tasks(tasks: TaskList, traj: Trajectory, workspace=None, max_gap_s: float | None = 2.0,
+                  min_duration_s: float = MIN_DURATION_S) -> TaskList:
+    """Return `tasks`, or raise a one-line ConfigError saying why there is none."""
+    if tasks:
+        return tasks
+    name = traj.source or "trajectory"
+    if workspace is not None and tasks.inside == 0:
+        lo, hi = traj.positions.min(axis=0), traj.positions.max(axis=0)
+        box = ",".join(f"{v:.3f}" for v in (*lo, *hi))
+        ws = ",".join(f"{v:g}" for v in workspace)
+        raise ConfigError(f"--workspace {ws}: contains no sample of {name}, whose bounding box is {box} "
+                          f"(x0,y0,z0,x1,y1,z1, metres, frame {traj.frame or '?'})")
+    where = "inside --workspace" if workspace is not None else "in the trajectory"
+    gap = f", split at pauses > {max_gap_s:g} s (--split-gap)" if max_gap_s else ""
+    raise ConfigError(f"{name}: no task left: all {tasks.dropped} run(s) of samples {where}{gap} last less than "
+                      f"{min_duration_s:g} s (--min-task) or have too few samples")
