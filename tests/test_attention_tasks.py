@@ -14,9 +14,8 @@ import pytest
 from click.testing import CliRunner
 
 from kinfu_cli.attention.pois import pois_document
-from kinfu_cli.attention.tasks import inside_workspace, parse_workspace, require_tasks, split_tasks
+from kinfu_cli.attention.tasks import detect_by_task, inside_workspace, parse_workspace, require_tasks, split_tasks
 from kinfu_cli.cli import cli
-from kinfu_cli.commands.poi import detect_tasks
 from kinfu_cli.errors import ConfigError
 from kinfu_cli.evaluation.poi import MATCH_RADIUS, make_detector, score_pois
 from kinfu_cli.io.hand import load_hand_trajectory
@@ -392,7 +391,7 @@ def test_many_streams_of_random_public_tasks():
         streams += 1
         stream = Trajectory(t=np.arange(len(pos)) / RATE, positions=pos)
         for alg in ("gmm-as", "zvc"):
-            tasks, _, pois = detect_tasks(stream, alg, {}, box, max_gap_s=0)
+            tasks, _, pois = detect_by_task(stream, lambda: make_detector(alg), box, max_gap_s=0)
             assert [(t.start, t.stop) for t in tasks] == spans
             add((alg, "per task"), [p for tr in trajs for p in make_detector(alg).fit(tr).pois_], gt)
             add((alg, "split"), pois, gt)

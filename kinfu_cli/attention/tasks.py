@@ -17,10 +17,12 @@ the input, so POI times and stamps of a task read like those of the whole stream
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from kinfu_cli.attention.pois import Poi
 from kinfu_cli.errors import ConfigError
 from kinfu_cli.io.trajectory import Trajectory
 
@@ -170,3 +172,42 @@ def require_tasks(tasks: TaskList, traj: Trajectory, workspace=None, max_gap_s: 
     gap = f", split at pauses > {max_gap_s:g} s (--split-gap)" if max_gap_s else ""
     raise ConfigError(f"{name}: no task left: all {tasks.dropped} run(s) of samples {where}{gap} last less than "
                       f"{min_duration_s:g} s (--min-task) or have too few samples")
+
+
+def detect_by_task(traj: Trajectory, new_detector: Callable[[], object], workspace=None,
+                   max_gap_s: float | None = 2.0, min_duration_s: float = MIN_DURATION_S,
+                   min_samples: int = MIN_SAMPLES, quiet: bool = True) -> tuple[TaskList, list, list[Poi]]:
+    """Split `traj` into tasks and fit a fresh detector (`new_detector()`, GMM-AS or ZVC) on each.
+
+    Returns (tasks, fitted detectors, POIs): the POIs concatenated in task order, ids renumbered 0..,
+    each with extra "task" (its task index) and, when the trajectory has absolute stamps, "stamp_ns".
+    Raises ConfigError (require_tasks) when no task is left.
+    """
+    from kinfu_cli.progress import progress
+
+    tasks = split_tasks(traj, workspace, max_gap_s=max_gap_s, min_duration_s=min_duration_s,
+                        min_samples=min_samples)
+    require_tasks(tasks, traj, workspace, max_gap_s, min_duration_s)
+    detectors, pois = [], []
+    for task in progress(tasks, total=len(tasks), desc="poi", quiet=quiet or len(tasks) < 2, unit="task"):
+        det = new_detector().fit(task.trajectory)
+        for p in det.pois_:
+            p.id = len(pois)
+            if traj.t0_ns:
+                p.extra["stamp_ns"] = int(traj.t0_ns + round(p.time * 1e9))
+            p.extra["task"] = task.index
+            pois.append(p)
+        detectors.append(det)
+    return tasks, detectors, pois
+
+
+def task_entries(tasks: TaskList, detectors: list) -> list[dict]:
+    """The pois.json "tasks" list: Task.to_dict() + n_pois (+ n_components for GMM-AS)."""
+    out = []
+    for task, det in zip(tasks, detectors):
+        e = task.to_dict()
+        e["n_pois"] = len(det.pois_)
+        if hasattr(det, "n_components_"):
+            e["n_components"] = int(det.n_components_)
+        out.append(e)
+    return out

@@ -93,30 +93,13 @@ def load_trajectory(path: Path, hand_topic: str | None, hand_frame: str | None, 
 
 def detect_tasks(traj, algorithm: str, params: dict, workspace=None, max_gap_s: float | None = 2.0,
                  min_duration_s: float | None = None, quiet: bool = True):
-    """Split `traj` into tasks (attention/tasks.py) and run a fresh detector on each.
-
-    Returns (tasks, detectors, pois): POIs concatenated in task order, ids renumbered 0.., each with
-    extra "task" (and "stamp_ns" when the trajectory has absolute stamps).
-    """
-    from kinfu_cli.attention.tasks import MIN_DURATION_S, require_tasks, split_tasks
+    """attention.tasks.detect_by_task with a fresh `algorithm` detector (constructor `params`) per task."""
+    from kinfu_cli.attention.tasks import MIN_DURATION_S, detect_by_task
     from kinfu_cli.evaluation.poi import make_detector
-    from kinfu_cli.progress import progress
 
-    min_duration_s = MIN_DURATION_S if min_duration_s is None else min_duration_s
     make_detector(algorithm, params)._check()  # bad detector options fail before any work
-    tasks = split_tasks(traj, workspace, max_gap_s=max_gap_s, min_duration_s=min_duration_s)
-    require_tasks(tasks, traj, workspace, max_gap_s, min_duration_s)
-    detectors, pois = [], []
-    for task in progress(tasks, total=len(tasks), desc="poi", quiet=quiet or len(tasks) < 2, unit="task"):
-        det = make_detector(algorithm, params).fit(task.trajectory)
-        for p in det.pois_:
-            p.id = len(pois)
-            if traj.t0_ns:
-                p.extra["stamp_ns"] = int(traj.t0_ns + round(p.time * 1e9))
-            p.extra["task"] = task.index
-            pois.append(p)
-        detectors.append(det)
-    return tasks, detectors, pois
+    return detect_by_task(traj, lambda: make_detector(algorithm, params), workspace, max_gap_s,
+                          MIN_DURATION_S if min_duration_s is None else min_duration_s, quiet=quiet)
 
 
 def _min_task(value: float) -> float:
@@ -171,7 +154,8 @@ def command(source, algorithm, hand_topic, hand_frame, world_frame, workspace, s
       kinfu poi user1_cup0.traj --literal --plot literal.png
     """
     from kinfu_cli.attention.pois import pois_document
-    from kinfu_cli.attention.tasks import parse_workspace
+    from kinfu_cli.attention.tasks import parse_workspace, task_entries
+    from kinfu_cli.evaluation.poi import make_detector
     from kinfu_cli.io.atomic import write_json
 
     params = detector_params(kw)[algorithm]
@@ -179,23 +163,14 @@ def command(source, algorithm, hand_topic, hand_frame, world_frame, workspace, s
     if not split_gap >= 0:
         raise ConfigError(f"--split-gap: expected seconds >= 0 (0 = never split on pauses), got {split_gap}")
     _min_task(min_task)
-    from kinfu_cli.evaluation.poi import make_detector
-
-    make_detector(algorithm, params)._check()
+    make_detector(algorithm, params)._check()  # every option checked before the trajectory is read
     traj = load_trajectory(source, hand_topic, hand_frame, world_frame)
     tasks, detectors, pois = detect_tasks(traj, algorithm, params, box, split_gap, min_task, quiet=quiet)
     recorded = dict(detectors[0].get_params())
     if algorithm == "gmm-as":
         recorded["n_components"] = int(sum(d.n_components_ for d in detectors))  # per task in "tasks"
     doc = pois_document(pois, algorithm, recorded, frame=traj.frame, source=str(source))
-    entries = []
-    for task, det in zip(tasks, detectors):
-        e = task.to_dict()
-        e["n_pois"] = len(det.pois_)
-        if algorithm == "gmm-as":
-            e["n_components"] = int(det.n_components_)
-        entries.append(e)
-    doc["tasks"] = entries
+    doc["tasks"] = entries = task_entries(tasks, detectors)
     doc["tasks_dropped"] = tasks.dropped
     doc["task_split"] = {"workspace": list(box) if box else None, "split_gap": float(split_gap),
                          "min_task": float(min_task)}
