@@ -12,6 +12,11 @@ metres, bounds inclusive; None = everywhere) with no pause between consecutive s
 `min_duration_s` or `min_samples` (the hand crossing a corner of the box, tracker glitches) are
 dropped and counted. Each Task keeps its samples as a Trajectory on the SAME clock (t, t0_ns) as
 the input, so POI times and stamps of a task read like those of the whole stream.
+
+`kinfu poi` writes the result into pois.json: each POI gains "task" (its task index), and the file gains
+"tasks" (task_entries: index, t_start, t_end [s, the POIs' clock], samples, first_sample, last_sample,
+stamp_ns_start/end from recordings, n_pois, n_components for GMM-AS), "tasks_dropped" (runs too short)
+and "task_split" (the --workspace, --split-gap and --min-task used).
 """
 
 from __future__ import annotations
