@@ -9,7 +9,9 @@ pois.json::
 Positions in metres in `frame`; time in seconds on the trajectory's clock; `radius` is the region of
 interest S(POI) around the position (0.2 m in the paper). ZVC POIs have `"gaussian": null`; GMM-AS
 Gaussians are in (x, y, z, t) with t in seconds. Optional extra keys per POI: "stamp_ns" (absolute
-time, when the trajectory came from a recording), "component"/"threshold" (GMM-AS), "segment" (ZVC).
+time, when the trajectory came from a recording), "component"/"threshold" (GMM-AS), "segment" (ZVC), "task"
+(index into "tasks"). `kinfu poi` also writes "tasks" (the hand stream cut into tasks: index, t_start, t_end,
+samples, n_pois, ...), "tasks_dropped" and "task_split" (see attention/tasks.py).
 """
 
 from __future__ import annotations
