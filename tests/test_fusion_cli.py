@@ -177,3 +177,30 @@ def test_clear_pois_forgets_spheres_after_fusing(sample_dir, tmp_path):
     bad.write_text("{\"pois\": [{\"position\": [1, 2]}]}")
     res = run([str(sample_dir / "recording.mcap"), "-o", str(tmp_path / "o2"), *FAST, "--clear-pois", str(bad)])
     assert res.exit_code == 2 and "position" in res.output and not (tmp_path / "o2").exists()
+
+
+def test_world_frame_is_recorded_and_checked(fused, sample_dir, tmp_path):
+    """The frame the poses came in travels with the volume: report, volume.npz, ternary.npz. Fusing into a
+    volume of another frame is refused; POIs of another frame give a warning (they may be calibrated)."""
+    from kinfu_cli.fusion.volume import load_volume as load
+
+    report = json.loads((fused / "report.json").read_text())
+    assert report["world_frame"] == "world" and report["warnings"] == []
+    assert load(fused / "volume.npz").frame == "world"
+    assert load_ternary(fused / "ternary.npz").frame == "world"
+
+    pois = tmp_path / "pois.json"
+    pois.write_text(json.dumps({"frame": "polhemus_base", "pois": [{"position": [0.03, 0.14, 0.77], "radius": 0.1}]}))
+    res = CliRunner().invoke(cli, ["fuse", str(sample_dir / "recording.mcap"), "-o", str(tmp_path / "o1"), *FAST,
+                                   "--clear-pois", str(pois)])
+    assert res.exit_code == 0, res.output
+    assert "kinfu: warning: --clear-pois" in res.stderr and "'polhemus_base'" in res.stderr
+    assert json.loads((tmp_path / "o1" / "report.json").read_text())["warnings"][0].startswith("--clear-pois")
+
+    vol = load(fused / "volume.npz")
+    vol.frame = "odom"
+    vol.save(tmp_path / "odom.npz")
+    res = run([str(sample_dir / "recording.mcap"), "-o", str(tmp_path / "o2"), *FAST, "--init",
+               str(tmp_path / "odom.npz")])
+    assert res.exit_code == 2 and "--init" in res.output and "'odom'" in res.output and "'world'" in res.output
+    assert not (tmp_path / "o2").exists()

@@ -10,7 +10,7 @@ from click.testing import CliRunner
 
 from kinfu_cli.cli import cli
 from kinfu_cli.errors import ConfigError
-from kinfu_cli.fusion.ternary import EMPTY, OCCUPIED, UNKNOWN, TernaryGrid, save_ternary
+from kinfu_cli.fusion.ternary import EMPTY, OCCUPIED, UNKNOWN, TernaryGrid, load_ternary, save_ternary
 from kinfu_cli.nbv.camera import CameraModel, camera_from_options
 from kinfu_cli.nbv.ranking import (estimate_table_z, forget_around, rank_poi, reject_reasons, score_views,
                                    unknown_in_sphere)
@@ -235,3 +235,20 @@ def test_table_height_is_the_highest_large_upward_surface_not_the_floor():
     g.labels[:, :, 6:20] = EMPTY
     g.labels[:40, :, 20] = EMPTY  # the table covers only half of the floor
     assert estimate_table_z(g) == pytest.approx(0.42)
+
+
+def test_cli_warns_when_pois_and_volume_frames_differ(scene_files):
+    vol, pois, tmp = scene_files
+    g = load_ternary(vol)
+    g.frame = "world"
+    save_ternary(vol, g)
+    assert load_ternary(vol).frame == "world"
+    doc = json.loads(pois.read_text())
+    for frame, warned in (("world", False), ("polhemus_base", True), ("", False)):
+        doc["frame"] = frame
+        pois.write_text(json.dumps(doc))
+        res = CliRunner().invoke(cli, ["nbv", str(vol), "--pois", str(pois), "--json"] + SMALL)
+        assert res.exit_code == 0, res.output
+        out = json.loads(res.stdout)
+        assert bool(out["warnings"]) == warned
+        assert ("kinfu: warning: --pois" in res.stderr) == warned

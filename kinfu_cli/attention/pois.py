@@ -154,3 +154,15 @@ def read_pois(path: str | os.PathLike) -> list[Poi]:
 def poi_positions(pois: list[Poi]) -> np.ndarray:
     """(K, 3) positions of `pois`."""
     return np.array([p.position for p in pois], dtype=np.float64).reshape(-1, 3)
+
+
+def poi_frame_warnings(pois_path, frame: str, option: str) -> list[str]:
+    """A warning when the POIs of `pois_path` are in another named frame than `frame` (the volume's)."""
+    if not pois_path or not frame:
+        return []
+    theirs = str(read_pois_document(pois_path).get("frame") or "").lstrip("/")
+    frame = frame.lstrip("/")
+    if theirs and theirs != frame:
+        return [f"{option} {pois_path}: POIs are in frame {theirs!r}, the volume in {frame!r}; they are used at "
+                f"their coordinates as given (is the hand tracker calibrated to {frame!r}?)"]
+    return []

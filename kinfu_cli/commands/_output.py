@@ -9,8 +9,15 @@ from collections.abc import Callable, Iterable
 import click
 
 
+def print_warnings(doc: dict) -> None:
+    """Each entry of doc["warnings"] as one `kinfu: warning: ...` line on stderr (also with --quiet / --json)."""
+    for w in doc.get("warnings") or []:
+        click.echo(f"kinfu: warning: {w}", err=True)
+
+
 def emit(doc: dict, output, as_json: bool, lines_of: Callable[[dict], Iterable[str]]) -> None:
     """Write `doc` atomically to `output` when given; print it as JSON or as the lines `lines_of` makes."""
+    print_warnings(doc)
     if output is not None:
         from kinfu_cli.io.atomic import write_json
 

@@ -76,6 +76,7 @@ def command(recording: Path, outdir: Path, voxel_size, resolution, size, origin,
       kinfu fuse rec.bag -o out/fuse --voxel-size 0.01 --size 2,2,1 --pose icp --every 2
       kinfu fuse rec2.mcap -o out/fuse2 --init out/fuse/volume.npz --clear-pois out/poi/pois.json
     """
+    from kinfu_cli.commands._output import print_warnings
     from kinfu_cli.fusion.pipeline import FuseOptions, fuse_recording
 
     roles = role_kwargs(kwargs)
@@ -98,6 +99,7 @@ def command(recording: Path, outdir: Path, voxel_size, resolution, size, origin,
         fill_gaps=fill_gaps, bilateral=bilateral, shadow_filter=shadow_filter, plot=plot, color=not no_color,
         quiet=quiet, roles=roles)
     report = fuse_recording(recording, outdir, opts)
+    print_warnings(report)
     if as_json:
         click.echo(json.dumps(report, indent=2, default=str))
     elif not quiet:

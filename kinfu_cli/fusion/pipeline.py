@@ -109,6 +109,7 @@ def fuse_recording(recording: str | Path, outdir: str | Path, opts: FuseOptions 
 
     Returns the report (also written as report.json).
     """
+    from kinfu_cli.attention.pois import poi_frame_warnings
     from kinfu_cli.io.frames import FrameStats, iter_frames
     from kinfu_cli.io.recording import open_recording
     from kinfu_cli.io.roles import detect_roles
@@ -167,6 +168,12 @@ def fuse_recording(recording: str | Path, outdir: str | Path, opts: FuseOptions 
             source_desc = f"tf {roles.world_frame} <- {roles.camera_frame}"
             if mode == "icp":
                 source_desc += " (first frame only)"
+        world = _world_frame(rec, mode, source, roles, opts.pose_topic)
+        if vol is not None and vol.frame and world and vol.frame != world:
+            raise RecordingError(f"--init {opts.init}: the volume was fused in frame {vol.frame!r}, but {rec.path} "
+                                 f"gives camera poses in {world!r}")
+        warnings = poi_frame_warnings(opts.clear_pois, world or (vol.frame if vol is not None else ""),
+                                      "--clear-pois")
         stats = FrameStats()
         frames = iter_frames(rec, roles, pose_source=source, pose_topic=opts.pose_topic, start_s=opts.start,
                              end_s=opts.end, every=opts.every, stats=stats, tf=tf,
@@ -251,6 +258,7 @@ def fuse_recording(recording: str | Path, outdir: str | Path, opts: FuseOptions 
             raise RecordingError(f"{rec.path}: no usable depth frames ({why})")
         recording_path = str(rec.path)
         roles_dict = roles.as_dict()
+        vol.frame = vol.frame or world
 
     if not opts.init:
         for s in spheres:
@@ -298,6 +306,7 @@ def fuse_recording(recording: str | Path, outdir: str | Path, opts: FuseOptions 
         "roles": roles_dict,
         "pose_mode": mode,
         "pose_source": source_desc,
+        "world_frame": vol.frame,
         "frames": {"depth_messages": stats.depth_messages, "used": used, "skipped_every": stats.skipped,
                    "without_color": stats.without_color, "dropped": dropped,
                    "dropped_total": int(sum(dropped.values())), "every": opts.every, "start_s": opts.start,
@@ -320,9 +329,23 @@ def fuse_recording(recording: str | Path, outdir: str | Path, opts: FuseOptions 
         "cloud": {"points": len(cloud.points)},
         "timing_s": {k: round(v, 3) for k, v in timer.t.items()},
         "outputs": list(OUTPUTS) + plots,
+        "warnings": warnings,
     }
     write_json(outdir / "report.json", report)
     return report
+
+
+def _world_frame(rec, mode: str, source: str, roles, pose_topic: str | None) -> str:
+    """Name of the frame the camera poses of this run are in ("" when ICP starts from an unnamed first pose)."""
+    if source == "tf":
+        return roles.world_frame or ""
+    if source == "topic":
+        from kinfu_cli.io.messages import header_frame
+
+        rec.require_topic(pose_topic, "pose topic")
+        msg = rec.first_message(pose_topic)
+        return header_frame(msg).lstrip("/") if msg is not None else ""
+    return ""
 
 
 def _track_entry(frame, res, T_given) -> dict:

@@ -3,7 +3,7 @@
 File contract (`ternary.npz`, as ros_kinfu exports): array `ternary` int8, indexed [x, y, z],
 1 = occupied, 0 = unknown, -1 = empty; `origin` (3,) world position of the grid's minimum
 corner, so voxel (i, j, k) has its centre at origin + (i + 0.5, j + 0.5, k + 0.5) * voxel_size;
-`voxel_size` (metres).
+`voxel_size` (metres); optional `frame` (str): name of the world frame ("" or absent when not known).
 """
 
 from __future__ import annotations
@@ -28,6 +28,7 @@ class TernaryGrid:
     labels: np.ndarray
     origin: np.ndarray
     voxel_size: float
+    frame: str = ""  # world frame name, "" when not known
 
     def __post_init__(self) -> None:
         self.labels = np.asarray(self.labels, dtype=np.int8)
@@ -62,7 +63,8 @@ def save_ternary(path: str | os.PathLike, grid: TernaryGrid) -> None:
     """Write `ternary.npz` atomically (compressed: mostly-constant labels shrink a lot)."""
     from kinfu_cli.io.atomic import write_npz
 
-    write_npz(path, {"ternary": grid.labels, "origin": grid.origin, "voxel_size": np.float64(grid.voxel_size)})
+    write_npz(path, {"ternary": grid.labels, "origin": grid.origin, "voxel_size": np.float64(grid.voxel_size),
+                     "frame": np.array(grid.frame)})
 
 
 def load_ternary(path: str | os.PathLike) -> TernaryGrid:
@@ -74,7 +76,8 @@ def load_ternary(path: str | os.PathLike) -> TernaryGrid:
         with np.load(path, allow_pickle=False) as data:
             keys = set(data.files)
             if "ternary" in keys:
-                return TernaryGrid(data["ternary"], data["origin"], float(data["voxel_size"]))
+                frame = str(data["frame"]) if "frame" in keys else ""
+                return TernaryGrid(data["ternary"], data["origin"], float(data["voxel_size"]), frame)
     except (OSError, ValueError, EOFError) as exc:
         raise VolumeError(f"{path}: not a readable .npz volume ({exc})") from None
     try:

@@ -113,6 +113,7 @@ class TernaryVolume:
         self._check_memory()
         self._raylen_cache: dict = {}
         self.frames_integrated = 0
+        self.frame = ""  # name of the world frame the poses were given in ("" = not known)
         if _allocate:
             self.block_idx = np.full(tuple(self.nb), -1, dtype=np.int32)
             self.block_w = np.zeros(tuple(self.nb), dtype=np.uint8)
@@ -295,7 +296,7 @@ class TernaryVolume:
                                self.pool_v, self.pool_w)
 
     def ternary_grid(self) -> TernaryGrid:
-        return TernaryGrid(self.labels(), self.origin.copy(), self.voxel_size)
+        return TernaryGrid(self.labels(), self.origin.copy(), self.voxel_size, self.frame)
 
     def _box(self, lo, hi) -> tuple[np.ndarray, np.ndarray]:
         lo = np.zeros(3, np.int64) if lo is None else np.asarray(lo, dtype=np.int64).reshape(3)
@@ -390,7 +391,8 @@ class TernaryVolume:
         return {"format": FORMAT, "format_version": FORMAT_VERSION, "shape": list(self.shape),
                 "voxel_size": self.voxel_size, "origin": self.origin.tolist(), "truncation": self.truncation,
                 "max_weight": self.max_weight, "min_depth": self.min_depth, "max_depth": self.max_depth,
-                "color": self.color, "block": kn.B, "frames_integrated": self.frames_integrated}
+                "color": self.color, "block": kn.B, "frames_integrated": self.frames_integrated,
+                "frame": self.frame}
 
     def save(self, path: str | os.PathLike) -> Path:
         """Write one .npz (metadata, block tables, used pool rows) atomically; `load_volume` reads it back."""
@@ -451,4 +453,5 @@ def load_volume(path: str | os.PathLike) -> TernaryVolume:
             raise VolumeError(f"{path}: inconsistent colour pool ({arrays['pool_c'].shape[0]} rows, expected {n})")
         vol.pool_c[:n] = arrays["pool_c"]
     vol.frames_integrated = int(meta.get("frames_integrated", 0))
+    vol.frame = str(meta.get("frame", "") or "")
     return vol

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from kinfu_cli.attention.pois import poi_frame_warnings
 from kinfu_cli.errors import ConfigError
 from kinfu_cli.fusion.ternary import TernaryGrid, load_ternary
 from kinfu_cli.nbv.camera import CameraModel
@@ -96,6 +97,7 @@ def run_nbv(volume_path: str | os.PathLike, pois_path: str | os.PathLike, camera
         "share_rolls": opts.share_rolls, "optimistic": opts.optimistic,
         "voxel_size": grid.voxel_size, "shape": list(grid.shape),
         "pois": [r.to_dict(top=opts.top) for r in rankings],
+        "warnings": poi_frame_warnings(pois_path, grid.frame, "--pois"),
     }
     return doc, grid, rankings
 
