@@ -98,9 +98,11 @@ def test_fuse_from_pose_topic_equals_fuse_from_tf(fused, container):
     assert r_topic["frames"]["dropped_total"] == 0 and r_topic["tracking"] is None
 
 
-def copy_with_shifted_poses(src, dst, topic: str, dx: float) -> None:
+def copy_with_shifted_poses(src, dst, topic: str, dx: float, frame_from: int | None = None) -> None:
     """Copy the depth, camera info, TF and pose topics of `src` into `dst` (colour left out), moving every pose
-    on `topic` by dx metres along world x. TF is copied unchanged."""
+    on `topic` by dx metres along world x. TF is copied unchanged. With frame_from = k, the poses on `topic`
+    from its k-th message on claim frame_id "odom"."""
+    n_pose = 0
     with open_recording(src) as rec, RecordingWriter(dst) as w:
         for name, msgtype, log_ns, msg in rec.typed_messages():
             kind = msgtype.split("/")[-1]
@@ -119,6 +121,9 @@ def copy_with_shifted_poses(src, dst, topic: str, dx: float) -> None:
                 T = pose_message_to_matrix(msg, msgtype)
                 if name == topic:
                     T[0, 3] += dx
+                    if frame_from is not None and n_pose >= frame_from:
+                        frame = "odom"
+                    n_pose += 1
                 w.write_pose(name, stamp, frame, T)
 
 
@@ -196,3 +201,15 @@ def test_synth_refuses_a_camera_pose_topic_it_cannot_write(tmp_path, topic):
     assert res.exit_code == 2, res.output
     assert res.output.startswith("kinfu: error: --camera-pose-topic") and topic in res.output
     assert not out.exists()
+
+
+def test_pose_topic_that_changes_frame_is_refused(posed, tmp_path):
+    mixed = tmp_path / "mixed.mcap"
+    copy_with_shifted_poses(posed / "recording.mcap", mixed, POSE_TOPIC, 0.0, frame_from=3)
+    out = tmp_path / "out"
+    res = CliRunner().invoke(cli, ["fuse", str(mixed), "-o", str(out), "--pose", "topic", "--pose-topic", POSE_TOPIC,
+                                   "--quiet"])
+    assert res.exit_code == 2, res.output
+    lines = res.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("kinfu: error:") and POSE_TOPIC in lines[0]
+    assert "'world'" in lines[0] and "'odom'" in lines[0] and not out.exists()

@@ -82,7 +82,12 @@ class _PosePath:
         self.frame = None
         for _, msgtype, log_ns, msg in rec.typed_messages([topic]):
             T = pose_message_to_matrix(msg, msgtype)
-            self.frame = self.frame or header_frame(msg) or "world"
+            frame = header_frame(msg).lstrip("/") or "world"
+            if self.frame is None:
+                self.frame = frame
+            elif frame != self.frame:  # poses in two frames cannot be interpolated into one trajectory
+                raise RecordingError(f"{rec.path}: pose topic {topic} changes frame_id from {self.frame!r} to "
+                                     f"{frame!r} at stamp {_stamp(msg, log_ns)} ns; expected one frame")
             self.tf.add(self.frame, "__camera__", _stamp(msg, log_ns), T)
         if self.frame is None:
             raise RecordingError(f"{rec.path}: pose topic {topic} has no messages")
