@@ -172,7 +172,7 @@ def _clampi(v, a, b):
     return a if v < a else (b if v > b else v)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _trace(labels, bdist, B, lo, vs, p, d, min_range, max_range, cen, r2, through, optimistic, p_unknown, h_unknown,
            vals):
     """Walk one ray (p origin, d unit direction). Fills vals[0:4]; returns (class, t of the first hit)."""
@@ -282,7 +282,7 @@ def _trace(labels, bdist, B, lo, vs, p, d, min_range, max_range, cen, r2, throug
             prev_unknown_in_s = False
             continue
         # walk voxel by voxel through this non-empty block
-        bx1, by1, bz1 = bx, by, bz
+        xb0, yb0, zb0 = bx * B, by * B, bz * B  # this block's voxel range [b0, b0 + B) per axis
         while True:
             lab = labels[ix, iy, iz]
             in_s = False
@@ -341,12 +341,12 @@ def _trace(labels, bdist, B, lo, vs, p, d, min_range, max_range, cen, r2, throug
                     return cls, thit
             if tcur >= t1:
                 return cls, thit
-            if ix // B != bx1 or iy // B != by1 or iz // B != bz1:
+            if ix < xb0 or ix >= xb0 + B or iy < yb0 or iy >= yb0 + B or iz < zb0 or iz >= zb0 + B:
                 break
     return cls, thit
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, error_model="numpy")
 def _cast_kernel(labels, bempty, B, lo, vs, origins, dirs, min_range, max_range, cen, radius, through,
                  optimistic, p_unknown, out_cls, out_t, out_vals):
     n = dirs.shape[0]
