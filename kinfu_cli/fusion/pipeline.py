@@ -168,7 +168,7 @@ def fuse_recording(recording: str | Path, outdir: str | Path, opts: FuseOptions 
             source_desc = f"tf {roles.world_frame} <- {roles.camera_frame}"
             if mode == "icp":
                 source_desc += " (first frame only)"
-        world = _world_frame(rec, mode, source, roles, opts.pose_topic)
+        world = _world_frame(rec, source, roles, opts.pose_topic)
         if vol is not None and vol.frame and world and vol.frame != world:
             raise RecordingError(f"--init {opts.init}: the volume was fused in frame {vol.frame!r}, but {rec.path} "
                                  f"gives camera poses in {world!r}")
@@ -335,8 +335,9 @@ def fuse_recording(recording: str | Path, outdir: str | Path, opts: FuseOptions 
     return report
 
 
-def _world_frame(rec, mode: str, source: str, roles, pose_topic: str | None) -> str:
-    """Name of the frame the camera poses of this run are in ("" when ICP starts from an unnamed first pose)."""
+def _world_frame(rec, source: str, roles, pose_topic: str | None) -> str:
+    """Name of the frame the camera poses of this run are in ("" when not known: ICP from an unnamed first pose,
+    or a pose topic without frame_id)."""
     if source == "tf":
         return roles.world_frame or ""
     if source == "topic":
