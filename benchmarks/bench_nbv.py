@@ -24,8 +24,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from kinfu_cli.fusion.ternary import EMPTY, OCCUPIED, UNKNOWN, TernaryGrid  # noqa: E402
-from kinfu_cli.nbv.camera import KINECT_V1, CameraModel  # noqa: E402
+from kinfu_cli.core.grid import EMPTY, OCCUPIED, UNKNOWN, TernaryGrid  # noqa: E402
+from kinfu_cli.core.camera import KINECT_V1, CameraModel  # noqa: E402
 from kinfu_cli.nbv.raycast import RayVolume, cast_views  # noqa: E402
 from kinfu_cli.nbv.ranking import forget_around  # noqa: E402
 from kinfu_cli.nbv.reference import reference_views  # noqa: E402

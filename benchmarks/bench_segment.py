@@ -126,7 +126,7 @@ def bench_scenes(seeds) -> dict:
 
 def bench_object_planning(seed: int = 0) -> dict:
     from kinfu_cli.fusion.volume import TernaryVolume
-    from kinfu_cli.nbv.camera import CameraModel
+    from kinfu_cli.core.camera import CameraModel
     from kinfu_cli.nbv.contours import extract_contours
     from kinfu_cli.nbv.objects import nbv_scorer, plan_object_views, plan_standard_views
     from kinfu_cli.segmentation.pipeline import SegmentOptions, analyse_volume

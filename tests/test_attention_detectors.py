@@ -12,7 +12,7 @@ from kinfu_cli.attention.em import fit_em, fit_em_numpy
 from kinfu_cli.attention.gmm_as import GmmActivitySaliency
 from kinfu_cli.attention.zvc import ZeroVelocityCrossing
 from kinfu_cli.cli import cli
-from kinfu_cli.errors import ConfigError, TrajectoryError
+from kinfu_cli.core.errors import ConfigError, TrajectoryError
 from kinfu_cli.evaluation.poi import resample_speed
 from kinfu_cli.io.polhemus import write_polhemus
 from kinfu_cli.io.trajectory import Trajectory

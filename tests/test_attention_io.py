@@ -7,8 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from kinfu_cli.attention.pois import Gaussian4, Poi, PoiFileError, read_pois, read_pois_document, write_pois
-from kinfu_cli.errors import KinfuError, TrajectoryError
+from kinfu_cli.core.pois import Gaussian4, Poi, PoiFileError, read_pois, read_pois_document, write_pois
+from kinfu_cli.core.errors import KinfuError, TrajectoryError
 from kinfu_cli.io.polhemus import read_ground_truth, read_polhemus, write_polhemus
 from kinfu_cli.io.trajectory import Trajectory
 

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from kinfu_cli.attention.pois import pois_document
+from kinfu_cli.core.pois import pois_document
 from kinfu_cli.attention.tasks import detect_by_task, inside_workspace, parse_workspace, require_tasks, split_tasks
 from kinfu_cli.cli import cli
-from kinfu_cli.errors import ConfigError
+from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.evaluation.poi import MATCH_RADIUS, make_detector, score_pois
 from kinfu_cli.io.hand import load_hand_trajectory
 from kinfu_cli.io.polhemus import read_ground_truth, read_polhemus, write_polhemus

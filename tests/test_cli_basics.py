@@ -1,5 +1,6 @@
 """The CLI skeleton: help, version, one-line errors."""
 
+import click
 from click.testing import CliRunner
 
 from kinfu_cli.cli import cli
@@ -9,15 +10,17 @@ def test_help_lists_commands_with_descriptions():
     res = CliRunner().invoke(cli, ["--help"])
     assert res.exit_code == 0
     assert "Usage:" in res.output
-    for name, cmd in cli.commands.items():
+    for name in cli.list_commands(None):
+        cmd = cli.get_command(None, name)
         assert name in res.output
         assert cmd.get_short_help_str(), f"{name} has no one-line description"
 
 
 def test_each_subcommand_help_shows_an_example():
-    for name, cmd in cli.commands.items():
-        subs = cmd.commands.items() if hasattr(cmd, "commands") else [(None, cmd)]
-        for sub, _ in subs:
+    for name in cli.list_commands(None):
+        cmd = cli.get_command(None, name)
+        subs = cmd.list_commands(None) if isinstance(cmd, click.Group) else [None]
+        for sub in subs:
             args = [name] + ([sub] if sub else []) + ["--help"]
             res = CliRunner().invoke(cli, args)
             assert res.exit_code == 0, args

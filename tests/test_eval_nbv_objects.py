@@ -10,7 +10,7 @@ from click.testing import CliRunner
 
 from kinfu_cli.cli import cli
 from kinfu_cli.evaluation.nbv_loop import LoopConfig, near_object_voxels, run_loop
-from kinfu_cli.fusion.ternary import TernaryGrid
+from kinfu_cli.core.grid import TernaryGrid
 from kinfu_cli.nbv.objects import not_attempted
 
 SMALL = dict(width=160, height=120, score_width=80)

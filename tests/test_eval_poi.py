@@ -9,7 +9,7 @@ import pytest
 from click.testing import CliRunner
 
 from kinfu_cli.cli import cli
-from kinfu_cli.errors import TrajectoryError
+from kinfu_cli.core.errors import TrajectoryError
 from kinfu_cli.evaluation.poi import (add_noise, evaluate_dataset, find_tasks, format_tables, resample_speed,
                                       score_pois, settings_for)
 from kinfu_cli.io.polhemus import write_polhemus

@@ -9,7 +9,7 @@ import pytest
 from click.testing import CliRunner
 
 from kinfu_cli.cli import cli
-from kinfu_cli.fusion.ternary import load_ternary
+from kinfu_cli.core.grid import load_ternary
 from kinfu_cli.fusion.volume import load_volume
 
 FAST = ["--voxel-size", "0.02", "--size", "2.0", "--quiet"]

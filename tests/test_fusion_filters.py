@@ -6,7 +6,7 @@ import numpy as np
 import open3d as o3d
 import pytest
 
-from kinfu_cli.errors import ConfigError
+from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.fusion import filters
 from kinfu_cli.fusion.synthetic import default_K
 

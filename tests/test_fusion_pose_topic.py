@@ -11,8 +11,8 @@ import pytest
 from click.testing import CliRunner
 
 from kinfu_cli.cli import cli
-from kinfu_cli.errors import TransformError
-from kinfu_cli.fusion.ternary import load_ternary
+from kinfu_cli.core.errors import TransformError
+from kinfu_cli.core.grid import load_ternary
 from kinfu_cli.io.frames import _PosePath, iter_frames
 from kinfu_cli.io.messages import (camera_info_K, decode_depth, header_frame, header_stamp_ns,
                                    pose_message_to_matrix, transform_to_matrix)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from kinfu_cli.errors import ConfigError, RecordingError, TransformError
+from kinfu_cli.core.errors import ConfigError, RecordingError, TransformError
 from kinfu_cli.io.frames import DROP_NO_POSE, FrameStats, iter_frames
 from kinfu_cli.io.recording import open_recording
 from kinfu_cli.io.roles import detect_roles

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from test_io_frames import T0, make_recording
 
-from kinfu_cli.errors import RecordingError, TrajectoryError
+from kinfu_cli.core.errors import RecordingError, TrajectoryError
 from kinfu_cli.io.hand import load_hand_trajectory
 from kinfu_cli.io.messages import pose_message_to_matrix, time_to_ns
 from kinfu_cli.io.recording import open_recording

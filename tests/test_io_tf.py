@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation, Slerp
 
-from kinfu_cli.errors import TransformError
+from kinfu_cli.core.errors import TransformError
 from kinfu_cli.io.tf_buffer import TfBuffer
 
 S = 1_000_000_000

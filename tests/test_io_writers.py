@@ -7,7 +7,7 @@ import pytest
 from rosbags.highlevel import AnyReader
 from scipy.spatial.transform import Rotation
 
-from kinfu_cli.errors import ConfigError
+from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.io.messages import (camera_info_K, decode_color, decode_depth, header_frame, header_stamp_ns,
                                    pose_message_to_matrix, transform_to_matrix)
 from kinfu_cli.io.writers import RecordingWriter, format_for

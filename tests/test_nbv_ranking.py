@@ -9,13 +9,15 @@ import pytest
 from click.testing import CliRunner
 
 from kinfu_cli.cli import cli
-from kinfu_cli.errors import ConfigError
-from kinfu_cli.fusion.ternary import EMPTY, OCCUPIED, UNKNOWN, TernaryGrid, load_ternary, save_ternary
-from kinfu_cli.nbv.camera import CameraModel, camera_from_options
+from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.core.grid import EMPTY, OCCUPIED, UNKNOWN, TernaryGrid, load_ternary, save_ternary
+from kinfu_cli.core.camera import CameraModel
+from kinfu_cli.nbv.sensor import camera_from_options
 from kinfu_cli.nbv.ranking import (estimate_table_z, forget_around, rank_poi, reject_reasons, score_views,
                                    unknown_in_sphere)
 from kinfu_cli.nbv.raycast import RayVolume
-from kinfu_cli.nbv.viewpoints import read_candidates, rotation_to_quaternion, sphere_viewpoints
+from kinfu_cli.core.poses import matrix_to_quaternion
+from kinfu_cli.nbv.viewpoints import read_candidates, sphere_viewpoints
 
 CAM = CameraModel(60.0, 60.0, 39.5, 29.5, 80, 60, min_range=0.3, max_range=3.0)
 SMALL = ["--fx", "60", "--fy", "60", "--cx", "39.5", "--cy", "29.5", "--width", "80", "--height", "60",
@@ -38,7 +40,7 @@ def test_sphere_viewpoints_look_at_the_poi_from_the_paper_sphere():
     below_pole = t[roll0, 2] < c[2] + 0.79
     assert np.all(R[roll0][below_pole][:, 2, 1] < 0)
     assert len(np.unique(np.round(t, 9), axis=0)) == 12 * 9 + 1  # 12 longitudes x 9 latitudes + the pole
-    q = rotation_to_quaternion(R[:3])
+    q = matrix_to_quaternion(R[:3])
     assert np.allclose(np.linalg.norm(q, axis=1), 1.0)
 
 
@@ -49,7 +51,7 @@ def test_camera_options_and_widened_fov():
     half = lambda c: np.degrees(np.arctan((c.cy + 0.5) / c.fy))  # noqa: E731
     assert half(wide) - half(cam) == pytest.approx(5.0, abs=0.15)
     assert wide.width == 640 and wide.height > 480
-    with pytest.raises(ConfigError, match="intrinsics missing: --fy, --cy"):
+    with pytest.raises(ConfigError, match="intrinsics missing: fy, cy"):
         camera_from_options(fx=500.0, cx=320.0)
 
 

@@ -5,13 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kinfu_cli.fusion.ternary import EMPTY, OCCUPIED, UNKNOWN, TernaryGrid
-from kinfu_cli.nbv.camera import CameraModel
+from kinfu_cli.core.grid import EMPTY, OCCUPIED, UNKNOWN, TernaryGrid
+from kinfu_cli.core.camera import CameraModel
 from kinfu_cli.nbv.raycast import (CLS_EMPTY_EXIT, CLS_OCCUPIED, CLS_UNKNOWN, RayVolume, cast_rays, cast_views,
                                    knowledge_map)
 from kinfu_cli.nbv.ranking import forget_around
 from kinfu_cli.nbv.reference import reference_views
-from kinfu_cli.nbv.viewpoints import look_at, sphere_viewpoints
+from kinfu_cli.core.poses import look_at
+from kinfu_cli.nbv.viewpoints import sphere_viewpoints
 
 CAM = CameraModel(60.0, 60.0, 39.5, 29.5, 80, 60, min_range=0.2, max_range=4.0)
 

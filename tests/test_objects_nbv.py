@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kinfu_cli.errors import ConfigError
+from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.nbv.contours import contour_voxels, extract_contours
 from kinfu_cli.nbv.objects import contour_viewpoints, find_near, plan_object_views, plan_standard_views
 from kinfu_cli.segmentation.pipeline import SegmentOptions, analyse_volume
-from kinfu_cli.fusion.ternary import TernaryGrid
+from kinfu_cli.core.grid import TernaryGrid
 from kinfu_cli.segmentation.synthetic import primitives_tsdf, tabletop_primitives
 
 VS = 0.01
@@ -125,7 +125,7 @@ def test_object_plan_takes_the_most_salient_segment_and_casts_few_candidates(pla
 
 def test_object_plan_with_the_nbv_ray_caster(planned):
     ranking = pytest.importorskip("kinfu_cli.nbv.ranking")
-    camera_mod = pytest.importorskip("kinfu_cli.nbv.camera")
+    camera_mod = pytest.importorskip("kinfu_cli.core.camera")
     from kinfu_cli.nbv.objects import nbv_scorer
 
     prims, grid, segs, contours = planned

@@ -9,9 +9,9 @@ import pytest
 from click.testing import CliRunner
 
 from kinfu_cli.cli import cli
-from kinfu_cli.errors import VolumeError
+from kinfu_cli.core.errors import VolumeError
 from kinfu_cli.evaluation.segments import boundary_set, score_segmentation
-from kinfu_cli.fusion.ternary import TernaryGrid, save_ternary
+from kinfu_cli.core.grid import TernaryGrid, save_ternary
 from kinfu_cli.segmentation.pipeline import SegmentOptions, analyse_cloud
 from kinfu_cli.segmentation.saliency import isolation, oriented_box, segment_saliency
 from kinfu_cli.segmentation.segments import PLANE_LABEL, segment_cloud

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from kinfu_cli.errors import ConfigError
+from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.sim.hand import Action, min_jerk, pick_and_place, synth_hand_trajectory, write_polhemus
 from kinfu_cli.sim.scene import Table
 

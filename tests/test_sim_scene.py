@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from kinfu_cli.errors import ConfigError
+from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.sim.scene import Table, make_tabletop_scene
 
 

@@ -4,7 +4,7 @@ import numpy as np
 import open3d as o3d
 import pytest
 
-from kinfu_cli.errors import ConfigError
+from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.sim.scene import make_tabletop_scene
 from kinfu_cli.sim.sensor import DepthSensor, kinect_v1_intrinsics, nguyen_axial_sigma
 

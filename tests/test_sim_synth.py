@@ -7,8 +7,9 @@ import pytest
 from click.testing import CliRunner
 
 from kinfu_cli.cli import cli
-from kinfu_cli.errors import ConfigError
-from kinfu_cli.sim.robot import RobotArm, look_at
+from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.core.poses import look_at
+from kinfu_cli.sim.robot import RobotArm
 from kinfu_cli.sim.scenario import depth_to_mm, make_scenario
 
 SMALL = dict(width=64, height=48, frames=6)
@@ -167,7 +168,7 @@ def test_committed_sample_data_is_what_the_generator_makes(sample_dir):
 
 
 def test_load_ground_truth_errors(tmp_path):
-    from kinfu_cli.errors import RecordingError
+    from kinfu_cli.core.errors import RecordingError
     from kinfu_cli.sim.scenario import load_ground_truth
 
     with pytest.raises(RecordingError, match="no changes.json"):

@@ -62,8 +62,8 @@ from __future__ import annotations
 import numpy as np
 
 from kinfu_cli.attention.em import Mixture, fit_em
-from kinfu_cli.attention.pois import DEFAULT_RADIUS, Gaussian4, Poi
-from kinfu_cli.errors import ConfigError
+from kinfu_cli.core.pois import DEFAULT_RADIUS, Gaussian4, Poi
+from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.io.trajectory import Trajectory
 
 SALIENCY_MODES = ("precision", "literal", "weight", "conditional")

@@ -27,8 +27,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from kinfu_cli.attention.pois import Poi
-from kinfu_cli.errors import ConfigError
+from kinfu_cli.core.pois import Poi
+from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.io.trajectory import Trajectory
 
 #: Default minimum task: real tasks last 0.9 s and more (hand-polhemus); a hand crossing a corner of
@@ -188,7 +188,7 @@ def detect_by_task(traj: Trajectory, new_detector: Callable[[], object], workspa
     each with extra "task" (its task index) and, when the trajectory has absolute stamps, "stamp_ns".
     Raises ConfigError (require_tasks) when no task is left.
     """
-    from kinfu_cli.progress import progress
+    from kinfu_cli.core.progress import progress
 
     tasks = split_tasks(traj, workspace, max_gap_s=max_gap_s, min_duration_s=min_duration_s,
                         min_samples=min_samples)

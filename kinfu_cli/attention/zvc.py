@@ -23,8 +23,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from kinfu_cli.attention.pois import DEFAULT_RADIUS, Poi
-from kinfu_cli.errors import ConfigError
+from kinfu_cli.core.pois import DEFAULT_RADIUS, Poi
+from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.io.trajectory import Trajectory
 
 

@@ -19,7 +19,7 @@ def emit(doc: dict, output, as_json: bool, lines_of: Callable[[dict], Iterable[s
     """Write `doc` atomically to `output` when given; print it as JSON or as the lines `lines_of` makes."""
     print_warnings(doc)
     if output is not None:
-        from kinfu_cli.io.atomic import write_json
+        from kinfu_cli.core.atomic import write_json
 
         write_json(output, doc)
     if as_json:

@@ -53,7 +53,7 @@ def command(reconstruction: Path, ground_truth: Path, state: str, threshold: flo
       kinfu eval fusion out/scan --ground-truth sample_data/tabletop --error-mesh out/scan_error.ply
     """
     from kinfu_cli.evaluation.reconstruction import evaluate_fusion, format_fusion_tables
-    from kinfu_cli.io.atomic import write_json
+    from kinfu_cli.core.atomic import write_json
 
     doc = evaluate_fusion(reconstruction, ground_truth, state=state, threshold=threshold, spacing=spacing,
                           margin=margin, min_height=min_height, footprint=footprint, use_volume=not no_volume,

@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 
 from kinfu_cli.commands.poi import detector_options, detector_params
-from kinfu_cli.errors import ConfigError
+from kinfu_cli.core.errors import ConfigError
 
 group = "eval"
 

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from kinfu_cli.errors import ConfigError
+from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.io.roles import role_kwargs, role_options
 
 

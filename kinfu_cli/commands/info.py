@@ -31,7 +31,7 @@ def summarize(rec: Recording, check_frames: dict | None = None, quiet: bool = Tr
     frames = None
     if check_frames is not None:
         from kinfu_cli.io.frames import FrameStats, iter_frames
-        from kinfu_cli.progress import progress
+        from kinfu_cli.core.progress import progress
 
         stats = FrameStats()
         total = rec.topics[roles.depth_topic].count if roles.depth_topic in rec.topics else None

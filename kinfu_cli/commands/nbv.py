@@ -9,7 +9,7 @@ import click
 
 from kinfu_cli.commands._output import emit
 
-from kinfu_cli.errors import ConfigError
+from kinfu_cli.core.errors import ConfigError
 
 
 def _table_z_option(value: str):
@@ -89,7 +89,7 @@ def command(volume, pois_path, mode, clear, gain, top, output, plot, candidates,
       kinfu nbv volume.npz --pois pois.json --gain entropy --top 5 --json
       kinfu nbv volume.npz --mode objects -o views.json
     """
-    from kinfu_cli.nbv.camera import camera_from_options
+    from kinfu_cli.nbv.sensor import camera_from_options
     from kinfu_cli.nbv.workflow import NbvOptions, objects_summary_lines, run_nbv, run_objects, summary_lines
 
     t0 = time.perf_counter()

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from kinfu_cli.errors import ConfigError
+from kinfu_cli.core.errors import ConfigError
 
 
 def _time_scale(value: str) -> str | float:
@@ -153,10 +153,10 @@ def command(source, algorithm, hand_topic, hand_frame, world_frame, workspace, s
       kinfu poi session.mcap --workspace -0.5,-0.8,0.7,0.6,0.4,1.3 --split-gap 1
       kinfu poi user1_cup0.traj --literal --plot literal.png
     """
-    from kinfu_cli.attention.pois import pois_document
+    from kinfu_cli.core.pois import pois_document
     from kinfu_cli.attention.tasks import parse_workspace, task_entries
     from kinfu_cli.evaluation.poi import make_detector
-    from kinfu_cli.io.atomic import write_json
+    from kinfu_cli.core.atomic import write_json
 
     params = detector_params(kw)[algorithm]
     box = parse_workspace(workspace)

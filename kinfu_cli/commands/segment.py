@@ -8,8 +8,8 @@ from pathlib import Path
 
 import click
 
-from kinfu_cli.errors import ConfigError
-from kinfu_cli.progress import progress
+from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.core.progress import progress
 
 
 def _pair(value: str, name: str) -> tuple[float, float]:

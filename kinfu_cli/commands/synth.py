@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from kinfu_cli.errors import ConfigError
+from kinfu_cli.core.errors import ConfigError
 
 FORMAT_NAMES = {"mcap": "recording.mcap", "bag": "recording.bag", "ros2": "recording_ros2"}
 

@@ -51,7 +51,7 @@ from pathlib import Path
 
 import numpy as np
 
-from kinfu_cli.errors import ConfigError, RecordingError
+from kinfu_cli.core.errors import ConfigError, RecordingError
 from kinfu_cli.nbv.ranking import default_inc_th, score_views, unknown_in_sphere
 from kinfu_cli.nbv.viewpoints import sphere_viewpoints
 
@@ -270,7 +270,7 @@ def _initial_scan(sc: SimScene, cfg: LoopConfig, sensor, K: np.ndarray, poses, m
     """Render and fuse the initial scan over the scene box -> (volume, views that saw something);
     RecordingError when none did."""
     from kinfu_cli.fusion.volume import TernaryVolume
-    from kinfu_cli.progress import progress
+    from kinfu_cli.core.progress import progress
 
     vol = TernaryVolume(size=tuple(sc.box_hi - sc.box_lo), voxel_size=cfg.voxel_size, origin=tuple(sc.box_lo),
                         min_depth=sensor.min_range, max_depth=sensor.max_range, color=False)
@@ -403,7 +403,7 @@ def _take_view(vol, T_cur, T_goal, mode, sc, cfg, sensor, K, timer, frames: int)
 
 def _sensor_setup(sc: SimScene, cfg: LoopConfig):
     """Room-enclosed render meshes, the simulated sensor and the NBV camera model (same image, same ranges)."""
-    from kinfu_cli.nbv.camera import CameraModel
+    from kinfu_cli.core.camera import CameraModel
     from kinfu_cli.sim.sensor import DepthSensor
 
     centre = (sc.box_lo + sc.box_hi) / 2
@@ -449,10 +449,10 @@ def run_exploration(sc: SimScene, cfg: LoopConfig, quiet: bool = True, scene_nam
     `exclude_shift` m and `exclude_turn_deg`), score with the same ray caster on a `score_width`-wide image
     of the sensor's field of view and ranges, and stop when the best score < `score_fraction` of its pixels.
     Measured after each view: unknown voxels inside the true objects' bounding spheres + `near_margin`."""
-    from kinfu_cli.nbv.camera import CameraModel
+    from kinfu_cli.core.camera import CameraModel
     from kinfu_cli.nbv.contours import extract_contours
     from kinfu_cli.nbv.objects import nbv_scorer, plan_object_views, plan_standard_views
-    from kinfu_cli.progress import progress
+    from kinfu_cli.core.progress import progress
     from kinfu_cli.segmentation.pipeline import SegmentOptions, analyse_volume
 
     if sc.object_spheres is None or len(sc.object_spheres) == 0:
@@ -753,7 +753,7 @@ def plot_loop(path: str | os.PathLike, doc: dict) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from kinfu_cli.io.atomic import atomic_path
+    from kinfu_cli.core.atomic import atomic_path
 
     if doc.get("kind") == "exploration":
         fig, ax = plt.subplots(figsize=(5.5, 3.8))

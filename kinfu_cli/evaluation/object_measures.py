@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from kinfu_cli.errors import ConfigError, RecordingError
+from kinfu_cli.core.errors import ConfigError, RecordingError
 
 # Monica et al. RAS 2016 Table 1 (thesis Table 2.1): mean abs. / st. dev. (m) of the object measure errors
 PAPER_TABLE_1 = [

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from kinfu_cli.errors import ConfigError, TrajectoryError
+from kinfu_cli.core.errors import ConfigError, TrajectoryError
 from kinfu_cli.io.trajectory import Trajectory
 
 MATCH_RADIUS = 0.20
@@ -199,7 +199,7 @@ def evaluate_dataset(dataset_dir: str | os.PathLike, algorithms: list[str], spee
 
     params: {"gmm-as": {...constructor kwargs...}, "zvc": {...}}.
     """
-    from kinfu_cli.progress import progress
+    from kinfu_cli.core.progress import progress
 
     tasks = find_tasks(dataset_dir)
     settings = settings_for(speeds or [1.0], noises or [])

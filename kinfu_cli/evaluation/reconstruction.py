@@ -31,15 +31,10 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numba
 import numpy as np
 from numba import njit, prange
 
-from kinfu_cli.errors import ConfigError, RecordingError, VolumeError
-
-# numba's workqueue pool does not spin at fork/join (see kinfu_cli/fusion/kernels.py); honours an explicit setting
-if "NUMBA_THREADING_LAYER" not in os.environ:
-    numba.config.THREADING_LAYER = "workqueue"
+from kinfu_cli.core.errors import ConfigError, RecordingError, VolumeError
 
 DEFAULT_THRESHOLD = 0.01  # m: completeness / precision distance
 DEFAULT_SPACING = 0.005  # m: true-surface sample spacing
@@ -363,7 +358,7 @@ class ReconstructionScore:
 
 def volume_coverage(volume, samples_visible: np.ndarray, samples_in_grid: np.ndarray) -> dict:
     """Label counts of the volume and the share of true-surface samples whose voxel is known (w > 0)."""
-    from kinfu_cli.fusion.ternary import UNKNOWN
+    from kinfu_cli.core.grid import UNKNOWN
 
     grid = volume.ternary_grid()
     counts = grid.counts()
@@ -486,7 +481,7 @@ def write_error_mesh(path: str | os.PathLike, rec: Reconstruction, distances: np
     import open3d as o3d
     from matplotlib import colormaps
 
-    from kinfu_cli.io.atomic import atomic_path
+    from kinfu_cli.core.atomic import atomic_path
 
     d = np.asarray(distances, dtype=np.float64)
     cols = colormaps["turbo"](np.clip(np.nan_to_num(d, nan=0.0) / vmax, 0.0, 1.0))[:, :3]
@@ -531,7 +526,7 @@ def evaluate_fusion(path, ground_truth, state: str = "after", threshold: float =
     ground-truth folder; returns the results document that `kinfu eval fusion` prints and writes. error_mesh: also
     write the reconstruction coloured by its distance to the truth (0 .. 2 x threshold) there."""
     from kinfu_cli.evaluation.object_measures import PAPER_TABLE_1, object_measures
-    from kinfu_cli.progress import progress
+    from kinfu_cli.core.progress import progress
     from kinfu_cli.sim.scenario import load_ground_truth
 
     for name, val in (("--threshold", threshold), ("--spacing", spacing)):

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
-from kinfu_cli.errors import ConfigError
+from kinfu_cli.core.errors import ConfigError
 
 
 def boundary_set(points: np.ndarray, labels: np.ndarray, t_eval: float = 0.02) -> np.ndarray:

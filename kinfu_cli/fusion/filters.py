@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from kinfu_cli.errors import ConfigError
+from kinfu_cli.core.errors import ConfigError
 
 
 def range_filter(depth: np.ndarray, min_depth: float, max_depth: float) -> np.ndarray:

@@ -24,17 +24,9 @@ from __future__ import annotations
 
 import math
 
-import os
 
-import numba
 import numpy as np
 from numba import njit, prange
-
-# The GNU OpenMP layer spins at every fork/join; on a machine shared with other processes a descheduled
-# spinning thread makes each small parallel kernel cost tens of milliseconds. numba's own workqueue
-# pool does not spin. (Honours an explicit NUMBA_THREADING_LAYER.)
-if "NUMBA_THREADING_LAYER" not in os.environ:
-    numba.config.THREADING_LAYER = "workqueue"
 
 B = 8  # block edge in voxels
 B3 = B * B * B

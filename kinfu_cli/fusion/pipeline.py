@@ -12,12 +12,12 @@ from pathlib import Path
 
 import numpy as np
 
-from kinfu_cli.errors import ConfigError, KinfuError, RecordingError, VolumeError
+from kinfu_cli.core.errors import ConfigError, KinfuError, RecordingError, VolumeError
 from kinfu_cli.fusion import filters
 from kinfu_cli.fusion.placement import default_origin
 from kinfu_cli.fusion.tracking import POSE_MODES, FrameToModelTracker
 from kinfu_cli.fusion.volume import TernaryVolume, load_volume
-from kinfu_cli.progress import progress
+from kinfu_cli.core.progress import progress
 
 OUTPUTS = ("mesh.ply", "cloud.ply", "volume.npz", "ternary.npz", "report.json")
 PLACEMENT_FRAMES = 5
@@ -62,7 +62,7 @@ def _spheres(opts: FuseOptions) -> list[dict]:
             raise ConfigError(f"--clear-sphere {s}: expected x,y,z,r with r > 0")
         out.append({"center": list(s[:3]), "radius": s[3], "source": "--clear-sphere"})
     if opts.clear_pois:
-        from kinfu_cli.attention.pois import read_pois
+        from kinfu_cli.core.pois import read_pois
 
         for p in read_pois(opts.clear_pois):
             if not (np.isfinite(p.radius) and p.radius > 0):
@@ -109,7 +109,7 @@ def fuse_recording(recording: str | Path, outdir: str | Path, opts: FuseOptions 
 
     Returns the report (also written as report.json).
     """
-    from kinfu_cli.attention.pois import poi_frame_warnings
+    from kinfu_cli.core.pois import poi_frame_warnings
     from kinfu_cli.io.frames import FrameStats, iter_frames
     from kinfu_cli.io.recording import open_recording
     from kinfu_cli.io.roles import detect_roles
@@ -267,8 +267,8 @@ def fuse_recording(recording: str | Path, outdir: str | Path, opts: FuseOptions 
     # ---------------------------------------------------------------- read-out and outputs
     import open3d as o3d
 
-    from kinfu_cli.fusion.ternary import save_ternary
-    from kinfu_cli.io.atomic import atomic_path, write_json
+    from kinfu_cli.core.grid import save_ternary
+    from kinfu_cli.core.atomic import atomic_path, write_json
 
     t0 = time.perf_counter()
     grid = vol.ternary_grid()

@@ -6,7 +6,7 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from kinfu_cli.errors import VolumeError
+from kinfu_cli.core.errors import VolumeError
 
 
 def backproject(depth: np.ndarray, K: np.ndarray, T_world_camera: np.ndarray, stride: int = 4,

@@ -8,15 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-
-def scaled_intrinsics(K: np.ndarray, factor: float) -> np.ndarray:
-    """Intrinsics of the image resized by `factor` (pixel centres preserved)."""
-    Ks = np.asarray(K, dtype=np.float64).copy()
-    Ks[0, 0] *= factor
-    Ks[1, 1] *= factor
-    Ks[0, 2] = (Ks[0, 2] + 0.5) * factor - 0.5
-    Ks[1, 2] = (Ks[1, 2] + 0.5) * factor - 0.5
-    return Ks
+from kinfu_cli.core.camera import scaled_intrinsics
 
 
 def raycast_maps(volume, K: np.ndarray, width: int, height: int, T_world_camera: np.ndarray):
@@ -45,7 +37,7 @@ def depth_to_png(depth: np.ndarray, path, max_depth: float | None = None) -> Non
     """Write a ray-cast depth map as a grey PNG (near = bright, miss = black), atomically."""
     import cv2
 
-    from kinfu_cli.io.atomic import atomic_path
+    from kinfu_cli.core.atomic import atomic_path
 
     d = np.asarray(depth, dtype=np.float32)
     top = float(max_depth) if max_depth else float(d.max() or 1.0)

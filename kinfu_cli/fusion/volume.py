@@ -11,18 +11,17 @@ carved free space too; only blocks near surfaces hold per-voxel v (int16), w (ui
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 
 import numpy as np
 
-from kinfu_cli.errors import ConfigError, VolumeError
+from kinfu_cli.core.errors import ConfigError, VolumeError
 from kinfu_cli.fusion import kernels as kn
-from kinfu_cli.fusion.ternary import TernaryGrid
+from kinfu_cli.core.grid import TernaryGrid, read_ternary
+from kinfu_cli.core.volume_file import FORMAT, FORMAT_VERSION, read_volume_file, write_volume_file
+from kinfu_cli.core.poses import check_rigid
 
-FORMAT = "kinfu-volume"
-FORMAT_VERSION = 1
 BYTES_PER_VOXEL = 3  # v int16 + w uint8
 BYTES_PER_VOXEL_COLOR = 3
 
@@ -46,21 +45,6 @@ def _available_bytes() -> int:
     except OSError:
         pass
     return 16 * 1024**3
-
-
-def check_rigid(T: np.ndarray, what: str = "T_world_camera") -> np.ndarray:
-    """Return T as float64 (4, 4) or raise VolumeError when it is not a finite rigid transform."""
-    T = np.asarray(T, dtype=np.float64)
-    if T.shape != (4, 4):
-        raise VolumeError(f"{what}: expected a 4x4 pose, got shape {T.shape}")
-    if not np.all(np.isfinite(T)):
-        raise VolumeError(f"{what}: pose is not finite (NaN or inf)")
-    R = T[:3, :3]
-    if (np.abs(R.T @ R - np.eye(3)).max() > 1e-3 or abs(np.linalg.det(R) - 1.0) > 1e-3
-            or np.abs(T[3] - [0, 0, 0, 1]).max() > 1e-9):
-        raise VolumeError(f"{what}: pose is not rigid (rotation not orthonormal with det +1, or last row "
-                          f"not [0 0 0 1])")
-    return T
 
 
 class TernaryVolume:
@@ -396,12 +380,10 @@ class TernaryVolume:
 
     def save(self, path: str | os.PathLike) -> Path:
         """Write one .npz (metadata, block tables, used pool rows) atomically; `load_volume` reads it back."""
-        from kinfu_cli.io.atomic import write_npz
-
         n = self.n_used
-        return write_npz(path, {"meta": np.array(json.dumps(self.meta())), "block_idx": self.block_idx,
-                                "block_w": self.block_w, "pool_v": self.pool_v[:n], "pool_w": self.pool_w[:n],
-                                "pool_c": self.pool_c[:n] if self.color else self.pool_c[:0]})
+        return write_volume_file(path, self.meta(), {
+            "block_idx": self.block_idx, "block_w": self.block_w, "pool_v": self.pool_v[:n],
+            "pool_w": self.pool_w[:n], "pool_c": self.pool_c[:n] if self.color else self.pool_c[:0]})
 
     def copy(self) -> "TernaryVolume":
         other = TernaryVolume.__new__(TernaryVolume)
@@ -418,22 +400,7 @@ class TernaryVolume:
 def load_volume(path: str | os.PathLike) -> TernaryVolume:
     """Read a volume written by TernaryVolume.save; VolumeError for missing, foreign or other-version files."""
     path = Path(path)
-    if not path.exists():
-        raise VolumeError(f"{path}: no such volume file")
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            if "meta" not in data.files:
-                raise VolumeError(f"{path}: not a kinfu volume.npz (no 'meta' array; a ternary.npz cannot be "
-                                  f"fused into)")
-            meta = json.loads(str(data["meta"]))
-            if meta.get("format") != FORMAT or meta.get("format_version") != FORMAT_VERSION:
-                raise VolumeError(f"{path}: volume format {meta.get('format')!r} version "
-                                  f"{meta.get('format_version')!r}, expected {FORMAT!r} version {FORMAT_VERSION}")
-            arrays = {k: data[k] for k in ("block_idx", "block_w", "pool_v", "pool_w", "pool_c")}
-    except VolumeError:
-        raise
-    except (OSError, ValueError, EOFError, KeyError, json.JSONDecodeError) as exc:
-        raise VolumeError(f"{path}: not a readable volume file ({exc})") from None
+    meta, arrays = read_volume_file(path)
     vol = TernaryVolume(size=[s * meta["voxel_size"] for s in meta["shape"]], voxel_size=meta["voxel_size"],
                         origin=meta["origin"], truncation=meta["truncation"], max_weight=meta["max_weight"],
                         min_depth=meta["min_depth"], max_depth=meta["max_depth"], color=meta["color"],
@@ -455,3 +422,9 @@ def load_volume(path: str | os.PathLike) -> TernaryVolume:
     vol.frames_integrated = int(meta.get("frames_integrated", 0))
     vol.frame = str(meta.get("frame", "") or "")
     return vol
+
+
+def load_grid(path: str | os.PathLike) -> TernaryGrid:
+    """The ternary grid of a `ternary.npz` or of a fusion `volume.npz`."""
+    grid = read_ternary(path)
+    return grid if grid is not None else load_volume(path).ternary_grid()

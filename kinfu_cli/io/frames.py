@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from kinfu_cli.errors import ConfigError, RecordingError, TransformError
+from kinfu_cli.core.errors import ConfigError, RecordingError, TransformError
 from kinfu_cli.io.messages import (POSE_TYPES, camera_info_K, decode_color, decode_depth, header_frame,
                                    header_stamp_ns, normalize_msgtype, pose_message_to_matrix)
 from kinfu_cli.io.roles import Roles, detect_roles

@@ -12,8 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
-from kinfu_cli.errors import RecordingError, TrajectoryError
-from kinfu_cli.io.messages import POSE_TYPES, header_frame, header_stamp_ns, pose_message_to_tq, quats_to_matrices
+from kinfu_cli.core.errors import RecordingError, TrajectoryError
+from kinfu_cli.core.poses import quaternion_to_matrix
+from kinfu_cli.io.messages import POSE_TYPES, header_frame, header_stamp_ns, pose_message_to_tq
 from kinfu_cli.io.recording import Recording, open_recording
 from kinfu_cli.io.tf_buffer import TfBuffer
 from kinfu_cli.io.trajectory import Trajectory
@@ -92,7 +93,7 @@ def _from_topic(rec: Recording, topic: str, world_frame: str | None, tf: TfBuffe
     stamps_a = np.asarray(stamps, dtype=np.int64)
     T = np.zeros((len(stamps), 4, 4))
     if stamps:
-        T[:, :3, :3] = quats_to_matrices(np.asarray(quats, dtype=np.float64))
+        T[:, :3, :3] = quaternion_to_matrix(np.asarray(quats, dtype=np.float64))
         T[:, :3, 3] = np.asarray(trans, dtype=np.float64)
         T[:, 3, 3] = 1.0
     meta = {"topic": topic, "msgtype": info.msgtype}

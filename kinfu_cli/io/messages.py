@@ -11,7 +11,8 @@ import struct
 import cv2
 import numpy as np
 
-from kinfu_cli.errors import RecordingError
+from kinfu_cli.core.errors import RecordingError
+from kinfu_cli.core.poses import quaternion_to_matrix
 
 DEPTH_ENCODINGS = ("16UC1", "mono16", "32FC1")
 COLOR_ENCODINGS = ("rgb8", "bgr8", "rgba8", "bgra8", "mono8", "8UC3", "8UC1")
@@ -46,24 +47,6 @@ def header_frame(msg: object) -> str:
     return str(getattr(header, "frame_id", "") or "") if header is not None else ""
 
 
-# ------------------------------------------------------------------------------------------- rotations
-def matrix_to_quat(R: np.ndarray) -> np.ndarray:
-    """3x3 rotation -> unit quaternion (x, y, z, w) with w >= 0."""
-    from scipy.spatial.transform import Rotation
-
-    q = Rotation.from_matrix(np.asarray(R, dtype=np.float64)).as_quat()
-    return -q if q[3] < 0 else q
-
-
-def quat_to_matrix(q: np.ndarray) -> np.ndarray:
-    """Quaternion (x, y, z, w), normalised here -> 3x3 rotation."""
-    q = np.asarray(q, dtype=np.float64)
-    n = np.linalg.norm(q)
-    if not np.isfinite(n) or n < 1e-12:
-        raise RecordingError(f"quaternion {q.tolist()} has zero or non-finite norm")
-    return quats_to_matrices(q)
-
-
 def _xyz(v: object) -> list[float]:
     return [float(v.x), float(v.y), float(v.z)]
 
@@ -75,7 +58,7 @@ def _xyzw(q: object) -> list[float]:
 def transform_to_matrix(transform: object) -> np.ndarray:
     """geometry_msgs/Transform -> 4x4."""
     T = np.eye(4)
-    T[:3, :3] = quat_to_matrix(_xyzw(transform.rotation))
+    T[:3, :3] = quaternion_to_matrix(_xyzw(transform.rotation))
     T[:3, 3] = _xyz(transform.translation)
     return T
 
@@ -83,7 +66,7 @@ def transform_to_matrix(transform: object) -> np.ndarray:
 def pose_to_matrix(pose: object) -> np.ndarray:
     """geometry_msgs/Pose -> 4x4."""
     T = np.eye(4)
-    T[:3, :3] = quat_to_matrix(_xyzw(pose.orientation))
+    T[:3, :3] = quaternion_to_matrix(_xyzw(pose.orientation))
     T[:3, 3] = _xyz(pose.position)
     return T
 
@@ -121,27 +104,6 @@ def pose_message_to_tq(msg: object, msgtype: str) -> tuple[tuple[float, float, f
     else:
         raise RecordingError(f"message type {msgtype}: expected one of {', '.join(POSE_TYPES)}")
     return (p.x, p.y, p.z), (q.x, q.y, q.z, q.w)
-
-
-def quats_to_matrices(q: np.ndarray) -> np.ndarray:
-    """(..., 4) quaternions xyzw (normalised here) -> (..., 3, 3) rotations, vectorised."""
-    q = np.asarray(q, dtype=np.float64)
-    n = np.linalg.norm(q, axis=-1, keepdims=True)
-    if not np.all(np.isfinite(n)) or np.any(n < 1e-12):
-        raise RecordingError("a quaternion has zero or non-finite norm")
-    q = q / n
-    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    R = np.empty(q.shape[:-1] + (3, 3))
-    R[..., 0, 0] = 1 - 2 * (y * y + z * z)
-    R[..., 0, 1] = 2 * (x * y - z * w)
-    R[..., 0, 2] = 2 * (x * z + y * w)
-    R[..., 1, 0] = 2 * (x * y + z * w)
-    R[..., 1, 1] = 1 - 2 * (x * x + z * z)
-    R[..., 1, 2] = 2 * (y * z - x * w)
-    R[..., 2, 0] = 2 * (x * z - y * w)
-    R[..., 2, 1] = 2 * (y * z + x * w)
-    R[..., 2, 2] = 1 - 2 * (x * x + y * y)
-    return R
 
 
 def normalize_msgtype(msgtype: str) -> str:

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Protocol
 
-from kinfu_cli.errors import RecordingError
+from kinfu_cli.core.errors import RecordingError
 from kinfu_cli.io.messages import camera_info_K, decode_color, decode_depth, normalize_msgtype
 
 __all__ = ["Recording", "TopicInfo", "open_recording", "detect_format", "decode_depth", "decode_color",

@@ -30,7 +30,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from kinfu_cli.errors import ConfigError, RecordingError
+from kinfu_cli.core.errors import ConfigError, RecordingError
 
 WORLD_FRAME = "world"
 CAMERA_FRAME = "camera_optical"
@@ -191,7 +191,7 @@ def _stamp_ns(text: str, where: str) -> int:
 
 
 def _scan_tum(folder: Path, intrinsics) -> RGBDFolder:
-    from kinfu_cli.io.messages import quats_to_matrices
+    from kinfu_cli.core.poses import quaternion_to_matrix
 
     depth_rows = _read_list(folder / "depth.txt", 2)
     if not depth_rows:
@@ -211,7 +211,7 @@ def _scan_tum(folder: Path, intrinsics) -> RGBDFolder:
         order = np.argsort(gt_st, kind="stable")
         gt_st, vals = gt_st[order], vals[order]
         gt_T = np.tile(np.eye(4), (len(rows), 1, 1))
-        gt_T[:, :3, :3] = quats_to_matrices(vals[:, 3:7])
+        gt_T[:, :3, :3] = quaternion_to_matrix(vals[:, 3:7])
         gt_T[:, :3, 3] = vals[:, :3]
     K, k_source = _read_K(folder, intrinsics)
     if K is None:
@@ -250,7 +250,7 @@ def import_folder(src: str | os.PathLike, out: str | os.PathLike, rate: float = 
                   compress: bool = True, quiet: bool = True) -> dict:
     """Convert an RGB-D folder into a recording at `out` (.mcap, .bag, or a ROS 2 bag folder); return a summary."""
     from kinfu_cli.io.writers import RecordingWriter, format_for
-    from kinfu_cli.progress import progress
+    from kinfu_cli.core.progress import progress
 
     if color not in ("compressed", "raw", "none"):
         raise ConfigError(f"--color {color!r}: expected compressed, raw or none")
@@ -333,11 +333,11 @@ def export_frames(recording: str | os.PathLike, out: str | os.PathLike, roles_kw
     """
     import json
 
-    from kinfu_cli.io.atomic import atomic_dir
+    from kinfu_cli.core.atomic import atomic_dir
     from kinfu_cli.io.frames import FrameStats, iter_frames
     from kinfu_cli.io.recording import open_recording
     from kinfu_cli.io.roles import detect_roles
-    from kinfu_cli.progress import progress
+    from kinfu_cli.core.progress import progress
 
     stats = FrameStats()
     listing = []

@@ -10,7 +10,7 @@ from __future__ import annotations
 import re
 from dataclasses import asdict, dataclass
 
-from kinfu_cli.errors import RecordingError
+from kinfu_cli.core.errors import RecordingError
 from kinfu_cli.io.messages import POSE_TYPES, header_frame
 from kinfu_cli.io.tf_buffer import TfBuffer
 

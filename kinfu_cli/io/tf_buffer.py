@@ -14,8 +14,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from kinfu_cli.errors import TransformError
-from kinfu_cli.io.messages import header_frame, matrix_to_quat, normalize_msgtype, quats_to_matrices, time_to_ns
+from kinfu_cli.core.errors import TransformError
+from kinfu_cli.core.poses import matrix_to_quaternion, quaternion_to_matrix
+from kinfu_cli.io.messages import header_frame, normalize_msgtype, time_to_ns
 
 TF_TYPES = ("tf2_msgs/msg/TFMessage", "tf/msg/tfMessage")
 
@@ -91,7 +92,7 @@ class TfBuffer:
         T = np.asarray(T, dtype=np.float64)
         if T.shape != (4, 4) or not np.all(np.isfinite(T)):
             raise TransformError(f"TF link {parent} -> {child}: transform is not a finite 4x4 matrix")
-        self.add_quat(parent, child, stamp_ns, T[:3, 3], matrix_to_quat(T[:3, :3]), static)
+        self.add_quat(parent, child, stamp_ns, T[:3, 3], matrix_to_quaternion(T[:3, :3]), static)
 
     def add_quat(self, parent: str, child: str, stamp_ns: int, translation, quat_xyzw, static: bool = False) -> None:
         """Add a link given as translation (3,) and quaternion (x, y, z, w)."""
@@ -255,7 +256,7 @@ class TfBuffer:
         if link.static or stamps_ns is None:
             if link._last_T is None:
                 T = np.eye(4)
-                T[:3, :3] = quats_to_matrices(qu[-1])
+                T[:3, :3] = quaternion_to_matrix(qu[-1])
                 T[:3, 3] = tr[-1]
                 link._last_T = T
             return np.broadcast_to(link._last_T, (n, 4, 4))
@@ -279,7 +280,7 @@ class TfBuffer:
             trans = tr[i0] + a[:, None] * (tr[i1] - tr[i0])
             quat = slerp(qu[i0], qu[i1], a)
         T = np.zeros((s.shape[0], 4, 4))
-        T[:, :3, :3] = quats_to_matrices(quat)
+        T[:, :3, :3] = quaternion_to_matrix(quat)
         T[:, :3, 3] = trans
         T[:, 3, 3] = 1.0
         return T

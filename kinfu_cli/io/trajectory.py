@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from kinfu_cli.errors import TrajectoryError
+from kinfu_cli.core.errors import TrajectoryError
 
 
 @dataclass

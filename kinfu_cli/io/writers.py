@@ -20,9 +20,9 @@ from types import TracebackType
 import cv2
 import numpy as np
 
-from kinfu_cli.errors import ConfigError, RecordingError
-from kinfu_cli.io.atomic import atomic_dir, atomic_path
-from kinfu_cli.io.messages import matrix_to_quat
+from kinfu_cli.core.errors import ConfigError, RecordingError
+from kinfu_cli.core.atomic import atomic_dir, atomic_path
+from kinfu_cli.core.poses import matrix_to_quaternion
 
 FORMATS = ("mcap", "bag", "ros2", "ros2-mcap")  # ros2-mcap: a ROS 2 bag folder with mcap storage
 
@@ -203,7 +203,7 @@ class RecordingWriter:
 
     def _transform(self, T: np.ndarray):
         T = _as_pose(T)
-        q = matrix_to_quat(T[:3, :3])
+        q = matrix_to_quaternion(T[:3, :3])
         vec = self._type("geometry_msgs/msg/Vector3")(x=float(T[0, 3]), y=float(T[1, 3]), z=float(T[2, 3]))
         quat = self._type("geometry_msgs/msg/Quaternion")(x=float(q[0]), y=float(q[1]), z=float(q[2]),
                                                           w=float(q[3]))
@@ -311,7 +311,7 @@ class RecordingWriter:
     def write_pose(self, topic: str, stamp_ns: int, frame_id: str, T: np.ndarray) -> None:
         """geometry_msgs/PoseStamped of the 4x4 pose T (pose of the object in `frame_id`)."""
         T = _as_pose(T)
-        q = matrix_to_quat(T[:3, :3])
+        q = matrix_to_quaternion(T[:3, :3])
         point = self._type("geometry_msgs/msg/Point")(x=float(T[0, 3]), y=float(T[1, 3]), z=float(T[2, 3]))
         quat = self._type("geometry_msgs/msg/Quaternion")(x=float(q[0]), y=float(q[1]), z=float(q[2]),
                                                           w=float(q[3]))

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
-from kinfu_cli.errors import ConfigError
+from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.nbv.contours import Contours, extract_contours
 
 Scorer = Callable[[np.ndarray, np.ndarray, float], np.ndarray]
@@ -251,7 +251,7 @@ def plan_object_views_for_volume(volume, camera, *, scorer: Scorer | None = None
                                  **kwargs) -> ObjectPlan:
     """Everything from a volume (fusion TernaryVolume or TernaryGrid): segments, contours, NBV scoring.
 
-    This is the entry point for `kinfu nbv --mode objects`. camera: a kinfu_cli.nbv.camera.CameraModel.
+    This is the entry point for `kinfu nbv --mode objects`. camera: a kinfu_cli.core.camera.CameraModel.
     """
     from kinfu_cli.segmentation.pipeline import SegmentOptions, analyse_volume
 

@@ -16,12 +16,13 @@ from pathlib import Path
 
 import numpy as np
 
-from kinfu_cli.errors import ConfigError, VolumeError
-from kinfu_cli.fusion.ternary import EMPTY, OCCUPIED, UNKNOWN, TernaryGrid
-from kinfu_cli.nbv.camera import CameraModel
+from kinfu_cli.core.errors import ConfigError, VolumeError
+from kinfu_cli.core.grid import EMPTY, OCCUPIED, UNKNOWN, TernaryGrid
+from kinfu_cli.core.camera import CameraModel
 from kinfu_cli.nbv.gains import all_gain_values, get_gain
 from kinfu_cli.nbv.raycast import RayVolume, cast_views
-from kinfu_cli.nbv.viewpoints import check_poses, rotation_to_quaternion, sphere_viewpoints
+from kinfu_cli.core.poses import check_poses, matrix_to_quaternion
+from kinfu_cli.nbv.viewpoints import sphere_viewpoints
 
 REJECT_REASONS = ("below_table", "inside_occupied", "inside_unknown")
 
@@ -65,7 +66,7 @@ class ViewScores:
     def view_dict(self, i: int) -> dict:
         T = self.poses[i]
         return {"index": int(i), "pose": T.tolist(), "position": T[:3, 3].tolist(),
-                "quaternion": rotation_to_quaternion(T[:3, :3]).tolist(), "gain": float(self.gain[i]),
+                "quaternion": matrix_to_quaternion(T[:3, :3]).tolist(), "gain": float(self.gain[i]),
                 "rays_unknown": int(self.counts[i, 0]), "rays_occupied": int(self.counts[i, 1]),
                 "rays_empty_exit": int(self.counts[i, 2]), "rays": int(self.rays[i]),
                 "gains": {k: float(v[i]) for k, v in self.gains.items()}}
@@ -287,7 +288,7 @@ class PoiSpec:
 def load_pois(path: str | os.PathLike, default_radius: float | None = None) -> list[PoiSpec]:
     """POIs of a pois.json (via the POI module's reader); `default_radius` overrides each radius.
     Raises a KinfuError naming the file when there are none."""
-    from kinfu_cli.attention.pois import read_pois
+    from kinfu_cli.core.pois import read_pois
 
     pois = read_pois(path)
     if not pois:

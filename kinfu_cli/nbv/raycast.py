@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, prange
 
-from kinfu_cli.fusion.ternary import TernaryGrid
+from kinfu_cli.core.grid import TernaryGrid
 
 CLS_UNKNOWN = 0
 CLS_OCCUPIED = 1

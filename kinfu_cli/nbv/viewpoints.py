@@ -18,7 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from kinfu_cli.errors import ConfigError
+from kinfu_cli.core.atomic import write_json
+from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.core.poses import check_poses
 
 
 def _angles(start: float, stop: float, step: float, *, closed: bool, name: str) -> np.ndarray:
@@ -66,48 +68,6 @@ def sphere_viewpoints(center, radius: float = 0.8, lon_step: float = 30.0, lat_m
     return T
 
 
-def look_at(position, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
-    """4x4 camera-to-world pose at `position` looking at `target` with the image y axis pointing
-    away from `up` (upright image); a pose looking straight along `up` uses the world x axis."""
-    p = np.asarray(position, dtype=np.float64).reshape(3)
-    z = np.asarray(target, dtype=np.float64).reshape(3) - p
-    n = np.linalg.norm(z)
-    if not n > 0:
-        raise ConfigError("look_at: position and target coincide")
-    z /= n
-    up = np.asarray(up, dtype=np.float64)
-    x = np.cross(z, up)
-    if np.linalg.norm(x) < 1e-9:
-        x = np.cross(z, [1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.cross(z, [0.0, 1.0, 0.0])
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    T = np.eye(4)
-    T[:3, 0], T[:3, 1], T[:3, 2], T[:3, 3] = x, y, z, p
-    return T
-
-
-def check_poses(poses, source: str = "poses") -> np.ndarray:
-    """Validate (N, 4, 4) rigid camera-to-world poses; raises ConfigError naming `source`."""
-    arr = np.asarray(poses, dtype=np.float64)
-    if arr.ndim == 2 and arr.shape == (4, 4):
-        arr = arr[None]
-    if arr.ndim != 3 or arr.shape[1:] != (4, 4):
-        raise ConfigError(f"{source}: expected a list of 4x4 poses, got shape {arr.shape}")
-    if arr.shape[0] == 0:
-        raise ConfigError(f"{source}: no poses")
-    if not np.all(np.isfinite(arr)):
-        bad = int(np.flatnonzero(~np.isfinite(arr).all(axis=(1, 2)))[0])
-        raise ConfigError(f"{source}: pose {bad} is not finite")
-    R = arr[:, :3, :3]
-    err = np.abs(np.einsum("nji,njk->nik", R, R) - np.eye(3)).max(axis=(1, 2))
-    det = np.linalg.det(R)
-    bad = np.flatnonzero((err > 1e-4) | (det < 0) | np.any(np.abs(arr[:, 3] - [0, 0, 0, 1]) > 1e-9, axis=1))
-    if bad.size:
-        raise ConfigError(f"{source}: pose {int(bad[0])} is not a rigid transform (rotation not orthonormal "
-                          "or last row not [0 0 0 1])")
-    return arr
-
-
 def read_candidates(path: str | os.PathLike) -> np.ndarray:
     """Read a candidate file: a JSON list of 4x4 camera-to-world poses, or {"poses": [...]}
     (entries may also be objects with a "pose" key, as in views.json)."""
@@ -132,17 +92,5 @@ def read_candidates(path: str | os.PathLike) -> np.ndarray:
 
 def write_candidates(path: str | os.PathLike, poses) -> Path:
     """Write poses as {"poses": [4x4, ...]} atomically."""
-    from kinfu_cli.io.atomic import write_json
-
     arr = check_poses(poses)
     return write_json(path, {"poses": arr.tolist()})
-
-
-def rotation_to_quaternion(R) -> np.ndarray:
-    """(..., 3, 3) rotation matrices -> (..., 4) unit quaternions [x, y, z, w] with w >= 0."""
-    from scipy.spatial.transform import Rotation
-
-    R = np.asarray(R, dtype=np.float64)
-    q = Rotation.from_matrix(R.reshape(-1, 3, 3)).as_quat()
-    q[q[:, 3] < 0] *= -1
-    return q.reshape(R.shape[:-2] + (4,))

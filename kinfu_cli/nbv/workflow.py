@@ -7,10 +7,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from kinfu_cli.attention.pois import poi_frame_warnings
-from kinfu_cli.errors import ConfigError
-from kinfu_cli.fusion.ternary import TernaryGrid, load_ternary
-from kinfu_cli.nbv.camera import CameraModel
+from kinfu_cli.core.pois import poi_frame_warnings
+from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.core.grid import TernaryGrid
+from kinfu_cli.fusion.volume import load_grid
+from kinfu_cli.core.camera import CameraModel
 from kinfu_cli.nbv.gains import get_gain
 from kinfu_cli.nbv.ranking import (PoiRanking, check_region_inside, estimate_table_z, forget_around, load_pois,
                                    rank_poi)
@@ -54,7 +55,7 @@ def run_nbv(volume_path: str | os.PathLike, pois_path: str | os.PathLike, camera
     if opts.clearance < 0:
         raise ConfigError(f"--clearance: expected a non-negative distance, got {opts.clearance}")
     pois = load_pois(pois_path, opts.poi_radius)
-    grid = load_ternary(volume_path)
+    grid = load_grid(volume_path)
     for p in pois:
         check_region_inside(grid, p.position, f"{pois_path}: POI {p.id}")
     cand = read_candidates(opts.candidates) if opts.candidates is not None else None
@@ -67,7 +68,7 @@ def run_nbv(volume_path: str | os.PathLike, pois_path: str | os.PathLike, camera
     per_poi = [cand if cand is not None else sphere_viewpoints(p.position, **opts.sphere) for p in pois]
     total = sum(len(c) for c in per_poi)
 
-    from kinfu_cli.progress import progress_enabled
+    from kinfu_cli.core.progress import progress_enabled
 
     bar = None
     if progress_enabled(quiet):
@@ -131,7 +132,7 @@ def run_objects(volume_path: str | os.PathLike, camera: CameraModel, *, gain: st
     """`kinfu nbv --mode objects`: the object-driven planner (thesis Alg. 4, kinfu_cli.nbv.objects) scored
     with this module's ray caster; returns the views.json document."""
     from kinfu_cli.nbv.objects import nbv_scorer, plan_object_views_for_volume
-    from kinfu_cli.nbv.viewpoints import rotation_to_quaternion
+    from kinfu_cli.core.poses import matrix_to_quaternion
     from kinfu_cli.segmentation.pipeline import load_segment_input
 
     get_gain(gain)
@@ -143,7 +144,7 @@ def run_objects(volume_path: str | os.PathLike, camera: CameraModel, *, gain: st
     doc = plan.to_json(top=top or 10**9)
     for v in doc["views"]:
         T = np.asarray(v["pose"])
-        v.update(position=T[:3, 3].tolist(), quaternion=rotation_to_quaternion(T[:3, :3]).tolist(), gain=v["score"])
+        v.update(position=T[:3, 3].tolist(), quaternion=matrix_to_quaternion(T[:3, :3]).tolist(), gain=v["score"])
     return {"mode": "objects", "volume": str(volume_path), "gain": gain, "gain_unit": get_gain(gain).unit,
             "camera": camera.to_dict(), "table_z": tz, "voxel_size": grid.voxel_size, "shape": list(grid.shape),
             "score_threshold": score_threshold, **doc}

@@ -6,7 +6,7 @@ import os
 
 import numpy as np
 
-from kinfu_cli.fusion.ternary import TernaryGrid
+from kinfu_cli.core.grid import TernaryGrid
 
 _COLORS = {1: (0.15, 0.15, 0.15), 0: (0.65, 0.65, 0.75), -1: (1.0, 1.0, 1.0)}
 
@@ -28,7 +28,7 @@ def plot_nbv(path: str | os.PathLike, grid: TernaryGrid, rankings, top: int = 5,
     import matplotlib.pyplot as plt
     from matplotlib.patches import Circle
 
-    from kinfu_cli.io.atomic import atomic_path
+    from kinfu_cli.core.atomic import atomic_path
 
     n = max(len(rankings), 1)
     fig, axes = plt.subplots(n, 2, figsize=(10, 4.8 * n), squeeze=False)

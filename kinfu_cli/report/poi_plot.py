@@ -39,7 +39,7 @@ def plot_pois(path: str | os.PathLike, traj: Trajectory, detector, title: str = 
     import matplotlib.pyplot as plt
     from matplotlib import cm, colors
 
-    from kinfu_cli.io.atomic import atomic_path
+    from kinfu_cli.core.atomic import atomic_path
 
     fig = plt.figure(figsize=(12, 5.5))
     ax = fig.add_subplot(1, 2, 1, projection="3d")
@@ -104,7 +104,7 @@ def plot_task_pois(path: str | os.PathLike, traj: Trajectory, tasks, detectors, 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from kinfu_cli.io.atomic import atomic_path
+    from kinfu_cli.core.atomic import atomic_path
 
     fig = plt.figure(figsize=(13, 5.5))
     ax = fig.add_subplot(1, 2, 1, projection="3d")

@@ -15,7 +15,7 @@ def plot_segments(result, outdir: str | os.PathLike) -> dict[str, Path]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from kinfu_cli.io.atomic import atomic_path
+    from kinfu_cli.core.atomic import atomic_path
     from kinfu_cli.segmentation.pipeline import saliency_colors, segment_colors
     from kinfu_cli.segmentation.superquadric import SuperquadricFit
 

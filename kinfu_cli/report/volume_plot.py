@@ -24,7 +24,7 @@ def plot_slices(grid, outdir, n: int = 4) -> list[Path]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from kinfu_cli.io.atomic import atomic_path
+    from kinfu_cli.core.atomic import atomic_path
 
     lab = grid.labels
     observed = lab != 0

@@ -14,7 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from kinfu_cli.errors import VolumeError
+from kinfu_cli.core.errors import VolumeError
+from kinfu_cli.core.grid import read_ternary
+from kinfu_cli.fusion.volume import load_volume
 from kinfu_cli.segmentation.saliency import SegmentSaliency, segment_saliency
 from kinfu_cli.segmentation.segments import PLANE_LABEL, Segmentation, SegmentationParams, segment_cloud
 from kinfu_cli.segmentation.superquadric import SegmentError, SuperquadricFit, fit_superquadric
@@ -136,23 +138,11 @@ def analyse_volume(volume, options: SegmentOptions | None = None) -> SegmentResu
 
 def load_segment_input(path: str | os.PathLike):
     """A fusion volume.npz (TSDF + weights) or a ternary.npz (labels only)."""
-    from kinfu_cli.fusion.ternary import load_ternary
-
     path = Path(path)
     if not path.exists():
         raise VolumeError(f"{path}: no such volume file")
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            is_ternary = "ternary" in data.files
-    except (OSError, ValueError, EOFError) as exc:
-        raise VolumeError(f"{path}: not a readable .npz volume ({exc})") from None
-    if is_ternary:
-        return load_ternary(path)
-    try:
-        from kinfu_cli.fusion.volume import load_volume
-    except ImportError:
-        raise VolumeError(f"{path}: expected a ternary.npz (arrays 'ternary', 'origin', 'voxel_size')") from None
-    return load_volume(path)
+    grid = read_ternary(path)
+    return grid if grid is not None else load_volume(path)
 
 
 def segment_colors(labels: np.ndarray) -> np.ndarray:
@@ -182,7 +172,7 @@ def write_segment_outputs(result: SegmentResult, outdir: str | os.PathLike, plot
     """segments.ply, saliency.ply, segments.json (+ segments.png, saliency.png with plot)."""
     import open3d as o3d
 
-    from kinfu_cli.io.atomic import atomic_path, write_json
+    from kinfu_cli.core.atomic import atomic_path, write_json
 
     out = Path(outdir)
     seg = result.segmentation

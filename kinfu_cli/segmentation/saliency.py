@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from kinfu_cli.errors import ConfigError
+from kinfu_cli.core.errors import ConfigError
 
 
 @dataclass

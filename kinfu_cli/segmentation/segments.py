@@ -29,7 +29,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from kinfu_cli.errors import ConfigError, VolumeError
+from kinfu_cli.core.errors import ConfigError, VolumeError
 
 PLANE_LABEL = 0
 NOISE_LABEL = -1

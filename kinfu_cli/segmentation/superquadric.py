@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
-from kinfu_cli.errors import ConfigError, KinfuError
+from kinfu_cli.core.errors import ConfigError, KinfuError
 
 E_MIN = 0.1
 E_MAX = 1.9

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kinfu_cli.errors import VolumeError
+from kinfu_cli.core.errors import VolumeError
 
 __all__ = ["SurfaceCloud", "surface_from_tsdf", "surface_from_labels", "surface_from_volume", "downsample"]
 

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from kinfu_cli.errors import ConfigError
+from kinfu_cli.core.errors import ConfigError
 
 LINKS = ("base_link", "link1", "link2", "link3", "link4", "link5", "link6", "wrist")
 CAMERA_FRAME = "camera_optical"
@@ -42,19 +42,6 @@ def rotvec(v) -> np.ndarray:
     from scipy.spatial.transform import Rotation
 
     return Rotation.from_rotvec(v).as_matrix()
-
-
-def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
-    """Camera-to-world pose (optical frame: x right, y down, z forward) at `eye` looking at `target`, level horizon."""
-    eye = np.asarray(eye, dtype=float)
-    z = np.asarray(target, dtype=float) - eye
-    z /= np.linalg.norm(z)
-    x = np.cross(z, up)
-    if np.linalg.norm(x) < 1e-9:
-        raise ConfigError("look_at: viewing direction parallel to the up vector")
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    return transform(np.stack([x, y, z], axis=1), eye)
 
 
 def _default_base() -> np.ndarray:

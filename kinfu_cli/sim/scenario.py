@@ -26,10 +26,11 @@ from pathlib import Path
 
 import numpy as np
 
-from kinfu_cli.errors import ConfigError
+from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.io.trajectory import Trajectory
 from kinfu_cli.sim.hand import Action, HandChange, synth_hand_trajectory
-from kinfu_cli.sim.robot import CAMERA_FRAME, WORLD_FRAME, RobotArm, look_at
+from kinfu_cli.core.poses import look_at
+from kinfu_cli.sim.robot import CAMERA_FRAME, WORLD_FRAME, RobotArm
 from kinfu_cli.sim.scene import PALETTE, Scene, make_tabletop_scene, random_object
 from kinfu_cli.sim.sensor import DepthSensor, SensorFrame, kinect_v1_intrinsics
 
@@ -232,7 +233,7 @@ def write_recordings(scenario: Scenario, paths: list[str | os.PathLike], depth_f
     from contextlib import ExitStack
 
     from kinfu_cli.io.writers import RecordingWriter
-    from kinfu_cli.progress import progress
+    from kinfu_cli.core.progress import progress
 
     if depth_format not in ("png", "raw"):
         raise ConfigError(f"--depth-format {depth_format!r}: expected png or raw")
@@ -345,7 +346,7 @@ def check_camera_pose_topic(topic: str | None, depth_format: str = "png", color_
 def write_ground_truth(scenario: Scenario, folder: str | os.PathLike, topics: dict | None = None) -> Path:
     """Write ground truth into `folder` (atomically, as a whole): scene_before.ply, scene_after.ply, objects/<id>.ply
     + table.ply + floor.ply (after state), changes.json, camera_poses.txt, hand.traj (Polhemus format, 100 Hz)."""
-    from kinfu_cli.io.atomic import atomic_dir
+    from kinfu_cli.core.atomic import atomic_dir
     from kinfu_cli.io.polhemus import write_polhemus
     from kinfu_cli.sim.hand import resample
 
@@ -417,7 +418,7 @@ def ground_truth_json(sc: Scenario, topics: dict | None = None) -> dict:
 def _json(obj) -> str:
     import json
 
-    from kinfu_cli.io.atomic import _json_default
+    from kinfu_cli.core.atomic import _json_default
 
     return json.dumps(obj, indent=2, default=_json_default) + "\n"
 
@@ -486,7 +487,7 @@ def load_ground_truth(folder: str | os.PathLike) -> GroundTruth:
     """Read a ground_truth/ folder written by `kinfu synth` (or the recording folder holding it)."""
     import json
 
-    from kinfu_cli.errors import RecordingError
+    from kinfu_cli.core.errors import RecordingError
 
     folder = Path(folder)
     if (folder / "ground_truth" / "changes.json").exists():
@@ -527,7 +528,7 @@ def load_ground_truth(folder: str | os.PathLike) -> GroundTruth:
 def _read_mesh(path: Path):
     import open3d as o3d
 
-    from kinfu_cli.errors import RecordingError
+    from kinfu_cli.core.errors import RecordingError
 
     if not path.exists():
         raise RecordingError(f"{path}: missing ground-truth mesh")

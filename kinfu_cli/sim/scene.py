@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import open3d as o3d
 
-from kinfu_cli.errors import ConfigError
+from kinfu_cli.core.errors import ConfigError
 
 SHAPES = ("box", "cylinder", "sphere", "torus", "cone")
 

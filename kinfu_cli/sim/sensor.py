@@ -32,7 +32,8 @@ import numpy as np
 import open3d as o3d
 from numba import njit, prange
 
-from kinfu_cli.errors import ConfigError
+from kinfu_cli.core.camera import preset_intrinsics
+from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.sim.scene import LABEL_NONE, RaycastTarget, Scene
 
 # numba probes the TBB threading layer at the first parallel call and warns when the installed TBB is too old;
@@ -44,12 +45,9 @@ BACKGROUND_RGB = np.array([0.08, 0.08, 0.09])
 
 
 def kinect_v1_intrinsics(width: int = 640, height: int = 480) -> np.ndarray:
-    """Kinect v1 depth intrinsics scaled to width x height: fx = fy = 585 at 640x480, principal point at the centre."""
-    if width < 2 or height < 2:
-        raise ConfigError(f"image size {width}x{height}: expected at least 2x2 pixels")
-    fx = 585.0 * width / 640.0
-    fy = 585.0 * height / 480.0
-    return np.array([[fx, 0.0, (width - 1) / 2.0], [0.0, fy, (height - 1) / 2.0], [0.0, 0.0, 1.0]])
+    """The simulated sensor's intrinsics: the raw Kinect v1 IR camera (preset "kinect_v1_ir", fx = fy = 585 at
+    640x480) scaled to width x height, principal point at the centre."""
+    return preset_intrinsics("kinect_v1_ir", width, height)
 
 
 def nguyen_axial_sigma(z: np.ndarray, theta: np.ndarray | float = 0.0) -> np.ndarray:

@@ -3,13 +3,17 @@
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import shutil
 import tempfile
+import zipfile
 from collections.abc import Iterator
 from pathlib import Path
 
-from kinfu_cli.errors import KinfuError
+import numpy as np
+
+from kinfu_cli.core.errors import KinfuError
 
 
 def _ensure_parent(final: Path) -> Path:
@@ -78,8 +82,6 @@ def _umask() -> int:
 
 def write_json(final: str | os.PathLike, obj: object) -> Path:
     """Write `obj` as indented JSON atomically."""
-    import json
-
     final = Path(final)
     with atomic_path(final) as tmp:
         tmp.write_text(json.dumps(obj, indent=2, default=_json_default) + "\n")
@@ -89,10 +91,6 @@ def write_json(final: str | os.PathLike, obj: object) -> Path:
 def write_npz(final: str | os.PathLike, arrays: dict) -> Path:
     """Write `arrays` as one .npz atomically (np.load reads it), compressed with zlib level 1: several times
     faster than np.savez_compressed's level 6, and nearly as small for mostly-constant volumes."""
-    import zipfile
-
-    import numpy as np
-
     final = Path(final)
     with atomic_path(final) as tmp:
         with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=1) as zf:
@@ -103,8 +101,6 @@ def write_npz(final: str | os.PathLike, arrays: dict) -> Path:
 
 
 def _json_default(obj: object) -> object:
-    import numpy as np
-
     if isinstance(obj, np.generic):
         return obj.item()
     if isinstance(obj, np.ndarray):

@@ -1,7 +1,9 @@
 """Error classes the CLI turns into one-line messages with exit code 2.
 
-Library code raises these with the file, topic or option and what was expected;
-it never prints. Anything else escaping a command is a bug.
+Library code raises these with the file, topic or parameter and what was expected; it never prints
+and never names a command-line flag. An error about one argument passes `parameter=` (the Python
+name); the message then reads "parameter: detail", and the command layer may show the flag instead.
+Anything else escaping a command is a bug.
 """
 
 from __future__ import annotations
@@ -11,6 +13,11 @@ class KinfuError(Exception):
     """Bad input or an impossible request; the message is shown to the user as one line."""
 
     exit_code = 2
+
+    def __init__(self, message: str, *, parameter: str | None = None) -> None:
+        super().__init__(f"{parameter}: {message}" if parameter else message)
+        self.parameter = parameter
+        self.detail = message
 
 
 class RecordingError(KinfuError):

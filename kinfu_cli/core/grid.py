@@ -14,7 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from kinfu_cli.errors import VolumeError
+from kinfu_cli.core.atomic import write_npz
+from kinfu_cli.core.errors import VolumeError
 
 OCCUPIED = np.int8(1)
 UNKNOWN = np.int8(0)
@@ -61,27 +62,30 @@ class TernaryGrid:
 
 def save_ternary(path: str | os.PathLike, grid: TernaryGrid) -> None:
     """Write `ternary.npz` atomically (compressed: mostly-constant labels shrink a lot)."""
-    from kinfu_cli.io.atomic import write_npz
-
     write_npz(path, {"ternary": grid.labels, "origin": grid.origin, "voxel_size": np.float64(grid.voxel_size),
                      "frame": np.array(grid.frame)})
 
 
-def load_ternary(path: str | os.PathLike) -> TernaryGrid:
-    """Read a `ternary.npz`; a fusion `volume.npz` is accepted too when fusion provides a loader."""
+def read_ternary(path: str | os.PathLike) -> TernaryGrid | None:
+    """The grid of a `ternary.npz`; None when `path` is a readable .npz without a 'ternary' array (such as a
+    fusion volume.npz, which fusion's `load_grid` reads); VolumeError when it is missing or unreadable."""
     path = Path(path)
     if not path.exists():
         raise VolumeError(f"{path}: no such file")
     try:
         with np.load(path, allow_pickle=False) as data:
             keys = set(data.files)
-            if "ternary" in keys:
-                frame = str(data["frame"]) if "frame" in keys else ""
-                return TernaryGrid(data["ternary"], data["origin"], float(data["voxel_size"]), frame)
+            if "ternary" not in keys:
+                return None
+            frame = str(data["frame"]) if "frame" in keys else ""
+            return TernaryGrid(data["ternary"], data["origin"], float(data["voxel_size"]), frame)
     except (OSError, ValueError, EOFError) as exc:
         raise VolumeError(f"{path}: not a readable .npz volume ({exc})") from None
-    try:
-        from kinfu_cli.fusion.volume import load_volume  # provided by the fusion module
-    except ImportError:
-        raise VolumeError(f"{path}: expected a ternary.npz with arrays 'ternary', 'origin', 'voxel_size'") from None
-    return load_volume(path).ternary_grid()
+
+
+def load_ternary(path: str | os.PathLike) -> TernaryGrid:
+    """Read a `ternary.npz` (VolumeError for anything else; fusion's `load_grid` also takes a volume.npz)."""
+    grid = read_ternary(path)
+    if grid is None:
+        raise VolumeError(f"{path}: expected a ternary.npz with arrays 'ternary', 'origin', 'voxel_size'")
+    return grid

@@ -24,7 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from kinfu_cli.errors import ConfigError, TrajectoryError
+from kinfu_cli.core.atomic import write_json
+from kinfu_cli.core.errors import ConfigError, TrajectoryError
 
 DEFAULT_RADIUS = 0.2
 ALGORITHMS = ("gmm-as", "zvc")
@@ -82,8 +83,6 @@ def pois_document(pois: list[Poi], algorithm: str, parameters: dict, frame: str 
 def write_pois(path: str | os.PathLike, pois: list[Poi], algorithm: str, parameters: dict,
                frame: str = "", source: str = "") -> Path:
     """Write pois.json atomically; returns the path."""
-    from kinfu_cli.io.atomic import write_json
-
     return write_json(path, pois_document(pois, algorithm, parameters, frame, source))
 
 
