@@ -2,7 +2,7 @@
 
 The renovation's proof that moving code changed no result: run the demo before and after a change and
 compare. Timing fields (keys `seconds`, `seconds_per_view`, `timing_s`, `time_s`, and any key ending in
-`_seconds`) are dropped before comparing; PNG plots are reported but not compared (matplotlib embeds
+`_seconds`) are dropped before comparing; kinfu's ownership manifests are skipped; PNG plots are reported but not compared (matplotlib embeds
 nothing variable, but fonts can differ between machines).
 
     python benchmarks/compare_demo_outputs.py OUT_BEFORE OUT_AFTER      # exit 1 on any difference
@@ -19,6 +19,7 @@ import sys
 import tempfile
 from pathlib import Path
 
+MANIFEST = ".kinfu-manifest.json"  # ownership records differ by file times
 TIMING_KEYS = {"seconds", "seconds_per_view", "timing_s", "time_s"}
 
 
@@ -71,8 +72,8 @@ def _rewrite_paths(obj: object, old: str, new: str) -> object:
 def compare(before: Path, after: Path) -> list[str]:
     """One line per difference between the two output folders (empty when they agree)."""
     problems = []
-    files_b = {p.relative_to(before) for p in before.rglob("*") if p.is_file()}
-    files_a = {p.relative_to(after) for p in after.rglob("*") if p.is_file()}
+    files_b = {p.relative_to(before) for p in before.rglob("*") if p.is_file() and p.name != MANIFEST}
+    files_a = {p.relative_to(after) for p in after.rglob("*") if p.is_file() and p.name != MANIFEST}
     for rel in sorted(files_b ^ files_a):
         problems.append(f"{rel}: only in {'before' if rel in files_b else 'after'}")
     for rel in sorted(files_b & files_a):

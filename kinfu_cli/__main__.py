@@ -1,3 +1,30 @@
-from kinfu_cli.cli import main
+"""`python -m kinfu_cli` and the `kinfu` script.
 
-main()
+The CLI is imported inside the handler (the one function-level import of the package, for this reason):
+Ctrl-C during start-up imports then also ends with the one line `kinfu: interrupted`, exit 130.
+"""
+
+import os
+import sys
+
+
+def main() -> None:
+    try:
+        from kinfu_cli.cli import main as cli_main
+
+        code = cli_main()
+    except KeyboardInterrupt:
+        sys.stderr.write("kinfu: interrupted\n")
+        code = 130
+    if code == 130:
+        # A Ctrl-C that passed through a C extension's embedded Python (pybind11 exec in open3d) marks the
+        # interpreter as "interrupted"; it would then end itself with SIGINT instead of exit code 130. Outputs
+        # were already cleaned by the handlers on the way out, so leave at once with the code we promise.
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(130)
+    sys.exit(code)
+
+
+if __name__ == "__main__":
+    main()

@@ -15,6 +15,7 @@ import click
 from kinfu_cli import __version__
 from kinfu_cli.commands._options import PARAMETER_FLAGS
 from kinfu_cli.core.errors import KinfuError
+from kinfu_cli.core.ownership import ForeignOutputError
 
 # command name -> module in kinfu_cli.commands; a dict is a group of sub-commands
 COMMANDS: dict[str, str | dict[str, str]] = {
@@ -68,21 +69,72 @@ def _flags_of(parameter: str, group: _LazyGroup) -> str:
     return "/".join(PARAMETER_FLAGS.get(n) or options.get(n) or n for n in parameter.split("/"))
 
 
+def _one_line(message: str) -> str:
+    """Messages may quote names from a recording (a frame_id with a newline): keep the error one line."""
+    return message.strip().replace("\r", "\\r").replace("\n", "\\n")
+
+
+def _usage_message(exc: click.ClickException) -> str:
+    """click's usage errors as `--flag: what is wrong` (no usage block)."""
+    param = getattr(exc, "param", None)
+    if isinstance(exc, click.BadParameter) and not isinstance(exc, click.MissingParameter) and param is not None:
+        name = max(param.opts, key=len) if isinstance(param, click.Option) else param.human_readable_name
+        return f"{name}: {exc.message}"
+    return exc.format_message()
+
+
+def _caused_by_interrupt(exc: BaseException) -> bool:
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
+
+
 class _Main(_LazyGroup):
-    def invoke(self, ctx: click.Context):  # one-line errors, exit 2, no traceback
+    """The root group: every failure ends as one `kinfu: error: ...` line on stderr (exit 2), Ctrl-C as
+    `kinfu: interrupted` (exit 130); no traceback, no usage block."""
+
+    def invoke(self, ctx: click.Context):
         try:
             return super().invoke(ctx)
         except KinfuError as exc:
             message = f"{_flags_of(exc.parameter, self)}: {exc.detail}" if exc.parameter else str(exc)
-            click.echo(f"kinfu: error: {message}", err=True)
+            if isinstance(exc, ForeignOutputError):
+                message += " or pass --force"
+            click.echo(f"kinfu: error: {_one_line(message)}", err=True)
             ctx.exit(exc.exit_code)
+        except (KeyboardInterrupt, click.Abort):
+            click.echo("kinfu: interrupted", err=True)
+            ctx.exit(130)
         except MemoryError:
             click.echo("kinfu: error: out of memory (try a coarser --voxel-size or smaller --size)", err=True)
             ctx.exit(2)
         except OSError as exc:
             where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
-            click.echo(f"kinfu: error: {where}{exc.strerror or exc}", err=True)
+            click.echo(f"kinfu: error: {_one_line(where + str(exc.strerror or exc))}", err=True)
             ctx.exit(2)
+        except Exception as exc:  # a Ctrl-C inside numba's dispatcher or an import arrives wrapped
+            if not _caused_by_interrupt(exc):
+                raise
+            click.echo("kinfu: interrupted", err=True)
+            ctx.exit(130)
+
+    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
+        try:
+            code = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+            code = code if isinstance(code, int) else 0
+        except click.ClickException as exc:
+            click.echo(f"kinfu: error: {_one_line(_usage_message(exc))}", err=True)
+            code = exc.exit_code
+        except (KeyboardInterrupt, click.Abort, EOFError):
+            click.echo("kinfu: interrupted", err=True)
+            code = 130
+        if standalone_mode:
+            sys.exit(code)
+        return code
 
 
 @click.group(cls=_Main, modules=COMMANDS, context_settings={"help_option_names": ["-h", "--help"]})
@@ -96,8 +148,9 @@ def cli() -> None:
     """
 
 
-def main() -> None:
-    cli.main(prog_name="kinfu")
+def main() -> int:
+    """Run the CLI on sys.argv; returns the exit code (0, 2 for errors, 130 when interrupted)."""
+    return cli.main(prog_name="kinfu", standalone_mode=False)
 
 
 if __name__ == "__main__":

@@ -10,6 +10,7 @@ import pytest
 from click.testing import CliRunner
 from test_io_frames import make_recording
 
+from kinfu_cli.core.ownership import MANIFEST
 from kinfu_cli.cli import cli
 
 
@@ -109,7 +110,7 @@ def test_export_then_import_round_trip(tmp_path, sample_dir):
     assert res.exit_code == 0, res.output
     s = json.loads(res.output)
     assert s["frames"] == 36 and s["stats"]["dropped_total"] == 0
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["frames"]
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name != MANIFEST) == ["frames"]
     res = run("import", out, "-o", tmp_path / "again.mcap", "--rate", "5", "-q")
     assert res.exit_code == 0, res.output
     from kinfu_cli.io.frames import iter_frames
@@ -145,7 +146,7 @@ def test_frame_errors_through_the_cli(tmp_path, shared_data):
     one_line_error(run("export", late, "-o", out, "--tolerance", "0.01"), "late.bag", "no usable depth frame",
                    "no camera pose")
     assert not out.exists()
-    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temp folders either
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".") and p.name != MANIFEST]  # no temp folders either
 
 
 def test_info_frames_reports_dropped_frames(tmp_path):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import glob
 import json
 import os
 import shutil
@@ -14,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from kinfu_cli.core.errors import KinfuError
+from kinfu_cli.core.ownership import owned_entries, record_written
 
 
 def _ensure_parent(final: Path) -> Path:
@@ -26,25 +28,37 @@ def _ensure_parent(final: Path) -> Path:
     return parent
 
 
+def _clear_debris(parent: Path, pattern: str) -> None:
+    """Remove what a killed earlier run left beside an output: kinfu's own temporary `.part` names only."""
+    for stale in parent.glob(pattern):
+        if stale.is_dir() and not stale.is_symlink():
+            shutil.rmtree(stale, ignore_errors=True)
+        else:
+            with contextlib.suppress(OSError):
+                stale.unlink()
+
+
 @contextlib.contextmanager
 def atomic_path(final: str | os.PathLike, suffix: str | None = None) -> Iterator[Path]:
     """Yield a temporary path beside `final`; rename it to `final` only if the block succeeds.
 
-    The temporary name keeps the final suffix (writers such as open3d pick the format by it).
+    The temporary name keeps the final suffix (writers such as open3d pick the format by it). The written
+    file is recorded in its folder's kinfu manifest (see core/ownership.py).
     """
     final = Path(final)
     parent = _ensure_parent(final)
     suffix = final.suffix if suffix is None else suffix
+    _clear_debris(parent, f".{glob.escape(final.stem)}.*.part{glob.escape(suffix)}")
     fd, tmp = tempfile.mkstemp(prefix=f".{final.stem}.", suffix=f".part{suffix}", dir=parent)
     os.close(fd)
     tmp_path = Path(tmp)
     os.chmod(tmp_path, 0o666 & ~_umask())  # mkstemp makes 0600; outputs get the usual mode
     try:
         yield tmp_path
-        if tmp_path.is_dir():
-            if final.exists():
-                shutil.rmtree(final) if final.is_dir() else final.unlink()
-        os.replace(tmp_path, final)
+        if tmp_path.is_dir() and final.exists():
+            _replace_folder(tmp_path, final)
+        else:
+            os.replace(tmp_path, final)
     except BaseException:
         if tmp_path.is_dir():
             shutil.rmtree(tmp_path, ignore_errors=True)
@@ -52,26 +66,54 @@ def atomic_path(final: str | os.PathLike, suffix: str | None = None) -> Iterator
             with contextlib.suppress(FileNotFoundError):
                 tmp_path.unlink()
         raise
+    record_written(final)
 
 
 @contextlib.contextmanager
 def atomic_dir(final: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary folder beside `final`; it replaces `final` only if the block succeeds.
 
-    For outputs that are folders (ROS 2 bags, result folders with several files).
+    For outputs that are folders (ROS 2 bags, result folders with several files): the whole folder appears
+    at once, so a killed run leaves no folder that looks complete or mixes old and new files. Entries of an
+    existing `final` that kinfu did not write are carried over, never removed.
     """
     final = Path(final)
     parent = _ensure_parent(final)
+    _clear_debris(parent, f".{glob.escape(final.name)}.*.part")
     tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".part", dir=parent))
     os.chmod(tmp, 0o777 & ~_umask())
     try:
         yield tmp
         if final.exists():
-            shutil.rmtree(final) if final.is_dir() else final.unlink()
-        os.replace(tmp, final)
+            _replace_folder(tmp, final)
+        else:
+            os.replace(tmp, final)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+    record_written(final)
+
+
+def _replace_folder(new: Path, final: Path) -> None:
+    """Swap the finished folder `new` in for `final`, keeping the entries of `final` kinfu did not write.
+
+    A file `final` (a kinfu output, or one the caller was told to overwrite) is replaced. A foreign entry
+    with the name of a new output stops the swap: the new outputs stay in `new` and the error says so."""
+    if not final.is_dir():
+        final.unlink()
+        os.replace(new, final)
+        return
+    mine = owned_entries(final)
+    foreign = [e for e in final.iterdir() if e.name not in mine]
+    clash = [e.name for e in foreign if (new / e.name).exists()]
+    if clash:
+        raise KinfuError(f"{final}: {', '.join(sorted(clash))} there was not written by kinfu and would be replaced")
+    for entry in foreign:
+        os.replace(entry, new / entry.name)
+    old = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".old.part", dir=final.parent))
+    os.replace(final, old / final.name)
+    os.replace(new, final)
+    shutil.rmtree(old, ignore_errors=True)
 
 
 def _umask() -> int:

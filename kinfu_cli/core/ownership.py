@@ -1,0 +1,120 @@
+"""Which files kinfu wrote, so it replaces only its own outputs and never an input or a user's file.
+
+Every file or folder kinfu writes through `core.atomic` is recorded in a manifest, `.kinfu-manifest.json`,
+in the folder that holds it: name -> size and modification time (ns) as written. A path is kinfu's when
+its folder's manifest lists it with the same size and time (a file the user replaced or edited since is
+theirs again), or, for a folder output, when it holds a manifest of its own. `claim_output` is called
+before any work: it refuses an output that is an input, lies above an input, is empty, or exists without
+being kinfu's (unless `force`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import tempfile
+from collections.abc import Iterable
+from pathlib import Path
+
+from kinfu_cli.core.errors import KinfuError
+
+MANIFEST = ".kinfu-manifest.json"
+
+
+class ForeignOutputError(KinfuError):
+    """The output path exists and kinfu did not write it; `force` would write over it."""
+
+
+def _read_manifest(folder: Path) -> dict[str, dict]:
+    try:
+        doc = json.loads((folder / MANIFEST).read_text())
+    except (OSError, ValueError):
+        return {}
+    files = doc.get("files") if isinstance(doc, dict) else None
+    return files if isinstance(files, dict) else {}
+
+
+def _stat_entry(path: Path) -> dict:
+    st = path.stat()
+    return {"size": st.st_size if path.is_file() else None, "mtime_ns": st.st_mtime_ns,
+            "kind": "folder" if path.is_dir() else "file"}
+
+
+def record_written(path: str | os.PathLike) -> None:
+    """Add `path` (just written by kinfu) to its folder's manifest; the manifest is replaced atomically.
+
+    Best effort: a folder where the manifest cannot be written only loses the ownership record."""
+    path = Path(path)
+    folder = path.parent if str(path.parent) else Path(".")
+    files = _read_manifest(folder)
+    try:
+        files[path.name] = _stat_entry(path)
+        fd, tmp = tempfile.mkstemp(prefix=f"{MANIFEST}.", suffix=".part", dir=folder)
+        with os.fdopen(fd, "w") as fh:
+            json.dump({"written_by": "kinfu", "files": files}, fh, indent=1, sort_keys=True)
+        os.replace(tmp, folder / MANIFEST)
+    except OSError:
+        with contextlib.suppress(Exception):
+            os.unlink(tmp)
+
+
+def forget_written(path: str | os.PathLike) -> None:
+    """Drop `path` from its folder's manifest (kinfu removed it)."""
+    path = Path(path)
+    folder = path.parent if str(path.parent) else Path(".")
+    files = _read_manifest(folder)
+    if files.pop(path.name, None) is not None:
+        with contextlib.suppress(OSError):
+            (folder / MANIFEST).write_text(json.dumps({"written_by": "kinfu", "files": files}, indent=1,
+                                                      sort_keys=True))
+
+
+def written_by_kinfu(path: str | os.PathLike) -> bool:
+    """True when kinfu wrote `path` and nobody changed it since (see the module docstring)."""
+    path = Path(path)
+    if path.is_dir() and (path / MANIFEST).is_file():
+        return True
+    entry = _read_manifest(path.parent if str(path.parent) else Path(".")).get(path.name)
+    if not isinstance(entry, dict) or not path.exists():
+        return False
+    now = _stat_entry(path)
+    return entry.get("kind") == now["kind"] and (now["kind"] == "folder" or (
+        entry.get("size") == now["size"] and entry.get("mtime_ns") == now["mtime_ns"]))
+
+
+def owned_entries(folder: str | os.PathLike) -> set[str]:
+    """Names inside a kinfu output folder that kinfu wrote (the manifest itself included)."""
+    folder = Path(folder)
+    return {n for n in _read_manifest(folder) if written_by_kinfu(folder / n)} | {MANIFEST}
+
+
+def _inside(child: Path, parent: Path) -> bool:
+    return child == parent or parent in child.parents
+
+
+def claim_output(output: str | os.PathLike | None, inputs: Iterable[str | os.PathLike] = (), *,
+                 force: bool = False, parameter: str = "output") -> Path:
+    """Check that kinfu may write `output`, before any work is done; returns it as a Path.
+
+    Refused always: an empty path, an output that is one of `inputs`, or a folder that holds one of them
+    (replacing it would destroy the input). Refused unless `force`: an existing path kinfu did not write.
+    """
+    if output is None or str(output).strip() == "":
+        raise KinfuError("expected a path, got an empty one", parameter=parameter)
+    out = Path(output)
+    real = Path(os.path.realpath(out))
+    for inp in inputs:
+        if inp is None or str(inp) == "":
+            continue
+        src = Path(os.path.realpath(inp))
+        if real == src:
+            raise KinfuError(f"{out} is also an input; choose another output path", parameter=parameter)
+        if _inside(src, real):
+            raise KinfuError(f"{out} contains the input {inp}; writing it would replace the input",
+                             parameter=parameter)
+    if out.exists() and not force and not written_by_kinfu(out):
+        what = "folder" if out.is_dir() else "file"
+        raise ForeignOutputError(f"{out}: an existing {what} that kinfu did not write; choose another path",
+                                 parameter=parameter)
+    return out

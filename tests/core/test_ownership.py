@@ -1,0 +1,84 @@
+"""Output safety: kinfu replaces only what it wrote, never an input or a user's file, and a folder output
+appears whole or not at all."""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+
+from kinfu_cli.core.atomic import atomic_dir, write_json
+from kinfu_cli.core.errors import KinfuError
+from kinfu_cli.core.ownership import MANIFEST, ForeignOutputError, claim_output, written_by_kinfu
+
+
+def test_written_files_are_recorded_and_lose_ownership_when_changed(tmp_path):
+    out = write_json(tmp_path / "a.json", {"x": 1})
+    assert written_by_kinfu(out)
+    assert claim_output(out) == out  # kinfu may replace its own file
+    out.write_text('{"x": 2, "edited": "by the user"}')
+    assert not written_by_kinfu(out)
+    with pytest.raises(ForeignOutputError, match="kinfu did not write"):
+        claim_output(out)
+    assert claim_output(out, force=True) == out
+
+
+def test_empty_input_and_enclosing_outputs_are_always_refused(tmp_path):
+    rec = tmp_path / "data" / "rec.mcap"
+    rec.parent.mkdir()
+    rec.write_bytes(b"x")
+    for bad in ("", "  ", None):
+        with pytest.raises(KinfuError, match="empty"):
+            claim_output(bad, force=True)
+    with pytest.raises(KinfuError, match="is also an input"):
+        claim_output(rec, [rec], force=True)
+    with pytest.raises(KinfuError, match="contains the input"):
+        claim_output(tmp_path / "data", [rec], force=True)
+    with pytest.raises(KinfuError, match="contains the input"):
+        claim_output(tmp_path, [rec], force=True)
+    os.symlink(rec, tmp_path / "link.mcap")
+    with pytest.raises(KinfuError, match="is also an input"):
+        claim_output(tmp_path / "link.mcap", [rec], force=True)
+
+
+def test_an_existing_user_folder_is_refused_and_kinfu_folders_are_not(tmp_path):
+    user = tmp_path / "mine"
+    user.mkdir()
+    (user / "thesis.tex").write_text("precious")
+    with pytest.raises(ForeignOutputError, match="existing folder"):
+        claim_output(user)
+    with atomic_dir(tmp_path / "out") as d:
+        write_json(d / "report.json", {})
+    assert (tmp_path / "out" / MANIFEST).is_file() and written_by_kinfu(tmp_path / "out")
+    claim_output(tmp_path / "out")
+
+
+def test_replacing_a_folder_keeps_user_files_and_drops_old_outputs(tmp_path):
+    out = tmp_path / "out"
+    with atomic_dir(out) as d:
+        write_json(d / "old.json", {"v": 1})
+        write_json(d / "report.json", {"v": 1})
+    (out / "notes.txt").write_text("mine")
+    with atomic_dir(out) as d:
+        write_json(d / "report.json", {"v": 2})
+    assert sorted(p.name for p in out.iterdir()) == [MANIFEST, "notes.txt", "report.json"]
+    assert (out / "notes.txt").read_text() == "mine"
+    assert [p.name for p in tmp_path.iterdir() if p.name != MANIFEST] == ["out"]  # no debris left
+
+
+def test_a_failed_run_leaves_the_old_folder_untouched_and_debris_is_cleaned(tmp_path):
+    out = tmp_path / "out"
+    with atomic_dir(out) as d:
+        write_json(d / "report.json", {"v": 1})
+    with pytest.raises(RuntimeError):
+        with atomic_dir(out) as d:
+            write_json(d / "report.json", {"v": 2})
+            raise RuntimeError("killed")
+    assert (out / "report.json").read_text().count('"v": 1') == 1
+    stale = tmp_path / ".out.k1ll3d.part"  # what a SIGKILLed run leaves
+    stale.mkdir()
+    (stale / "mesh.ply").write_text("half")
+    with atomic_dir(out) as d:
+        write_json(d / "report.json", {"v": 3})
+    assert not stale.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == [MANIFEST, "out"]
