@@ -16,23 +16,23 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+from sklearn.exceptions import ConvergenceWarning
+from sklearn.mixture import GaussianMixture
 
 from kinfu_cli.attention.em import fit_em, fit_em_numpy, time_segment_init
 from kinfu_cli.attention.gmm_as import GmmActivitySaliency
 from kinfu_cli.attention.zvc import ZeroVelocityCrossing
+from kinfu_cli.io.polhemus import read_polhemus
+from kinfu_cli.sim.hand import random_task, synth_hand_trajectory
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "hand-polhemus"
 
 
 def load_tasks(n: int):
     if DATA.exists():
-        from kinfu_cli.io.polhemus import read_polhemus
-
         files = sorted(DATA.rglob("*.traj"))
         step = max(1, len(files) // n)
         return [read_polhemus(f) for f in files[::step][:n]], "hand-polhemus users 1+4"
-    from kinfu_cli.sim.hand import random_task, synth_hand_trajectory
-
     kinds = ("placement", "removal", "pick-and-place")
     return [synth_hand_trajectory(random_task(kinds[i % 3], seed=i), seed=i)[0] for i in range(n)], "synthetic"
 
@@ -64,15 +64,12 @@ def main() -> None:
     jobs = []
     for tr in trajs:
         det = GmmActivitySaliency().fit(tr)
-        x, _ = det._samples(tr, det.smoothing_half_width_)
+        x, _, _ = det._samples(tr, det.smoothing_half_width_)
         reg = np.array([max(det.reg_space, det.noise_) ** 2] * 3 + [det.reg_time ** 2])
         jobs += [(x, k, reg) for k in det.bic_]
     fit_em(*jobs[0])
     t_numba = sum(timed(lambda j: fit_em(*j), jobs))
     t_numpy = sum(timed(lambda j: fit_em_numpy(*j), jobs))
-
-    from sklearn.exceptions import ConvergenceWarning
-    from sklearn.mixture import GaussianMixture
 
     def sk(j):
         x, k, reg = j

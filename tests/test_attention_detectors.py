@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from kinfu_cli.attention.detect import detector_params, make_detector
 from kinfu_cli.attention.em import fit_em, fit_em_numpy
 from kinfu_cli.attention.gmm_as import GmmActivitySaliency
 from kinfu_cli.attention.zvc import ZeroVelocityCrossing
@@ -124,10 +125,23 @@ def test_detectors_reject_bad_input():
     with pytest.raises(TrajectoryError, match="nan.traj: sample 4 is not finite"):
         ZeroVelocityCrossing().fit(bad)
     traj = Trajectory(t=np.arange(50) / 100, positions=np.zeros((50, 3)))
-    with pytest.raises(ConfigError, match="--saliency"):
+    with pytest.raises(ConfigError, match="^saliency: expected one of"):
         GmmActivitySaliency(saliency="bogus").fit(traj)
-    with pytest.raises(ConfigError, match="--zvc-r1/--zvc-r2"):
+    with pytest.raises(ConfigError, match="^zvc_r1/zvc_r2: expected 0 < r1 < r2"):
         ZeroVelocityCrossing(r1=0.3, r2=0.1).fit(traj)
+
+
+def test_detector_params_split_one_flat_set_between_the_detectors():
+    params = detector_params(poi_threshold=2.0, zvc_r1=0.05, zvc_threshold=1.6, radius=0.3)
+    assert params == {"gmm-as": {"poi_threshold": 2.0, "radius": 0.3},
+                      "zvc": {"r1": 0.05, "threshold": 1.6, "radius": 0.3}}
+    literal = detector_params(poi_threshold=2.0, zvc_threshold=1.6, literal=True)
+    assert literal["gmm-as"] == GmmActivitySaliency.LITERAL and literal["zvc"] == {"threshold": 1.72}
+    gmm, zvc = make_detector("gmm-as", params["gmm-as"]), make_detector("zvc", params["zvc"])
+    assert gmm.get_params()["radius"] == zvc.radius == 0.3 and zvc.r1 == 0.05
+    assert make_detector("gmm-as").get_params() == GmmActivitySaliency().get_params()
+    with pytest.raises(ConfigError, match="^algorithm: "):
+        make_detector("kmeans")
 
 
 def test_short_still_trajectory_gives_no_pois_not_an_error():

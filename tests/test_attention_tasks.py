@@ -13,11 +13,12 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from kinfu_cli.core.pois import pois_document
+from kinfu_cli.attention.detect import detect_pois, make_detector
 from kinfu_cli.attention.tasks import detect_by_task, inside_workspace, parse_workspace, require_tasks, split_tasks
 from kinfu_cli.cli import cli
 from kinfu_cli.core.errors import ConfigError
-from kinfu_cli.evaluation.poi import MATCH_RADIUS, make_detector, score_pois
+from kinfu_cli.core.pois import pois_document
+from kinfu_cli.evaluation.poi import MATCH_RADIUS, score_pois
 from kinfu_cli.io.hand import load_hand_trajectory
 from kinfu_cli.io.polhemus import read_ground_truth, read_polhemus, write_polhemus
 from kinfu_cli.io.trajectory import Trajectory
@@ -64,11 +65,11 @@ def test_box_bounds_are_inclusive():
 def test_pauses_longer_than_the_gap_split_tasks():
     a, b = _line(100), _line(120, t0=1.0 + 2.5)  # a 2.5 s pause between them (1.01 s -> 3.5 s)
     traj = Trajectory(t=np.r_[a.t, b.t], positions=np.r_[a.positions, b.positions])
-    assert _bounds(split_tasks(traj, None, max_gap_s=2.0)) == [(0, 100), (100, 220)]
-    assert _bounds(split_tasks(traj, BOX, max_gap_s=2.0)) == [(0, 100), (100, 220)]
-    assert _bounds(split_tasks(traj, None, max_gap_s=3.0)) == [(0, 220)]
-    assert _bounds(split_tasks(traj, None, max_gap_s=0)) == [(0, 220)]  # 0 = never split on pauses
-    assert _bounds(split_tasks(traj, None, max_gap_s=None)) == [(0, 220)]
+    assert _bounds(split_tasks(traj, None, split_gap=2.0)) == [(0, 100), (100, 220)]
+    assert _bounds(split_tasks(traj, BOX, split_gap=2.0)) == [(0, 100), (100, 220)]
+    assert _bounds(split_tasks(traj, None, split_gap=3.0)) == [(0, 220)]
+    assert _bounds(split_tasks(traj, None, split_gap=0)) == [(0, 220)]  # 0 = never split on pauses
+    assert _bounds(split_tasks(traj, None, split_gap=None)) == [(0, 220)]
 
 
 def test_short_runs_are_dropped_and_counted():
@@ -80,9 +81,9 @@ def test_short_runs_are_dropped_and_counted():
     traj.positions[out, 1] = 5.0
     tasks = split_tasks(traj, BOX)
     assert _bounds(tasks) == [(150, 260)] and tasks.dropped == 2 and tasks[0].index == 0
-    loose = split_tasks(traj, BOX, min_duration_s=0.0, min_samples=3)
+    loose = split_tasks(traj, BOX, min_task=0.0, min_samples=3)
     assert _bounds(loose) == [(10, 13), (50, 90), (150, 260)] and loose.dropped == 0
-    assert _bounds(split_tasks(traj, BOX, min_duration_s=0.3, min_samples=1)) == [(50, 90), (150, 260)]
+    assert _bounds(split_tasks(traj, BOX, min_task=0.3, min_samples=1)) == [(50, 90), (150, 260)]
 
 
 def test_empty_results_and_their_errors():
@@ -91,12 +92,12 @@ def test_empty_results_and_their_errors():
     far = (5.0, 5.0, 5.0, 6.0, 6.0, 6.0)
     tasks = split_tasks(traj, far)
     assert tasks == [] and tasks.inside == 0 and tasks.dropped == 0
-    with pytest.raises(ConfigError, match=r"--workspace 5,5,5,6,6,6: contains no sample of hand.traj.*"
+    with pytest.raises(ConfigError, match=r"workspace: box 5,5,5,6,6,6 contains no sample of hand.traj.*"
                                           r"bounding box is 0.500,0.200,0.500,0.500,0.800,0.500"):
         require_tasks(tasks, traj, far)
     short = split_tasks(_line(30), BOX)  # 0.29 s: too short
     assert short == [] and short.dropped == 1
-    with pytest.raises(ConfigError, match="no task left.*--min-task"):
+    with pytest.raises(ConfigError, match=r"no task left.*\(min_task\)"):
         require_tasks(short, _line(30), BOX)
     empty = Trajectory(t=np.zeros(0), positions=np.zeros((0, 3)))
     assert split_tasks(empty, BOX) == []
@@ -107,15 +108,15 @@ def test_empty_results_and_their_errors():
     ("1,0,0,0,1,1", "x0 < x1"),
 ])
 def test_bad_workspace_text(text, expect):
-    with pytest.raises(ConfigError, match=f"--workspace: .*{expect}"):
+    with pytest.raises(ConfigError, match=f"^workspace: .*{expect}"):
         parse_workspace(text)
 
 
 def test_workspace_text_parses():
     assert parse_workspace("-0.5, -0.8,0.7,0.6,0.4,1.3") == (-0.5, -0.8, 0.7, 0.6, 0.4, 1.3)
     assert parse_workspace(None) is None and parse_workspace("") is None
-    with pytest.raises(ConfigError, match="--split-gap"):
-        split_tasks(_line(10), None, max_gap_s=-1.0)
+    with pytest.raises(ConfigError, match="^split_gap: "):
+        split_tasks(_line(10), None, split_gap=-1.0)
 
 
 # --- kinfu poi: defaults unchanged on one-task inputs, errors -----------------------------------------
@@ -168,7 +169,7 @@ def test_default_output_is_unchanged_on_a_polhemus_file(tmp_path):
 @pytest.mark.parametrize("args, expect", [
     (["--workspace", "1,2,3"], "--workspace: expected six numbers"),
     (["--workspace", "0,0,0,1,1,-1"], "--workspace: expected x0 < x1"),
-    (["--workspace", "5,5,5,6,6,6"], "--workspace 5,5,5,6,6,6: contains no sample"),
+    (["--workspace", "5,5,5,6,6,6"], "--workspace: box 5,5,5,6,6,6 contains no sample"),
     (["--split-gap", "-1"], "--split-gap: expected seconds >= 0"),
     (["--min-task", "nan"], "--min-task"),
     (["--min-task", "100"], "no task left"),
@@ -183,6 +184,51 @@ def test_cli_split_errors_are_one_line_and_leave_no_output(tmp_path, args, expec
     assert res.output.strip().count("\n") == 0 and res.output.startswith("kinfu: error:")
     assert not out.exists()
 
+
+@pytest.mark.parametrize("args, expect", [
+    (["--neighbours", "0"], "--neighbours: expected an integer >= 1"),
+    (["--time-scale", "-1"], "--time-scale: expected 'duration' or a positive number"),
+    (["--radius", "0"], "--poi-threshold/--radius: expected positive numbers"),
+    (["--reg-time", "-1"], "--reg-space/--reg-time: expected >= 0"),
+    (["--algorithm", "zvc", "--zvc-r1", "0.3"], "--zvc-r1/--zvc-r2: expected 0 < r1 < r2"),
+    (["--algorithm", "zvc", "--zvc-half-width", "-1"], "--zvc-half-width: expected an integer >= 0"),
+    (["--algorithm", "zvc", "--zvc-threshold", "0"], "--zvc-threshold: expected a positive multiplier"),
+    (["--algorithm", "zvc", "--radius", "-1"], "--radius: expected a positive radius"),
+])
+def test_cli_detector_errors_name_the_flag_before_reading(tmp_path, args, expect):
+    """Library errors name detector parameters; `kinfu poi` shows their flags, before opening the input."""
+    res = CliRunner().invoke(cli, ["poi", str(tmp_path / "missing.traj"), *args, "-o", str(tmp_path / "p.json")])
+    assert res.exit_code == 2, res.output
+    assert res.output.startswith("kinfu: error: ") and res.output.strip().count("\n") == 0
+    assert expect in res.output and "missing.traj" not in res.output
+
+
+def test_detect_pois_checks_every_argument_before_reading(tmp_path):
+    missing = tmp_path / "none.traj"
+    with pytest.raises(ConfigError, match="^split_gap: expected seconds >= 0"):
+        detect_pois(missing, split_gap=-1.0)
+    with pytest.raises(ConfigError, match="^min_task: expected seconds >= 0"):
+        detect_pois(missing, min_task=float("nan"))
+    with pytest.raises(ConfigError, match="^workspace: expected six numbers"):
+        detect_pois(missing, workspace="1,2,3")
+    with pytest.raises(ConfigError, match="^zvc_r1/zvc_r2: "):
+        detect_pois(missing, "zvc", {"r1": 0.3, "r2": 0.1})
+    with pytest.raises(ConfigError, match="^algorithm: "):
+        detect_pois(missing, "kmeans")
+
+
+def test_detect_pois_is_what_the_cli_writes(tmp_path):
+    traj, _ = synth_hand_trajectory(random_task("placement", seed=1), seed=1)
+    src = write_polhemus(tmp_path / "task.traj", traj)
+    for algorithm in ("gmm-as", "zvc"):
+        doc = _cli_pois([str(src), "--algorithm", algorithm], tmp_path / f"{algorithm}.json")
+        found = detect_pois(src, algorithm)
+        assert json.loads(json.dumps(found.document)) == doc
+        assert found.whole_trajectory and len(found.detectors) == 1 and found.workspace is None
+        assert [p.id for p in found.pois] == list(range(len(found.pois))) == [p["id"] for p in doc["pois"]]
+        # a Trajectory in memory gives the same POIs (the source is then the trajectory's own)
+        again = detect_pois(read_polhemus(src), algorithm)
+        assert again.document["pois"] == found.document["pois"]
 
 # --- evaluation: real tasks concatenated into one long stream -----------------------------------------
 
@@ -391,7 +437,7 @@ def test_many_streams_of_random_public_tasks():
         streams += 1
         stream = Trajectory(t=np.arange(len(pos)) / RATE, positions=pos)
         for alg in ("gmm-as", "zvc"):
-            tasks, _, pois = detect_by_task(stream, lambda: make_detector(alg), box, max_gap_s=0)
+            tasks, _, pois = detect_by_task(stream, lambda: make_detector(alg), box, split_gap=0)
             assert [(t.start, t.stop) for t in tasks] == spans
             add((alg, "per task"), [p for tr in trajs for p in make_detector(alg).fit(tr).pois_], gt)
             add((alg, "split"), pois, gt)

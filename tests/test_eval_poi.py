@@ -9,7 +9,7 @@ import pytest
 from click.testing import CliRunner
 
 from kinfu_cli.cli import cli
-from kinfu_cli.core.errors import TrajectoryError
+from kinfu_cli.core.errors import ConfigError, TrajectoryError
 from kinfu_cli.evaluation.poi import (add_noise, evaluate_dataset, find_tasks, format_tables, resample_speed,
                                       score_pois, settings_for)
 from kinfu_cli.io.polhemus import write_polhemus
@@ -46,6 +46,15 @@ def test_add_noise_is_repeatable_and_has_the_std():
     np.testing.assert_array_equal(a.positions, b.positions)
     assert a.positions.std() == pytest.approx(0.025, rel=0.02)
     assert not np.array_equal(a.positions, add_noise(tr, 0.025, seed=4).positions)
+    assert add_noise(tr, 0.0) is tr and resample_speed(tr, 1.0) is tr
+
+
+def test_bad_settings_name_the_parameter():
+    tr = Trajectory(t=np.arange(10) / 100.0, positions=np.zeros((10, 3)), source="a/b.traj")
+    with pytest.raises(ConfigError, match="^noise: expected standard deviations >= 0"):
+        add_noise(tr, -0.01)
+    with pytest.raises(ConfigError, match="^speed: expected positive multipliers"):
+        resample_speed(tr, 0.0)
 
 
 def test_settings_order():
@@ -102,6 +111,8 @@ def test_cli_eval_poi_several_settings_and_tables(synth_dataset):
     (["DS", "--speed", "1,fast"], "--speed"),
     (["DS", "--speed", "0"], "--speed"),
     (["DS", "--noise", "-1"], "--noise"),
+    (["DS", "--zvc-r1", "0.3"], "--zvc-r1/--zvc-r2: expected 0 < r1 < r2"),
+    (["DS", "--algorithm", "gmm-as", "--neighbours", "0"], "--neighbours: expected an integer >= 1"),
 ])
 def test_cli_eval_poi_errors(synth_dataset, tmp_path, args, expect):
     (tmp_path / "empty").mkdir()

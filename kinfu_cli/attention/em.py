@@ -26,10 +26,6 @@ class Mixture:
     n_iter: int
     converged: bool
 
-    @property
-    def n_components(self) -> int:
-        return int(self.weights.shape[0])
-
     def n_parameters(self) -> int:
         k, d = self.means.shape
         return int(k * d + k * d * (d + 1) // 2 + k - 1)

@@ -31,7 +31,7 @@ Reading chosen here, and why (measured on the public subset only: users 1 and 4,
 3. "Eigenvalues of the covariance marginalised over Cartesian coordinates". Taken literally (σ =
    sqrt of the eigenvalues of the 3×3 spatial block, eq. 13) the still hand of an action makes a
    SMALL Gaussian and the long transport Gaussians score higher. Measured on users 1+4 (recall,
-   pick-and-place / placements): the paper read literally (`literal()` / `--literal`: raw samples,
+   pick-and-place / placements): the paper read literally (`GmmActivitySaliency.LITERAL`: raw samples,
    t in s, 1 mm floor, eq. 13, POITh 2.5, Σ/2Λ) 0 % / 0 % (23 POIs, all false); eq. 13 on the
    spatial block with everything else as below 7 % / 11 %. The reading that reproduces the paper
    is that the matrix the eigenvalues come from is the Gaussian's PRECISION (inverse covariance,
@@ -62,8 +62,9 @@ from __future__ import annotations
 import numpy as np
 
 from kinfu_cli.attention.em import Mixture, fit_em
-from kinfu_cli.core.pois import DEFAULT_RADIUS, Gaussian4, Poi
+from kinfu_cli.attention.zvc import mean_filter
 from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.core.pois import DEFAULT_RADIUS, Gaussian4, Poi
 from kinfu_cli.io.trajectory import Trajectory
 
 SALIENCY_MODES = ("precision", "literal", "weight", "conditional")
@@ -100,7 +101,7 @@ class GmmActivitySaliency:
     `saliency_` (K,), `thresholds_` (K,; NaN for the first and last), `bic_` {K: BIC},
     `n_components_`, `mixture_` (the raw Mixture in the scaled coordinates), `noise_` (estimated
     sensor noise, m), `smoothing_half_width_` (mean filter applied, samples; 0 = none).
-    `GmmActivitySaliency.literal()` gives the paper read literally, for comparison.
+    `GmmActivitySaliency.LITERAL` holds the parameters of the paper read literally, for comparison.
     """
 
     algorithm = "gmm-as"
@@ -133,54 +134,52 @@ class GmmActivitySaliency:
     LITERAL = {"saliency": "literal", "resample": 0, "time_scale": 1.0, "reg_space": 1e-3, "reg_time": 1e-3,
                "noise_floor": 0.0, "poi_threshold": 2.5, "threshold_mode": "literal"}
 
-    @classmethod
-    def literal(cls, **overrides) -> "GmmActivitySaliency":
-        """A detector configured as the literal reading of the paper (for comparison)."""
-        return cls(**{**cls.LITERAL, **overrides})
-
     def get_params(self) -> dict:
         return {k: getattr(self, k) for k in (
             "poi_threshold", "neighbours", "bic_threshold", "max_components", "selection", "time_scale",
             "reg_space", "reg_time", "saliency", "threshold_mode", "radius", "max_iter", "tol",
             "min_samples_per_component", "resample", "noise_floor")}
 
-    def _check(self) -> None:
+    def check_params(self) -> None:
+        """Raise ConfigError naming the first bad parameter (called by `fit`; callers check before any work)."""
         if self.saliency not in SALIENCY_MODES:
-            raise ConfigError(f"--saliency: expected one of {', '.join(SALIENCY_MODES)}, got {self.saliency!r}")
+            raise ConfigError(f"expected one of {', '.join(SALIENCY_MODES)}, got {self.saliency!r}",
+                              parameter="saliency")
         if self.threshold_mode not in THRESHOLD_MODES:
-            raise ConfigError(f"--threshold-mode: expected one of {', '.join(THRESHOLD_MODES)}, "
-                              f"got {self.threshold_mode!r}")
+            raise ConfigError(f"expected one of {', '.join(THRESHOLD_MODES)}, got {self.threshold_mode!r}",
+                              parameter="threshold_mode")
         if self.selection not in SELECTION_MODES:
-            raise ConfigError(f"--selection: expected one of {', '.join(SELECTION_MODES)}, got {self.selection!r}")
+            raise ConfigError(f"expected one of {', '.join(SELECTION_MODES)}, got {self.selection!r}",
+                              parameter="selection")
         if self.time_scale != "duration":
             try:
                 ok = float(self.time_scale) > 0
             except (TypeError, ValueError):
                 ok = False
             if not ok:
-                raise ConfigError(f"--time-scale: expected 'duration' or a positive number, got {self.time_scale!r}")
+                raise ConfigError(f"expected 'duration' or a positive number, got {self.time_scale!r}",
+                                  parameter="time_scale")
         if int(self.neighbours) != self.neighbours or self.neighbours < 1:
-            raise ConfigError(f"--neighbours: expected an integer >= 1, got {self.neighbours}")
+            raise ConfigError(f"expected an integer >= 1, got {self.neighbours}", parameter="neighbours")
         if int(self.max_components) != self.max_components or self.max_components < 1:
-            raise ConfigError(f"--max-components: expected an integer >= 1, got {self.max_components}")
+            raise ConfigError(f"expected an integer >= 1, got {self.max_components}", parameter="max_components")
         if not (self.poi_threshold > 0 and self.radius > 0):
-            raise ConfigError(f"--poi-threshold/--radius: expected positive numbers, got "
-                              f"{self.poi_threshold}, {self.radius}")
+            raise ConfigError(f"expected positive numbers, got {self.poi_threshold}, {self.radius}",
+                              parameter="poi_threshold/radius")
         if self.reg_space < 0 or self.reg_time < 0:
-            raise ConfigError(f"--reg-space/--reg-time: expected >= 0, got {self.reg_space}, {self.reg_time}")
+            raise ConfigError(f"expected >= 0, got {self.reg_space}, {self.reg_time}", parameter="reg_space/reg_time")
 
     # --- steps ---------------------------------------------------------------------------------
-    def _samples(self, traj: Trajectory, smooth: int = 0) -> tuple[np.ndarray, float]:
+    def _samples(self, traj: Trajectory, smooth: int = 0) -> tuple[np.ndarray, float, tuple[np.ndarray, np.ndarray]]:
+        """(x, y, z, scaled t) samples, the time scale, and (model clock, trajectory clock), both from 0."""
         t = traj.t - traj.t[0]
         pos = traj.positions
         dt = np.diff(t)
         if len(dt) and dt.max() > GAP_FACTOR * np.median(dt):
             # tracking gaps carry no dwell information: shorten each to GAP_FACTOR sample periods
             t = np.r_[0.0, np.cumsum(np.minimum(dt, GAP_FACTOR * np.median(dt)))]
-        self._clock = (t, traj.t - traj.t[0])  # (model clock, trajectory clock), both from 0
+        clock = (t, traj.t - traj.t[0])
         if smooth > 0:
-            from kinfu_cli.attention.zvc import mean_filter
-
             pos = mean_filter(pos, smooth)
         if self.resample and int(self.resample) >= 2:
             tt = np.linspace(0.0, t[-1], int(self.resample))
@@ -190,7 +189,7 @@ class GmmActivitySaliency:
             scale = 1.0 / max(float(t[-1]), 1e-12)
         else:
             scale = float(self.time_scale)
-        return np.column_stack([pos, t * scale]), scale
+        return np.column_stack([pos, t * scale]), scale, clock
 
     @staticmethod
     def estimate_noise(positions: np.ndarray) -> float:
@@ -243,7 +242,7 @@ class GmmActivitySaliency:
         return th
 
     def fit(self, traj: Trajectory) -> "GmmActivitySaliency":
-        self._check()
+        self.check_params()
         traj.validate(min_samples=2)
         reg_space = float(self.reg_space)
         self.noise_ = noise = self.estimate_noise(traj.positions)
@@ -254,7 +253,7 @@ class GmmActivitySaliency:
             half = int(max(0, np.ceil((width - 1) / 2)))
             noise = noise / np.sqrt(2 * half + 1)
         self.smoothing_half_width_ = half
-        x, scale = self._samples(traj, half)
+        x, scale, (clock, real) = self._samples(traj, half)
         if self.noise_floor:
             reg_space = max(reg_space, float(self.noise_floor) * noise)
         mix, bics = self._select(x, reg_space)
@@ -264,7 +263,6 @@ class GmmActivitySaliency:
         th = self._thresholds(s)
         # Gaussians back in (x, y, z, t seconds) on the trajectory's clock
         to_sec = np.array([1.0, 1.0, 1.0, 1.0 / scale])
-        clock, real = self._clock
         gaussians = []
         for j in range(len(w)):
             mean = mu[j] * to_sec

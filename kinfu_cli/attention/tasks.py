@@ -8,15 +8,15 @@ a time: fed minutes of stream with several actions, the actions blur into a few 
 
 A task is a maximal run of samples inside the workspace box (axis-aligned, the trajectory's frame,
 metres, bounds inclusive; None = everywhere) with no pause between consecutive samples longer than
-`max_gap_s` (a tracker that stops streaming while the hand is away). Runs shorter than
-`min_duration_s` or `min_samples` (the hand crossing a corner of the box, tracker glitches) are
-dropped and counted. Each Task keeps its samples as a Trajectory on the SAME clock (t, t0_ns) as
+`split_gap` seconds (a tracker that stops streaming while the hand is away). Runs shorter than
+`min_task` seconds or `min_samples` samples (the hand crossing a corner of the box, tracker glitches)
+are dropped and counted. Each Task keeps its samples as a Trajectory on the SAME clock (t, t0_ns) as
 the input, so POI times and stamps of a task read like those of the whole stream.
 
-`kinfu poi` writes the result into pois.json: each POI gains "task" (its task index), and the file gains
-"tasks" (task_entries: index, t_start, t_end [s, the POIs' clock], samples, first_sample, last_sample,
-stamp_ns_start/end from recordings, n_pois, n_components for GMM-AS), "tasks_dropped" (runs too short)
-and "task_split" (the --workspace, --split-gap and --min-task used).
+The POI driver (attention/detect.py) writes the result into pois.json: each POI gains "task" (its task
+index), and the file gains "tasks" (task_entries: index, t_start, t_end [s, the POIs' clock], samples,
+first_sample, last_sample, stamp_ns_start/end from recordings, n_pois, n_components for GMM-AS),
+"tasks_dropped" (runs too short) and "task_split" (the workspace, split_gap and min_task used).
 """
 
 from __future__ import annotations
@@ -27,14 +27,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from kinfu_cli.core.pois import Poi
 from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.core.pois import Poi
+from kinfu_cli.core.progress import progress
 from kinfu_cli.io.trajectory import Trajectory
 
 #: Default minimum task: real tasks last 0.9 s and more (hand-polhemus); a hand crossing a corner of
 #: the box or a tracker glitch lasts a fraction of that.
-MIN_DURATION_S = 0.5
+MIN_TASK_S = 0.5
 MIN_SAMPLES = 5
+#: Default pause that starts a new task (seconds; 0 = never split on pauses).
+SPLIT_GAP_S = 2.0
 
 
 @dataclass
@@ -80,7 +83,7 @@ class TaskList(list):
 
 
 def parse_workspace(text: str | None) -> tuple[float, ...] | None:
-    """'x0,y0,z0,x1,y1,z1' (metres) -> 6 floats, or None for None/'' ; ConfigError naming --workspace."""
+    """'x0,y0,z0,x1,y1,z1' (metres) -> 6 floats, or None for None/''; errors name `workspace`."""
     if text is None or not str(text).strip():
         return None
     parts = [p for p in str(text).replace(" ", ",").split(",") if p]
@@ -89,12 +92,12 @@ def parse_workspace(text: str | None) -> tuple[float, ...] | None:
     except ValueError:
         vals = ()
     if len(vals) != 6 or not all(math.isfinite(v) for v in vals):
-        raise ConfigError(f"--workspace: expected six numbers x0,y0,z0,x1,y1,z1 (metres), got {text!r}")
+        raise ConfigError(f"expected six numbers x0,y0,z0,x1,y1,z1 (metres), got {text!r}", parameter="workspace")
     return check_workspace(vals)
 
 
 def check_workspace(workspace) -> tuple[float, ...] | None:
-    """Validate a (x0, y0, z0, x1, y1, z1) box (None passes); ConfigError naming --workspace."""
+    """Validate a (x0, y0, z0, x1, y1, z1) box (None passes); errors name `workspace`."""
     if workspace is None:
         return None
     try:
@@ -102,20 +105,32 @@ def check_workspace(workspace) -> tuple[float, ...] | None:
     except (TypeError, ValueError):
         w = np.zeros(0)
     if w.shape != (6,) or not np.all(np.isfinite(w)):
-        raise ConfigError(f"--workspace: expected six finite numbers x0,y0,z0,x1,y1,z1 (metres), got {workspace!r}")
+        raise ConfigError(f"expected six finite numbers x0,y0,z0,x1,y1,z1 (metres), got {workspace!r}",
+                          parameter="workspace")
     if not np.all(w[:3] < w[3:]):
-        raise ConfigError(f"--workspace: expected x0 < x1, y0 < y1, z0 < z1 (min corner first), "
-                          f"got {','.join(f'{v:g}' for v in w)}")
+        raise ConfigError(f"expected x0 < x1, y0 < y1, z0 < z1 (min corner first), "
+                          f"got {','.join(f'{v:g}' for v in w)}", parameter="workspace")
     return tuple(float(v) for v in w)
 
 
-def _check_limits(max_gap_s, min_duration_s, min_samples) -> None:
-    if max_gap_s is not None and not (isinstance(max_gap_s, (int, float)) and max_gap_s >= 0):
-        raise ConfigError(f"--split-gap: expected seconds >= 0 (0 = never split on pauses), got {max_gap_s!r}")
-    if not (isinstance(min_duration_s, (int, float)) and min_duration_s >= 0):
-        raise ConfigError(f"--min-task: expected seconds >= 0, got {min_duration_s!r}")
+def check_split_gap(split_gap) -> None:
+    """`split_gap` is None or seconds >= 0 (0 = never split on pauses)."""
+    if split_gap is not None and not (isinstance(split_gap, (int, float)) and split_gap >= 0):
+        raise ConfigError(f"expected seconds >= 0 (0 = never split on pauses), got {split_gap}",
+                          parameter="split_gap")
+
+
+def check_min_task(min_task) -> None:
+    """`min_task` is seconds >= 0."""
+    if not (isinstance(min_task, (int, float)) and min_task >= 0):
+        raise ConfigError(f"expected seconds >= 0, got {min_task}", parameter="min_task")
+
+
+def _check_limits(split_gap, min_task, min_samples) -> None:
+    check_split_gap(split_gap)
+    check_min_task(min_task)
     if int(min_samples) != min_samples or min_samples < 1:
-        raise ConfigError(f"split_tasks: min_samples must be an integer >= 1, got {min_samples!r}")
+        raise ConfigError(f"expected an integer >= 1, got {min_samples!r}", parameter="min_samples")
 
 
 def inside_workspace(positions: np.ndarray, workspace) -> np.ndarray:
@@ -127,29 +142,29 @@ def inside_workspace(positions: np.ndarray, workspace) -> np.ndarray:
     return np.all((p >= w[:3]) & (p <= w[3:]), axis=1)
 
 
-def split_tasks(traj: Trajectory, workspace=None, max_gap_s: float | None = 2.0,
-                min_duration_s: float = MIN_DURATION_S, min_samples: int = MIN_SAMPLES) -> TaskList:
-    """Tasks of `traj`: maximal runs inside `workspace` without a pause longer than `max_gap_s`.
+def split_tasks(traj: Trajectory, workspace=None, split_gap: float | None = SPLIT_GAP_S,
+                min_task: float = MIN_TASK_S, min_samples: int = MIN_SAMPLES) -> TaskList:
+    """Tasks of `traj`: maximal runs inside `workspace` without a pause longer than `split_gap`.
 
     workspace: (x0, y0, z0, x1, y1, z1) metres in traj.frame, or None (everywhere).
-    max_gap_s: split where consecutive samples are more than this apart; 0 or None = never.
-    Runs lasting less than `min_duration_s` (t_end - t_start) or with fewer than `min_samples`
+    split_gap: split where consecutive samples are more than this many seconds apart; 0 or None = never.
+    Runs lasting less than `min_task` seconds (t_end - t_start) or with fewer than `min_samples`
     samples are dropped (counted in `.dropped`). Returns a TaskList (index 0.. in time order).
     """
     workspace = check_workspace(workspace)
-    _check_limits(max_gap_s, min_duration_s, min_samples)
+    _check_limits(split_gap, min_task, min_samples)
     n = len(traj)
     inside = inside_workspace(traj.positions, workspace)
     if n == 0:
         return TaskList()
     brk = np.zeros(max(n - 1, 0), bool)  # brk[i]: a run cannot continue from sample i to i + 1
-    if max_gap_s:
-        brk |= np.diff(traj.t) > max_gap_s
+    if split_gap:
+        brk |= np.diff(traj.t) > split_gap
     inn = inside.astype(np.int8)
     starts = np.flatnonzero(inside & np.r_[True, brk | (inn[:-1] == 0)])
     stops = np.flatnonzero(inside & np.r_[brk | (inn[1:] == 0), True]) + 1
     dur = traj.t[stops - 1] - traj.t[starts] if len(starts) else np.zeros(0)
-    keep = (stops - starts >= min_samples) & (dur >= min_duration_s)
+    keep = (stops - starts >= min_samples) & (dur >= min_task)
     tasks = TaskList(dropped=int((~keep).sum()), inside=int(inside.sum()))
     for a, b in zip(starts[keep], stops[keep]):
         sub = Trajectory(t=traj.t[a:b], positions=traj.positions[a:b],
@@ -161,8 +176,8 @@ def split_tasks(traj: Trajectory, workspace=None, max_gap_s: float | None = 2.0,
     return tasks
 
 
-def require_tasks(tasks: TaskList, traj: Trajectory, workspace=None, max_gap_s: float | None = 2.0,
-                  min_duration_s: float = MIN_DURATION_S) -> TaskList:
+def require_tasks(tasks: TaskList, traj: Trajectory, workspace=None, split_gap: float | None = SPLIT_GAP_S,
+                  min_task: float = MIN_TASK_S) -> TaskList:
     """Return `tasks`, or raise a one-line ConfigError saying why there is none."""
     if tasks:
         return tasks
@@ -171,16 +186,16 @@ def require_tasks(tasks: TaskList, traj: Trajectory, workspace=None, max_gap_s: 
         lo, hi = traj.positions.min(axis=0), traj.positions.max(axis=0)
         box = ",".join(f"{v:.3f}" for v in (*lo, *hi))
         ws = ",".join(f"{v:g}" for v in workspace)
-        raise ConfigError(f"--workspace {ws}: contains no sample of {name}, whose bounding box is {box} "
-                          f"(x0,y0,z0,x1,y1,z1, metres, frame {traj.frame or '?'})")
-    where = "inside --workspace" if workspace is not None else "in the trajectory"
-    gap = f", split at pauses > {max_gap_s:g} s (--split-gap)" if max_gap_s else ""
+        raise ConfigError(f"box {ws} contains no sample of {name}, whose bounding box is {box} "
+                          f"(x0,y0,z0,x1,y1,z1, metres, frame {traj.frame or '?'})", parameter="workspace")
+    where = "inside the workspace" if workspace is not None else "in the trajectory"
+    gap = f", split at pauses > {split_gap:g} s (split_gap)" if split_gap else ""
     raise ConfigError(f"{name}: no task left: all {tasks.dropped} run(s) of samples {where}{gap} last less than "
-                      f"{min_duration_s:g} s (--min-task) or have too few samples")
+                      f"{min_task:g} s (min_task) or have too few samples")
 
 
 def detect_by_task(traj: Trajectory, new_detector: Callable[[], object], workspace=None,
-                   max_gap_s: float | None = 2.0, min_duration_s: float = MIN_DURATION_S,
+                   split_gap: float | None = SPLIT_GAP_S, min_task: float = MIN_TASK_S,
                    min_samples: int = MIN_SAMPLES, quiet: bool = True) -> tuple[TaskList, list, list[Poi]]:
     """Split `traj` into tasks and fit a fresh detector (`new_detector()`, GMM-AS or ZVC) on each.
 
@@ -188,11 +203,8 @@ def detect_by_task(traj: Trajectory, new_detector: Callable[[], object], workspa
     each with extra "task" (its task index) and, when the trajectory has absolute stamps, "stamp_ns".
     Raises ConfigError (require_tasks) when no task is left.
     """
-    from kinfu_cli.core.progress import progress
-
-    tasks = split_tasks(traj, workspace, max_gap_s=max_gap_s, min_duration_s=min_duration_s,
-                        min_samples=min_samples)
-    require_tasks(tasks, traj, workspace, max_gap_s, min_duration_s)
+    tasks = split_tasks(traj, workspace, split_gap=split_gap, min_task=min_task, min_samples=min_samples)
+    require_tasks(tasks, traj, workspace, split_gap, min_task)
     detectors, pois = [], []
     for task in progress(tasks, total=len(tasks), desc="poi", quiet=quiet or len(tasks) < 2, unit="task"):
         det = new_detector().fit(task.trajectory)

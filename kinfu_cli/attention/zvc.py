@@ -23,8 +23,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from kinfu_cli.core.pois import DEFAULT_RADIUS, Poi
 from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.core.pois import DEFAULT_RADIUS, Poi
 from kinfu_cli.io.trajectory import Trajectory
 
 
@@ -106,18 +106,23 @@ class ZeroVelocityCrossing:
         return {"half_width": self.half_width, "threshold": self.threshold, "r1": self.r1, "r2": self.r2,
                 "radius": self.radius, "min_segment": self.min_segment}
 
-    def _check(self) -> None:
+    def check_params(self) -> None:
+        """Raise ConfigError naming the first bad parameter (called by `fit`; callers check before any work).
+
+        Errors name half_width, threshold, r1 and r2 with a `zvc_` prefix: their names among the parameters
+        of both detectors (attention.detect.detector_params), where GMM-AS has a threshold of its own.
+        """
         if int(self.half_width) != self.half_width or self.half_width < 0:
-            raise ConfigError(f"--zvc-half-width: expected an integer >= 0, got {self.half_width}")
+            raise ConfigError(f"expected an integer >= 0, got {self.half_width}", parameter="zvc_half_width")
         if not (0 < self.r1 < self.r2):
-            raise ConfigError(f"--zvc-r1/--zvc-r2: expected 0 < r1 < r2 metres, got {self.r1}, {self.r2}")
+            raise ConfigError(f"expected 0 < r1 < r2 metres, got {self.r1}, {self.r2}", parameter="zvc_r1/zvc_r2")
         if not self.threshold > 0:
-            raise ConfigError(f"--zvc-threshold: expected a positive multiplier, got {self.threshold}")
+            raise ConfigError(f"expected a positive multiplier, got {self.threshold}", parameter="zvc_threshold")
         if not self.radius > 0:
-            raise ConfigError(f"--radius: expected a positive radius in metres, got {self.radius}")
+            raise ConfigError(f"expected a positive radius in metres, got {self.radius}", parameter="radius")
 
     def fit(self, traj: Trajectory) -> "ZeroVelocityCrossing":
-        self._check()
+        self.check_params()
         traj.validate(min_samples=2)
         t = traj.t
         q = np.ascontiguousarray(mean_filter(traj.positions, int(self.half_width)))

@@ -8,8 +8,9 @@ from pathlib import Path
 
 import click
 
-from kinfu_cli.commands.poi import detector_options, detector_params
+from kinfu_cli.commands._detector_options import detector_options, detector_params_from
 from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.evaluation.poi import evaluate_dataset, format_tables
 
 group = "eval"
 
@@ -58,15 +59,13 @@ def command(dataset_dir, algorithm, speed, noise, seed, workers, as_json, quiet,
       kinfu eval poi DATA --algorithm gmm-as --speed 0.25,0.5,1,2,4 --noise 0.001,0.025,0.05 --workers 2
       kinfu eval poi DATA --algorithm zvc --json
     """
-    from kinfu_cli.evaluation.poi import evaluate_dataset, format_tables
-
     speeds = _floats("--speed", speed) or [1.0]
     noises = _floats("--noise", noise)
     if any(s <= 0 for s in speeds):
         raise ConfigError(f"--speed: expected positive multipliers, got {speed!r}")
     if any(n < 0 for n in noises):
         raise ConfigError(f"--noise: expected standard deviations >= 0 metres, got {noise!r}")
-    params = detector_params(kw)
+    params = detector_params_from(kw)
     algorithms = ["gmm-as", "zvc"] if algorithm == "both" else [algorithm]
     if workers is None:
         workers = max(1, min(8, os.cpu_count() or 1))

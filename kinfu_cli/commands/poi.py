@@ -7,105 +7,11 @@ from pathlib import Path
 
 import click
 
-from kinfu_cli.core.errors import ConfigError
-
-
-def _time_scale(value: str) -> str | float:
-    if value.strip().lower() == "duration":
-        return "duration"
-    try:
-        return float(value)
-    except ValueError:
-        raise ConfigError(f"--time-scale: expected 'duration' or units per second, got {value!r}") from None
-
-
-def detector_options(f):
-    """The GMM-AS and ZVC parameters as options (shared by `kinfu poi` and `kinfu eval poi`)."""
-    opts = [
-        click.option("--poi-threshold", default=1.5, show_default=True, type=float,
-                     help="GMM-AS POITh: saliency must exceed this x the neighbours' mean (paper Table 2: 2.5; "
-                          "Tables 5-6: 1.5)."),
-        click.option("--neighbours", default=2, show_default=True, type=int, help="GMM-AS Lambda: neighbours each side."),
-        click.option("--bic-threshold", default=0.0, show_default=True, type=float,
-                     help="GMM-AS BICTh: stop when BIC > min BIC + this."),
-        click.option("--max-components", default=15, show_default=True, type=int, help="GMM-AS Kmax."),
-        click.option("--selection", default="first-minimum", show_default=True,
-                     type=click.Choice(["first-minimum", "best"]), help="GMM-AS: first BIC minimum or best of 1..Kmax."),
-        click.option("--time-scale", default="duration", show_default=True,
-                     help="GMM-AS 4th coordinate: 'duration' (t normalised to 0..1) or units per second (1 = s)."),
-        click.option("--reg-space", default=0.005, show_default=True, type=float,
-                     help="GMM-AS spatial std floor (m) added to covariances."),
-        click.option("--reg-time", default=0.1, show_default=True, type=float,
-                     help="GMM-AS time std floor, in --time-scale units."),
-        click.option("--saliency", default="precision", show_default=True,
-                     type=click.Choice(["precision", "literal", "weight", "conditional"]),
-                     help="GMM-AS saliency reading (see kinfu_cli/attention/gmm_as.py; 'literal' = eq. 13 on "
-                          "the spatial covariance)."),
-        click.option("--threshold-mode", default="available", show_default=True,
-                     type=click.Choice(["available", "literal"]),
-                     help="GMM-AS: mean of existing neighbours, or sum / 2 Lambda as printed in Alg. 3."),
-        click.option("--resample", default=300, show_default=True, type=int,
-                     help="GMM-AS: resample each trajectory to this many samples (0 = raw samples)."),
-        click.option("--noise-floor", default=1.0, show_default=True, type=float,
-                     help="GMM-AS: raise the floor to this x the estimated sensor noise, denoising first (0 = off)."),
-        click.option("--literal", is_flag=True,
-                     help="The paper read literally: GMM-AS on raw samples, t in s, 1 mm floor, eq. 13 on the "
-                          "spatial covariance, POITh 2.5, sum / 2 Lambda; ZVC with ZVCTh 1.72. Overrides those options."),
-        click.option("--zvc-half-width", default=4, show_default=True, type=int, help="ZVC B (filter width 2B+1)."),
-        click.option("--zvc-threshold", default=1.5, show_default=True, type=float,
-                     help="ZVC ZVCTh (paper 1.72; 1.5 re-calibrated on users 1+4, see attention/zvc.py)."),
-        click.option("--zvc-r1", default=0.10, show_default=True, type=float, help="ZVC inner radius r1 (m)."),
-        click.option("--zvc-r2", default=0.25, show_default=True, type=float, help="ZVC outer radius r2 (m)."),
-        click.option("--radius", default=0.2, show_default=True, type=float, help="Region radius of each POI (m)."),
-    ]
-    for opt in reversed(opts):
-        f = opt(f)
-    return f
-
-
-def detector_params(kw: dict) -> dict:
-    """{"gmm-as": {...}, "zvc": {...}} constructor keywords from the parsed options (removed from kw)."""
-    g = {k: kw.pop(k) for k in ("poi_threshold", "neighbours", "bic_threshold", "max_components", "selection",
-                                "reg_space", "reg_time", "saliency", "threshold_mode", "resample", "noise_floor")}
-    g["time_scale"] = _time_scale(kw.pop("time_scale"))
-    literal = kw.pop("literal")
-    if literal:
-        from kinfu_cli.attention.gmm_as import GmmActivitySaliency
-
-        g.update(GmmActivitySaliency.LITERAL)
-    radius = kw.pop("radius")
-    g["radius"] = radius
-    z = {"half_width": kw.pop("zvc_half_width"), "threshold": kw.pop("zvc_threshold"), "r1": kw.pop("zvc_r1"),
-         "r2": kw.pop("zvc_r2"), "radius": radius}
-    if literal:
-        from kinfu_cli.attention.zvc import PAPER_THRESHOLD
-
-        z["threshold"] = PAPER_THRESHOLD
-    return {"gmm-as": g, "zvc": z}
-
-
-def load_trajectory(path: Path, hand_topic: str | None, hand_frame: str | None, world_frame: str | None):
-    """A `.traj` file or the hand trajectory of a recording (via the IO layer)."""
-    from kinfu_cli.io.hand import load_hand_trajectory
-
-    return load_hand_trajectory(path, hand_topic=hand_topic, hand_frame=hand_frame, world_frame=world_frame)
-
-
-def detect_tasks(traj, algorithm: str, params: dict, workspace=None, max_gap_s: float | None = 2.0,
-                 min_duration_s: float | None = None, quiet: bool = True):
-    """attention.tasks.detect_by_task with a fresh `algorithm` detector (constructor `params`) per task."""
-    from kinfu_cli.attention.tasks import MIN_DURATION_S, detect_by_task
-    from kinfu_cli.evaluation.poi import make_detector
-
-    make_detector(algorithm, params)._check()  # bad detector options fail before any work
-    return detect_by_task(traj, lambda: make_detector(algorithm, params), workspace, max_gap_s,
-                          MIN_DURATION_S if min_duration_s is None else min_duration_s, quiet=quiet)
-
-
-def _min_task(value: float) -> float:
-    if not value >= 0:
-        raise ConfigError(f"--min-task: expected seconds >= 0, got {value}")
-    return value
+from kinfu_cli.attention.detect import PoiDetection, detect_pois
+from kinfu_cli.attention.tasks import MIN_TASK_S, SPLIT_GAP_S
+from kinfu_cli.commands._detector_options import detector_options, detector_params_from
+from kinfu_cli.core.atomic import write_json
+from kinfu_cli.report.poi_plot import plot_pois, plot_task_pois
 
 
 @click.command("poi", short_help="Points of interest from the hand trajectory (GMM-AS or ZVC).")
@@ -118,9 +24,9 @@ def _min_task(value: float) -> float:
 @click.option("--workspace", default=None, metavar="X0,Y0,Z0,X1,Y1,Z1",
               help="Workspace box (metres, trajectory frame): a task is a run of samples inside it; each task "
                    "is analysed on its own, as the paper's recorder does [default: everywhere].")
-@click.option("--split-gap", default=2.0, show_default=True, type=float, metavar="SECONDS",
+@click.option("--split-gap", default=SPLIT_GAP_S, show_default=True, type=float, metavar="SECONDS",
               help="Also start a new task after a pause in the samples longer than this (0 = never).")
-@click.option("--min-task", default=0.5, show_default=True, type=float, metavar="SECONDS",
+@click.option("--min-task", default=MIN_TASK_S, show_default=True, type=float, metavar="SECONDS",
               help="Drop runs shorter than this (hand crossing a corner of the box, tracker glitches).")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=Path("pois.json"),
               show_default=True, help="pois.json to write (read by kinfu nbv --pois and kinfu fuse --clear-pois).")
@@ -153,51 +59,41 @@ def command(source, algorithm, hand_topic, hand_frame, world_frame, workspace, s
       kinfu poi session.mcap --workspace -0.5,-0.8,0.7,0.6,0.4,1.3 --split-gap 1
       kinfu poi user1_cup0.traj --literal --plot literal.png
     """
-    from kinfu_cli.core.pois import pois_document
-    from kinfu_cli.attention.tasks import parse_workspace, task_entries
-    from kinfu_cli.evaluation.poi import make_detector
-    from kinfu_cli.core.atomic import write_json
-
-    params = detector_params(kw)[algorithm]
-    box = parse_workspace(workspace)
-    if not split_gap >= 0:
-        raise ConfigError(f"--split-gap: expected seconds >= 0 (0 = never split on pauses), got {split_gap}")
-    _min_task(min_task)
-    make_detector(algorithm, params)._check()  # every option checked before the trajectory is read
-    traj = load_trajectory(source, hand_topic, hand_frame, world_frame)
-    tasks, detectors, pois = detect_tasks(traj, algorithm, params, box, split_gap, min_task, quiet=quiet)
-    recorded = dict(detectors[0].get_params())
-    if algorithm == "gmm-as":
-        recorded["n_components"] = int(sum(d.n_components_ for d in detectors))  # per task in "tasks"
-    doc = pois_document(pois, algorithm, recorded, frame=traj.frame, source=str(source))
-    doc["tasks"] = entries = task_entries(tasks, detectors)
-    doc["tasks_dropped"] = tasks.dropped
-    doc["task_split"] = {"workspace": list(box) if box else None, "split_gap": float(split_gap),
-                         "min_task": float(min_task)}
-    write_json(output, doc)
+    params = detector_params_from(kw)[algorithm]
+    found = detect_pois(source, algorithm, params, workspace=workspace, split_gap=split_gap, min_task=min_task,
+                        hand_topic=hand_topic, hand_frame=hand_frame, world_frame=world_frame, quiet=quiet)
+    write_json(output, found.document)
     if plot is not None:
-        from kinfu_cli.report.poi_plot import plot_pois, plot_task_pois
-
         title = f"{Path(str(source)).name} ({algorithm})"
-        if len(tasks) == 1 and tasks[0].samples == len(traj):
-            plot_pois(plot, traj, detectors[0], title=title)
+        if found.whole_trajectory:
+            plot_pois(plot, found.trajectory, found.detectors[0], title=title)
         else:
-            plot_task_pois(plot, traj, tasks, detectors, workspace=box, title=title)
+            plot_task_pois(plot, found.trajectory, found.tasks, found.detectors, workspace=found.workspace,
+                           title=title)
     if as_json:
-        click.echo(json.dumps(doc, indent=2))
+        click.echo(json.dumps(found.document, indent=2))
     elif not quiet:
-        if len(detectors) == 1 and not tasks.dropped:
-            extra = f", K = {detectors[0].n_components_} Gaussians" if algorithm == "gmm-as" else ""
-            click.echo(f"{len(pois)} POI(s) from {len(traj)} samples ({algorithm}{extra}) -> {output}")
-        else:
-            dropped = f", {tasks.dropped} short run(s) dropped" if tasks.dropped else ""
-            click.echo(f"{len(pois)} POI(s) in {len(tasks)} task(s) from {len(traj)} samples ({algorithm}{dropped})"
-                       f" -> {output}")
-            for e in entries:
-                k = f", K = {e['n_components']}" if algorithm == "gmm-as" else ""
-                click.echo(f"  task {e['index']}: t = {e['t_start']:.2f} .. {e['t_end']:.2f} s, {e['samples']} samples"
-                           f"{k}, {e['n_pois']} POI(s)")
-        for p in pois:
-            x, y, z = p.position
-            click.echo(f"  #{p.id}: ({x:.3f}, {y:.3f}, {z:.3f}) m at t = {p.time:.2f} s, saliency {p.saliency:.4g}"
-                       + (f", task {p.extra['task']}" if len(tasks) > 1 else ""))
+        for line in _summary_lines(found, output):
+            click.echo(line)
+
+
+def _summary_lines(found: PoiDetection, output: Path) -> list[str]:
+    """What was found: POI count (per task when the stream was cut), then one line per POI."""
+    algorithm, tasks, detectors, pois = found.algorithm, found.tasks, found.detectors, found.pois
+    samples = len(found.trajectory)
+    if len(detectors) == 1 and not tasks.dropped:
+        extra = f", K = {detectors[0].n_components_} Gaussians" if algorithm == "gmm-as" else ""
+        lines = [f"{len(pois)} POI(s) from {samples} samples ({algorithm}{extra}) -> {output}"]
+    else:
+        dropped = f", {tasks.dropped} short run(s) dropped" if tasks.dropped else ""
+        lines = [f"{len(pois)} POI(s) in {len(tasks)} task(s) from {samples} samples ({algorithm}{dropped})"
+                 f" -> {output}"]
+        for e in found.document["tasks"]:
+            k = f", K = {e['n_components']}" if algorithm == "gmm-as" else ""
+            lines.append(f"  task {e['index']}: t = {e['t_start']:.2f} .. {e['t_end']:.2f} s, {e['samples']} samples"
+                         f"{k}, {e['n_pois']} POI(s)")
+    for p in pois:
+        x, y, z = p.position
+        lines.append(f"  #{p.id}: ({x:.3f}, {y:.3f}, {z:.3f}) m at t = {p.time:.2f} s, saliency {p.saliency:.4g}"
+                     + (f", task {p.extra['task']}" if len(tasks) > 1 else ""))
+    return lines

@@ -1,4 +1,4 @@
-"""Points of interest (POIs) and the pois.json file that `kinfu nbv --pois` and `kinfu fuse --clear-pois` read.
+"""Points of interest (POIs) and the pois.json file that the NBV planner and the fusion's POI clearing read.
 
 pois.json::
 
@@ -11,7 +11,7 @@ interest S(POI) around the position (0.2 m in the paper). ZVC POIs have `"gaussi
 Gaussians are in (x, y, z, t) with t in seconds. Optional extra keys per POI: "stamp_ns" (absolute
 time, when the trajectory came from a recording), "component"/"threshold" (GMM-AS), "segment" (ZVC), "task"
 (index into "tasks"). `kinfu poi` also writes "tasks" (the hand stream cut into tasks: index, t_start, t_end,
-samples, n_pois, ...), "tasks_dropped" and "task_split" (see attention/tasks.py).
+samples, n_pois, ...), "tasks_dropped" and "task_split" (see attention/tasks.py and attention/detect.py).
 """
 
 from __future__ import annotations
@@ -75,7 +75,7 @@ class Poi:
 def pois_document(pois: list[Poi], algorithm: str, parameters: dict, frame: str = "", source: str = "") -> dict:
     """The pois.json object for `pois` (see the module docstring)."""
     if algorithm not in ALGORITHMS:
-        raise ConfigError(f"--algorithm: expected one of {', '.join(ALGORITHMS)}, got {algorithm!r}")
+        raise ConfigError(f"expected one of {', '.join(ALGORITHMS)}, got {algorithm!r}", parameter="algorithm")
     return {"pois": [p.to_dict() for p in pois], "algorithm": algorithm,
             "parameters": dict(parameters), "frame": frame, "source": source}
 
@@ -150,18 +150,17 @@ def read_pois(path: str | os.PathLike) -> list[Poi]:
     return [_parse_poi(path, i, d) for i, d in enumerate(doc["pois"])]
 
 
-def poi_positions(pois: list[Poi]) -> np.ndarray:
-    """(K, 3) positions of `pois`."""
-    return np.array([p.position for p in pois], dtype=np.float64).reshape(-1, 3)
+def poi_frame_warnings(pois_path, frame: str, option: str = "") -> list[str]:
+    """A warning when the POIs of `pois_path` are in another named frame than `frame` (the volume's).
 
-
-def poi_frame_warnings(pois_path, frame: str, option: str) -> list[str]:
-    """A warning when the POIs of `pois_path` are in another named frame than `frame` (the volume's)."""
+    option: how the caller names the file, put before its path (a command passes its flag); none by default.
+    """
     if not pois_path or not frame:
         return []
     theirs = str(read_pois_document(pois_path).get("frame") or "").lstrip("/")
     frame = frame.lstrip("/")
     if theirs and theirs != frame:
-        return [f"{option} {pois_path}: POIs are in frame {theirs!r}, the volume in {frame!r}; they are used at "
+        named = f"{option} {pois_path}" if option else str(pois_path)
+        return [f"{named}: POIs are in frame {theirs!r}, the volume in {frame!r}; they are used at "
                 f"their coordinates as given (is the hand tracker calibrated to {frame!r}?)"]
     return []

@@ -1,8 +1,8 @@
 """Scoring GMM-AS and ZVC against hand-labelled changes, as in Monica et al. RAS 2016 Sec. 6.2.
 
 Data set layout: every `*.traj` with a `*.traj.res` beside it is a task; tasks are grouped by their
-sub-folder (placements_removals, pick_and_place). A POI within `radius` (0.20 m) of a ground-truth
-change is a true positive, otherwise a false positive; a change with no POI within `radius` is a
+sub-folder (placements_removals, pick_and_place). A POI within `radius` (the POI radius, 0.20 m) of a
+ground-truth change is a true positive, otherwise a false positive; a change with no POI within `radius` is a
 false negative. precision = tp / (tp + fp); recall = (changes - fn) / changes.
 
 Robustness settings (Tables 3 and 4):
@@ -30,10 +30,15 @@ from pathlib import Path
 
 import numpy as np
 
+from kinfu_cli.attention.detect import make_detector
 from kinfu_cli.core.errors import ConfigError, TrajectoryError
+from kinfu_cli.core.pois import DEFAULT_RADIUS
+from kinfu_cli.core.progress import progress
+from kinfu_cli.io.polhemus import read_ground_truth, read_polhemus
 from kinfu_cli.io.trajectory import Trajectory
 
-MATCH_RADIUS = 0.20
+#: A POI matches a labelled change within its region of interest S(POI) (RAS 2016 Sec. 6.2).
+MATCH_RADIUS = DEFAULT_RADIUS
 
 #: Paper numbers (RAS 2016 Tables 2-4 = thesis Tables 2.2-2.4), percent (precision, recall).
 PAPER_TABLE2 = {
@@ -55,14 +60,16 @@ PAPER_TABLE4 = {  # noise std in metres -> algorithm -> (P, R)
 
 
 @dataclass(frozen=True)
-class Task:
+class LabelledTask:
+    """One task of the data set: its trajectory file and the ground-truth changes beside it."""
+
     group: str
     name: str
     traj_path: str
     res_path: str
 
 
-def find_tasks(dataset_dir: str | os.PathLike) -> list[Task]:
+def find_tasks(dataset_dir: str | os.PathLike) -> list[LabelledTask]:
     """Every `*.traj` under `dataset_dir` with a `.traj.res` beside it, grouped by sub-folder."""
     root = Path(dataset_dir)
     if not root.is_dir():
@@ -74,7 +81,7 @@ def find_tasks(dataset_dir: str | os.PathLike) -> list[Task]:
             continue
         rel = p.parent.relative_to(root)
         group = str(rel) if str(rel) != "." else root.name
-        tasks.append(Task(group, p.name, str(p), str(res)))
+        tasks.append(LabelledTask(group, p.name, str(p), str(res)))
     if not tasks:
         raise TrajectoryError(f"{root}: no *.traj file with a *.traj.res beside it")
     return tasks
@@ -97,7 +104,7 @@ def score_pois(pois_xyz: np.ndarray, gt: np.ndarray, radius: float = MATCH_RADIU
 def resample_speed(traj: Trajectory, speed: float) -> Trajectory:
     """The same path performed `speed` times faster, resampled at the original sampling rate."""
     if not speed > 0:
-        raise ConfigError(f"--speed: expected positive multipliers, got {speed}")
+        raise ConfigError(f"expected positive multipliers, got {speed}", parameter="speed")
     if speed == 1.0:
         return traj
     t = traj.t - traj.t[0]
@@ -109,37 +116,21 @@ def resample_speed(traj: Trajectory, speed: float) -> Trajectory:
                       t0_ns=traj.t0_ns, meta={**traj.meta, "speed": speed})
 
 
-def add_noise(traj: Trajectory, std: float, seed: int = 0) -> Trajectory:
-    """White Gaussian noise of `std` metres on every coordinate; the seed mixes in the file name."""
-    if std < 0:
-        raise ConfigError(f"--noise: expected standard deviations >= 0 metres, got {std}")
-    if std == 0:
+def add_noise(traj: Trajectory, noise: float, seed: int = 0) -> Trajectory:
+    """White Gaussian noise of std `noise` metres on every coordinate; the seed mixes in the file name."""
+    if noise < 0:
+        raise ConfigError(f"expected standard deviations >= 0 metres, got {noise}", parameter="noise")
+    if noise == 0:
         return traj
     rng = np.random.default_rng([seed, zlib.crc32(Path(traj.source).name.encode())])
-    pos = traj.positions + rng.normal(0.0, std, traj.positions.shape)
+    pos = traj.positions + rng.normal(0.0, noise, traj.positions.shape)
     return Trajectory(t=traj.t.copy(), positions=pos, frame=traj.frame, source=traj.source,
-                      t0_ns=traj.t0_ns, meta={**traj.meta, "noise": std})
-
-
-def make_detector(algorithm: str, params: dict | None = None):
-    """A fresh GmmActivitySaliency or ZeroVelocityCrossing with `params` (constructor keywords)."""
-    params = dict(params or {})
-    if algorithm == "gmm-as":
-        from kinfu_cli.attention.gmm_as import GmmActivitySaliency
-
-        return GmmActivitySaliency(**params)
-    if algorithm == "zvc":
-        from kinfu_cli.attention.zvc import ZeroVelocityCrossing
-
-        return ZeroVelocityCrossing(**params)
-    raise ConfigError(f"--algorithm: expected gmm-as, zvc or both, got {algorithm!r}")
+                      t0_ns=traj.t0_ns, meta={**traj.meta, "noise": noise})
 
 
 def _run_job(job: tuple) -> list[dict]:
     """One task under one (speed, noise) setting, every algorithm. Top level so it pickles."""
     task, speed, noise, seed, algorithms, params = job
-    from kinfu_cli.io.polhemus import read_ground_truth, read_polhemus
-
     traj = add_noise(resample_speed(read_polhemus(task.traj_path), speed), noise, seed)
     gt = read_ground_truth(task.res_path)
     out = []
@@ -197,14 +188,12 @@ def evaluate_dataset(dataset_dir: str | os.PathLike, algorithms: list[str], spee
                      seed: int = 0, quiet: bool = True) -> tuple[list[dict], list[dict]]:
     """Run every task under every setting; returns (summaries, per-task rows).
 
-    params: {"gmm-as": {...constructor kwargs...}, "zvc": {...}}.
+    params: {"gmm-as": {...constructor kwargs...}, "zvc": {...}} (attention.detect.detector_params).
     """
-    from kinfu_cli.core.progress import progress
-
     tasks = find_tasks(dataset_dir)
     settings = settings_for(speeds or [1.0], noises or [])
     for alg in algorithms:
-        make_detector(alg, (params or {}).get(alg))._check()  # bad options fail before any work
+        make_detector(alg, (params or {}).get(alg)).check_params()  # bad options fail before any work
     jobs = [(t, s, n, seed, list(algorithms), dict(params or {})) for s, n in settings for t in tasks]
     rows: list[dict] = []
     if workers <= 1 or len(jobs) < 4:

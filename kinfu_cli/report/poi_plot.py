@@ -11,6 +11,7 @@ import os
 
 import numpy as np
 
+from kinfu_cli.core.atomic import atomic_path
 from kinfu_cli.io.trajectory import Trajectory
 
 
@@ -33,13 +34,11 @@ def _equal_axes(ax, pts: np.ndarray) -> None:
 
 def plot_pois(path: str | os.PathLike, traj: Trajectory, detector, title: str = "") -> None:
     """Write the figure for a fitted GmmActivitySaliency or ZeroVelocityCrossing to `path` (atomic)."""
-    import matplotlib
+    import matplotlib  # heavy: loaded only when a plot is asked for
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib import cm, colors
-
-    from kinfu_cli.core.atomic import atomic_path
 
     fig = plt.figure(figsize=(12, 5.5))
     ax = fig.add_subplot(1, 2, 1, projection="3d")
@@ -99,12 +98,10 @@ def plot_task_pois(path: str | os.PathLike, traj: Trajectory, tasks, detectors, 
     """Figure for a stream cut into tasks (attention/tasks.py): the trajectory with each task in its own
     colour (samples outside every task in grey), the workspace box and the POIs (3-D, left); x, y, z
     over time with the task spans shaded and the POI times marked (right). Written atomically."""
-    import matplotlib
+    import matplotlib  # heavy: loaded only when a plot is asked for
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from kinfu_cli.core.atomic import atomic_path
 
     fig = plt.figure(figsize=(13, 5.5))
     ax = fig.add_subplot(1, 2, 1, projection="3d")

@@ -1,0 +1,117 @@
+"""The POI pipeline: a hand trajectory cut into tasks, a fresh GMM-AS or ZVC detector fitted on each.
+
+`detect_pois` is the driver (`kinfu poi`): it checks every argument before reading the trajectory,
+runs the detectors and returns a PoiDetection holding the POIs, the tasks, the fitted detectors and
+the pois.json object. `detector_params` and `make_detector` build the detectors from one flat set of
+parameters of both algorithms; the data-set evaluation (evaluation/poi.py) uses them too.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from kinfu_cli.attention.gmm_as import GmmActivitySaliency
+from kinfu_cli.attention.tasks import (MIN_TASK_S, SPLIT_GAP_S, TaskList, check_min_task, check_split_gap,
+                                       check_workspace, detect_by_task, parse_workspace, task_entries)
+from kinfu_cli.attention.zvc import PAPER_THRESHOLD, ZeroVelocityCrossing
+from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.core.pois import Poi, pois_document
+from kinfu_cli.io.hand import load_hand_trajectory
+from kinfu_cli.io.trajectory import Trajectory
+
+Detector = GmmActivitySaliency | ZeroVelocityCrossing
+
+
+def make_detector(algorithm: str, params: dict | None = None) -> Detector:
+    """A fresh GmmActivitySaliency ("gmm-as") or ZeroVelocityCrossing ("zvc") with `params` (constructor keywords)."""
+    params = dict(params or {})
+    if algorithm == "gmm-as":
+        return GmmActivitySaliency(**params)
+    if algorithm == "zvc":
+        return ZeroVelocityCrossing(**params)
+    raise ConfigError(f"expected gmm-as, zvc or both, got {algorithm!r}", parameter="algorithm")
+
+
+def detector_params(*, poi_threshold: float | None = None, neighbours: int | None = None,
+                    bic_threshold: float | None = None, max_components: int | None = None,
+                    selection: str | None = None, time_scale: str | float | None = None,
+                    reg_space: float | None = None, reg_time: float | None = None, saliency: str | None = None,
+                    threshold_mode: str | None = None, resample: int | None = None,
+                    noise_floor: float | None = None, literal: bool = False, zvc_half_width: int | None = None,
+                    zvc_threshold: float | None = None, zvc_r1: float | None = None, zvc_r2: float | None = None,
+                    radius: float | None = None) -> dict[str, dict]:
+    """{"gmm-as": {...}, "zvc": {...}}: constructor keywords of both detectors from one flat set.
+
+    The names are the GmmActivitySaliency ones, ZVC's with a `zvc_` prefix; `radius` goes to both.
+    None leaves the detector's default. `literal` overrides with the paper read literally
+    (GmmActivitySaliency.LITERAL, ZVCTh = PAPER_THRESHOLD).
+    """
+    given = {"poi_threshold": poi_threshold, "neighbours": neighbours, "bic_threshold": bic_threshold,
+             "max_components": max_components, "selection": selection, "reg_space": reg_space,
+             "reg_time": reg_time, "saliency": saliency, "threshold_mode": threshold_mode, "resample": resample,
+             "noise_floor": noise_floor, "time_scale": time_scale, "radius": radius}
+    gmm_as = {k: v for k, v in given.items() if v is not None}
+    zvc = {k: v for k, v in {"half_width": zvc_half_width, "threshold": zvc_threshold, "r1": zvc_r1, "r2": zvc_r2,
+                             "radius": radius}.items() if v is not None}
+    if literal:
+        gmm_as.update(GmmActivitySaliency.LITERAL)
+        zvc["threshold"] = PAPER_THRESHOLD
+    return {"gmm-as": gmm_as, "zvc": zvc}
+
+
+@dataclass
+class PoiDetection:
+    """What `detect_pois` found: the POIs of every task (ids 0.., extra "task"), the tasks, one fitted
+    detector per task, and `document`, the pois.json object (pois, algorithm, parameters, frame, source,
+    tasks, tasks_dropped, task_split)."""
+
+    trajectory: Trajectory
+    algorithm: str
+    workspace: tuple[float, ...] | None
+    tasks: TaskList
+    detectors: list[Detector]
+    pois: list[Poi]
+    document: dict
+
+    @property
+    def whole_trajectory(self) -> bool:
+        """True when one task holds every sample (nothing was cut away)."""
+        return len(self.tasks) == 1 and self.tasks[0].samples == len(self.trajectory)
+
+
+def detect_pois(source: str | os.PathLike | Trajectory, algorithm: str = "gmm-as", params: dict | None = None, *,
+                workspace: str | Sequence[float] | None = None, split_gap: float | None = SPLIT_GAP_S,
+                min_task: float = MIN_TASK_S, hand_topic: str | None = None, hand_frame: str | None = None,
+                world_frame: str | None = None, quiet: bool = True) -> PoiDetection:
+    """Points of interest of a hand trajectory, each task (attention/tasks.py) fitted on its own.
+
+    source: a Trajectory, a Polhemus `.traj` file or a recording (read with hand_topic / hand_frame /
+    world_frame, see io.hand.load_hand_trajectory). params: constructor keywords of the `algorithm`
+    detector (one entry of `detector_params`). workspace: a box (x0, y0, z0, x1, y1, z1) in metres or
+    its text 'x0,y0,z0,x1,y1,z1'; None = everywhere. Every argument is checked before the trajectory
+    is read. Raises ConfigError when no task is left.
+    """
+    box = parse_workspace(workspace) if isinstance(workspace, str) else check_workspace(workspace)
+    check_split_gap(split_gap)
+    check_min_task(min_task)
+    make_detector(algorithm, params).check_params()
+    if isinstance(source, Trajectory):
+        traj, source_name = source, source.source
+    else:
+        traj = load_hand_trajectory(source, hand_topic=hand_topic, hand_frame=hand_frame, world_frame=world_frame)
+        source_name = str(source)
+    tasks, detectors, pois = detect_by_task(traj, lambda: make_detector(algorithm, params), box, split_gap,
+                                            min_task, quiet=quiet)
+    recorded = dict(detectors[0].get_params())
+    if algorithm == "gmm-as":
+        recorded["n_components"] = int(sum(d.n_components_ for d in detectors))  # per task in "tasks"
+    document = pois_document(pois, algorithm, recorded, frame=traj.frame, source=source_name)
+    document["tasks"] = task_entries(tasks, detectors)
+    document["tasks_dropped"] = tasks.dropped
+    document["task_split"] = {"workspace": list(box) if box else None,
+                              "split_gap": None if split_gap is None else float(split_gap),
+                              "min_task": float(min_task)}
+    return PoiDetection(trajectory=traj, algorithm=algorithm, workspace=box, tasks=tasks, detectors=detectors,
+                        pois=pois, document=document)

@@ -1,0 +1,79 @@
+"""The GMM-AS and ZVC options shared by `kinfu poi` and `kinfu eval poi`, and their parsing.
+
+The option names are those of attention.detect.detector_params, so library errors about a detector
+parameter show the flag of the same name.
+"""
+
+from __future__ import annotations
+
+import click
+
+from kinfu_cli.attention.detect import detector_params
+from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.core.pois import DEFAULT_RADIUS
+
+#: Python names of the options `detector_options` adds.
+DETECTOR_OPTIONS = ("poi_threshold", "neighbours", "bic_threshold", "max_components", "selection", "time_scale",
+                    "reg_space", "reg_time", "saliency", "threshold_mode", "resample", "noise_floor", "literal",
+                    "zvc_half_width", "zvc_threshold", "zvc_r1", "zvc_r2", "radius")
+
+
+def _time_scale(value: str) -> str | float:
+    if value.strip().lower() == "duration":
+        return "duration"
+    try:
+        return float(value)
+    except ValueError:
+        raise ConfigError(f"--time-scale: expected 'duration' or units per second, got {value!r}") from None
+
+
+def detector_options(f):
+    """The GMM-AS and ZVC parameters as options (shared by `kinfu poi` and `kinfu eval poi`)."""
+    opts = [
+        click.option("--poi-threshold", default=1.5, show_default=True, type=float,
+                     help="GMM-AS POITh: saliency must exceed this x the neighbours' mean (paper Table 2: 2.5; "
+                          "Tables 5-6: 1.5)."),
+        click.option("--neighbours", default=2, show_default=True, type=int, help="GMM-AS Lambda: neighbours each side."),
+        click.option("--bic-threshold", default=0.0, show_default=True, type=float,
+                     help="GMM-AS BICTh: stop when BIC > min BIC + this."),
+        click.option("--max-components", default=15, show_default=True, type=int, help="GMM-AS Kmax."),
+        click.option("--selection", default="first-minimum", show_default=True,
+                     type=click.Choice(["first-minimum", "best"]), help="GMM-AS: first BIC minimum or best of 1..Kmax."),
+        click.option("--time-scale", default="duration", show_default=True,
+                     help="GMM-AS 4th coordinate: 'duration' (t normalised to 0..1) or units per second (1 = s)."),
+        click.option("--reg-space", default=0.005, show_default=True, type=float,
+                     help="GMM-AS spatial std floor (m) added to covariances."),
+        click.option("--reg-time", default=0.1, show_default=True, type=float,
+                     help="GMM-AS time std floor, in --time-scale units."),
+        click.option("--saliency", default="precision", show_default=True,
+                     type=click.Choice(["precision", "literal", "weight", "conditional"]),
+                     help="GMM-AS saliency reading (see kinfu_cli/attention/gmm_as.py; 'literal' = eq. 13 on "
+                          "the spatial covariance)."),
+        click.option("--threshold-mode", default="available", show_default=True,
+                     type=click.Choice(["available", "literal"]),
+                     help="GMM-AS: mean of existing neighbours, or sum / 2 Lambda as printed in Alg. 3."),
+        click.option("--resample", default=300, show_default=True, type=int,
+                     help="GMM-AS: resample each trajectory to this many samples (0 = raw samples)."),
+        click.option("--noise-floor", default=1.0, show_default=True, type=float,
+                     help="GMM-AS: raise the floor to this x the estimated sensor noise, denoising first (0 = off)."),
+        click.option("--literal", is_flag=True,
+                     help="The paper read literally: GMM-AS on raw samples, t in s, 1 mm floor, eq. 13 on the "
+                          "spatial covariance, POITh 2.5, sum / 2 Lambda; ZVC with ZVCTh 1.72. Overrides those options."),
+        click.option("--zvc-half-width", default=4, show_default=True, type=int, help="ZVC B (filter width 2B+1)."),
+        click.option("--zvc-threshold", default=1.5, show_default=True, type=float,
+                     help="ZVC ZVCTh (paper 1.72; 1.5 re-calibrated on users 1+4, see attention/zvc.py)."),
+        click.option("--zvc-r1", default=0.10, show_default=True, type=float, help="ZVC inner radius r1 (m)."),
+        click.option("--zvc-r2", default=0.25, show_default=True, type=float, help="ZVC outer radius r2 (m)."),
+        click.option("--radius", default=DEFAULT_RADIUS, show_default=True, type=float,
+                     help="Region radius of each POI (m)."),
+    ]
+    for opt in reversed(opts):
+        f = opt(f)
+    return f
+
+
+def detector_params_from(kw: dict) -> dict[str, dict]:
+    """{"gmm-as": {...}, "zvc": {...}} constructor keywords from the parsed options (removed from kw)."""
+    options = {name: kw.pop(name) for name in DETECTOR_OPTIONS}
+    options["time_scale"] = _time_scale(options["time_scale"])
+    return detector_params(**options)
