@@ -17,6 +17,7 @@ from kinfu_cli.nbv.ranking import (estimate_table_z, forget_around, rank_poi, re
                                    unknown_in_sphere)
 from kinfu_cli.nbv.raycast import RayVolume
 from kinfu_cli.core.poses import matrix_to_quaternion
+from kinfu_cli.fusion.volume import FORMAT
 from kinfu_cli.nbv.viewpoints import SphereSpec, read_candidates, sphere_viewpoints
 
 CAM = CameraModel(60.0, 60.0, 39.5, 29.5, 80, 60, min_range=0.3, max_range=3.0)
@@ -167,8 +168,6 @@ def test_cli_bad_input_is_a_one_line_error(scene_files, case):
         pois.write_text(json.dumps({"pois": [{"id": 0, "position": [5.0, 0.8, 0.5]}]}))
         expect = "POI 0 at (5.000, 0.800, 0.500) is outside the volume"
     elif case == "other_version":
-        from kinfu_cli.fusion.volume import FORMAT
-
         np.savez(vol, meta=np.array(json.dumps({"format": FORMAT, "format_version": 99})))
         expect = "version 99"
     elif case == "intrinsics":
