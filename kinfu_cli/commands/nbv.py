@@ -34,8 +34,9 @@ def summary_lines(doc: dict) -> list[str]:
         rej = ", ".join(f"{k} {v}" for k, v in p["rejected"].items() if v) or "none"
         state = "reconstructed" if p["reconstructed"] else "not reconstructed"
         x, y, z = p["position"]
-        lines.append(f"POI {p['id']} at ({x:.3f}, {y:.3f}, {z:.3f}) r={p['radius']:.2f} m: {p['candidates']} candidates,"
-                     f" rejected: {rej}; best {doc['gain']} gain {p['best_gain']:.1f} (IncTh {p['inc_th']:.1f}): {state}")
+        lines.append(f"POI {p['id']} at ({x:.3f}, {y:.3f}, {z:.3f}) r={p['radius']:.2f} m: "
+                     f"{p['candidates']} candidates, rejected: {rej}; best {doc['gain']} gain "
+                     f"{p['best_gain']:.1f} (IncTh {p['inc_th']:.1f}): {state}")
         lines.append("  rank      gain   unknown  occupied  empty-exit  position")
         for i, v in enumerate(p["views"][:10]):
             px, py, pz = v["position"]

@@ -173,7 +173,8 @@ def plan_object_views(segments: SegmentResult, contours: Contours, scorer: Score
                       margin: float = 0.2, distance: float = 0.8, cone_deg: float = 15.0, n_directions: int = 5,
                       n_rolls: int = 8, max_segments: int | None = None, exclude=None,
                       exclude_shift: float = 0.05, exclude_turn_deg: float = 10.0) -> ObjectPlan:
-    """Thesis Alg. 4 on precomputed `segments` and `contours`: the best pose of the most salient segment with score > score_threshold.
+    """Thesis Alg. 4 on precomputed `segments` and `contours`: the best pose of the most salient segment
+    with score > score_threshold.
 
     scorer(poses (V, 4, 4), center (3,), radius) -> scores (V,); exclude: poses (K, 4, 4) already taken:
     candidates within `exclude_shift` m and `exclude_turn_deg` of one are neither cast nor chosen. Returns an
