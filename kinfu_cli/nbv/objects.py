@@ -34,6 +34,12 @@ from kinfu_cli.segmentation.pipeline import SegmentOptions, SegmentResult, analy
 
 Scorer = Callable[[np.ndarray, np.ndarray, float], np.ndarray]
 
+# Candidate views of a contour point (thesis Alg. 4), the defaults of every planner here.
+VIEW_DISTANCE = 0.8  # sensor distance from the contour point (m)
+CONE_DEG = 15.0  # tilt of the 4 extra directions about the frontier normal
+N_DIRECTIONS = 5
+N_ROLLS = 8
+
 
 def _look_at_rolls(positions: np.ndarray, targets: np.ndarray, rolls: np.ndarray) -> np.ndarray:
     """(P * R, 4, 4) camera-to-world poses (optical frame: z forward, y down) for each position x roll."""
@@ -58,8 +64,9 @@ def _look_at_rolls(positions: np.ndarray, targets: np.ndarray, rolls: np.ndarray
     return T.reshape(P * R, 4, 4)
 
 
-def contour_viewpoints(points: np.ndarray, directions: np.ndarray, *, distance: float = 0.8, cone_deg: float = 15.0,
-                       n_directions: int = 5, n_rolls: int = 8) -> tuple[np.ndarray, np.ndarray]:
+def contour_viewpoints(points: np.ndarray, directions: np.ndarray, *, distance: float = VIEW_DISTANCE,
+                       cone_deg: float = CONE_DEG, n_directions: int = N_DIRECTIONS, n_rolls: int = N_ROLLS
+                       ) -> tuple[np.ndarray, np.ndarray]:
     """Candidate poses for contour points: (poses (M * n_directions * n_rolls, 4, 4), owner (same,) index of
     the contour point). Direction 0 is the frontier normal; the others are tilted by `cone_deg` about it
     at equal azimuths."""
@@ -170,9 +177,9 @@ def not_attempted(poses: np.ndarray, taken, *, shift: float = 0.05, turn_deg: fl
 
 
 def plan_object_views(segments: SegmentResult, contours: Contours, scorer: Scorer, *, score_threshold: float = 0.0,
-                      margin: float = 0.2, distance: float = 0.8, cone_deg: float = 15.0, n_directions: int = 5,
-                      n_rolls: int = 8, max_segments: int | None = None, exclude=None,
-                      exclude_shift: float = 0.05, exclude_turn_deg: float = 10.0) -> ObjectPlan:
+                      margin: float = 0.2, distance: float = VIEW_DISTANCE, cone_deg: float = CONE_DEG,
+                      n_directions: int = N_DIRECTIONS, n_rolls: int = N_ROLLS, max_segments: int | None = None,
+                      exclude=None, exclude_shift: float = 0.05, exclude_turn_deg: float = 10.0) -> ObjectPlan:
     """Thesis Alg. 4 on precomputed `segments` and `contours`: the best pose of the most salient segment
     with score > score_threshold.
 
@@ -227,8 +234,9 @@ def plan_object_views(segments: SegmentResult, contours: Contours, scorer: Score
 
 
 def plan_standard_views(contours: Contours, scorer: Scorer, region_center, region_radius: float, *,
-                        score_threshold: float = 0.0, distance: float = 0.8, cone_deg: float = 15.0,
-                        n_directions: int = 5, n_rolls: int = 8, exclude=None, exclude_shift: float = 0.05,
+                        score_threshold: float = 0.0, distance: float = VIEW_DISTANCE, cone_deg: float = CONE_DEG,
+                        n_directions: int = N_DIRECTIONS, n_rolls: int = N_ROLLS, exclude=None,
+                        exclude_shift: float = 0.05,
                         exclude_turn_deg: float = 10.0) -> ObjectPlan:
     """The "standard" baseline: every contour candidate scored on the whole environment sphere
     (candidates near an `exclude` pose, already taken, are skipped as in `plan_object_views`)."""
