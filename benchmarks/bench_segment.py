@@ -21,15 +21,24 @@ import time
 from pathlib import Path
 
 import numpy as np
+from click.testing import CliRunner
+from scipy.optimize import least_squares
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from kinfu_cli.cli import cli  # noqa: E402
+from kinfu_cli.core.camera import CameraModel  # noqa: E402
+from kinfu_cli.evaluation.objects_loop import compare_strategies  # noqa: E402
+from kinfu_cli.evaluation.segments import evaluate_synthetic_scenes  # noqa: E402
+from kinfu_cli.fusion.volume import TernaryVolume  # noqa: E402
+from kinfu_cli.nbv.contours import extract_contours  # noqa: E402
+from kinfu_cli.nbv.objects import nbv_scorer, plan_object_views, plan_standard_views  # noqa: E402
 from kinfu_cli.segmentation import superquadric as sqm  # noqa: E402
+from kinfu_cli.segmentation.pipeline import SegmentOptions, analyse_volume  # noqa: E402
+from kinfu_cli.sim.scenario import make_scenario  # noqa: E402
 
 
 def bench_superquadric(n: int = 30, seed: int = 1) -> dict:
-    from scipy.optimize import least_squares
-
     rng = np.random.default_rng(seed)
     shapes = [(0.1, 0.1), (0.1, 1.0), (1.0, 1.0), (0.5, 0.5), (1.0, 0.3)]
     clouds, truths = [], []
@@ -88,12 +97,6 @@ def bench_superquadric(n: int = 30, seed: int = 1) -> dict:
 
 
 def bench_segment_512(seed: int = 0) -> dict:
-    from click.testing import CliRunner
-
-    from kinfu_cli.cli import cli
-    from kinfu_cli.fusion.volume import TernaryVolume
-    from kinfu_cli.sim.scenario import make_scenario
-
     sc = make_scenario(seed)
     after = sc.scene_after
     c = np.array([after.table.center[0], after.table.center[1], after.table.top_z])
@@ -115,8 +118,6 @@ def bench_segment_512(seed: int = 0) -> dict:
 
 
 def bench_scenes(seeds) -> dict:
-    from kinfu_cli.evaluation.segments import evaluate_synthetic_scenes
-
     r = evaluate_synthetic_scenes(tuple(seeds), resolution=256, size=1.6)
     return {"seeds": list(seeds), "object_recall": r["object_recall"],
             "boundary_precision": r["boundary_precision"], "boundary_recall": r["boundary_recall"],
@@ -125,13 +126,6 @@ def bench_scenes(seeds) -> dict:
 
 
 def bench_object_planning(seed: int = 0) -> dict:
-    from kinfu_cli.fusion.volume import TernaryVolume
-    from kinfu_cli.core.camera import CameraModel
-    from kinfu_cli.nbv.contours import extract_contours
-    from kinfu_cli.nbv.objects import nbv_scorer, plan_object_views, plan_standard_views
-    from kinfu_cli.segmentation.pipeline import SegmentOptions, analyse_volume
-    from kinfu_cli.sim.scenario import make_scenario
-
     sc = make_scenario(seed)
     scene = sc.scene_after
     c = np.array([scene.table.center[0], scene.table.center[1], scene.table.top_z])
@@ -161,8 +155,6 @@ def bench_object_planning(seed: int = 0) -> dict:
 
 
 def bench_closed_loop(seed: int = 0, views: int = 5) -> dict:
-    from kinfu_cli.evaluation.objects_loop import compare_strategies
-
     return compare_strategies(seed, views=views, log=lambda name, d: print(name, json.dumps(d), flush=True))
 
 

@@ -17,7 +17,8 @@ from kinfu_cli.nbv.ranking import (estimate_table_z, forget_around, rank_poi, re
                                    unknown_in_sphere)
 from kinfu_cli.nbv.raycast import RayVolume
 from kinfu_cli.core.poses import matrix_to_quaternion
-from kinfu_cli.nbv.viewpoints import read_candidates, sphere_viewpoints
+from kinfu_cli.fusion.volume import FORMAT
+from kinfu_cli.nbv.viewpoints import SphereSpec, read_candidates, sphere_viewpoints
 
 CAM = CameraModel(60.0, 60.0, 39.5, 29.5, 80, 60, min_range=0.3, max_range=3.0)
 SMALL = ["--fx", "60", "--fy", "60", "--cx", "39.5", "--cy", "29.5", "--width", "80", "--height", "60",
@@ -106,13 +107,13 @@ def test_rejections_below_table_and_inside_occupied_or_unknown():
 def test_forget_around_and_inc_th_say_when_a_poi_is_reconstructed():
     g, poi = box_scene(with_occluder=False)
     g.labels[36:44, 36:44, 21:29] = OCCUPIED  # the box is fully known now
-    r = rank_poi(g, poi, CAM, sphere=dict(lon_step=90, lat_step=45, roll_step=180))
+    r = rank_poi(g, poi, CAM, sphere=SphereSpec(lon_step=90, lat_step=45, roll_step=180))
     assert r.best_gain == 0 and r.reconstructed
     n = forget_around(g, poi, 0.2)
     assert n > 0 and unknown_in_sphere(g, poi, 0.2) == pytest.approx(4 / 3 * np.pi * 10 ** 3, rel=0.1)
-    r = rank_poi(g, poi, CAM, sphere=dict(lon_step=90, lat_step=45, roll_step=180))
+    r = rank_poi(g, poi, CAM, sphere=SphereSpec(lon_step=90, lat_step=45, roll_step=180))
     assert not r.reconstructed and r.best_gain > r.inc_th > 0
-    r = rank_poi(g, poi, CAM, sphere=dict(lon_step=90, lat_step=45, roll_step=180), inc_th=1e9)
+    r = rank_poi(g, poi, CAM, sphere=SphereSpec(lon_step=90, lat_step=45, roll_step=180), inc_th=1e9)
     assert r.reconstructed
 
 
@@ -167,8 +168,6 @@ def test_cli_bad_input_is_a_one_line_error(scene_files, case):
         pois.write_text(json.dumps({"pois": [{"id": 0, "position": [5.0, 0.8, 0.5]}]}))
         expect = "POI 0 at (5.000, 0.800, 0.500) is outside the volume"
     elif case == "other_version":
-        from kinfu_cli.fusion.volume import FORMAT
-
         np.savez(vol, meta=np.array(json.dumps({"format": FORMAT, "format_version": 99})))
         expect = "version 99"
     elif case == "intrinsics":

@@ -5,9 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from kinfu_cli.core.camera import CameraModel
 from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.evaluation.objects_loop import compare_strategies
 from kinfu_cli.nbv.contours import contour_voxels, extract_contours
-from kinfu_cli.nbv.objects import contour_viewpoints, find_near, plan_object_views, plan_standard_views
+from kinfu_cli.nbv.objects import (contour_viewpoints, find_near, nbv_scorer, plan_object_views,
+                                   plan_object_views_for_volume, plan_standard_views)
 from kinfu_cli.segmentation.pipeline import SegmentOptions, analyse_volume
 from kinfu_cli.core.grid import TernaryGrid
 from kinfu_cli.segmentation.synthetic import primitives_tsdf, tabletop_primitives
@@ -124,19 +127,12 @@ def test_object_plan_takes_the_most_salient_segment_and_casts_few_candidates(pla
 
 
 def test_object_plan_with_the_nbv_ray_caster(planned):
-    ranking = pytest.importorskip("kinfu_cli.nbv.ranking")
-    camera_mod = pytest.importorskip("kinfu_cli.core.camera")
-    from kinfu_cli.nbv.objects import nbv_scorer
-
     prims, grid, segs, contours = planned
-    cam = camera_mod.CameraModel(fx=120.0, fy=120.0, cx=79.5, cy=59.5, width=160, height=120, min_range=0.3)
+    cam = CameraModel(fx=120.0, fy=120.0, cx=79.5, cy=59.5, width=160, height=120, min_range=0.3)
     plan = plan_object_views(segs, contours, nbv_scorer(grid, cam), score_threshold=0.0)
     assert plan.pose is not None and plan.score > 0
     assert plan.candidates_evaluated < plan.candidates_total
-    assert ranking is not None
     # the one-call entry point `kinfu nbv --mode objects` uses gives the same plan
-    from kinfu_cli.nbv.objects import plan_object_views_for_volume
-
     again = plan_object_views_for_volume(grid, cam, score_threshold=0.0)
     assert again.segment_id == plan.segment_id and again.score == plan.score
     doc = again.to_json(top=3)
@@ -146,9 +142,6 @@ def test_object_plan_with_the_nbv_ray_caster(planned):
 def test_closed_loop_object_views_keep_revealing_voxels_near_objects_on_another_scene():
     """The object-driven loop on a generated scene (seed 2, not the sample): no stall, few candidates cast.
     The comparison against the standard strategy is in tests/test_eval_nbv_objects.py."""
-    pytest.importorskip("kinfu_cli.nbv.ranking")
-    from kinfu_cli.evaluation.objects_loop import compare_strategies
-
     r = compare_strategies(2, views=5, strategies=("objects",))
     obj = r["strategies"]["objects"]
     curve = obj["unknown_near"]

@@ -14,7 +14,7 @@ from kinfu_cli.evaluation.segments import boundary_set, score_segmentation
 from kinfu_cli.core.grid import TernaryGrid, save_ternary
 from kinfu_cli.segmentation.pipeline import SegmentOptions, analyse_cloud
 from kinfu_cli.segmentation.saliency import isolation, oriented_box, segment_saliency
-from kinfu_cli.segmentation.segments import PLANE_LABEL, segment_cloud
+from kinfu_cli.segmentation.segments import PLANE_LABEL, SegmentationParams, detect_support_plane, segment_cloud
 from kinfu_cli.segmentation.surface import surface_from_labels, surface_from_tsdf
 from kinfu_cli.segmentation.synthetic import label_points, primitives_tsdf, tabletop_primitives
 
@@ -175,4 +175,24 @@ def test_cli_segment_bad_input_exits_2_without_outputs(tmp_path):
     assert res.exit_code == 2 and "junk.npz" in res.output
     res = runner.invoke(cli, ["segment", str(tmp_path / "empty.npz"), "-o", str(out), "--up", "1,2"])
     assert res.exit_code == 2 and "--up" in res.output
+    res = runner.invoke(cli, ["segment", str(tmp_path / "empty.npz"), "-o", str(out), "--isolation-threshold", "0"])
+    assert res.exit_code == 2 and "kinfu: error: --isolation-threshold: must be > 0 m" in res.output
     assert not out.exists() or not any(out.iterdir())
+
+
+def test_support_plane_ransac_gives_one_answer_per_seed():
+    """open3d stops its parallel RANSAC early, so on several threads the plane depended on thread timing;
+    the support plane is searched on one thread, and open3d's thread limit is restored afterwards."""
+    import open3d as o3d
+
+    rng = np.random.default_rng(3)
+    table = np.column_stack([rng.uniform(-0.5, 0.5, (20000, 2)), 0.7 + rng.normal(0, 0.003, 20000)])
+    floor = np.column_stack([rng.uniform(-1, 1, (20000, 2)), rng.normal(0, 0.003, 20000)])
+    pts = np.concatenate([table, floor])
+    nrm = np.tile([0.0, 0.0, 1.0], (len(pts), 1))
+    threads = o3d.utility.get_max_threads()
+    planes = [detect_support_plane(pts, nrm, SegmentationParams()) for _ in range(10)]
+    assert o3d.utility.get_max_threads() == threads
+    assert all(np.array_equal(p[0], planes[0][0]) and np.array_equal(p[1], planes[0][1]) for p in planes)
+    assert abs(planes[0][0][3] + 0.7) < 0.003  # the table (the highest plane), not the floor
+

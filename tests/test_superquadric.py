@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from kinfu_cli.segmentation.multi_superquadric import fit_multi_superquadric
 from kinfu_cli.segmentation.superquadric import (
     SegmentError, Superquadric, _residual_and_jacobian, arc_view_dirs, fit_superquadric, parameter_errors,
     partial_view_cloud, rpy_to_matrix, matrix_to_rpy)
@@ -89,8 +90,6 @@ def test_degenerate_segments_raise_clear_errors():
 
 
 def test_multi_superquadric_splits_a_t_shape_but_not_a_box():
-    from kinfu_cli.segmentation.multi_superquadric import fit_multi_superquadric
-
     rng = np.random.default_rng(0)
 
     def box(half, center, n):

@@ -8,8 +8,13 @@ from pathlib import Path
 import click
 
 from kinfu_cli.commands._output import emit
-
 from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.core.pois import DEFAULT_RADIUS, poi_frame_warnings
+from kinfu_cli.nbv.gains import gain_names
+from kinfu_cli.nbv.sensor import camera_from_options
+from kinfu_cli.nbv.viewpoints import PAPER_SPHERE, SphereSpec
+from kinfu_cli.nbv.workflow import NbvOptions, rank_object_views, rank_poi_views
+from kinfu_cli.report.nbv_plot import plot_nbv
 
 
 def _table_z_option(value: str):
@@ -22,6 +27,41 @@ def _table_z_option(value: str):
         raise ConfigError(f"--table-z: expected auto, none or a height in metres, got {value!r}") from None
 
 
+def summary_lines(doc: dict) -> list[str]:
+    """Human-readable summary of a views.json document of the POI mode."""
+    lines = []
+    for p in doc["pois"]:
+        rej = ", ".join(f"{k} {v}" for k, v in p["rejected"].items() if v) or "none"
+        state = "reconstructed" if p["reconstructed"] else "not reconstructed"
+        x, y, z = p["position"]
+        lines.append(f"POI {p['id']} at ({x:.3f}, {y:.3f}, {z:.3f}) r={p['radius']:.2f} m: "
+                     f"{p['candidates']} candidates, rejected: {rej}; best {doc['gain']} gain "
+                     f"{p['best_gain']:.1f} (IncTh {p['inc_th']:.1f}): {state}")
+        lines.append("  rank      gain   unknown  occupied  empty-exit  position")
+        for i, v in enumerate(p["views"][:10]):
+            px, py, pz = v["position"]
+            lines.append(f"  {i + 1:4d} {v['gain']:9.1f} {v['rays_unknown']:9d} {v['rays_occupied']:9d} "
+                         f"{v['rays_empty_exit']:11d}  ({px:.3f}, {py:.3f}, {pz:.3f})")
+    return lines
+
+
+def objects_summary_lines(doc: dict) -> list[str]:
+    """Human-readable summary of a views.json document of the objects mode."""
+    if doc["pose"] is None:
+        return [f"no view scores above {doc['score_threshold']} on any segment ({len(doc['attempts'])} tried): "
+                "the objects are considered reconstructed"]
+    r = doc["region"]
+    c = r["center"]
+    lines = [f"segment {doc['segment_id']} (region centre ({c[0]:.3f}, {c[1]:.3f}, {c[2]:.3f}), r={r['radius']:.2f} m):"
+             f" best {doc['gain']} gain {doc['score']:.1f}; {doc['candidates_evaluated']} of "
+             f"{doc['candidates_total']} candidates ray-cast",
+             "  rank      gain  position"]
+    for i, v in enumerate(doc["views"][:10]):
+        px, py, pz = v["position"]
+        lines.append(f"  {i + 1:4d} {v['gain']:9.1f}  ({px:.3f}, {py:.3f}, {pz:.3f})")
+    return lines
+
+
 @click.command("nbv", short_help="Rank next-best views around each POI by information gain.")
 @click.argument("volume", type=click.Path(path_type=Path))
 @click.option("--pois", "pois_path", default=None, type=click.Path(path_type=Path),
@@ -31,7 +71,7 @@ def _table_z_option(value: str):
                    "contours of the most salient segment (thesis Alg. 4).")
 @click.option("--clear", is_flag=True, help="First set every POI sphere to unknown (the paper's ForgetAround).")
 @click.option("--gain", default="unknown", show_default=True,
-              type=click.Choice(["unknown", "distance", "rear", "entropy"]), help="Gain function.")
+              type=click.Choice(gain_names()), help="Gain function.")
 @click.option("--top", default=10, show_default=True, type=click.IntRange(min=0),
               help="Views listed per POI (0 = all valid views).")
 @click.option("-o", "--output", type=click.Path(path_type=Path), default=None, help="Write views.json here.")
@@ -39,13 +79,20 @@ def _table_z_option(value: str):
               help="PNG: volume slices with each POI sphere and its top views as arrows.")
 @click.option("--candidates", type=click.Path(path_type=Path), default=None,
               help="JSON list of 4x4 camera-to-world poses to score instead of the viewing sphere.")
-@click.option("--radius", default=0.8, show_default=True, type=float, help="Viewing sphere radius d (m).")
-@click.option("--lon-step", default=30.0, show_default=True, type=float, help="Longitude step (deg).")
-@click.option("--lat-min", default=0.0, show_default=True, type=float, help="Lowest latitude (deg).")
-@click.option("--lat-max", default=90.0, show_default=True, type=float, help="Highest latitude (deg).")
-@click.option("--lat-step", default=10.0, show_default=True, type=float, help="Latitude step (deg).")
-@click.option("--roll-step", default=45.0, show_default=True, type=float, help="Roll step about the optical axis (deg).")
-@click.option("--poi-radius", default=None, type=float, help="Radius of S(POI) in m [default: each POI's radius, 0.2].")
+@click.option("--radius", default=PAPER_SPHERE.radius, show_default=True, type=float,
+              help="Viewing sphere radius d (m).")
+@click.option("--lon-step", default=PAPER_SPHERE.lon_step, show_default=True, type=float,
+              help="Longitude step (deg).")
+@click.option("--lat-min", default=PAPER_SPHERE.lat_min, show_default=True, type=float,
+              help="Lowest latitude (deg).")
+@click.option("--lat-max", default=PAPER_SPHERE.lat_max, show_default=True, type=float,
+              help="Highest latitude (deg).")
+@click.option("--lat-step", default=PAPER_SPHERE.lat_step, show_default=True, type=float,
+              help="Latitude step (deg).")
+@click.option("--roll-step", default=PAPER_SPHERE.roll_step, show_default=True, type=float,
+              help="Roll step about the optical axis (deg).")
+@click.option("--poi-radius", default=None, type=float,
+              help=f"Radius of S(POI) in m [default: each POI's radius, {DEFAULT_RADIUS}].")
 @click.option("--fx", type=float, default=None, help="Focal length x (px).")
 @click.option("--fy", type=float, default=None, help="Focal length y (px).")
 @click.option("--cx", type=float, default=None, help="Principal point x (px).")
@@ -89,29 +136,27 @@ def command(volume, pois_path, mode, clear, gain, top, output, plot, candidates,
       kinfu nbv volume.npz --pois pois.json --gain entropy --top 5 --json
       kinfu nbv volume.npz --mode objects -o views.json
     """
-    from kinfu_cli.nbv.sensor import camera_from_options
-    from kinfu_cli.nbv.workflow import NbvOptions, objects_summary_lines, run_nbv, run_objects, summary_lines
-
     t0 = time.perf_counter()
     cam = camera_from_options(fx, fy, cx, cy, width, height, camera_info, min_range, max_range, vfov_extra)
     if mode == "objects":
-        doc = run_objects(volume, cam, gain=gain, table_z=_table_z_option(table_z),
-                          score_threshold=0.0 if inc_th is None else inc_th, top=top)
+        planned = rank_object_views(volume, cam, gain=gain, table_z=_table_z_option(table_z),
+                                    score_threshold=0.0 if inc_th is None else inc_th, top=top)
+        doc = planned.to_json()
         doc["seconds"] = round(time.perf_counter() - t0, 3)
         emit(doc, output, as_json, objects_summary_lines)
         return
     if pois_path is None:
         raise ConfigError("--pois: required with --mode poi (a pois.json from `kinfu poi`)")
-    opts = NbvOptions(gain=gain, clear=clear, top=top, candidates=candidates,
-                      sphere=dict(radius=radius, lon_step=lon_step, lat_min=lat_min, lat_max=lat_max,
-                                  lat_step=lat_step, roll_step=roll_step),
-                      poi_radius=poi_radius, inc_th=inc_th, table_z=_table_z_option(table_z), clearance=clearance,
+    sphere = SphereSpec(radius=radius, lon_step=lon_step, lat_min=lat_min, lat_max=lat_max, lat_step=lat_step,
+                        roll_step=roll_step)
+    opts = NbvOptions(gain=gain, clear=clear, top=top, candidates=candidates, sphere=sphere, poi_radius=poi_radius,
+                      inc_th=inc_th, table_z=_table_z_option(table_z), clearance=clearance,
                       share_rolls=not exact_rolls, optimistic=optimistic)
-    doc, grid, rankings = run_nbv(volume, pois_path, cam, opts, quiet=quiet)
+    ranked = rank_poi_views(volume, pois_path, cam, opts, quiet=quiet)
+    doc = ranked.to_json()
+    doc["warnings"] = poi_frame_warnings(pois_path, ranked.grid.frame, "--pois")
     if plot is not None:
-        from kinfu_cli.report.nbv_plot import plot_nbv
-
-        plot_nbv(plot, grid, rankings, top=min(top or 5, 5))
+        plot_nbv(plot, ranked.grid, ranked.rankings, top=min(top or 5, 5))
         doc["plot"] = str(plot)
     doc["seconds"] = round(time.perf_counter() - t0, 3)
     emit(doc, output, as_json, summary_lines)

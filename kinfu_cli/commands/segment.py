@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import json
-import time
 from pathlib import Path
 
 import click
 
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.progress import progress
+from kinfu_cli.report.segment_plot import plot_segments
+from kinfu_cli.segmentation.outputs import write_segment_outputs
+from kinfu_cli.segmentation.pipeline import SegmentOptions, SegmentResult, segment_volume
+from kinfu_cli.segmentation.segments import SegmentationParams
 
 
 def _pair(value: str, name: str) -> tuple[float, float]:
@@ -82,41 +85,24 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
       kinfu segment out/fuse/volume.npz -o out/segments --plot
       kinfu segment out/fuse/ternary.npz --isolation-threshold 0.01 --json --quiet
     """
-    from kinfu_cli.segmentation.pipeline import (
-        SegmentOptions, analyse_volume, load_segment_input, write_segment_outputs)
-    from kinfu_cli.segmentation.segments import SegmentationParams
-
-    if resolution <= 0:
-        raise ConfigError(f"--resolution: must be > 0 m, got {resolution}")
-    if not 0 <= msq_height <= 6:
-        raise ConfigError(f"--msq-height: expected 0..6, got {msq_height}")
-    if not msq_mu > 0:
-        raise ConfigError(f"--msq-mu: must be > 0 m, got {msq_mu}")
-    if sq_max_points < 10:
-        raise ConfigError(f"--sq-max-points: must be >= 10, got {sq_max_points}")
     params = SegmentationParams(seed_resolution=seed_resolution, spatial_importance=spatial_importance,
                                 normal_importance=normal_importance, adjacency_radius=adjacency_radius,
                                 concavity_tolerance_deg=concavity_tolerance, sanity_angle_deg=sanity_angle,
                                 min_segment_points=min_segment_points, plane_distance=plane_distance,
                                 up=_up(up), up_tolerance_deg=up_tolerance, seed=seed)
-    params.validate()
     opts = SegmentOptions(resolution=resolution, min_weight=min_weight, isolation_threshold=isolation_threshold,
                           superquadrics=not no_superquadrics, sq_max_points=sq_max_points,
                           sq_exponent_bounds=_pair(sq_exponent_bounds, "--sq-exponent-bounds"), sq_cost=sq_cost,
                           multi_sq=multi_sq, msq_trigger=msq_trigger, msq_height=msq_height, msq_mu=msq_mu,
                           segmentation=params)
-    t0 = time.perf_counter()
-    steps = progress(["load", "segment", "write"], total=3, desc="segment", quiet=quiet)
-    result = None
-    vol = None
-    for step in steps:
-        if step == "load":
-            vol = load_segment_input(volume)
-        elif step == "segment":
-            result = analyse_volume(vol, opts)
+    result: SegmentResult | None = None
+    for step in progress(["segment", "write"], total=2, desc="segment", quiet=quiet):
+        if step == "segment":
+            result = segment_volume(volume, opts)
         else:
-            result.timing["total"] = time.perf_counter() - t0
-            write_segment_outputs(result, outdir, plot=plot)
+            write_segment_outputs(result, outdir)
+            if plot:
+                plot_segments(result, outdir)
     doc = result.to_json()
     if as_json:
         click.echo(json.dumps(doc, indent=2, default=float))

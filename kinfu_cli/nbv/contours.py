@@ -155,7 +155,7 @@ def contour_voxels(labels: np.ndarray, weights: np.ndarray | None = None, w_th: 
     if np.asarray(labels).ndim != 3:
         raise VolumeError(f"ternary labels must be 3-D, got shape {np.asarray(labels).shape}")
     if not w_th > 0:
-        raise ConfigError(f"--w-th: must be > 0, got {w_th}")
+        raise ConfigError(f"must be > 0, got {w_th}", parameter="w_th")
     state = ternary_state(labels, weights, w_th)
     # contour voxels touch an occupied voxel: only the box around occupied voxels (+ 2) can hold them
     box = []

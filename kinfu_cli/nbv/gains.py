@@ -50,20 +50,16 @@ GAINS: dict[str, Gain] = {
 
 
 def gain_names() -> tuple[str, ...]:
+    """The names `get_gain` accepts, in a fixed order (the paper's first)."""
     return tuple(GAINS)
 
 
 def get_gain(name: str) -> Gain:
-    """The gain called `name`; ConfigError naming --gain otherwise."""
+    """The gain called `name`; a ConfigError naming the parameter `gain` otherwise."""
     try:
         return GAINS[name]
     except KeyError:
-        raise ConfigError(f"--gain: expected one of {', '.join(GAINS)}, got {name!r}") from None
-
-
-def gain_values(terms: np.ndarray, name: str) -> np.ndarray:
-    """(V,) gain of each view from the summed per-ray terms (V, 4) of `raycast.cast_views`."""
-    return np.asarray(terms, dtype=np.float64)[:, get_gain(name).term].copy()
+        raise ConfigError(f"expected one of {', '.join(GAINS)}, got {name!r}", parameter="gain") from None
 
 
 def all_gain_values(terms: np.ndarray, through: bool) -> dict[str, np.ndarray]:

@@ -23,10 +23,22 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
+from kinfu_cli.core.camera import CameraModel
 from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.core.grid import TernaryGrid
+from kinfu_cli.fusion.volume import TernaryVolume
 from kinfu_cli.nbv.contours import Contours, extract_contours
+from kinfu_cli.nbv.ranking import as_ray_volume, score_views
+from kinfu_cli.nbv.raycast import RayVolume
+from kinfu_cli.segmentation.pipeline import SegmentOptions, SegmentResult, analyse_volume
 
 Scorer = Callable[[np.ndarray, np.ndarray, float], np.ndarray]
+
+# Candidate views of a contour point (thesis Alg. 4), the defaults of every planner here.
+VIEW_DISTANCE = 0.8  # sensor distance from the contour point (m)
+CONE_DEG = 15.0  # tilt of the 4 extra directions about the frontier normal
+N_DIRECTIONS = 5
+N_ROLLS = 8
 
 
 def _look_at_rolls(positions: np.ndarray, targets: np.ndarray, rolls: np.ndarray) -> np.ndarray:
@@ -52,15 +64,16 @@ def _look_at_rolls(positions: np.ndarray, targets: np.ndarray, rolls: np.ndarray
     return T.reshape(P * R, 4, 4)
 
 
-def contour_viewpoints(points: np.ndarray, directions: np.ndarray, *, distance: float = 0.8, cone_deg: float = 15.0,
-                       n_directions: int = 5, n_rolls: int = 8) -> tuple[np.ndarray, np.ndarray]:
+def contour_viewpoints(points: np.ndarray, directions: np.ndarray, *, distance: float = VIEW_DISTANCE,
+                       cone_deg: float = CONE_DEG, n_directions: int = N_DIRECTIONS, n_rolls: int = N_ROLLS
+                       ) -> tuple[np.ndarray, np.ndarray]:
     """Candidate poses for contour points: (poses (M * n_directions * n_rolls, 4, 4), owner (same,) index of
     the contour point). Direction 0 is the frontier normal; the others are tilted by `cone_deg` about it
     at equal azimuths."""
     if not distance > 0:
-        raise ConfigError(f"--view-distance: must be > 0 m, got {distance}")
+        raise ConfigError(f"must be > 0 m, got {distance}", parameter="distance")
     if n_directions < 1 or n_rolls < 1:
-        raise ConfigError(f"--directions/--rolls: must be >= 1, got {n_directions}, {n_rolls}")
+        raise ConfigError(f"must be >= 1, got {n_directions}, {n_rolls}", parameter="n_directions/n_rolls")
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     n = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
     n = n / np.linalg.norm(n, axis=1, keepdims=True)
@@ -135,13 +148,11 @@ class ObjectPlan:
         }
 
 
-def nbv_scorer(grid, camera, gain: str = "unknown", table_z: float | None = None, *, reject_unknown: bool = True,
-               optimistic: bool = False) -> Scorer:
+def nbv_scorer(grid: TernaryGrid | RayVolume, camera: CameraModel, gain: str = "unknown",
+               table_z: float | None = None, *, reject_unknown: bool = True, optimistic: bool = False) -> Scorer:
     """The NBV module's ray-casting score (rays ending on unknown voxels inside the region sphere).
     reject_unknown: a sensor position in unknown space scores 0 (the paper; a simulated arm without a motion
     planner may pass False); optimistic: unknown voxels outside the region do not stop rays."""
-    from kinfu_cli.nbv.ranking import as_ray_volume, score_views
-
     vol = as_ray_volume(grid)
 
     def score(poses: np.ndarray, center: np.ndarray, radius: float) -> np.ndarray:
@@ -165,12 +176,12 @@ def not_attempted(poses: np.ndarray, taken, *, shift: float = 0.05, turn_deg: fl
     return ~near.any(axis=1)
 
 
-def plan_object_views(segments, contours: Contours, scorer: Scorer, *, score_threshold: float = 0.0,
-                      margin: float = 0.2, distance: float = 0.8, cone_deg: float = 15.0, n_directions: int = 5,
-                      n_rolls: int = 8, max_segments: int | None = None, exclude=None,
-                      exclude_shift: float = 0.05, exclude_turn_deg: float = 10.0) -> ObjectPlan:
-    """Thesis Alg. 4 on precomputed `segments` (a kinfu_cli.segmentation.pipeline.SegmentResult) and
-    `contours`: the best pose of the most salient segment with score > score_threshold.
+def plan_object_views(segments: SegmentResult, contours: Contours, scorer: Scorer, *, score_threshold: float = 0.0,
+                      margin: float = 0.2, distance: float = VIEW_DISTANCE, cone_deg: float = CONE_DEG,
+                      n_directions: int = N_DIRECTIONS, n_rolls: int = N_ROLLS, max_segments: int | None = None,
+                      exclude=None, exclude_shift: float = 0.05, exclude_turn_deg: float = 10.0) -> ObjectPlan:
+    """Thesis Alg. 4 on precomputed `segments` and `contours`: the best pose of the most salient segment
+    with score > score_threshold.
 
     scorer(poses (V, 4, 4), center (3,), radius) -> scores (V,); exclude: poses (K, 4, 4) already taken:
     candidates within `exclude_shift` m and `exclude_turn_deg` of one are neither cast nor chosen. Returns an
@@ -223,8 +234,9 @@ def plan_object_views(segments, contours: Contours, scorer: Scorer, *, score_thr
 
 
 def plan_standard_views(contours: Contours, scorer: Scorer, region_center, region_radius: float, *,
-                        score_threshold: float = 0.0, distance: float = 0.8, cone_deg: float = 15.0,
-                        n_directions: int = 5, n_rolls: int = 8, exclude=None, exclude_shift: float = 0.05,
+                        score_threshold: float = 0.0, distance: float = VIEW_DISTANCE, cone_deg: float = CONE_DEG,
+                        n_directions: int = N_DIRECTIONS, n_rolls: int = N_ROLLS, exclude=None,
+                        exclude_shift: float = 0.05,
                         exclude_turn_deg: float = 10.0) -> ObjectPlan:
     """The "standard" baseline: every contour candidate scored on the whole environment sphere
     (candidates near an `exclude` pose, already taken, are skipped as in `plan_object_views`)."""
@@ -246,15 +258,12 @@ def plan_standard_views(contours: Contours, scorer: Scorer, region_center, regio
     return plan
 
 
-def plan_object_views_for_volume(volume, camera, *, scorer: Scorer | None = None, score_threshold: float = 0.0,
-                                 w_th: float = 5.0, segment_options=None, table_z: float | None = None,
+def plan_object_views_for_volume(volume: TernaryVolume | TernaryGrid, camera: CameraModel, *,
+                                 scorer: Scorer | None = None, score_threshold: float = 0.0, w_th: float = 5.0,
+                                 segment_options: SegmentOptions | None = None, table_z: float | None = None,
                                  **kwargs) -> ObjectPlan:
-    """Everything from a volume (fusion TernaryVolume or TernaryGrid): segments, contours, NBV scoring.
-
-    This is the entry point for `kinfu nbv --mode objects`. camera: a kinfu_cli.core.camera.CameraModel.
-    """
-    from kinfu_cli.segmentation.pipeline import SegmentOptions, analyse_volume
-
+    """Everything from a volume (fusion TernaryVolume or TernaryGrid): segments (without superquadrics),
+    contours, NBV scoring; `kwargs` go to `plan_object_views`."""
     t0 = time.perf_counter()
     opts = segment_options or SegmentOptions(superquadrics=False)
     segments = analyse_volume(volume, opts)

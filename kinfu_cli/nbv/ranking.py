@@ -8,6 +8,7 @@ ranking, and the IncTh test that says whether S(POI) is considered reconstructed
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import time
@@ -16,13 +17,14 @@ from pathlib import Path
 
 import numpy as np
 
+from kinfu_cli.core.camera import CameraModel
 from kinfu_cli.core.errors import ConfigError, VolumeError
 from kinfu_cli.core.grid import EMPTY, OCCUPIED, UNKNOWN, TernaryGrid
-from kinfu_cli.core.camera import CameraModel
+from kinfu_cli.core.pois import DEFAULT_RADIUS, Poi, read_pois
+from kinfu_cli.core.poses import check_poses, matrix_to_quaternion
 from kinfu_cli.nbv.gains import all_gain_values, get_gain
 from kinfu_cli.nbv.raycast import RayVolume, cast_views
-from kinfu_cli.core.poses import check_poses, matrix_to_quaternion
-from kinfu_cli.nbv.viewpoints import sphere_viewpoints
+from kinfu_cli.nbv.viewpoints import PAPER_SPHERE, SphereSpec
 
 REJECT_REASONS = ("below_table", "inside_occupied", "inside_unknown")
 
@@ -123,7 +125,7 @@ def score_views(volume: TernaryGrid | RayVolume, poses, camera: CameraModel, reg
     poses = check_poses(poses)
     center = np.asarray(region_center, dtype=np.float64).reshape(3)
     if not (math.isfinite(region_radius) and region_radius > 0):
-        raise ConfigError(f"--poi-radius: expected a positive radius in metres, got {region_radius}")
+        raise ConfigError(f"expected a positive radius in metres, got {region_radius}", parameter="region_radius")
     reasons = reject_reasons(vol, poses, table_z=table_z, clearance=clearance, reject_unknown=reject_unknown)
     valid = np.array([r is None for r in reasons], dtype=bool)
     V = poses.shape[0]
@@ -188,17 +190,18 @@ def default_inc_th(scores: ViewScores, fraction: float = 0.01) -> float:
     return float(fraction * scores.rays[v].mean()) if v.any() else 0.0
 
 
-def rank_poi(volume: TernaryGrid | RayVolume, center, camera: CameraModel, *, poi_id: int = 0, radius: float = 0.2,
-             gain: str = "unknown", candidates: np.ndarray | None = None, sphere: dict | None = None,
+def rank_poi(volume: TernaryGrid | RayVolume, center, camera: CameraModel, *, poi_id: int = 0,
+             radius: float = DEFAULT_RADIUS, gain: str = "unknown", candidates: np.ndarray | None = None,
+             sphere: SphereSpec = PAPER_SPHERE,
              inc_th: float | None = None, table_z: float | None = None, clearance: float = 0.0,
              share_rolls: bool = True, optimistic: bool = False, reject_unknown: bool = True,
              progress_cb=None) -> PoiRanking:
     """Score the viewing sphere (or `candidates`) around one POI and apply IncTh.
 
-    sphere: keyword arguments of `viewpoints.sphere_viewpoints` (radius 0.8 m, 30/10/45 deg steps).
+    sphere: the viewing sphere when no `candidates` are given (default: the paper's).
     """
     center = np.asarray(center, dtype=np.float64).reshape(3)
-    poses = candidates if candidates is not None else sphere_viewpoints(center, **(sphere or {}))
+    poses = candidates if candidates is not None else sphere.viewpoints(center)
     scores = score_views(volume, poses, camera, center, radius, gain, table_z=table_z, clearance=clearance,
                          share_rolls=share_rolls, optimistic=optimistic, reject_unknown=reject_unknown,
                          progress_cb=progress_cb)
@@ -278,20 +281,10 @@ def check_region_inside(grid: TernaryGrid, center, what: str) -> None:
                           f"[{lo[0]:.3f}..{hi[0]:.3f}] x [{lo[1]:.3f}..{hi[1]:.3f}] x [{lo[2]:.3f}..{hi[2]:.3f}] m")
 
 
-@dataclass
-class PoiSpec:
-    id: int
-    position: np.ndarray
-    radius: float
-
-
-def load_pois(path: str | os.PathLike, default_radius: float | None = None) -> list[PoiSpec]:
-    """POIs of a pois.json (via the POI module's reader); `default_radius` overrides each radius.
+def load_pois(path: str | os.PathLike, radius: float | None = None) -> list[Poi]:
+    """The POIs of a pois.json file; `radius` (m), when given, replaces each POI's own S(POI) radius.
     Raises a KinfuError naming the file when there are none."""
-    from kinfu_cli.core.pois import read_pois
-
     pois = read_pois(path)
     if not pois:
         raise ConfigError(f"{Path(path)}: no POIs in the file (nothing to plan views for)")
-    return [PoiSpec(int(p.id), np.asarray(p.position, dtype=np.float64),
-                    float(default_radius if default_radius is not None else p.radius)) for p in pois]
+    return pois if radius is None else [dataclasses.replace(p, radius=float(radius)) for p in pois]

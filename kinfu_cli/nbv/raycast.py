@@ -31,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit, prange
+from scipy.ndimage import distance_transform_cdt
 
 from kinfu_cli.core.grid import TernaryGrid
 
@@ -38,7 +39,6 @@ CLS_UNKNOWN = 0
 CLS_OCCUPIED = 1
 CLS_EMPTY_EXIT = 2
 N_TERMS = 4
-TERM_NAMES = ("unknown", "distance", "rear", "entropy")
 
 
 @dataclass
@@ -88,8 +88,6 @@ class RayVolume:
 def _chessboard(free: np.ndarray) -> np.ndarray:
     """Per block: 0 where not free, else the chessboard distance (in blocks, capped at 255) to the
     nearest block that is not free."""
-    from scipy.ndimage import distance_transform_cdt
-
     if free.all():
         return np.full(free.shape, 255, np.uint8)
     return np.ascontiguousarray(np.minimum(distance_transform_cdt(free, metric="chessboard"), 255).astype(np.uint8))
@@ -175,7 +173,12 @@ def _clampi(v, a, b):
 @njit(cache=True, error_model="numpy")
 def _trace(labels, bdist, B, lo, vs, p, d, min_range, max_range, cen, r2, through, optimistic, p_unknown, h_unknown,
            vals):
-    """Walk one ray (p origin, d unit direction). Fills vals[0:4]; returns (class, t of the first hit)."""
+    """Walk one ray (p origin, d unit direction). Fills vals[0:4]; returns (class, t of the first hit).
+
+    One long function on purpose: it is the innermost loop of every NBV command, and the walk state
+    (voxel, next boundaries, visibility) crossing between the empty-block skip and the voxel walk stays
+    in registers only while both live in one compiled loop.
+    """
     n0, n1, n2 = labels.shape
     px, py, pz = p[0], p[1], p[2]
     dx, dy, dz = d[0], d[1], d[2]

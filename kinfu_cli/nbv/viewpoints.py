@@ -14,20 +14,42 @@ from __future__ import annotations
 
 import json
 import os
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 
-from kinfu_cli.core.atomic import write_json
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.poses import check_poses
 
 
+@dataclass(frozen=True)
+class SphereSpec:
+    """The viewing sphere around a POI; the defaults are the paper's (960 poses). Angles in degrees."""
+
+    radius: float = 0.8  # distance d of the sensor from the POI (m)
+    lon_step: float = 30.0
+    lat_min: float = 0.0
+    lat_max: float = 90.0
+    lat_step: float = 10.0
+    roll_step: float = 45.0
+
+    def viewpoints(self, center) -> np.ndarray:
+        """(N, 4, 4) camera-to-world poses on this sphere around `center` (see `sphere_viewpoints`)."""
+        return sphere_viewpoints(center, **asdict(self))
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+
+PAPER_SPHERE = SphereSpec()
+
+
 def _angles(start: float, stop: float, step: float, *, closed: bool, name: str) -> np.ndarray:
     if not step > 0:
-        raise ConfigError(f"--{name}-step: expected a positive step in degrees, got {step}")
+        raise ConfigError(f"expected a positive step in degrees, got {step}", parameter=f"{name}_step")
     if stop < start:
-        raise ConfigError(f"--{name}-min/--{name}-max: expected min <= max, got {start} > {stop}")
+        raise ConfigError(f"expected min <= max, got {start} > {stop}", parameter=f"{name}_min/{name}_max")
     n = int(np.floor((stop - start) / step + 1e-9))
     vals = start + step * np.arange(n + 1)
     if not closed and vals.size > 1 and np.isclose(vals[-1] - start, 360.0):
@@ -35,21 +57,22 @@ def _angles(start: float, stop: float, step: float, *, closed: bool, name: str) 
     return vals
 
 
-def sphere_viewpoints(center, radius: float = 0.8, lon_step: float = 30.0, lat_min: float = 0.0,
-                      lat_max: float = 90.0, lat_step: float = 10.0, roll_step: float = 45.0,
-                      lon_min: float = 0.0, lon_max: float = 360.0) -> np.ndarray:
+def sphere_viewpoints(center, radius: float = PAPER_SPHERE.radius, lon_step: float = PAPER_SPHERE.lon_step,
+                      lat_min: float = PAPER_SPHERE.lat_min, lat_max: float = PAPER_SPHERE.lat_max,
+                      lat_step: float = PAPER_SPHERE.lat_step, roll_step: float = PAPER_SPHERE.roll_step
+                      ) -> np.ndarray:
     """(N, 4, 4) camera-to-world poses on a sphere of `radius` around `center`, all looking at it.
 
-    Longitudes in [lon_min, lon_max) (360 excluded when the range is a full turn), latitudes in
-    [lat_min, lat_max] inclusive, rolls in [0, 360). Order: longitude, latitude, roll (roll fastest).
+    Longitudes in [0, 360), latitudes in [lat_min, lat_max] inclusive, rolls in [0, 360).
+    Order: longitude, latitude, roll (roll fastest).
     """
     center = np.asarray(center, dtype=np.float64).reshape(3)
     if not (np.isfinite(radius) and radius > 0):
-        raise ConfigError(f"--radius: expected a positive distance in metres, got {radius}")
+        raise ConfigError(f"expected a positive distance in metres, got {radius}", parameter="radius")
     if not (-90 <= lat_min <= lat_max <= 90):
-        raise ConfigError(f"--lat-min/--lat-max: expected -90 <= min <= max <= 90, got {lat_min}, {lat_max}")
-    lons = np.radians(_angles(lon_min, lon_max, lon_step, closed=False, name="lon"))
-    if lons.size > 1 and np.isclose(np.degrees(lons[-1]) - lon_min, 360.0):
+        raise ConfigError(f"expected -90 <= min <= max <= 90, got {lat_min}, {lat_max}", parameter="lat_min/lat_max")
+    lons = np.radians(_angles(0.0, 360.0, lon_step, closed=False, name="lon"))
+    if lons.size > 1 and np.isclose(np.degrees(lons[-1]), 360.0):
         lons = lons[:-1]
     lats = np.radians(_angles(lat_min, lat_max, lat_step, closed=True, name="lat"))
     rolls = np.radians(_angles(0.0, 360.0, roll_step, closed=False, name="roll"))
@@ -75,7 +98,7 @@ def read_candidates(path: str | os.PathLike) -> np.ndarray:
     try:
         doc = json.loads(path.read_text())
     except FileNotFoundError:
-        raise ConfigError(f"{path}: no such candidate file (--candidates)") from None
+        raise ConfigError(f"{path}: no such candidate file") from None
     except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{path}: not a JSON candidate file ({exc}); expected a list of 4x4 poses") from None
     if isinstance(doc, dict):
@@ -88,9 +111,3 @@ def read_candidates(path: str | os.PathLike) -> np.ndarray:
     except (TypeError, ValueError):
         raise ConfigError(f"{path}: expected a list of 4x4 numeric poses") from None
     return check_poses(arr, source=str(path))
-
-
-def write_candidates(path: str | os.PathLike, poses) -> Path:
-    """Write poses as {"poses": [4x4, ...]} atomically."""
-    arr = check_poses(poses)
-    return write_json(path, {"poses": arr.tolist()})

@@ -1,4 +1,4 @@
-"""`kinfu nbv --plot`: volume slices through each POI with S(POI) and the top views as arrows."""
+"""PNG of a POI view ranking: volume slices through each POI with S(POI) and the top views as arrows."""
 
 from __future__ import annotations
 
@@ -6,7 +6,9 @@ import os
 
 import numpy as np
 
+from kinfu_cli.core.atomic import atomic_path
 from kinfu_cli.core.grid import TernaryGrid
+from kinfu_cli.nbv.ranking import PoiRanking
 
 _COLORS = {1: (0.15, 0.15, 0.15), 0: (0.65, 0.65, 0.75), -1: (1.0, 1.0, 1.0)}
 
@@ -18,17 +20,16 @@ def _slice_rgb(labels2d: np.ndarray) -> np.ndarray:
     return rgb
 
 
-def plot_nbv(path: str | os.PathLike, grid: TernaryGrid, rankings, top: int = 5, span: float = 1.0) -> None:
+def plot_nbv(path: str | os.PathLike, grid: TernaryGrid, rankings: list[PoiRanking], top: int = 5,
+             span: float = 1.0) -> None:
     """One row per POI: top view (x-y slice at the POI height) and side view (x-z slice through the
     POI). Dark = occupied, grey-blue = unknown, white = empty; circle = S(POI); arrows = the `top`
     best views (sensor position -> viewing direction), the best in red. Written atomically."""
-    import matplotlib
+    import matplotlib  # heavy; only needed to plot
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.patches import Circle
-
-    from kinfu_cli.core.atomic import atomic_path
 
     n = max(len(rankings), 1)
     fig, axes = plt.subplots(n, 2, figsize=(10, 4.8 * n), squeeze=False)

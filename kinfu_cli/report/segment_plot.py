@@ -1,5 +1,5 @@
-"""PNG renders for `kinfu segment --plot`: top and side views coloured by segment and by saliency,
-with each segment's id and saliency, and the fitted superquadrics' surfaces (their predicted back sides)."""
+"""PNG renders of a segmentation: top and side views coloured by segment and by saliency, with each
+segment's id and saliency, and the fitted superquadrics' surfaces (their predicted back sides)."""
 
 from __future__ import annotations
 
@@ -8,16 +8,18 @@ from pathlib import Path
 
 import numpy as np
 
+from kinfu_cli.core.atomic import atomic_path
+from kinfu_cli.segmentation.outputs import saliency_colors, segment_colors
+from kinfu_cli.segmentation.pipeline import SegmentResult
+from kinfu_cli.segmentation.superquadric import SuperquadricFit
 
-def plot_segments(result, outdir: str | os.PathLike) -> dict[str, Path]:
-    import matplotlib
+
+def plot_segments(result: SegmentResult, outdir: str | os.PathLike) -> dict[str, Path]:
+    """segments.png and saliency.png in `outdir`, written atomically; returns name -> path."""
+    import matplotlib  # heavy; only needed to plot
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from kinfu_cli.core.atomic import atomic_path
-    from kinfu_cli.segmentation.pipeline import saliency_colors, segment_colors
-    from kinfu_cli.segmentation.superquadric import SuperquadricFit
 
     out = Path(outdir)
     seg = result.segmentation

@@ -97,9 +97,9 @@ def fit_multi_superquadric(points: np.ndarray, *, height: int = 3, mu: float = 0
                            **fit_kwargs) -> MultiSuperquadric:
     """Split a segment into superquadric parts (thesis H = 3, mu = 0.03 m for noisy clouds)."""
     if height < 0 or height > 6:
-        raise ConfigError(f"--msq-height: expected 0..6, got {height}")
+        raise ConfigError(f"expected 0..6, got {height}", parameter="height")
     if not mu > 0:
-        raise ConfigError(f"--msq-mu: must be > 0 m, got {mu}")
+        raise ConfigError(f"must be > 0 m, got {mu}", parameter="mu")
     pts = np.asarray(points, dtype=np.float64)
     root = _build(pts, 0, int(height), int(min_points), fit_kwargs)
     if root.fit is None:

@@ -1,8 +1,8 @@
-"""`kinfu segment` as a library call: volume -> surface cloud -> segments -> saliency -> superquadrics -> files.
+"""`kinfu segment` as one library call: volume -> surface cloud -> segments -> saliency -> superquadrics.
 
-`analyse_cloud(points, normals, options)` and `analyse_volume(volume, options)` return a
-`SegmentResult`; `write_segment_outputs(result, outdir)` writes segments.ply, saliency.ply,
-segments.json (and PNG renders with plot=True), each atomically.
+`segment_volume(volume_or_path, options)` is the driver; it returns a `SegmentResult` whose `to_json()`
+is segments.json. `analyse_volume` / `analyse_cloud` are its steps for callers that already hold a
+volume or a cloud. Files are written by `segmentation.outputs.write_segment_outputs`.
 """
 
 from __future__ import annotations
@@ -14,10 +14,11 @@ from pathlib import Path
 
 import numpy as np
 
-from kinfu_cli.core.errors import VolumeError
-from kinfu_cli.core.grid import read_ternary
-from kinfu_cli.fusion.volume import load_volume
-from kinfu_cli.segmentation.saliency import SegmentSaliency, segment_saliency
+from kinfu_cli.core.errors import ConfigError, VolumeError
+from kinfu_cli.core.grid import TernaryGrid, read_ternary
+from kinfu_cli.fusion.volume import TernaryVolume, load_volume
+from kinfu_cli.segmentation.multi_superquadric import MultiSuperquadric, fit_multi_superquadric
+from kinfu_cli.segmentation.saliency import SegmentSaliency, oriented_box, segment_saliency
 from kinfu_cli.segmentation.segments import PLANE_LABEL, Segmentation, SegmentationParams, segment_cloud
 from kinfu_cli.segmentation.superquadric import SegmentError, SuperquadricFit, fit_superquadric
 from kinfu_cli.segmentation.surface import SurfaceCloud, surface_from_volume
@@ -25,6 +26,8 @@ from kinfu_cli.segmentation.surface import SurfaceCloud, surface_from_volume
 
 @dataclass
 class SegmentOptions:
+    """Every knob of `segment_volume`; the field names are the parameter names errors report."""
+
     resolution: float = 0.01  # surface cloud thinning (m)
     min_weight: float = 1.0  # TSDF weight for a voxel to count as observed
     isolation_threshold: float = 0.02  # B_th (m), eq. 3.11
@@ -39,26 +42,45 @@ class SegmentOptions:
     msq_mu: float = 0.03
     segmentation: SegmentationParams = field(default_factory=SegmentationParams)
 
+    def validate(self) -> None:
+        """ConfigError naming the first option out of its range, before any work is done."""
+        if not self.resolution > 0:
+            raise ConfigError(f"must be > 0 m, got {self.resolution}", parameter="resolution")
+        if not 0 <= self.msq_height <= 6:
+            raise ConfigError(f"expected 0..6, got {self.msq_height}", parameter="msq_height")
+        if not self.msq_mu > 0:
+            raise ConfigError(f"must be > 0 m, got {self.msq_mu}", parameter="msq_mu")
+        if self.sq_max_points < 10:
+            raise ConfigError(f"must be >= 10, got {self.sq_max_points}", parameter="sq_max_points")
+        self.segmentation.validate()
+        if not self.isolation_threshold > 0:
+            raise ConfigError(f"must be > 0 m, got {self.isolation_threshold}", parameter="isolation_threshold")
+        if self.superquadrics:
+            lo, hi = self.sq_exponent_bounds
+            if not 0.0 < lo < hi <= 2.0:
+                raise ConfigError(f"expected 0 < lo < hi <= 2, got {self.sq_exponent_bounds}",
+                                  parameter="sq_exponent_bounds")
+            if self.sq_cost not in ("radial", "volume"):
+                raise ConfigError(f"expected 'radial' or 'volume', got {self.sq_cost!r}", parameter="sq_cost")
+
 
 @dataclass
 class SegmentResult:
+    """What `segment_volume` found; `to_json()` is the segments.json document."""
+
     cloud: SurfaceCloud
     segmentation: Segmentation
     saliency: list[SegmentSaliency]  # decreasing saliency, support plane excluded
     superquadrics: dict[int, SuperquadricFit | str]  # fit, or the reason there is none
     timing: dict[str, float]
     options: SegmentOptions
-    multi: dict = field(default_factory=dict)  # segment id -> MultiSuperquadric (with options.multi_sq)
-
-    def most_salient(self) -> SegmentSaliency | None:
-        return self.saliency[0] if self.saliency else None
+    multi: dict[int, MultiSuperquadric] = field(default_factory=dict)  # with options.multi_sq
 
     def to_json(self) -> dict:
         segs = []
         seg = self.segmentation
-        entries = list(self.saliency)
         plane_pts = seg.points[seg.labels == PLANE_LABEL]
-        for rank, s in enumerate(entries, start=1):
+        for rank, s in enumerate(self.saliency, start=1):
             sq = self.superquadrics.get(s.id)
             segs.append({
                 "id": s.id, "kind": "object", "rank": rank, "point_count": s.n_points,
@@ -70,17 +92,46 @@ class SegmentResult:
                 **({"multi_superquadric": self.multi[s.id].to_json()} if s.id in self.multi else {}),
             })
         if len(plane_pts):
-            from kinfu_cli.segmentation.saliency import oriented_box
-
             box = oriented_box(plane_pts)
             segs.append({"id": PLANE_LABEL, "kind": "support_plane", "rank": None, "point_count": int(len(plane_pts)),
                          "centroid": plane_pts.mean(axis=0).tolist(), "oriented_box": box.to_json(),
                          "plane": None if seg.plane is None else seg.plane.tolist(),
                          "isolation": None, "roundness": None, "saliency": None, "superquadric": None})
-        opts = asdict(self.options)
         return {"segments": segs, "support_plane": None if seg.plane is None else seg.plane.tolist(),
                 "points": int(len(seg.points)), "noise_points": int(np.sum(seg.labels < 0)),
-                "stats": seg.stats, "timing_s": self.timing, "options": opts}
+                "stats": seg.stats, "timing_s": self.timing, "options": asdict(self.options)}
+
+
+def _fit_superquadrics(seg: Segmentation, saliency: list[SegmentSaliency], options: SegmentOptions
+                       ) -> dict[int, SuperquadricFit | str]:
+    """A superquadric per segment, or why there is none (too few points, degenerate)."""
+    fits: dict[int, SuperquadricFit | str] = {}
+    for s in saliency:
+        if s.n_points < options.sq_min_points:
+            fits[s.id] = f"{s.n_points} points (< sq_min_points {options.sq_min_points})"
+            continue
+        try:
+            fits[s.id] = fit_superquadric(seg.points[seg.labels == s.id], max_points=options.sq_max_points,
+                                          exponent_bounds=options.sq_exponent_bounds, cost=options.sq_cost)
+        except SegmentError as exc:
+            fits[s.id] = str(exc)
+    return fits
+
+
+def _fit_multi_superquadrics(seg: Segmentation, fits: dict[int, SuperquadricFit | str], options: SegmentOptions
+                             ) -> dict[int, MultiSuperquadric]:
+    """Thesis ch. 8 split of the segments whose single superquadric fits worse than msq_trigger."""
+    multi = {}
+    for sid, fit in fits.items():
+        if isinstance(fit, SuperquadricFit) and fit.residual > options.msq_trigger:
+            try:
+                multi[sid] = fit_multi_superquadric(
+                    seg.points[seg.labels == sid], height=options.msq_height, mu=options.msq_mu,
+                    min_points=options.sq_min_points, max_points=options.sq_max_points,
+                    exponent_bounds=options.sq_exponent_bounds, cost=options.sq_cost)
+            except SegmentError:
+                pass  # no split: the single superquadric stands
+    return multi
 
 
 def analyse_cloud(points: np.ndarray, normals: np.ndarray, options: SegmentOptions | None = None,
@@ -95,38 +146,18 @@ def analyse_cloud(points: np.ndarray, normals: np.ndarray, options: SegmentOptio
     sal = segment_saliency(seg.points, seg.labels, b_th=options.isolation_threshold, exclude=(-1, PLANE_LABEL))
     timing["saliency"] = time.perf_counter() - t
     t = time.perf_counter()
-    fits: dict[int, SuperquadricFit | str] = {}
-    if options.superquadrics:
-        for s in sal:
-            if s.n_points < options.sq_min_points:
-                fits[s.id] = f"{s.n_points} points (< --sq-min-points {options.sq_min_points})"
-                continue
-            try:
-                fits[s.id] = fit_superquadric(seg.points[seg.labels == s.id], max_points=options.sq_max_points,
-                                              exponent_bounds=options.sq_exponent_bounds, cost=options.sq_cost)
-            except SegmentError as exc:
-                fits[s.id] = str(exc)
+    fits = _fit_superquadrics(seg, sal, options) if options.superquadrics else {}
     timing["superquadrics"] = time.perf_counter() - t
     multi = {}
     if options.superquadrics and options.multi_sq:
-        from kinfu_cli.segmentation.multi_superquadric import fit_multi_superquadric
-
         t = time.perf_counter()
-        for sid, fit in fits.items():
-            if isinstance(fit, SuperquadricFit) and fit.residual > options.msq_trigger:
-                try:
-                    multi[sid] = fit_multi_superquadric(
-                        seg.points[seg.labels == sid], height=options.msq_height, mu=options.msq_mu,
-                        min_points=options.sq_min_points, max_points=options.sq_max_points,
-                        exponent_bounds=options.sq_exponent_bounds, cost=options.sq_cost)
-                except SegmentError:
-                    pass
+        multi = _fit_multi_superquadrics(seg, fits, options)
         timing["multi_superquadrics"] = time.perf_counter() - t
     return SegmentResult(SurfaceCloud(seg.points, seg.normals), seg, sal, fits, timing, options, multi)
 
 
-def analyse_volume(volume, options: SegmentOptions | None = None) -> SegmentResult:
-    """From a fusion TernaryVolume or a TernaryGrid."""
+def analyse_volume(volume: TernaryVolume | TernaryGrid, options: SegmentOptions | None = None) -> SegmentResult:
+    """From a fusion TernaryVolume (TSDF surface) or a TernaryGrid (labels only)."""
     options = options or SegmentOptions()
     t = time.perf_counter()
     cloud = surface_from_volume(volume, min_weight=options.min_weight, resolution=options.resolution)
@@ -136,7 +167,7 @@ def analyse_volume(volume, options: SegmentOptions | None = None) -> SegmentResu
     return analyse_cloud(cloud.points, cloud.normals, options, {"surface": t_surface})
 
 
-def load_segment_input(path: str | os.PathLike):
+def load_segment_input(path: str | os.PathLike) -> TernaryVolume | TernaryGrid:
     """A fusion volume.npz (TSDF + weights) or a ternary.npz (labels only)."""
     path = Path(path)
     if not path.exists():
@@ -145,48 +176,15 @@ def load_segment_input(path: str | os.PathLike):
     return grid if grid is not None else load_volume(path)
 
 
-def segment_colors(labels: np.ndarray) -> np.ndarray:
-    """A distinct colour per segment (support plane grey, dropped points black)."""
-    rng = np.random.default_rng(7)
-    n = int(max(labels.max(), 0)) + 1
-    pal = rng.uniform(0.15, 1.0, size=(n, 3))
-    col = pal[np.maximum(labels, 0)]
-    col[labels == PLANE_LABEL] = 0.6
-    col[labels < 0] = 0.0
-    return col
-
-
-def saliency_colors(points_labels: np.ndarray, saliency: list[SegmentSaliency]) -> np.ndarray:
-    """Per-point colour from the segment saliency (viridis; support plane and noise dark grey)."""
-    from matplotlib import colormaps
-
-    val = np.full(len(points_labels), np.nan)
-    for s in saliency:
-        val[points_labels == s.id] = s.saliency
-    col = np.asarray(colormaps["viridis"](np.nan_to_num(val, nan=0.0)))[:, :3]
-    col[np.isnan(val)] = 0.25
-    return col
-
-
-def write_segment_outputs(result: SegmentResult, outdir: str | os.PathLike, plot: bool = False) -> dict[str, Path]:
-    """segments.ply, saliency.ply, segments.json (+ segments.png, saliency.png with plot)."""
-    import open3d as o3d
-
-    from kinfu_cli.core.atomic import atomic_path, write_json
-
-    out = Path(outdir)
-    seg = result.segmentation
-    files: dict[str, Path] = {}
-    for name, col in (("segments.ply", segment_colors(seg.labels)),
-                      ("saliency.ply", saliency_colors(seg.labels, result.saliency))):
-        pc = SurfaceCloud(seg.points, seg.normals).to_open3d(col)
-        with atomic_path(out / name) as tmp:
-            if not o3d.io.write_point_cloud(str(tmp), pc, write_ascii=False):
-                raise VolumeError(f"{out / name}: open3d could not write the point cloud")
-        files[name] = out / name
-    if plot:
-        from kinfu_cli.report.segment_plot import plot_segments
-
-        files.update(plot_segments(result, out))
-    files["segments.json"] = write_json(out / "segments.json", result.to_json())
-    return files
+def segment_volume(volume: str | os.PathLike | TernaryVolume | TernaryGrid,
+                   options: SegmentOptions | None = None) -> SegmentResult:
+    """The `kinfu segment` pipeline: check the options, load the volume when given a path, then
+    surface, segments, saliency and superquadrics. timing["total"] covers all of it."""
+    t0 = time.perf_counter()
+    options = options or SegmentOptions()
+    options.validate()
+    if isinstance(volume, (str, os.PathLike)):
+        volume = load_segment_input(volume)
+    result = analyse_volume(volume, options)
+    result.timing["total"] = time.perf_counter() - t0
+    return result

@@ -45,7 +45,7 @@ def oriented_box(points: np.ndarray) -> OrientedBox:
 def isolation(points: np.ndarray, labels: np.ndarray, b_th: float = 0.02) -> dict[int, float]:
     """F(S) per label (eq. 3.11). Points labelled -1 count as "other" points for every segment."""
     if not b_th > 0:
-        raise ConfigError(f"--isolation-threshold: must be > 0 m, got {b_th}")
+        raise ConfigError(f"must be > 0 m, got {b_th}", parameter="b_th")
     pts = np.asarray(points, dtype=np.float64)
     lab = np.asarray(labels)
     pairs = cKDTree(pts).query_pairs(r=b_th, output_type="ndarray")

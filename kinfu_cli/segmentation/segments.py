@@ -56,13 +56,15 @@ class SegmentationParams:
     seed: int = 0
 
     def validate(self) -> None:
+        """ConfigError naming the first parameter out of its range."""
         for name in ("seed_resolution", "adjacency_radius", "plane_distance"):
             if not getattr(self, name) > 0:
-                raise ConfigError(f"--{name.replace('_', '-')}: must be > 0, got {getattr(self, name)}")
+                raise ConfigError(f"must be > 0, got {getattr(self, name)}", parameter=name)
         if not 0 <= self.concavity_tolerance_deg < 90:
-            raise ConfigError(f"--concavity-tolerance: expected 0..90 degrees, got {self.concavity_tolerance_deg}")
+            raise ConfigError(f"expected 0..90 degrees, got {self.concavity_tolerance_deg}",
+                              parameter="concavity_tolerance_deg")
         if self.min_segment_points < 1:
-            raise ConfigError(f"--min-segment-points: must be >= 1, got {self.min_segment_points}")
+            raise ConfigError(f"must be >= 1, got {self.min_segment_points}", parameter="min_segment_points")
 
 
 @dataclass
@@ -78,15 +80,30 @@ class Segmentation:
     n_supervoxels: int
     stats: dict = field(default_factory=dict)
 
-    @property
-    def segment_ids(self) -> list[int]:
-        return [int(v) for v in np.unique(self.labels) if v != NOISE_LABEL]
+
+def _ransac_plane(points: np.ndarray, distance: float, iterations: int) -> tuple[np.ndarray, list[int]]:
+    """open3d's RANSAC plane (model, inlier indices), run on one thread so that a seed gives one answer.
+
+    open3d runs the RANSAC iterations in parallel and stops them all once the best plane so far is good
+    enough; which sampled triples were tried before the stop then depends on thread timing, so with
+    several threads the seeded RANSAC returns a slightly different plane from run to run. On one thread
+    the iterations run in sample order (and, stopping early, no slower on a table-top cloud).
+    """
+    import open3d as o3d  # heavy; only needed here
+
+    pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    threads = o3d.utility.get_max_threads()
+    o3d.utility.set_max_threads(1)
+    try:
+        return pc.segment_plane(distance_threshold=distance, ransac_n=3, num_iterations=iterations)
+    finally:
+        o3d.utility.set_max_threads(threads)
 
 
 def detect_support_plane(points: np.ndarray, normals: np.ndarray, params: SegmentationParams
                          ) -> tuple[np.ndarray | None, np.ndarray]:
     """(plane (4,) or None, inlier mask (N,)) by open3d RANSAC on up-facing points."""
-    import open3d as o3d
+    import open3d as o3d  # heavy; only needed here
 
     n = len(points)
     none = (None, np.zeros(n, dtype=bool))
@@ -109,9 +126,7 @@ def detect_support_plane(points: np.ndarray, normals: np.ndarray, params: Segmen
     for _ in range(max(1, int(params.max_planes))):  # several horizontal planes (floor, table): take the highest
         if len(remaining) < max(3, params.min_plane_fraction * n):
             break
-        pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points[remaining]))
-        model, inl_idx = pc.segment_plane(distance_threshold=float(params.plane_distance), ransac_n=3,
-                                          num_iterations=int(params.plane_iterations))
+        model, inl_idx = _ransac_plane(points[remaining], float(params.plane_distance), int(params.plane_iterations))
         plane = np.asarray(model, dtype=np.float64)
         plane /= np.linalg.norm(plane[:3])
         if up is not None:
@@ -194,7 +209,7 @@ def segment_cloud(points: np.ndarray, normals: np.ndarray, params: SegmentationP
     good = np.all(np.isfinite(pts), axis=1) & np.all(np.isfinite(nrm), axis=1)
     if good.sum() < params.min_segment_points:
         raise VolumeError(f"surface cloud has {int(good.sum())} valid points: too few to segment "
-                          f"(need at least --min-segment-points={params.min_segment_points})")
+                          f"(need at least min_segment_points = {params.min_segment_points})")
     n = len(pts)
     labels = np.full(n, NOISE_LABEL, dtype=np.int64)
     plane, inl = detect_support_plane(pts[good], nrm[good], params)

@@ -21,11 +21,16 @@ cloud is subsampled uniformly.
 
 from __future__ import annotations
 
+import itertools
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import least_squares
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+from scipy.special import beta
 
 from kinfu_cli.core.errors import ConfigError, KinfuError
 
@@ -116,8 +121,6 @@ class Superquadric:
 
     def volume(self) -> float:
         """Enclosed volume (m^3), Jaklic et al.: 2 a1 a2 a3 e1 e2 B(e1/2 + 1, e1) B(e2/2, e2/2)."""
-        from scipy.special import beta
-
         e1, e2 = self.exponents
         return float(2.0 * np.prod(self.size) * e1 * e2 * beta(e1 / 2 + 1, e1) * beta(e2 / 2, e2 / 2))
 
@@ -273,8 +276,6 @@ def _solve(pts_p: np.ndarray, x0: np.ndarray, lb: np.ndarray, ub: np.ndarray, co
 
 def remove_outliers(points: np.ndarray, eps: float | None = None, min_points: int = 4) -> np.ndarray:
     """Keep the largest DBSCAN cluster (thesis pre-filter). `eps` defaults to 3x the median NN spacing."""
-    from scipy.spatial import cKDTree
-
     pts = np.asarray(points, dtype=np.float64)
     if len(pts) < 3 * min_points:
         return np.ones(len(pts), dtype=bool)
@@ -287,9 +288,6 @@ def remove_outliers(points: np.ndarray, eps: float | None = None, min_points: in
     core = nb >= min_points
     if not core.any():
         return np.ones(len(pts), dtype=bool)
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
     pairs = tree.query_pairs(r=eps, output_type="ndarray")
     keep_pair = core[pairs[:, 0]] | core[pairs[:, 1]]
     pairs = pairs[keep_pair]
@@ -338,10 +336,10 @@ def fit_superquadric(points: np.ndarray, *, max_points: int = 200, outlier_filte
     if len(pts) < 10:
         raise SegmentError(f"superquadric fit: segment has {len(pts)} finite points, need at least 10")
     if cost not in ("radial", "volume"):
-        raise ConfigError(f"--sq-cost: expected 'radial' or 'volume', got {cost!r}")
+        raise ConfigError(f"expected 'radial' or 'volume', got {cost!r}", parameter="cost")
     lo_e, hi_e = float(exponent_bounds[0]), float(exponent_bounds[1])
     if not (0.0 < lo_e < hi_e <= 2.0):
-        raise ConfigError(f"--sq-exponent-bounds: expected 0 < lo < hi <= 2, got {exponent_bounds}")
+        raise ConfigError(f"expected 0 < lo < hi <= 2, got {exponent_bounds}", parameter="exponent_bounds")
     keep = remove_outliers(pts) if outlier_filter else np.ones(len(pts), dtype=bool)
     kept = pts[keep]
     n_out = int(len(pts) - len(kept))
@@ -384,12 +382,6 @@ def fit_superquadric(points: np.ndarray, *, max_points: int = 200, outlier_filte
                            n_out, time.perf_counter() - t0, bool(res.success))
 
 
-def canonical_params(sq: Superquadric) -> dict:
-    """Shape described independently of axis order/sign: sorted semi-axes with their unit axes."""
-    order = np.argsort(-sq.size)
-    return {"size_sorted": sq.size[order], "axes_sorted": sq.rotation[:, order]}
-
-
 def partial_view_cloud(sq: Superquadric, view_dirs: np.ndarray, n: int = 1500, noise: float = 0.002,
                        rng: np.random.Generator | int | None = None) -> np.ndarray:
     """Synthetic partial view: surface points of a (convex) superquadric that face at least one of the
@@ -424,8 +416,6 @@ def parameter_errors(true: Superquadric, fit: Superquadric) -> dict:
     matching the superquadric z axis (the axis e1 acts on); angle_deg: largest angle between matched
     axes, over axes whose semi-axis differs from the others by > 10 % (else the axis is arbitrary).
     """
-    import itertools
-
     C = np.abs(true.rotation.T @ fit.rotation)
     perm = max(itertools.permutations(range(3)), key=lambda p: sum(C[i, p[i]] for i in range(3)))
     size_err = float(np.max(np.abs(np.sort(fit.size) - np.sort(true.size)) / np.sort(true.size)))

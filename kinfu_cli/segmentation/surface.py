@@ -12,6 +12,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.ndimage import gaussian_filter
+from skimage.measure import marching_cubes
 
 from kinfu_cli.core.errors import VolumeError
 
@@ -29,7 +31,7 @@ class SurfaceCloud:
         return int(len(self.points))
 
     def to_open3d(self, colors: np.ndarray | None = None):
-        import open3d as o3d
+        import open3d as o3d  # heavy; only needed for the open3d conversion
 
         pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(self.points, np.float64)))
         pc.normals = o3d.utility.Vector3dVector(np.asarray(self.normals, np.float64))
@@ -59,8 +61,6 @@ def surface_from_tsdf(tsdf: np.ndarray, weight: np.ndarray, origin, voxel_size: 
     resolution: thin the cloud on this voxel size (m); None keeps every marching-cubes vertex.
     Raises VolumeError when the volume has no observed surface.
     """
-    from skimage.measure import marching_cubes
-
     tsdf = np.asarray(tsdf)
     weight = np.asarray(weight)
     if tsdf.ndim != 3 or tsdf.shape != weight.shape:
@@ -98,8 +98,6 @@ def surface_from_tsdf(tsdf: np.ndarray, weight: np.ndarray, origin, voxel_size: 
 def surface_from_labels(labels: np.ndarray, origin, voxel_size: float, *, resolution: float | None = 0.01,
                         smoothing: float = 1.0) -> SurfaceCloud:
     """Occupied voxels (1) with an empty (-1) 6-neighbour; normals from the smoothed occupancy gradient."""
-    from scipy.ndimage import gaussian_filter
-
     labels = np.asarray(labels)
     if labels.ndim != 3:
         raise VolumeError(f"ternary labels must be 3-D, got shape {labels.shape}")
