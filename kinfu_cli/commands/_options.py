@@ -6,4 +6,6 @@ flag instead: this table first, else the option whose Python name is the paramet
 
 PARAMETER_FLAGS: dict[str, str] = {
     "vfov_extra_deg": "--vfov-extra",
+    "concavity_tolerance_deg": "--concavity-tolerance",
+    "region_radius": "--poi-radius",
 }
