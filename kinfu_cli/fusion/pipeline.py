@@ -38,7 +38,8 @@ from kinfu_cli.io.tf_buffer import TfBuffer
 if TYPE_CHECKING:  # open3d only for the annotations
     import open3d as o3d
 
-PLACEMENT_FRAMES = 5  # frames whose observed points centre the grid (one with icp: later poses depend on it)
+# frames whose observed points centre the grid; with icp the first only (the others have no pose until tracked)
+PLACEMENT_FRAMES = 5
 
 
 @dataclass
