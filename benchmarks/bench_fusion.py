@@ -18,13 +18,19 @@ import json
 import resource
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+
+from kinfu_cli.fusion import kernels as kn  # noqa: E402
+from kinfu_cli.fusion.placement import default_origin  # noqa: E402
+from kinfu_cli.fusion.volume import TernaryVolume  # noqa: E402
 
 SEVEN = REPO.parent / "shared" / "data" / "rgbd-7scenes-redkitchen"
 
@@ -42,8 +48,6 @@ def synthetic_frames(n: int, width: int = 640, height: int = 480):
 
 
 def seven_scenes_frames(n: int):
-    import cv2
-
     K = np.loadtxt(SEVEN / "camera-intrinsics.txt")
     out = []
     for i in range(n):
@@ -74,10 +78,7 @@ def compare(name, frames, res, size, trunc, max_depth, placement="scene"):
     placement "scene": the grid centred on what the first frames observe (kinfu fuse's default; most of the
     grid lies in the frustum); "camera": centred on the first camera (half the grid lies behind it, so
     open3d, which visits every voxel, skips more of them)."""
-    import open3d as o3d
-
-    from kinfu_cli.fusion.placement import default_origin
-    from kinfu_cli.fusion.volume import TernaryVolume
+    import open3d as o3d  # heavy: only for the comparison
 
     if placement == "scene":
         origin = default_origin([(d, K, T) for d, c, K, T in frames[:5]], size, max_depth=max_depth)
@@ -142,12 +143,6 @@ def _peak_rss_mb() -> float:
 def rss_child(res: int, size: float, n: int, worst: bool = False) -> None:
     """Build a res^3 colour volume from the 7-Scenes frames (synthetic ones without the data), read it out
     (labels, mesh, save); print peak RSS. With worst: every block gets per-voxel storage first."""
-    import tempfile
-
-    from kinfu_cli.fusion import kernels as kn
-    from kinfu_cli.fusion.placement import default_origin
-    from kinfu_cli.fusion.volume import TernaryVolume
-
     frames = seven_scenes_frames(60) if SEVEN.exists() else synthetic_frames(n)
     origin = default_origin([(d, K, T) for d, c, K, T in frames[:5]], size)
     vol = TernaryVolume(size=size, resolution=res, origin=origin, color=True)

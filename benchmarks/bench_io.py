@@ -20,6 +20,8 @@ import time
 from pathlib import Path
 
 import numpy as np
+from rosbags.highlevel import AnyReader
+from scipy.spatial.transform import Rotation, Slerp
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -34,8 +36,6 @@ CHAIN = ["world", "base_link", "link1", "link2", "link3", "link4", "link5", "lin
 
 
 def _link_pose(j: int, t: float) -> np.ndarray:
-    from scipy.spatial.transform import Rotation
-
     T = np.eye(4)
     T[:3, :3] = Rotation.from_rotvec([0.1 * np.sin(t + j), 0.2 * np.cos(0.5 * t), 0.05 * j * t]).as_matrix()
     T[:3, 3] = [0.1 * j, 0.02 * t, 0.3]
@@ -64,8 +64,6 @@ def write_recording(path: Path, n: int) -> Path:
 
 
 def bench_frames(path: Path) -> dict:
-    from rosbags.highlevel import AnyReader
-
     # reference: deserialize and decode the same messages, nothing else
     t = time.perf_counter()
     n_ref = 0
@@ -97,8 +95,6 @@ def bench_frames(path: Path) -> dict:
 
 
 def bench_tf(n_stamps: int) -> dict:
-    from scipy.spatial.transform import Rotation, Slerp
-
     tf = TfBuffer()
     tf.add("world", "base_link", 0, np.eye(4), static=True)
     tf.add("wrist", "camera_optical", 0, np.eye(4), static=True)

@@ -24,6 +24,8 @@ from pathlib import Path
 from click.testing import CliRunner
 
 from kinfu_cli.cli import cli
+from kinfu_cli.io.hand import load_hand_trajectory
+from kinfu_cli.io.recording import open_recording
 
 
 def _run(args: list[str]) -> tuple[int, str]:
@@ -36,9 +38,6 @@ def _run(args: list[str]) -> tuple[int, str]:
 
 def hand_window(recording: Path) -> tuple[float, float]:
     """Seconds from the recording start at which the hand trajectory starts and ends."""
-    from kinfu_cli.io.hand import load_hand_trajectory
-    from kinfu_cli.io.recording import open_recording
-
     with open_recording(recording) as rec:
         start_ns = rec.start_ns
     traj = load_hand_trajectory(recording)

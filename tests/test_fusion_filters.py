@@ -134,7 +134,7 @@ def test_fill_gaps_keeps_edges_blobs_and_can_be_off():
     assert np.all(out[60, 40:43] > 0)
     off, n = filters.fill_gaps(holed, max_gap=0)
     assert n == 0 and np.array_equal(off, holed)
-    with pytest.raises(ConfigError, match="--fill-gaps"):
+    with pytest.raises(ConfigError, match="max_gap"):
         filters.fill_gaps(holed, max_gap=-1)
 
 

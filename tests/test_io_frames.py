@@ -177,5 +177,5 @@ def test_bad_recordings_raise_clear_errors(tmp_path):
         roles = detect_roles(rec, camera_frame="camera_ir")
         with pytest.raises(TransformError, match="'camera_ir' is not in the TF tree"):
             list(iter_frames(rec, roles))
-        with pytest.raises(ConfigError, match="--every"):
+        with pytest.raises(ConfigError, match="every"):
             list(iter_frames(rec, every=0))

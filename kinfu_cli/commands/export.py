@@ -6,9 +6,9 @@ import json
 
 import click
 
-from kinfu_cli.io.frames import frame_kwargs, frame_options
+from kinfu_cli.commands._frames import frame_kwargs, frame_options
+from kinfu_cli.commands._roles import role_kwargs, role_options
 from kinfu_cli.io.rgbd_folders import export_frames
-from kinfu_cli.io.roles import role_kwargs, role_options
 
 
 @click.command("export", short_help="Write a recording's RGB-D frames (depth, colour, pose, K) as a frame folder.")

@@ -3,12 +3,22 @@
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 
 import click
 
+from kinfu_cli.commands._output import print_warnings
+from kinfu_cli.commands._roles import role_kwargs, role_options
+from kinfu_cli.core.atomic import write_json
 from kinfu_cli.core.errors import ConfigError
-from kinfu_cli.io.roles import role_kwargs, role_options
+from kinfu_cli.fusion.outputs import fusion_report, write_fusion_outputs
+from kinfu_cli.fusion.pipeline import fuse_recording
+from kinfu_cli.report.volume_plot import plot_slices
+
+# how report.json names the arguments that placed the grid or cleared spheres: by their options
+ARGUMENT_FLAGS = {"init": "--init", "origin": "--origin", "clear_spheres": "--clear-sphere",
+                  "clear_pois": "--clear-pois"}
 
 
 def _floats(value: str, name: str, n: tuple[int, ...]) -> tuple[float, ...]:
@@ -41,14 +51,14 @@ def _floats(value: str, name: str, n: tuple[int, ...]) -> tuple[float, ...]:
 @click.option("--pose-topic", default=None, metavar="TOPIC", help="PoseStamped/Odometry topic for --pose topic.")
 @click.option("--init", "init", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Continue fusing into this volume.npz (its grid wins over the grid options).")
-@click.option("--clear-sphere", "clear_sphere", multiple=True, metavar="X,Y,Z,R",
+@click.option("--clear-sphere", "clear_spheres", multiple=True, metavar="X,Y,Z,R",
               help="Forget a sphere (set unknown); repeatable. With --init before fusing, else after.")
 @click.option("--clear-pois", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Forget a sphere around each POI of this pois.json (its radius, default 0.2 m).")
-@click.option("--start", type=float, default=None, help="Start time, seconds from the recording start.")
-@click.option("--end", type=float, default=None, help="End time, seconds from the recording start.")
+@click.option("--start", "start_s", type=float, default=None, help="Start time, seconds from the recording start.")
+@click.option("--end", "end_s", type=float, default=None, help="End time, seconds from the recording start.")
 @click.option("--every", type=int, default=1, show_default=True, help="Use every N-th depth frame.")
-@click.option("--tolerance", type=float, default=0.05, show_default=True,
+@click.option("--tolerance", "tolerance_s", type=float, default=0.05, show_default=True,
               help="Largest depth/colour stamp difference, and how far a pose may be extrapolated (s).")
 @click.option("--fill-gaps", type=click.IntRange(min=0), default=2, show_default=True, metavar="N",
               help="Fill invalid runs of up to N pixels along a row or column between two readings that agree "
@@ -61,8 +71,8 @@ def _floats(value: str, name: str, n: tuple[int, ...]) -> tuple[float, ...]:
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @role_options
 def command(recording: Path, outdir: Path, voxel_size, resolution, size, origin, truncation, max_weight, min_depth,
-            max_depth, pose, pose_topic, init, clear_sphere, clear_pois, start, end, every, tolerance, fill_gaps,
-            bilateral, shadow_filter, no_color, plot, as_json, quiet, **kwargs) -> None:
+            max_depth, pose, pose_topic, init, clear_spheres, clear_pois, start_s, end_s, every, tolerance_s,
+            fill_gaps, bilateral, shadow_filter, no_color, plot, as_json, quiet, **kwargs) -> None:
     """Fuse the depth frames of RECORDING (MCAP, ROS 1 .bag, ROS 2 bag folder) into a KinectFusion TSDF
     volume that keeps unknown / empty / occupied per voxel (Monica et al. 2016, eqs. 1-3): free space in
     front of surfaces becomes known-empty, interiors stay unknown. Writes OUTDIR/mesh.ply (coloured),
@@ -76,10 +86,6 @@ def command(recording: Path, outdir: Path, voxel_size, resolution, size, origin,
       kinfu fuse rec.bag -o out/fuse --voxel-size 0.01 --size 2,2,1 --pose icp --every 2
       kinfu fuse rec2.mcap -o out/fuse2 --init out/fuse/volume.npz --clear-pois out/poi/pois.json
     """
-    from kinfu_cli.commands._output import print_warnings
-    from kinfu_cli.fusion.pipeline import FuseOptions, fuse_recording
-
-    roles = role_kwargs(kwargs)
     if voxel_size is not None and resolution is not None:
         raise ConfigError("--voxel-size and --resolution: give one of them, not both")
     res = None
@@ -89,16 +95,20 @@ def command(recording: Path, outdir: Path, voxel_size, resolution, size, origin,
             raise ConfigError(f"--resolution: expected positive integers, got {resolution!r}")
         res = int(r[0]) if len(r) == 1 else tuple(int(x) for x in r)
     sz = _floats(size, "--size", (1, 3))
-    opts = FuseOptions(
-        size=sz[0] if len(sz) == 1 else sz, resolution=res, voxel_size=voxel_size,
+    result = fuse_recording(
+        recording, size=sz[0] if len(sz) == 1 else sz, resolution=res, voxel_size=voxel_size,
         origin=_floats(origin, "--origin", (3,)) if origin else None, truncation=truncation, max_weight=max_weight,
-        min_depth=min_depth, max_depth=max_depth, pose=pose, pose_topic=pose_topic,
-        init=str(init) if init else None,
-        clear_spheres=[_floats(s, "--clear-sphere", (4,)) for s in clear_sphere],
-        clear_pois=str(clear_pois) if clear_pois else None, start=start, end=end, every=every, tolerance=tolerance,
-        fill_gaps=fill_gaps, bilateral=bilateral, shadow_filter=shadow_filter, plot=plot, color=not no_color,
-        quiet=quiet, roles=roles)
-    report = fuse_recording(recording, outdir, opts)
+        min_depth=min_depth, max_depth=max_depth, color=not no_color, pose=pose, pose_topic=pose_topic,
+        init=str(init) if init else None, clear_spheres=[_floats(s, "--clear-sphere", (4,)) for s in clear_spheres],
+        clear_pois=str(clear_pois) if clear_pois else None, start_s=start_s, end_s=end_s, every=every,
+        tolerance_s=tolerance_s, fill_gaps=fill_gaps, bilateral=bilateral, shadow_filter=shadow_filter,
+        roles=role_kwargs(kwargs), quiet=quiet, argument_names=ARGUMENT_FLAGS)
+    t0 = time.perf_counter()
+    write_fusion_outputs(result, outdir)
+    plots = [p.name for p in plot_slices(result.grid, outdir)] if plot else []
+    result.add_time("write", time.perf_counter() - t0)
+    report = fusion_report(result, extra_outputs=plots)
+    write_json(outdir / "report.json", report)
     print_warnings(report)
     if as_json:
         click.echo(json.dumps(report, indent=2, default=str))

@@ -39,7 +39,7 @@ def command(folder: str, out: str, rate: float, frames: str | None, color: str, 
       kinfu import tum_fr1_desk/ -o fr1_desk.bag --frames 0:300:2
     """
     summary = import_folder(folder, out, rate=rate, frames=frames, color=color, intrinsics=intrinsics,
-                            compress=not no_compress, quiet=quiet)
+                            compress=not no_compress, quiet=quiet, intrinsics_source="--intrinsics")
     if as_json:
         click.echo(json.dumps(summary, indent=2))
         return

@@ -8,6 +8,7 @@ the largest angle met so far (eq. 3.17-3.18, Alg. 5); a veil (mixed) pixel is on
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 from numba import njit, prange
 
@@ -24,8 +25,6 @@ def range_filter(depth: np.ndarray, min_depth: float, max_depth: float) -> np.nd
 def bilateral(depth: np.ndarray, diameter: int = 5, sigma_depth: float = 0.03, sigma_space: float = 4.5) -> np.ndarray:
     """Edge-preserving smoothing (cv2.bilateralFilter, sigma_depth in metres); invalid pixels stay invalid
     and do not bleed into valid ones (their value is far outside sigma_depth)."""
-    import cv2
-
     d = np.asarray(depth, dtype=np.float32)
     valid = d > 0
     out = cv2.bilateralFilter(d, int(diameter), float(sigma_depth), float(sigma_space))
@@ -174,7 +173,7 @@ def fill_gaps(depth: np.ndarray, max_gap: int = 2, max_rel_step: float = 0.03) -
     """
     max_gap = int(max_gap)
     if max_gap < 0:
-        raise ConfigError(f"--fill-gaps: expected a gap width >= 0 pixels, got {max_gap}")
+        raise ConfigError(f"expected a gap width >= 0 pixels, got {max_gap}", parameter="max_gap")
     d = np.asarray(depth, dtype=np.float32)
     if max_gap == 0:
         return d, 0

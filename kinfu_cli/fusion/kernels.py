@@ -610,6 +610,10 @@ def raycast_kernel(dims, block_idx, block_w, pool_v, pool_w, origin, vs, trunc,
     and state per pixel: 1 hit occupied, 0 met unknown space, -1 left through known-empty space only.
     With stop_unknown the ray also stops at the first unknown voxel (NBV: the first non-empty voxel), whose
     position is returned as the vertex (depth and normal stay 0 / NaN).
+
+    One function on purpose (hot path, ~175 lines): grid clipping, the march that jumps over uniform blocks,
+    the zero-crossing refinement and the normal all share a dozen per-ray variables inside one prange body;
+    split into numba functions they would pass them all back and forth for every pixel.
     """
     depth = np.zeros((height, width), dtype=np.float32)
     verts = np.full((height, width, 3), np.nan, dtype=np.float32)

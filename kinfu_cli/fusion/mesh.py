@@ -8,6 +8,7 @@ surface can be), so a 512^3 volume never becomes dense at once. A cube is meshed
 from __future__ import annotations
 
 import numpy as np
+from skimage.measure import marching_cubes
 
 CHUNK = 48  # voxels per chunk edge (chunks without surface blocks are skipped)
 
@@ -24,8 +25,6 @@ def _known_cubes_mask(known: np.ndarray) -> np.ndarray:
 def surface_arrays(vol, lo=None, hi=None):
     """Vertices (N, 3) world, faces (M, 3), vertex normals (N, 3, pointing into empty space) and colours
     (N, 3) uint8 of the v = 0 surface inside the voxel box [lo, hi) (default: everywhere)."""
-    from skimage.measure import marching_cubes
-
     empty = (np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros((0, 3)), np.zeros((0, 3), np.uint8))
     sblocks = vol.surface_blocks()
     ib = np.argwhere(sblocks)
@@ -83,7 +82,7 @@ def surface_arrays(vol, lo=None, hi=None):
 
 def extract_mesh(vol, lo=None, hi=None):
     """open3d TriangleMesh (vertex colours and normals) of the volume's surface, seams between chunks merged."""
-    import open3d as o3d
+    import open3d as o3d  # heavy: only when a mesh is made
 
     v, f, n, c = surface_arrays(vol, lo, hi)
     mesh = o3d.geometry.TriangleMesh()
@@ -101,16 +100,11 @@ def extract_mesh(vol, lo=None, hi=None):
     return mesh
 
 
-def extract_cloud(vol, lo=None, hi=None):
-    """open3d PointCloud of surface points (marching-cubes vertices, as ExtractSurfacePts) with colours and
-    normals pointing into empty space."""
-    import open3d as o3d
+def mesh_cloud(mesh):
+    """open3d PointCloud of a mesh's vertices with their colours and normals (pointing into empty space): the
+    surface points, as KinFu's ExtractSurfacePts."""
+    import open3d as o3d  # heavy: only when a cloud is made
 
-    mesh = extract_mesh(vol, lo, hi)
-    pc = o3d.geometry.PointCloud()
-    if len(mesh.vertices) == 0:
-        return pc
-    pc.points = mesh.vertices
-    pc.colors = mesh.vertex_colors
-    pc.normals = mesh.vertex_normals
-    return pc
+    cloud = o3d.geometry.PointCloud()
+    cloud.points, cloud.colors, cloud.normals = mesh.vertices, mesh.vertex_colors, mesh.vertex_normals
+    return cloud

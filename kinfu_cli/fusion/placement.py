@@ -29,7 +29,8 @@ def observed_center(frames: Iterable[tuple[np.ndarray, np.ndarray, np.ndarray]],
     pts = [backproject(d, K, T, min_depth=min_depth, max_depth=max_depth) for d, K, T in frames]
     pts = [p for p in pts if len(p)]
     if not pts:
-        raise VolumeError("cannot place the volume: the first frames have no valid depth (use --origin x,y,z)")
+        raise VolumeError("cannot place the volume: the first frames have no valid depth (give the grid origin "
+                          "x,y,z)", parameter="origin")
     p = np.concatenate(pts)
     lo = np.percentile(p, low, axis=0)
     hi = np.percentile(p, high, axis=0)

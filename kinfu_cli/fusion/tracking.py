@@ -60,7 +60,8 @@ class FrameToModelTracker:
         self.min_points = int(min_points)
 
     def track(self, volume, depth: np.ndarray, K: np.ndarray, T_init: np.ndarray) -> TrackResult:
-        import open3d as o3d
+        """ICP of `depth` (camera frame) against the volume's surface seen from T_init; T_init when lost."""
+        import open3d as o3d  # heavy: only when tracking
 
         reg = o3d.pipelines.registration
         T_init = np.asarray(T_init, dtype=np.float64)

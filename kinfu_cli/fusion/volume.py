@@ -14,13 +14,16 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+import cv2
 import numpy as np
+from scipy.ndimage import binary_dilation
 
 from kinfu_cli.core.errors import ConfigError, VolumeError
-from kinfu_cli.fusion import kernels as kn
 from kinfu_cli.core.grid import TernaryGrid, read_ternary
-from kinfu_cli.core.volume_file import FORMAT, FORMAT_VERSION, read_volume_file, write_volume_file
 from kinfu_cli.core.poses import check_rigid
+from kinfu_cli.core.volume_file import FORMAT, FORMAT_VERSION, read_volume_file, write_volume_file
+from kinfu_cli.fusion import kernels as kn
+from kinfu_cli.fusion.mesh import extract_mesh
 
 BYTES_PER_VOXEL = 3  # v int16 + w uint8
 BYTES_PER_VOXEL_COLOR = 3
@@ -73,7 +76,8 @@ class TernaryVolume:
             if not all(d > 0 for d in dims):
                 raise ConfigError(f"resolution: expected positive voxel counts, got {dims}")
             if len(set(np.round(np.array(size) / np.array(dims), 12))) != 1:
-                raise ConfigError(f"size {size} and resolution {dims} give non-cubic voxels; use --voxel-size")
+                raise ConfigError(f"size {size} and resolution {dims} give non-cubic voxels; give a voxel size "
+                                  f"instead", parameter="voxel_size")
             voxel_size = size[0] / dims[0]
         if not (np.isfinite(truncation) and truncation > 0):
             raise ConfigError(f"truncation: expected a positive distance in metres, got {truncation}")
@@ -118,7 +122,7 @@ class TernaryVolume:
             nx, ny, nz = self.shape
             raise VolumeError(f"volume of {nx}x{ny}x{nz} voxels at {self.voxel_size * 1000:.2f} mm would need up to "
                               f"{need / 1024**3:.1f} GB ({avail / 1024**3:.1f} GB available); use a coarser "
-                              f"--voxel-size or a smaller --size")
+                              f"voxel size or a smaller size", parameter="voxel_size/size")
 
     def _alloc_pools(self, cap: int) -> None:
         self.pool_v = np.zeros((cap, kn.B3), dtype=np.int16)
@@ -193,8 +197,6 @@ class TernaryVolume:
             if color.ndim != 3 or color.shape[2] < 3:
                 raise VolumeError(f"color: expected an RGB image (H, W, 3), got shape {color.shape}")
             if color.shape[:2] != (h, w):
-                import cv2
-
                 color = cv2.resize(np.ascontiguousarray(color[:, :, :3]), (w, h), interpolation=cv2.INTER_NEAREST)
             col = np.ascontiguousarray(color[:, :, :3], dtype=np.uint8)
         else:
@@ -320,8 +322,6 @@ class TernaryVolume:
         occ = kn.occupied_blocks(self.block_idx, self.pool_v, self.pool_w)
         if not occ.any():
             return occ
-        from scipy.ndimage import binary_dilation
-
         return binary_dilation(occ, structure=np.ones((3, 3, 3), bool)) & (self.block_idx >= 0)
 
     def surface_block_box(self) -> tuple[np.ndarray, np.ndarray] | None:
@@ -357,15 +357,7 @@ class TernaryVolume:
     def extract_mesh(self, lo=None, hi=None):
         """Coloured open3d TriangleMesh of the v = 0 surface (marching cubes, skimage) between known voxels,
         optionally only inside the voxel box [lo, hi)."""
-        from kinfu_cli.fusion.mesh import extract_mesh
-
         return extract_mesh(self, lo, hi)
-
-    def extract_cloud(self, lo=None, hi=None):
-        """Surface point cloud (open3d PointCloud with colours and normals): the mesh vertices."""
-        from kinfu_cli.fusion.mesh import extract_cloud
-
-        return extract_cloud(self, lo, hi)
 
     def counts(self) -> dict[str, int]:
         return self.ternary_grid().counts()

@@ -9,7 +9,7 @@ by reason in a `FrameStats`, which the fusion report prints.
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -43,7 +43,7 @@ class RGBDFrame:
 
 @dataclass
 class FrameStats:
-    """How many depth frames were used, skipped by --every / time window, and dropped (reason -> count)."""
+    """How many depth frames were used, skipped (every n-th, time window) and dropped (reason -> count)."""
 
     depth_messages: int = 0
     used: int = 0
@@ -107,190 +107,213 @@ def iter_frames(rec, roles: Roles | None = None, pose_source: str = "tf", pose_t
     T_world_camera, `pose_topic`), or "none". start_s/end_s: seconds from the start of the recording.
     every: keep every n-th depth frame. tolerance_s: largest |t_colour - t_depth| for a pair, and how far
     a pose may be extrapolated beyond the TF / pose range. Frames without colour are kept (color=None)
-    unless require_color. `stats` (a FrameStats) is filled in while streaming.
+    unless require_color. `stats` (a FrameStats) is filled in while streaming. Every argument is checked
+    when the first frame is asked for, before any image is decoded.
     """
     if pose_source not in POSE_SOURCES:
-        raise ConfigError(f"--pose-source {pose_source!r}: expected one of {', '.join(POSE_SOURCES)}")
+        raise ConfigError(f"expected one of {', '.join(POSE_SOURCES)}, got {pose_source!r}", parameter="pose_source")
     if every < 1:
-        raise ConfigError(f"--every {every}: expected an integer >= 1")
+        raise ConfigError(f"expected an integer >= 1, got {every}", parameter="every")
     if tolerance_s < 0:
-        raise ConfigError(f"--tolerance {tolerance_s}: expected a value >= 0 seconds")
+        raise ConfigError(f"expected a value >= 0 seconds, got {tolerance_s}", parameter="tolerance_s")
     stats = stats if stats is not None else FrameStats()
     if roles is None:
         if tf is None and pose_source == "tf":
             tf = TfBuffer.from_recording(rec)
         roles = detect_roles(rec, tf=tf)
-    depth_topic = roles.depth_topic
-    if depth_topic is None:
-        avail = ", ".join(f"{n} ({i.msgtype})" for n, i in rec.topics.items()) or "none"
-        raise RecordingError(f"{rec.path}: no depth image topic found (set --depth-topic); topics: {avail}")
-    rec.require_topic(depth_topic, "depth topic")
-    if roles.info_topic is None:
-        raise RecordingError(f"{rec.path}: no sensor_msgs/CameraInfo topic for depth topic {depth_topic} "
-                             f"(intrinsics are needed; set --info-topic)")
-    rec.require_topic(roles.info_topic, "camera info topic")
-    color_topic = roles.color_topic
-    if color_topic is not None:
-        rec.require_topic(color_topic, "colour topic")
+    depth_topic = _require_topics(rec, roles)
     tol_ns = int(round(tolerance_s * 1e9))
-
     first_info = rec.first_message(roles.info_topic)
     if first_info is None:
         raise RecordingError(f"{rec.path}: camera info topic {roles.info_topic} has no messages")
-    K, info_w, info_h = camera_info_K(first_info, roles.info_topic)
-
-    pose_fn = None
+    K, width, height = camera_info_K(first_info, roles.info_topic)
     if pose_source == "tf":
-        tf = tf if tf is not None else TfBuffer.from_recording(rec)
-        camera = roles.camera_frame
-        if camera is None:
-            first_depth = rec.first_message(depth_topic)
-            camera = header_frame(first_depth).lstrip("/") if first_depth is not None else ""
-        if not camera:
-            raise RecordingError(f"{rec.path}: depth topic {depth_topic} has no header frame_id; "
-                                 f"set --camera-frame")
-        world = roles.world_frame
-        if world is None:
-            raise TransformError(f"{rec.path}: no TF world frame found for camera frame {camera!r} "
-                                 f"(no /tf data?); set --world-frame or --pose-source none")
-        try:
-            tf.require_chain(world, camera)  # a missing link fails now, naming both frames
-        except TransformError as exc:
-            raise TransformError(f"{rec.path}: {exc} (set --camera-frame / --world-frame)") from None
-
-        def pose_fn(stamp_ns: int) -> np.ndarray | None:
-            try:
-                return tf.lookup(world, camera, stamp_ns, tolerance_ns=tol_ns)
-            except TransformError:
-                stats.drop(DROP_NO_POSE)
-                return None
+        pose_fn = _tf_poses(rec, roles, depth_topic, tf, tol_ns, stats)
     elif pose_source == "topic":
-        if pose_topic is None:
-            raise ConfigError("--pose-source topic needs --pose-topic (a PoseStamped/Odometry/... topic)")
-        path = _PosePath(rec, pose_topic, tol_ns)
+        pose_fn = _topic_poses(rec, pose_topic, tol_ns, stats)
+    else:
+        pose_fn = None
+    start_ns, end_ns = _time_window(rec, start_s, end_s)
+    pairer = _FramePairer(rec, roles, depth_topic, K, width, height, pose_fn, tol_ns, stats, require_color)
+    yield from pairer.stream(start_ns, end_ns, every)
 
-        def pose_fn(stamp_ns: int) -> np.ndarray | None:
-            try:
-                return path.pose(stamp_ns)
-            except TransformError:
-                stats.drop(DROP_NO_POSE_TOPIC)
-                return None
 
+def _require_topics(rec, roles: Roles) -> str:
+    """The depth topic; RecordingError unless the depth, camera info and (when set) colour topics are there."""
+    depth_topic = roles.depth_topic
+    if depth_topic is None:
+        avail = ", ".join(f"{n} ({i.msgtype})" for n, i in rec.topics.items()) or "none"
+        raise RecordingError(f"{rec.path}: no depth image topic found; topics: {avail}", parameter="depth_topic")
+    rec.require_topic(depth_topic, "depth topic")
+    if roles.info_topic is None:
+        raise RecordingError(f"{rec.path}: no sensor_msgs/CameraInfo topic for depth topic {depth_topic} "
+                             f"(intrinsics are needed)", parameter="info_topic")
+    rec.require_topic(roles.info_topic, "camera info topic")
+    if roles.color_topic is not None:
+        rec.require_topic(roles.color_topic, "colour topic")
+    return depth_topic
+
+
+PoseLookup = Callable[[int], "np.ndarray | None"]
+
+
+def _tf_poses(rec, roles: Roles, depth_topic: str, tf: TfBuffer | None, tol_ns: int,
+              stats: FrameStats) -> PoseLookup:
+    """Camera pose at a stamp from TF (world frame <- camera frame); None (counted) outside the TF range.
+    The chain of links is checked now, so a missing link fails before any frame, naming both frames."""
+    tf = tf if tf is not None else TfBuffer.from_recording(rec)
+    camera = roles.camera_frame
+    if camera is None:
+        first_depth = rec.first_message(depth_topic)
+        camera = header_frame(first_depth).lstrip("/") if first_depth is not None else ""
+    if not camera:
+        raise RecordingError(f"{rec.path}: depth topic {depth_topic} has no header frame_id",
+                             parameter="camera_frame")
+    world = roles.world_frame
+    if world is None:
+        raise TransformError(f"{rec.path}: no TF world frame found for camera frame {camera!r} "
+                             f"(no /tf data?); name the world frame, or take no poses (pose source "
+                             f"'none')", parameter="world_frame")
+    try:
+        tf.require_chain(world, camera)
+    except TransformError as exc:
+        raise TransformError(f"{rec.path}: {exc}", parameter="camera_frame/world_frame") from None
+
+    def pose(stamp_ns: int) -> np.ndarray | None:
+        try:
+            return tf.lookup(world, camera, stamp_ns, tolerance_ns=tol_ns)
+        except TransformError:
+            stats.drop(DROP_NO_POSE)
+            return None
+
+    return pose
+
+
+def _topic_poses(rec, pose_topic: str | None, tol_ns: int, stats: FrameStats) -> PoseLookup:
+    """Camera pose at a stamp from a pose topic, interpolated; None (counted) beyond its messages."""
+    if pose_topic is None:
+        raise ConfigError("needed with pose source 'topic' (a PoseStamped/Odometry/... topic)",
+                          parameter="pose_topic")
+    path = _PosePath(rec, pose_topic, tol_ns)
+
+    def pose(stamp_ns: int) -> np.ndarray | None:
+        try:
+            return path.pose(stamp_ns)
+        except TransformError:
+            stats.drop(DROP_NO_POSE_TOPIC)
+            return None
+
+    return pose
+
+
+def _time_window(rec, start_s: float | None, end_s: float | None) -> tuple[int | None, int | None]:
+    """[start, end] in log nanoseconds from seconds after the recording's first message (None: open)."""
     t0 = rec.start_ns or 0
     start_ns = None if start_s is None else t0 + int(start_s * 1e9)
     end_ns = None if end_s is None else t0 + int(end_s * 1e9)
     if start_ns is not None and end_ns is not None and end_ns < start_ns:
-        raise ConfigError(f"--start {start_s} s is after --end {end_s} s")
-    read_start = None if start_ns is None else max(0, start_ns - tol_ns)
-    read_end = None if end_ns is None else end_ns + tol_ns
+        raise ConfigError(f"start {start_s} s is after end {end_s} s", parameter="start_s/end_s")
+    return start_ns, end_ns
 
-    topics = [depth_topic, roles.info_topic] + ([color_topic] if color_topic else [])
-    pending: deque[tuple[int, int, object]] = deque()  # (index, stamp, depth msg)
-    colors: deque[tuple[int, object]] = deque()  # (stamp, colour msg), decoded only when paired
-    state = {"K": K, "w": info_w, "h": info_h, "n": 0, "index": 0}
 
-    def emit(index: int, stamp: int, msg: object) -> RGBDFrame | None:
-        depth = decode_depth(msg, depth_topic)
+class _FramePairer:
+    """Streams the depth, colour and camera-info topics once, in log order, pairing each depth image with the
+    nearest colour image within the tolerance and its camera pose. Only the messages still waiting for a
+    partner are kept: depth frames until no closer colour image can arrive, colour images (undecoded) until
+    no depth frame can use them."""
+
+    def __init__(self, rec, roles: Roles, depth_topic: str, K: np.ndarray, width: int, height: int,
+                 pose_fn: PoseLookup | None, tol_ns: int, stats: FrameStats, require_color: bool) -> None:
+        self.rec = rec
+        self.depth_topic = depth_topic
+        self.info_topic = roles.info_topic
+        self.color_topic = roles.color_topic
+        self.K, self.width, self.height = K, width, height  # of the latest camera info
+        self.pose_fn = pose_fn
+        self.tol_ns = tol_ns
+        self.stats = stats
+        self.require_color = require_color
+        self.pending: deque[tuple[int, int, object]] = deque()  # (index, stamp, depth msg)
+        self.colors: deque[tuple[int, object]] = deque()  # (stamp, colour msg), decoded only when paired
+
+    def stream(self, start_ns: int | None, end_ns: int | None, every: int) -> Iterator[RGBDFrame]:
+        """Frames of depth messages stamped in [start_ns, end_ns] (either None: open), every n-th; messages
+        within the tolerance outside the window are read too, as partners."""
+        tol_ns, stats, pending = self.tol_ns, self.stats, self.pending
+        read_start = None if start_ns is None else max(0, start_ns - tol_ns)
+        read_end = None if end_ns is None else end_ns + tol_ns
+        topics = [self.depth_topic, self.info_topic] + ([self.color_topic] if self.color_topic else [])
+        index = 0  # position of the depth message on its topic among those read
+        kept = 0  # depth messages inside the window so far
+        for topic, log_ns, msg in self.rec.messages(topics, start_ns=read_start, end_ns=read_end):
+            if topic == self.info_topic:
+                self.K, self.width, self.height = camera_info_K(msg, self.info_topic)
+                continue
+            stamp = _stamp(msg, log_ns)
+            if topic == self.color_topic:
+                self.colors.append((stamp, msg))
+                yield from self._flush(stamp)
+                if not pending:
+                    self._prune(stamp)
+                continue
+            # a depth message
+            index += 1
+            if (start_ns is not None and stamp < start_ns) or (end_ns is not None and stamp > end_ns):
+                continue  # read only for the tolerance margin of the time window
+            stats.depth_messages += 1
+            kept += 1
+            if (kept - 1) % every:
+                stats.skipped += 1
+                continue
+            pending.append((index - 1, stamp, msg))
+            if self.color_topic is None:
+                yield from self._flush(None)
+            elif len(pending) > 64:  # colour stream stalled: do not hold depth frames forever
+                frame = self._emit(*pending.popleft())
+                if frame is not None:
+                    yield frame
+        yield from self._flush(None)
+
+    def _emit(self, index: int, stamp: int, msg: object) -> RGBDFrame | None:
+        """The frame of one depth message, or None (counted in stats) when it has no pose, no valid pixel, or
+        no colour while colour is required."""
+        depth = decode_depth(msg, self.depth_topic)
         h, w = depth.shape
-        if state["w"] and state["h"] and (w, h) != (state["w"], state["h"]):
-            raise RecordingError(f"{rec.path}: depth image on {depth_topic} is {w}x{h} but camera info "
-                                 f"{roles.info_topic} says {state['w']}x{state['h']}")
+        if self.width and self.height and (w, h) != (self.width, self.height):
+            raise RecordingError(f"{self.rec.path}: depth image on {self.depth_topic} is {w}x{h} but camera info "
+                                 f"{self.info_topic} says {self.width}x{self.height}")
         T = None
-        if pose_fn is not None:
-            T = pose_fn(stamp)
+        if self.pose_fn is not None:
+            T = self.pose_fn(stamp)
             if T is None:
                 return None
         if not np.any(depth > 0):
-            stats.drop(DROP_EMPTY)
+            self.stats.drop(DROP_EMPTY)
             return None
         color = None
-        if color_topic is not None and colors:
-            best_stamp, best = min(colors, key=lambda c: abs(c[0] - stamp))
-            if abs(best_stamp - stamp) <= tol_ns:
-                color = decode_color(best, color_topic)
+        if self.color_topic is not None and self.colors:
+            best_stamp, best = min(self.colors, key=lambda c: abs(c[0] - stamp))
+            if abs(best_stamp - stamp) <= self.tol_ns:
+                color = decode_color(best, self.color_topic)
         if color is None:
-            if require_color:
-                stats.drop(DROP_NO_COLOR)
+            if self.require_color:
+                self.stats.drop(DROP_NO_COLOR)
                 return None
-            stats.without_color += 1
-        stats.used += 1
-        return RGBDFrame(index=index, stamp_ns=stamp, depth=depth, color=color, K=state["K"].copy(),
-                         T_world_camera=T)
+            self.stats.without_color += 1
+        self.stats.used += 1
+        return RGBDFrame(index=index, stamp_ns=stamp, depth=depth, color=color, K=self.K.copy(), T_world_camera=T)
 
-    def prune(before: int) -> None:
-        while colors and colors[0][0] < before - tol_ns:
-            colors.popleft()
+    def _prune(self, before: int) -> None:
+        """Forget colour images too old for any depth frame from `before` on."""
+        while self.colors and self.colors[0][0] < before - self.tol_ns:
+            self.colors.popleft()
 
-    def flush(up_to: int | None) -> Iterator[RGBDFrame]:
+    def _flush(self, up_to: int | None) -> Iterator[RGBDFrame]:
         """Emit pending depth frames whose colour partner can no longer arrive (all when up_to is None)."""
-        while pending and (up_to is None or pending[0][1] + tol_ns < up_to):
+        pending = self.pending
+        while pending and (up_to is None or pending[0][1] + self.tol_ns < up_to):
             index, stamp, msg = pending.popleft()
-            frame = emit(index, stamp, msg)
+            frame = self._emit(index, stamp, msg)
             if frame is not None:
                 yield frame
-            prune(pending[0][1] if pending else stamp)
-
-    for topic, log_ns, msg in rec.messages(topics, start_ns=read_start, end_ns=read_end):
-        if topic == roles.info_topic:
-            K_new, w_new, h_new = camera_info_K(msg, roles.info_topic)
-            state.update(K=K_new, w=w_new, h=h_new)
-            continue
-        stamp = _stamp(msg, log_ns)
-        if topic == color_topic:
-            colors.append((stamp, msg))
-            yield from flush(stamp)
-            if not pending:
-                prune(stamp)
-            continue
-        # a depth message
-        index = state["index"]
-        state["index"] += 1
-        if (start_ns is not None and stamp < start_ns) or (end_ns is not None and stamp > end_ns):
-            continue  # read only for the tolerance margin of the time window
-        stats.depth_messages += 1
-        if state["n"] % every:
-            state["n"] += 1
-            stats.skipped += 1
-            continue
-        state["n"] += 1
-        pending.append((index, stamp, msg))
-        if color_topic is None:
-            yield from flush(None)
-        elif len(pending) > 64:  # colour stream stalled: do not hold depth frames forever
-            index, stamp, msg = pending.popleft()
-            frame = emit(index, stamp, msg)
-            if frame is not None:
-                yield frame
-    yield from flush(None)
-
-
-# ------------------------------------------------------------------------------------------- CLI options
-FRAME_OPTIONS = ("pose_source", "pose_topic", "tolerance_s", "start_s", "end_s", "every")
-
-
-def frame_options(func):
-    """click decorator adding --pose-source, --pose-topic, --tolerance, --start, --end, --every; hand the
-    values to iter_frames with `iter_frames(rec, roles, **frame_kwargs(kwargs))`."""
-    import click
-
-    opts = [
-        click.option("--pose-source", "pose_source", type=click.Choice(list(POSE_SOURCES)), default="tf",
-                     show_default=True, help="Camera poses from TF (world frame <- camera frame), a pose topic, "
-                                             "or none."),
-        click.option("--pose-topic", "pose_topic", default=None, metavar="TOPIC",
-                     help="Camera pose topic (PoseStamped, Odometry, ...) for --pose-source topic."),
-        click.option("--tolerance", "tolerance_s", default=0.05, show_default=True, type=float,
-                     help="Largest depth/colour stamp difference, and how far a pose may be extrapolated (s)."),
-        click.option("--start", "start_s", default=None, type=float, help="Start, seconds from the recording start."),
-        click.option("--end", "end_s", default=None, type=float, help="End, seconds from the recording start."),
-        click.option("--every", "every", default=1, show_default=True, type=int,
-                     help="Use every n-th depth frame."),
-    ]
-    for opt in reversed(opts):
-        func = opt(func)
-    return func
-
-
-def frame_kwargs(kwargs: dict) -> dict:
-    """Pop the frame options out of a command's kwargs (for iter_frames)."""
-    return {name: kwargs.pop(name) for name in FRAME_OPTIONS if name in kwargs}
+            self._prune(pending[0][1] if pending else stamp)

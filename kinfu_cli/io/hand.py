@@ -15,7 +15,9 @@ import numpy as np
 from kinfu_cli.core.errors import RecordingError, TrajectoryError
 from kinfu_cli.core.poses import quaternion_to_matrix
 from kinfu_cli.io.messages import POSE_TYPES, header_frame, header_stamp_ns, pose_message_to_tq
+from kinfu_cli.io.polhemus import read_polhemus
 from kinfu_cli.io.recording import Recording, open_recording
+from kinfu_cli.io.roles import detect_roles
 from kinfu_cli.io.tf_buffer import TfBuffer
 from kinfu_cli.io.trajectory import Trajectory
 
@@ -33,8 +35,6 @@ def load_hand_trajectory(path: str | os.PathLike, hand_topic: str | None = None,
     """
     path = Path(path)
     if path.suffix.lower() in TEXT_SUFFIXES:
-        from kinfu_cli.io.polhemus import read_polhemus  # the POI engineer's reader
-
         return read_polhemus(path)
     with open_recording(path) as rec:
         return hand_trajectory_from_recording(rec, hand_topic, hand_frame, world_frame)
@@ -45,15 +45,13 @@ def hand_trajectory_from_recording(rec: Recording, hand_topic: str | None = None
     """As load_hand_trajectory, on an open Recording."""
     tf: TfBuffer | None = None
     if hand_topic is None and hand_frame is None:
-        from kinfu_cli.io.roles import detect_roles
-
         tf = TfBuffer.from_recording(rec)
         roles = detect_roles(rec, world_frame=world_frame or "", tf=tf)
         hand_topic, hand_frame = roles.hand_topic, roles.hand_frame
         if hand_topic is None and hand_frame is None:
             poses = ", ".join(rec.topics_of_type(*POSE_TYPES)) or "none"
-            raise RecordingError(f"{rec.path}: no hand pose topic or TF frame found (set --hand-topic or "
-                                 f"--hand-frame); pose topics: {poses}")
+            raise RecordingError(f"{rec.path}: no hand pose topic or TF frame found; pose topics: {poses}",
+                                 parameter="hand_topic/hand_frame")
     if hand_topic is not None:
         return _from_topic(rec, hand_topic, world_frame, tf)
     return _from_tf(rec, hand_frame, world_frame, tf)

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from kinfu_cli.core.atomic import atomic_path
 from kinfu_cli.core.errors import TrajectoryError
 from kinfu_cli.io.trajectory import Trajectory
 
@@ -120,8 +121,6 @@ def write_polhemus(path: str | os.PathLike, traj: Trajectory) -> Path:
 
     The file has no timestamps: readers assume 100 Hz, so resample first if `traj` is not.
     """
-    from kinfu_cli.core.atomic import atomic_path
-
     n = len(traj)
     mats = np.tile(np.eye(4), (n, 1, 1))
     if traj.rotations is not None:

@@ -19,11 +19,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Protocol
 
-from kinfu_cli.core.errors import RecordingError
-from kinfu_cli.io.messages import camera_info_K, decode_color, decode_depth, normalize_msgtype
+from mcap.reader import make_reader
 
-__all__ = ["Recording", "TopicInfo", "open_recording", "detect_format", "decode_depth", "decode_color",
-           "camera_info_K"]
+from kinfu_cli.core.errors import RecordingError
+from kinfu_cli.io.messages import normalize_msgtype
 
 _ROS1_MAGIC = b"#ROSBAG V2.0"
 _MCAP_MAGIC = b"\x89MCAP0\r\n"
@@ -236,9 +235,12 @@ _KIND_NAMES = {"bag": "ROS 1 bag", "ros2": "ROS 2 bag", "mcap": "MCAP file"}
 
 class _RosbagsBackend(_Backend):
     def __init__(self, path: Path, fmt: str, stack: contextlib.ExitStack):
+        # rosbags takes a good part of a second to import: only when a recording is opened
         from rosbags.highlevel import AnyReader
+        from rosbags.typesys import Stores, get_typestore
 
         self.path = path
+        self.fmt = fmt
         self.kind = _KIND_NAMES[fmt]
         open_path = path
         if fmt == "bag" and path.suffix != ".bag":  # AnyReader picks ROS 1 by the .bag suffix
@@ -247,8 +249,6 @@ class _RosbagsBackend(_Backend):
             open_path = tmp / (path.name + ".bag")
             open_path.symlink_to(path.resolve())
         try:
-            from rosbags.typesys import Stores, get_typestore
-
             # ROS 2 bags before Iron store no message definitions: decode standard types with Humble's
             self.reader = AnyReader([open_path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
             self.reader.open()
@@ -261,12 +261,10 @@ class _RosbagsBackend(_Backend):
             self.reader.close()
 
     def topic_infos(self) -> dict[str, TopicInfo]:
-        from rosbags.rosbag1 import Reader as Reader1
-
         infos = _topic_infos((c.topic, c.msgtype, c.msgcount) for c in self.reader.connections)
         # first/last stamps: from the ROS 1 index at once; else one pass over the raw records, when asked for
-        reader = self.reader.readers[0]
-        if isinstance(reader, Reader1):
+        if self.stamps_known:
+            reader = self.reader.readers[0]
             for conn in self.reader.connections:
                 idx = reader.indexes.get(conn.id) or []
                 if idx:
@@ -275,9 +273,8 @@ class _RosbagsBackend(_Backend):
 
     @property
     def stamps_known(self) -> bool:
-        from rosbags.rosbag1 import Reader as Reader1
-
-        return isinstance(self.reader.readers[0], Reader1)
+        """True for ROS 1 bags (rosbags reads them with its rosbag1 reader), whose index holds every stamp."""
+        return self.fmt == "bag"
 
     def fill_stamps(self, infos: dict[str, TopicInfo]) -> None:
         try:
@@ -338,8 +335,6 @@ def _extend(info: TopicInfo, first: int, last: int) -> None:
 
 def _mcap_needs_mcap_lib(path: Path) -> bool:
     """True when an MCAP file holds messages rosbags cannot decode (ROS 1 encoding)."""
-    from mcap.reader import make_reader
-
     try:
         with path.open("rb") as f:
             summary = make_reader(f).get_summary()
@@ -354,7 +349,7 @@ class _McapBackend(_Backend):
     """MCAP via the mcap library with ROS 1 and ROS 2 decoders (for ROS 1 encoded MCAP files)."""
 
     def __init__(self, path: Path, stack: contextlib.ExitStack):
-        from mcap.reader import make_reader
+        # the ROS message decoders take a fifth of a second to import: only for ROS 1 encoded MCAP files
         from mcap_ros1.decoder import DecoderFactory as Ros1Decoder
         from mcap_ros2.decoder import DecoderFactory as Ros2Decoder
 

@@ -22,6 +22,7 @@ Recordings written by `import_folder` (names documented for users and tests):
 
 from __future__ import annotations
 
+import json
 import os
 import re
 from dataclasses import dataclass, field
@@ -30,7 +31,14 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from kinfu_cli.core.atomic import atomic_dir
 from kinfu_cli.core.errors import ConfigError, RecordingError
+from kinfu_cli.core.poses import quaternion_to_matrix
+from kinfu_cli.core.progress import progress
+from kinfu_cli.io.frames import FrameStats, iter_frames
+from kinfu_cli.io.recording import open_recording
+from kinfu_cli.io.roles import detect_roles
+from kinfu_cli.io.writers import RecordingWriter, format_for
 
 WORLD_FRAME = "world"
 CAMERA_FRAME = "camera_optical"
@@ -87,10 +95,12 @@ def _read_matrix(path: Path, shape: tuple[int, int], what: str) -> np.ndarray:
     return M.reshape(shape)
 
 
-def _read_K(folder: Path, intrinsics: tuple[float, float, float, float] | None) -> tuple[np.ndarray | None, str]:
+def _read_K(folder: Path, intrinsics: tuple[float, float, float, float] | None,
+            intrinsics_source: str) -> tuple[np.ndarray | None, str]:
+    """K and where it came from: the caller's intrinsics, else an intrinsics file of the folder or its parent."""
     if intrinsics is not None:
         fx, fy, cx, cy = intrinsics
-        return np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]]), "--intrinsics"
+        return np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]]), intrinsics_source
     for p in [d / name for d in (folder, folder.parent) for name in _INTRINSICS_FILES]:  # 3DMatch: scene root
         if p.is_file():
             K = _read_matrix(p, (3, 3), "intrinsics")
@@ -101,7 +111,7 @@ def _read_K(folder: Path, intrinsics: tuple[float, float, float, float] | None) 
 
 
 def parse_intrinsics(text: str | None) -> tuple[float, float, float, float] | None:
-    """'fx,fy,cx,cy' -> tuple (ConfigError naming --intrinsics otherwise)."""
+    """'fx,fy,cx,cy' -> tuple (ConfigError naming the intrinsics parameter otherwise)."""
     if text is None:
         return None
     try:
@@ -109,12 +119,12 @@ def parse_intrinsics(text: str | None) -> tuple[float, float, float, float] | No
     except ValueError:
         vals = ()
     if len(vals) != 4 or vals[0] <= 0 or vals[1] <= 0:
-        raise ConfigError(f"--intrinsics {text!r}: expected fx,fy,cx,cy with positive focal lengths")
+        raise ConfigError(f"expected fx,fy,cx,cy with positive focal lengths, got {text!r}", parameter="intrinsics")
     return vals  # type: ignore[return-value]
 
 
 def parse_frames(text: str | None, n: int) -> slice:
-    """--frames: 'N' (first N), 'A:B' or 'A:B:S' (positions in the sorted frame list)."""
+    """Frame selection text: 'N' (first N), 'A:B' or 'A:B:S' (positions in the sorted frame list)."""
     if text is None:
         return slice(None)
     try:
@@ -125,19 +135,23 @@ def parse_frames(text: str | None, n: int) -> slice:
         return slice(0, parts[0])
     if 2 <= len(parts) <= 3 and (len(parts) < 3 or parts[2] is None or parts[2] > 0):
         return slice(*parts)
-    raise ConfigError(f"--frames {text!r}: expected N (first N frames), A:B or A:B:STEP")
+    raise ConfigError(f"expected N (first N frames), A:B or A:B:STEP, got {text!r}", parameter="frames")
 
 
 def scan_folder(path: str | os.PathLike, rate: float = 30.0,
-                intrinsics: tuple[float, float, float, float] | None = None) -> RGBDFolder:
-    """Find the layout, frames, intrinsics and poses of an RGB-D folder (RecordingError when none fits)."""
+                intrinsics: tuple[float, float, float, float] | None = None,
+                intrinsics_source: str = "intrinsics argument") -> RGBDFolder:
+    """Find the layout, frames, intrinsics and poses of an RGB-D folder (RecordingError when none fits).
+
+    intrinsics_source: how `k_source` names intrinsics given here (callers name their own option).
+    """
     folder = Path(path)
     if not folder.is_dir():
         raise RecordingError(f"{folder}: not a folder, expected an RGB-D frame folder (7-Scenes or TUM layout)")
     if rate <= 0:
-        raise ConfigError(f"--rate {rate}: expected a positive frame rate in Hz")
+        raise ConfigError(f"expected a positive frame rate in Hz, got {rate}", parameter="rate")
     if (folder / "depth.txt").is_file():
-        return _scan_tum(folder, intrinsics)
+        return _scan_tum(folder, intrinsics, intrinsics_source)
     depth_files = sorted((int(m.group(1)), p) for p in folder.iterdir() if (m := _FRAME_RE.match(p.name)))
     if not depth_files:
         seqs = sorted(p.name for p in folder.iterdir() if p.is_dir() and any(p.glob("frame-*.depth.png")))
@@ -146,10 +160,10 @@ def scan_folder(path: str | os.PathLike, rate: float = 30.0,
                                  f"them, e.g. {folder / seqs[0]}")
         raise RecordingError(f"{folder}: no frame-N.depth.png files and no depth.txt, expected a 7-Scenes/3DMatch "
                              f"or TUM RGB-D folder")
-    K, k_source = _read_K(folder, intrinsics)
+    K, k_source = _read_K(folder, intrinsics, intrinsics_source)
     if K is None:
-        raise RecordingError(f"{folder}: no camera-intrinsics.txt or intrinsics.K.txt (3x3 K); give --intrinsics "
-                             f"fx,fy,cx,cy")
+        raise RecordingError(f"{folder}: no camera-intrinsics.txt or intrinsics.K.txt (3x3 K); give the "
+                             f"intrinsics fx,fy,cx,cy", parameter="intrinsics")
     frames = []
     notes = []
     bad_poses = 0
@@ -190,9 +204,7 @@ def _stamp_ns(text: str, where: str) -> int:
         raise RecordingError(f"{where}: timestamp {text!r} is not a number") from None
 
 
-def _scan_tum(folder: Path, intrinsics) -> RGBDFolder:
-    from kinfu_cli.core.poses import quaternion_to_matrix
-
+def _scan_tum(folder: Path, intrinsics, intrinsics_source: str) -> RGBDFolder:
     depth_rows = _read_list(folder / "depth.txt", 2)
     if not depth_rows:
         raise RecordingError(f"{folder / 'depth.txt'}: no frames listed")
@@ -213,7 +225,7 @@ def _scan_tum(folder: Path, intrinsics) -> RGBDFolder:
         gt_T = np.tile(np.eye(4), (len(rows), 1, 1))
         gt_T[:, :3, :3] = quaternion_to_matrix(vals[:, 3:7])
         gt_T[:, :3, 3] = vals[:, :3]
-    K, k_source = _read_K(folder, intrinsics)
+    K, k_source = _read_K(folder, intrinsics, intrinsics_source)
     if K is None:
         name = next((k for k in _TUM_K if k in str(folder.resolve()).lower()), None)
         fx, fy, cx, cy = _TUM_K[name] if name else _TUM_DEFAULT_K
@@ -247,17 +259,19 @@ def read_depth_mm(frame: FolderFrame, units_per_m: float) -> np.ndarray:
 
 def import_folder(src: str | os.PathLike, out: str | os.PathLike, rate: float = 30.0, frames: str | None = None,
                   color: str = "compressed", intrinsics: str | None = None, fmt: str | None = None,
-                  compress: bool = True, quiet: bool = True) -> dict:
-    """Convert an RGB-D folder into a recording at `out` (.mcap, .bag, or a ROS 2 bag folder); return a summary."""
-    from kinfu_cli.io.writers import RecordingWriter, format_for
-    from kinfu_cli.core.progress import progress
+                  compress: bool = True, quiet: bool = True, intrinsics_source: str = "intrinsics argument") -> dict:
+    """Convert an RGB-D folder into a recording at `out` (.mcap, .bag, or a ROS 2 bag folder); return a summary.
 
+    intrinsics: "fx,fy,cx,cy" when the folder has no intrinsics file; intrinsics_source: how the summary's
+    K_source names them.
+    """
     if color not in ("compressed", "raw", "none"):
-        raise ConfigError(f"--color {color!r}: expected compressed, raw or none")
-    folder = scan_folder(src, rate=rate, intrinsics=parse_intrinsics(intrinsics))
+        raise ConfigError(f"expected compressed, raw or none, got {color!r}", parameter="color")
+    folder = scan_folder(src, rate=rate, intrinsics=parse_intrinsics(intrinsics), intrinsics_source=intrinsics_source)
     chosen = folder.frames[parse_frames(frames, len(folder.frames))]
     if not chosen:
-        raise ConfigError(f"--frames {frames!r}: selects none of the {len(folder.frames)} frames of {folder.path}")
+        raise ConfigError(f"{frames!r} selects none of the {len(folder.frames)} frames of {folder.path}",
+                          parameter="frames")
     out = Path(out)
     kind = format_for(out, fmt)
     compression = ({"mcap": "zstd", "bag": "lz4", "ros2": None}[kind]) if compress else None
@@ -331,14 +345,6 @@ def export_frames(recording: str | os.PathLike, out: str | os.PathLike, roles_kw
     (T_world_camera, when posed), camera-intrinsics.txt (K of the first frame), frames.json (stamps, stats,
     roles). N is the depth message index. The folder appears only when every frame was written.
     """
-    import json
-
-    from kinfu_cli.core.atomic import atomic_dir
-    from kinfu_cli.io.frames import FrameStats, iter_frames
-    from kinfu_cli.io.recording import open_recording
-    from kinfu_cli.io.roles import detect_roles
-    from kinfu_cli.core.progress import progress
-
     stats = FrameStats()
     listing = []
     with open_recording(recording) as rec:

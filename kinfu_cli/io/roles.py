@@ -1,8 +1,8 @@
 """Which topic / frame plays which part: depth, colour, camera info, camera frame, world frame, hand.
 
-Detected from message types and names; every role can be forced by the caller (the CLI's --depth-topic,
---color-topic, --info-topic, --camera-frame, --world-frame, --hand-topic, --hand-frame). A forced topic that
-is not in the recording is an error naming it and listing the available topics.
+Detected from message types and names; every role can be forced by the caller (`detect_roles` arguments,
+which the command line exposes as options). A forced topic that is not in the recording is an error naming
+it and listing the available topics.
 """
 
 from __future__ import annotations
@@ -10,14 +10,12 @@ from __future__ import annotations
 import re
 from dataclasses import asdict, dataclass
 
-from kinfu_cli.core.errors import RecordingError
-from kinfu_cli.io.messages import POSE_TYPES, header_frame
+from kinfu_cli.io.messages import DEPTH_ENCODINGS, POSE_TYPES, header_frame
 from kinfu_cli.io.tf_buffer import TfBuffer
 
 IMAGE = "sensor_msgs/msg/Image"
 COMPRESSED = "sensor_msgs/msg/CompressedImage"
 CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
-_DEPTH_ENCODINGS = {"16UC1", "32FC1", "mono16"}
 _WORLD_NAMES = ("world", "map", "odom")
 _HAND_WORDS = re.compile(r"hand|wrist|tracker|polhemus|glove", re.I)
 
@@ -60,7 +58,7 @@ def _depth_candidates(rec) -> list[str]:
                 out.append((0 if "raw" in low or "rect" in low else 1, name))
             elif not re.search(r"colou?r|rgb|mono|ir\b|infra", low):
                 msg = rec.first_message(name)
-                if msg is not None and str(getattr(msg, "encoding", "")) in _DEPTH_ENCODINGS:
+                if msg is not None and str(getattr(msg, "encoding", "")) in DEPTH_ENCODINGS:
                     out.append((2, name))
         elif COMPRESSED in info.msgtypes and "compresseddepth" in low:
             out.append((3, name))
@@ -81,7 +79,7 @@ def _color_candidates(rec, depth_topic: str | None) -> list[str]:
                 score += 2  # prefer raw images when both exist
             if IMAGE in info.msgtypes and score % 2 == 1:
                 msg = rec.first_message(name)
-                if msg is not None and str(getattr(msg, "encoding", "")) in _DEPTH_ENCODINGS:
+                if msg is not None and str(getattr(msg, "encoding", "")) in DEPTH_ENCODINGS:
                     continue
             out.append((score, -_common_prefix(name, depth_topic or ""), name))
     return [n for *_, n in sorted(out)]
@@ -165,43 +163,3 @@ def detect_roles(rec, depth_topic: str | None = None, color_topic: str | None = 
                  camera_frame=camera_frame, world_frame=world_frame, hand_topic=hand_topic,
                  hand_frame=hand_frame)
 
-
-def require(roles: Roles, field: str, rec, option: str) -> str:
-    """The value of a role, or RecordingError saying it could not be detected and which option sets it."""
-    value = getattr(roles, field)
-    if value is None:
-        avail = ", ".join(f"{n} ({i.msgtype})" for n, i in rec.topics.items()) or "none"
-        what = field.replace("_", " ")
-        raise RecordingError(f"{rec.path}: no {what} found (set it with {option}); topics: {avail}")
-    return value
-
-
-# ------------------------------------------------------------------------------------------- CLI options
-ROLE_OPTIONS = ("depth_topic", "color_topic", "info_topic", "camera_frame", "world_frame", "hand_topic",
-                "hand_frame")
-
-
-def role_options(func):
-    """click decorator adding --depth-topic, --color-topic, --info-topic, --camera-frame, --world-frame,
-    --hand-topic, --hand-frame (each default None = auto-detect). Pass the values to `detect_roles(rec, **kw)`
-    with `role_kwargs(kwargs)`."""
-    import click
-
-    helps = {
-        "depth_topic": "Depth image topic (sensor_msgs/Image 16UC1/32FC1 or compressedDepth) [auto].",
-        "color_topic": "Colour image topic (Image or jpeg/png CompressedImage) [auto].",
-        "info_topic": "sensor_msgs/CameraInfo topic of the depth camera [auto].",
-        "camera_frame": "TF frame of the depth camera [frame_id of the depth images].",
-        "world_frame": "TF frame poses are expressed in [world, map, odom or the TF root].",
-        "hand_topic": "Hand pose topic (PoseStamped, PoseWithCovarianceStamped, Odometry, TransformStamped) [auto].",
-        "hand_frame": "TF frame of the hand, when the hand comes as TF [auto].",
-    }
-    for name in reversed(ROLE_OPTIONS):
-        func = click.option(f"--{name.replace('_', '-')}", name, default=None, metavar="NAME",
-                            help=helps[name])(func)
-    return func
-
-
-def role_kwargs(kwargs: dict) -> dict:
-    """Pop the role options out of a command's kwargs (for detect_roles)."""
-    return {name: kwargs.pop(name, None) for name in ROLE_OPTIONS}

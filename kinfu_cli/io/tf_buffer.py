@@ -8,6 +8,8 @@ array of stamps at once (vectorised numpy), `lookup` one stamp.
 
 from __future__ import annotations
 
+import bisect
+import math
 from array import array
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -193,13 +195,6 @@ class TfBuffer:
             return False
         return True
 
-    def can_transform(self, target: str, source: str, stamp_ns: int | None = None) -> bool:
-        try:
-            self.lookup(target, source, stamp_ns)
-        except TransformError:
-            return False
-        return True
-
     def lookup(self, target: str, source: str, stamp_ns: int | None = None,
                tolerance_ns: int = 0) -> np.ndarray:
         """T_target_source (4x4) at stamp_ns (None = the latest of each link)."""
@@ -288,9 +283,6 @@ class TfBuffer:
 
 def _edge_one(st: np.ndarray, tr: np.ndarray, qu: np.ndarray, s: int) -> np.ndarray:
     """One stamp of one link (within its range), in scalar arithmetic: the per-frame path of iter_frames."""
-    import bisect
-    import math
-
     n = st.shape[0]
     i1 = min(max(bisect.bisect_right(st, s), 1), n - 1) if n > 1 else 0
     i0 = max(i1 - 1, 0)

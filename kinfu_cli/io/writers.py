@@ -88,13 +88,15 @@ class RecordingWriter:
         self.close(failed=exc_type is not None)
 
     def open(self) -> None:
+        # rosbags takes a good part of a second to import: only when a recording is written
+        from rosbags.rosbag1 import Writer as Writer1
+        from rosbags.rosbag2 import StoragePlugin, Writer as Writer2
+        from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
         from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
         stack = contextlib.ExitStack()
         try:
             if self.fmt == "bag":
-                from rosbags.rosbag1 import Writer as Writer1
-
                 self._typestore = get_typestore(Stores.ROS1_NOETIC)
                 self._typestore.register(get_types_from_msg(_TFMESSAGE_ROS1, "tf2_msgs/msg/TFMessage"))
                 tmp = stack.enter_context(atomic_path(self.path))
@@ -106,9 +108,6 @@ class RecordingWriter:
                         raise ConfigError(f"compression {self.compression!r} for a .bag: expected lz4 or bz2")
                     writer.set_compression(comp[self.compression])
             else:
-                from rosbags.rosbag2 import StoragePlugin, Writer as Writer2
-                from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
-
                 self._typestore = get_typestore(Stores.ROS2_HUMBLE)
                 if self.fmt == "mcap":
                     # rosbags writes a bag folder holding <name>.mcap; the file alone is a complete MCAP.

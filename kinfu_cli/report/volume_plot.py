@@ -1,10 +1,14 @@
-"""PNG slices of a ternary volume (`kinfu fuse --plot`): occupied / empty / unknown per voxel."""
+"""PNG slices of a ternary volume (the plots of `kinfu fuse`): occupied / empty / unknown per voxel."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
+
+from kinfu_cli.core.atomic import atomic_path
+from kinfu_cli.core.grid import TernaryGrid
 
 COLORS = {1: (0.80, 0.15, 0.10), 0: (0.55, 0.55, 0.55), -1: (1.0, 1.0, 1.0)}
 
@@ -16,15 +20,13 @@ def _rgb(labels2d: np.ndarray) -> np.ndarray:
     return img
 
 
-def plot_slices(grid, outdir, n: int = 4) -> list[Path]:
+def plot_slices(grid: TernaryGrid, outdir: str | os.PathLike, n: int = 4) -> list[Path]:
     """Write slices_xy.png, slices_xz.png, slices_yz.png: `n` evenly spaced slices through the observed
     part of the grid along each axis (red occupied, white empty, grey unknown). Returns the paths."""
-    import matplotlib
+    import matplotlib  # heavy: only when plotting
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from kinfu_cli.core.atomic import atomic_path
 
     lab = grid.labels
     observed = lab != 0

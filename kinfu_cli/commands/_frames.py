@@ -1,0 +1,37 @@
+"""The frame-assembly options of commands that stream RGB-D frames (io.frames.iter_frames)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import click
+
+from kinfu_cli.io.frames import POSE_SOURCES
+
+FRAME_OPTIONS = ("pose_source", "pose_topic", "tolerance_s", "start_s", "end_s", "every")
+
+
+def frame_options(func: Callable) -> Callable:
+    """click decorator adding --pose-source, --pose-topic, --tolerance, --start, --end, --every; hand the
+    values to iter_frames with `iter_frames(rec, roles, **frame_kwargs(kwargs))`."""
+    opts = [
+        click.option("--pose-source", "pose_source", type=click.Choice(list(POSE_SOURCES)), default="tf",
+                     show_default=True, help="Camera poses from TF (world frame <- camera frame), a pose topic, "
+                                             "or none."),
+        click.option("--pose-topic", "pose_topic", default=None, metavar="TOPIC",
+                     help="Camera pose topic (PoseStamped, Odometry, ...) for --pose-source topic."),
+        click.option("--tolerance", "tolerance_s", default=0.05, show_default=True, type=float,
+                     help="Largest depth/colour stamp difference, and how far a pose may be extrapolated (s)."),
+        click.option("--start", "start_s", default=None, type=float, help="Start, seconds from the recording start."),
+        click.option("--end", "end_s", default=None, type=float, help="End, seconds from the recording start."),
+        click.option("--every", "every", default=1, show_default=True, type=int,
+                     help="Use every n-th depth frame."),
+    ]
+    for opt in reversed(opts):
+        func = opt(func)
+    return func
+
+
+def frame_kwargs(kwargs: dict) -> dict:
+    """Pop the frame options out of a command's kwargs (for iter_frames)."""
+    return {name: kwargs.pop(name) for name in FRAME_OPTIONS if name in kwargs}

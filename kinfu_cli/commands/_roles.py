@@ -1,0 +1,35 @@
+"""The role options shared by commands that read a recording: which topic / frame plays which part.
+
+Each defaults to None (auto-detect, io.roles.detect_roles); `role_kwargs` hands the values over.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import click
+
+ROLE_HELP = {
+    "depth_topic": "Depth image topic (sensor_msgs/Image 16UC1/32FC1 or compressedDepth) [auto].",
+    "color_topic": "Colour image topic (Image or jpeg/png CompressedImage) [auto].",
+    "info_topic": "sensor_msgs/CameraInfo topic of the depth camera [auto].",
+    "camera_frame": "TF frame of the depth camera [frame_id of the depth images].",
+    "world_frame": "TF frame poses are expressed in [world, map, odom or the TF root].",
+    "hand_topic": "Hand pose topic (PoseStamped, PoseWithCovarianceStamped, Odometry, TransformStamped) [auto].",
+    "hand_frame": "TF frame of the hand, when the hand comes as TF [auto].",
+}
+
+
+def role_options(func: Callable) -> Callable:
+    """click decorator adding --depth-topic, --color-topic, --info-topic, --camera-frame, --world-frame,
+    --hand-topic, --hand-frame (each default None = auto-detect). Pass the values to `detect_roles(rec, **kw)`
+    with `role_kwargs(kwargs)`."""
+    for name in reversed(ROLE_HELP):
+        func = click.option(f"--{name.replace('_', '-')}", name, default=None, metavar="NAME",
+                            help=ROLE_HELP[name])(func)
+    return func
+
+
+def role_kwargs(kwargs: dict) -> dict:
+    """Pop the role options out of a command's kwargs (for detect_roles)."""
+    return {name: kwargs.pop(name, None) for name in ROLE_HELP}

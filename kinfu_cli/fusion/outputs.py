@@ -1,0 +1,79 @@
+"""The files of a fusion run: mesh, surface cloud, volume, ternary labels, and the report (report.json).
+
+`write_fusion_outputs(result, outdir)` writes the first four, each atomically; `fusion_report(result)` is the
+report dict, which the caller writes last (after any plots it adds to the folder, named in extra_outputs).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Iterable
+from pathlib import Path
+
+import numpy as np
+
+from kinfu_cli.core.atomic import atomic_path
+from kinfu_cli.core.grid import save_ternary
+from kinfu_cli.fusion.pipeline import FusionResult
+
+OUTPUTS = ("mesh.ply", "cloud.ply", "volume.npz", "ternary.npz", "report.json")
+
+
+def write_fusion_outputs(result: FusionResult, outdir: str | os.PathLike) -> None:
+    """Write mesh.ply, cloud.ply, volume.npz and ternary.npz into outdir (made when missing)."""
+    import open3d as o3d  # heavy: only when writing
+
+    outdir = Path(outdir)
+    outdir.mkdir(parents=True, exist_ok=True)
+    with atomic_path(outdir / "mesh.ply") as tmp:
+        if not o3d.io.write_triangle_mesh(str(tmp), result.mesh):
+            raise OSError(f"could not write {outdir / 'mesh.ply'}")
+    with atomic_path(outdir / "cloud.ply") as tmp:
+        if not o3d.io.write_point_cloud(str(tmp), result.cloud):
+            raise OSError(f"could not write {outdir / 'cloud.ply'}")
+    result.volume.save(outdir / "volume.npz")
+    save_ternary(outdir / "ternary.npz", result.grid)
+
+
+def fusion_report(result: FusionResult, extra_outputs: Iterable[str] = ()) -> dict:
+    """The report of a fusion run (report.json): frames used and dropped, poses, tracking, grid, filters,
+    cleared spheres, counts, bounding boxes, mesh and cloud sizes, timing (with the total until now), the
+    output files (OUTPUTS, then extra_outputs) and warnings."""
+    vol = result.volume
+    stats = result.frame_stats
+    depth_filter = result.depth_filter
+    track_log = result.tracking
+    timing = {**result.timing, "total": time.perf_counter() - result.started}
+    return {
+        "recording": result.recording,
+        "roles": result.roles.as_dict(),
+        "pose_mode": result.pose_mode,
+        "pose_source": result.pose_source,
+        "world_frame": vol.frame,
+        "frames": {"depth_messages": stats.depth_messages, "used": result.frames_used,
+                   "skipped_every": stats.skipped, "without_color": stats.without_color,
+                   "dropped": result.dropped, "dropped_total": int(sum(result.dropped.values())),
+                   "every": result.every, "start_s": result.start_s, "end_s": result.end_s},
+        "tracking": None if track_log is None else {
+            "frames": track_log, "lost_frames": [t["index"] for t in track_log if t["lost"]],
+            "lost": int(sum(t["lost"] for t in track_log)),
+            "mean_fitness": float(np.mean([t["fitness"] for t in track_log])) if track_log else None},
+        "grid": {"origin": vol.origin.tolist(), "voxel_size": vol.voxel_size, "shape": list(vol.shape),
+                 "size_m": (np.array(vol.shape) * vol.voxel_size).tolist(), "truncation": vol.truncation,
+                 "max_weight": vol.max_weight, "min_depth": depth_filter.min_depth,
+                 "max_depth": depth_filter.max_depth, "placement": result.placement,
+                 "blocks_stored": vol.n_blocks_allocated, "memory_MB": round(vol.memory_bytes() / 2**20, 1),
+                 "frames_in_volume": vol.frames_integrated},
+        "filters": {"range": [depth_filter.min_depth, depth_filter.max_depth], "fill_gaps": depth_filter.fill_gaps,
+                    "gap_pixels_filled": depth_filter.gap_pixels, "bilateral": depth_filter.bilateral,
+                    "shadow_veil": depth_filter.shadow_filter},
+        "cleared_spheres": result.cleared_spheres,
+        "counts": result.counts,
+        "bounding_box": result.bounding_box,
+        "mesh": {"vertices": len(result.mesh.vertices), "triangles": len(result.mesh.triangles)},
+        "cloud": {"points": len(result.cloud.points)},
+        "timing_s": {k: round(v, 3) for k, v in timing.items()},
+        "outputs": list(OUTPUTS) + list(extra_outputs),
+        "warnings": result.warnings,
+    }
