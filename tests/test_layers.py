@@ -27,7 +27,7 @@ LAYERS: list[set[str]] = [
     {"demo", "__main__"},
 ]
 # Plots still called from two library pipelines; the renovation moves them into the commands.
-_BEING_MOVED = {("fusion", "report"), ("segmentation", "report")}
+_BEING_MOVED: set[tuple[str, str]] = set()
 LAYER_OF = {name: i for i, layer in enumerate(LAYERS) for name in layer}
 
 
