@@ -3,7 +3,8 @@
 File contract (`ternary.npz`, as ros_kinfu exports): array `ternary` int8, indexed [x, y, z],
 1 = occupied, 0 = unknown, -1 = empty; `origin` (3,) world position of the grid's minimum
 corner, so voxel (i, j, k) has its centre at origin + (i + 0.5, j + 0.5, k + 0.5) * voxel_size;
-`voxel_size` (metres); optional `frame` (str): name of the world frame ("" or absent when not known).
+`voxel_size` (metres); optional `frame` (str): name of the world frame ("" or absent when not known);
+optional `up` (3,) float64: the unit direction against gravity in that frame (absent when not known).
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from kinfu_cli.core.atomic import write_npz
-from kinfu_cli.core.errors import VolumeError
+from kinfu_cli.core.errors import ConfigError, VolumeError
 
 OCCUPIED = np.int8(1)
 UNKNOWN = np.int8(0)
@@ -30,9 +31,12 @@ class TernaryGrid:
     origin: np.ndarray
     voxel_size: float
     frame: str = ""  # world frame name, "" when not known
+    up: np.ndarray | None = None  # unit "up" direction in the world frame (against gravity), None when not known
 
     def __post_init__(self) -> None:
         self.labels = np.asarray(self.labels, dtype=np.int8)
+        if self.up is not None:
+            self.up = check_up(self.up)
         self.origin = np.asarray(self.origin, dtype=np.float64).reshape(3)
         self.voxel_size = float(self.voxel_size)
         if self.labels.ndim != 3:
@@ -60,10 +64,25 @@ class TernaryGrid:
         return {"occupied": occ, "empty": emp, "unknown": int(flat.size - occ - emp)}
 
 
+def check_up(up, parameter: str = "up") -> np.ndarray:
+    """`up` as a unit float64 (3,) vector; ConfigError naming `parameter` for a non-finite or zero vector."""
+    try:
+        v = np.asarray(up, dtype=np.float64).reshape(3)
+    except (TypeError, ValueError):
+        raise ConfigError(f"expected three numbers x,y,z, got {up!r}", parameter=parameter) from None
+    n = float(np.linalg.norm(v))
+    if not (np.all(np.isfinite(v)) and n > 1e-9):
+        raise ConfigError(f"expected a finite non-zero direction x,y,z, got {v.tolist()}", parameter=parameter)
+    return v / n
+
+
 def save_ternary(path: str | os.PathLike, grid: TernaryGrid) -> None:
     """Write `ternary.npz` atomically (compressed: mostly-constant labels shrink a lot)."""
-    write_npz(path, {"ternary": grid.labels, "origin": grid.origin, "voxel_size": np.float64(grid.voxel_size),
-                     "frame": np.array(grid.frame)})
+    arrays = {"ternary": grid.labels, "origin": grid.origin, "voxel_size": np.float64(grid.voxel_size),
+              "frame": np.array(grid.frame)}
+    if grid.up is not None:
+        arrays["up"] = grid.up
+    write_npz(path, arrays)
 
 
 def read_ternary(path: str | os.PathLike) -> TernaryGrid | None:
@@ -78,7 +97,8 @@ def read_ternary(path: str | os.PathLike) -> TernaryGrid | None:
             if "ternary" not in keys:
                 return None
             frame = str(data["frame"]) if "frame" in keys else ""
-            return TernaryGrid(data["ternary"], data["origin"], float(data["voxel_size"]), frame)
+            up = data["up"] if "up" in keys else None
+            return TernaryGrid(data["ternary"], data["origin"], float(data["voxel_size"]), frame, up)
     except (OSError, ValueError, EOFError) as exc:
         raise VolumeError(f"{path}: not a readable .npz volume ({exc})") from None
 
