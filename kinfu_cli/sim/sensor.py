@@ -50,6 +50,32 @@ def kinect_v1_intrinsics(width: int = 640, height: int = 480) -> np.ndarray:
     return preset_intrinsics("kinect_v1_ir", width, height)
 
 
+def pixel_directions(K: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Camera-frame directions (..., 3) of the rays through image points (u, v) (float pixels, 0 = the first
+    pixel's centre), scaled to camera z = 1 so that a hit's distance along the ray is its depth."""
+    return np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones_like(u)], axis=-1)
+
+
+def world_rays(d_cam: np.ndarray, T_world_camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """open3d rays (..., 6) float32 (camera centre, world direction) for camera-frame directions, and the world
+    directions in float64."""
+    d_world = d_cam @ T_world_camera[:3, :3].T
+    rays = np.empty(d_world.shape[:-1] + (6,), dtype=np.float32)
+    rays[..., :3] = T_world_camera[:3, 3]
+    rays[..., 3:] = d_world
+    return rays, d_world
+
+
+def ideal_depth(scene: o3d.t.geometry.RaycastingScene, K: np.ndarray, width: int, height: int,
+                T_world_camera: np.ndarray) -> np.ndarray:
+    """Noise-free optical-axis depth (H, W) float32 of a RaycastingScene through the pixel centres, inf where
+    the ray hits nothing and no range limits: the exact image a z-buffer test compares with."""
+    v, u = np.mgrid[0:height, 0:width]
+    rays, _ = world_rays(pixel_directions(np.asarray(K, dtype=np.float64), u.astype(np.float64),
+                                          v.astype(np.float64)), np.asarray(T_world_camera, dtype=np.float64))
+    return scene.cast_rays(o3d.core.Tensor.from_numpy(rays))["t_hit"].numpy()
+
+
 def nguyen_axial_sigma(z: np.ndarray, theta: np.ndarray | float = 0.0) -> np.ndarray:
     """Kinect v1 axial depth noise sigma (metres) at depth z (m) and incidence angle theta (rad), Nguyen et al. 2012."""
     z = np.asarray(z, dtype=np.float64)
@@ -106,7 +132,7 @@ class DepthSensor:
         self._u = u.astype(np.float64)
         self._v = v.astype(np.float64)
         self._cache: tuple[int, RaycastTarget] | None = None
-        self._dcam: np.ndarray | None = None
+        self._dcam = pixel_directions(self.K, self._u, self._v)
 
     # ---- public -------------------------------------------------------------------------------------
     def render(self, scene_or_mesh, T_world_camera: np.ndarray, frame_seed: int | None = None
@@ -204,18 +230,8 @@ class DepthSensor:
         Returns t (H,W) float64 optical-axis depth (0 = no hit), valid, gid, normals (H,W,3) float32,
         dir (H,W,3) float64 world ray directions with camera-z component 1, prim, uv.
         """
-        K = self.K
-        if u is None:
-            if self._dcam is None:
-                self._dcam = np.stack([(self._u - K[0, 2]) / K[0, 0], (self._v - K[1, 2]) / K[1, 1],
-                                       np.ones_like(self._u)], axis=-1)
-            d_cam = self._dcam
-        else:
-            d_cam = np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones_like(u)], axis=-1)
-        d_world = d_cam @ T[:3, :3].T  # z component in camera = 1, so t_hit is the optical-axis depth
-        rays = np.empty(d_world.shape[:-1] + (6,), dtype=np.float32)
-        rays[..., :3] = T[:3, 3]
-        rays[..., 3:] = d_world
+        d_cam = self._dcam if u is None else pixel_directions(self.K, u, v)
+        rays, d_world = world_rays(d_cam, T)
         ans = target.scene.cast_rays(o3d.core.Tensor.from_numpy(rays))
         t = ans["t_hit"].numpy()
         gid = ans["geometry_ids"].numpy()
