@@ -6,8 +6,9 @@ World frame: z up, metres. The table is centred at (0, 0) in x-y, its top at z =
 A `Scene` is immutable in use: `scene.with_change(...)` returns a new scene with one object placed, removed or moved,
 so a recording scenario keeps both states. `scene.mesh()` is the whole scene as one open3d TriangleMesh (what the
 sensor sees), `scene.raycasting_scene()` the same ready for open3d's RaycastingScene with a label and a colour per
-geometry id (the simulated sensor uses those for colour and label images). `scene.sdf(points)` is the exact signed distance of the same
-geometry (analytic, per shape), for ideal TSDF volumes (`kinfu_cli.sim.tsdf`).
+geometry id (the simulated sensor uses those for colour and label images). `scene.sdf(points)` is the exact signed
+distance to the same geometry (analytic, per shape), for ideal TSDF volumes (`kinfu_cli.sim.tsdf`) and ground-truth
+labels (`scene.nearest_labels`).
 
 Layouts: `make_tabletop_scene(seed)` is the synth recording's random tabletop; `primitive_tabletop_scene(seed)` a
 tabletop of boxes, cylinders and spheres with one box stacked on another (segmentation tests); `box_scene()` three
