@@ -14,8 +14,11 @@ from click.testing import CliRunner
 
 from kinfu_cli.cli import cli
 from kinfu_cli.evaluation.object_measures import footprint_axes, object_measures
-from kinfu_cli.evaluation.reconstruction import (Reconstruction, format_fusion_tables, load_reconstruction,
-                                                 observed_surface, score_reconstruction)
+from kinfu_cli.evaluation.reconstruction import (Reconstruction, fused_window, load_reconstruction, mesh_scene,
+                                                 observed_surface, score_reconstruction, state_frames, visible_mask,
+                                                 visible_mask_exact)
+from kinfu_cli.evaluation.tables import format_fusion_tables
+from kinfu_cli.sim.sampling import sample_surface
 from kinfu_cli.sim.scenario import load_ground_truth
 
 VOXEL = 1.6 / 256
@@ -253,12 +256,9 @@ def test_bad_input_is_one_line_exit_2(case, gt, fused_dir, tmp_path):
 
 def test_zbuffer_visibility_agrees_with_exact_occlusion_rays(gt):
     """visible_mask (one rendered depth image per pose) vs casting a ray from the camera to every sample."""
-    from kinfu_cli.evaluation.reconstruction import (_raycasting_scene, sample_surface, visible_mask,
-                                                     visible_mask_exact)
-
     m = gt.mesh("before")
     v, f = np.asarray(m.vertices), np.asarray(m.triangles)
-    scene = _raycasting_scene(v, f)
+    scene = mesh_scene(v, f)
     pts, nrm = sample_surface(v, f, spacing=0.01, seed=1)
     keep = np.all(np.abs(pts[:, :2]) < 1.0, axis=1)  # the table and the floor around it
     pts, nrm = pts[keep], nrm[keep]
@@ -273,8 +273,6 @@ def test_zbuffer_visibility_agrees_with_exact_occlusion_rays(gt):
 
 
 def test_fused_time_window_selects_the_true_poses(gt):
-    from kinfu_cli.evaluation.reconstruction import fused_window, state_frames
-
     n_scan = gt.info["frames"]["scan"]
     assert len(state_frames(gt, "before")) == n_scan
     assert len(state_frames(gt, "after")) == len(gt.poses)
