@@ -2,8 +2,8 @@
 
 `synthesize(out, ...)` checks every argument before writing anything, builds the scenario
 (`sim.scenario.make_scenario`), streams it into OUT/recording.mcap, OUT/recording.bag and/or OUT/recording_ros2/
-at once and writes OUT/ground_truth/. It returns a `SynthResult`, whose `to_json()` is the summary `kinfu synth
---json` prints.
+at once and writes OUT/ground_truth/. It returns a `SynthResult`, whose `to_json()` is the summary `kinfu synth`
+prints as JSON.
 """
 
 from __future__ import annotations
