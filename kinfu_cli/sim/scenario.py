@@ -33,11 +33,11 @@ from kinfu_cli.core.atomic import atomic_dir, write_json
 from kinfu_cli.core.errors import ConfigError, RecordingError
 from kinfu_cli.core.poses import look_at
 from kinfu_cli.core.progress import progress
-from kinfu_cli.io.polhemus import read_polhemus, write_polhemus
+from kinfu_cli.io.polhemus import read_polhemus
 from kinfu_cli.io.trajectory import Trajectory
 from kinfu_cli.io.writers import RecordingWriter
-from kinfu_cli.sim.hand import Action, HandChange, resample, synth_hand_trajectory
-from kinfu_cli.sim.robot import CAMERA_FRAME, WORLD_FRAME, RobotArm
+from kinfu_cli.sim.hand import Action, HandChange, synth_hand_trajectory, write_polhemus
+from kinfu_cli.sim.robot import CAMERA_FRAME, LINKS, WORLD_FRAME, RobotArm
 from kinfu_cli.sim.scene import FLOOR_COLOUR, PALETTE, TABLE_COLOUR, Scene, make_tabletop_scene, random_object
 from kinfu_cli.sim.sensor import DepthSensor, SensorFrame, kinect_v1_intrinsics
 
@@ -285,11 +285,6 @@ def write_recordings(scenario: Scenario, paths: list[str | os.PathLike], depth_f
     return [Path(p) for p in paths]
 
 
-def write_recording(scenario: Scenario, path: str | os.PathLike, **kwargs) -> Path:
-    """Write one container (see write_recordings)."""
-    return write_recordings(scenario, [path], **kwargs)[0]
-
-
 def _compression_for(path, compression: str | None) -> str | None:
     if compression is None:
         return None
@@ -367,10 +362,7 @@ def write_ground_truth(scenario: Scenario, folder: str | os.PathLike, topics: di
             lines.append(f"{f.stamp_ns // 1_000_000_000}.{f.stamp_ns % 1_000_000_000:09d} "
                          + " ".join(f"{v:.9f}" for v in f.T_world_camera.reshape(-1)))
         (tmp / "camera_poses.txt").write_text("\n".join(lines) + "\n")
-        hand = sc.hand
-        if abs(sc.hand_rate_hz - 100.0) > 1e-9:
-            hand = resample(hand, 100.0)
-        write_polhemus(tmp / "hand.traj", hand)
+        write_polhemus(tmp / "hand.traj", sc.hand, rate_hz=100.0)
     return Path(folder)
 
 
@@ -406,8 +398,7 @@ def ground_truth_json(sc: Scenario, topics: dict | None = None) -> dict:
                  "start_time": float(sc.hand.t[0]), "end_time": float(sc.hand.t[-1]),
                  "traj_file": "hand.traj (100 Hz, t = start_time + i / 100)"},
         "frames_tree": {"world_frame": WORLD_FRAME, "camera_frame": CAMERA_FRAME,
-                        "chain": ["world", "base_link", "link1", "link2", "link3", "link4", "link5", "link6",
-                                  "wrist", CAMERA_FRAME]},
+                        "chain": [WORLD_FRAME, *LINKS, CAMERA_FRAME]},
         "topics": topics or recording_topics(),
         "time_unit": "seconds after t0_ns (the recording starts at t0_ns)",
     }
