@@ -34,6 +34,7 @@ from numba import njit, prange
 
 from kinfu_cli.core.camera import preset_intrinsics
 from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.core.poses import check_poses
 from kinfu_cli.sim.scene import LABEL_NONE, RaycastTarget, Scene
 
 # numba probes the TBB threading layer at the first parallel call and warns when the installed TBB is too old;
@@ -147,7 +148,7 @@ class DepthSensor:
         scene_or_mesh: a Scene, a RaycastTarget, or an open3d TriangleMesh (legacy or tensor; vertex colours are used
         when present). frame_seed: when given, the noise of this frame depends only on (seed, frame_seed).
         """
-        T = _check_pose(T_world_camera)
+        T = check_poses(T_world_camera, "camera pose")[0]
         target = self._target(scene_or_mesh)
         rng = np.random.default_rng([self.seed, int(frame_seed)]) if frame_seed is not None else self._rng
         H, W = self.height, self.width
@@ -329,13 +330,3 @@ def _discontinuities(depth: np.ndarray, jump: float) -> np.ndarray:
         edge[sa] |= e
         edge[sb] |= e
     return edge
-
-
-def _check_pose(T: np.ndarray) -> np.ndarray:
-    T = np.asarray(T, dtype=np.float64)
-    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
-        raise ConfigError(f"camera pose: expected a finite 4x4 matrix, got shape {T.shape}")
-    R = T[:3, :3]
-    if np.abs(R @ R.T - np.eye(3)).max() > 1e-4 or np.linalg.det(R) < 0:
-        raise ConfigError("camera pose: the rotation part is not a rotation matrix")
-    return T
