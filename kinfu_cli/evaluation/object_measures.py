@@ -129,7 +129,14 @@ def fit_table_plane(points: np.ndarray, gt, objects: list[GroundTruthObject], ba
                              f"plane (is the reconstruction in the ground truth's world frame?)")
     o3d.utility.random.seed(seed)
     pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(cand))
-    _, inliers = pc.segment_plane(distance_threshold=distance, ransac_n=3, num_iterations=500)
+    # one thread: open3d's parallel RANSAC stops early, so on several threads the seeded plane depended on
+    # thread timing and the results changed from run to run
+    threads = o3d.utility.get_max_threads()
+    o3d.utility.set_max_threads(1)
+    try:
+        _, inliers = pc.segment_plane(distance_threshold=distance, ransac_n=3, num_iterations=500)
+    finally:
+        o3d.utility.set_max_threads(threads)
     q = cand[np.asarray(inliers, dtype=np.int64)]
     # least-squares refit on the RANSAC inliers (centroid + direction of least spread)
     c = q.mean(axis=0)
