@@ -161,7 +161,7 @@ def bench_object_planning(seed: int = 0) -> dict:
 
 
 def bench_closed_loop(seed: int = 0, views: int = 5) -> dict:
-    from kinfu_cli.evaluation.nbv_loop import compare_strategies
+    from kinfu_cli.evaluation.objects_loop import compare_strategies
 
     return compare_strategies(seed, views=views, log=lambda name, d: print(name, json.dumps(d), flush=True))
 

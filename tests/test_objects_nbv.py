@@ -149,7 +149,7 @@ def test_closed_loop_object_views_keep_revealing_voxels_near_objects_on_another_
     """The object-driven loop on a generated scene (seed 2, not the sample): no stall, few candidates cast.
     The comparison against the standard strategy is in tests/test_eval_nbv_objects.py."""
     pytest.importorskip("kinfu_cli.nbv.ranking")
-    from kinfu_cli.evaluation.nbv_loop import compare_strategies
+    from kinfu_cli.evaluation.objects_loop import compare_strategies
 
     r = compare_strategies(2, views=5, strategies=("objects",))
     obj = r["strategies"]["objects"]
