@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from kinfu_cli.evaluation.reconstruction import (_raycasting_scene, point_to_mesh_distance, sample_surface,
-                                                 visible_mask, visible_mask_exact)
+from kinfu_cli.evaluation.reconstruction import mesh_scene, point_to_mesh_distance, visible_mask, visible_mask_exact
+from kinfu_cli.sim.sampling import sample_surface
 from kinfu_cli.sim.scenario import load_ground_truth
 
 GT = Path(__file__).resolve().parents[1] / "sample_data" / "tabletop" / "ground_truth"
@@ -37,7 +37,7 @@ def main() -> None:
     gt = load_ground_truth(GT)
     m = gt.mesh("before")
     v, f = np.asarray(m.vertices), np.asarray(m.triangles)
-    scene = _raycasting_scene(v, f)
+    scene = mesh_scene(v, f)
     pts, nrm = sample_surface(v, f, spacing=a.spacing)
     keep = np.all(np.abs(pts[:, :2]) < 1.5, axis=1)
     pts, nrm = pts[keep], nrm[keep]

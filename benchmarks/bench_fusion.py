@@ -36,13 +36,17 @@ SEVEN = REPO.parent / "shared" / "data" / "rgbd-7scenes-redkitchen"
 
 
 def synthetic_frames(n: int, width: int = 640, height: int = 480):
-    from kinfu_cli.fusion.synthetic import Renderer, default_K, orbit_poses
+    from kinfu_cli.core.camera import preset_intrinsics
+    from kinfu_cli.sim.paths import orbit_poses
+    from kinfu_cli.sim.scene import box_scene
+    from kinfu_cli.sim.sensor import DepthSensor
 
-    r = Renderer()
-    K = default_K(width, height)
+    K = preset_intrinsics("kinect_v1", width, height)
+    sensor = DepthSensor(K, width, height, noise=False)  # exact depth
+    scene = box_scene()
     out = []
     for T in orbit_poses(n, radius=1.0, height=0.8, span_deg=120):
-        d, c = r.render(K, T, width, height)
+        d, c = sensor.render(scene, T)
         out.append((d, c, K, T))
     return out
 

@@ -6,9 +6,9 @@ import numpy as np
 import open3d as o3d
 import pytest
 
+from kinfu_cli.core.camera import preset_intrinsics
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.fusion import filters
-from kinfu_cli.fusion.synthetic import default_K
 
 W, H = 320, 240
 BASELINE = 0.08
@@ -31,7 +31,7 @@ def _cast(scene, origins, dirs):
 
 @pytest.fixture(scope="module")
 def rendered():
-    K = default_K(W, H)
+    K = preset_intrinsics("kinect_v1", W, H)
     u, v = np.meshgrid(np.arange(W), np.arange(H))
     dirs = np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones((H, W))], axis=-1)
     scene = _scene()

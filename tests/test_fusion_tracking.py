@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from kinfu_cli.fusion.synthetic import Renderer, default_K, orbit_poses
+from kinfu_cli.core.camera import preset_intrinsics
 from kinfu_cli.fusion.tracking import FrameToModelTracker, ate_rmse
 from kinfu_cli.fusion.volume import TernaryVolume
+from kinfu_cli.sim.paths import orbit_poses
+from kinfu_cli.sim.scene import box_scene
+from kinfu_cli.sim.sensor import DepthSensor
 
 W, H = 320, 240
 
@@ -25,10 +28,15 @@ def _track_sequence(frames, vol, tracker, first_T):
 
 def test_icp_on_synthetic_sequence_within_2cm():
     rng = np.random.default_rng(1)
-    r = Renderer()
-    K = default_K(W, H)
+    K = preset_intrinsics("kinect_v1", W, H)
+    sensor = DepthSensor(K, W, H, noise=False)
     poses = orbit_poses(16, radius=0.8, height=0.6, span_deg=60)
-    frames = [(r.render(K, T, W, H, noise_std=0.002, rng=rng)[0], None, K, T) for T in poses]
+    scene = box_scene()
+    frames = []
+    for T in poses:  # exact depth + 2 mm Gaussian noise
+        d = sensor.render(scene, T)[0]
+        frames.append((np.where(d > 0, d + rng.normal(0, 0.002, d.shape).astype(np.float32), 0).astype(np.float32),
+                       None, K, T))
     vol = TernaryVolume(size=(1.2, 1.2, 0.6), voxel_size=0.008, origin=(-0.6, -0.6, -0.1), min_depth=0.1,
                         color=False)
     est, results = _track_sequence(frames, vol, FrameToModelTracker(model_scale=0.5, voxel=0.01), poses[0])
@@ -65,11 +73,10 @@ def test_icp_on_7scenes_beats_no_tracking(shared_data):
 
 def test_lost_frame_keeps_initial_pose():
     """A depth image of something the model has never seen: tracking reports lost and keeps the hint."""
-    r = Renderer()
-    K = default_K(W, H)
+    K = preset_intrinsics("kinect_v1", W, H)
     T0 = orbit_poses(1, radius=0.8, height=0.6)[0]
     vol = TernaryVolume(size=(1.2, 1.2, 0.6), voxel_size=0.01, origin=(-0.6, -0.6, -0.1), min_depth=0.1, color=False)
-    vol.integrate(r.render(K, T0, W, H)[0], K, T0)
+    vol.integrate(DepthSensor(K, W, H, noise=False).render(box_scene(), T0)[0], K, T0)
     wall = np.full((H, W), 0.5, np.float32)  # a flat wall 0.5 m in front of the camera
     res = FrameToModelTracker().track(vol, wall, K, T0)
     assert res.lost and np.array_equal(res.T_world_camera, T0)

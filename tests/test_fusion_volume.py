@@ -5,25 +5,29 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from kinfu_cli.core.camera import preset_intrinsics
 from kinfu_cli.core.errors import ConfigError, VolumeError
-from kinfu_cli.fusion.synthetic import Renderer, default_K, orbit_poses
 from kinfu_cli.fusion.volume import TernaryVolume, load_grid, load_volume
+from kinfu_cli.sim.paths import orbit_poses
+from kinfu_cli.sim.scene import box_scene
+from kinfu_cli.sim.sensor import DepthSensor
 
 W, H = 320, 240
 VS = 0.006
 
 
 @pytest.fixture(scope="module")
-def renderer():
-    return Renderer()
+def scene():
+    return box_scene()
 
 
 @pytest.fixture(scope="module")
-def frames(renderer):
-    K = default_K(W, H)
+def frames(scene):
+    K = preset_intrinsics("kinect_v1", W, H)
+    sensor = DepthSensor(K, W, H, noise=False)  # exact depth
     poses = orbit_poses(10, radius=0.8, height=0.6, span_deg=360) + orbit_poses(4, radius=0.5, height=0.8,
                                                                                  start_deg=45, span_deg=360)
-    return [(*renderer.render(K, T, W, H), K, T) for T in poses]
+    return [(*sensor.render(scene, T), K, T) for T in poses]
 
 
 def new_volume(**kw):
@@ -44,12 +48,12 @@ def fused(frames):
     return fuse(new_volume(), frames)
 
 
-def test_mesh_within_one_voxel_of_truth(fused, renderer):
+def test_mesh_within_one_voxel_of_truth(fused, scene):
     mesh = fused.extract_mesh()
     v = np.asarray(mesh.vertices)
     assert len(v) > 5000
     assert mesh.has_vertex_colors()
-    dist = renderer.distance(v)
+    dist = np.abs(scene.sdf(v))
     assert dist.mean() <= VS, f"mean distance {dist.mean() * 1000:.2f} mm > 1 voxel"
     assert np.percentile(dist, 95) <= 2 * VS
 
@@ -66,14 +70,14 @@ def test_mesh_faces_face_empty_space(fused):
     assert np.mean(face_n[up, 2] > 0) > 0.98
 
 
-def test_object_measures_within_1cm(fused, renderer):
+def test_object_measures_within_1cm(fused, scene):
     """Paper Table 1 measures for each box: height, and major/minor axes of the footprint (the minimum-area
     rectangle around the side vertices between 20 % and 80 % of the height, away from edge artefacts)."""
     import cv2
 
     v = np.asarray(fused.extract_mesh().vertices)
-    for box in renderer.scene_def.boxes:
-        c = np.asarray(box.center)
+    for box in scene.objects:
+        c = np.asarray(box.center[:2])
         rad = 0.5 * np.hypot(box.size[0], box.size[1]) + 0.01
         sel = v[(np.linalg.norm(v[:, :2] - c, axis=1) < rad) & (v[:, 2] > 0.01)]
         assert len(sel) > 100
@@ -85,9 +89,9 @@ def test_object_measures_within_1cm(fused, renderer):
         assert abs(min(a, b) - min(box.size[:2])) < 0.01, (box, a, b)
 
 
-def test_ternary_rule_free_space_surface_and_unknown_interior(fused, renderer):
+def test_ternary_rule_free_space_surface_and_unknown_interior(fused, scene):
     grid = fused.ternary_grid()
-    box = renderer.scene_def.boxes[0]
+    box = scene.objects[0]
     # interior of the big box, deeper than the truncation band: never observed -> unknown
     inner = grid.index_of(np.array([[box.center[0], box.center[1], box.size[2] / 2]]))[0]
     assert grid.labels[tuple(inner)] == 0
@@ -133,7 +137,7 @@ def test_matches_open3d_uniform_tsdf_labels(frames):
     assert (lab == lab_ref)[observed].mean() >= 0.995
 
 
-def test_clear_sphere_then_reintegration_restores(frames, renderer):
+def test_clear_sphere_then_reintegration_restores(frames, scene):
     vol = fuse(new_volume(), frames[:8])
     v0, w0 = vol.tsdf_weights()
     lab0 = vol.labels()
@@ -151,8 +155,8 @@ def test_clear_sphere_then_reintegration_restores(frames, renderer):
     ref = fuse(new_volume(), frames[8:]).labels()
     occ_back = np.count_nonzero(lab2[inside] == 1)
     assert occ_back >= 0.95 * np.count_nonzero(ref[inside] == 1)
-    d = renderer.distance(np.asarray(vol.extract_mesh(lo=np.argwhere(inside).min(0),
-                                                      hi=np.argwhere(inside).max(0) + 1).vertices))
+    d = np.abs(scene.sdf(np.asarray(vol.extract_mesh(lo=np.argwhere(inside).min(0),
+                                                     hi=np.argwhere(inside).max(0) + 1).vertices)))
     assert len(d) > 500 and d.mean() <= VS
 
 
@@ -316,7 +320,7 @@ def test_block_sparse_update_equals_dense_reference(frames):
 
 def test_block_sparse_update_equals_dense_reference_in_open_space():
     """Large free space (a wall 1.6-2.0 m away, seen from two poses): whole super-blocks are carved in bulk."""
-    K = default_K(W, H)
+    K = preset_intrinsics("kinect_v1", W, H)
     v, u = np.mgrid[0:H, 0:W]
     wall = (1.6 + 0.4 * u / W + 0.1 * v / H).astype(np.float32)  # a slanted wall
     wall[100:130, 150:200] = 0  # a blob without readings

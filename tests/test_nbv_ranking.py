@@ -204,16 +204,17 @@ def test_cli_intrinsics_from_the_recordings_camera_info(scene_files, sample_dir)
 
 
 def test_cli_objects_mode_plans_views_at_the_contours_of_a_salient_segment(tmp_path):
-    from kinfu_cli.segmentation.synthetic import primitives_tsdf, tabletop_primitives
+    from kinfu_cli.sim.scene import primitive_tabletop_scene
+    from kinfu_cli.sim.tsdf import scene_tsdf
 
     origin, vs, shape = np.array([-0.7, -0.5, 0.6]), 0.01, (140, 100, 45)
-    prims = tabletop_primitives(3, n_objects=3, stacked=False)
-    tsdf, w = primitives_tsdf(prims, origin, vs, shape, box_min=(-0.7, -0.5, 0.6), box_max=(0.7, 0.5, 1.05))
+    scene = primitive_tabletop_scene(3, n_objects=3, stacked=False)
+    tsdf, w = scene_tsdf(scene, origin, vs, shape, box_min=(-0.7, -0.5, 0.6), box_max=(0.7, 0.5, 1.05))
     labels = np.where(w == 0, 0, np.where(tsdf <= 0, 1, -1)).astype(np.int8)
     c = origin + (np.indices(shape).transpose(1, 2, 3, 0) + 0.5) * vs
-    for p in prims[1:]:  # the back of every object unseen
+    for p in scene.objects:  # the back of every object unseen
         back = (c[..., 1] > p.center[1]) & (np.hypot(c[..., 0] - p.center[0], c[..., 1] - p.center[1])
-                                            < np.hypot(p.half[0], p.half[1]) + 0.06) & (c[..., 2] > 0.7)
+                                            < np.hypot(p.size[0] / 2, p.size[1] / 2) + 0.06) & (c[..., 2] > 0.7)
         labels[back] = 0
     vol = tmp_path / "ternary.npz"
     save_ternary(vol, TernaryGrid(labels, origin, vs))

@@ -13,7 +13,8 @@ from kinfu_cli.nbv.objects import (contour_viewpoints, find_near, nbv_scorer, pl
                                    plan_object_views_for_volume, plan_standard_views)
 from kinfu_cli.segmentation.pipeline import SegmentOptions, analyse_volume
 from kinfu_cli.core.grid import TernaryGrid
-from kinfu_cli.segmentation.synthetic import primitives_tsdf, tabletop_primitives
+from kinfu_cli.sim.scene import primitive_tabletop_scene
+from kinfu_cli.sim.tsdf import scene_tsdf
 
 VS = 0.01
 ORIGIN = np.array([-0.7, -0.5, 0.6])
@@ -54,16 +55,17 @@ def test_forty_viewpoints_per_contour_point_look_at_it_from_0_8_m():
 
 
 def _partially_seen_scene():
-    prims = tabletop_primitives(3, n_objects=4, stacked=False)
-    tsdf, w = primitives_tsdf(prims, ORIGIN, VS, SHAPE, box_min=(-0.7, -0.5, 0.6), box_max=(0.7, 0.5, 1.05))
+    scene = primitive_tabletop_scene(3, n_objects=4, stacked=False)
+    tsdf, w = scene_tsdf(scene, ORIGIN, VS, SHAPE, box_min=(-0.7, -0.5, 0.6), box_max=(0.7, 0.5, 1.05))
     labels = np.where(w == 0, 0, np.where(tsdf <= 0, 1, -1)).astype(np.int8)
     c = ORIGIN + (np.indices(SHAPE).transpose(1, 2, 3, 0) + 0.5) * VS
-    for p in prims[1:]:  # the back half (y > centre) of every object and the space around it is unseen
-        r = float(np.hypot(p.half[0], p.half[1])) + 0.06
+    for p in scene.objects:  # the back half (y > centre) of every object and the space around it is unseen
+        half = np.asarray(p.size) / 2
+        r = float(np.hypot(half[0], half[1])) + 0.06
         back = (c[..., 1] > p.center[1]) & (np.hypot(c[..., 0] - p.center[0], c[..., 1] - p.center[1]) < r) \
-            & (c[..., 2] > 0.7) & (c[..., 2] < p.center[2] + p.half[2] + 0.06)
+            & (c[..., 2] > 0.7) & (c[..., 2] < p.center[2] + half[2] + 0.06)
         labels[back] = 0
-    return prims, TernaryGrid(labels, ORIGIN, VS)
+    return scene.objects, TernaryGrid(labels, ORIGIN, VS)
 
 
 def _frustum_scorer(grid: TernaryGrid, hfov_deg: float = 30.0):
@@ -94,9 +96,9 @@ def planned():
 def test_contours_surround_every_object(planned):
     prims, grid, segs, contours = planned
     assert len(contours) > 0
-    for p in prims[1:]:
-        d = np.linalg.norm(contours.positions[:, :2] - p.center[:2], axis=1)
-        assert (d < np.hypot(p.half[0], p.half[1]) + 0.08).sum() >= 2, p
+    for p in prims:
+        d = np.linalg.norm(contours.positions[:, :2] - np.asarray(p.center[:2]), axis=1)
+        assert (d < np.hypot(p.size[0] / 2, p.size[1] / 2) + 0.08).sum() >= 2, p
     near = find_near(contours.positions, segs.segmentation.points, segs.segmentation.labels)
     assert set(near) - {0, -1}  # some contour points belong to object segments
 

@@ -16,7 +16,8 @@ from kinfu_cli.segmentation.pipeline import SegmentOptions, analyse_cloud
 from kinfu_cli.segmentation.saliency import isolation, oriented_box, segment_saliency
 from kinfu_cli.segmentation.segments import PLANE_LABEL, SegmentationParams, detect_support_plane, segment_cloud
 from kinfu_cli.segmentation.surface import surface_from_labels, surface_from_tsdf
-from kinfu_cli.segmentation.synthetic import label_points, primitives_tsdf, tabletop_primitives
+from kinfu_cli.sim.scene import LABEL_NONE, LABEL_TABLE, primitive_tabletop_scene
+from kinfu_cli.sim.tsdf import scene_tsdf
 
 VS = 0.006
 ORIGIN = np.array([-0.66, -0.46, 0.62])
@@ -28,10 +29,16 @@ BOX = dict(box_min=(-0.66, -0.46, 0.62), box_max=(0.66, 0.46, 0.98))
 def scenes():
     out = []
     for seed in (0, 11):
-        prims = tabletop_primitives(seed)
-        tsdf, w = primitives_tsdf(prims, ORIGIN, VS, SHAPE, **BOX)
-        out.append((prims, tsdf, w))
+        scene = primitive_tabletop_scene(seed)
+        tsdf, w = scene_tsdf(scene, ORIGIN, VS, SHAPE, **BOX)
+        out.append((scene, tsdf, w))
     return out
+
+
+def label_points(scene, points, max_distance):
+    """Ground truth: 0 = table, 1.. = the objects in scene order (nearest by exact distance), -1 = farther."""
+    lab = scene.nearest_labels(points, max_distance)
+    return np.where(lab == LABEL_NONE, -1, lab - LABEL_TABLE)
 
 
 def test_surface_from_tsdf_is_on_the_sphere_with_outward_normals():
@@ -67,12 +74,12 @@ def test_empty_or_surfaceless_volume_is_a_clear_error():
 def test_segmentation_finds_every_object_and_cuts_the_stack(scenes):
     """Object-level recall >= 0.9 (each object >= 80 % in one segment it dominates) and boundary
     precision/recall at 2 cm (thesis ch. 4 protocol) on two scenes, one with a box stacked on a box."""
-    for prims, tsdf, w in scenes:
+    for scene, tsdf, w in scenes:
         cloud = surface_from_tsdf(tsdf, w, ORIGIN, VS)
         seg = segment_cloud(cloud.points, cloud.normals)
-        gt = label_points(prims, cloud.points, 0.01)
+        gt = label_points(scene, cloud.points, 0.01)
         score = score_segmentation(cloud.points, seg.labels, gt)
-        assert score.objects_total == len(prims) - 1
+        assert score.objects_total == len(scene.objects)
         assert score.object_recall >= 0.9, score.per_object
         assert score.boundary_precision >= 0.8 and score.boundary_recall >= 0.8, score
         # the table is one segment and holds (almost) all table points
@@ -116,22 +123,23 @@ def test_saliency_isolation_and_roundness():
 
 
 def test_pipeline_fits_superquadrics_to_objects(scenes):
-    prims, tsdf, w = scenes[0]
+    scene, tsdf, w = scenes[0]
     cloud = surface_from_tsdf(tsdf, w, ORIGIN, VS)
     res = analyse_cloud(cloud.points, cloud.normals, SegmentOptions())
-    gt = label_points(prims, res.segmentation.points, 0.01)
+    gt = label_points(scene, res.segmentation.points, 0.01)
     checked = 0
-    for prim in prims[1:]:  # the segment holding most of each object
-        counts = np.bincount(res.segmentation.labels[gt == prim.label] + 1)
+    for label, prim in enumerate(scene.objects, start=1):  # the segment holding most of each object
+        counts = np.bincount(res.segmentation.labels[gt == label] + 1)
         sid = int(counts.argmax()) - 1
         fit = res.superquadrics[sid]
         assert fit.residual < 0.004
-        if prim.kind == "sphere":
-            assert np.allclose(fit.superquadric.size, prim.half[0], rtol=0.1)
-            assert np.linalg.norm(fit.superquadric.center - prim.center) < 0.01
+        half = np.asarray(prim.size) / 2
+        if prim.shape == "sphere":
+            assert np.allclose(fit.superquadric.size, half[0], rtol=0.1)
+            assert np.linalg.norm(fit.superquadric.center - np.asarray(prim.center)) < 0.01
             checked += 1
-        if prim.kind == "cylinder" and counts.max() > 0.9 * counts.sum():  # standing: height along fitted z
-            assert max(fit.superquadric.size) == pytest.approx(max(prim.half[0], prim.half[2]), rel=0.1)
+        if prim.shape == "cylinder" and counts.max() > 0.9 * counts.sum():  # standing: height along fitted z
+            assert max(fit.superquadric.size) == pytest.approx(max(half[0], half[2]), rel=0.1)
             checked += 1
     assert checked >= 2
     doc = res.to_json()
@@ -140,7 +148,7 @@ def test_pipeline_fits_superquadrics_to_objects(scenes):
 
 
 def test_cli_segment_writes_outputs_from_a_ternary_file(tmp_path, scenes):
-    prims, tsdf, w = scenes[1]
+    scene, tsdf, w = scenes[1]
     labels = np.where(w == 0, 0, np.where(tsdf <= 0, 1, -1)).astype(np.int8)
     save_ternary(tmp_path / "ternary.npz", TernaryGrid(labels, ORIGIN, VS))
     out = tmp_path / "seg"
@@ -149,7 +157,7 @@ def test_cli_segment_writes_outputs_from_a_ternary_file(tmp_path, scenes):
     doc = json.loads((out / "segments.json").read_text())
     assert json.loads(res.output) == doc
     objs = [s for s in doc["segments"] if s["kind"] == "object"]
-    assert len(objs) >= len(prims) - 1
+    assert len(objs) >= len(scene.objects)
     sal = [s["saliency"] for s in objs]
     assert sal == sorted(sal, reverse=True)
     for key in ("id", "point_count", "centroid", "oriented_box", "isolation", "roundness", "saliency", "superquadric"):

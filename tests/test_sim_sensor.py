@@ -6,7 +6,7 @@ import pytest
 
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.sim.scene import make_tabletop_scene
-from kinfu_cli.sim.sensor import DepthSensor, kinect_v1_intrinsics, nguyen_axial_sigma
+from kinfu_cli.sim.sensor import DepthSensor, ideal_depth, kinect_v1_intrinsics, nguyen_axial_sigma
 
 W, H = 160, 120
 
@@ -131,3 +131,17 @@ def test_bad_sensor_input_raises_config_error():
         DepthSensor(K, W, H).render(_plane(), bad)
     with pytest.raises(ConfigError, match="cannot render"):
         DepthSensor(K, W, H).render("scene.ply", np.eye(4))
+
+
+def test_ideal_depth_is_the_noise_free_image_with_inf_where_nothing_is_hit():
+    """The z-buffer image the evaluation compares with: the same rays as the sensor's noise-free render, no
+    range limits, inf (not 0) where the ray hits nothing."""
+    K = kinect_v1_intrinsics(W, H)
+    scene = make_tabletop_scene(2, n_objects=3, floor=False)
+    T = _down(2.0, 10.0)
+    target = scene.raycasting_scene()
+    z = ideal_depth(target.scene, K, W, H, T)
+    exact = DepthSensor(K, W, H, noise=False, min_range=0.0, max_range=100.0).render(scene, T)[0]
+    hit = np.isfinite(z)
+    assert z.dtype == np.float32 and 0.2 < hit.mean() < 1.0  # no floor: rays beside the table hit nothing
+    assert np.array_equal(z[hit], exact[hit]) and np.all(exact[~hit] == 0)

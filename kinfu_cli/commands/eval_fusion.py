@@ -7,6 +7,11 @@ from pathlib import Path
 
 import click
 
+from kinfu_cli.core.atomic import write_json
+from kinfu_cli.evaluation.reconstruction import DEFAULT_SPACING, DEFAULT_THRESHOLD, evaluate_fusion
+from kinfu_cli.evaluation.tables import format_fusion_tables
+from kinfu_cli.report.eval_fusion_mesh import write_error_mesh
+
 group = "eval"
 
 
@@ -16,9 +21,10 @@ group = "eval"
               help="A `kinfu synth` ground_truth/ folder (or the recording folder holding it).")
 @click.option("--state", type=click.Choice(["after", "before"]), default="after", show_default=True,
               help="Which true scene to compare with (before: the initial scan's scene and poses).")
-@click.option("--threshold", type=float, default=0.01, show_default=True,
+@click.option("--threshold", type=float, default=DEFAULT_THRESHOLD, show_default=True,
               help="Distance (m) for precision / completeness.")
-@click.option("--spacing", type=float, default=0.005, show_default=True, help="True-surface sample spacing (m).")
+@click.option("--spacing", type=float, default=DEFAULT_SPACING, show_default=True,
+              help="True-surface sample spacing (m).")
 @click.option("--margin", type=float, default=0.02, show_default=True,
               help="Points within this distance (m) of an object's true box are its points.")
 @click.option("--min-height", type=float, default=0.005, show_default=True,
@@ -52,12 +58,13 @@ def command(reconstruction: Path, ground_truth: Path, state: str, threshold: flo
       kinfu eval fusion out/all/mesh.ply --ground-truth sample_data/tabletop --json -o fusion_eval.json
       kinfu eval fusion out/scan --ground-truth sample_data/tabletop --error-mesh out/scan_error.ply
     """
-    from kinfu_cli.evaluation.reconstruction import evaluate_fusion, format_fusion_tables
-    from kinfu_cli.core.atomic import write_json
-
-    doc = evaluate_fusion(reconstruction, ground_truth, state=state, threshold=threshold, spacing=spacing,
-                          margin=margin, min_height=min_height, footprint=footprint, use_volume=not no_volume,
-                          quiet=quiet, error_mesh=error_mesh)
+    result = evaluate_fusion(reconstruction, ground_truth, state=state, threshold=threshold, spacing=spacing,
+                             margin=margin, min_height=min_height, footprint=footprint, use_volume=not no_volume,
+                             quiet=quiet)
+    doc = result.document
+    if error_mesh is not None:
+        write_error_mesh(error_mesh, result.reconstruction, result.score.vertex_distances, 2.0 * threshold)
+        doc["input"]["error_mesh"] = str(error_mesh)
     if output is not None:
         write_json(output, doc)
     if as_json:

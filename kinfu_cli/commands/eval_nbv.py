@@ -7,6 +7,11 @@ from pathlib import Path
 import click
 
 from kinfu_cli.commands._output import emit
+from kinfu_cli.core.pois import DEFAULT_RADIUS
+from kinfu_cli.evaluation.nbv_loop import LoopConfig, run_loop
+from kinfu_cli.evaluation.tables import nbv_loop_table
+from kinfu_cli.nbv.gains import gain_names
+from kinfu_cli.report.eval_nbv_plot import plot_nbv_loop
 
 group = "eval"
 
@@ -23,9 +28,9 @@ group = "eval"
 @click.option("--voxel-size", default=0.01, show_default=True, type=float,
               help="Simulation volume voxel (m); coarser than the 512^3 KinFu grid so the loop is quick.")
 @click.option("--gain", default="unknown", show_default=True,
-              type=click.Choice(["unknown", "distance", "rear", "entropy"]), help="Gain function.")
+              type=click.Choice(list(gain_names())), help="Gain function.")
 @click.option("--inc-th", type=float, default=None, help="IncTh [default: 1% of the pixels that see S(POI)].")
-@click.option("--poi-radius", default=0.2, show_default=True, type=float, help="Radius of S(POI) (m).")
+@click.option("--poi-radius", default=DEFAULT_RADIUS, show_default=True, type=float, help="Radius of S(POI) (m).")
 @click.option("--pois-from", default="gmm-as", show_default=True, type=click.Choice(["gmm-as", "truth"]),
               help="POIs from GMM-AS on the simulated hand trajectory, or the true changes.")
 @click.option("--poi", nargs=3, type=float, default=None, help="POI x y z for a bare mesh SCENE.")
@@ -78,8 +83,6 @@ def command(scene, strategies, views, mode, voxel_size, gain, inc_th, poi_radius
       kinfu eval nbv sample_data/tabletop --strategy poi,random --mode both --voxel-size 0.015 --json
       kinfu eval nbv sample_data/tabletop --strategy objects,standard --width 160 --height 120
     """
-    from kinfu_cli.evaluation.nbv_loop import LoopConfig, plot_loop, result_table, run_loop
-
     modes = ("kfovp", "kfom") if mode == "both" else (mode,)
     cfg = LoopConfig(strategies=tuple(s.strip() for s in strategies.split(",") if s.strip()), modes=modes,
                      views=views, voxel_size=voxel_size, gain=gain, inc_th=inc_th, poi_radius=poi_radius,
@@ -90,6 +93,6 @@ def command(scene, strategies, views, mode, voxel_size, gain, inc_th, poi_radius
                      score_width=score_width, reject_unknown=reject_unknown)
     doc = run_loop(scene, cfg, quiet=quiet)
     if plot is not None:
-        plot_loop(plot, doc)
+        plot_nbv_loop(plot, doc)
         doc["plot"] = str(plot)
-    emit(doc, output, as_json, result_table)
+    emit(doc, output, as_json, nbv_loop_table)

@@ -3,13 +3,11 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import click
 
 from kinfu_cli.core.errors import ConfigError
-
-FORMAT_NAMES = {"mcap": "recording.mcap", "bag": "recording.bag", "ros2": "recording_ros2"}
+from kinfu_cli.sim.synth import FORMAT_NAMES, synthesize
 
 
 def parse_formats(text: str) -> list[str]:
@@ -19,46 +17,6 @@ def parse_formats(text: str) -> list[str]:
     if not items or bad:
         raise ConfigError(f"--formats {text!r}: expected a comma-separated subset of mcap,bag,ros2")
     return list(dict.fromkeys(items))
-
-
-def run_synth(out: str | Path, seed: int = 0, width: int = 320, height: int = 240, frames: int = 36,
-              formats: list[str] = ("mcap", "bag", "ros2"), scenario: str = "pick-and-place", n_objects: int = 4,
-              hand_rate: float = 100.0, frame_rate: float = 5.0, noise: bool = True, depth_format: str = "png",
-              color_format: str = "jpeg", jpeg_quality: int = 75, quiet: bool = True,
-              camera_pose_topic: str | None = None) -> dict:
-    """Build the scenario and write the containers and OUT/ground_truth/. Returns a summary (paths, counts).
-    camera_pose_topic: also write the true camera poses (PoseStamped in `world`) on this topic."""
-    from kinfu_cli.sim.scenario import (check_camera_pose_topic, make_scenario, recording_topics, write_ground_truth,
-                                        write_recordings)
-
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise ConfigError(f"-o {out}: exists and is not a folder")
-    check_camera_pose_topic(camera_pose_topic, depth_format, color_format)
-    sc = make_scenario(seed=seed, kind=scenario, width=width, height=height, frames=frames, n_objects=n_objects,
-                       noise=noise, hand_rate_hz=hand_rate, frame_rate_hz=frame_rate)
-    paths = [out / FORMAT_NAMES[f] for f in formats]
-    write_recordings(sc, paths, depth_format=depth_format, color_format=color_format, quiet=quiet,
-                     jpeg_quality=jpeg_quality, camera_pose_topic=camera_pose_topic)
-    gt = write_ground_truth(sc, out / "ground_truth",
-                            topics=recording_topics(depth_format, color_format, camera_pose_topic))
-    for p in paths + [gt]:
-        _relax_permissions(p)
-    return {"recordings": [str(p) for p in paths], "ground_truth": str(gt), "frames": len(sc.frames),
-            "scan_frames": sc.meta["n_scan"], "after_frames": sc.meta["n_after"], "hand_samples": len(sc.hand),
-            "changes": sc.changes, "seed": seed, "scenario": scenario, "width": width, "height": height,
-            "camera_pose_topic": camera_pose_topic}
-
-
-def _relax_permissions(path: Path) -> None:
-    """The atomic temp files/folders are created 0600/0700: give outputs the usual umask-based modes."""
-    import os
-
-    umask = os.umask(0)
-    os.umask(umask)
-    paths = [path] + (sorted(path.rglob("*")) if path.is_dir() else [])
-    for p in paths:
-        os.chmod(p, (0o777 if p.is_dir() else 0o666) & ~umask)
 
 
 @click.command("synth", short_help="Write a synthetic tabletop recording (MCAP, bag, ROS 2) with ground truth.")
@@ -105,22 +63,11 @@ def command(out, seed, width, height, frames, formats, scenario, n_objects, hand
       kinfu synth -o /tmp/small --width 64 --height 48 --frames 6 --formats mcap --scenario place
       kinfu synth -o /tmp/posed --camera-pose-topic /camera/pose
     """
-    if frames < 2:
-        raise ConfigError(f"--frames {frames}: expected at least 2 (scan and after the change)")
-    if width < 8 or height < 6:
-        raise ConfigError(f"--width/--height {width}x{height}: expected at least 8x6 pixels")
-    if not 0 <= n_objects <= 12:
-        raise ConfigError(f"--n-objects {n_objects}: expected 0..12")
-    if not hand_rate > 0:
-        raise ConfigError(f"--hand-rate {hand_rate}: expected a positive rate in Hz")
-    if not frame_rate > 0:
-        raise ConfigError(f"--frame-rate {frame_rate}: expected a positive rate in Hz")
-    if not 1 <= jpeg_quality <= 100:
-        raise ConfigError(f"--jpeg-quality {jpeg_quality}: expected 1..100")
-    summary = run_synth(out, seed=seed, width=width, height=height, frames=frames, formats=parse_formats(formats),
+    result = synthesize(out, seed=seed, width=width, height=height, frames=frames, formats=parse_formats(formats),
                         scenario=scenario, n_objects=n_objects, hand_rate=hand_rate, frame_rate=frame_rate,
                         noise=noise, depth_format=depth_format, color_format=color_format,
                         jpeg_quality=jpeg_quality, quiet=quiet, camera_pose_topic=camera_pose_topic)
+    summary = result.to_json()
     if as_json:
         click.echo(json.dumps(summary, indent=2))
     else:

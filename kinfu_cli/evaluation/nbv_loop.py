@@ -39,6 +39,10 @@ is most of them) and stopped rays at unknown voxels outside the segment's sphere
 rendered inside a room (`room`), candidates in unknown space are allowed (`reject_unknown`, the simulated
 arm has no planner) and rays pass unknown space outside the region (`optimistic`); views within
 `exclude_shift` / `exclude_turn_deg` of one already taken are skipped, as the paper skips attempted views.
+
+`run_loop(scene, LoopConfig(...))` is the driver; it returns the JSON-ready results document. Its tables are
+`evaluation.tables.nbv_loop_table`, its plot `report.eval_nbv_plot`; `compare_strategies` runs the exploration on
+a generated scenario (no files), for tests and benchmarks.
 """
 
 from __future__ import annotations
@@ -50,10 +54,26 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
+import open3d as o3d
+from scipy.spatial.transform import Rotation, Slerp
 
+from kinfu_cli.attention.gmm_as import GmmActivitySaliency
+from kinfu_cli.core.camera import CameraModel
 from kinfu_cli.core.errors import ConfigError, RecordingError
+from kinfu_cli.core.grid import TernaryGrid
+from kinfu_cli.core.pois import DEFAULT_RADIUS
+from kinfu_cli.core.progress import progress
+from kinfu_cli.evaluation.reconstruction import point_to_mesh_distance
+from kinfu_cli.fusion.volume import TernaryVolume
+from kinfu_cli.nbv.contours import extract_contours
+from kinfu_cli.nbv.gains import get_gain
+from kinfu_cli.nbv.objects import nbv_scorer, plan_object_views, plan_standard_views
 from kinfu_cli.nbv.ranking import default_inc_th, score_views, unknown_in_sphere
 from kinfu_cli.nbv.viewpoints import sphere_viewpoints
+from kinfu_cli.segmentation.pipeline import SegmentOptions, analyse_volume
+from kinfu_cli.sim.sampling import sample_triangles, surface_area
+from kinfu_cli.sim.scenario import load_ground_truth, make_scenario
+from kinfu_cli.sim.sensor import DepthSensor, kinect_v1_intrinsics
 
 EXPLORE = ("objects", "standard")
 STRATEGIES = ("poi", "random", "fixed") + EXPLORE
@@ -71,7 +91,7 @@ class LoopConfig:
     voxel_size: float = 0.01
     gain: str = "unknown"
     inc_th: float | None = None
-    poi_radius: float = 0.2
+    poi_radius: float = DEFAULT_RADIUS
     pois_from: str = "gmm-as"
     oscillation_deg: float = 5.0
     path_step: float = 0.1
@@ -95,30 +115,32 @@ class LoopConfig:
     exclude_turn_deg: float = 10.0
 
     def check(self) -> None:
+        """ConfigError naming the first field out of range (and the gain when it is unknown)."""
         for s in self.strategies:
             if s not in STRATEGIES:
-                raise ConfigError(f"--strategy: expected some of {', '.join(STRATEGIES)}, got {s!r}")
+                raise ConfigError(f"expected some of {', '.join(STRATEGIES)}, got {s!r}", parameter="strategies")
         for m in self.modes:
             if m not in MODES:
-                raise ConfigError(f"--mode: expected kfovp, kfom or both, got {m!r}")
+                raise ConfigError(f"expected some of {', '.join(MODES)}, got {m!r}", parameter="modes")
         explore = [s in EXPLORE for s in self.strategies]
         if any(explore) and not all(explore):
-            raise ConfigError("--strategy: objects and standard (POI-free exploration) cannot be mixed with "
-                              f"poi, random or fixed, got {','.join(self.strategies)}")
+            raise ConfigError("objects and standard (POI-free exploration) cannot be mixed with poi, random or "
+                              f"fixed, got {','.join(self.strategies)}", parameter="strategies")
         if self.views < 1:
-            raise ConfigError(f"--views: expected at least 1, got {self.views}")
+            raise ConfigError(f"expected at least 1, got {self.views}", parameter="views")
         if not (0.002 <= self.voxel_size <= 0.1):
-            raise ConfigError(f"--voxel-size: expected 0.002 to 0.1 m, got {self.voxel_size}")
+            raise ConfigError(f"expected 0.002 to 0.1 m, got {self.voxel_size}", parameter="voxel_size")
         if self.pois_from not in ("gmm-as", "truth"):
-            raise ConfigError(f"--pois-from: expected gmm-as or truth, got {self.pois_from!r}")
+            raise ConfigError(f"expected gmm-as or truth, got {self.pois_from!r}", parameter="pois_from")
         if self.scan_every < 1:
-            raise ConfigError(f"--scan-every: expected at least 1, got {self.scan_every}")
+            raise ConfigError(f"expected at least 1, got {self.scan_every}", parameter="scan_every")
         if self.scan_frames < 1:
-            raise ConfigError(f"--scan-frames: expected at least 1, got {self.scan_frames}")
+            raise ConfigError(f"expected at least 1, got {self.scan_frames}", parameter="scan_frames")
         if self.score_width < 8:
-            raise ConfigError(f"--score-width: expected at least 8 pixels, got {self.score_width}")
+            raise ConfigError(f"expected at least 8 pixels, got {self.score_width}", parameter="score_width")
         if not self.near_margin >= 0:
-            raise ConfigError(f"--near-margin: expected a distance >= 0 m, got {self.near_margin}")
+            raise ConfigError(f"expected a distance >= 0 m, got {self.near_margin}", parameter="near_margin")
+        get_gain(self.gain)
 
 
 @dataclass
@@ -126,8 +148,8 @@ class SimScene:
     """What the loop needs from a scene: meshes before/after, camera, initial-scan poses, hand, truth."""
 
     name: str
-    before: object
-    after: object
+    before: o3d.geometry.TriangleMesh
+    after: o3d.geometry.TriangleMesh
     K: np.ndarray
     width: int
     height: int
@@ -148,8 +170,6 @@ def load_scene(path: str | os.PathLike, cfg: LoopConfig) -> SimScene:
     if not path.exists():
         raise RecordingError(f"{path}: no such scene (expected a kinfu synth ground_truth folder or a mesh file)")
     if path.is_dir():
-        from kinfu_cli.sim.scenario import load_ground_truth
-
         gt = load_ground_truth(path)
         table = gt.info.get("table", {})
         cx, cy = table.get("center", [0.0, 0.0])
@@ -163,16 +183,12 @@ def load_scene(path: str | os.PathLike, cfg: LoopConfig) -> SimScene:
         return SimScene(gt.folder.name, gt.mesh("before"), gt.mesh("after"), gt.K, gt.width, gt.height,
                         gt.poses[:n_scan:cfg.scan_every], gt.hand(), gt.change_positions, tz, lo, hi,
                         object_spheres=spheres)
-    import open3d as o3d
-
     mesh = o3d.io.read_triangle_mesh(str(path))
     if len(mesh.triangles) == 0:
         raise RecordingError(f"{path}: not a triangle mesh (no triangles)")
     if cfg.poi is None:
-        raise ConfigError(f"{path}: a bare mesh has no hand trajectory; give --poi X Y Z")
-    from kinfu_cli.nbv.viewpoints import sphere_viewpoints
-    from kinfu_cli.sim.sensor import kinect_v1_intrinsics
-
+        raise ConfigError(f"{path}: a bare mesh has no hand trajectory; give the POI position (x, y, z)",
+                          parameter="poi")
     bb = mesh.get_axis_aligned_bounding_box()
     lo, hi = np.asarray(bb.min_bound) - 0.3, np.asarray(bb.max_bound) + 0.3
     centre = (np.asarray(bb.min_bound) + np.asarray(bb.max_bound)) / 2
@@ -196,8 +212,6 @@ def bounding_spheres(meshes) -> np.ndarray:
 
 def scene_from_scenario(seed: int = 0, **kwargs) -> SimScene:
     """A SimScene from `kinfu_cli.sim.scenario.make_scenario(seed, **kwargs)` (no files needed)."""
-    from kinfu_cli.sim.scenario import make_scenario
-
     sc = make_scenario(seed, **kwargs)
     t = sc.scene_before.table
     cx, cy = t.center[0], t.center[1]
@@ -214,8 +228,6 @@ def scene_from_scenario(seed: int = 0, **kwargs) -> SimScene:
 def _with_room(mesh, centre: np.ndarray, size: float):
     """`mesh` plus the walls, floor and ceiling of a size x size x 3 m room around `centre` (rendering only):
     in the paper's lab every ray ends on something, and KinFu only carves along rays with a depth reading."""
-    import open3d as o3d
-
     room = o3d.geometry.TriangleMesh.create_box(size, size, 3.0)
     room.translate([centre[0] - size / 2, centre[1] - size / 2, -0.01])
     room.paint_uniform_color([0.8, 0.8, 0.75])
@@ -249,8 +261,6 @@ def _tilt(T: np.ndarray, deg: float) -> np.ndarray:
 
 def _path(T0: np.ndarray, T1: np.ndarray, step: float) -> list[np.ndarray]:
     """Poses strictly between T0 and T1 on the straight line (slerped orientation), every `step` m."""
-    from scipy.spatial.transform import Rotation, Slerp
-
     dist = float(np.linalg.norm(T1[:3, 3] - T0[:3, 3]))
     n = int(dist // step)
     if n < 1:
@@ -269,9 +279,6 @@ def _path(T0: np.ndarray, T1: np.ndarray, step: float) -> list[np.ndarray]:
 def _initial_scan(sc: SimScene, cfg: LoopConfig, sensor, K: np.ndarray, poses, mesh, name: str, quiet: bool):
     """Render and fuse the initial scan over the scene box -> (volume, views that saw something);
     RecordingError when none did."""
-    from kinfu_cli.fusion.volume import TernaryVolume
-    from kinfu_cli.core.progress import progress
-
     vol = TernaryVolume(size=tuple(sc.box_hi - sc.box_lo), voxel_size=cfg.voxel_size, origin=tuple(sc.box_lo),
                         min_depth=sensor.min_range, max_depth=sensor.max_range, color=False)
     n_int = 0
@@ -295,10 +302,7 @@ class _Timer:
 
 def run_loop(scene_path: str | os.PathLike, cfg: LoopConfig, quiet: bool = True) -> dict:
     """Run the closed loop; returns the result document (see the module docstring)."""
-    from kinfu_cli.nbv.gains import get_gain
-
     cfg.check()
-    get_gain(cfg.gain)
     if cfg.strategies and all(s in EXPLORE for s in cfg.strategies):
         return run_exploration(load_scene(scene_path, cfg), cfg, quiet=quiet, scene_name=str(scene_path))
     timer = _Timer()
@@ -359,8 +363,6 @@ def _cfg_doc(cfg: LoopConfig) -> dict:
 def _find_pois(sc: SimScene, cfg: LoopConfig) -> np.ndarray:
     if cfg.pois_from == "truth" or sc.hand is None:
         return np.asarray(sc.changes, dtype=float).reshape(-1, 3)
-    from kinfu_cli.attention.gmm_as import GmmActivitySaliency
-
     det = GmmActivitySaliency(radius=cfg.poi_radius).fit(sc.hand)
     return np.array([p.position for p in det.pois_], dtype=float).reshape(-1, 3)
 
@@ -403,9 +405,6 @@ def _take_view(vol, T_cur, T_goal, mode, sc, cfg, sensor, K, timer, frames: int)
 
 def _sensor_setup(sc: SimScene, cfg: LoopConfig):
     """Room-enclosed render meshes, the simulated sensor and the NBV camera model (same image, same ranges)."""
-    from kinfu_cli.core.camera import CameraModel
-    from kinfu_cli.sim.sensor import DepthSensor
-
     centre = (sc.box_lo + sc.box_hi) / 2
     sc.render_before = _with_room(sc.before, centre, cfg.room) if cfg.room > 0 else sc.before
     sc.render_after = _with_room(sc.after, centre, cfg.room) if cfg.room > 0 else sc.after
@@ -418,7 +417,8 @@ def _sensor_setup(sc: SimScene, cfg: LoopConfig):
     return sensor, K, cam
 
 
-def near_object_voxels(grid, spheres: np.ndarray, margin: float, table_z: float | None = None) -> np.ndarray:
+def near_object_voxels(grid: TernaryGrid, spheres: np.ndarray, margin: float,
+                       table_z: float | None = None) -> np.ndarray:
     """(N, 3) voxel indices whose centres lie inside some true object's bounding sphere enlarged by `margin`
     (the thesis scores unknown voxels there), above the table top when `table_z` is given."""
     shape = np.array(grid.shape)
@@ -449,15 +449,10 @@ def run_exploration(sc: SimScene, cfg: LoopConfig, quiet: bool = True, scene_nam
     `exclude_shift` m and `exclude_turn_deg`), score with the same ray caster on a `score_width`-wide image
     of the sensor's field of view and ranges, and stop when the best score < `score_fraction` of its pixels.
     Measured after each view: unknown voxels inside the true objects' bounding spheres + `near_margin`."""
-    from kinfu_cli.core.camera import CameraModel
-    from kinfu_cli.nbv.contours import extract_contours
-    from kinfu_cli.nbv.objects import nbv_scorer, plan_object_views, plan_standard_views
-    from kinfu_cli.core.progress import progress
-    from kinfu_cli.segmentation.pipeline import SegmentOptions, analyse_volume
-
     if sc.object_spheres is None or len(sc.object_spheres) == 0:
-        raise ConfigError(f"{scene_name or sc.name}: --strategy objects/standard needs the true objects of a kinfu "
-                          "synth ground_truth folder (objects/*.ply); a bare mesh has none")
+        raise ConfigError(f"{scene_name or sc.name}: the objects and standard strategies need the true objects of "
+                          "a kinfu synth ground_truth folder (objects/*.ply); a bare mesh has none",
+                          parameter="strategies")
     timer = _Timer()
     t0 = time.perf_counter()
     sensor, K, cam = _sensor_setup(sc, cfg)
@@ -639,8 +634,6 @@ def _run_strategy(strat, mode, vol, pois, sc, cfg, sensor, K, cam, sphere, table
 
 def reconstruction_error(vol, true_mesh, pois: np.ndarray, radius: float, threshold: float) -> dict:
     """Accuracy and completeness of the fused surface inside the POI spheres vs the true mesh."""
-    from kinfu_cli.evaluation.reconstruction import point_to_mesh_distance
-
     tv = np.asarray(true_mesh.vertices, dtype=np.float64)
     tt = np.asarray(true_mesh.triangles, dtype=np.int64)
     rec = vol.extract_mesh()
@@ -670,117 +663,28 @@ def reconstruction_error(vol, true_mesh, pois: np.ndarray, radius: float, thresh
     return out
 
 
-def _sample_surface(mesh, pois: np.ndarray, radius: float, spacing: float = 0.004) -> np.ndarray:
-    """Area-uniform samples (about one per spacing^2) of the triangles near the POI spheres."""
+def _sample_surface(mesh: o3d.geometry.TriangleMesh, pois: np.ndarray, radius: float, spacing: float = 0.004
+                    ) -> np.ndarray:
+    """Area-uniform samples (about one per spacing^2, at most 400,000) of the triangles near the POI spheres."""
     v = np.asarray(mesh.vertices, dtype=np.float64)
     t = np.asarray(mesh.triangles, dtype=np.int64)
     a, b, c = v[t[:, 0]], v[t[:, 1]], v[t[:, 2]]
     cen = (a + b + c) / 3
     reach = np.max(np.linalg.norm(np.stack([a, b, c]) - cen, axis=2), axis=0)
-    near = np.min(np.linalg.norm(cen[:, None, :] - pois[None], axis=2), axis=1) < radius + reach
-    a, b, c = a[near], b[near], c[near]
-    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
-    n = min(int(area.sum() / spacing ** 2) + 1, 400_000)
-    if not len(area) or area.sum() <= 0:
-        return np.zeros((0, 3))
-    rng = np.random.default_rng(0)
-    idx = rng.choice(len(area), size=n, p=area / area.sum())
-    r1, r2 = rng.random(n), rng.random(n)
-    s1 = np.sqrt(r1)
-    return (1 - s1)[:, None] * a[idx] + (s1 * (1 - r2))[:, None] * b[idx] + (s1 * r2)[:, None] * c[idx]
+    near = t[np.min(np.linalg.norm(cen[:, None, :] - pois[None], axis=2), axis=1) < radius + reach]
+    count = min(int(surface_area(v, near) / spacing ** 2) + 1, 400_000)
+    return sample_triangles(v, near, count, seed=0)[0]
 
 
-def exploration_table(doc: dict) -> list[str]:
-    """The `run_exploration` result as text: unknown voxels near objects after each view, candidate views
-    ray-cast and planning time per view, and the object-driven vs standard comparison."""
-    runs = doc["strategies"]
-    near = doc["near_objects"]
-    nmax = max((len(r["unknown_near"]) for r in runs.values()), default=1)
-    lines = [f"unknown voxels near objects (true bounding spheres + {near['margin_m']:g} m, {near['voxels']} voxels) "
-             "after each view (v0 = after the initial scan)",
-             f"{'strategy':10s} " + " ".join(f"{'v' + str(i):>7s}" for i in range(nmax)) + "  reduction"]
-    for name, r in runs.items():
-        u = r["unknown_near"]
-        cells = " ".join(f"{int(x):7d}" for x in u) + " " * (8 * (nmax - len(u)))
-        lines.append(f"{name:10s} {cells}  {(u[0] - u[-1]) / u[0] if u[0] else 0.0:9.1%}")
-    lines.append("candidate views ray-cast per view (planning seconds)")
-    for name, r in runs.items():
-        cells = " ".join(f"{c}({t:.1f}s)" for c, t in zip(r["candidates_cast"], r["planning_seconds"]))
-        lines.append(f"{name:10s} {cells}  total {r['candidates_cast_total']} ({r['planning_seconds_total']:.1f} s)")
-    eq = doc.get("equal_reduction")
-    if eq:
-        ratio = "-" if eq["cast_ratio"] is None else f"{eq['cast_ratio']:.1f}x"
-        tr = "-" if eq["time_ratio"] is None else f"{eq['time_ratio']:.1f}x"
-        lines.append(f"same reduction ({eq['reduction_fraction']:.1%}, down to {eq['unknown_near']} unknown): "
-                     f"objects {eq['objects_views']} views / {eq['objects_cast']} cast, standard "
-                     f"{eq['standard_views']} views / {eq['standard_cast']} cast: {ratio} fewer cast views, "
-                     f"{tr} less planning time")
-    lines.append("time per stage (s): " + ", ".join(f"{k} {v:.2f}" for k, v in doc["time_s"].items()))
-    return lines
-
-
-def result_table(doc: dict) -> list[str]:
-    """Unknown voxels in each POI sphere after each view (the paper's Fig. 20 as a table), one row per
-    strategy and POI, with views until IncTh, and the final error of each strategy."""
-    if doc.get("kind") == "exploration":
-        return exploration_table(doc)
-    runs = doc["strategies"]
-    nmax = max((len(v) for r in runs.values() for v in r["unknown"].values()), default=1)
-    lines = ["unknown voxels in each POI sphere after each view (v0 = before the first view of that POI)",
-             f"{'strategy':14s} {'POI':>3s} " + " ".join(f"{'v' + str(i):>7s}" for i in range(nmax)) + "  until-IncTh"]
-    for name, r in runs.items():
-        for pid, v in r["unknown"].items():
-            u = r["views_until_incth"].get(pid)
-            cells = " ".join(f"{int(x):7d}" for x in v) + " " * (8 * (nmax - len(v)))
-            lines.append(f"{name:14s} {pid:>3s} {cells}  {'-' if u is None else u:>11}")
-    lines.append(f"{'strategy':14s} {'views':>5s} {'frames':>6s} {'accuracy':>9s} {'precision':>9s} "
-                 f"{'complete':>8s} {'s/view':>6s}")
-    for name, r in runs.items():
-        e = r["error"]
-        acc = "-" if e.get("accuracy_mean_m") is None else f"{e['accuracy_mean_m'] * 1000:.1f}mm"
-        prec = "-" if e.get("precision") is None else f"{e['precision']:.3f}"
-        comp = "-" if e.get("completeness") is None else f"{e['completeness']:.3f}"
-        lines.append(f"{name:14s} {sum(r['views_taken'].values()):5d} {r['frames_fused']:6d} {acc:>9s} {prec:>9s} "
-                     f"{comp:>8s} {r['seconds_per_view']:6.2f}")
-    lines.append("time per stage (s): " + ", ".join(f"{k} {v:.2f}" for k, v in doc["time_s"].items()))
-    return lines
-
-
-def plot_loop(path: str | os.PathLike, doc: dict) -> None:
-    """PNG: unknown voxels in each POI sphere vs views, one line per strategy (the paper's Fig. 20)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from kinfu_cli.core.atomic import atomic_path
-
-    if doc.get("kind") == "exploration":
-        fig, ax = plt.subplots(figsize=(5.5, 3.8))
-        for name, r in doc["strategies"].items():
-            ax.plot(range(len(r["unknown_near"])), r["unknown_near"], marker="o",
-                    label=f"{name} ({r['candidates_cast_total']} cast)")
-        ax.set_xlabel("views")
-        ax.set_ylabel("unknown voxels near objects")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
-        fig.tight_layout()
-        with atomic_path(path) as tmp:
-            fig.savefig(tmp, dpi=90)
-        plt.close(fig)
-        return
-    pois = [str(p["id"]) for p in doc["pois"]]
-    fig, axes = plt.subplots(1, len(pois), figsize=(5 * len(pois), 3.8), squeeze=False)
-    for ax, pid in zip(axes[0], pois):
-        for name, r in doc["strategies"].items():
-            v = r["unknown"].get(pid, [])
-            ax.plot(range(len(v)), v, marker="o", label=name)
-        ax.set_xlabel("views")
-        ax.set_ylabel("unknown voxels in S(POI)")
-        ax.set_title(f"POI {pid}")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=90)
-    plt.close(fig)
+def compare_strategies(seed: int = 0, *, views: int = 5, scan_frames: int = 8, score_px: int = 80,
+                       voxel_size: float = 0.01, width: int | None = 160, height: int | None = 120,
+                       strategies=("objects", "standard"), log=None, quiet: bool = True, **config) -> dict:
+    """Thesis Fig. 3.17 / Table 3.1 in simulation on `make_scenario(seed)` (no files): from a short one-sided
+    scan (`scan_frames` poses), take `views` NBVs with each strategy, counting unknown voxels inside the true
+    objects' bounding spheres + 0.2 m after each view, candidate views ray-cast and planning time. Views are
+    scored on a `score_px`-wide image of the sensor's field of view. Extra keyword arguments are `LoopConfig`
+    fields. Returns the `run_exploration` document."""
+    cfg = LoopConfig(strategies=tuple(strategies), views=views, scan_frames=scan_frames, score_width=score_px,
+                     voxel_size=voxel_size, width=width, height=height, seed=seed, **config)
+    cfg.check()
+    return run_exploration(scene_from_scenario(seed), cfg, quiet=quiet, scene_name=f"scenario seed {seed}", log=log)

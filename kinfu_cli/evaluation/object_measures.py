@@ -22,7 +22,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
+import open3d as o3d
 
 from kinfu_cli.core.errors import ConfigError, RecordingError
 
@@ -65,7 +67,7 @@ def ground_truth_objects(gt, state: str = "after") -> list[GroundTruthObject]:
     """The objects present in `state` with their true vertices (after-state meshes, shifted to `center_before`
     for the before state; an object without a mesh file is cut out of the scene mesh by its box)."""
     if state not in ("after", "before"):
-        raise ConfigError(f"--state {state!r}: expected after or before")
+        raise ConfigError(f"expected after or before, got {state!r}", parameter="state")
     meshes = None
     out = []
     for o in gt.objects:
@@ -84,8 +86,6 @@ def ground_truth_objects(gt, state: str = "after") -> list[GroundTruthObject]:
         path = gt.folder / "objects" / f"{oid}.ply"
         obj = GroundTruthObject(oid, str(o.get("shape", "")), center, size, yaw, np.zeros((0, 3)))
         if path.exists() and bool(o.get("present_after", True)):
-            import open3d as o3d
-
             v = np.asarray(o3d.io.read_triangle_mesh(str(path)).vertices, dtype=np.float64)
             obj.vertices = v + (center - np.asarray(o["center"], dtype=float))
         else:
@@ -114,8 +114,6 @@ def table_plane_truth(gt) -> np.ndarray:
 def fit_table_plane(points: np.ndarray, gt, objects: list[GroundTruthObject], band: float = 0.05,
                     distance: float = 0.005, seed: int = 0) -> np.ndarray:
     """RANSAC plane through the reconstructed points near the true table top (see module docstring)."""
-    import open3d as o3d
-
     truth = table_plane_truth(gt)
     t = gt.info["table"]
     p = np.asarray(points, dtype=np.float64)
@@ -131,7 +129,14 @@ def fit_table_plane(points: np.ndarray, gt, objects: list[GroundTruthObject], ba
                              f"plane (is the reconstruction in the ground truth's world frame?)")
     o3d.utility.random.seed(seed)
     pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(cand))
-    _, inliers = pc.segment_plane(distance_threshold=distance, ransac_n=3, num_iterations=500)
+    # one thread: open3d's parallel RANSAC stops early, so on several threads the seeded plane depended on
+    # thread timing and the results changed from run to run
+    threads = o3d.utility.get_max_threads()
+    o3d.utility.set_max_threads(1)
+    try:
+        _, inliers = pc.segment_plane(distance_threshold=distance, ransac_n=3, num_iterations=500)
+    finally:
+        o3d.utility.set_max_threads(threads)
     q = cand[np.asarray(inliers, dtype=np.int64)]
     # least-squares refit on the RANSAC inliers (centroid + direction of least spread)
     c = q.mean(axis=0)
@@ -154,8 +159,6 @@ def footprint_axes(xy: np.ndarray, method: str = "rect") -> tuple[float, float]:
     if len(xy) < 3:
         return float("nan"), float("nan")
     if method == "rect":
-        import cv2
-
         c = xy.mean(axis=0)
         (_, _), (w, h), _ = cv2.minAreaRect(((xy - c) * 1000.0).astype(np.float32))  # mm: float32-friendly
         w, h = w / 1000.0, h / 1000.0
@@ -165,7 +168,7 @@ def footprint_axes(xy: np.ndarray, method: str = "rect") -> tuple[float, float]:
         ext = q @ vecs
         w, h = np.ptp(ext[:, 0]), np.ptp(ext[:, 1])
     else:
-        raise ConfigError(f"--footprint {method!r}: expected one of {', '.join(FOOTPRINTS)}")
+        raise ConfigError(f"expected one of {', '.join(FOOTPRINTS)}, got {method!r}", parameter="method")
     return float(max(w, h)), float(min(w, h))
 
 
@@ -224,11 +227,11 @@ def object_measures(points: np.ndarray, gt, state: str = "after", margin: float 
     object row then gets `surface_seen_share`, the share of its true surface (bottom excluded) the cameras saw.
     """
     if not margin >= 0:
-        raise ConfigError(f"--margin: expected a distance >= 0 m, got {margin}")
+        raise ConfigError(f"expected a distance >= 0 m, got {margin}", parameter="margin")
     if not min_height >= 0:
-        raise ConfigError(f"--min-height: expected a distance >= 0 m, got {min_height}")
+        raise ConfigError(f"expected a distance >= 0 m, got {min_height}", parameter="min_height")
     if footprint not in FOOTPRINTS:
-        raise ConfigError(f"--footprint {footprint!r}: expected one of {', '.join(FOOTPRINTS)}")
+        raise ConfigError(f"expected one of {', '.join(FOOTPRINTS)}, got {footprint!r}", parameter="footprint")
     pts = np.asarray(points, dtype=np.float64)
     objects = ground_truth_objects(gt, state)
     truth_plane = table_plane_truth(gt)

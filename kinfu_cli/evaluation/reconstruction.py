@@ -18,8 +18,11 @@ Both directions, as the usual accuracy / completeness metrics:
 
 Which poses belong to a state: "before" = the initial-scan frames (`frames.scan` of changes.json), "after" = all
 frames (the after-change views look at the changed region; the rest of the table is the same in both states). When
-the input is a `kinfu fuse` folder whose report.json records a time window (--start / --end), only the poses inside
-it count: the observed region is what the fused frames saw.
+the input is a `kinfu fuse` folder whose report.json records a time window (a start and/or end time), only the poses
+inside it count: the observed region is what the fused frames saw.
+
+`evaluate_fusion` is the driver: paths in, a `FusionEvaluation` (the results document and what it was computed
+from) out. Tables are formatted by `evaluation.tables`, the error-coloured mesh is written by `report`.
 """
 
 from __future__ import annotations
@@ -32,13 +35,21 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import open3d as o3d
 from numba import njit, prange
+from scipy.spatial import cKDTree
 
 from kinfu_cli.core.errors import ConfigError, RecordingError, VolumeError
+from kinfu_cli.core.grid import UNKNOWN
+from kinfu_cli.core.progress import progress
+from kinfu_cli.evaluation.object_measures import PAPER_TABLE_1, ObjectMeasuresResult, object_measures
+from kinfu_cli.fusion.volume import TernaryVolume, load_volume
+from kinfu_cli.sim.sampling import sample_surface
+from kinfu_cli.sim.scenario import GroundTruth, load_ground_truth
+from kinfu_cli.sim.sensor import ideal_depth
 
 DEFAULT_THRESHOLD = 0.01  # m: completeness / precision distance
 DEFAULT_SPACING = 0.005  # m: true-surface sample spacing
-MAX_SAMPLES = 3_000_000
 STATES = ("after", "before")
 MESH_SUFFIXES = (".ply", ".obj", ".stl", ".off", ".gltf", ".glb")
 
@@ -77,7 +88,7 @@ class Reconstruction:
     vertices: np.ndarray
     triangles: np.ndarray
     source: Path
-    volume: object | None = None
+    volume: TernaryVolume | None = None
     volume_path: Path | None = None
 
     @property
@@ -88,8 +99,6 @@ class Reconstruction:
 def read_mesh_arrays(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     """(vertices (N, 3) float64, triangles (M, 3) int64) of a mesh or point-cloud file; VolumeError when it is
     missing, unreadable or has no vertices."""
-    import open3d as o3d
-
     path = Path(path)
     if not path.is_file():
         raise VolumeError(f"{path}: no such mesh file")
@@ -119,8 +128,6 @@ def load_reconstruction(path: str | os.PathLike, use_volume: bool = True) -> Rec
         v, f = read_mesh_arrays(mesh_path)
         vol, vol_path = None, None
         if use_volume and (path / "volume.npz").exists():
-            from kinfu_cli.fusion.volume import load_volume
-
             vol_path = path / "volume.npz"
             vol = load_volume(vol_path)
         return Reconstruction(v, f, mesh_path, vol, vol_path)
@@ -130,12 +137,12 @@ def load_reconstruction(path: str | os.PathLike, use_volume: bool = True) -> Rec
     return Reconstruction(v, f, path)
 
 
-def state_frames(gt, state: str, window: tuple | None = None) -> np.ndarray:
+def state_frames(gt: GroundTruth, state: str, window: tuple | None = None) -> np.ndarray:
     """Indices of the ground-truth camera poses that saw the scene in `state` (see module docstring), and, with
     window = (start_s, end_s) in seconds after the recording start (either may be None), only those whose stamp
-    is inside it (the frames a `kinfu fuse --start/--end` run used)."""
+    is inside it (the frames a time-limited `kinfu fuse` run used)."""
     if state not in STATES:
-        raise ConfigError(f"--state {state!r}: expected one of {', '.join(STATES)}")
+        raise ConfigError(f"expected one of {', '.join(STATES)}, got {state!r}", parameter="state")
     n = len(gt.poses)
     if n == 0:
         raise RecordingError(f"{gt.folder}/camera_poses.txt: no camera poses")
@@ -166,9 +173,8 @@ def fused_window(report: dict | None) -> tuple | None:
 
 
 # ---------------------------------------------------------------------------------------------- geometry
-def _raycasting_scene(vertices: np.ndarray, triangles: np.ndarray):
-    import open3d as o3d
-
+def mesh_scene(vertices: np.ndarray, triangles: np.ndarray) -> o3d.t.geometry.RaycastingScene:
+    """An open3d RaycastingScene of a mesh given as arrays (distances, visibility)."""
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(o3d.core.Tensor(np.ascontiguousarray(vertices, dtype=np.float32)),
                         o3d.core.Tensor(np.ascontiguousarray(triangles, dtype=np.uint32)))
@@ -178,60 +184,18 @@ def _raycasting_scene(vertices: np.ndarray, triangles: np.ndarray):
 def point_to_mesh_distance(points: np.ndarray, vertices: np.ndarray, triangles: np.ndarray, scene=None
                            ) -> np.ndarray:
     """Unsigned distance (N,) from each point to the mesh surface (open3d RaycastingScene.compute_distance)."""
-    import open3d as o3d
-
     pts = np.ascontiguousarray(points, dtype=np.float32).reshape(-1, 3)
     if len(pts) == 0:
         return np.zeros(0)
-    scene = scene if scene is not None else _raycasting_scene(vertices, triangles)
+    scene = scene if scene is not None else mesh_scene(vertices, triangles)
     return scene.compute_distance(o3d.core.Tensor(pts)).numpy().astype(np.float64)
 
 
 def distance_to_reconstruction(points: np.ndarray, rec: Reconstruction) -> np.ndarray:
     """Distance of points to the reconstructed surface (to its triangles; to its points for a cloud)."""
     if rec.is_cloud:
-        from scipy.spatial import cKDTree
-
         return cKDTree(rec.vertices).query(np.asarray(points, dtype=np.float64), workers=-1)[0]
     return point_to_mesh_distance(points, rec.vertices, rec.triangles)
-
-
-def sample_surface(vertices: np.ndarray, triangles: np.ndarray, spacing: float = DEFAULT_SPACING,
-                   seed: int = 0, max_samples: int = MAX_SAMPLES) -> tuple[np.ndarray, np.ndarray]:
-    """Uniform random points on a mesh, one per spacing^2 of area on average (area-weighted triangle choice,
-    uniform barycentric coordinates; at most max_samples, the spacing grows instead), and the unit normal of the
-    triangle each lies on (winding order: outward for the ground-truth meshes)."""
-    if not spacing > 0:
-        raise ConfigError(f"--spacing: expected a positive distance in metres, got {spacing}")
-    v = np.asarray(vertices, dtype=np.float64)
-    f = np.asarray(triangles, dtype=np.int64)
-    a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
-    cr = np.cross(b - a, c - a)
-    area2 = np.linalg.norm(cr, axis=1)
-    total = 0.5 * float(area2.sum())
-    if total <= 0:
-        return np.zeros((0, 3)), np.zeros((0, 3))
-    n = int(min(max_samples, max(1, round(total / spacing**2))))
-    rng = np.random.default_rng(seed)
-    tri = rng.choice(len(f), size=n, p=area2 / area2.sum())
-    r1, r2 = rng.random(n), rng.random(n)
-    s = np.sqrt(r1)
-    w0, w1, w2 = 1 - s, s * (1 - r2), s * r2
-    pts = w0[:, None] * a[tri] + w1[:, None] * b[tri] + w2[:, None] * c[tri]
-    normals = cr[tri] / np.maximum(area2[tri], 1e-30)[:, None]
-    return pts, normals
-
-
-def render_depth(scene, K: np.ndarray, width: int, height: int, T_world_camera: np.ndarray) -> np.ndarray:
-    """Optical-axis depth (H, W) of a RaycastingScene seen from a pinhole camera (inf = no hit)."""
-    import open3d as o3d
-
-    u, v = np.meshgrid(np.arange(width, dtype=np.float64), np.arange(height, dtype=np.float64))
-    d_cam = np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones_like(u)], axis=-1)
-    rays = np.empty((height, width, 6), dtype=np.float32)
-    rays[..., :3] = T_world_camera[:3, 3]
-    rays[..., 3:] = d_cam @ T_world_camera[:3, :3].T  # camera-z component 1: t_hit is the optical-axis depth
-    return scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy()
 
 
 def visible_mask(points: np.ndarray, normals: np.ndarray, scene, poses: np.ndarray, K: np.ndarray, width: int,
@@ -250,7 +214,7 @@ def visible_mask(points: np.ndarray, normals: np.ndarray, scene, poses: np.ndarr
     pix = 1.0 / min(K[0, 0], K[1, 1])
     for c0 in range(0, len(poses), max(1, int(chunk))):
         Ts = poses[c0:c0 + max(1, int(chunk))]
-        depths = np.stack([render_depth(scene, K, width, height, T) for T in Ts]).astype(np.float32)
+        depths = np.stack([ideal_depth(scene, K, width, height, T) for T in Ts]).astype(np.float32)
         _visible_kernel(pts, nrm, np.ascontiguousarray(Ts[:, :3, :3]), np.ascontiguousarray(Ts[:, :3, 3]), depths,
                         float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2]), float(min_depth),
                         float(max_depth), float(tolerance), pix, seen)
@@ -294,8 +258,6 @@ def visible_mask_exact(points: np.ndarray, normals: np.ndarray, scene, poses: np
     """Reference for visible_mask: the same image / range / facing tests, then one ray from the camera centre to
     every candidate point (open3d cast_rays); visible when nothing is hit before `stop_short` of the point.
     Exact but casts a ray per point and pose (see benchmarks/bench_eval_fusion.py)."""
-    import open3d as o3d
-
     pts = np.asarray(points, dtype=np.float64)
     nrm = np.asarray(normals, dtype=np.float64)
     K = np.asarray(K, dtype=np.float64)
@@ -356,10 +318,8 @@ class ReconstructionScore:
         return out
 
 
-def volume_coverage(volume, samples_visible: np.ndarray, samples_in_grid: np.ndarray) -> dict:
+def volume_coverage(volume: TernaryVolume, samples_visible: np.ndarray, samples_in_grid: np.ndarray) -> dict:
     """Label counts of the volume and the share of true-surface samples whose voxel is known (w > 0)."""
-    from kinfu_cli.core.grid import UNKNOWN
-
     grid = volume.ternary_grid()
     counts = grid.counts()
 
@@ -400,7 +360,7 @@ class ObservedSurface:
         return self.in_bounds[self.seen]
 
 
-def observed_surface(gt, state: str, bounds: tuple, spacing: float = DEFAULT_SPACING,
+def observed_surface(gt: GroundTruth, state: str, bounds: tuple, spacing: float = DEFAULT_SPACING,
                      visibility_tolerance: float = 0.005, seed: int = 0, scene=None,
                      frames: np.ndarray | None = None) -> ObservedSurface:
     """Sample the true `state` mesh uniformly and keep what the state's camera poses (or the given pose indices)
@@ -408,7 +368,7 @@ def observed_surface(gt, state: str, bounds: tuple, spacing: float = DEFAULT_SPA
     mesh = gt.mesh(state)
     tv = np.asarray(mesh.vertices, dtype=np.float64)
     tf = np.asarray(mesh.triangles, dtype=np.int64)
-    scene = scene if scene is not None else _raycasting_scene(tv, tf)
+    scene = scene if scene is not None else mesh_scene(tv, tf)
     frames = state_frames(gt, state) if frames is None else np.asarray(frames, dtype=np.int64)
     if len(frames) == 0:
         raise RecordingError(f"{gt.folder}: no ground-truth camera pose of the {state} state was used")
@@ -428,7 +388,7 @@ def reconstruction_bounds(rec: Reconstruction, margin: float = 0.05) -> tuple[np
     return rec.vertices.min(axis=0) - margin, rec.vertices.max(axis=0) + margin
 
 
-def score_reconstruction(rec: Reconstruction, gt, state: str = "after", threshold: float = DEFAULT_THRESHOLD,
+def score_reconstruction(rec: Reconstruction, gt: GroundTruth, state: str = "after", threshold: float = DEFAULT_THRESHOLD,
                          spacing: float = DEFAULT_SPACING, region_margin: float = 0.05,
                          visibility_tolerance: float = 0.005, seed: int = 0,
                          surface: ObservedSurface | None = None) -> ReconstructionScore:
@@ -436,13 +396,13 @@ def score_reconstruction(rec: Reconstruction, gt, state: str = "after", threshol
     surface: a precomputed `observed_surface(gt, state, reconstruction_bounds(rec), ...)` (to score several
     reconstructions of the same extent against one truth)."""
     if not threshold > 0:
-        raise ConfigError(f"--threshold: expected a positive distance in metres, got {threshold}")
+        raise ConfigError(f"expected a positive distance in metres, got {threshold}", parameter="threshold")
     if not region_margin >= 0:
-        raise ConfigError(f"region margin: expected a distance >= 0 m, got {region_margin}")
+        raise ConfigError(f"expected a distance >= 0 m, got {region_margin}", parameter="region_margin")
     mesh = gt.mesh(state)
     tv = np.asarray(mesh.vertices, dtype=np.float64)
     tf = np.asarray(mesh.triangles, dtype=np.int64)
-    scene = _raycasting_scene(tv, tf)
+    scene = mesh_scene(tv, tf)
     if surface is None:
         surface = observed_surface(gt, state, reconstruction_bounds(rec, region_margin), spacing,
                                    visibility_tolerance, seed, scene)
@@ -475,33 +435,6 @@ def score_reconstruction(rec: Reconstruction, gt, state: str = "after", threshol
                                surface.frames, coverage, notes, per_vertex)
 
 
-def write_error_mesh(path: str | os.PathLike, rec: Reconstruction, distances: np.ndarray, vmax: float) -> Path:
-    """The reconstruction with vertex colours by distance to the truth (matplotlib 'turbo': dark blue 0 .. dark
-    red >= vmax; grey where not evaluated), written atomically (PLY/OBJ/... by suffix)."""
-    import open3d as o3d
-    from matplotlib import colormaps
-
-    from kinfu_cli.core.atomic import atomic_path
-
-    d = np.asarray(distances, dtype=np.float64)
-    cols = colormaps["turbo"](np.clip(np.nan_to_num(d, nan=0.0) / vmax, 0.0, 1.0))[:, :3]
-    cols[~np.isfinite(d)] = 0.6
-    path = Path(path)
-    with atomic_path(path) as tmp:
-        if rec.is_cloud:
-            geo = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(rec.vertices))
-            geo.colors = o3d.utility.Vector3dVector(cols)
-            ok = o3d.io.write_point_cloud(str(tmp), geo)
-        else:
-            geo = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(rec.vertices),
-                                            o3d.utility.Vector3iVector(rec.triangles.astype(np.int32)))
-            geo.vertex_colors = o3d.utility.Vector3dVector(cols)
-            ok = o3d.io.write_triangle_mesh(str(tmp), geo)
-        if not ok:
-            raise ConfigError(f"--error-mesh {path}: open3d could not write this file type (use .ply)")
-    return path
-
-
 def report_json_of(path: str | os.PathLike) -> dict | None:
     """The report.json beside a `kinfu fuse` output, if any (for provenance in the results)."""
     p = Path(path)
@@ -519,22 +452,29 @@ POSE_MODE_LABELS = {"forced": "robot kinematics (forced)", "icp": "egomotion (ic
                     "hint": "icp, kinematics hint", "topic": "pose topic"}
 
 
-def evaluate_fusion(path, ground_truth, state: str = "after", threshold: float = 0.01, spacing: float = 0.005,
-                    margin: float = 0.02, min_height: float = 0.005, footprint: str = "rect", use_volume: bool = True,
-                    seed: int = 0, quiet: bool = True, error_mesh: str | os.PathLike | None = None) -> dict:
-    """Score a `kinfu fuse` output folder (mesh.ply [+ volume.npz]) or a mesh file against a `kinfu synth`
-    ground-truth folder; returns the results document that `kinfu eval fusion` prints and writes. error_mesh: also
-    write the reconstruction coloured by its distance to the truth (0 .. 2 x threshold) there."""
-    from kinfu_cli.evaluation.object_measures import PAPER_TABLE_1, object_measures
-    from kinfu_cli.core.progress import progress
-    from kinfu_cli.sim.scenario import load_ground_truth
+@dataclass
+class FusionEvaluation:
+    """What `evaluate_fusion` computed: the results document (`kinfu eval fusion`'s JSON; its
+    input.error_mesh is None until a caller writes the error-coloured mesh), the reconstruction and its score
+    (per-vertex distances for that mesh)."""
 
-    for name, val in (("--threshold", threshold), ("--spacing", spacing)):
+    document: dict
+    reconstruction: Reconstruction
+    score: ReconstructionScore
+
+
+def evaluate_fusion(path: str | os.PathLike, ground_truth: str | os.PathLike, state: str = "after",
+                    threshold: float = DEFAULT_THRESHOLD, spacing: float = DEFAULT_SPACING, margin: float = 0.02,
+                    min_height: float = 0.005, footprint: str = "rect", use_volume: bool = True, seed: int = 0,
+                    quiet: bool = True) -> FusionEvaluation:
+    """Score a `kinfu fuse` output folder (mesh.ply [+ volume.npz]) or a mesh file against a `kinfu synth`
+    ground-truth folder (module docstring); quiet: no progress bar."""
+    for name, val in (("threshold", threshold), ("spacing", spacing)):
         if not (isinstance(val, (int, float)) and math.isfinite(val) and val > 0):
-            raise ConfigError(f"{name}: expected a positive distance in metres, got {val}")
-    for name, val in (("--margin", margin), ("--min-height", min_height)):
+            raise ConfigError(f"expected a positive distance in metres, got {val}", parameter=name)
+    for name, val in (("margin", margin), ("min_height", min_height)):
         if not (isinstance(val, (int, float)) and math.isfinite(val) and val >= 0):
-            raise ConfigError(f"{name}: expected a distance >= 0 m, got {val}")
+            raise ConfigError(f"expected a distance >= 0 m, got {val}", parameter=name)
     t0 = time.perf_counter()
     gt = rec = score = measures = surface = frames = None
     report = report_json_of(path)
@@ -543,10 +483,10 @@ def evaluate_fusion(path, ground_truth, state: str = "after", threshold: float =
                          quiet=quiet):
         if step == "ground truth":
             gt = load_ground_truth(ground_truth)
-            frames = state_frames(gt, state, window)  # checks --state and the poses before the heavy work
+            frames = state_frames(gt, state, window)  # checks the state and the poses before the heavy work
             if len(frames) == 0:
                 raise ConfigError(f"{path}: the fused time window {window} s holds no ground-truth camera pose of "
-                                  f"the {state} state (use --state after?)")
+                                  f"the {state} state (compare with the after state?)")
         elif step == "reconstruction":
             rec = load_reconstruction(path, use_volume=use_volume)
         elif step == "distances":
@@ -556,8 +496,13 @@ def evaluate_fusion(path, ground_truth, state: str = "after", threshold: float =
         else:
             measures = object_measures(rec.vertices, gt, state, margin=margin, min_height=min_height,
                                        footprint=footprint, surface=(surface.in_bounds, surface.seen))
-    if error_mesh is not None:
-        write_error_mesh(error_mesh, rec, score.vertex_distances, 2.0 * threshold)
+    return FusionEvaluation(_document(rec, gt, state, window, report, score, measures, time.perf_counter() - t0),
+                            rec, score)
+
+
+def _document(rec: Reconstruction, gt: GroundTruth, state: str, window: tuple | None, report: dict | None,
+              score: ReconstructionScore, measures: ObjectMeasuresResult, seconds: float) -> dict:
+    """The results document, strict JSON (NaN / inf as null)."""
     mode = (report or {}).get("pose_mode")
     tracking = POSE_MODE_LABELS.get(mode, mode or "as fused")
     objs = measures.to_json()
@@ -565,14 +510,13 @@ def evaluate_fusion(path, ground_truth, state: str = "after", threshold: float =
         "input": {"reconstruction": str(rec.source), "volume": str(rec.volume_path) if rec.volume_path else None,
                   "vertices": int(len(rec.vertices)), "triangles": int(len(rec.triangles)),
                   "ground_truth": str(gt.folder), "state": state, "pose_mode": tracking,
-                  "fused_window_s": list(window) if window else None,
-                  "error_mesh": str(error_mesh) if error_mesh is not None else None},
+                  "fused_window_s": list(window) if window else None, "error_mesh": None},
         "reconstruction": score.to_json(),
         "objects": objs,
         "table_1": PAPER_TABLE_1 + [{"scenario": "this run", "tracking": tracking, "mean_abs": objs["mean_abs"],
                                      "std": objs["std"], "objects_measured": objs["objects_measured"],
                                      "objects_total": objs["objects_total"]}],
-        "seconds": time.perf_counter() - t0,
+        "seconds": seconds,
     }
     return _finite(doc)
 
@@ -588,59 +532,3 @@ def _finite(obj):
     if isinstance(obj, np.integer):
         return int(obj)
     return obj
-
-
-def _mm(x) -> str:
-    if x is None or (isinstance(x, float) and not math.isfinite(x)):
-        return "   -  "
-    return f"{x * 1000:6.1f}"
-
-
-def format_fusion_tables(doc: dict) -> str:
-    """The human-readable tables (millimetres; Table 1 in metres like the paper)."""
-    r = doc["reconstruction"]
-    a, c = r["accuracy"], r["completeness_distances"]
-    lines = [f"kinfu eval fusion: {doc['input']['reconstruction']} vs {doc['input']['ground_truth']} "
-             f"({doc['input']['state']} state, {r['frames']} true camera poses)", "",
-             "Reconstruction error (mm)      mean  median     RMS     p95     max       n",
-             f"  accuracy (recon -> true) {_mm(a['mean'])}  {_mm(a['median'])}  {_mm(a['rms'])}  {_mm(a['p95'])}  "
-             f"{_mm(a['max'])}  {a['count']:6d}",
-             f"  completeness (true -> rec){_mm(c['mean'])}  {_mm(c['median'])}  {_mm(c['rms'])}  {_mm(c['p95'])}  "
-             f"{_mm(c['max'])}  {c['count']:6d}",
-             f"  within {r['threshold'] * 1000:.0f} mm: precision {r['precision']:.3f}  completeness "
-             f"{r['completeness']:.3f}  F-score {r['fscore']:.3f}  (observed true surface: {r['samples_observed']} "
-             f"samples every ~{r['spacing'] * 1000:.0f} mm)"]
-    v = r.get("volume")
-    if v:
-        cnt = v["counts"]
-        share = v["visible_surface_known_share"]
-        lines += ["", f"Volume {'x'.join(map(str, v['shape']))} at {v['voxel_size'] * 1000:.2f} mm: occupied "
-                      f"{cnt['occupied']}, empty {cnt['empty']}, unknown {cnt['unknown']} "
-                      f"({v['unknown_share'] * 100:.1f} % unknown)",
-                  f"  true surface observed (voxel known): {share * 100 if share is not None else float('nan'):.1f} % "
-                  f"of the visible surface, {(v['surface_in_grid_known_share'] or 0) * 100:.1f} % of all true "
-                  f"surface in the grid"]
-    o = doc["objects"]
-    lines += ["", "Objects (mm)   shape      points   height true/err    major true/err    minor true/err   seen"]
-    for row in o["objects"]:
-        t, e = row["true"], row["error"] or {}
-        seen = row.get("surface_seen_share")
-        lines.append(f"  {row['id']:<12} {row['shape']:<9} {row['points']:6d}   {_mm(t['height'])} {_mm(e.get('height'))}"
-                     f"    {_mm(t['major'])} {_mm(e.get('major'))}    {_mm(t['minor'])} {_mm(e.get('minor'))}"
-                     + (f"   {seen * 100:3.0f} %" if seen is not None else "      -")
-                     + ("   (not measured)" if row["error"] is None else ""))
-    lines.append("  (seen: share of the object's true surface, bottom excluded, visible from the true camera poses)")
-    pl = o["table_plane"]
-    if pl.get("source", "fitted") == "fitted":
-        lines.append(f"  table plane fit: tilt {pl['tilt_deg']:.2f} deg, offset {pl['offset'] * 1000:+.1f} mm")
-    else:
-        lines.append(f"  table plane: {pl['source']}")
-    lines += ["", "Table 1 (Monica et al. RAS 2016): 3D object reconstruction errors (height, major and minor axis)",
-              "  scenario   tracking                   mean abs. (m)   st. dev. (m)"]
-    for row in doc["table_1"]:
-        ma = "-" if row["mean_abs"] is None or not math.isfinite(row["mean_abs"]) else f"{row['mean_abs']:.3f}"
-        sd = "-" if row["std"] is None or not math.isfinite(row["std"]) else f"{row['std']:.3f}"
-        n = (f"   ({row['objects_measured']}/{row['objects_total']} objects measured)"
-             if "objects_measured" in row else "")
-        lines.append(f"  {str(row['scenario']):<10} {row['tracking']:<26} {ma:>13}   {sd:>12}{n}")
-    return "\n".join(lines)

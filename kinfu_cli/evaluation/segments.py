@@ -13,14 +13,17 @@
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
+import open3d as o3d
 from scipy.spatial import cKDTree
 
 from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.fusion.volume import TernaryVolume
+from kinfu_cli.segmentation.pipeline import SegmentOptions, analyse_volume
+from kinfu_cli.sim.scenario import make_scenario
+from kinfu_cli.sim.scene import Scene
 
 
 def boundary_set(points: np.ndarray, labels: np.ndarray, t_eval: float = 0.02) -> np.ndarray:
@@ -128,8 +131,6 @@ def score_segmentation(points: np.ndarray, labels: np.ndarray, gt_labels: np.nda
 def gt_labels_from_meshes(points: np.ndarray, meshes: dict[int, object], max_distance: float = 0.015
                           ) -> np.ndarray:
     """Label of the nearest ground-truth mesh per point (-1 beyond `max_distance`)."""
-    import open3d as o3d
-
     pts = o3d.core.Tensor(np.asarray(points, dtype=np.float32))
     ids = sorted(meshes)
     dist = np.full((len(points), len(ids)), np.inf, dtype=np.float64)
@@ -142,41 +143,12 @@ def gt_labels_from_meshes(points: np.ndarray, meshes: dict[int, object], max_dis
     return np.where(dist[np.arange(len(points)), best] <= max_distance, lab, -1)
 
 
-def load_gt_meshes(ground_truth_dir: str | os.PathLike) -> tuple[dict[int, object], dict[int, str]]:
-    """Meshes of a synth ground-truth folder: `objects/table.ply` -> label 0, `objects/<id>.ply` -> labels
-    1.. in sorted order. Returns (label -> open3d mesh, label -> file stem)."""
-    import open3d as o3d
-
-    root = Path(ground_truth_dir)
-    folder = root / "objects" if (root / "objects").is_dir() else root
-    files = sorted(folder.glob("*.ply"))
-    if not files:
-        raise ConfigError(f"{folder}: no ground-truth meshes (*.ply) found")
-    meshes: dict[int, object] = {}
-    names: dict[int, str] = {}
-    nxt = 1
-    for f in files:
-        m = o3d.io.read_triangle_mesh(str(f))
-        if not len(m.triangles):
-            continue
-        if f.stem == "table":
-            lab = 0
-        else:
-            lab, nxt = nxt, nxt + 1
-        meshes[lab] = m
-        names[lab] = f.stem
-    return meshes, names
-
-
 def fuse_synthetic_scene(seed: int = 0, *, resolution: int = 256, size: float = 1.6, width: int = 320,
-                         height: int = 240, frames: int = 36, noise: bool = True):
+                         height: int = 240, frames: int = 36, noise: bool = True) -> tuple[TernaryVolume, Scene]:
     """Fuse the after-change state of the synth scenario `seed` from all its camera poses.
 
-    Returns (volume (fusion TernaryVolume), scene after the change (kinfu_cli.sim.scene.Scene)).
+    Returns (volume, scene after the change).
     """
-    from kinfu_cli.fusion.volume import TernaryVolume
-    from kinfu_cli.sim.scenario import make_scenario
-
     sc = make_scenario(seed, width=width, height=height, frames=frames, noise=noise)
     after = sc.scene_after
     c = np.array([after.table.center[0], after.table.center[1], after.table.top_z])
@@ -188,7 +160,7 @@ def fuse_synthetic_scene(seed: int = 0, *, resolution: int = 256, size: float = 
     return vol, after
 
 
-def scene_gt_labels(points: np.ndarray, scene, max_distance: float = 0.015) -> tuple[np.ndarray, dict[int, str]]:
+def scene_gt_labels(points: np.ndarray, scene: Scene, max_distance: float = 0.015) -> tuple[np.ndarray, dict[int, str]]:
     """Ground-truth label per point: 0 for table and floor, 1.. for the present objects (nearest mesh)."""
     meshes = {0: scene.table.mesh()}
     names = {0: "table"}
@@ -205,8 +177,6 @@ def scene_gt_labels(points: np.ndarray, scene, max_distance: float = 0.015) -> t
 def evaluate_synthetic_scenes(seeds=(0, 1, 2), *, resolution: int = 256, size: float = 1.6, options=None,
                               t_eval: float = 0.02) -> dict:
     """Segmentation of fused synth scenes vs their object meshes: boundary P/R at t_eval, object recall."""
-    from kinfu_cli.segmentation.pipeline import SegmentOptions, analyse_volume
-
     options = options or SegmentOptions(superquadrics=False)
     rows = []
     for seed in seeds:

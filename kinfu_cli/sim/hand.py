@@ -20,6 +20,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
 from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.io import polhemus
 from kinfu_cli.io.trajectory import Trajectory
 from kinfu_cli.sim.scene import Table
 
@@ -254,9 +255,7 @@ def write_polhemus(path: str | os.PathLike, traj: Trajectory, rate_hz: float = 1
     Resamples first when the trajectory's spacing is not 1 / rate_hz; the file itself is written by the
     Polhemus reader's module (kinfu_cli.io.polhemus.write_polhemus).
     """
-    from kinfu_cli.io.polhemus import write_polhemus as _write
-
     traj.validate()
     if np.abs(np.diff(traj.t) - 1.0 / rate_hz).max() > 1e-6:
         traj = resample(traj, rate_hz)
-    _write(path, traj)
+    polhemus.write_polhemus(path, traj)

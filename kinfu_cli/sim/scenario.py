@@ -14,24 +14,31 @@ Topics: /camera/depth/image_raw (16UC1 mm) or /camera/depth/image_raw/compressed
 /camera/color/image_raw (rgb8) or /camera/color/image_raw/compressed (jpeg/png), /camera/depth/camera_info, /tf,
 /tf_static, /hand/pose (geometry_msgs/PoseStamped in `world`). Depth and colour share the `camera_optical` frame.
 Optionally (`camera_pose_topic`) a geometry_msgs/PoseStamped topic with the pose of `camera_optical` in `world` at
-every depth frame stamp (the pose the TF chain gives there), for `kinfu fuse --pose topic`.
+every depth frame stamp (the pose the TF chain gives there), for fusing with poses from a topic.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import json
 import os
+from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import open3d as o3d
 
-from kinfu_cli.core.errors import ConfigError
-from kinfu_cli.io.trajectory import Trajectory
-from kinfu_cli.sim.hand import Action, HandChange, synth_hand_trajectory
+from kinfu_cli.core.atomic import atomic_dir, write_json
+from kinfu_cli.core.errors import ConfigError, RecordingError
 from kinfu_cli.core.poses import look_at
-from kinfu_cli.sim.robot import CAMERA_FRAME, WORLD_FRAME, RobotArm
-from kinfu_cli.sim.scene import PALETTE, Scene, make_tabletop_scene, random_object
+from kinfu_cli.core.progress import progress
+from kinfu_cli.io.polhemus import read_polhemus
+from kinfu_cli.io.trajectory import Trajectory
+from kinfu_cli.io.writers import RecordingWriter
+from kinfu_cli.sim.hand import Action, HandChange, synth_hand_trajectory, write_polhemus
+from kinfu_cli.sim.robot import CAMERA_FRAME, LINKS, WORLD_FRAME, RobotArm
+from kinfu_cli.sim.scene import FLOOR_COLOUR, PALETTE, TABLE_COLOUR, Scene, make_tabletop_scene, random_object
 from kinfu_cli.sim.sensor import DepthSensor, SensorFrame, kinect_v1_intrinsics
 
 KINDS = ("place", "remove", "pick-and-place")
@@ -103,15 +110,16 @@ def make_scenario(seed: int = 0, kind: str = "pick-and-place", width: int = 320,
     """Build a seeded scenario. kind: place | remove | pick-and-place. frames: total depth frames, `after_fraction`
     of them after the change (at least 1 on each side)."""
     if kind not in KINDS:
-        raise ConfigError(f"--scenario {kind!r}: expected one of {', '.join(KINDS)}")
+        raise ConfigError(f"expected one of {', '.join(KINDS)}, got {kind!r}", parameter="kind")
     if frames < 2:
-        raise ConfigError(f"--frames {frames}: expected at least 2 (scan and after the change)")
+        raise ConfigError(f"expected at least 2 (scan and after the change), got {frames}", parameter="frames")
     if width < 8 or height < 6 or width > 4096 or height > 4096:
-        raise ConfigError(f"--width/--height {width}x{height}: expected 8x6 to 4096x4096 pixels")
+        raise ConfigError(f"expected 8x6 to 4096x4096 pixels, got {width}x{height}", parameter="width/height")
     if not hand_rate_hz > 0 or not frame_rate_hz > 0:
-        raise ConfigError("--hand-rate and the frame rate must be positive")
+        raise ConfigError(f"expected positive rates in Hz, got {hand_rate_hz} and {frame_rate_hz}",
+                          parameter="hand_rate_hz/frame_rate_hz")
     if kind in ("remove", "pick-and-place") and n_objects < 1:
-        raise ConfigError(f"--scenario {kind} needs at least one object (--n-objects {n_objects})")
+        raise ConfigError(f"the {kind} scenario needs at least one object, got {n_objects}", parameter="n_objects")
     rng = np.random.default_rng([seed, 7])
     scene = make_tabletop_scene(seed, n_objects)
     table = scene.table
@@ -230,17 +238,12 @@ def write_recordings(scenario: Scenario, paths: list[str | os.PathLike], depth_f
     camera_pose_topic: also write geometry_msgs/PoseStamped (frame `world`) on this topic at every depth frame
     stamp: the true pose of the camera optical frame in `world` (T_world_camera, as the TF chain gives it).
     """
-    from contextlib import ExitStack
-
-    from kinfu_cli.io.writers import RecordingWriter
-    from kinfu_cli.core.progress import progress
-
     if depth_format not in ("png", "raw"):
-        raise ConfigError(f"--depth-format {depth_format!r}: expected png or raw")
+        raise ConfigError(f"expected png or raw, got {depth_format!r}", parameter="depth_format")
     if not 1 <= int(jpeg_quality) <= 100:
-        raise ConfigError(f"--jpeg-quality {jpeg_quality}: expected 1..100")
+        raise ConfigError(f"expected 1..100, got {jpeg_quality}", parameter="jpeg_quality")
     if color_format not in ("jpeg", "png", "raw"):
-        raise ConfigError(f"--color-format {color_format!r}: expected jpeg, png or raw")
+        raise ConfigError(f"expected jpeg, png or raw, got {color_format!r}", parameter="color_format")
     check_camera_pose_topic(camera_pose_topic, depth_format, color_format)
     sc = scenario
     events = _events(sc)
@@ -280,11 +283,6 @@ def write_recordings(scenario: Scenario, paths: list[str | os.PathLike], depth_f
                         w.write_compressed_image(COLOR_TOPIC + "/compressed", stamp, CAMERA_FRAME, fr.color,
                                                  fmt=color_format, quality=jpeg_quality)
     return [Path(p) for p in paths]
-
-
-def write_recording(scenario: Scenario, path: str | os.PathLike, **kwargs) -> Path:
-    """Write one container (see write_recordings)."""
-    return write_recordings(scenario, [path], **kwargs)[0]
 
 
 def _compression_for(path, compression: str | None) -> str | None:
@@ -332,24 +330,21 @@ def recording_topics(depth_format: str = "png", color_format: str = "jpeg",
 
 
 def check_camera_pose_topic(topic: str | None, depth_format: str = "png", color_format: str = "jpeg") -> None:
-    """ConfigError naming --camera-pose-topic unless it is None or an absolute topic name of its own."""
+    """ConfigError about the camera pose topic unless it is None or an absolute topic name of its own."""
     if topic is None:
         return
     taken = set(recording_topics(depth_format, color_format).values())
     if not topic.startswith("/") or len(topic) < 2 or any(c.isspace() for c in topic) or topic.endswith("/"):
-        raise ConfigError(f"--camera-pose-topic {topic!r}: expected an absolute topic name such as /camera/pose")
+        raise ConfigError(f"expected an absolute topic name such as /camera/pose, got {topic!r}",
+                          parameter="camera_pose_topic")
     if topic in taken:
-        raise ConfigError(f"--camera-pose-topic {topic}: already used by the recording (topics: "
-                          f"{', '.join(sorted(taken))})")
+        raise ConfigError(f"{topic} is already used by the recording (topics: {', '.join(sorted(taken))})",
+                          parameter="camera_pose_topic")
 
 
 def write_ground_truth(scenario: Scenario, folder: str | os.PathLike, topics: dict | None = None) -> Path:
     """Write ground truth into `folder` (atomically, as a whole): scene_before.ply, scene_after.ply, objects/<id>.ply
     + table.ply + floor.ply (after state), changes.json, camera_poses.txt, hand.traj (Polhemus format, 100 Hz)."""
-    from kinfu_cli.core.atomic import atomic_dir
-    from kinfu_cli.io.polhemus import write_polhemus
-    from kinfu_cli.sim.hand import resample
-
     sc = scenario
     with atomic_dir(folder) as tmp:
         for name, scene in (("scene_before.ply", sc.scene_before), ("scene_after.ply", sc.scene_after)):
@@ -359,20 +354,15 @@ def write_ground_truth(scenario: Scenario, folder: str | os.PathLike, topics: di
             m = o.mesh
             m.paint_uniform_color(o.colour)
             _write_mesh(tmp / "objects" / f"{o.id}.ply", m)
-        from kinfu_cli.sim.scene import FLOOR_COLOUR, TABLE_COLOUR
-
         _write_mesh(tmp / "objects" / "table.ply", sc.scene_after.table.mesh().paint_uniform_color(TABLE_COLOUR))
         _write_mesh(tmp / "objects" / "floor.ply", sc.scene_after.floor_mesh().paint_uniform_color(FLOOR_COLOUR))
-        (tmp / "changes.json").write_text(_json(ground_truth_json(sc, topics)))
+        write_json(tmp / "changes.json", ground_truth_json(sc, topics))
         lines = ["# stamp_s (Unix seconds of the depth message) then the true T_world_camera, 16 numbers row-major"]
         for f in sc.frames:
             lines.append(f"{f.stamp_ns // 1_000_000_000}.{f.stamp_ns % 1_000_000_000:09d} "
                          + " ".join(f"{v:.9f}" for v in f.T_world_camera.reshape(-1)))
         (tmp / "camera_poses.txt").write_text("\n".join(lines) + "\n")
-        hand = sc.hand
-        if abs(sc.hand_rate_hz - 100.0) > 1e-9:
-            hand = resample(hand, 100.0)
-        write_polhemus(tmp / "hand.traj", hand)
+        write_polhemus(tmp / "hand.traj", sc.hand, rate_hz=100.0)
     return Path(folder)
 
 
@@ -408,24 +398,13 @@ def ground_truth_json(sc: Scenario, topics: dict | None = None) -> dict:
                  "start_time": float(sc.hand.t[0]), "end_time": float(sc.hand.t[-1]),
                  "traj_file": "hand.traj (100 Hz, t = start_time + i / 100)"},
         "frames_tree": {"world_frame": WORLD_FRAME, "camera_frame": CAMERA_FRAME,
-                        "chain": ["world", "base_link", "link1", "link2", "link3", "link4", "link5", "link6",
-                                  "wrist", CAMERA_FRAME]},
+                        "chain": [WORLD_FRAME, *LINKS, CAMERA_FRAME]},
         "topics": topics or recording_topics(),
         "time_unit": "seconds after t0_ns (the recording starts at t0_ns)",
     }
 
 
-def _json(obj) -> str:
-    import json
-
-    from kinfu_cli.core.atomic import _json_default
-
-    return json.dumps(obj, indent=2, default=_json_default) + "\n"
-
-
-def _write_mesh(path: Path, mesh) -> None:
-    import open3d as o3d
-
+def _write_mesh(path: Path, mesh: o3d.geometry.TriangleMesh) -> None:
     mesh.compute_vertex_normals()
     if not o3d.io.write_triangle_mesh(str(path), mesh, write_ascii=False, compressed=False,
                                       write_vertex_normals=False, print_progress=False):
@@ -475,8 +454,6 @@ class GroundTruth:
 
     def hand(self) -> Trajectory:
         """The hand trajectory from hand.traj, in `world`, t in seconds after t0_ns (as on /hand/pose)."""
-        from kinfu_cli.io.polhemus import read_polhemus
-
         tr = read_polhemus(self.folder / "hand.traj")
         start = float(self.info.get("hand", {}).get("start_time", 0.0))
         return Trajectory(tr.t + start, tr.positions, tr.rotations, frame=WORLD_FRAME, source=str(tr.source),
@@ -485,10 +462,6 @@ class GroundTruth:
 
 def load_ground_truth(folder: str | os.PathLike) -> GroundTruth:
     """Read a ground_truth/ folder written by `kinfu synth` (or the recording folder holding it)."""
-    import json
-
-    from kinfu_cli.core.errors import RecordingError
-
     folder = Path(folder)
     if (folder / "ground_truth" / "changes.json").exists():
         folder = folder / "ground_truth"
@@ -525,11 +498,7 @@ def load_ground_truth(folder: str | os.PathLike) -> GroundTruth:
                        np.array(poses, dtype=float).reshape(-1, 4, 4))
 
 
-def _read_mesh(path: Path):
-    import open3d as o3d
-
-    from kinfu_cli.core.errors import RecordingError
-
+def _read_mesh(path: Path) -> o3d.geometry.TriangleMesh:
     if not path.exists():
         raise RecordingError(f"{path}: missing ground-truth mesh")
     mesh = o3d.io.read_triangle_mesh(str(path))

@@ -6,7 +6,13 @@ World frame: z up, metres. The table is centred at (0, 0) in x-y, its top at z =
 A `Scene` is immutable in use: `scene.with_change(...)` returns a new scene with one object placed, removed or moved,
 so a recording scenario keeps both states. `scene.mesh()` is the whole scene as one open3d TriangleMesh (what the
 sensor sees), `scene.raycasting_scene()` the same ready for open3d's RaycastingScene with a label and a colour per
-geometry id (the simulated sensor uses those for colour and label images).
+geometry id (the simulated sensor uses those for colour and label images). `scene.sdf(points)` is the exact signed
+distance to the same geometry (analytic, per shape), for ideal TSDF volumes (`kinfu_cli.sim.tsdf`) and ground-truth
+labels (`scene.nearest_labels`).
+
+Layouts: `make_tabletop_scene(seed)` is the synth recording's random tabletop; `primitive_tabletop_scene(seed)` a
+tabletop of boxes, cylinders and spheres with one box stacked on another (segmentation tests); `box_scene()` three
+boxes on a slab at z = 0 (fusion tests). Any other scene is `Scene(table, (resting_object(...), ...))`.
 """
 
 from __future__ import annotations
@@ -35,7 +41,8 @@ LABEL_NONE, LABEL_FLOOR, LABEL_TABLE = 0, 1, 2
 
 @dataclass(frozen=True)
 class Table:
-    """A table: top centred at (center[0], center[1], top_z), size (x, y) metres, with four legs."""
+    """A table: top centred at (center[0], center[1], top_z), size (x, y) metres, with four legs (none when
+    leg_width is 0 or the top is at floor height)."""
 
     center: tuple[float, float] = (0.0, 0.0)
     size: tuple[float, float] = (1.2, 0.8)
@@ -50,17 +57,34 @@ class Table:
         return np.all(np.abs(xy - np.asarray(self.center)) <= half, axis=-1)
 
     def mesh(self) -> o3d.geometry.TriangleMesh:
-        sx, sy = self.size
-        cx, cy = self.center
-        top = _box_mesh((sx, sy, self.thickness), (cx, cy, self.top_z - self.thickness / 2))
-        legs_h = self.top_z - self.thickness
-        inset = 0.06
-        for dx in (-1, 1):
-            for dy in (-1, 1):
-                c = (cx + dx * (sx / 2 - inset), cy + dy * (sy / 2 - inset), legs_h / 2)
-                top += _box_mesh((self.leg_width, self.leg_width, legs_h), c)
+        top = _box_mesh(*self._top_box())
+        for extents, centre in self._leg_boxes():
+            top += _box_mesh(extents, centre)
         top.compute_vertex_normals()
         return top
+
+    def sdf(self, points: np.ndarray) -> np.ndarray:
+        """Signed distance (m, negative inside) of (..., 3) points to the top and legs."""
+        boxes = [self._top_box()] + self._leg_boxes()
+        return np.min([_box_sdf(np.asarray(points, dtype=np.float64) - c, np.asarray(e) / 2) for e, c in boxes],
+                      axis=0)
+
+    def _top_box(self) -> tuple[tuple, tuple]:
+        """(extents, centre) of the top slab."""
+        return (self.size[0], self.size[1], self.thickness), (self.center[0], self.center[1],
+                                                               self.top_z - self.thickness / 2)
+
+    def _leg_boxes(self) -> list[tuple[tuple, tuple]]:
+        """(extents, centre) of each leg, from the floor (z = 0) to the underside of the top."""
+        legs_h = self.top_z - self.thickness
+        if self.leg_width <= 0 or legs_h <= 0:
+            return []
+        sx, sy = self.size
+        cx, cy = self.center
+        inset = 0.06
+        return [((self.leg_width, self.leg_width, legs_h),
+                 (cx + dx * (sx / 2 - inset), cy + dy * (sy / 2 - inset), legs_h / 2))
+                for dx in (-1, 1) for dy in (-1, 1)]
 
     def to_json(self) -> dict:
         return {"center": [float(self.center[0]), float(self.center[1])], "size": [float(s) for s in self.size],
@@ -95,6 +119,26 @@ class SceneObject:
     def mesh(self) -> o3d.geometry.TriangleMesh:
         """The object's mesh in world coordinates (built on demand)."""
         return _object_mesh(self)
+
+    def sdf(self, points: np.ndarray) -> np.ndarray:
+        """Exact signed distance (m, negative inside) of (..., 3) world points to the shape (not its mesh)."""
+        q = np.asarray(points, dtype=np.float64) - np.asarray(self.center, dtype=np.float64)
+        p = self.params
+        if self.shape == "sphere":
+            return np.linalg.norm(q, axis=-1) - p["radius"]
+        c, s = np.cos(self.yaw), np.sin(self.yaw)
+        local = np.stack([c * q[..., 0] + s * q[..., 1], -s * q[..., 0] + c * q[..., 1], q[..., 2]], axis=-1)
+        if self.shape == "box":
+            return _box_sdf(local, np.asarray(self.size, dtype=np.float64) / 2)
+        radial = np.hypot(local[..., 0], local[..., 1])
+        if self.shape == "cylinder":
+            d = np.stack([radial - p["radius"], np.abs(local[..., 2]) - p["height"] / 2], axis=-1)
+            return np.linalg.norm(np.maximum(d, 0.0), axis=-1) + np.minimum(d.max(axis=-1), 0.0)
+        if self.shape == "torus":
+            return np.hypot(radial - p["torus_radius"], local[..., 2]) - p["tube_radius"]
+        if self.shape == "cone":
+            return _cone_sdf(radial, local[..., 2], p["radius"], p["height"] / 2)
+        raise ConfigError(f"unknown shape {self.shape!r}")
 
     def moved_to(self, xy: tuple[float, float], yaw: float | None = None) -> "SceneObject":
         return dataclasses.replace(self, center=(float(xy[0]), float(xy[1]), float(self.center[2])),
@@ -142,9 +186,13 @@ class Scene:
         return 3 + [o.id for o in self.objects].index(object_id)
 
     def floor_mesh(self) -> o3d.geometry.TriangleMesh:
-        m = _box_mesh((4.0, 4.0, 0.02), (self.table.center[0], self.table.center[1], -0.01))
+        m = _box_mesh(*self._floor_box())
         m.compute_vertex_normals()
         return m
+
+    def _floor_box(self) -> tuple[tuple, tuple]:
+        """(extents, centre) of the floor: 4 m square, its top at z = 0."""
+        return (4.0, 4.0, 0.02), (self.table.center[0], self.table.center[1], -0.01)
 
     def mesh(self, include_table: bool = True, include_floor: bool | None = None,
              colours: bool = True) -> o3d.geometry.TriangleMesh:
@@ -163,6 +211,30 @@ class Scene:
             out += m
         out.compute_vertex_normals()
         return out
+
+    def sdf(self, points: np.ndarray) -> np.ndarray:
+        """Signed distance (m, negative inside) of (..., 3) points to the union of the present geometry."""
+        return np.min([d for _, d in self._part_distances(points)], axis=0)
+
+    def nearest_labels(self, points: np.ndarray, max_distance: float = np.inf) -> np.ndarray:
+        """Label (as in label images) of the present part nearest to each of the (..., 3) points by exact
+        distance to its surface; LABEL_NONE where that is farther than `max_distance`."""
+        parts = self._part_distances(points)
+        dist = np.stack([np.abs(d) for _, d in parts], axis=-1)
+        idx = np.argmin(dist, axis=-1)
+        labels = np.array([label for label, _ in parts])[idx]
+        return np.where(dist.min(axis=-1) <= max_distance, labels, LABEL_NONE)
+
+    def _part_distances(self, points: np.ndarray) -> list[tuple[int, np.ndarray]]:
+        """(label, signed distance) of the floor (if any), the table and each present object."""
+        parts = []
+        if self.floor:
+            extents, centre = self._floor_box()
+            parts.append((LABEL_FLOOR, _box_sdf(np.asarray(points, dtype=np.float64) - centre,
+                                                np.asarray(extents) / 2)))
+        parts.append((LABEL_TABLE, self.table.sdf(points)))
+        parts += [(3 + i, o.sdf(points)) for i, o in enumerate(self.objects) if o.present]
+        return parts
 
     def raycasting_scene(self) -> RaycastTarget:
         """The present geometry in an open3d RaycastingScene, with labels and albedo per geometry id."""
@@ -262,40 +334,51 @@ class Scene:
 
 # ---- construction -------------------------------------------------------------------------------------
 
+def shape_size(shape: str, params: dict) -> tuple[float, float, float]:
+    """Axis-aligned extents (x, y, z) in the object frame of a shape with these parameters."""
+    p = params
+    if shape == "box":
+        return float(p["x"]), float(p["y"]), float(p["z"])
+    if shape in ("cylinder", "cone"):
+        return 2 * p["radius"], 2 * p["radius"], float(p["height"])
+    if shape == "sphere":
+        return 2 * p["radius"], 2 * p["radius"], 2 * p["radius"]
+    if shape == "torus":
+        d = 2 * (p["torus_radius"] + p["tube_radius"])
+        return d, d, 2 * p["tube_radius"]
+    raise ConfigError(f"unknown shape {shape!r}: expected one of {', '.join(SHAPES)}")
+
+
+def resting_object(object_id: str, shape: str, params: dict, *, xy: tuple[float, float] = (0.0, 0.0),
+                   base_z: float = 0.0, yaw: float = 0.0, colour=(0.7, 0.7, 0.7)) -> SceneObject:
+    """An object of that shape and parameters (box: x, y, z; cylinder, cone: radius, height; sphere: radius;
+    torus: torus_radius, tube_radius) standing at `xy` on a surface at height `base_z`."""
+    params = {k: float(v) for k, v in params.items()}
+    size = tuple(float(s) for s in shape_size(shape, params))
+    return SceneObject(object_id, shape, (float(xy[0]), float(xy[1]), float(base_z + size[2] / 2)), size, params,
+                       tuple(float(c) for c in colour), float(yaw))
+
+
 def random_object(rng: np.random.Generator, object_id: str, shape: str, colour, table: Table) -> SceneObject:
     """An object of that shape with random dimensions (5-16 cm), resting on the table at its centre."""
-    top = table.top_z
     yaw = float(rng.uniform(-np.pi, np.pi))
     if shape == "box":
         ext = rng.uniform([0.06, 0.06, 0.06], [0.16, 0.12, 0.16])
         params = {"x": ext[0], "y": ext[1], "z": ext[2]}
-        size = tuple(float(e) for e in ext)
-        cz = top + ext[2] / 2
     elif shape == "cylinder":
         r, h = rng.uniform(0.03, 0.055), rng.uniform(0.08, 0.18)
         params = {"radius": r, "height": h}
-        size = (2 * r, 2 * r, h)
-        cz = top + h / 2
     elif shape == "sphere":
-        r = rng.uniform(0.035, 0.06)
-        params = {"radius": r}
-        size = (2 * r, 2 * r, 2 * r)
-        cz = top + r
+        params = {"radius": rng.uniform(0.035, 0.06)}
     elif shape == "torus":
         R, r = rng.uniform(0.045, 0.065), rng.uniform(0.015, 0.025)
         params = {"torus_radius": R, "tube_radius": r}
-        size = (2 * (R + r), 2 * (R + r), 2 * r)
-        cz = top + r
     elif shape == "cone":
         r, h = rng.uniform(0.04, 0.06), rng.uniform(0.08, 0.15)
         params = {"radius": r, "height": h}
-        size = (2 * r, 2 * r, h)
-        cz = top + h / 2
     else:
         raise ConfigError(f"unknown shape {shape!r}: expected one of {', '.join(SHAPES)}")
-    params = {k: float(v) for k, v in params.items()}
-    return SceneObject(object_id, shape, (float(table.center[0]), float(table.center[1]), float(cz)),
-                       tuple(float(s) for s in size), params, tuple(float(c) for c in colour), yaw)
+    return resting_object(object_id, shape, params, xy=table.center, base_z=table.top_z, yaw=yaw, colour=colour)
 
 
 def make_tabletop_scene(seed: int = 0, n_objects: int = 4, table: Table | None = None,
@@ -305,7 +388,7 @@ def make_tabletop_scene(seed: int = 0, n_objects: int = 4, table: Table | None =
     Objects are placed without overlap in the central part of the table; ids are "obj1", "obj2", ...
     """
     if n_objects < 0 or n_objects > 12:
-        raise ConfigError(f"--n-objects {n_objects}: expected 0..12")
+        raise ConfigError(f"expected 0..12, got {n_objects}", parameter="n_objects")
     table = table or Table()
     rng = np.random.default_rng(seed)
     base = ["box", "cylinder", "sphere", rng.choice(["torus", "cone"])]
@@ -317,6 +400,83 @@ def make_tabletop_scene(seed: int = 0, n_objects: int = 4, table: Table | None =
         xy = scene.free_spot(rng, obj.footprint_radius, margin=0.15)
         scene = scene.with_change("placement", obj, xy)
     return scene
+
+
+def primitive_tabletop_scene(seed: int = 0, n_objects: int = 5, stacked: bool = True) -> Scene:
+    """A seeded tabletop of boxes, cylinders and spheres 6-16 cm in size, at least 4 cm apart, on the default
+    table top (no legs, no floor: nothing below the top), plus (with `stacked`) a smaller box standing on the
+    first box: a concave junction that segmentation must cut. Ids "obj1", "obj2", ... (the stacked box last)."""
+    table = Table(leg_width=0.0)
+    rng = np.random.default_rng(seed)
+    objects: list[SceneObject] = []
+    placed: list[tuple[np.ndarray, float]] = []
+    tries = 0
+    while len(objects) < n_objects and tries < 500:
+        tries += 1
+        label = len(objects) + 1
+        shape = ("box", "cylinder", "sphere")[label % 3]
+        if shape == "box":
+            half = rng.uniform([0.03, 0.03, 0.03], [0.07, 0.06, 0.08])
+            params = {"x": 2 * half[0], "y": 2 * half[1], "z": 2 * half[2]}
+            foot = float(np.hypot(half[0], half[1]))
+        elif shape == "cylinder":
+            r = rng.uniform(0.03, 0.05)
+            params = {"radius": r, "height": 2 * rng.uniform(0.04, 0.08)}
+            foot = float(r)
+        else:
+            r = rng.uniform(0.035, 0.06)
+            params = {"radius": r}
+            foot = float(r)
+        xy = rng.uniform([-0.45, -0.28], [0.45, 0.28])
+        if any(np.linalg.norm(xy - c) < foot + f + 0.04 for c, f in placed):
+            continue
+        objects.append(resting_object(f"obj{label}", shape, params, xy=xy, base_z=table.top_z,
+                                      yaw=float(rng.uniform(0, np.pi)), colour=PALETTE[(label - 1) % len(PALETTE)]))
+        placed.append((xy, foot))
+    base = next((o for o in objects if o.shape == "box"), None)
+    if stacked and base is not None:
+        half = np.asarray(base.size) / 2
+        top_half = np.array([0.6, 0.6, 0.8]) * half
+        centre = np.asarray(base.center) + np.array([0.0, 0.0, half[2] + top_half[2]])
+        params = {"x": 2 * top_half[0], "y": 2 * top_half[1], "z": 2 * top_half[2]}
+        objects.append(SceneObject(f"obj{len(objects) + 1}", "box", tuple(float(c) for c in centre),
+                                   shape_size("box", params), {k: float(v) for k, v in params.items()},
+                                   tuple(float(c) for c in PALETTE[len(objects) % len(PALETTE)]), base.yaw + 0.5))
+    return Scene(table, tuple(objects), floor=False, seed=seed)
+
+
+def box_scene() -> Scene:
+    """Three boxes (up to 25 cm tall) on a 1.2 m square slab whose top is z = 0, no legs, no floor: a fixed scene
+    with exact, easily measured geometry (fusion tests and benchmarks)."""
+    table = Table(center=(0.0, 0.0), size=(1.2, 1.2), top_z=0.0, thickness=0.02, leg_width=0.0)
+    boxes = [((0.0, 0.0), (0.20, 0.12, 0.15), 0.3), ((0.25, 0.15), (0.10, 0.10, 0.25), -0.5),
+             ((-0.22, 0.18), (0.16, 0.08, 0.08), 0.9)]
+    objects = tuple(resting_object(f"box{i + 1}", "box", {"x": sx, "y": sy, "z": sz}, xy=xy, yaw=yaw,
+                                   colour=PALETTE[i]) for i, (xy, (sx, sy, sz), yaw) in enumerate(boxes))
+    return Scene(table, objects, floor=False)
+
+
+# ---- signed distances ---------------------------------------------------------------------------------
+
+def _box_sdf(q: np.ndarray, half: np.ndarray) -> np.ndarray:
+    """Signed distance of points q (..., 3), in the box frame, to an axis-aligned box of half-extents `half`."""
+    d = np.abs(q) - half
+    return np.linalg.norm(np.maximum(d, 0.0), axis=-1) + np.minimum(d.max(axis=-1), 0.0)
+
+
+def _cone_sdf(radial: np.ndarray, z: np.ndarray, radius: float, half_height: float) -> np.ndarray:
+    """Signed distance to a solid cone, base of `radius` at z = -half_height, apex at +half_height, from each
+    point's distance to the axis and height (the capped-cone formula of I. Quilez, top radius 0)."""
+    h = half_height
+    k2 = np.array([-radius, 2 * h])
+    ca_r = radial - np.minimum(radial, np.where(z < 0, radius, 0.0))
+    ca_z = np.abs(z) - h
+    t = np.clip(((-radial) * k2[0] + (h - z) * k2[1]) / (k2 @ k2), 0.0, 1.0)
+    cb_r = radial + k2[0] * t
+    cb_z = z - h + k2[1] * t
+    inside = (cb_r < 0) & (ca_z < 0)
+    dist = np.sqrt(np.minimum(ca_r ** 2 + ca_z ** 2, cb_r ** 2 + cb_z ** 2))
+    return np.where(inside, -dist, dist)
 
 
 # ---- meshes ------------------------------------------------------------------------------------------

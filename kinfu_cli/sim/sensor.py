@@ -34,6 +34,7 @@ from numba import njit, prange
 
 from kinfu_cli.core.camera import preset_intrinsics
 from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.core.poses import check_poses
 from kinfu_cli.sim.scene import LABEL_NONE, RaycastTarget, Scene
 
 # numba probes the TBB threading layer at the first parallel call and warns when the installed TBB is too old;
@@ -48,6 +49,32 @@ def kinect_v1_intrinsics(width: int = 640, height: int = 480) -> np.ndarray:
     """The simulated sensor's intrinsics: the raw Kinect v1 IR camera (preset "kinect_v1_ir", fx = fy = 585 at
     640x480) scaled to width x height, principal point at the centre."""
     return preset_intrinsics("kinect_v1_ir", width, height)
+
+
+def pixel_directions(K: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Camera-frame directions (..., 3) of the rays through image points (u, v) (float pixels, 0 = the first
+    pixel's centre), scaled to camera z = 1 so that a hit's distance along the ray is its depth."""
+    return np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones_like(u)], axis=-1)
+
+
+def world_rays(d_cam: np.ndarray, T_world_camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """open3d rays (..., 6) float32 (camera centre, world direction) for camera-frame directions, and the world
+    directions in float64."""
+    d_world = d_cam @ T_world_camera[:3, :3].T
+    rays = np.empty(d_world.shape[:-1] + (6,), dtype=np.float32)
+    rays[..., :3] = T_world_camera[:3, 3]
+    rays[..., 3:] = d_world
+    return rays, d_world
+
+
+def ideal_depth(scene: o3d.t.geometry.RaycastingScene, K: np.ndarray, width: int, height: int,
+                T_world_camera: np.ndarray) -> np.ndarray:
+    """Noise-free optical-axis depth (H, W) float32 of a RaycastingScene through the pixel centres, inf where
+    the ray hits nothing and no range limits: the exact image a z-buffer test compares with."""
+    v, u = np.mgrid[0:height, 0:width]
+    rays, _ = world_rays(pixel_directions(np.asarray(K, dtype=np.float64), u.astype(np.float64),
+                                          v.astype(np.float64)), np.asarray(T_world_camera, dtype=np.float64))
+    return scene.cast_rays(o3d.core.Tensor.from_numpy(rays))["t_hit"].numpy()
 
 
 def nguyen_axial_sigma(z: np.ndarray, theta: np.ndarray | float = 0.0) -> np.ndarray:
@@ -106,7 +133,7 @@ class DepthSensor:
         self._u = u.astype(np.float64)
         self._v = v.astype(np.float64)
         self._cache: tuple[int, RaycastTarget] | None = None
-        self._dcam: np.ndarray | None = None
+        self._dcam = pixel_directions(self.K, self._u, self._v)
 
     # ---- public -------------------------------------------------------------------------------------
     def render(self, scene_or_mesh, T_world_camera: np.ndarray, frame_seed: int | None = None
@@ -121,7 +148,7 @@ class DepthSensor:
         scene_or_mesh: a Scene, a RaycastTarget, or an open3d TriangleMesh (legacy or tensor; vertex colours are used
         when present). frame_seed: when given, the noise of this frame depends only on (seed, frame_seed).
         """
-        T = _check_pose(T_world_camera)
+        T = check_poses(T_world_camera, "camera pose")[0]
         target = self._target(scene_or_mesh)
         rng = np.random.default_rng([self.seed, int(frame_seed)]) if frame_seed is not None else self._rng
         H, W = self.height, self.width
@@ -204,18 +231,8 @@ class DepthSensor:
         Returns t (H,W) float64 optical-axis depth (0 = no hit), valid, gid, normals (H,W,3) float32,
         dir (H,W,3) float64 world ray directions with camera-z component 1, prim, uv.
         """
-        K = self.K
-        if u is None:
-            if self._dcam is None:
-                self._dcam = np.stack([(self._u - K[0, 2]) / K[0, 0], (self._v - K[1, 2]) / K[1, 1],
-                                       np.ones_like(self._u)], axis=-1)
-            d_cam = self._dcam
-        else:
-            d_cam = np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones_like(u)], axis=-1)
-        d_world = d_cam @ T[:3, :3].T  # z component in camera = 1, so t_hit is the optical-axis depth
-        rays = np.empty(d_world.shape[:-1] + (6,), dtype=np.float32)
-        rays[..., :3] = T[:3, 3]
-        rays[..., 3:] = d_world
+        d_cam = self._dcam if u is None else pixel_directions(self.K, u, v)
+        rays, d_world = world_rays(d_cam, T)
         ans = target.scene.cast_rays(o3d.core.Tensor.from_numpy(rays))
         t = ans["t_hit"].numpy()
         gid = ans["geometry_ids"].numpy()
@@ -313,13 +330,3 @@ def _discontinuities(depth: np.ndarray, jump: float) -> np.ndarray:
         edge[sa] |= e
         edge[sb] |= e
     return edge
-
-
-def _check_pose(T: np.ndarray) -> np.ndarray:
-    T = np.asarray(T, dtype=np.float64)
-    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
-        raise ConfigError(f"camera pose: expected a finite 4x4 matrix, got shape {T.shape}")
-    R = T[:3, :3]
-    if np.abs(R @ R.T - np.eye(3)).max() > 1e-4 or np.linalg.det(R) < 0:
-        raise ConfigError("camera pose: the rotation part is not a rotation matrix")
-    return T

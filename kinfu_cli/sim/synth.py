@@ -1,0 +1,77 @@
+"""The synthetic recording pipeline: one seeded scenario written into several containers plus its ground truth.
+
+`synthesize(out, ...)` checks every argument before writing anything, builds the scenario
+(`sim.scenario.make_scenario`), streams it into OUT/recording.mcap, OUT/recording.bag and/or OUT/recording_ros2/
+at once and writes OUT/ground_truth/. It returns a `SynthResult`, whose `to_json()` is the summary `kinfu synth`
+prints as JSON.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.sim.scenario import (Scenario, check_camera_pose_topic, make_scenario, recording_topics,
+                                    write_ground_truth, write_recordings)
+
+FORMAT_NAMES = {"mcap": "recording.mcap", "bag": "recording.bag", "ros2": "recording_ros2"}
+
+
+@dataclass
+class SynthResult:
+    """What `synthesize` wrote: the containers, the ground-truth folder, and the scenario they hold."""
+
+    recordings: list[Path]
+    ground_truth: Path
+    scenario: Scenario
+    camera_pose_topic: str | None = None
+
+    def to_json(self) -> dict:
+        sc = self.scenario
+        return {"recordings": [str(p) for p in self.recordings], "ground_truth": str(self.ground_truth),
+                "frames": len(sc.frames), "scan_frames": sc.meta["n_scan"], "after_frames": sc.meta["n_after"],
+                "hand_samples": len(sc.hand), "changes": sc.changes, "seed": sc.seed, "scenario": sc.kind,
+                "width": sc.width, "height": sc.height, "camera_pose_topic": self.camera_pose_topic}
+
+
+def synthesize(out: str | os.PathLike, seed: int = 0, width: int = 320, height: int = 240, frames: int = 36,
+               formats: tuple[str, ...] = ("mcap", "bag", "ros2"), scenario: str = "pick-and-place",
+               n_objects: int = 4, hand_rate: float = 100.0, frame_rate: float = 5.0, noise: bool = True,
+               depth_format: str = "png", color_format: str = "jpeg", jpeg_quality: int = 75, quiet: bool = True,
+               camera_pose_topic: str | None = None) -> SynthResult:
+    """Build the scenario and write the containers named in `formats` (FORMAT_NAMES) and OUT/ground_truth/.
+    camera_pose_topic: also write the true camera poses (PoseStamped in `world`) on this topic; quiet: no
+    progress bar."""
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"{out} exists and is not a folder", parameter="out")
+    if not formats or any(f not in FORMAT_NAMES for f in formats):
+        raise ConfigError(f"expected some of {', '.join(FORMAT_NAMES)}, got {', '.join(formats) or 'none'}",
+                          parameter="formats")
+    for name, rate in (("hand_rate", hand_rate), ("frame_rate", frame_rate)):
+        if not rate > 0:
+            raise ConfigError(f"expected a positive rate in Hz, got {rate}", parameter=name)
+    if not 1 <= jpeg_quality <= 100:
+        raise ConfigError(f"expected 1..100, got {jpeg_quality}", parameter="jpeg_quality")
+    check_camera_pose_topic(camera_pose_topic, depth_format, color_format)
+    sc = make_scenario(seed=seed, kind=scenario, width=width, height=height, frames=frames, n_objects=n_objects,
+                       noise=noise, hand_rate_hz=hand_rate, frame_rate_hz=frame_rate)
+    paths = [out / FORMAT_NAMES[f] for f in formats]
+    write_recordings(sc, paths, depth_format=depth_format, color_format=color_format, quiet=quiet,
+                     jpeg_quality=jpeg_quality, camera_pose_topic=camera_pose_topic)
+    gt = write_ground_truth(sc, out / "ground_truth",
+                            topics=recording_topics(depth_format, color_format, camera_pose_topic))
+    for p in paths + [gt]:
+        _relax_permissions(p)
+    return SynthResult(paths, gt, sc, camera_pose_topic)
+
+
+def _relax_permissions(path: Path) -> None:
+    """The atomic temp files/folders are created 0600/0700: give outputs the usual umask-based modes."""
+    umask = os.umask(0)
+    os.umask(umask)
+    paths = [path] + (sorted(path.rglob("*")) if path.is_dir() else [])
+    for p in paths:
+        os.chmod(p, (0o777 if p.is_dir() else 0o666) & ~umask)
