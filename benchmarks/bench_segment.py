@@ -28,7 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from kinfu_cli.cli import cli  # noqa: E402
 from kinfu_cli.core.camera import CameraModel  # noqa: E402
-from kinfu_cli.evaluation.objects_loop import compare_strategies  # noqa: E402
+from kinfu_cli.evaluation.nbv_loop import compare_strategies  # noqa: E402
 from kinfu_cli.evaluation.segments import evaluate_synthetic_scenes  # noqa: E402
 from kinfu_cli.fusion.volume import TernaryVolume  # noqa: E402
 from kinfu_cli.nbv.contours import extract_contours  # noqa: E402

@@ -30,3 +30,14 @@ def sample_dir() -> Path:
     if not (p / "recording.mcap").exists():
         pytest.fail(f"{p}/recording.mcap missing: sample_data must be committed (kinfu synth -o {p})")
     return p
+
+
+def one_line_error(res, *needles):
+    """Assert a CliRunner result ended with exactly one `kinfu: error:` line (exit 2) holding `needles`."""
+    assert res.exit_code == 2, res.output
+    assert "Traceback" not in res.output
+    lines = [l for l in res.output.splitlines() if l.strip()]
+    assert len(lines) == 1 and lines[0].startswith("kinfu: error: "), res.output
+    for n in needles:
+        assert n in lines[0], (n, lines[0])
+    return lines[0]

@@ -116,3 +116,35 @@ def test_core_imports_no_stage():
     stages = {u for u in LAYER_OF if u != "core"}
     bad = [(a, b) for a, b in _edges() if a == "core" and b in stages]
     assert not bad
+# "--flag" inside a string literal of library code (outside commands/, cli.py, demo.py)
+_FLAG = re.compile(r"(?<![\w-])--[a-z][a-z0-9]*(?:-[a-z0-9]+)*")
+
+
+def test_library_code_names_parameters_not_flags():
+    hits = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        unit = _unit(_module_name(path))
+        if LAYER_OF.get(unit, 0) >= LAYER_OF["commands"] or not unit:
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Constant) and isinstance(node.value, str):
+                for m in _FLAG.finditer(node.value):
+                    hits.append(f"{path.relative_to(PACKAGE.parent)}:{node.lineno}: {m.group(0)}")
+    assert not hits, "library code mentions command-line flags:\n" + "\n".join(hits)
+
+
+MAX_LINES = 120
+
+
+def test_long_functions_say_why_in_their_docstring():
+    """A function over MAX_LINES lines is a hot-path kernel kept whole on purpose; its docstring says why
+    (and contains "on purpose")."""
+    long = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                n = node.end_lineno - node.lineno + 1
+                doc = (ast.get_docstring(node) or "").lower()
+                if n > MAX_LINES and "on purpose" not in doc:
+                    long.append(f"{path.relative_to(PACKAGE.parent)}:{node.lineno} {node.name} ({n} lines)")
+    assert not long, "functions over 120 lines without a reason:\n" + "\n".join(long)

@@ -8,4 +8,5 @@ PARAMETER_FLAGS: dict[str, str] = {
     "vfov_extra_deg": "--vfov-extra",
     "concavity_tolerance_deg": "--concavity-tolerance",
     "region_radius": "--poi-radius",
+    "modes": "--mode",
 }

@@ -8,6 +8,8 @@ from collections.abc import Callable, Iterable
 
 import click
 
+from kinfu_cli.core.atomic import write_json
+
 
 def print_warnings(doc: dict) -> None:
     """Each entry of doc["warnings"] as one `kinfu: warning: ...` line on stderr (also with --quiet / --json)."""
@@ -19,8 +21,6 @@ def emit(doc: dict, output, as_json: bool, lines_of: Callable[[dict], Iterable[s
     """Write `doc` atomically to `output` when given; print it as JSON or as the lines `lines_of` makes."""
     print_warnings(doc)
     if output is not None:
-        from kinfu_cli.core.atomic import write_json
-
         write_json(output, doc)
     if as_json:
         click.echo(json.dumps(doc, indent=2, default=float))

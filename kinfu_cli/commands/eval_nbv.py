@@ -11,6 +11,7 @@ from kinfu_cli.core.pois import DEFAULT_RADIUS
 from kinfu_cli.evaluation.nbv_loop import LoopConfig, run_loop
 from kinfu_cli.evaluation.tables import nbv_loop_table
 from kinfu_cli.nbv.gains import gain_names
+from kinfu_cli.nbv.viewpoints import PAPER_SPHERE
 from kinfu_cli.report.eval_nbv_plot import plot_nbv_loop
 
 group = "eval"
@@ -42,9 +43,9 @@ group = "eval"
 @click.option("--width", type=int, default=None, help="Sensor image width [scene camera].")
 @click.option("--height", type=int, default=None, help="Sensor image height [scene camera].")
 @click.option("--scan-every", default=1, show_default=True, type=int, help="Use every k-th initial-scan pose.")
-@click.option("--lon-step", default=30.0, show_default=True, type=float, help="Viewing sphere longitude step (deg).")
-@click.option("--lat-step", default=10.0, show_default=True, type=float, help="Viewing sphere latitude step (deg).")
-@click.option("--roll-step", default=45.0, show_default=True, type=float, help="Viewing sphere roll step (deg).")
+@click.option("--lon-step", default=PAPER_SPHERE.lon_step, show_default=True, type=float, help="Viewing sphere longitude step (deg).")
+@click.option("--lat-step", default=PAPER_SPHERE.lat_step, show_default=True, type=float, help="Viewing sphere latitude step (deg).")
+@click.option("--roll-step", default=PAPER_SPHERE.roll_step, show_default=True, type=float, help="Viewing sphere roll step (deg).")
 @click.option("--scan-frames", default=8, show_default=True, type=int,
               help="objects/standard: initial scan = the first N scan poses (one side of the table).")
 @click.option("--near-margin", default=0.2, show_default=True, type=float,

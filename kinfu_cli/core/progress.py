@@ -1,4 +1,4 @@
-"""tqdm progress bars on stderr, off with --quiet or when stderr is not a terminal."""
+"""tqdm progress bars on stderr, off when asked (`quiet`) or when stderr is not a terminal."""
 
 from __future__ import annotations
 

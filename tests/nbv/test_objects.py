@@ -7,7 +7,7 @@ import pytest
 
 from kinfu_cli.core.camera import CameraModel
 from kinfu_cli.core.errors import ConfigError
-from kinfu_cli.evaluation.objects_loop import compare_strategies
+from kinfu_cli.evaluation.nbv_loop import compare_strategies
 from kinfu_cli.nbv.contours import contour_voxels, extract_contours
 from kinfu_cli.nbv.objects import (contour_viewpoints, find_near, nbv_scorer, plan_object_views,
                                    plan_object_views_for_volume, plan_standard_views)

@@ -8,7 +8,8 @@ import shutil
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from test_io_frames import make_recording
+from conftest import one_line_error
+from recordings import make_recording
 
 from kinfu_cli.core.ownership import MANIFEST
 from kinfu_cli.cli import cli
@@ -16,16 +17,6 @@ from kinfu_cli.cli import cli
 
 def run(*args):
     return CliRunner().invoke(cli, [str(a) for a in args])
-
-
-def one_line_error(res, *needles):
-    assert res.exit_code == 2, res.output
-    assert "Traceback" not in res.output
-    lines = [l for l in res.output.splitlines() if l.strip()]
-    assert len(lines) == 1 and lines[0].startswith("kinfu: error: "), res.output
-    for n in needles:
-        assert n in lines[0], (n, lines[0])
-    return lines[0]
 
 
 @pytest.mark.parametrize("name,topics,frames", [

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 from scipy.spatial.transform import Rotation
-from test_io_cli import one_line_error
+from conftest import one_line_error
 
 from kinfu_cli.core.ownership import MANIFEST
 from kinfu_cli.cli import cli

@@ -14,7 +14,7 @@ from click.testing import CliRunner
 
 from kinfu_cli.cli import cli
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 @pytest.mark.parametrize("args, line", [

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_io_frames import T0, make_recording
+from recordings import T0, make_recording
 
 from kinfu_cli.core.errors import RecordingError, TrajectoryError
 from kinfu_cli.io.hand import load_hand_trajectory

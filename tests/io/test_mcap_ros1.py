@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from mcap.writer import Writer as McapWriter
 from rosbags.highlevel import AnyReader
-from test_io_frames import make_recording
+from recordings import make_recording
 
 from kinfu_cli.io.frames import iter_frames
 from kinfu_cli.io.hand import load_hand_trajectory
