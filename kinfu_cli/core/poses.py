@@ -49,19 +49,7 @@ def quaternion_to_matrix(q) -> np.ndarray:
     if not np.all(np.isfinite(n)) or np.any(n < 1e-12):
         bad = q.reshape(-1, 4)[int(np.flatnonzero(~(np.isfinite(n) & (n >= 1e-12)).ravel())[0])]
         raise TransformError(f"quaternion {bad.tolist()} has zero or non-finite norm")
-    q = q / n[..., None]
-    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    R = np.empty(q.shape[:-1] + (3, 3))
-    R[..., 0, 0] = 1 - 2 * (y * y + z * z)
-    R[..., 0, 1] = 2 * (x * y - z * w)
-    R[..., 0, 2] = 2 * (x * z + y * w)
-    R[..., 1, 0] = 2 * (x * y + z * w)
-    R[..., 1, 1] = 1 - 2 * (x * x + z * z)
-    R[..., 1, 2] = 2 * (y * z - x * w)
-    R[..., 2, 0] = 2 * (x * z - y * w)
-    R[..., 2, 1] = 2 * (y * z + x * w)
-    R[..., 2, 2] = 1 - 2 * (x * x + y * y)
-    return R
+    return Rotation.from_quat(q.reshape(-1, 4)).as_matrix().reshape(q.shape[:-1] + (3, 3))
 
 
 def check_rigid(T: np.ndarray, what: str = "T_world_camera") -> np.ndarray:
