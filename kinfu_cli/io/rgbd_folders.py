@@ -32,6 +32,7 @@ import cv2
 import numpy as np
 
 from kinfu_cli.core.atomic import atomic_dir
+from kinfu_cli.core.camera import SENSOR_PRESETS
 from kinfu_cli.core.errors import ConfigError, RecordingError
 from kinfu_cli.core.poses import quaternion_to_matrix
 from kinfu_cli.core.progress import progress
@@ -51,7 +52,7 @@ _FRAME_RE = re.compile(r"^frame-(\d+)\.depth\.png$")
 _INTRINSICS_FILES = ("camera-intrinsics.txt", "intrinsics.K.txt", "intrinsics.txt", "camera_intrinsics.txt")
 _TUM_K = {"freiburg1": (517.3, 516.5, 318.6, 255.3), "freiburg2": (520.9, 521.0, 325.1, 249.7),
           "freiburg3": (535.4, 539.2, 320.1, 247.6)}
-_TUM_DEFAULT_K = (525.0, 525.0, 319.5, 239.5)
+_TUM_DEFAULT_K = tuple(SENSOR_PRESETS["kinect_v1"][k] for k in ("fx", "fy", "cx", "cy"))  # TUM's "ROS default"
 
 
 @dataclass

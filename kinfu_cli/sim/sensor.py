@@ -32,7 +32,7 @@ import numpy as np
 import open3d as o3d
 from numba import njit, prange
 
-from kinfu_cli.core.camera import preset_intrinsics
+from kinfu_cli.core.camera import SENSOR_PRESETS, preset_intrinsics
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.poses import check_poses
 from kinfu_cli.sim.scene import LABEL_NONE, RaycastTarget, Scene
@@ -106,7 +106,8 @@ class DepthSensor:
                  noise: bool = True, seed: int = 0, *, baseline: float = 0.075, lateral_px: float = 0.5,
                  edge_dropout: float = 0.5, missing_rate: float = 0.005, max_incidence_deg: float = 80.0,
                  edge_jump: float = 0.03, color_noise: float = 2.0 / 255.0,
-                 disparity_quantisation: bool = True, ir_focal: float = 585.0, subpixel: int = 8) -> None:
+                 disparity_quantisation: bool = True, ir_focal: float = SENSOR_PRESETS["kinect_v1_ir"]["fx"],
+                 subpixel: int = 8) -> None:
         K = np.asarray(K, dtype=np.float64)
         if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
             raise ConfigError(f"camera intrinsics: expected a 3x3 matrix with positive focal lengths, got {K.tolist()}")
