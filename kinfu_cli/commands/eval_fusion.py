@@ -7,6 +7,7 @@ from pathlib import Path
 
 import click
 
+from kinfu_cli.commands._options import claim_outputs, force_option
 from kinfu_cli.core.atomic import write_json
 from kinfu_cli.evaluation.reconstruction import DEFAULT_SPACING, DEFAULT_THRESHOLD, evaluate_fusion
 from kinfu_cli.evaluation.tables import format_fusion_tables
@@ -39,9 +40,10 @@ group = "eval"
               help="Write the results as JSON here.")
 @click.option("--json", "as_json", is_flag=True, help="Print the results JSON to stdout instead of tables.")
 @click.option("--quiet", is_flag=True, help="No progress output.")
+@force_option
 def command(reconstruction: Path, ground_truth: Path, state: str, threshold: float, spacing: float, margin: float,
             min_height: float, footprint: str, no_volume: bool, error_mesh: Path | None, output: Path | None,
-            as_json: bool, quiet: bool) -> None:
+            as_json: bool, quiet: bool, force: bool) -> None:
     """Score a fused reconstruction against ground truth. OUTDIR_OR_MESH is a `kinfu fuse` output folder
     (mesh.ply, and volume.npz when present) or a mesh file in the ground truth's world frame.
 
@@ -58,6 +60,7 @@ def command(reconstruction: Path, ground_truth: Path, state: str, threshold: flo
       kinfu eval fusion out/all/mesh.ply --ground-truth sample_data/tabletop --json -o fusion_eval.json
       kinfu eval fusion out/scan --ground-truth sample_data/tabletop --error-mesh out/scan_error.ply
     """
+    claim_outputs({"output": output, "error_mesh": error_mesh}, [reconstruction, ground_truth], force)
     result = evaluate_fusion(reconstruction, ground_truth, state=state, threshold=threshold, spacing=spacing,
                              margin=margin, min_height=min_height, footprint=footprint, use_volume=not no_volume,
                              quiet=quiet)

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import click
 
+from kinfu_cli.commands._options import claim_outputs, force_option
 from kinfu_cli.commands._output import emit
 from kinfu_cli.core.pois import DEFAULT_RADIUS
 from kinfu_cli.evaluation.nbv_loop import LoopConfig, run_loop
@@ -61,9 +62,10 @@ group = "eval"
               help="PNG: unknown voxels in each POI sphere vs views (the paper's Fig. 20).")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @click.option("--json", "as_json", is_flag=True, help="Print the result JSON on stdout.")
+@force_option
 def command(scene, strategies, views, mode, voxel_size, gain, inc_th, poi_radius, pois_from, poi, optimistic,
             oscillation, width, height, scan_every, lon_step, lat_step, roll_step, scan_frames, near_margin,
-            score_width, reject_unknown, no_noise, seed, output, plot, quiet, as_json):
+            score_width, reject_unknown, no_noise, seed, output, plot, quiet, as_json, force):
     """Run the paper's Algorithm 1 on a simulated scene and compare view strategies.
 
     SCENE is a `kinfu synth` ground_truth folder (or the recording folder holding it) or a mesh file
@@ -84,6 +86,7 @@ def command(scene, strategies, views, mode, voxel_size, gain, inc_th, poi_radius
       kinfu eval nbv sample_data/tabletop --strategy poi,random --mode both --voxel-size 0.015 --json
       kinfu eval nbv sample_data/tabletop --strategy objects,standard --width 160 --height 120
     """
+    claim_outputs({"output": output, "plot": plot}, [scene], force)
     modes = ("kfovp", "kfom") if mode == "both" else (mode,)
     cfg = LoopConfig(strategies=tuple(s.strip() for s in strategies.split(",") if s.strip()), modes=modes,
                      views=views, voxel_size=voxel_size, gain=gain, inc_th=inc_th, poi_radius=poi_radius,

@@ -6,6 +6,7 @@ import json
 
 import click
 
+from kinfu_cli.commands._options import claim_outputs, force_option
 from kinfu_cli.commands._frames import frame_kwargs, frame_options
 from kinfu_cli.commands._roles import role_kwargs, role_options
 from kinfu_cli.io.rgbd_folders import export_frames
@@ -19,7 +20,8 @@ from kinfu_cli.io.rgbd_folders import export_frames
 @click.option("--json", "as_json", is_flag=True, help="Print the summary (stats, roles, frame list) as JSON.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
 @role_options
-def command(recording: str, out: str, as_json: bool, quiet: bool, **kwargs) -> None:
+@force_option
+def command(recording: str, out: str, as_json: bool, quiet: bool, force: bool, **kwargs) -> None:
     """Assemble the RGB-D frames of RECORDING (depth paired with the nearest colour image and the camera
     pose at the depth stamp) and write them as a frame folder that `kinfu import` and other RGB-D tools
     read. Depth is written in millimetres; frames.json lists stamps and the dropped frames by reason.
@@ -29,6 +31,7 @@ def command(recording: str, out: str, as_json: bool, quiet: bool, **kwargs) -> N
       kinfu export sample_data/tabletop/recording.mcap -o tabletop_frames/
       kinfu export run.bag -o frames/ --every 5 --camera-frame camera_depth_optical_frame
     """
+    claim_outputs({"out": out}, [recording], force)
     fk = frame_kwargs(kwargs)
     summary = export_frames(recording, out, roles_kw=role_kwargs(kwargs), quiet=quiet, **fk)
     if as_json:

@@ -8,9 +8,10 @@ from pathlib import Path
 
 import click
 
+from kinfu_cli.commands._options import claim_outputs, force_option
 from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.commands._roles import role_kwargs, role_options
-from kinfu_cli.core.atomic import write_json
+from kinfu_cli.core.atomic import atomic_dir, write_json
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.fusion.outputs import fusion_report, write_fusion_outputs
 from kinfu_cli.fusion.pipeline import fuse_recording
@@ -67,12 +68,13 @@ def _floats(value: str, name: str, n: tuple[int, ...]) -> tuple[float, ...]:
 @click.option("--shadow-filter", is_flag=True, help="Remove Kinect V2 shadow and veil pixels (thesis 3.1.3).")
 @click.option("--no-color", is_flag=True, help="Do not keep colour per voxel.")
 @click.option("--plot", is_flag=True, help="Also write PNG slices of the ternary volume.")
+@force_option
 @click.option("--json", "as_json", is_flag=True, help="Print report.json to stdout.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @role_options
 def command(recording: Path, outdir: Path, voxel_size, resolution, size, origin, truncation, max_weight, min_depth,
             max_depth, pose, pose_topic, init, clear_spheres, clear_pois, start_s, end_s, every, tolerance_s,
-            fill_gaps, bilateral, shadow_filter, no_color, plot, as_json, quiet, **kwargs) -> None:
+            fill_gaps, bilateral, shadow_filter, no_color, plot, as_json, quiet, force, **kwargs) -> None:
     """Fuse the depth frames of RECORDING (MCAP, ROS 1 .bag, ROS 2 bag folder) into a KinectFusion TSDF
     volume that keeps unknown / empty / occupied per voxel (Monica et al. 2016, eqs. 1-3): free space in
     front of surfaces becomes known-empty, interiors stay unknown. Writes OUTDIR/mesh.ply (coloured),
@@ -86,6 +88,7 @@ def command(recording: Path, outdir: Path, voxel_size, resolution, size, origin,
       kinfu fuse rec.bag -o out/fuse --voxel-size 0.01 --size 2,2,1 --pose icp --every 2
       kinfu fuse rec2.mcap -o out/fuse2 --init out/fuse/volume.npz --clear-pois out/poi/pois.json
     """
+    claim_outputs({"outdir": outdir}, [recording, init, clear_pois], force)
     if voxel_size is not None and resolution is not None:
         raise ConfigError("--voxel-size and --resolution: give one of them, not both")
     res = None
@@ -104,11 +107,12 @@ def command(recording: Path, outdir: Path, voxel_size, resolution, size, origin,
         tolerance_s=tolerance_s, fill_gaps=fill_gaps, bilateral=bilateral, shadow_filter=shadow_filter,
         roles=role_kwargs(kwargs), quiet=quiet, argument_names=ARGUMENT_FLAGS)
     t0 = time.perf_counter()
-    write_fusion_outputs(result, outdir)
-    plots = [p.name for p in plot_slices(result.grid, outdir)] if plot else []
-    result.add_time("write", time.perf_counter() - t0)
-    report = fusion_report(result, extra_outputs=plots)
-    write_json(outdir / "report.json", report)
+    with atomic_dir(outdir) as tmp:  # one transaction: the folder appears whole, report.json written last
+        write_fusion_outputs(result, tmp)
+        plots = [p.name for p in plot_slices(result.grid, tmp)] if plot else []
+        result.add_time("write", time.perf_counter() - t0)
+        report = fusion_report(result, extra_outputs=plots)
+        write_json(tmp / "report.json", report)
     print_warnings(report)
     if as_json:
         click.echo(json.dumps(report, indent=2, default=str))

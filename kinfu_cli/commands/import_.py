@@ -6,6 +6,7 @@ import json
 
 import click
 
+from kinfu_cli.commands._options import claim_outputs, force_option
 from kinfu_cli.io.rgbd_folders import import_folder
 
 
@@ -24,8 +25,9 @@ from kinfu_cli.io.rgbd_folders import import_folder
 @click.option("--no-compress", is_flag=True, help="Do not compress chunks (zstd for MCAP, lz4 for .bag).")
 @click.option("--json", "as_json", is_flag=True, help="Print the import summary as JSON on stdout.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
+@force_option
 def command(folder: str, out: str, rate: float, frames: str | None, color: str, intrinsics: str | None,
-            no_compress: bool, as_json: bool, quiet: bool) -> None:
+            no_compress: bool, as_json: bool, quiet: bool, force: bool) -> None:
     """Convert the RGB-D frame FOLDER into a recording that every kinfu command reads.
 
     Layouts: 7-Scenes/3DMatch (frame-N.depth.png, frame-N.color.png|jpg, frame-N.pose.txt,
@@ -38,6 +40,7 @@ def command(folder: str, out: str, rate: float, frames: str | None, color: str, 
       kinfu import ../shared/data/rgbd-7scenes-redkitchen -o redkitchen.mcap
       kinfu import tum_fr1_desk/ -o fr1_desk.bag --frames 0:300:2
     """
+    claim_outputs({"out": out}, [folder], force)
     summary = import_folder(folder, out, rate=rate, frames=frames, color=color, intrinsics=intrinsics,
                             compress=not no_compress, quiet=quiet, intrinsics_source="--intrinsics")
     if as_json:

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import click
 
+from kinfu_cli.commands._options import claim_outputs, force_option
 from kinfu_cli.commands._output import emit
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.pois import DEFAULT_RADIUS, poi_frame_warnings
@@ -117,9 +118,10 @@ def objects_summary_lines(doc: dict) -> list[str]:
 @click.option("--exact-rolls", is_flag=True, help="Cast every view's own rays (no sharing between rolls; slower).")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @click.option("--json", "as_json", is_flag=True, help="Print the result JSON on stdout.")
+@force_option
 def command(volume, pois_path, mode, clear, gain, top, output, plot, candidates, radius, lon_step, lat_min, lat_max,
             lat_step, roll_step, poi_radius, fx, fy, cx, cy, width, height, camera_info, min_range, max_range,
-            vfov_extra, inc_th, table_z, clearance, optimistic, exact_rolls, quiet, as_json):
+            vfov_extra, inc_th, table_z, clearance, optimistic, exact_rolls, quiet, as_json, force):
     """Rank candidate views around each POI by the information gain inside S(POI).
 
     Ray casts each candidate (the paper's viewing sphere: d = 0.8 m, longitude 30 deg, latitude
@@ -136,6 +138,7 @@ def command(volume, pois_path, mode, clear, gain, top, output, plot, candidates,
       kinfu nbv volume.npz --pois pois.json --gain entropy --top 5 --json
       kinfu nbv volume.npz --mode objects -o views.json
     """
+    claim_outputs({"output": output, "plot": plot}, [volume, pois_path, candidates, camera_info], force)
     t0 = time.perf_counter()
     cam = camera_from_options(fx, fy, cx, cy, width, height, camera_info, min_range, max_range, vfov_extra)
     if mode == "objects":

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import click
 
+from kinfu_cli.commands._options import claim_outputs, force_option
 from kinfu_cli.attention.detect import PoiDetection, detect_pois
 from kinfu_cli.attention.tasks import MIN_TASK_S, SPLIT_GAP_S
 from kinfu_cli.commands._detector_options import detector_options, detector_params_from
@@ -36,8 +37,9 @@ from kinfu_cli.report.poi_plot import plot_pois, plot_task_pois
 @click.option("--json", "as_json", is_flag=True, help="Print the pois.json object on stdout.")
 @click.option("--quiet", is_flag=True, help="No progress output.")
 @detector_options
+@force_option
 def command(source, algorithm, hand_topic, hand_frame, world_frame, workspace, split_gap, min_task, output, plot,
-            as_json, quiet, **kw):
+            as_json, quiet, force, **kw):
     """Find where the person acted (placed, removed, picked an object) from the wrist trajectory.
 
     GMM-AS (Monica et al. 2016, Alg. 3) fits a Gaussian mixture on (x, y, z, t), picks the number of
@@ -59,6 +61,7 @@ def command(source, algorithm, hand_topic, hand_frame, world_frame, workspace, s
       kinfu poi session.mcap --workspace -0.5,-0.8,0.7,0.6,0.4,1.3 --split-gap 1
       kinfu poi user1_cup0.traj --literal --plot literal.png
     """
+    claim_outputs({"output": output, "plot": plot}, [source], force)
     params = detector_params_from(kw)[algorithm]
     found = detect_pois(source, algorithm, params, workspace=workspace, split_gap=split_gap, min_task=min_task,
                         hand_topic=hand_topic, hand_frame=hand_frame, world_frame=world_frame, quiet=quiet)

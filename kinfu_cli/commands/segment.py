@@ -7,6 +7,8 @@ from pathlib import Path
 
 import click
 
+from kinfu_cli.commands._options import claim_outputs, force_option
+from kinfu_cli.core.atomic import atomic_dir
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.progress import progress
 from kinfu_cli.report.segment_plot import plot_segments
@@ -67,13 +69,14 @@ def _up(value: str) -> tuple[float, float, float] | None:
 @click.option("--msq-mu", type=float, default=0.03, show_default=True, help="Dimension difference mu (m).")
 @click.option("--seed", type=int, default=0, show_default=True, help="RANSAC / subsampling seed.")
 @click.option("--plot", is_flag=True, help="Also write segments.png and saliency.png.")
+@force_option
 @click.option("--json", "as_json", is_flag=True, help="Print segments.json to stdout.")
 @click.option("--quiet", is_flag=True, help="No progress output.")
 def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution, spatial_importance,
             normal_importance, adjacency_radius, concavity_tolerance, sanity_angle, min_segment_points,
             plane_distance, up, up_tolerance, isolation_threshold, no_superquadrics, sq_max_points,
             sq_exponent_bounds, sq_cost, multi_sq, msq_trigger, msq_height, msq_mu, seed, plot, as_json,
-            quiet) -> None:
+            quiet, force) -> None:
     """Segment the surface of VOLUME (a fusion volume.npz or a ternary.npz): support plane, supervoxels
     merged across convex boundaries (LCCP idea), saliency = isolation x roundness (thesis eq. 3.12) and a
     superquadric per segment (Vezzani ch. 7). Writes OUTDIR/segments.ply (coloured by segment),
@@ -85,6 +88,7 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
       kinfu segment out/fuse/volume.npz -o out/segments --plot
       kinfu segment out/fuse/ternary.npz --isolation-threshold 0.01 --json --quiet
     """
+    claim_outputs({"outdir": outdir}, [volume], force)
     params = SegmentationParams(seed_resolution=seed_resolution, spatial_importance=spatial_importance,
                                 normal_importance=normal_importance, adjacency_radius=adjacency_radius,
                                 concavity_tolerance_deg=concavity_tolerance, sanity_angle_deg=sanity_angle,
@@ -100,9 +104,10 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
         if step == "segment":
             result = segment_volume(volume, opts)
         else:
-            write_segment_outputs(result, outdir)
-            if plot:
-                plot_segments(result, outdir)
+            with atomic_dir(outdir) as tmp:  # the folder appears whole or not at all
+                write_segment_outputs(result, tmp)
+                if plot:
+                    plot_segments(result, tmp)
     doc = result.to_json()
     if as_json:
         click.echo(json.dumps(doc, indent=2, default=float))

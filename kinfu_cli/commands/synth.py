@@ -6,6 +6,7 @@ import json
 
 import click
 
+from kinfu_cli.commands._options import claim_outputs, force_option
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.sim.synth import FORMAT_NAMES, synthesize
 
@@ -44,8 +45,9 @@ def parse_formats(text: str) -> list[str]:
                    "at every depth frame stamp, for `kinfu fuse --pose topic` [none].")
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON summary on stdout.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
+@force_option
 def command(out, seed, width, height, frames, formats, scenario, n_objects, hand_rate, frame_rate, noise,
-            depth_format, color_format, jpeg_quality, camera_pose_topic, as_json, quiet):
+            depth_format, color_format, jpeg_quality, camera_pose_topic, as_json, quiet, force):
     """Write a synthetic tabletop recording and its ground truth.
 
     A table with boxes, cylinders, spheres and meshes; a 6-joint arm carries a Kinect-like camera (TF chain
@@ -63,6 +65,7 @@ def command(out, seed, width, height, frames, formats, scenario, n_objects, hand
       kinfu synth -o /tmp/small --width 64 --height 48 --frames 6 --formats mcap --scenario place
       kinfu synth -o /tmp/posed --camera-pose-topic /camera/pose
     """
+    claim_outputs({"out": out}, [], force)
     result = synthesize(out, seed=seed, width=width, height=height, frames=frames, formats=parse_formats(formats),
                         scenario=scenario, n_objects=n_objects, hand_rate=hand_rate, frame_rate=frame_rate,
                         noise=noise, depth_format=depth_format, color_format=color_format,

@@ -59,17 +59,6 @@ def record_written(path: str | os.PathLike) -> None:
             os.unlink(tmp)
 
 
-def forget_written(path: str | os.PathLike) -> None:
-    """Drop `path` from its folder's manifest (kinfu removed it)."""
-    path = Path(path)
-    folder = path.parent if str(path.parent) else Path(".")
-    files = _read_manifest(folder)
-    if files.pop(path.name, None) is not None:
-        with contextlib.suppress(OSError):
-            (folder / MANIFEST).write_text(json.dumps({"written_by": "kinfu", "files": files}, indent=1,
-                                                      sort_keys=True))
-
-
 def written_by_kinfu(path: str | os.PathLike) -> bool:
     """True when kinfu wrote `path` and nobody changed it since (see the module docstring)."""
     path = Path(path)
@@ -97,13 +86,16 @@ def claim_output(output: str | os.PathLike | None, inputs: Iterable[str | os.Pat
                  force: bool = False, parameter: str = "output") -> Path:
     """Check that kinfu may write `output`, before any work is done; returns it as a Path.
 
-    Refused always: an empty path, an output that is one of `inputs`, or a folder that holds one of them
-    (replacing it would destroy the input). Refused unless `force`: an existing path kinfu did not write.
+    Refused always: an empty path, the current folder or one above it, an output that is one of `inputs`,
+    or a folder that holds one of them (replacing it would destroy the input). Refused unless `force`: an existing path kinfu did not write.
     """
     if output is None or str(output).strip() == "":
         raise KinfuError("expected a path, got an empty one", parameter=parameter)
     out = Path(output)
     real = Path(os.path.realpath(out))
+    if _inside(Path(os.getcwd()).resolve(), real):
+        raise KinfuError(f"{out} is the current folder or holds it; name a new or kinfu-written path",
+                         parameter=parameter)
     for inp in inputs:
         if inp is None or str(inp) == "":
             continue
