@@ -11,6 +11,7 @@ import click
 from kinfu_cli.commands._options import claim_outputs, force_option
 from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.commands._roles import role_kwargs, role_options
+from kinfu_cli.commands._up import parse_up
 from kinfu_cli.core.atomic import atomic_dir, write_json
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.fusion.outputs import fusion_report, write_fusion_outputs
@@ -19,7 +20,7 @@ from kinfu_cli.report.volume_plot import plot_slices
 
 # how report.json names the arguments that placed the grid or cleared spheres: by their options
 ARGUMENT_FLAGS = {"init": "--init", "origin": "--origin", "clear_spheres": "--clear-sphere",
-                  "clear_pois": "--clear-pois"}
+                  "clear_pois": "--clear-pois", "up": "--up"}
 
 
 def _floats(value: str, name: str, n: tuple[int, ...]) -> tuple[float, ...]:
@@ -66,6 +67,10 @@ def _floats(value: str, name: str, n: tuple[int, ...]) -> tuple[float, ...]:
                    "within 3 % (lines of no reading some sensors leave); 0 turns it off.")
 @click.option("--bilateral", is_flag=True, help="Bilateral-filter the depth images first.")
 @click.option("--shadow-filter", is_flag=True, help="Remove Kinect V2 shadow and veil pixels (thesis 3.1.3).")
+@click.option("--up", default="auto", show_default=True, metavar="X,Y,Z|auto",
+              help="Direction against gravity in the world frame. auto: z for a REP-103 TF frame (world, map, "
+                   "odom, ...) unless the recording says otherwise, else the largest plane below the cameras "
+                   "(report.json: up, up_source).")
 @click.option("--no-color", is_flag=True, help="Do not keep colour per voxel.")
 @click.option("--plot", is_flag=True, help="Also write PNG slices of the ternary volume.")
 @force_option
@@ -74,13 +79,14 @@ def _floats(value: str, name: str, n: tuple[int, ...]) -> tuple[float, ...]:
 @role_options
 def command(recording: Path, outdir: Path, voxel_size, resolution, size, origin, truncation, max_weight, min_depth,
             max_depth, pose, pose_topic, init, clear_spheres, clear_pois, start_s, end_s, every, tolerance_s,
-            fill_gaps, bilateral, shadow_filter, no_color, plot, as_json, quiet, force, **kwargs) -> None:
+            fill_gaps, bilateral, shadow_filter, up, no_color, plot, as_json, quiet, force, **kwargs) -> None:
     """Fuse the depth frames of RECORDING (MCAP, ROS 1 .bag, ROS 2 bag folder) into a KinectFusion TSDF
     volume that keeps unknown / empty / occupied per voxel (Monica et al. 2016, eqs. 1-3): free space in
     front of surfaces becomes known-empty, interiors stay unknown. Writes OUTDIR/mesh.ply (coloured),
     cloud.ply, volume.npz (continue with --init), ternary.npz (int8 [x,y,z]: 1 occupied, 0 unknown,
-    -1 empty; origin; voxel_size) and report.json (frames used/dropped, poses, tracking, timing, counts,
-    bounding box).
+    -1 empty; origin; voxel_size; up) and report.json (frames used/dropped, poses, up direction, depth
+    intrinsics, tracking, timing, counts, bounding box). segment and nbv use the up direction and nbv the
+    intrinsics stored in volume.npz.
 
     \b
     Example:
@@ -105,7 +111,8 @@ def command(recording: Path, outdir: Path, voxel_size, resolution, size, origin,
         init=str(init) if init else None, clear_spheres=[_floats(s, "--clear-sphere", (4,)) for s in clear_spheres],
         clear_pois=str(clear_pois) if clear_pois else None, start_s=start_s, end_s=end_s, every=every,
         tolerance_s=tolerance_s, fill_gaps=fill_gaps, bilateral=bilateral, shadow_filter=shadow_filter,
-        roles=role_kwargs(kwargs), quiet=quiet, argument_names=ARGUMENT_FLAGS)
+        roles=role_kwargs(kwargs), quiet=quiet, argument_names=ARGUMENT_FLAGS,
+        up=None if isinstance(up_dir := parse_up(up, ("auto",)), str) else up_dir)
     t0 = time.perf_counter()
     with atomic_dir(outdir) as tmp:  # one transaction: the folder appears whole, report.json written last
         write_fusion_outputs(result, tmp)

@@ -7,6 +7,7 @@ import json
 import click
 
 from kinfu_cli.commands._options import claim_outputs, force_option
+from kinfu_cli.commands._up import parse_up
 from kinfu_cli.io.rgbd_folders import import_folder
 
 
@@ -22,32 +23,41 @@ from kinfu_cli.io.rgbd_folders import import_folder
               help="Colour as the data set's own jpeg/png bytes (CompressedImage), as rgb8 Image, or not at all.")
 @click.option("--intrinsics", default=None, metavar="FX,FY,CX,CY",
               help="Depth camera intrinsics when the folder has no intrinsics file.")
+@click.option("--up", default=None, metavar="X,Y,Z",
+              help="Direction against gravity in the folder's pose frame, when known [not known: `kinfu fuse` "
+                   "estimates it].")
 @click.option("--no-compress", is_flag=True, help="Do not compress chunks (zstd for MCAP, lz4 for .bag).")
 @click.option("--json", "as_json", is_flag=True, help="Print the import summary as JSON on stdout.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
 @force_option
 def command(folder: str, out: str, rate: float, frames: str | None, color: str, intrinsics: str | None,
-            no_compress: bool, as_json: bool, quiet: bool, force: bool) -> None:
+            up: str | None, no_compress: bool, as_json: bool, quiet: bool, force: bool) -> None:
     """Convert the RGB-D frame FOLDER into a recording that every kinfu command reads.
 
     Layouts: 7-Scenes/3DMatch (frame-N.depth.png, frame-N.color.png|jpg, frame-N.pose.txt,
     camera-intrinsics.txt or intrinsics.K.txt) and TUM RGB-D (depth.txt, rgb.txt, groundtruth.txt).
     The recording holds /camera/depth/image_raw (16UC1 mm), /camera/depth/camera_info, colour on
-    /camera/color/image_raw/compressed, and /tf world -> camera_optical from the poses.
+    /camera/color/image_raw/compressed, /tf world -> camera_optical from the poses, and /kinfu/world_up:
+    the --up direction, or zero when not given ("world" is the data set's frame, often the first camera,
+    not a z-up REP-103 frame).
 
     \b
     Example:
       kinfu import ../shared/data/rgbd-7scenes-redkitchen -o redkitchen.mcap
       kinfu import tum_fr1_desk/ -o fr1_desk.bag --frames 0:300:2
+      kinfu import scans/ -o scans.mcap --up 0,-1,0
     """
     claim_outputs({"out": out}, [folder], force)
     summary = import_folder(folder, out, rate=rate, frames=frames, color=color, intrinsics=intrinsics,
-                            compress=not no_compress, quiet=quiet, intrinsics_source="--intrinsics")
+                            compress=not no_compress, quiet=quiet, intrinsics_source="--intrinsics",
+                            up=parse_up(up))
     if as_json:
         click.echo(json.dumps(summary, indent=2))
         return
     click.echo(f"wrote {summary['output']} ({summary['format']}): {summary['frames']} of "
                f"{summary['frames_in_folder']} frames ({summary['layout']} layout), {summary['color_frames']} "
                f"colour images, {summary['tf_samples']} TF samples {summary['topics']['tf']}")
+    up_text = ",".join(f"{v:g}" for v in summary["up"]) if summary["up"] else "not known (kinfu fuse estimates it)"
+    click.echo(f"world frame up: {up_text}, declared on {summary['topics']['world_up']}")
     for note in summary["notes"]:
         click.echo(f"note: {note}")

@@ -9,10 +9,12 @@ import click
 
 from kinfu_cli.commands._options import claim_outputs, force_option
 from kinfu_cli.commands._output import emit
+from kinfu_cli.commands._up import parse_up
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.pois import DEFAULT_RADIUS, poi_frame_warnings
+from kinfu_cli.fusion.volume import volume_intrinsics
 from kinfu_cli.nbv.gains import gain_names
-from kinfu_cli.nbv.sensor import camera_from_options
+from kinfu_cli.nbv.sensor import camera_from_options, camera_source, preset_warning
 from kinfu_cli.nbv.viewpoints import PAPER_SPHERE, SphereSpec
 from kinfu_cli.nbv.workflow import NbvOptions, rank_object_views, rank_poi_views
 from kinfu_cli.report.nbv_plot import plot_nbv
@@ -35,9 +37,10 @@ def summary_lines(doc: dict) -> list[str]:
         rej = ", ".join(f"{k} {v}" for k, v in p["rejected"].items() if v) or "none"
         state = "reconstructed" if p["reconstructed"] else "not reconstructed"
         x, y, z = p["position"]
+        best = (f"best {doc['gain']} gain {p['best_gain']:.1f} (IncTh {p['inc_th']:.1f}): {state}" if p["valid"]
+                else "no valid view to rank")
         lines.append(f"POI {p['id']} at ({x:.3f}, {y:.3f}, {z:.3f}) r={p['radius']:.2f} m: "
-                     f"{p['candidates']} candidates, rejected: {rej}; best {doc['gain']} gain "
-                     f"{p['best_gain']:.1f} (IncTh {p['inc_th']:.1f}): {state}")
+                     f"{p['candidates']} candidates, rejected: {rej}; {best}")
         lines.append("  rank      gain   unknown  occupied  empty-exit  position")
         for i, v in enumerate(p["views"][:10]):
             px, py, pz = v["position"]
@@ -49,6 +52,8 @@ def summary_lines(doc: dict) -> list[str]:
 def objects_summary_lines(doc: dict) -> list[str]:
     """Human-readable summary of a views.json document of the objects mode."""
     if doc["pose"] is None:
+        if doc.get("empty_reason"):
+            return [f"no view to plan: {doc['empty_reason']}"]
         return [f"no view scores above {doc['score_threshold']} on any segment ({len(doc['attempts'])} tried): "
                 "the objects are considered reconstructed"]
     r = doc["region"]
@@ -101,7 +106,8 @@ def objects_summary_lines(doc: dict) -> list[str]:
 @click.option("--width", type=int, default=None, help="Image width (px) [640].")
 @click.option("--height", type=int, default=None, help="Image height (px) [480].")
 @click.option("--camera-info", type=click.Path(path_type=Path), default=None,
-              help="Recording whose sensor_msgs/CameraInfo gives the intrinsics [default: Kinect v1 525/319.5/239.5].")
+              help="Recording whose sensor_msgs/CameraInfo gives the intrinsics [default: those the volume was "
+                   "fused with; Kinect v1 525/319.5/239.5 when it has none].")
 @click.option("--min-range", default=0.5, show_default=True, type=float, help="Sensor minimum range (m).")
 @click.option("--max-range", default=4.0, show_default=True, type=float, help="Sensor maximum range (m).")
 @click.option("--vfov-extra", default=5.0, show_default=True, type=float,
@@ -110,7 +116,10 @@ def objects_summary_lines(doc: dict) -> list[str]:
               help="IncTh: a POI is reconstructed when its best gain is below this [default: 1% of the "
                    "pixels that see S(POI)].")
 @click.option("--table-z", default="auto", show_default=True,
-              help="Reject sensor positions below this height: auto (table top found in the volume), none, or metres.")
+              help="Reject sensor positions below this height along up: auto (table top found in the volume), "
+                   "none, or metres.")
+@click.option("--up", default="auto", show_default=True, metavar="X,Y,Z|auto",
+              help="The world's up direction (viewing sphere, table): auto = the volume's (z when it has none).")
 @click.option("--clearance", default=0.0, show_default=True, type=float,
               help="Reject sensor positions within this distance (m) of occupied/unknown voxels.")
 @click.option("--optimistic", is_flag=True,
@@ -121,7 +130,7 @@ def objects_summary_lines(doc: dict) -> list[str]:
 @force_option
 def command(volume, pois_path, mode, clear, gain, top, output, plot, candidates, radius, lon_step, lat_min, lat_max,
             lat_step, roll_step, poi_radius, fx, fy, cx, cy, width, height, camera_info, min_range, max_range,
-            vfov_extra, inc_th, table_z, clearance, optimistic, exact_rolls, quiet, as_json, force):
+            vfov_extra, inc_th, table_z, up, clearance, optimistic, exact_rolls, quiet, as_json, force):
     """Rank candidate views around each POI by the information gain inside S(POI).
 
     Ray casts each candidate (the paper's viewing sphere: d = 0.8 m, longitude 30 deg, latitude
@@ -140,11 +149,19 @@ def command(volume, pois_path, mode, clear, gain, top, output, plot, candidates,
     """
     claim_outputs({"output": output, "plot": plot}, [volume, pois_path, candidates, camera_info], force)
     t0 = time.perf_counter()
-    cam = camera_from_options(fx, fy, cx, cy, width, height, camera_info, min_range, max_range, vfov_extra)
+    recorded = volume_intrinsics(volume) if Path(volume).is_file() else None
+    cam = camera_from_options(fx, fy, cx, cy, width, height, camera_info, min_range, max_range, vfov_extra,
+                              recorded=recorded)
+    source = camera_source(fx, fy, cx, cy, camera_info, recorded)
+    camera_warnings = [preset_warning()] if source == "kinect_v1 preset" else []
+    up_dir = parse_up(up, ("auto",))
+    up_dir = None if isinstance(up_dir, str) else tuple(float(v) for v in up_dir)
     if mode == "objects":
         planned = rank_object_views(volume, cam, gain=gain, table_z=_table_z_option(table_z),
-                                    score_threshold=0.0 if inc_th is None else inc_th, top=top)
+                                    score_threshold=0.0 if inc_th is None else inc_th, top=top, up=up_dir)
         doc = planned.to_json()
+        doc["camera_source"] = source
+        doc["warnings"] = camera_warnings + doc["warnings"]
         doc["seconds"] = round(time.perf_counter() - t0, 3)
         emit(doc, output, as_json, objects_summary_lines)
         return
@@ -154,12 +171,13 @@ def command(volume, pois_path, mode, clear, gain, top, output, plot, candidates,
                         roll_step=roll_step)
     opts = NbvOptions(gain=gain, clear=clear, top=top, candidates=candidates, sphere=sphere, poi_radius=poi_radius,
                       inc_th=inc_th, table_z=_table_z_option(table_z), clearance=clearance,
-                      share_rolls=not exact_rolls, optimistic=optimistic)
+                      share_rolls=not exact_rolls, optimistic=optimistic, up=up_dir)
     ranked = rank_poi_views(volume, pois_path, cam, opts, quiet=quiet)
     doc = ranked.to_json()
-    doc["warnings"] = poi_frame_warnings(pois_path, ranked.grid.frame, "--pois")
+    doc["camera_source"] = source
+    doc["warnings"] = camera_warnings + poi_frame_warnings(pois_path, ranked.grid.frame, "--pois") + doc["warnings"]
     if plot is not None:
-        plot_nbv(plot, ranked.grid, ranked.rankings, top=min(top or 5, 5))
+        plot_nbv(plot, ranked.grid, ranked.rankings, top=min(top or 5, 5), up=ranked.up)
         doc["plot"] = str(plot)
     doc["seconds"] = round(time.perf_counter() - t0, 3)
     emit(doc, output, as_json, summary_lines)

@@ -8,6 +8,8 @@ from pathlib import Path
 import click
 
 from kinfu_cli.commands._options import claim_outputs, force_option
+from kinfu_cli.commands._output import print_warnings
+from kinfu_cli.commands._up import parse_up
 from kinfu_cli.core.atomic import atomic_dir
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.progress import progress
@@ -25,16 +27,11 @@ def _pair(value: str, name: str) -> tuple[float, float]:
     return lo, hi
 
 
-def _up(value: str) -> tuple[float, float, float] | None:
-    if value.lower() == "none":
-        return None
-    try:
-        v = tuple(float(x) for x in value.split(","))
-    except ValueError:
-        v = ()
-    if len(v) != 3 or not any(v):
-        raise ConfigError(f"--up: expected 'x,y,z' (non-zero) or 'none', got {value!r}")
-    return v  # type: ignore[return-value]
+def _up(value: str) -> tuple[float, float, float] | str | None:
+    v = parse_up(value, ("auto", "none"))
+    if isinstance(v, str):
+        return None if v == "none" else v
+    return tuple(float(x) for x in v)  # type: ignore[return-value]
 
 
 @click.command("segment", short_help="Segments, saliency and superquadrics of a fused volume.")
@@ -54,7 +51,9 @@ def _up(value: str) -> tuple[float, float, float] | None:
 @click.option("--min-segment-points", type=int, default=20, show_default=True,
               help="Smaller segments join a neighbour or are dropped.")
 @click.option("--plane-distance", type=float, default=0.01, show_default=True, help="Support plane RANSAC inlier distance (m).")
-@click.option("--up", default="0,0,1", show_default=True, help="Expected support-plane normal 'x,y,z' or 'none'.")
+@click.option("--up", default="auto", show_default=True,
+              help="Expected support-plane normal: 'x,y,z', 'none' (any plane) or 'auto' (the volume's up, "
+                   "stored by kinfu fuse; z when the volume has none).")
 @click.option("--up-tolerance", type=float, default=30.0, show_default=True, help="Allowed plane tilt from --up (deg).")
 @click.option("--isolation-threshold", type=float, default=0.02, show_default=True, help="B_th of eq. 3.11 (m).")
 @click.option("--no-superquadrics", is_flag=True, help="Skip the superquadric fits.")
@@ -109,11 +108,13 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
                 if plot:
                     plot_segments(result, tmp)
     doc = result.to_json()
+    print_warnings(doc)
     if as_json:
         click.echo(json.dumps(doc, indent=2, default=float))
     elif not quiet:
         objs = [s for s in doc["segments"] if s["kind"] == "object"]
-        click.echo(f"{len(objs)} segments + support plane from {doc['points']} surface points "
+        plane = " + support plane" if doc["support_plane"] is not None else ", no support plane"
+        click.echo(f"{len(objs)} segments{plane} from {doc['points']} surface points "
                    f"in {result.timing['total']:.2f} s -> {outdir}/segments.json")
         for s in objs[:10]:
             sq = s["superquadric"]

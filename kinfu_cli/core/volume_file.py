@@ -1,7 +1,9 @@
 """The fusion volume file (`volume.npz`): format name and version, writer and validating reader.
 
 One .npz holding `meta` (a JSON string: format, format_version, shape, voxel_size, origin, truncation,
-max_weight, min_depth, max_depth, color, block, frames_integrated, frame) and the block-sparse arrays
+max_weight, min_depth, max_depth, color, block, frames_integrated, frame, and since the up direction and
+intrinsics are recorded: up (unit [x, y, z] against gravity or null), up_source, intrinsics ({fx, fy, cx, cy,
+width, height} of the depth camera fused, or null); readers treat missing ones as null) and the block-sparse arrays
 `block_idx`, `block_w`, `pool_v`, `pool_w`, `pool_c` (see fusion/kernels.py for their meaning). The
 reader checks format and version here so every stage reports a foreign file the same way; turning the
 arrays back into a TernaryVolume is fusion's job (`fusion.volume.load_volume`).
@@ -48,3 +50,16 @@ def read_volume_file(path: str | os.PathLike) -> tuple[dict, dict[str, np.ndarra
     except (OSError, ValueError, EOFError, KeyError, json.JSONDecodeError) as exc:
         raise VolumeError(f"{path}: not a readable volume file ({exc})") from None
     return meta, arrays
+
+
+def read_volume_meta(path: str | os.PathLike) -> dict | None:
+    """The meta dict of a volume.npz without reading its arrays; None for an .npz without 'meta' (a
+    ternary.npz); VolumeError for a missing or unreadable file."""
+    path = Path(path)
+    if not path.exists():
+        raise VolumeError(f"{path}: no such volume file")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            return json.loads(str(data["meta"])) if "meta" in data.files else None
+    except (OSError, ValueError, EOFError, json.JSONDecodeError) as exc:
+        raise VolumeError(f"{path}: not a readable volume file ({exc})") from None

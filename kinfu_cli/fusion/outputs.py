@@ -37,7 +37,8 @@ def write_fusion_outputs(result: FusionResult, outdir: str | os.PathLike) -> Non
 
 
 def fusion_report(result: FusionResult, extra_outputs: Iterable[str] = ()) -> dict:
-    """The report of a fusion run (report.json): frames used and dropped, poses, tracking, grid, filters,
+    """The report of a fusion run (report.json): frames used and dropped, poses, the world's up direction
+    (up, up_source, up_evidence: fusion.up) and the depth intrinsics fused, tracking, grid, filters,
     cleared spheres, counts, bounding boxes, mesh and cloud sizes, timing (with the total until now), the
     output files (OUTPUTS, then extra_outputs) and warnings."""
     vol = result.volume
@@ -51,6 +52,10 @@ def fusion_report(result: FusionResult, extra_outputs: Iterable[str] = ()) -> di
         "pose_mode": result.pose_mode,
         "pose_source": result.pose_source,
         "world_frame": vol.frame,
+        "up": None if vol.up is None else vol.up.tolist(),
+        "up_source": result.up.get("source", vol.up_source),
+        "up_evidence": {k: v for k, v in result.up.items() if k not in ("up", "source")},
+        "intrinsics": vol.intrinsics,
         "frames": {"depth_messages": stats.depth_messages, "used": result.frames_used,
                    "skipped_every": stats.skipped, "without_color": stats.without_color,
                    "dropped": result.dropped, "dropped_total": int(sum(result.dropped.values())),

@@ -21,19 +21,21 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from kinfu_cli.core.errors import ConfigError, RecordingError, VolumeError
-from kinfu_cli.core.grid import TernaryGrid
+from kinfu_cli.core.grid import TernaryGrid, check_up
 from kinfu_cli.core.pois import poi_frame_warnings, read_pois
 from kinfu_cli.core.progress import progress
 from kinfu_cli.fusion import filters
 from kinfu_cli.fusion.mesh import mesh_cloud
 from kinfu_cli.fusion.placement import default_origin
 from kinfu_cli.fusion.tracking import POSE_MODES, FrameToModelTracker, TrackResult
+from kinfu_cli.fusion.up import choose_up
 from kinfu_cli.fusion.volume import TernaryVolume, load_volume
 from kinfu_cli.io.frames import FrameStats, RGBDFrame, iter_frames
 from kinfu_cli.io.messages import header_frame
 from kinfu_cli.io.recording import Recording, open_recording
 from kinfu_cli.io.roles import Roles, detect_roles
 from kinfu_cli.io.tf_buffer import TfBuffer
+from kinfu_cli.io.world_up import read_world_up
 
 if TYPE_CHECKING:  # open3d only for the annotations
     import open3d as o3d
@@ -69,6 +71,7 @@ class FusionResult:
     cloud: o3d.geometry.PointCloud
     timing: dict[str, float] = field(default_factory=dict)  # seconds per step
     started: float = 0.0  # time.perf_counter() when fusing began
+    up: dict = field(default_factory=dict)  # fusion.up.UpChoice.to_json(): up, source and the evidence
 
     def add_time(self, step: str, seconds: float) -> None:
         self.timing[step] = self.timing.get(step, 0.0) + seconds
@@ -141,7 +144,7 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple = 3.0, r
                    tolerance_s: float = 0.05, fill_gaps: int = 2, bilateral: bool = False,
                    shadow_filter: bool = False, shadow_baseline: float = 0.08,
                    roles: Mapping[str, str | None] | None = None, quiet: bool = True,
-                   argument_names: Mapping[str, str] | None = None) -> FusionResult:
+                   argument_names: Mapping[str, str] | None = None, up=None) -> FusionResult:
     """Fuse the depth frames of `recording` (MCAP, ROS 1 .bag, ROS 2 bag folder) into a TernaryVolume.
 
     Grid (defaults as KinFu LS): size (m, one or three values), resolution (voxels per axis, 512 unless
@@ -151,13 +154,16 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple = 3.0, r
     continue. clear_spheres (x, y, z, r) and the POIs of clear_pois are forgotten (before fusing with init,
     else after). start_s / end_s (seconds from the recording start), every, tolerance_s: frame selection as
     io.frames.iter_frames. fill_gaps, bilateral, shadow_filter, shadow_baseline: depth filters. roles:
-    detect_roles overrides. argument_names: how the report names the init, origin, clear_spheres and
-    clear_pois arguments (default these names; a command line passes its options).
+    detect_roles overrides. argument_names: how the report names the init, origin, clear_spheres,
+    clear_pois and up arguments (default these names; a command line passes its options). up: the world's
+    direction against gravity (x, y, z); None decides it as fusion.up.choose_up says (the volume's up,
+    stored in volume.npz, ternary.npz and the report with its source).
     """
     started = time.perf_counter()
     timing: dict[str, float] = {}
     names = {"init": "init", "origin": "origin", "clear_spheres": "clear_spheres", "clear_pois": "clear_pois",
-             **(argument_names or {})}
+             "up": "up", **(argument_names or {})}
+    up = None if up is None else check_up(up, "up")
     if pose is not None and pose not in POSE_MODES:
         raise ConfigError(f"expected one of {', '.join(POSE_MODES)}, got {pose!r}", parameter="pose")
     if pose == "topic" and not pose_topic:
@@ -182,6 +188,7 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple = 3.0, r
 
     with open_recording(recording) as rec:
         tf = TfBuffer.from_recording(rec)
+        declared_up = read_world_up(rec)
         found = detect_roles(rec, tf=tf, **{k: v for k, v in (roles or {}).items() if v is not None})
         plan = _pose_plan(rec, tf, found, pose, pose_topic)
         if vol is not None and vol.frame and plan.world and vol.frame != plan.world:
@@ -213,6 +220,17 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple = 3.0, r
     t0 = time.perf_counter()
     grid, counts, bounding_box, mesh, cloud = _read_out(vol)
     _add(timing, "extract", time.perf_counter() - t0)
+    t0 = time.perf_counter()
+    up_choice = choose_up(option=up, init_up=vol.up if init else None, init_source=vol.up_source,
+                          declared=declared_up, world=plan.world, world_from_tf=plan.source in ("tf", "topic"),
+                          points=np.asarray(cloud.points), normals=np.asarray(cloud.normals),
+                          camera_poses=np.array(integrator.camera_poses),
+                          up_name=names["up"])
+    vol.up = grid.up = up_choice.up
+    vol.up_source = up_choice.source if up_choice.up is not None else ""
+    vol.intrinsics = vol.intrinsics or integrator.intrinsics
+    warnings += up_choice.warnings
+    _add(timing, "up", time.perf_counter() - t0)
     dropped = dict(stats.dropped)
     for reason, n in depth_filter.drops.items():
         dropped[reason] = dropped.get(reason, 0) + n
@@ -222,7 +240,7 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple = 3.0, r
         dropped=dropped, tracking=integrator.track_log if integrator.tracker is not None else None,
         depth_filter=depth_filter, every=every, start_s=start_s, end_s=end_s, cleared_spheres=spheres,
         warnings=warnings, grid=grid, counts=counts, bounding_box=bounding_box, mesh=mesh, cloud=cloud,
-        timing=timing, started=started)
+        timing=timing, started=started, up=up_choice.to_json())
 
 
 def _spheres(clear_spheres: Iterable[tuple], clear_pois: str | os.PathLike | None, spheres_name: str) -> list[dict]:
@@ -296,6 +314,8 @@ class _Integrator:
         self.prev_T: np.ndarray | None = None
         self.buffered: list[tuple[RGBDFrame, np.ndarray]] = []  # frames waiting for the grid to be placed
         self.n_place = 1 if mode == "icp" else PLACEMENT_FRAMES
+        self.camera_poses: list[np.ndarray] = []  # T_world_camera of every frame integrated (fusion.up)
+        self.intrinsics: dict | None = None  # of the first frame integrated
 
     def add(self, frame: RGBDFrame, depth: np.ndarray) -> None:
         if self.volume is not None:
@@ -357,6 +377,11 @@ class _Integrator:
         _add(self.timing, "integrate", time.perf_counter() - t0)
         self.prev_T = np.asarray(T, dtype=np.float64)
         self.used += 1
+        self.camera_poses.append(self.prev_T)
+        if self.intrinsics is None:
+            K = np.asarray(frame.K, dtype=np.float64)
+            self.intrinsics = {"fx": float(K[0, 0]), "fy": float(K[1, 1]), "cx": float(K[0, 2]),
+                               "cy": float(K[1, 2]), "width": int(depth.shape[1]), "height": int(depth.shape[0])}
 
 
 def _track_entry(frame: RGBDFrame, res: TrackResult, T_given: np.ndarray | None) -> dict:

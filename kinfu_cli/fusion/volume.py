@@ -19,9 +19,10 @@ import numpy as np
 from scipy.ndimage import binary_dilation
 
 from kinfu_cli.core.errors import ConfigError, VolumeError
-from kinfu_cli.core.grid import TernaryGrid, read_ternary
+from kinfu_cli.core.grid import TernaryGrid, check_up, read_ternary
 from kinfu_cli.core.poses import check_rigid
-from kinfu_cli.core.volume_file import FORMAT, FORMAT_VERSION, read_volume_file, write_volume_file
+from kinfu_cli.core.volume_file import (FORMAT, FORMAT_VERSION, read_volume_file, read_volume_meta,
+                                        write_volume_file)
 from kinfu_cli.fusion import kernels as kn
 from kinfu_cli.fusion.mesh import extract_mesh
 
@@ -102,6 +103,9 @@ class TernaryVolume:
         self._raylen_cache: dict = {}
         self.frames_integrated = 0
         self.frame = ""  # name of the world frame the poses were given in ("" = not known)
+        self.up: np.ndarray | None = None  # unit direction against gravity in that frame (None = not known)
+        self.up_source = ""  # how up was decided (fusion.up.choose_up), "" when not known
+        self.intrinsics: dict | None = None  # the depth camera fused: fx, fy, cx, cy, width, height
         if _allocate:
             self.block_idx = np.full(tuple(self.nb), -1, dtype=np.int32)
             self.block_w = np.zeros(tuple(self.nb), dtype=np.uint8)
@@ -282,7 +286,7 @@ class TernaryVolume:
                                self.pool_v, self.pool_w)
 
     def ternary_grid(self) -> TernaryGrid:
-        return TernaryGrid(self.labels(), self.origin.copy(), self.voxel_size, self.frame)
+        return TernaryGrid(self.labels(), self.origin.copy(), self.voxel_size, self.frame, self.up)
 
     def _box(self, lo, hi) -> tuple[np.ndarray, np.ndarray]:
         lo = np.zeros(3, np.int64) if lo is None else np.asarray(lo, dtype=np.int64).reshape(3)
@@ -368,7 +372,8 @@ class TernaryVolume:
                 "voxel_size": self.voxel_size, "origin": self.origin.tolist(), "truncation": self.truncation,
                 "max_weight": self.max_weight, "min_depth": self.min_depth, "max_depth": self.max_depth,
                 "color": self.color, "block": kn.B, "frames_integrated": self.frames_integrated,
-                "frame": self.frame}
+                "frame": self.frame, "up": None if self.up is None else self.up.tolist(),
+                "up_source": self.up_source, "intrinsics": self.intrinsics}
 
     def save(self, path: str | os.PathLike) -> Path:
         """Write one .npz (metadata, block tables, used pool rows) atomically; `load_volume` reads it back."""
@@ -413,7 +418,38 @@ def load_volume(path: str | os.PathLike) -> TernaryVolume:
         vol.pool_c[:n] = arrays["pool_c"]
     vol.frames_integrated = int(meta.get("frames_integrated", 0))
     vol.frame = str(meta.get("frame", "") or "")
+    try:  # volumes written before the up direction and the intrinsics were recorded have neither
+        vol.up = None if meta.get("up") is None else check_up(meta["up"])
+    except ConfigError:
+        raise VolumeError(f"{path}: meta 'up' is not a finite direction: {meta.get('up')!r}") from None
+    vol.up_source = str(meta.get("up_source", "") or "") if vol.up is not None else ""
+    vol.intrinsics = _intrinsics(meta.get("intrinsics"), path)
     return vol
+
+
+INTRINSICS_KEYS = ("fx", "fy", "cx", "cy", "width", "height")
+
+
+def _intrinsics(value, path) -> dict | None:
+    """The meta 'intrinsics' of a volume file checked (None when absent); VolumeError when malformed."""
+    if value is None:
+        return None
+    try:
+        out = {k: float(value[k]) for k in INTRINSICS_KEYS}
+    except (KeyError, TypeError, ValueError):
+        raise VolumeError(f"{path}: meta 'intrinsics' is not fx, fy, cx, cy, width, height: {value!r}") from None
+    if not (all(np.isfinite(v) for v in out.values()) and out["fx"] > 0 and out["fy"] > 0
+            and out["width"] >= 1 and out["height"] >= 1):
+        raise VolumeError(f"{path}: meta 'intrinsics' out of range: {value!r}")
+    out["width"], out["height"] = int(out["width"]), int(out["height"])
+    return out
+
+
+def volume_intrinsics(path: str | os.PathLike) -> dict | None:
+    """The depth intrinsics (fx, fy, cx, cy, width, height) a fusion volume.npz was fused with; None for a
+    ternary.npz or a volume written before they were recorded."""
+    meta = read_volume_meta(path)
+    return None if meta is None else _intrinsics(meta.get("intrinsics"), path)
 
 
 def load_grid(path: str | os.PathLike) -> TernaryGrid:

@@ -18,6 +18,10 @@ Recordings written by `import_folder` (names documented for users and tests):
 - `/tf`: `world -> camera_optical` (T_world_camera), at each depth stamp (7-Scenes) or each ground-truth
   sample around the frames (TUM). Rotations are projected onto the nearest rotation matrix (SVD): 7-Scenes
   poses are orthonormal only to ~1e-4.
+- `/kinfu/world_up` geometry_msgs/Vector3Stamped (io.world_up), once at the first stamp, frame `world`: the
+  `up` direction given to the import, else the zero vector. `world` here is the data set's frame (7-Scenes: a
+  KinectFusion volume frame, TUM: the motion-capture frame, a 3DMatch or tabletop folder: often the first
+  camera), not a REP-103 z-up frame, and this message keeps fusion from taking it for one.
 """
 
 from __future__ import annotations
@@ -34,11 +38,13 @@ import numpy as np
 from kinfu_cli.core.atomic import atomic_dir
 from kinfu_cli.core.camera import SENSOR_PRESETS
 from kinfu_cli.core.errors import ConfigError, RecordingError
+from kinfu_cli.core.grid import check_up
 from kinfu_cli.core.poses import quaternion_to_matrix
 from kinfu_cli.core.progress import progress
 from kinfu_cli.io.frames import FrameStats, iter_frames
 from kinfu_cli.io.recording import open_recording
 from kinfu_cli.io.roles import detect_roles
+from kinfu_cli.io.world_up import WORLD_UP_TOPIC
 from kinfu_cli.io.writers import RecordingWriter, format_for
 
 WORLD_FRAME = "world"
@@ -260,12 +266,15 @@ def read_depth_mm(frame: FolderFrame, units_per_m: float) -> np.ndarray:
 
 def import_folder(src: str | os.PathLike, out: str | os.PathLike, rate: float = 30.0, frames: str | None = None,
                   color: str = "compressed", intrinsics: str | None = None, fmt: str | None = None,
-                  compress: bool = True, quiet: bool = True, intrinsics_source: str = "intrinsics argument") -> dict:
+                  compress: bool = True, quiet: bool = True, intrinsics_source: str = "intrinsics argument",
+                  up=None) -> dict:
     """Convert an RGB-D folder into a recording at `out` (.mcap, .bag, or a ROS 2 bag folder); return a summary.
 
     intrinsics: "fx,fy,cx,cy" when the folder has no intrinsics file; intrinsics_source: how the summary's
-    K_source names them.
+    K_source names them. up: the direction against gravity (x, y, z) in the folder's pose frame, when known;
+    declared on /kinfu/world_up (the zero vector when not given: the frame is not taken for REP-103 z-up).
     """
+    up = None if up is None else check_up(up, "up")
     if color not in ("compressed", "raw", "none"):
         raise ConfigError(f"expected compressed, raw or none, got {color!r}", parameter="color")
     folder = scan_folder(src, rate=rate, intrinsics=parse_intrinsics(intrinsics), intrinsics_source=intrinsics_source)
@@ -303,6 +312,7 @@ def import_folder(src: str | os.PathLike, out: str | os.PathLike, rate: float = 
     color_topic = {"compressed": COLOR_TOPIC_COMPRESSED, "raw": COLOR_TOPIC_RAW, "none": None}[color]
     n_color = 0
     with RecordingWriter(out, fmt=kind, compression=compression) as w:
+        w.write_vector(WORLD_UP_TOPIC, events[0][0], WORLD_FRAME, np.zeros(3) if up is None else up)
         for stamp, kind_i, item in progress(events, total=len(events), desc="import", quiet=quiet):
             if kind_i == 0:
                 w.write_tf(stamp, [(WORLD_FRAME, CAMERA_FRAME, item)])
@@ -331,7 +341,8 @@ def import_folder(src: str | os.PathLike, out: str | os.PathLike, rate: float = 
         "K_source": folder.k_source, "max_rotation_orthonormality_error": ortho,
         "first_stamp_ns": chosen[0].stamp_ns, "last_stamp_ns": chosen[-1].stamp_ns,
         "topics": {"depth": DEPTH_TOPIC, "camera_info": INFO_TOPIC, "color": color_topic if n_color else None,
-                   "tf": f"/tf {WORLD_FRAME} -> {CAMERA_FRAME}"},
+                   "tf": f"/tf {WORLD_FRAME} -> {CAMERA_FRAME}", "world_up": WORLD_UP_TOPIC},
+        "up": None if up is None else up.tolist(),
         "notes": folder.notes,
     }
 

@@ -307,6 +307,14 @@ class RecordingWriter:
         msg = self._type("tf2_msgs/msg/TFMessage")(transforms=items)
         self._write(topic, "tf2_msgs/msg/TFMessage", stamp_ns, msg)
 
+    def write_vector(self, topic: str, stamp_ns: int, frame_id: str, v) -> None:
+        """geometry_msgs/Vector3Stamped of the 3-vector v in `frame_id`."""
+        x, y, z = (float(c) for c in np.asarray(v, dtype=np.float64).reshape(3))
+        vec = self._type("geometry_msgs/msg/Vector3")(x=x, y=y, z=z)
+        msg = self._type("geometry_msgs/msg/Vector3Stamped")(header=self._header(topic, stamp_ns, frame_id),
+                                                             vector=vec)
+        self._write(topic, "geometry_msgs/msg/Vector3Stamped", stamp_ns, msg)
+
     def write_pose(self, topic: str, stamp_ns: int, frame_id: str, T: np.ndarray) -> None:
         """geometry_msgs/PoseStamped of the 4x4 pose T (pose of the object in `frame_id`)."""
         T = _as_pose(T)

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -26,6 +26,7 @@ from scipy.spatial import cKDTree
 from kinfu_cli.core.camera import CameraModel
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.grid import TernaryGrid
+from kinfu_cli.fusion.up import z_to_up_rotation
 from kinfu_cli.fusion.volume import TernaryVolume
 from kinfu_cli.nbv.contours import Contours, extract_contours
 from kinfu_cli.nbv.ranking import as_ray_volume, score_views
@@ -41,14 +42,15 @@ N_DIRECTIONS = 5
 N_ROLLS = 8
 
 
-def _look_at_rolls(positions: np.ndarray, targets: np.ndarray, rolls: np.ndarray) -> np.ndarray:
-    """(P * R, 4, 4) camera-to-world poses (optical frame: z forward, y down) for each position x roll."""
+def _look_at_rolls(positions: np.ndarray, targets: np.ndarray, rolls: np.ndarray, up=None) -> np.ndarray:
+    """(P * R, 4, 4) camera-to-world poses (optical frame: z forward, y down) for each position x roll; roll 0
+    has the image upright for the world's `up` (default z)."""
+    R_up = z_to_up_rotation(up)
     z = targets - positions
     z /= np.linalg.norm(z, axis=1, keepdims=True)
-    up = np.array([0.0, 0.0, 1.0])
-    x = np.cross(z, up)
+    x = np.cross(z, R_up[:, 2])
     bad = np.linalg.norm(x, axis=1) < 1e-6
-    x[bad] = np.cross(z[bad], [1.0, 0.0, 0.0])
+    x[bad] = np.cross(z[bad], R_up[:, 0])
     x /= np.linalg.norm(x, axis=1, keepdims=True)
     y = np.cross(z, x)
     c, s = np.cos(rolls), np.sin(rolls)
@@ -65,11 +67,11 @@ def _look_at_rolls(positions: np.ndarray, targets: np.ndarray, rolls: np.ndarray
 
 
 def contour_viewpoints(points: np.ndarray, directions: np.ndarray, *, distance: float = VIEW_DISTANCE,
-                       cone_deg: float = CONE_DEG, n_directions: int = N_DIRECTIONS, n_rolls: int = N_ROLLS
-                       ) -> tuple[np.ndarray, np.ndarray]:
+                       cone_deg: float = CONE_DEG, n_directions: int = N_DIRECTIONS, n_rolls: int = N_ROLLS,
+                       up=None) -> tuple[np.ndarray, np.ndarray]:
     """Candidate poses for contour points: (poses (M * n_directions * n_rolls, 4, 4), owner (same,) index of
     the contour point). Direction 0 is the frontier normal; the others are tilted by `cone_deg` about it
-    at equal azimuths."""
+    at equal azimuths. up: the world's up (default z); the candidates turn with it (fusion.up.z_to_up_rotation)."""
     if not distance > 0:
         raise ConfigError(f"must be > 0 m, got {distance}", parameter="distance")
     if n_directions < 1 or n_rolls < 1:
@@ -80,7 +82,8 @@ def contour_viewpoints(points: np.ndarray, directions: np.ndarray, *, distance: 
     M = len(p)
     if M == 0:
         return np.zeros((0, 4, 4)), np.zeros(0, np.int64)
-    a = np.where(np.abs(n[:, 0:1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    R_up = z_to_up_rotation(up)
+    a = np.where(np.abs((n @ R_up)[:, 0:1]) < 0.9, R_up[:, 0], R_up[:, 1])  # the z-up choice, turned with up
     u = np.cross(n, a)
     u /= np.linalg.norm(u, axis=1, keepdims=True)
     v = np.cross(n, u)
@@ -92,7 +95,7 @@ def contour_viewpoints(points: np.ndarray, directions: np.ndarray, *, distance: 
     D = np.stack(dirs, axis=1).reshape(-1, 3)  # (M * nd, 3)
     targets = np.repeat(p, n_directions, axis=0)
     rolls = 2 * np.pi * np.arange(n_rolls) / n_rolls
-    poses = _look_at_rolls(targets + distance * D, targets, rolls)
+    poses = _look_at_rolls(targets + distance * D, targets, rolls, up)
     owner = np.repeat(np.arange(M), n_directions * n_rolls)
     return poses, owner
 
@@ -149,15 +152,24 @@ class ObjectPlan:
 
 
 def nbv_scorer(grid: TernaryGrid | RayVolume, camera: CameraModel, gain: str = "unknown",
-               table_z: float | None = None, *, reject_unknown: bool = True, optimistic: bool = False) -> Scorer:
+               table_z: float | None = None, *, reject_unknown: bool = True, optimistic: bool = False,
+               up=None, tally: dict | None = None) -> Scorer:
     """The NBV module's ray-casting score (rays ending on unknown voxels inside the region sphere).
     reject_unknown: a sensor position in unknown space scores 0 (the paper; a simulated arm without a motion
-    planner may pass False); optimistic: unknown voxels outside the region do not stop rays."""
+    planner may pass False); optimistic: unknown voxels outside the region do not stop rays; table_z: the
+    table's height along `up` (default z); tally: when given, counts the views scored ("views", "valid") and
+    rejected (by reason)."""
     vol = as_ray_volume(grid)
 
     def score(poses: np.ndarray, center: np.ndarray, radius: float) -> np.ndarray:
-        return np.asarray(score_views(vol, poses, camera, center, radius, gain, table_z=table_z,
-                                      reject_unknown=reject_unknown, optimistic=optimistic).gain, dtype=float)
+        s = score_views(vol, poses, camera, center, radius, gain, table_z=table_z, reject_unknown=reject_unknown,
+                        optimistic=optimistic, up=up)
+        if tally is not None:
+            tally["views"] = tally.get("views", 0) + len(s.reasons)
+            tally["valid"] = tally.get("valid", 0) + int(s.valid.sum())
+            for reason, n in s.rejected().items():
+                tally[reason] = tally.get(reason, 0) + n
+        return np.asarray(s.gain, dtype=float)
 
     return score
 
@@ -179,17 +191,19 @@ def not_attempted(poses: np.ndarray, taken, *, shift: float = 0.05, turn_deg: fl
 def plan_object_views(segments: SegmentResult, contours: Contours, scorer: Scorer, *, score_threshold: float = 0.0,
                       margin: float = 0.2, distance: float = VIEW_DISTANCE, cone_deg: float = CONE_DEG,
                       n_directions: int = N_DIRECTIONS, n_rolls: int = N_ROLLS, max_segments: int | None = None,
-                      exclude=None, exclude_shift: float = 0.05, exclude_turn_deg: float = 10.0) -> ObjectPlan:
+                      exclude=None, exclude_shift: float = 0.05, exclude_turn_deg: float = 10.0,
+                      up=None) -> ObjectPlan:
     """Thesis Alg. 4 on precomputed `segments` and `contours`: the best pose of the most salient segment
     with score > score_threshold.
 
     scorer(poses (V, 4, 4), center (3,), radius) -> scores (V,); exclude: poses (K, 4, 4) already taken:
-    candidates within `exclude_shift` m and `exclude_turn_deg` of one are neither cast nor chosen. Returns an
-    ObjectPlan with the number of candidates generated and ray-cast.
+    candidates within `exclude_shift` m and `exclude_turn_deg` of one are neither cast nor chosen; up: the
+    world's up (default z) for the candidates' orientation. Returns an ObjectPlan with the number of
+    candidates generated and ray-cast.
     """
     t0 = time.perf_counter()
     poses, owner = contour_viewpoints(contours.positions, contours.directions, distance=distance,
-                                      cone_deg=cone_deg, n_directions=n_directions, n_rolls=n_rolls)
+                                      cone_deg=cone_deg, n_directions=n_directions, n_rolls=n_rolls, up=up)
     free = not_attempted(poses, exclude, shift=exclude_shift, turn_deg=exclude_turn_deg)
     seg = segments.segmentation
     near = find_near(contours.positions, seg.points, seg.labels)
@@ -261,11 +275,16 @@ def plan_standard_views(contours: Contours, scorer: Scorer, region_center, regio
 def plan_object_views_for_volume(volume: TernaryVolume | TernaryGrid, camera: CameraModel, *,
                                  scorer: Scorer | None = None, score_threshold: float = 0.0, w_th: float = 5.0,
                                  segment_options: SegmentOptions | None = None, table_z: float | None = None,
-                                 **kwargs) -> ObjectPlan:
+                                 up=None, **kwargs) -> ObjectPlan:
     """Everything from a volume (fusion TernaryVolume or TernaryGrid): segments (without superquadrics),
-    contours, NBV scoring; `kwargs` go to `plan_object_views`."""
+    contours, NBV scoring; `kwargs` go to `plan_object_views`. up: the world's up (table_z is the table's
+    height along it); default the volume's, else z."""
     t0 = time.perf_counter()
     opts = segment_options or SegmentOptions(superquadrics=False)
+    if up is None:
+        up = getattr(volume, "up", None)
+    elif isinstance(opts.segmentation.up, str):  # "auto": the caller's up, not the volume's
+        opts = replace(opts, segmentation=replace(opts.segmentation, up=tuple(float(v) for v in up)))
     segments = analyse_volume(volume, opts)
     t_seg = time.perf_counter() - t0
     grid = volume.ternary_grid() if hasattr(volume, "ternary_grid") else volume
@@ -275,7 +294,7 @@ def plan_object_views_for_volume(volume: TernaryVolume | TernaryGrid, camera: Ca
     contours = extract_contours(grid.labels, grid.origin, grid.voxel_size, w_th=w_th)
     t_cont = time.perf_counter() - t
     if scorer is None:
-        scorer = nbv_scorer(grid, camera, table_z=table_z)
-    plan = plan_object_views(segments, contours, scorer, score_threshold=score_threshold, **kwargs)
+        scorer = nbv_scorer(grid, camera, table_z=table_z, up=up)
+    plan = plan_object_views(segments, contours, scorer, score_threshold=score_threshold, up=up, **kwargs)
     plan.timing.update({"segmentation": t_seg, "contours": t_cont, "total": time.perf_counter() - t0})
     return plan

@@ -19,7 +19,7 @@ import numpy as np
 
 from kinfu_cli.core.camera import CameraModel
 from kinfu_cli.core.errors import ConfigError, VolumeError
-from kinfu_cli.core.grid import EMPTY, OCCUPIED, UNKNOWN, TernaryGrid
+from kinfu_cli.core.grid import EMPTY, OCCUPIED, UNKNOWN, TernaryGrid, check_up
 from kinfu_cli.core.pois import DEFAULT_RADIUS, Poi, read_pois
 from kinfu_cli.core.poses import check_poses, matrix_to_quaternion
 from kinfu_cli.nbv.gains import all_gain_values, get_gain
@@ -79,11 +79,12 @@ def as_ray_volume(volume: TernaryGrid | RayVolume) -> RayVolume:
 
 
 def reject_reasons(vol: RayVolume, poses: np.ndarray, *, table_z: float | None = None,
-                   clearance: float = 0.0, reject_unknown: bool = True) -> list[str | None]:
-    """Why each sensor position is impossible, or None: below the table plane, or inside (within
-    `clearance` metres of) an occupied or (when `reject_unknown`, as the paper's planner) an unknown
-    voxel. Positions outside the volume are allowed."""
+                   clearance: float = 0.0, reject_unknown: bool = True, up=None) -> list[str | None]:
+    """Why each sensor position is impossible, or None: below the table plane (height `table_z` along
+    `up`, default z), or inside (within `clearance` metres of) an occupied or (when `reject_unknown`, as
+    the paper's planner) an unknown voxel. Positions outside the volume are allowed."""
     pos = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)[:, :3, 3]
+    height = pos[:, 2] if up is None else pos @ check_up(up, "up")
     worst = vol.label_at(pos)
     if clearance > 0:
         r = clearance
@@ -98,7 +99,7 @@ def reject_reasons(vol: RayVolume, poses: np.ndarray, *, table_z: float | None =
         unk = (worst == UNKNOWN) & inside
     out: list[str | None] = []
     for i in range(len(pos)):
-        if table_z is not None and pos[i, 2] < table_z:
+        if table_z is not None and height[i] < table_z:
             out.append("below_table")
         elif occ[i]:
             out.append("inside_occupied")
@@ -112,12 +113,13 @@ def reject_reasons(vol: RayVolume, poses: np.ndarray, *, table_z: float | None =
 def score_views(volume: TernaryGrid | RayVolume, poses, camera: CameraModel, region_center, region_radius: float,
                 gain: str = "unknown", *, table_z: float | None = None, clearance: float = 0.0,
                 reject_unknown: bool = True, optimistic: bool = False, restrict: bool = True,
-                share_rolls: bool = True, all_gains: bool = False, progress_cb=None) -> ViewScores:
+                share_rolls: bool = True, all_gains: bool = False, progress_cb=None, up=None) -> ViewScores:
     """Score candidate views for the region S(region_center, region_radius).
 
     volume: a TernaryGrid (or a prepared RayVolume, to reuse it across calls); poses (V, 4, 4)
     camera-to-world; gain: a name from gains.GAINS; all_gains: also compute the through-unknown gains;
-    optimistic: unknown voxels outside the region do not stop rays (the paper: they do).
+    optimistic: unknown voxels outside the region do not stop rays (the paper: they do); table_z: height
+    of the table along `up` (default z) below which sensor positions are rejected.
     """
     t_start = time.perf_counter()
     g = get_gain(gain)
@@ -126,7 +128,8 @@ def score_views(volume: TernaryGrid | RayVolume, poses, camera: CameraModel, reg
     center = np.asarray(region_center, dtype=np.float64).reshape(3)
     if not (math.isfinite(region_radius) and region_radius > 0):
         raise ConfigError(f"expected a positive radius in metres, got {region_radius}", parameter="region_radius")
-    reasons = reject_reasons(vol, poses, table_z=table_z, clearance=clearance, reject_unknown=reject_unknown)
+    reasons = reject_reasons(vol, poses, table_z=table_z, clearance=clearance, reject_unknown=reject_unknown,
+                             up=up)
     valid = np.array([r is None for r in reasons], dtype=bool)
     V = poses.shape[0]
     through = g.through or all_gains
@@ -195,16 +198,17 @@ def rank_poi(volume: TernaryGrid | RayVolume, center, camera: CameraModel, *, po
              sphere: SphereSpec = PAPER_SPHERE,
              inc_th: float | None = None, table_z: float | None = None, clearance: float = 0.0,
              share_rolls: bool = True, optimistic: bool = False, reject_unknown: bool = True,
-             progress_cb=None) -> PoiRanking:
+             progress_cb=None, up=None) -> PoiRanking:
     """Score the viewing sphere (or `candidates`) around one POI and apply IncTh.
 
-    sphere: the viewing sphere when no `candidates` are given (default: the paper's).
+    sphere: the viewing sphere when no `candidates` are given (default: the paper's); up: the world's up
+    direction (default z), which the sphere and the table height follow.
     """
     center = np.asarray(center, dtype=np.float64).reshape(3)
-    poses = candidates if candidates is not None else sphere.viewpoints(center)
+    poses = candidates if candidates is not None else sphere.viewpoints(center, up=up)
     scores = score_views(volume, poses, camera, center, radius, gain, table_z=table_z, clearance=clearance,
                          share_rolls=share_rolls, optimistic=optimistic, reject_unknown=reject_unknown,
-                         progress_cb=progress_cb)
+                         progress_cb=progress_cb, up=up)
     th = default_inc_th(scores) if inc_th is None else float(inc_th)
     o = scores.order()
     best = float(scores.gain[o[0]]) if o.size else 0.0
@@ -248,27 +252,56 @@ def unknown_in_sphere(grid: TernaryGrid, center, radius: float) -> int:
     return int(np.count_nonzero(inside & (sub == UNKNOWN)))
 
 
-def estimate_table_z(grid: TernaryGrid, min_fraction: float = 0.02, relative: float = 0.25) -> float | None:
-    """Height of the table top: the HIGHEST large upward-facing surface (occupied voxels with empty
-    space right above), so a floor seen below the table does not win. A layer counts as large when it
-    (with its two neighbours) holds at least `min_fraction` of the grid's x-y cells and `relative` of
-    the largest such layer. None when there is none."""
-    lab = grid.labels
-    if lab.shape[2] < 2:
+def estimate_table_z(grid: TernaryGrid, min_fraction: float = 0.02, relative: float = 0.25,
+                     up=None) -> float | None:
+    """Height of the table top along `up` (default z; e.g. the grid's own up): the HIGHEST large
+    upward-facing surface (occupied voxels with empty space right above), so a floor seen below the table
+    does not win. A layer counts as large when it (with its two neighbours) holds at least `min_fraction`
+    of the grid's cells across up and `relative` of the largest such layer. None when there is none.
+    Along a world axis (z up, y down, ...) the layers are the grid's own; an oblique up is binned in
+    voxel-size layers of the voxel centres' heights."""
+    u = np.array([0.0, 0.0, 1.0]) if up is None else check_up(up, "up")
+    a = int(np.argmax(np.abs(u)))
+    if np.count_nonzero(u) == 1:
+        lab = np.moveaxis(grid.labels, a, 2)
+        if u[a] < 0:
+            lab = lab[:, :, ::-1]
+        if lab.shape[2] < 2:
+            return None
+        per_layer = np.zeros(lab.shape[2] - 1, np.int64)
+        for x0 in range(0, lab.shape[0], 64):  # slabs keep the temporaries small
+            sl = lab[x0:x0 + 64]
+            per_layer += np.count_nonzero((sl[:, :, :-1] == OCCUPIED) & (sl[:, :, 1:] == EMPTY), axis=(0, 1))
+        cells = lab.shape[0] * lab.shape[1]
+    else:
+        occ = np.argwhere(grid.labels == OCCUPIED)
+        c = grid.centers(occ)
+        above = grid.index_of(c + u * grid.voxel_size)
+        ok = np.all((above >= 0) & (above < np.array(grid.shape)), axis=1)
+        ok[ok] = grid.labels[above[ok, 0], above[ok, 1], above[ok, 2]] == EMPTY
+        box = np.array(np.meshgrid(*[[0, n] for n in grid.shape])).reshape(3, -1).T
+        corners = grid.origin + box * grid.voxel_size
+        ref = float((corners @ u).min())
+        k = np.floor((c[ok] @ u - ref) / grid.voxel_size).astype(np.int64)
+        n_layers = int(np.ceil(float((corners @ u).max() - ref) / grid.voxel_size))
+        per_layer = np.bincount(k, minlength=n_layers)[:n_layers] if len(k) else np.zeros(n_layers, np.int64)
+        n = np.array(grid.shape, dtype=np.float64)
+        cells = float(np.abs(u) @ np.array([n[1] * n[2], n[0] * n[2], n[0] * n[1]]))  # box projected across u
+    if len(per_layer) == 0:
         return None
-    per_layer = np.zeros(lab.shape[2] - 1, np.int64)
-    for x0 in range(0, lab.shape[0], 64):  # slabs keep the temporaries small
-        sl = lab[x0:x0 + 64]
-        per_layer += np.count_nonzero((sl[:, :, :-1] == OCCUPIED) & (sl[:, :, 1:] == EMPTY), axis=(0, 1))
     smooth = np.convolve(per_layer, np.ones(3, np.int64), mode="same")
-    need = max(min_fraction * lab.shape[0] * lab.shape[1], relative * smooth.max())
+    need = max(min_fraction * cells, relative * smooth.max())
     big = np.flatnonzero(smooth >= need) if smooth.max() > 0 else np.zeros(0, int)
     if big.size == 0:
         return None
     top = int(big.max())
     lo = max(top - 2, 0)
     k = lo + int(np.argmax(per_layer[lo:top + 1]))
-    return float(grid.origin[2] + (k + 1) * grid.voxel_size)
+    if np.count_nonzero(u) == 1:  # the boundary above layer k, as a height along u
+        n_a = grid.shape[a]
+        return float(grid.origin[a] + (k + 1) * grid.voxel_size) if u[a] > 0 else \
+            float(-(grid.origin[a] + (n_a - 1 - k) * grid.voxel_size))
+    return float(ref + (k + 1) * grid.voxel_size)
 
 
 def check_region_inside(grid: TernaryGrid, center, what: str) -> None:

@@ -6,7 +6,9 @@ roll about the optical axis 0-360 deg in 45 deg steps: 12 * 10 * 8 = 960 poses, 
 
 Poses are 4x4 camera-to-world in the optical convention (z forward, y down). At roll 0 the image x
 axis is horizontal (east of the sphere's meridian) and y points down the meridian, so the image is
-upright for latitudes below 90 deg. Poses are ordered position-major (all rolls of one sphere
+upright for latitudes below 90 deg. In a world whose up is not z the sphere is turned by the smallest
+rotation taking z to up (fusion.up.z_to_up_rotation): latitudes count from the plane across up. Poses are
+ordered position-major (all rolls of one sphere
 position are consecutive), which lets the ray caster share the rays of the rolls.
 """
 
@@ -20,7 +22,9 @@ from pathlib import Path
 import numpy as np
 
 from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.core.grid import check_up
 from kinfu_cli.core.poses import check_poses
+from kinfu_cli.fusion.up import z_to_up_rotation
 
 
 @dataclass(frozen=True)
@@ -34,9 +38,9 @@ class SphereSpec:
     lat_step: float = 10.0
     roll_step: float = 45.0
 
-    def viewpoints(self, center) -> np.ndarray:
+    def viewpoints(self, center, up=None) -> np.ndarray:
         """(N, 4, 4) camera-to-world poses on this sphere around `center` (see `sphere_viewpoints`)."""
-        return sphere_viewpoints(center, **asdict(self))
+        return sphere_viewpoints(center, **asdict(self), up=up)
 
     def to_json(self) -> dict:
         return asdict(self)
@@ -59,12 +63,13 @@ def _angles(start: float, stop: float, step: float, *, closed: bool, name: str) 
 
 def sphere_viewpoints(center, radius: float = PAPER_SPHERE.radius, lon_step: float = PAPER_SPHERE.lon_step,
                       lat_min: float = PAPER_SPHERE.lat_min, lat_max: float = PAPER_SPHERE.lat_max,
-                      lat_step: float = PAPER_SPHERE.lat_step, roll_step: float = PAPER_SPHERE.roll_step
-                      ) -> np.ndarray:
+                      lat_step: float = PAPER_SPHERE.lat_step, roll_step: float = PAPER_SPHERE.roll_step,
+                      up=None) -> np.ndarray:
     """(N, 4, 4) camera-to-world poses on a sphere of `radius` around `center`, all looking at it.
 
     Longitudes in [0, 360), latitudes in [lat_min, lat_max] inclusive, rolls in [0, 360).
-    Order: longitude, latitude, roll (roll fastest).
+    Order: longitude, latitude, roll (roll fastest). up: the world's up direction (None: z); the sphere
+    built about z is turned onto it.
     """
     center = np.asarray(center, dtype=np.float64).reshape(3)
     if not (np.isfinite(radius) and radius > 0):
@@ -86,8 +91,12 @@ def sphere_viewpoints(center, radius: float = PAPER_SPHERE.radius, lon_step: flo
     y = -s * x0 + c * y0
     T = np.zeros((lon.size, 4, 4))
     T[:, :3, 0], T[:, :3, 1], T[:, :3, 2] = x, y, z
-    T[:, :3, 3] = center + radius * radial
+    T[:, :3, 3] = radius * radial
     T[:, 3, 3] = 1.0
+    if up is not None:
+        R = z_to_up_rotation(check_up(up, "up"))
+        T[:, :3, :] = np.einsum("ij,njk->nik", R, T[:, :3, :])
+    T[:, :3, 3] += center
     return T
 
 

@@ -4,20 +4,24 @@
   ForgetAround every POI, then rank the viewing sphere (or given candidates) around each POI -> `PoiViews`.
 - `rank_object_views(volume_path, camera, ...)`: the object-driven planner (thesis Alg. 4): views at the
   contours of the most salient segment -> `ObjectViews`.
+
+Both work along the volume's up direction (stored by fusion; `resolve_up`): the viewing sphere, the table
+height and the below-table rejection follow it. A result that is empty for a structural reason (every
+candidate rejected, no candidate at all) says so in its `warnings`, with the counts per reason.
 """
 
 from __future__ import annotations
 
 import os
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from tqdm import tqdm
 
 from kinfu_cli.core.camera import CameraModel
 from kinfu_cli.core.errors import ConfigError
-from kinfu_cli.core.grid import TernaryGrid
+from kinfu_cli.core.grid import TernaryGrid, check_up
 from kinfu_cli.core.poses import matrix_to_quaternion
 from kinfu_cli.core.progress import progress_enabled
 from kinfu_cli.fusion.volume import load_grid
@@ -40,7 +44,8 @@ class NbvOptions:
     (0 = all); candidates: a pose file scored instead of the viewing `sphere`; poi_radius: replaces each
     POI's radius (m); inc_th: IncTh (None: 1 % of the pixels that see S(POI)); table_z: see `TableZ`;
     clearance: reject sensor positions this close (m) to occupied/unknown voxels; share_rolls: rolls
-    of one position share their rays; optimistic: unknown voxels outside S(POI) do not stop rays.
+    of one position share their rays; optimistic: unknown voxels outside S(POI) do not stop rays; up:
+    the world's up direction instead of the volume's.
     """
 
     gain: str = "unknown"
@@ -54,6 +59,7 @@ class NbvOptions:
     clearance: float = 0.0
     share_rolls: bool = True
     optimistic: bool = False
+    up: tuple[float, float, float] | None = None  # the world's up; None: the volume's (z when it has none)
 
     def validate(self) -> None:
         """ConfigError naming the first option out of its range."""
@@ -64,14 +70,42 @@ class NbvOptions:
             raise ConfigError(f"expected a non-negative gain, got {self.inc_th}", parameter="inc_th")
         if self.clearance < 0:
             raise ConfigError(f"expected a non-negative distance, got {self.clearance}", parameter="clearance")
+        if self.up is not None:
+            check_up(self.up, "up")
 
 
-def resolve_table_z(grid: TernaryGrid, table_z: TableZ) -> float | None:
-    """The table height in metres that `table_z` asks for, or None for no table."""
+def resolve_up(grid: TernaryGrid, up=None) -> tuple[np.ndarray, str]:
+    """The up direction to plan with and where it came from: "option" (`up` given), "volume" (the grid's,
+    stored by fusion), or "assumed-z" (a volume that does not know its up)."""
+    if up is not None:
+        return check_up(up, "up"), "option"
+    if grid.up is not None:
+        return grid.up, "volume"
+    return np.array([0.0, 0.0, 1.0]), "assumed-z"
+
+
+def _up_words(up: np.ndarray, source: str) -> str:
+    why = {"volume": "the volume's", "option": "given", "assumed-z": "assumed: the volume has none"}.get(source, source)
+    return f"up {[round(float(v), 3) for v in up]} ({why})"
+
+
+def rejection_warning(what: str, rejected: dict[str, int], total: int, table_z: float | None, up: np.ndarray,
+                      up_source: str) -> str:
+    """The warning of a planner whose every candidate view was rejected: counts per reason, and the table
+    height and up direction when the table rejected some."""
+    counts = ", ".join(f"{k} {v}" for k, v in rejected.items() if v)
+    msg = f"{what}: all {total} candidate views rejected ({counts}): no view to rank"
+    if rejected.get("below_table") and table_z is not None:
+        msg += f"; the table is at height {table_z:.3f} m along {_up_words(up, up_source)}"
+    return msg
+
+
+def resolve_table_z(grid: TernaryGrid, table_z: TableZ, up=None) -> float | None:
+    """The table height in metres along `up` (default z) that `table_z` asks for, or None for no table."""
     if table_z is None or table_z == "none":
         return None
     if table_z == "auto":
-        return estimate_table_z(grid)
+        return estimate_table_z(grid, up=up)
     return float(table_z)
 
 
@@ -79,7 +113,7 @@ def resolve_table_z(grid: TernaryGrid, table_z: TableZ) -> float | None:
 class PoiViews:
     """Result of `rank_poi_views`: the ranked views of every POI.
 
-    grid is the volume as ranked (after ForgetAround with options.clear); table_z the height used.
+    grid is the volume as ranked (after ForgetAround with options.clear); table_z the height used (along up).
     """
 
     volume_path: str
@@ -89,6 +123,9 @@ class PoiViews:
     grid: TernaryGrid
     table_z: float | None
     rankings: list[PoiRanking]
+    up: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
+    up_source: str = "assumed-z"
+    warnings: list[str] = field(default_factory=list)
 
     def to_json(self) -> dict:
         """The views.json document."""
@@ -97,10 +134,11 @@ class PoiViews:
             "volume": self.volume_path, "pois_file": self.pois_path, "gain": opts.gain,
             "gain_unit": get_gain(opts.gain).unit, "cleared": bool(opts.clear),
             "candidates": str(opts.candidates) if opts.candidates is not None else {"sphere": opts.sphere.to_json()},
-            "camera": self.camera.to_dict(), "table_z": self.table_z, "clearance": opts.clearance,
+            "camera": self.camera.to_dict(), "table_z": self.table_z, "up": self.up.tolist(),
+            "up_source": self.up_source, "clearance": opts.clearance,
             "share_rolls": opts.share_rolls, "optimistic": opts.optimistic,
             "voxel_size": self.grid.voxel_size, "shape": list(self.grid.shape),
-            "pois": [r.to_dict(top=opts.top) for r in self.rankings],
+            "pois": [r.to_dict(top=opts.top) for r in self.rankings], "warnings": list(self.warnings),
         }
 
 
@@ -122,9 +160,10 @@ def rank_poi_views(volume_path: str | os.PathLike, pois_path: str | os.PathLike,
         check_region_inside(grid, p.position, f"{pois_path}: POI {p.id}")
     candidates = read_candidates(opts.candidates) if opts.candidates is not None else None
     cleared = {p.id: forget_around(grid, p.position, p.radius) for p in pois} if opts.clear else {}
-    table_z = resolve_table_z(grid, opts.table_z)
+    up, up_source = resolve_up(grid, opts.up)
+    table_z = resolve_table_z(grid, opts.table_z, up)
     vol = RayVolume.from_grid(grid)
-    per_poi = [candidates if candidates is not None else opts.sphere.viewpoints(p.position) for p in pois]
+    per_poi = [candidates if candidates is not None else opts.sphere.viewpoints(p.position, up=up) for p in pois]
     bar = _view_bar(sum(len(c) for c in per_poi), quiet)
     rankings = []
     try:
@@ -132,14 +171,16 @@ def rank_poi_views(volume_path: str | os.PathLike, pois_path: str | os.PathLike,
             r = rank_poi(vol, p.position, camera, poi_id=p.id, radius=p.radius, gain=opts.gain, candidates=poses,
                          inc_th=opts.inc_th, table_z=table_z, clearance=opts.clearance,
                          share_rolls=opts.share_rolls, optimistic=opts.optimistic,
-                         progress_cb=bar.update if bar is not None else None)
+                         progress_cb=bar.update if bar is not None else None, up=up)
             if opts.clear:
                 r.extra["cleared_voxels"] = cleared[p.id]
             rankings.append(r)
     finally:
         if bar is not None:
             bar.close()
-    return PoiViews(str(volume_path), str(pois_path), opts, camera, grid, table_z, rankings)
+    warnings = [rejection_warning(f"POI {r.poi_id}", r.scores.rejected(), len(r.scores.reasons), table_z, up,
+                                  up_source) for r in rankings if len(r.scores.reasons) and not r.scores.valid.any()]
+    return PoiViews(str(volume_path), str(pois_path), opts, camera, grid, table_z, rankings, up, up_source, warnings)
 
 
 @dataclass
@@ -154,6 +195,11 @@ class ObjectViews:
     score_threshold: float
     plan: ObjectPlan
     top: int = 10  # views listed (0 = all)
+    up: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
+    up_source: str = "assumed-z"
+    warnings: list[str] = field(default_factory=list)
+    empty_reason: str | None = None  # why there is no view when that is structural (not "all reconstructed")
+    rejected: dict[str, int] = field(default_factory=dict)  # candidate views rejected, per reason
 
     def to_json(self) -> dict:
         """The views.json document of the objects mode: the plan plus each view's position and quaternion."""
@@ -163,18 +209,36 @@ class ObjectViews:
             v.update(position=T[:3, 3].tolist(), quaternion=matrix_to_quaternion(T[:3, :3]).tolist(), gain=v["score"])
         return {"mode": "objects", "volume": self.volume_path, "gain": self.gain,
                 "gain_unit": get_gain(self.gain).unit, "camera": self.camera.to_dict(), "table_z": self.table_z,
+                "up": self.up.tolist(), "up_source": self.up_source, "candidates_rejected": dict(self.rejected),
+                "empty_reason": self.empty_reason,
                 "voxel_size": self.grid.voxel_size, "shape": list(self.grid.shape),
-                "score_threshold": self.score_threshold, **doc}
+                "score_threshold": self.score_threshold, **doc, "warnings": list(self.warnings)}
 
 
 def rank_object_views(volume_path: str | os.PathLike, camera: CameraModel, *, gain: str = "unknown",
-                      table_z: TableZ = "auto", score_threshold: float = 0.0, top: int = 10) -> ObjectViews:
+                      table_z: TableZ = "auto", score_threshold: float = 0.0, top: int = 10,
+                      up=None) -> ObjectViews:
     """The object-driven planner (thesis Alg. 4, `nbv.objects`) on a volume, scored with this package's
-    ray caster: the best views of the most salient segment whose best score exceeds `score_threshold`."""
+    ray caster: the best views of the most salient segment whose best score exceeds `score_threshold`.
+    up: the world's up instead of the volume's."""
     get_gain(gain)
     volume = load_segment_input(volume_path)
     grid = volume.ternary_grid() if hasattr(volume, "ternary_grid") else volume
-    tz = resolve_table_z(grid, table_z)
-    plan = plan_object_views_for_volume(volume, camera, scorer=nbv_scorer(grid, camera, gain=gain, table_z=tz),
-                                        score_threshold=score_threshold, table_z=tz)
-    return ObjectViews(str(volume_path), gain, camera, grid, tz, score_threshold, plan, top)
+    up, up_source = resolve_up(grid, up)
+    tz = resolve_table_z(grid, table_z, up)
+    tally: dict[str, int] = {}
+    plan = plan_object_views_for_volume(
+        volume, camera, scorer=nbv_scorer(grid, camera, gain=gain, table_z=tz, up=up, tally=tally),
+        score_threshold=score_threshold, table_z=tz, up=up)
+    rejected = {k: v for k, v in tally.items() if k not in ("views", "valid")}
+    empty = None
+    if plan.pose is None:
+        if plan.candidates_total == 0:
+            empty = "no candidate views: the volume has no contour point (observed surface next to unknown space)"
+        elif plan.candidates_evaluated == 0:
+            empty = (f"no candidate views near a segment: {plan.candidates_total} candidates at the contours, "
+                     f"{len(plan.attempts)} segments tried, none with a contour point")
+        elif tally.get("views", 0) and not tally.get("valid", 0):
+            empty = rejection_warning("objects", rejected, tally["views"], tz, up, up_source)
+    return ObjectViews(str(volume_path), gain, camera, grid, tz, score_threshold, plan, top, up, up_source,
+                       [empty] if empty else [], empty, rejected)

@@ -8,6 +8,7 @@ import numpy as np
 
 from kinfu_cli.core.atomic import atomic_path
 from kinfu_cli.core.grid import TernaryGrid
+from kinfu_cli.fusion.up import view_axes
 from kinfu_cli.nbv.ranking import PoiRanking
 
 _COLORS = {1: (0.15, 0.15, 0.15), 0: (0.65, 0.65, 0.75), -1: (1.0, 1.0, 1.0)}
@@ -21,16 +22,24 @@ def _slice_rgb(labels2d: np.ndarray) -> np.ndarray:
 
 
 def plot_nbv(path: str | os.PathLike, grid: TernaryGrid, rankings: list[PoiRanking], top: int = 5,
-             span: float = 1.0) -> None:
-    """One row per POI: top view (x-y slice at the POI height) and side view (x-z slice through the
-    POI). Dark = occupied, grey-blue = unknown, white = empty; circle = S(POI); arrows = the `top`
-    best views (sensor position -> viewing direction), the best in red. Written atomically."""
+             span: float = 1.0, up=None) -> None:
+    """One row per POI: top view (slice across `up` at the POI height; x-y for z up) and side view (slice
+    along up through the POI, up pointing up; x-z for z up). The slices are the grid's own: up is taken
+    as the world axis nearest to it. Dark = occupied, grey-blue = unknown, white = empty; circle = S(POI);
+    arrows = the `top` best views (sensor position -> viewing direction), the best in red. Written
+    atomically."""
     import matplotlib  # heavy; only needed to plot
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.patches import Circle
 
+    if up is not None:  # the world axis nearest to up, with its sign
+        k = int(np.argmax(np.abs(up)))
+        up = np.eye(3)[k] * np.sign(up[k])
+    va = view_axes(up)
+    a_up, h1, h2 = va.axis, va.e1_axis, va.e2_axis
+    up_note = "" if va.sign > 0 and a_up == 2 else f" (up = {va.names[2]})"
     n = max(len(rankings), 1)
     fig, axes = plt.subplots(n, 2, figsize=(10, 4.8 * n), squeeze=False)
     vs, o = grid.voxel_size, grid.origin
@@ -39,9 +48,12 @@ def plot_nbv(path: str | os.PathLike, grid: TernaryGrid, rankings: list[PoiRanki
         c = r.center
         idx = np.clip(np.floor((c - o) / vs).astype(int), 0, np.array(grid.shape) - 1)
         order = r.scores.order()[:top]
-        for ax, (a0, a1, fixed, name) in zip(row, ((0, 1, 2, "top view: x-y at POI height"),
-                                                   (0, 2, 1, "side view: x-z through POI"))):
-            sl = np.take(grid.labels, idx[fixed], axis=fixed)  # 2-D with axes (a0, a1)
+        views = ((h1, h2, a_up, f"top view: {'xyz'[h1]}-{'xyz'[h2]} at POI height{up_note}"),
+                 (h1, a_up, h2, f"side view: {'xyz'[h1]}-{'xyz'[a_up]} through POI{up_note}"))
+        for ax, (a0, a1, fixed, name) in zip(row, views):
+            sl = np.take(grid.labels, idx[fixed], axis=fixed)  # 2-D with the other two axes in order
+            if a0 > a1:
+                sl = sl.T  # axes (a0, a1)
             ax.imshow(_slice_rgb(sl).transpose(1, 0, 2), origin="lower", interpolation="nearest",
                       extent=(o[a0], hi[a0], o[a1], hi[a1]))
             ax.add_patch(Circle((c[a0], c[a1]), r.radius, fill=False, color="tab:orange", lw=1.5))
@@ -54,7 +66,8 @@ def plot_nbv(path: str | os.PathLike, grid: TernaryGrid, rankings: list[PoiRanki
                                             lw=2.0 if best else 1.0))
             lim = span + 0.1
             ax.set_xlim(c[a0] - lim, c[a0] + lim)
-            ax.set_ylim(c[a1] - lim, c[a1] + lim)
+            flip = a1 == a_up and va.sign < 0  # up along a negative axis: that axis runs downwards
+            ax.set_ylim(*((c[a1] + lim, c[a1] - lim) if flip else (c[a1] - lim, c[a1] + lim)))
             ax.set_xlabel("xyz"[a0] + " (m)")
             ax.set_ylabel("xyz"[a1] + " (m)")
             state = "reconstructed" if r.reconstructed else f"best gain {r.best_gain:.0f}"

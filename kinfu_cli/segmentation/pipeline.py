@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import os
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from kinfu_cli.core.errors import ConfigError, VolumeError
-from kinfu_cli.core.grid import TernaryGrid, read_ternary
+from kinfu_cli.core.grid import TernaryGrid, check_up, read_ternary
 from kinfu_cli.fusion.volume import TernaryVolume, load_volume
 from kinfu_cli.segmentation.multi_superquadric import MultiSuperquadric, fit_multi_superquadric
 from kinfu_cli.segmentation.saliency import SegmentSaliency, oriented_box, segment_saliency
@@ -75,6 +75,8 @@ class SegmentResult:
     timing: dict[str, float]
     options: SegmentOptions
     multi: dict[int, MultiSuperquadric] = field(default_factory=dict)  # with options.multi_sq
+    up_source: str = ""  # where the support plane's expected normal came from (see `resolve_up`)
+    warnings: list[str] = field(default_factory=list)  # an empty result's structural reason, with counts
 
     def to_json(self) -> dict:
         segs = []
@@ -97,7 +99,10 @@ class SegmentResult:
                          "centroid": plane_pts.mean(axis=0).tolist(), "oriented_box": box.to_json(),
                          "plane": None if seg.plane is None else seg.plane.tolist(),
                          "isolation": None, "roundness": None, "saliency": None, "superquadric": None})
+        up = self.options.segmentation.up
         return {"segments": segs, "support_plane": None if seg.plane is None else seg.plane.tolist(),
+                "up": None if up is None else [float(v) for v in self.options.segmentation.up_vector()],
+                "up_source": self.up_source, "warnings": list(self.warnings),
                 "points": int(len(seg.points)), "noise_points": int(np.sum(seg.labels < 0)),
                 "stats": seg.stats, "timing_s": self.timing, "options": asdict(self.options)}
 
@@ -134,10 +139,50 @@ def _fit_multi_superquadrics(seg: Segmentation, fits: dict[int, SuperquadricFit 
     return multi
 
 
+def resolve_up(volume, options: SegmentOptions) -> tuple[SegmentOptions, str]:
+    """Options whose segmentation.up is a direction or None (never "auto"), and where it came from:
+    "option" (given), "none" (any plane), "volume" (the volume's up: fusion or ternary.npz), or
+    "assumed-z" ("auto" on a volume that does not know its up: written before kinfu recorded it, or by
+    another tool)."""
+    up = options.segmentation.up
+    if up is None:
+        return options, "none"
+    if not isinstance(up, str):
+        up = tuple(float(v) for v in check_up(up, "up"))
+        return replace(options, segmentation=replace(options.segmentation, up=up)), "option"
+    vol_up = getattr(volume, "up", None)
+    if vol_up is None:
+        return replace(options, segmentation=replace(options.segmentation, up=(0.0, 0.0, 1.0))), "assumed-z"
+    up = tuple(float(v) for v in vol_up)
+    return replace(options, segmentation=replace(options.segmentation, up=up)), "volume"
+
+
+def support_plane_warnings(seg: Segmentation, up_source: str) -> list[str]:
+    """Why there is no support plane, with the counts of the search, or [] when there is one."""
+    if seg.plane is not None or len(seg.points) == 0:
+        return []
+    s = seg.stats.get("support_plane_search", {})
+    up = s.get("up")
+    params_up = "any direction" if up is None else (
+        f"up {[round(v, 3) for v in up]} ("
+        + {"assumed-z": "assumed: the volume has no up direction", "volume": "the volume's"}.get(up_source, up_source)
+        + ")")
+    labels = seg.labels[seg.labels > 0]
+    share = np.bincount(labels).max() / len(seg.points) if len(labels) else 0.0
+    return [f"no support plane: of {s.get('points', len(seg.points))} surface points "
+            f"{s.get('candidate_points', 0)} have a normal near {params_up}, the largest plane among them holds "
+            f"{s.get('largest_plane_points', 0)} ({s.get('needed_points', 0)} needed) after "
+            f"{s.get('planes_tried', 0)} tries; objects stay joined to what they stand on (the largest "
+            f"segment holds {share:.0%} of the points)"]
+
+
 def analyse_cloud(points: np.ndarray, normals: np.ndarray, options: SegmentOptions | None = None,
-                  timing: dict | None = None) -> SegmentResult:
-    """Segment a surface cloud, score saliency, fit superquadrics."""
+                  timing: dict | None = None, up_source: str = "") -> SegmentResult:
+    """Segment a surface cloud, score saliency, fit superquadrics. up_source: where options.segmentation.up
+    came from (`resolve_up`; for the result and its warnings)."""
     options = options or SegmentOptions()
+    up = options.segmentation.up
+    up_source = up_source or ("none" if up is None else "assumed-z" if isinstance(up, str) else "option")
     timing = dict(timing or {})
     t = time.perf_counter()
     seg = segment_cloud(points, normals, options.segmentation)
@@ -153,18 +198,20 @@ def analyse_cloud(points: np.ndarray, normals: np.ndarray, options: SegmentOptio
         t = time.perf_counter()
         multi = _fit_multi_superquadrics(seg, fits, options)
         timing["multi_superquadrics"] = time.perf_counter() - t
-    return SegmentResult(SurfaceCloud(seg.points, seg.normals), seg, sal, fits, timing, options, multi)
+    return SegmentResult(SurfaceCloud(seg.points, seg.normals), seg, sal, fits, timing, options, multi,
+                         up_source, support_plane_warnings(seg, up_source))
 
 
 def analyse_volume(volume: TernaryVolume | TernaryGrid, options: SegmentOptions | None = None) -> SegmentResult:
-    """From a fusion TernaryVolume (TSDF surface) or a TernaryGrid (labels only)."""
-    options = options or SegmentOptions()
+    """From a fusion TernaryVolume (TSDF surface) or a TernaryGrid (labels only); segmentation.up "auto"
+    becomes the volume's up (`resolve_up`)."""
+    options, up_source = resolve_up(volume, options or SegmentOptions())
     t = time.perf_counter()
     cloud = surface_from_volume(volume, min_weight=options.min_weight, resolution=options.resolution)
     t_surface = time.perf_counter() - t
     if len(cloud) < options.segmentation.min_segment_points:
         raise VolumeError(f"volume surface has only {len(cloud)} points: nothing to segment")
-    return analyse_cloud(cloud.points, cloud.normals, options, {"surface": t_surface})
+    return analyse_cloud(cloud.points, cloud.normals, options, {"surface": t_surface}, up_source)
 
 
 def load_segment_input(path: str | os.PathLike) -> TernaryVolume | TernaryGrid:

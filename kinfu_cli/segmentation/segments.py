@@ -4,8 +4,9 @@ Thesis Alg. 4 line 4 uses PCL's VCCS supervoxels + LCCP (Stein et al. 2014). Thi
 numpy/scipy/open3d:
 
 1. Support plane: open3d RANSAC (`segment_plane`, up to `max_planes` rounds) on points whose normal is
-   within `up_tolerance_deg` of `up`; the highest plane holding >= `min_plane_fraction` of the points (the
-   table, not the floor) is the support; its inliers with a matching normal become segment 0.
+   within `up_tolerance_deg` of `up`; the highest plane holding >= `min_plane_fraction` of the points, or
+   >= `min_up_facing_fraction` of those up-facing points (and at least `min_segment_points`), is the
+   support (the table, not the floor); its inliers with a matching normal become segment 0.
 2. Supervoxels (VCCS-like): seeds on a `seed_resolution` grid, then a few k-means rounds where each point
    joins the closest of its 8 spatially nearest seeds under the VCCS distance
    D^2 = w_s |dx|^2 / R_seed^2 + w_n (1 - n_p . n_s); each supervoxel is then split into its
@@ -30,6 +31,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from kinfu_cli.core.errors import ConfigError, VolumeError
+from kinfu_cli.core.grid import check_up
 
 PLANE_LABEL = 0
 NOISE_LABEL = -1
@@ -49,9 +51,14 @@ class SegmentationParams:
     min_segment_points: int = 20
     plane_distance: float = 0.01  # RANSAC inlier distance (m)
     plane_iterations: int = 1000
-    up: tuple[float, float, float] | None = (0.0, 0.0, 1.0)  # expected support-plane normal; None = any
+    # expected support-plane normal (x, y, z); None = any plane; "auto" = the volume's up where the pipeline
+    # knows a volume (segmentation.pipeline), z (0, 0, 1) for a bare cloud
+    up: tuple[float, float, float] | str | None = "auto"
     up_tolerance_deg: float = 30.0
-    min_plane_fraction: float = 0.1  # a support plane must hold this share of the points
+    min_plane_fraction: float = 0.1  # a support plane must hold this share of the points,
+    # or (up given) this share of the points facing up: a scene whose vertical faces outnumber its horizontal
+    # ones (a box on its side filling the view) still has its table
+    min_up_facing_fraction: float = 0.3
     max_planes: int = 3  # RANSAC rounds; the highest qualifying horizontal plane is the support
     seed: int = 0
 
@@ -65,6 +72,17 @@ class SegmentationParams:
                               parameter="concavity_tolerance_deg")
         if self.min_segment_points < 1:
             raise ConfigError(f"must be >= 1, got {self.min_segment_points}", parameter="min_segment_points")
+        if isinstance(self.up, str):
+            if self.up != "auto":
+                raise ConfigError(f"expected x,y,z, 'auto' or None, got {self.up!r}", parameter="up")
+        elif self.up is not None:
+            check_up(self.up, "up")
+
+    def up_vector(self) -> np.ndarray | None:
+        """The expected support-plane normal as a unit vector (z for "auto"), None for any plane."""
+        if self.up is None:
+            return None
+        return np.array([0.0, 0.0, 1.0]) if isinstance(self.up, str) else check_up(self.up, "up")
 
 
 @dataclass
@@ -100,31 +118,37 @@ def _ransac_plane(points: np.ndarray, distance: float, iterations: int) -> tuple
         o3d.utility.set_max_threads(threads)
 
 
-def detect_support_plane(points: np.ndarray, normals: np.ndarray, params: SegmentationParams
-                         ) -> tuple[np.ndarray | None, np.ndarray]:
-    """(plane (4,) or None, inlier mask (N,)) by open3d RANSAC on up-facing points."""
+def detect_support_plane(points: np.ndarray, normals: np.ndarray, params: SegmentationParams,
+                         info: dict | None = None) -> tuple[np.ndarray | None, np.ndarray]:
+    """(plane (4,) or None, inlier mask (N,)) by open3d RANSAC on up-facing points. `info`, when given,
+    receives what the search saw: points, up (the unit direction used, None for any), candidate_points
+    (normal within up_tolerance_deg of up), planes_tried, largest_plane_points (of the planes with an
+    up-facing normal) and needed_points."""
     import open3d as o3d  # heavy; only needed here
 
     n = len(points)
+    up = params.up_vector()
+    info = {} if info is None else info
+    info.update(points=int(n), up=None if up is None else [float(v) for v in up], candidate_points=0,
+                planes_tried=0, largest_plane_points=0, needed_points=int(np.ceil(params.min_plane_fraction * n)))
     none = (None, np.zeros(n, dtype=bool))
     if n < 3:
         return none
     cos_tol = np.cos(np.radians(params.up_tolerance_deg))
-    if params.up is not None:
-        up = np.asarray(params.up, dtype=np.float64)
-        up = up / np.linalg.norm(up)
-        cand = np.abs(normals @ up) >= cos_tol
-    else:
-        up = None
-        cand = np.ones(n, dtype=bool)
-    if cand.sum() < max(3, params.min_plane_fraction * n):
+    cand = np.abs(normals @ up) >= cos_tol if up is not None else np.ones(n, dtype=bool)
+    need = params.min_plane_fraction * n
+    if up is not None:
+        need = min(need, params.min_up_facing_fraction * cand.sum())
+    need = max(need, params.min_segment_points, 3)
+    info.update(candidate_points=int(cand.sum()), needed_points=int(np.ceil(need)))
+    if cand.sum() < need:
         return none
     idx = np.flatnonzero(cand)
     o3d.utility.random.seed(int(params.seed))
     best = None
     remaining = idx
     for _ in range(max(1, int(params.max_planes))):  # several horizontal planes (floor, table): take the highest
-        if len(remaining) < max(3, params.min_plane_fraction * n):
+        if len(remaining) < need:
             break
         model, inl_idx = _ransac_plane(points[remaining], float(params.plane_distance), int(params.plane_iterations))
         plane = np.asarray(model, dtype=np.float64)
@@ -136,7 +160,11 @@ def detect_support_plane(points: np.ndarray, normals: np.ndarray, params: Segmen
             plane = -plane  # no up given: orient towards the side with more points
         dist = points @ plane[:3] + plane[3]
         inl = (np.abs(dist) <= params.plane_distance) & (np.abs(normals @ plane[:3]) >= cos_tol)
-        ok = inl.sum() >= params.min_plane_fraction * n and (up is None or abs(plane[:3] @ up) >= cos_tol)
+        facing = up is None or abs(plane[:3] @ up) >= cos_tol
+        ok = inl.sum() >= need and facing
+        info["planes_tried"] += 1
+        if facing:
+            info["largest_plane_points"] = max(info["largest_plane_points"], int(inl.sum()))
         if ok:
             height = -plane[3] if up is None else float(np.mean(points[inl] @ up))
             if best is None or height > best[0]:
@@ -212,13 +240,14 @@ def segment_cloud(points: np.ndarray, normals: np.ndarray, params: SegmentationP
                           f"(need at least min_segment_points = {params.min_segment_points})")
     n = len(pts)
     labels = np.full(n, NOISE_LABEL, dtype=np.int64)
-    plane, inl = detect_support_plane(pts[good], nrm[good], params)
+    search: dict = {}
+    plane, inl = detect_support_plane(pts[good], nrm[good], params, search)
     on_plane = np.zeros(n, dtype=bool)
     on_plane[np.flatnonzero(good)[inl]] = True
     rest = np.flatnonzero(good & ~on_plane)
     labels[on_plane] = PLANE_LABEL
     sv_all = np.full(n, -1, dtype=np.int64)
-    stats = {"points": int(n), "plane_points": int(on_plane.sum())}
+    stats = {"points": int(n), "plane_points": int(on_plane.sum()), "support_plane_search": search}
     if len(rest) == 0:
         return Segmentation(pts, nrm, labels, plane, sv_all, 0, stats)
     P, N = pts[rest], nrm[rest]
