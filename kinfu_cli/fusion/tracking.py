@@ -132,10 +132,11 @@ class FrameToModelTracker:
                 targets[i] = t if len(t.points) >= self.min_points else None
             return targets[i]
 
-        # data-cloud voxel per level: no finer than the model's voxel (the surface has no finer detail) nor than a
-        # quarter of the level's correspondence distance (coarse levels need no dense cloud)
+        # data-cloud voxel per level: `voxel`, or a quarter of the level's correspondence distance when coarser
+        # (coarse levels need no dense cloud; the finest keeps `voxel`: at the model's 2 cm voxel a 2 cm cloud
+        # tracked the 7-Scenes kitchen 1 mm worse)
         def level_voxel(dist: float) -> float:
-            return max(self.voxel, volume.voxel_size, dist / 4) if self.voxel > 0 else 0.0
+            return max(self.voxel, dist / 4) if self.voxel > 0 else 0.0
 
         fine = [(d, it, level_voxel(d)) for d, it in zip(self.max_distances, self.iterations)]
         plans = [(0, fine, False)]
