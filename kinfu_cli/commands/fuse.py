@@ -23,6 +23,18 @@ ARGUMENT_FLAGS = {"init": "--init", "origin": "--origin", "clear_spheres": "--cl
                   "clear_pois": "--clear-pois", "up": "--up"}
 
 
+def _share(value: str) -> float:
+    """--max-lost: a share 0..1, or a percentage ("10%")."""
+    text = value.strip()
+    try:
+        share = float(text[:-1]) / 100 if text.endswith("%") else float(text)
+    except ValueError:
+        raise ConfigError(f"--max-lost: expected a share like 0.1 or 10%, got {value!r}") from None
+    if not 0 <= share <= 1:
+        raise ConfigError(f"--max-lost: expected a share in [0, 1] (0-100%), got {value!r}")
+    return share
+
+
 def _floats(value: str, name: str, n: tuple[int, ...]) -> tuple[float, ...]:
     try:
         v = tuple(float(x) for x in value.replace(" ", "").split(","))
@@ -38,11 +50,20 @@ def _floats(value: str, name: str, n: tuple[int, ...]) -> tuple[float, ...]:
 @click.argument("recording", type=click.Path(path_type=Path))
 @click.option("-o", "--output", "outdir", type=click.Path(file_okay=False, path_type=Path), required=True,
               help="Output folder (mesh.ply, cloud.ply, volume.npz, ternary.npz, report.json).")
-@click.option("--voxel-size", type=float, default=None, help="Voxel edge in metres (instead of --resolution).")
-@click.option("--resolution", default=None, help="Voxels per axis: N or nx,ny,nz [512].")
-@click.option("--size", default="3.0", show_default=True, help="Grid edge in metres: S or sx,sy,sz.")
-@click.option("--origin", default=None, help="World position x,y,z of the grid's minimum corner "
-                                             "[centred on what the first frames observe].")
+@click.option("--voxel-size", type=float, default=None,
+              help="Voxel edge in metres (instead of --resolution) [size/512; with --size auto 3/512 m, coarser "
+                   "when the grid would exceed --max-memory].")
+@click.option("--resolution", default=None,
+              help="Voxels per axis: N or nx,ny,nz [512 with a --size; with --size auto over the observed box].")
+@click.option("--size", default="auto", show_default=True,
+              help="Grid edge in metres: S or sx,sy,sz, or auto: a box around everything the selected frames "
+                   "observe (a quick first pass over their poses and depth), plus a margin.")
+@click.option("--max-memory", type=float, default=None, metavar="GIB",
+              help="Memory budget of --size auto (worst case of the grid) in GiB [half the available memory, at "
+                   "most 2]; above it the default voxel grows, a given --voxel-size crops the box.")
+@click.option("--origin", default=None, help="World position x,y,z of the grid's minimum corner [with --size "
+                                             "auto the observed box's; else centred on what the first frames "
+                                             "observe].")
 @click.option("--truncation", type=float, default=0.03, show_default=True, help="TSDF truncation M_v (m).")
 @click.option("--max-weight", type=int, default=128, show_default=True, help="Weight cap M_w (1..255).")
 @click.option("--min-depth", type=float, default=0.3, show_default=True, help="Ignore closer readings (m).")
@@ -51,6 +72,11 @@ def _floats(value: str, name: str, n: tuple[int, ...]) -> tuple[float, ...]:
               help="Camera poses: forced (TF, no tracking), icp (frame-to-model), hint (ICP from TF), "
                    "topic (--pose-topic) [forced when TF has the camera frame, else icp].")
 @click.option("--pose-topic", default=None, metavar="TOPIC", help="PoseStamped/Odometry topic for --pose topic.")
+@click.option("--max-lost", default="10%", show_default=True, metavar="SHARE",
+              help="With --pose icp/hint: fail when tracking loses more than this share of the tracked frames "
+                   "(0.1 or 10%). Lost frames (ICP fitness < 0.3, depth agreeing with the model on < 75 % of "
+                   "the shared pixels, or a jump faster than 3 m/s or 600 deg/s; re-localisation tried first) "
+                   "are never fused.")
 @click.option("--init", "init", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Continue fusing into this volume.npz (its grid wins over the grid options).")
 @click.option("--clear-sphere", "clear_spheres", multiple=True, metavar="X,Y,Z,R",
@@ -79,19 +105,28 @@ def _floats(value: str, name: str, n: tuple[int, ...]) -> tuple[float, ...]:
 @role_options
 def command(recording: Path, outdir: Path, voxel_size, resolution, size, origin, truncation, max_weight, min_depth,
             max_depth, pose, pose_topic, init, clear_spheres, clear_pois, start_s, end_s, every, tolerance_s,
-            fill_gaps, bilateral, shadow_filter, up, no_color, plot, as_json, quiet, force, **kwargs) -> None:
+            fill_gaps, bilateral, shadow_filter, up, no_color, plot, as_json, quiet, force, max_memory, max_lost,
+            **kwargs) -> None:
     """Fuse the depth frames of RECORDING (MCAP, ROS 1 .bag, ROS 2 bag folder) into a KinectFusion TSDF
     volume that keeps unknown / empty / occupied per voxel (Monica et al. 2016, eqs. 1-3): free space in
     front of surfaces becomes known-empty, interiors stay unknown. Writes OUTDIR/mesh.ply (coloured),
     cloud.ply, volume.npz (continue with --init), ternary.npz (int8 [x,y,z]: 1 occupied, 0 unknown,
     -1 empty; origin; voxel_size; up) and report.json (frames used/dropped, poses, up direction, depth
-    intrinsics, tracking, timing, counts, bounding box). segment and nbv use the up direction and nbv the
-    intrinsics stored in volume.npz.
+    intrinsics, tracking, timing, counts, bounding box, grid sizing, warnings). segment and nbv use the up
+    direction and nbv the intrinsics stored in volume.npz.
+
+    The grid is sized to the scene by default (--size auto) and the note line says what was chosen;
+    occupied voxels on a face of the grid give a warning (the scene goes on beyond it). With --pose icp or
+    hint, frames whose tracking is lost are reported (report.json tracking.lost, per-frame fitness, rmse,
+    agreement) and not fused; more than --max-lost of them fail the run (exit 2). With recorded poses the
+    report gives the tracked trajectory's error against them (tracking.ate_vs_given_m).
 
     \b
     Example:
       kinfu fuse sample_data/tabletop/recording.mcap -o out/fuse --plot
       kinfu fuse rec.bag -o out/fuse --voxel-size 0.01 --size 2,2,1 --pose icp --every 2
+      kinfu fuse room.mcap -o out/room --voxel-size 0.01 --max-memory 4
+      kinfu fuse rec.mcap -o out/icp --pose icp --every 5 --max-lost 5%
       kinfu fuse rec2.mcap -o out/fuse2 --init out/fuse/volume.npz --clear-pois out/poi/pois.json
     """
     claim_outputs({"outdir": outdir}, [recording, init, clear_pois], force)
@@ -103,16 +138,23 @@ def command(recording: Path, outdir: Path, voxel_size, resolution, size, origin,
         if any(x != int(x) or x < 1 for x in r):
             raise ConfigError(f"--resolution: expected positive integers, got {resolution!r}")
         res = int(r[0]) if len(r) == 1 else tuple(int(x) for x in r)
-    sz = _floats(size, "--size", (1, 3))
+    if size.strip().lower() == "auto":
+        grid_size = "auto"
+    else:
+        sz = _floats(size, "--size", (1, 3))
+        grid_size = sz[0] if len(sz) == 1 else sz
     result = fuse_recording(
-        recording, size=sz[0] if len(sz) == 1 else sz, resolution=res, voxel_size=voxel_size,
+        recording, size=grid_size, resolution=res, voxel_size=voxel_size,
         origin=_floats(origin, "--origin", (3,)) if origin else None, truncation=truncation, max_weight=max_weight,
         min_depth=min_depth, max_depth=max_depth, color=not no_color, pose=pose, pose_topic=pose_topic,
         init=str(init) if init else None, clear_spheres=[_floats(s, "--clear-sphere", (4,)) for s in clear_spheres],
         clear_pois=str(clear_pois) if clear_pois else None, start_s=start_s, end_s=end_s, every=every,
         tolerance_s=tolerance_s, fill_gaps=fill_gaps, bilateral=bilateral, shadow_filter=shadow_filter,
-        roles=role_kwargs(kwargs), quiet=quiet, argument_names=ARGUMENT_FLAGS,
-        up=None if isinstance(up_dir := parse_up(up, ("auto",)), str) else up_dir)
+        roles=role_kwargs(kwargs), quiet=quiet, argument_names=ARGUMENT_FLAGS, max_lost=_share(max_lost),
+        max_memory=max_memory, up=None if isinstance(up_dir := parse_up(up, ("auto",)), str) else up_dir)
+    if not quiet:
+        for note in result.notes:
+            click.echo(f"kinfu: note: {note}", err=True)
     t0 = time.perf_counter()
     with atomic_dir(outdir) as tmp:  # one transaction: the folder appears whole, report.json written last
         write_fusion_outputs(result, tmp)
@@ -126,5 +168,9 @@ def command(recording: Path, outdir: Path, voxel_size, resolution, size, origin,
     elif not quiet:
         c = report["counts"]
         f = report["frames"]
-        click.echo(f"fused {f['used']} frames ({f['dropped_total']} dropped) with poses {report['pose_mode']}: "
-                   f"{c['occupied']} occupied, {c['empty']} empty, {c['unknown']} unknown voxels -> {outdir}")
+        t = report["tracking"]
+        lost = f", {t['lost']} lost by tracking" if t and t["lost"] else ""
+        ate = t and t["ate_vs_given_m"]
+        ate = f", {ate['rmse'] * 100:.2f} cm RMS from the recorded poses" if ate else ""
+        click.echo(f"fused {f['used']} frames ({f['dropped_total']} dropped{lost}) with poses {report['pose_mode']}"
+                   f"{ate}: {c['occupied']} occupied, {c['empty']} empty, {c['unknown']} unknown voxels -> {outdir}")

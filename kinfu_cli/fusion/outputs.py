@@ -60,16 +60,15 @@ def fusion_report(result: FusionResult, extra_outputs: Iterable[str] = ()) -> di
                    "skipped_every": stats.skipped, "without_color": stats.without_color,
                    "dropped": result.dropped, "dropped_total": int(sum(result.dropped.values())),
                    "every": result.every, "start_s": result.start_s, "end_s": result.end_s},
-        "tracking": None if track_log is None else {
-            "frames": track_log, "lost_frames": [t["index"] for t in track_log if t["lost"]],
-            "lost": int(sum(t["lost"] for t in track_log)),
-            "mean_fitness": float(np.mean([t["fitness"] for t in track_log])) if track_log else None},
+        "tracking": None if track_log is None else _tracking_summary(track_log),
         "grid": {"origin": vol.origin.tolist(), "voxel_size": vol.voxel_size, "shape": list(vol.shape),
                  "size_m": (np.array(vol.shape) * vol.voxel_size).tolist(), "truncation": vol.truncation,
                  "max_weight": vol.max_weight, "min_depth": depth_filter.min_depth,
                  "max_depth": depth_filter.max_depth, "placement": result.placement,
                  "blocks_stored": vol.n_blocks_allocated, "memory_MB": round(vol.memory_bytes() / 2**20, 1),
-                 "frames_in_volume": vol.frames_integrated},
+                 "frames_in_volume": vol.frames_integrated,
+                 "sizing": result.grid_sizing,
+                 "face_contacts": result.face_contacts},
         "filters": {"range": [depth_filter.min_depth, depth_filter.max_depth], "fill_gaps": depth_filter.fill_gaps,
                     "gap_pixels_filled": depth_filter.gap_pixels, "bilateral": depth_filter.bilateral,
                     "shadow_veil": depth_filter.shadow_filter},
@@ -82,3 +81,18 @@ def fusion_report(result: FusionResult, extra_outputs: Iterable[str] = ()) -> di
         "outputs": list(OUTPUTS) + list(extra_outputs),
         "warnings": result.warnings,
     }
+
+
+def _tracking_summary(track_log: list[dict]) -> dict:
+    """The report's tracking section: every tracked frame, the lost ones, and the error against the given poses
+    (when the recording has them: a tracked pose's camera position minus the given one, RMSE and max)."""
+    kept = [t for t in track_log if not t["lost"]]
+    dev = np.array([t["given_minus_tracked_m"] for t in kept if t.get("given_minus_tracked_m") is not None])
+    return {
+        "frames": track_log, "tracked": len(track_log), "lost_frames": [t["index"] for t in track_log if t["lost"]],
+        "lost": len(track_log) - len(kept),
+        "relocalised": int(sum(bool(t.get("relocalised")) for t in kept)),
+        "mean_fitness": float(np.mean([t["fitness"] for t in track_log])) if track_log else None,
+        "ate_vs_given_m": None if not len(dev) else {
+            "rmse": round(float(np.sqrt(np.mean(dev ** 2))), 5), "max": round(float(dev.max()), 5),
+            "frames": len(dev)}}

@@ -4,10 +4,13 @@
 where asked and integrates every frame, then reads out the ternary grid, mesh and cloud: a FusionResult.
 It writes nothing; fusion.outputs writes the files and the report. Steps, in order:
 1. check the arguments and the clear spheres, load the initial volume (or check the grid settings);
-2. open the recording, detect roles, choose where the camera poses come from (`_pose_plan`);
+2. open the recording, detect roles, choose where the camera poses come from (`_pose_plan`); with size
+   'auto', size the grid from a first pass over the frames (`_auto_grid`, fusion.extent);
 3. stream frames through the depth filters (`DepthFilter`) into the integrator (`_Integrator`), which
-   places the grid on the first frames and tracks with ICP in the icp and hint modes;
-4. clear spheres (after fusing unless continuing a volume) and read out labels, mesh and cloud.
+   places the grid on the first frames and tracks with ICP in the icp and hint modes; frames whose tracking
+   is lost are not fused, and more of them than max_lost (a share of the tracked frames) fail the run;
+4. clear spheres (after fusing unless continuing a volume) and read out labels, mesh and cloud; warn when
+   occupied voxels touch a face of the grid (the scene goes on beyond it).
 """
 
 from __future__ import annotations
@@ -15,7 +18,7 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Iterable, Iterator, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -25,9 +28,10 @@ from kinfu_cli.core.grid import TernaryGrid, check_up
 from kinfu_cli.core.pois import poi_frame_warnings, read_pois
 from kinfu_cli.core.progress import progress
 from kinfu_cli.fusion import filters
+from kinfu_cli.fusion.extent import SURVEY_FRAMES, AutoGrid, auto_grid, budget_bytes, face_contacts, survey
 from kinfu_cli.fusion.mesh import mesh_cloud
 from kinfu_cli.fusion.placement import default_origin
-from kinfu_cli.fusion.tracking import POSE_MODES, FrameToModelTracker, TrackResult
+from kinfu_cli.fusion.tracking import POSE_MODES, FrameToModelTracker, TrackResult, predict_pose
 from kinfu_cli.fusion.up import choose_up
 from kinfu_cli.fusion.volume import TernaryVolume, load_volume
 from kinfu_cli.io.frames import FrameStats, RGBDFrame, iter_frames
@@ -42,6 +46,11 @@ if TYPE_CHECKING:  # open3d only for the annotations
 
 # frames whose observed points centre the grid; with icp the first only (the others have no pose until tracked)
 PLACEMENT_FRAMES = 5
+# how the report counts frames not fused because tracking lost them
+DROP_LOST = "tracking lost (not fused)"
+# size 'auto' without camera poses (icp from the first frame): the first frame's box, grown by this share of its
+# extent on each side, for what the camera turns to later (the face-contact warning says when it was not enough)
+ICP_GROW = 0.5
 
 
 @dataclass
@@ -72,6 +81,9 @@ class FusionResult:
     timing: dict[str, float] = field(default_factory=dict)  # seconds per step
     started: float = 0.0  # time.perf_counter() when fusing began
     up: dict = field(default_factory=dict)  # fusion.up.UpChoice.to_json(): up, source and the evidence
+    grid_sizing: dict = field(default_factory=dict)  # mode given, init or auto (the observed box, budget, cap)
+    face_contacts: dict[str, int] = field(default_factory=dict)  # occupied voxels on each face of the grid
+    notes: list[str] = field(default_factory=list)  # what the run chose by itself (a command may print them)
 
     def add_time(self, step: str, seconds: float) -> None:
         self.timing[step] = self.timing.get(step, 0.0) + seconds
@@ -135,7 +147,8 @@ class _PosePlan:
     world: str  # frame of the camera poses ("" when not known)
 
 
-def fuse_recording(recording: str | os.PathLike, *, size: float | tuple = 3.0, resolution: int | tuple | None = None,
+def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = "auto",
+                   resolution: int | tuple | None = None,
                    voxel_size: float | None = None, origin: tuple | None = None, truncation: float = 0.03,
                    max_weight: int = 128, min_depth: float = 0.3, max_depth: float = 4.0, color: bool = True,
                    pose: str | None = None, pose_topic: str | None = None, init: str | os.PathLike | None = None,
@@ -144,11 +157,15 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple = 3.0, r
                    tolerance_s: float = 0.05, fill_gaps: int = 2, bilateral: bool = False,
                    shadow_filter: bool = False, shadow_baseline: float = 0.08,
                    roles: Mapping[str, str | None] | None = None, quiet: bool = True,
-                   argument_names: Mapping[str, str] | None = None, up=None) -> FusionResult:
+                   argument_names: Mapping[str, str] | None = None, up=None, max_lost: float = 0.10,
+                   max_memory: float | None = None) -> FusionResult:
     """Fuse the depth frames of `recording` (MCAP, ROS 1 .bag, ROS 2 bag folder) into a TernaryVolume.
 
-    Grid (defaults as KinFu LS): size (m, one or three values), resolution (voxels per axis, 512 unless
-    voxel_size), voxel_size (m), origin (minimum corner; default centred on what the first frames see),
+    Grid: size (m, one or three values, or "auto": a box around what the selected frames observe from their
+    poses, fusion.extent), resolution (voxels per axis: with a size 512 unless voxel_size, with "auto" over
+    the box), voxel_size (m; with "auto" default 3 m / 512, coarser when the grid's worst case exceeds
+    max_memory GiB, default half the available memory up to 2 GiB), origin (minimum corner; default centred
+    on what the first frames see, with "auto" the box's corner),
     truncation, max_weight, min_depth/max_depth (m), color. pose: forced (TF), icp, hint (ICP from TF) or topic
     (pose_topic); default forced when TF links the camera to the world, else icp. init: a volume.npz to
     continue. clear_spheres (x, y, z, r) and the POIs of clear_pois are forgotten (before fusing with init,
@@ -158,20 +175,20 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple = 3.0, r
     clear_pois and up arguments (default these names; a command line passes its options). up: the world's
     direction against gravity (x, y, z); None decides it as fusion.up.choose_up says (the volume's up,
     stored in volume.npz, ternary.npz and the report with its source).
+    max_lost: the largest share of tracked frames (icp, hint) that may be lost (not fused) before the run
+    fails.
     """
     started = time.perf_counter()
     timing: dict[str, float] = {}
     names = {"init": "init", "origin": "origin", "clear_spheres": "clear_spheres", "clear_pois": "clear_pois",
              "up": "up", **(argument_names or {})}
     up = None if up is None else check_up(up, "up")
-    if pose is not None and pose not in POSE_MODES:
-        raise ConfigError(f"expected one of {', '.join(POSE_MODES)}, got {pose!r}", parameter="pose")
-    if pose == "topic" and not pose_topic:
-        raise ConfigError("needed with pose 'topic' (a PoseStamped/Odometry topic)", parameter="pose_topic")
-    if every < 1:
-        raise ConfigError(f"expected an integer >= 1, got {every}", parameter="every")
+    _check_arguments(pose, pose_topic, every, max_lost, size)
+    auto = isinstance(size, str)
+    budget = budget_bytes(max_memory)
     spheres = _spheres(clear_spheres, clear_pois, names["clear_spheres"])
-    grid_spec = _GridSpec(size, resolution, voxel_size, truncation, max_weight, min_depth, max_depth, color)
+    grid_spec = _GridSpec(1.0 if auto else size, resolution, voxel_size, truncation, max_weight, min_depth,
+                          max_depth, color)
     depth_filter = DepthFilter(min_depth, max_depth, fill_gaps, bilateral, shadow_filter, shadow_baseline)
 
     vol = None
@@ -196,21 +213,35 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple = 3.0, r
                                  f"camera poses in {plan.world!r}", parameter="init")
         warnings = poi_frame_warnings(clear_pois, plan.world or (vol.frame if vol is not None else ""),
                                       names["clear_pois"])
+        sizing, notes = {"mode": "init" if init else "given"}, []
+        if auto and vol is None:
+            t0 = time.perf_counter()
+            chosen = _auto_grid(rec, found, plan, grid_spec, resolution, voxel_size, origin, budget,
+                                dict(pose_topic=pose_topic, start_s=start_s, end_s=end_s, every=every, tf=tf,
+                                     tolerance_s=tolerance_s))
+            timing["size"] = time.perf_counter() - t0
+            grid_spec, origin, sizing = _apply_auto_grid(chosen, grid_spec, origin, names, notes, warnings)
         stats = FrameStats()
         frames = iter_frames(rec, found, pose_source=plan.source, pose_topic=pose_topic, start_s=start_s,
                              end_s=end_s, every=every, stats=stats, tf=tf, tolerance_s=tolerance_s)
         integrator = _Integrator(vol, plan.mode, grid_spec, origin, names["origin"], str(rec.path), timing)
+        # at most this many frames can be tracked (all selected ones): past max_lost of it, fail at once
+        count = rec.topics[found.depth_topic].count if found.depth_topic in rec.topics else 0
+        bound = -(-count // every)
         for frame in progress(_timed(frames, timing, "read"), desc="fusing", quiet=quiet, unit="frame"):
             t0 = time.perf_counter()
             d = depth_filter(frame)
             _add(timing, "filter", time.perf_counter() - t0)
             if d is not None:
                 integrator.add(frame, d)
+                if len(integrator.lost) > max_lost * bound:
+                    _tracking_verdict(integrator, max_lost, str(rec.path), bound)
         integrator.finish()
         if integrator.used == 0:
             dropped = {**stats.dropped, **depth_filter.drops}
             why = "; ".join(f"{k}: {v}" for k, v in dropped.items()) or "no depth frames in the selection"
             raise RecordingError(f"{rec.path}: no usable depth frames ({why})")
+        warnings += _tracking_verdict(integrator, max_lost, str(rec.path))
         vol = integrator.volume
         vol.frame = vol.frame or plan.world
 
@@ -221,26 +252,119 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple = 3.0, r
     grid, counts, bounding_box, mesh, cloud = _read_out(vol)
     _add(timing, "extract", time.perf_counter() - t0)
     t0 = time.perf_counter()
-    up_choice = choose_up(option=up, init_up=vol.up if init else None, init_source=vol.up_source,
-                          declared=declared_up, world=plan.world, world_from_tf=plan.source in ("tf", "topic"),
-                          points=np.asarray(cloud.points), normals=np.asarray(cloud.normals),
-                          camera_poses=np.array(integrator.camera_poses),
-                          up_name=names["up"])
-    vol.up = grid.up = up_choice.up
-    vol.up_source = up_choice.source if up_choice.up is not None else ""
-    vol.intrinsics = vol.intrinsics or integrator.intrinsics
+    up_choice = _decide_up(vol, grid, cloud, integrator, up, bool(init), declared_up, plan, names["up"])
     warnings += up_choice.warnings
     _add(timing, "up", time.perf_counter() - t0)
-    dropped = dict(stats.dropped)
-    for reason, n in depth_filter.drops.items():
-        dropped[reason] = dropped.get(reason, 0) + n
+    faces = face_contacts(grid.labels)
+    warnings += _face_warnings(faces)
+    dropped = _dropped(stats, depth_filter, integrator)
     return FusionResult(
         recording=str(rec.path), roles=found, pose_mode=plan.mode, pose_source=plan.description, volume=vol,
         placement=placement or integrator.placement, frame_stats=stats, frames_used=integrator.used,
         dropped=dropped, tracking=integrator.track_log if integrator.tracker is not None else None,
         depth_filter=depth_filter, every=every, start_s=start_s, end_s=end_s, cleared_spheres=spheres,
         warnings=warnings, grid=grid, counts=counts, bounding_box=bounding_box, mesh=mesh, cloud=cloud,
-        timing=timing, started=started, up=up_choice.to_json())
+        timing=timing, started=started, up=up_choice.to_json(), grid_sizing=sizing, face_contacts=faces,
+        notes=notes)
+
+
+def _check_arguments(pose: str | None, pose_topic: str | None, every: int, max_lost: float, size) -> None:
+    """ConfigError naming the first argument of fuse_recording out of its range, before anything is read."""
+    if pose is not None and pose not in POSE_MODES:
+        raise ConfigError(f"expected one of {', '.join(POSE_MODES)}, got {pose!r}", parameter="pose")
+    if pose == "topic" and not pose_topic:
+        raise ConfigError("needed with pose 'topic' (a PoseStamped/Odometry topic)", parameter="pose_topic")
+    if every < 1:
+        raise ConfigError(f"expected an integer >= 1, got {every}", parameter="every")
+    if not 0 <= max_lost <= 1:
+        raise ConfigError(f"expected a share of the tracked frames in [0, 1], got {max_lost}", parameter="max_lost")
+    if isinstance(size, str) and size != "auto":
+        raise ConfigError(f"expected metres or 'auto', got {size!r}", parameter="size")
+
+
+def _dropped(stats: FrameStats, depth_filter: DepthFilter, integrator: "_Integrator") -> dict[str, int]:
+    """Frames dropped by reason: while assembling, by the depth filter, and lost by tracking."""
+    dropped = dict(stats.dropped)
+    for reason, n in depth_filter.drops.items():
+        dropped[reason] = dropped.get(reason, 0) + n
+    if integrator.lost:
+        dropped[DROP_LOST] = len(integrator.lost)
+    return dropped
+
+
+def _apply_auto_grid(chosen: AutoGrid, grid_spec: "_GridSpec", origin, names: dict, notes: list[str],
+                     warnings: list[str]) -> tuple["_GridSpec", tuple, dict]:
+    """The grid settings of an automatic size (and the note and warning it gives): spec, origin, sizing."""
+    grid_spec = replace(grid_spec, size=chosen.size, resolution=None, voxel_size=chosen.voxel_size)
+    if origin is None:
+        names["origin"] = f"size auto (the box of what {chosen.frames} frame(s) observe)"
+    notes.append(chosen.note())
+    if chosen.capped.startswith("box cropped"):
+        warnings.append(f"size auto: {chosen.capped}; the scene goes on beyond the grid")
+    return grid_spec, tuple(chosen.origin), chosen.as_dict()
+
+
+def _decide_up(vol: TernaryVolume, grid: TernaryGrid, cloud, integrator: "_Integrator", up, continued: bool,
+               declared_up, plan: "_PosePlan", up_name: str):
+    """Decide the world's up once (fusion.up.choose_up) and store it, with the depth intrinsics, on the volume
+    and its grid; returns the choice (its warnings and report entry)."""
+    choice = choose_up(option=up, init_up=vol.up if continued else None, init_source=vol.up_source,
+                       declared=declared_up, world=plan.world, world_from_tf=plan.source in ("tf", "topic"),
+                       points=np.asarray(cloud.points), normals=np.asarray(cloud.normals),
+                       camera_poses=np.array(integrator.camera_poses), up_name=up_name)
+    vol.up = grid.up = choice.up
+    vol.up_source = choice.source if choice.up is not None else ""
+    vol.intrinsics = vol.intrinsics or integrator.intrinsics
+    return choice
+
+
+def _auto_grid(rec: Recording, roles: Roles, plan: _PosePlan, grid_spec: _GridSpec, resolution, voxel_size,
+               origin, budget: int, selection: dict) -> AutoGrid:
+    """Size 'auto': survey up to SURVEY_FRAMES of the selected frames (depth only, evenly spread) at their poses;
+    without poses (icp with no TF) the first frame at the identity, its box grown by ICP_GROW."""
+    count = rec.topics[roles.depth_topic].count if roles.depth_topic in rec.topics else 0
+    step = max(1, -(-count // (selection["every"] * SURVEY_FRAMES)))
+    frames = iter_frames(rec, replace(roles, color_topic=None), pose_source=plan.source,
+                         **{**selection, "every": selection["every"] * step})
+    lo, hi = grid_spec.min_depth, grid_spec.max_depth
+    if plan.source == "none":
+        first = next(iter(frames), None)
+        views = [] if first is None else [(filters.range_filter(first.depth, lo, hi), first.K, np.eye(4))]
+        grow = ICP_GROW
+    else:
+        views = ((filters.range_filter(f.depth, lo, hi), f.K, f.T_world_camera) for f in frames
+                 if f.T_world_camera is not None and np.all(np.isfinite(f.T_world_camera)))
+        grow = 0.0
+    return auto_grid(survey(views, lo, hi), voxel_size=voxel_size, resolution=resolution,
+                     truncation=grid_spec.truncation, color=grid_spec.color, budget=budget, origin=origin, grow=grow)
+
+
+def _tracking_verdict(integrator: _Integrator, max_lost: float, recording: str,
+                      bound: int | None = None) -> list[str]:
+    """Warnings about frames lost by tracking; RecordingError when more than max_lost of the tracked frames were,
+    or (while fusing) of `bound`, the most frames the selection can have."""
+    lost, tracked = integrator.lost, len(integrator.track_log)
+    if not lost:
+        return []
+    shown = ", ".join(str(i) for i in lost[:10]) + (", ..." if len(lost) > 10 else "")
+    what = (f"tracking ({integrator.mode}) lost {len(lost)} of {tracked} tracked frames "
+            f"({100 * len(lost) / tracked:.0f} %): frames {shown}")
+    if bound is not None:
+        raise RecordingError(f"{recording}: {what}; stopped: more than {100 * max_lost:.0f} % of the {bound} frames "
+                             f"selected (sub-sample less, or give camera poses)", parameter="max_lost")
+    if len(lost) > max_lost * tracked:
+        raise RecordingError(f"{recording}: {what}; more than the {100 * max_lost:.0f} % allowed (sub-sample "
+                             f"less, or give camera poses)", parameter="max_lost")
+    return [f"{what}; they were not fused"]
+
+
+def _face_warnings(faces: dict[str, int]) -> list[str]:
+    touched = {f: n for f, n in faces.items() if n}
+    if not touched:
+        return []
+    where = ", ".join(f"{f} ({n})" for f, n in touched.items())
+    return [f"occupied voxels touch the grid faces {where}: the scene goes on beyond the grid (a larger grid "
+            f"would keep it)"]
 
 
 def _spheres(clear_spheres: Iterable[tuple], clear_pois: str | os.PathLike | None, spheres_name: str) -> list[dict]:
@@ -309,9 +433,13 @@ class _Integrator:
         self.timing = timing
         self.tracker = FrameToModelTracker() if mode in ("icp", "hint") else None
         self.track_log: list[dict] = []
+        self.lost: list[int] = []  # indices of the frames tracking lost (not fused)
         self.placement = ""
         self.used = 0
-        self.prev_T: np.ndarray | None = None
+        self.prev_T: np.ndarray | None = None  # the last good pose and its stamp; the one before (velocity)
+        self.prev_stamp: int | None = None
+        self.prev2: tuple[np.ndarray, int] | None = None
+        self.prev_given: np.ndarray | None = None  # the given pose of the last good frame (hint)
         self.buffered: list[tuple[RGBDFrame, np.ndarray]] = []  # frames waiting for the grid to be placed
         self.n_place = 1 if mode == "icp" else PLACEMENT_FRAMES
         self.camera_poses: list[np.ndarray] = []  # T_world_camera of every frame integrated (fusion.up)
@@ -365,17 +493,24 @@ class _Integrator:
             T = T_given if T_given is not None or self.mode == "hint" else np.eye(4)
         else:  # icp tracks from the previous pose, hint from the given one
             t0 = time.perf_counter()
-            res = self.tracker.track(vol, depth, frame.K, self.prev_T if self.mode == "icp" else T_given)
+            dt = None if self.prev_stamp is None else (frame.stamp_ns - self.prev_stamp) * 1e-9
+            res = self.tracker.track(vol, depth, frame.K, self._candidates(T_given, dt), T_ref=self.prev_T, dt_s=dt)
             _add(self.timing, "track", time.perf_counter() - t0)
-            T = res.T_world_camera
             self.track_log.append(_track_entry(frame, res, T_given))
+            if res.lost:  # not fused at a stale pose: the next frame is tracked from the last good one
+                self.lost.append(frame.index)
+                return
+            T = res.T_world_camera
         t0 = time.perf_counter()
         try:
             vol.integrate(depth, frame.K, T, frame.color)
         except VolumeError as exc:
             raise VolumeError(f"{where}: {exc}") from None
         _add(self.timing, "integrate", time.perf_counter() - t0)
-        self.prev_T = np.asarray(T, dtype=np.float64)
+        if self.prev_T is not None and self.prev_stamp is not None:
+            self.prev2 = (self.prev_T, self.prev_stamp)
+        self.prev_T, self.prev_stamp = np.asarray(T, dtype=np.float64), frame.stamp_ns
+        self.prev_given = T_given
         self.used += 1
         self.camera_poses.append(self.prev_T)
         if self.intrinsics is None:
@@ -383,12 +518,29 @@ class _Integrator:
             self.intrinsics = {"fx": float(K[0, 0]), "fy": float(K[1, 1]), "cx": float(K[0, 2]),
                                "cy": float(K[1, 2]), "width": int(depth.shape[1]), "height": int(depth.shape[0])}
 
+    def _candidates(self, T_given: np.ndarray | None, dt: float | None) -> list[np.ndarray]:
+        """Initial poses for the tracker, the first tried first: icp the constant-velocity prediction, then the
+        last good pose; hint the given pose, then the last good pose moved by the given poses' motion since."""
+        if self.mode == "hint":
+            out = [T_given]
+            if self.prev_T is not None and self.prev_given is not None:
+                out.append(self.prev_T @ np.linalg.inv(self.prev_given) @ T_given)
+            return out
+        prev2_T, dt_prev = (None, None) if self.prev2 is None else (
+            self.prev2[0], (self.prev_stamp - self.prev2[1]) * 1e-9)
+        pred = predict_pose(self.prev_T, prev2_T, dt_prev, dt)
+        return [pred, self.prev_T] if not np.allclose(pred, self.prev_T) else [pred]
+
 
 def _track_entry(frame: RGBDFrame, res: TrackResult, T_given: np.ndarray | None) -> dict:
+    """One frame's tracking in the report: fitness, rmse, agreement, lost and why, the pose (None when lost) and,
+    with given poses, the distance between given and tracked camera positions."""
     e = {"index": frame.index, "stamp_ns": frame.stamp_ns, "fitness": round(res.fitness, 4),
-         "rmse": None if not np.isfinite(res.rmse) else round(res.rmse, 5), "lost": res.lost, "reason": res.reason,
-         "T_world_camera": np.round(res.T_world_camera, 6).tolist()}
-    if T_given is not None:
+         "rmse": None if not np.isfinite(res.rmse) else round(res.rmse, 5),
+         "agreement": None if not np.isfinite(res.agreement) else round(res.agreement, 4), "lost": res.lost,
+         "reason": res.reason, "relocalised": res.relocalised, "attempts": res.attempts,
+         "T_world_camera": None if res.lost else np.round(res.T_world_camera, 6).tolist()}
+    if T_given is not None and not res.lost:
         e["given_minus_tracked_m"] = round(float(np.linalg.norm(np.asarray(T_given)[:3, 3]
                                                                 - res.T_world_camera[:3, 3])), 5)
     return e

@@ -40,7 +40,14 @@ def _triple(x, name: str, kind=float) -> tuple:
     return t
 
 
-def _available_bytes() -> int:
+def worst_case_bytes(shape, color: bool) -> int:
+    """Bytes a grid of `shape` voxels needs when every block holds a surface (block tables and full pools)."""
+    nblocks = int(np.prod([(int(d) + kn.B - 1) // kn.B for d in shape]))
+    return nblocks * (kn.B3 * (BYTES_PER_VOXEL + (BYTES_PER_VOXEL_COLOR if color else 0)) + 5)
+
+
+def available_bytes() -> int:
+    """Memory available now (MemAvailable of /proc/meminfo; 16 GiB when it cannot be read)."""
     try:
         with open("/proc/meminfo") as fh:
             for line in fh:
@@ -115,13 +122,11 @@ class TernaryVolume:
     # ------------------------------------------------------------------ storage
     @property
     def bytes_worst_case(self) -> int:
-        nblocks = int(np.prod(self.nb))
-        per = kn.B3 * (BYTES_PER_VOXEL + (BYTES_PER_VOXEL_COLOR if self.color else 0))
-        return nblocks * (per + 5)
+        return worst_case_bytes(self.shape, self.color)
 
     def _check_memory(self) -> None:
         need = self.bytes_worst_case
-        avail = _available_bytes()
+        avail = available_bytes()
         if need > 0.8 * avail:
             nx, ny, nz = self.shape
             raise VolumeError(f"volume of {nx}x{ny}x{nz} voxels at {self.voxel_size * 1000:.2f} mm would need up to "
