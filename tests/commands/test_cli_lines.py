@@ -36,11 +36,18 @@ def test_a_newline_in_a_message_does_not_split_the_line(tmp_path):
     assert "a\\nb.mcap" in res.output
 
 
+def _default_sigint() -> None:
+    """A test runner's worker may ignore SIGINT, and an ignored signal stays ignored across exec (Python then
+    installs no KeyboardInterrupt handler): give the child the default disposition a terminal gives."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def test_ctrl_c_is_one_line_and_exit_130(tmp_path):
     env = dict(os.environ, PYTHONPATH=str(REPO))
     proc = subprocess.Popen([sys.executable, "-m", "kinfu_cli", "fuse", str(REPO / "sample_data/tabletop/recording.mcap"),
                              "-o", str(tmp_path / "out"), "--quiet"], cwd=tmp_path, env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=_default_sigint)
     time.sleep(2.5)  # inside start-up imports or the fusion itself; both must end the same way
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=60)
