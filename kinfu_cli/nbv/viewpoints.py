@@ -61,6 +61,9 @@ def _angles(start: float, stop: float, step: float, *, closed: bool, name: str) 
     return vals
 
 
+MIN_RADIUS_M, MAX_RADIUS_M = 0.01, 100.0  # viewing sphere radius
+
+
 def sphere_viewpoints(center, radius: float = PAPER_SPHERE.radius, lon_step: float = PAPER_SPHERE.lon_step,
                       lat_min: float = PAPER_SPHERE.lat_min, lat_max: float = PAPER_SPHERE.lat_max,
                       lat_step: float = PAPER_SPHERE.lat_step, roll_step: float = PAPER_SPHERE.roll_step,
@@ -72,8 +75,9 @@ def sphere_viewpoints(center, radius: float = PAPER_SPHERE.radius, lon_step: flo
     built about z is turned onto it.
     """
     center = np.asarray(center, dtype=np.float64).reshape(3)
-    if not (np.isfinite(radius) and radius > 0):
-        raise ConfigError(f"expected a positive distance in metres, got {radius}", parameter="radius")
+    if not (MIN_RADIUS_M <= radius <= MAX_RADIUS_M):  # also refuses NaN; farther or nearer hangs the ray caster
+        raise ConfigError(f"expected a distance in [{MIN_RADIUS_M:g}, {MAX_RADIUS_M:g}] m, got {radius}",
+                          parameter="radius")
     if not (-90 <= lat_min <= lat_max <= 90):
         raise ConfigError(f"expected -90 <= min <= max <= 90, got {lat_min}, {lat_max}", parameter="lat_min/lat_max")
     lons = np.radians(_angles(0.0, 360.0, lon_step, closed=False, name="lon"))
@@ -110,6 +114,8 @@ def read_candidates(path: str | os.PathLike) -> np.ndarray:
         raise ConfigError(f"{path}: no such candidate file") from None
     except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{path}: not a JSON candidate file ({exc}); expected a list of 4x4 poses") from None
+    except RecursionError:
+        raise ConfigError(f"{path}: JSON nested too deeply to read; expected a list of 4x4 poses") from None
     if isinstance(doc, dict):
         doc = doc.get("poses", doc.get("candidates"))
     if not isinstance(doc, list):
