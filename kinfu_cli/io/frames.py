@@ -16,7 +16,7 @@ import numpy as np
 
 from kinfu_cli.core.errors import ConfigError, RecordingError, TransformError
 from kinfu_cli.io.messages import (POSE_TYPES, camera_info_K, decode_color, decode_depth, header_frame,
-                                   header_stamp_ns, normalize_msgtype, pose_message_to_matrix)
+                                   header_stamp_ns, normalize_msgtype, pose_message_to_tq)
 from kinfu_cli.io.roles import Roles, detect_roles, require_role_topic
 from kinfu_cli.io.tf_buffer import TfBuffer
 
@@ -82,16 +82,22 @@ class _PosePath:
         self.tf = TfBuffer()
         self.frame = None
         for _, msgtype, log_ns, msg in rec.typed_messages([topic]):
-            T = pose_message_to_matrix(msg, msgtype)
+            trans, quat = pose_message_to_tq(msg, msgtype)
             frame = header_frame(msg).lstrip("/") or "world"
             if self.frame is None:
                 self.frame = frame
             elif frame != self.frame:  # poses in two frames cannot be interpolated into one trajectory
                 raise RecordingError(f"{rec.path}: pose topic {topic} changes frame_id from {self.frame!r} to "
                                      f"{frame!r} at stamp {_stamp(msg, log_ns)} ns; expected one frame")
-            self.tf.add(self.frame, "__camera__", _stamp(msg, log_ns), T)
+            try:  # the checks of a TF transform: finite, unit quaternion, within reach
+                self.tf.add_quat(self.frame, "__camera__", _stamp(msg, log_ns), trans, quat)
+            except TransformError as exc:
+                raise RecordingError(f"{rec.path}: pose topic {topic}: the pose at stamp {_stamp(msg, log_ns)} ns is "
+                                     f"refused ({exc.detail.split(': ', 1)[-1]})") from None
         if self.frame is None:
-            raise RecordingError(f"{rec.path}: pose topic {topic} has no messages")
+            raise RecordingError(f"{rec.path}: pose topic {topic} has no messages" if not info.count else
+                                 f"{rec.path}: pose topic {topic} lists {info.count} messages but none of a pose "
+                                 f"type could be read")
         self.tolerance_ns = tolerance_ns
 
     def pose(self, stamp_ns: int) -> np.ndarray:
@@ -127,7 +133,10 @@ def iter_frames(rec, roles: Roles | None = None, pose_source: str = "tf", pose_t
     tol_ns = int(round(tolerance_s * 1e9))
     first_info = rec.first_message(roles.info_topic)
     if first_info is None:
-        raise RecordingError(f"{rec.path}: camera info topic {roles.info_topic} has no messages")
+        count = rec.topics[roles.info_topic].count
+        raise RecordingError(f"{rec.path}: camera info topic {roles.info_topic} has no messages" if not count else
+                             f"{rec.path}: camera info topic {roles.info_topic} lists {count} messages but none "
+                             f"could be read")
     K, width, height = camera_info_K(first_info, f"{rec.path}: {roles.info_topic}")
     if pose_source == "tf":
         pose_fn = _tf_poses(rec, roles, depth_topic, tf, tol_ns, stats)

@@ -226,7 +226,9 @@ def _decode_compressed_depth(msg: object, topic: str) -> np.ndarray:
     if start < 0:
         raise RecordingError(f"{topic}: compressedDepth message holds no PNG data")
     img = imdecode_quiet(np.frombuffer(raw[start:], dtype=np.uint8), cv2.IMREAD_UNCHANGED)
-    if img is None or img.ndim != 2 or img.dtype != np.uint16:
+    if img is None:
+        raise RecordingError(f"{topic}: compressedDepth PNG could not be decoded (truncated or corrupt image data)")
+    if img.ndim != 2 or img.dtype != np.uint16:
         raise RecordingError(f"{topic}: compressedDepth PNG is not a 16-bit single-channel image")
     enc = fmt.split(";")[0].strip()
     if enc in ("16UC1", "mono16"):
