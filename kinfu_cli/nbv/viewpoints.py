@@ -50,8 +50,8 @@ PAPER_SPHERE = SphereSpec()
 
 
 def _angles(start: float, stop: float, step: float, *, closed: bool, name: str) -> np.ndarray:
-    if not step > 0:
-        raise ConfigError(f"expected a positive step in degrees, got {step}", parameter=f"{name}_step")
+    if not 0 < step <= 360:  # also refuses NaN and inf
+        raise ConfigError(f"expected a step in (0, 360] degrees, got {step}", parameter=f"{name}_step")
     if stop < start:
         raise ConfigError(f"expected min <= max, got {start} > {stop}", parameter=f"{name}_min/{name}_max")
     n = int(np.floor((stop - start) / step + 1e-9))
