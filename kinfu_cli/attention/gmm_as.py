@@ -63,7 +63,8 @@ import numpy as np
 
 from kinfu_cli.attention.em import Mixture, fit_em
 from kinfu_cli.attention.zvc import mean_filter
-from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.core.checks import check_number
+from kinfu_cli.core.errors import ConfigError, TrajectoryError
 from kinfu_cli.core.pois import DEFAULT_RADIUS, Gaussian4, Poi
 from kinfu_cli.io.trajectory import Trajectory
 
@@ -159,15 +160,19 @@ class GmmActivitySaliency:
             if not ok:
                 raise ConfigError(f"expected 'duration' or a positive number, got {self.time_scale!r}",
                                   parameter="time_scale")
-        if int(self.neighbours) != self.neighbours or self.neighbours < 1:
-            raise ConfigError(f"expected an integer >= 1, got {self.neighbours}", parameter="neighbours")
-        if int(self.max_components) != self.max_components or self.max_components < 1:
-            raise ConfigError(f"expected an integer >= 1, got {self.max_components}", parameter="max_components")
-        if not (self.poi_threshold > 0 and self.radius > 0):
-            raise ConfigError(f"expected positive numbers, got {self.poi_threshold}, {self.radius}",
-                              parameter="poi_threshold/radius")
-        if self.reg_space < 0 or self.reg_time < 0:
-            raise ConfigError(f"expected >= 0, got {self.reg_space}, {self.reg_time}", parameter="reg_space/reg_time")
+        # finite and of a sensible size: NaN slips through comparisons, 1e300 overflows a variance
+        check_number(self.neighbours, "neighbours", 1, 1000, integer=True)
+        check_number(self.max_components, "max_components", 1, 1000, integer=True)
+        check_number(self.poi_threshold, "poi_threshold", 0, 1e6, low_open=True)
+        check_number(self.radius, "radius", 0, 100, low_open=True, unit="m")
+        check_number(self.bic_threshold, "bic_threshold", -1e12, 1e12)
+        check_number(self.reg_space, "reg_space", 0, 100, unit="m")
+        check_number(self.reg_time, "reg_time", 0, 1e6)
+        check_number(self.noise_floor, "noise_floor", 0, 1e3)
+        check_number(self.resample, "resample", 0, 1e6, integer=True)
+        check_number(self.max_iter, "max_iter", 1, 1e6, integer=True)
+        check_number(self.tol, "tol", 0, 1, low_open=True)
+        check_number(self.min_samples_per_component, "min_samples_per_component", 1, 1e6, integer=True)
 
     # --- steps ---------------------------------------------------------------------------------
     def _samples(self, traj: Trajectory, smooth: int = 0) -> tuple[np.ndarray, float, tuple[np.ndarray, np.ndarray]]:
@@ -216,7 +221,9 @@ class GmmActivitySaliency:
                 min_bic, best = b, m
             elif self.selection == "first-minimum" and b > min_bic + self.bic_threshold:
                 break
-        assert best is not None
+        if best is None:  # every fit's BIC was NaN: the samples defeat the arithmetic (validated data should not)
+            raise TrajectoryError(f"GMM-AS: no mixture of 1..{kmax} components fits the {n} samples with a finite "
+                                  f"likelihood (BIC {', '.join(f'{b:g}' for b in bics.values())})")
         return best, bics
 
     def _saliency(self, weights: np.ndarray, covs: np.ndarray) -> np.ndarray:

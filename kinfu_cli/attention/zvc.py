@@ -23,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.pois import DEFAULT_RADIUS, Poi
 from kinfu_cli.io.trajectory import Trajectory
@@ -112,14 +113,12 @@ class ZeroVelocityCrossing:
         Errors name half_width, threshold, r1 and r2 with a `zvc_` prefix: their names among the parameters
         of both detectors (attention.detect.detector_params), where GMM-AS has a threshold of its own.
         """
-        if int(self.half_width) != self.half_width or self.half_width < 0:
-            raise ConfigError(f"expected an integer >= 0, got {self.half_width}", parameter="zvc_half_width")
-        if not (0 < self.r1 < self.r2):
-            raise ConfigError(f"expected 0 < r1 < r2 metres, got {self.r1}, {self.r2}", parameter="zvc_r1/zvc_r2")
-        if not self.threshold > 0:
-            raise ConfigError(f"expected a positive multiplier, got {self.threshold}", parameter="zvc_threshold")
-        if not self.radius > 0:
-            raise ConfigError(f"expected a positive radius in metres, got {self.radius}", parameter="radius")
+        check_number(self.half_width, "zvc_half_width", 0, 1e6, integer=True)
+        if not (0 < self.r1 < self.r2 <= 100):
+            raise ConfigError(f"expected 0 < r1 < r2 <= 100 metres, got {self.r1}, {self.r2}",
+                              parameter="zvc_r1/zvc_r2")
+        check_number(self.threshold, "zvc_threshold", 0, 1e6, low_open=True)
+        check_number(self.radius, "radius", 0, 100, low_open=True, unit="m")
 
     def fit(self, traj: Trajectory) -> "ZeroVelocityCrossing":
         self.check_params()

@@ -17,6 +17,8 @@ from kinfu_cli.core.ownership import claim_output
 PARAMETER_FLAGS: dict[str, str] = {
     "vfov_extra_deg": "--vfov-extra",
     "concavity_tolerance_deg": "--concavity-tolerance",
+    "sanity_angle_deg": "--sanity-angle",
+    "oscillation_deg": "--oscillation",
     "region_radius": "--poi-radius",
     "modes": "--mode",
 }

@@ -17,6 +17,7 @@ import numpy as np
 
 from kinfu_cli.core.atomic import write_npz
 from kinfu_cli.core.errors import ConfigError, VolumeError
+from kinfu_cli.core.volume_file import MAX_COORDINATE_M, READ_ERRORS
 
 OCCUPIED = np.int8(1)
 UNKNOWN = np.int8(0)
@@ -87,7 +88,9 @@ def save_ternary(path: str | os.PathLike, grid: TernaryGrid) -> None:
 
 def read_ternary(path: str | os.PathLike) -> TernaryGrid | None:
     """The grid of a `ternary.npz`; None when `path` is a readable .npz without a 'ternary' array (such as a
-    fusion volume.npz, which fusion's `load_grid` reads); VolumeError when it is missing or unreadable."""
+    fusion volume.npz, which fusion's `load_grid` reads); VolumeError naming the file when it is missing,
+    unreadable (truncated, corrupt) or its arrays break the file contract (labels other than 1 / 0 / -1, a
+    non-finite or far-away origin, a voxel size that is not a positive length, a bad up direction)."""
     path = Path(path)
     if not path.exists():
         raise VolumeError(f"{path}: no such file")
@@ -96,11 +99,33 @@ def read_ternary(path: str | os.PathLike) -> TernaryGrid | None:
             keys = set(data.files)
             if "ternary" not in keys:
                 return None
-            frame = str(data["frame"]) if "frame" in keys else ""
+            missing = [k for k in ("origin", "voxel_size") if k not in keys]
+            if missing:
+                raise VolumeError(f"{path}: ternary.npz lacks the arrays {', '.join(missing)}")
+            labels, origin, voxel_size = data["ternary"], data["origin"], data["voxel_size"]
+            frame = data["frame"] if "frame" in keys else np.array("")
             up = data["up"] if "up" in keys else None
-            return TernaryGrid(data["ternary"], data["origin"], float(data["voxel_size"]), frame, up)
-    except (OSError, ValueError, EOFError) as exc:
-        raise VolumeError(f"{path}: not a readable .npz volume ({exc})") from None
+    except VolumeError:
+        raise
+    except READ_ERRORS as exc:
+        text = str(exc).replace("\n", " ").strip()[:160] or type(exc).__name__
+        raise VolumeError(f"{path}: not a readable .npz volume ({text}); it may be truncated or corrupt") from None
+    if labels.ndim != 3 or labels.dtype.kind not in "iu" or (labels.size and (
+            int(labels.min()) < -1 or int(labels.max()) > 1)):
+        raise VolumeError(f"{path}: 'ternary' is {labels.dtype} {labels.shape}, expected a 3-D integer array of "
+                          f"1 (occupied), 0 (unknown), -1 (empty)")
+    if origin.shape != (3,) or origin.dtype.kind not in "iuf" or not (
+            np.all(np.isfinite(origin)) and np.abs(origin).max() <= MAX_COORDINATE_M):
+        raise VolumeError(f"{path}: 'origin' is {origin.tolist()!r}, expected three finite coordinates within "
+                          f"{MAX_COORDINATE_M:g} m")
+    if voxel_size.size != 1 or voxel_size.dtype.kind not in "iuf" or not (0 < float(voxel_size) <= 1e3):
+        raise VolumeError(f"{path}: 'voxel_size' is {voxel_size.tolist()!r}, expected a positive length in metres")
+    if frame.shape != () or frame.dtype.kind != "U":
+        raise VolumeError(f"{path}: 'frame' is not a frame name")
+    try:
+        return TernaryGrid(labels, origin, float(voxel_size), str(frame), up)
+    except ConfigError as exc:  # the up direction
+        raise VolumeError(f"{path}: 'up' {exc.detail}") from None
 
 
 def load_ternary(path: str | os.PathLike) -> TernaryGrid:

@@ -97,6 +97,9 @@ def read_pois_document(path: str | os.PathLike) -> dict:
         raise PoiFileError(f"{path}: is a folder, expected a pois.json file") from None
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise PoiFileError(f"{path}: not valid JSON ({exc}), expected a pois.json file from `kinfu poi`") from None
+    except RecursionError:
+        raise PoiFileError(f"{path}: JSON nested too deeply to read, expected a pois.json file from "
+                           f"`kinfu poi`") from None
     if not isinstance(doc, dict) or "pois" not in doc:
         raise PoiFileError(f"{path}: no \"pois\" key, expected {{\"pois\": [{{\"position\": [x, y, z], ...}}]}}")
     if not isinstance(doc["pois"], list):

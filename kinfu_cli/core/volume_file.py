@@ -12,7 +12,11 @@ arrays back into a TernaryVolume is fusion's job (`fusion.volume.load_volume`).
 from __future__ import annotations
 
 import json
+import math
 import os
+import struct
+import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +27,13 @@ from kinfu_cli.core.errors import VolumeError
 FORMAT = "kinfu-volume"
 FORMAT_VERSION = 1
 ARRAYS = ("block_idx", "block_w", "pool_v", "pool_w", "pool_c")
+VOXELS_PER_BLOCK = 512  # a pool row: one 8x8x8 block
+MAX_COORDINATE_M = 1e6  # farther than this from the world origin is corrupt data, not a scene
+MAX_VOXELS_PER_AXIS = 1 << 16
+
+# what a damaged or foreign .npz raises inside np.load / zipfile / zlib: the file is unreadable, not kinfu broken
+READ_ERRORS = (OSError, ValueError, EOFError, KeyError, TypeError, IndexError, zipfile.BadZipFile, zlib.error,
+               struct.error, NotImplementedError, RuntimeError, OverflowError, MemoryError, RecursionError)
 
 
 def write_volume_file(path: str | os.PathLike, meta: dict, arrays: dict[str, np.ndarray]) -> Path:
@@ -41,14 +52,21 @@ def read_volume_file(path: str | os.PathLike) -> tuple[dict, dict[str, np.ndarra
                 raise VolumeError(f"{path}: not a kinfu volume.npz (no 'meta' array; a ternary.npz cannot be "
                                   f"fused into)")
             meta = json.loads(str(data["meta"]))
+            if not isinstance(meta, dict):
+                raise VolumeError(f"{path}: volume metadata is not a JSON object")
             if meta.get("format") != FORMAT or meta.get("format_version") != FORMAT_VERSION:
                 raise VolumeError(f"{path}: volume format {meta.get('format')!r} version "
                                   f"{meta.get('format_version')!r}, expected {FORMAT!r} version {FORMAT_VERSION}")
+            missing = [k for k in ARRAYS if k not in data.files]
+            if missing:
+                raise VolumeError(f"{path}: volume file lacks the arrays {', '.join(missing)}")
             arrays = {k: data[k] for k in ARRAYS}
     except VolumeError:
         raise
-    except (OSError, ValueError, EOFError, KeyError, json.JSONDecodeError) as exc:
-        raise VolumeError(f"{path}: not a readable volume file ({exc})") from None
+    except READ_ERRORS as exc:
+        raise VolumeError(f"{path}: not a readable volume file ({_short(exc)}); it may be truncated or "
+                          f"corrupt") from None
+    _check(path, meta, arrays)
     return meta, arrays
 
 
@@ -60,6 +78,71 @@ def read_volume_meta(path: str | os.PathLike) -> dict | None:
         raise VolumeError(f"{path}: no such volume file")
     try:
         with np.load(path, allow_pickle=False) as data:
-            return json.loads(str(data["meta"])) if "meta" in data.files else None
-    except (OSError, ValueError, EOFError, json.JSONDecodeError) as exc:
-        raise VolumeError(f"{path}: not a readable volume file ({exc})") from None
+            meta = json.loads(str(data["meta"])) if "meta" in data.files else None
+    except READ_ERRORS as exc:
+        raise VolumeError(f"{path}: not a readable volume file ({_short(exc)}); it may be truncated or "
+                          f"corrupt") from None
+    if meta is not None and not isinstance(meta, dict):
+        raise VolumeError(f"{path}: volume metadata is not a JSON object")
+    return meta
+
+
+def _short(exc: BaseException) -> str:
+    text = str(exc).replace("\n", " ").strip() or type(exc).__name__
+    return text if len(text) <= 160 else text[:160] + "..."
+
+
+def _number(meta: dict, key: str, path: Path, low: float, high: float, integer: bool = False,
+            low_open: bool = False) -> float:
+    v = meta.get(key)
+    ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and low <= v <= high
+    ok = ok and (not integer or float(v).is_integer()) and (not low_open or v > low)
+    if not ok:
+        what = "an integer" if integer else "a number"
+        raise VolumeError(f"{path}: volume metadata {key!r} is {v!r}, expected {what} in "
+                          f"{'(' if low_open else '['}{low:g}, {high:g}]")
+    return v
+
+
+def _check(path: Path, meta: object, arrays: dict[str, np.ndarray]) -> None:
+    """VolumeError naming the file unless the metadata and arrays describe one consistent volume (so that no
+    kernel indexes outside its arrays)."""
+    if not isinstance(meta, dict):
+        raise VolumeError(f"{path}: volume metadata is not a JSON object")
+    shape = meta.get("shape")
+    if not (isinstance(shape, list) and len(shape) == 3 and all(
+            isinstance(n, int) and not isinstance(n, bool) and 1 <= n <= MAX_VOXELS_PER_AXIS for n in shape)):
+        raise VolumeError(f"{path}: volume metadata 'shape' is {shape!r}, expected three voxel counts in "
+                          f"[1, {MAX_VOXELS_PER_AXIS}]")
+    _number(meta, "voxel_size", path, 0.0, 1e3, low_open=True)
+    origin = meta.get("origin")
+    if not (isinstance(origin, list) and len(origin) == 3 and all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+            and abs(v) <= MAX_COORDINATE_M for v in origin)):
+        raise VolumeError(f"{path}: volume metadata 'origin' is {origin!r}, expected three finite coordinates "
+                          f"within {MAX_COORDINATE_M:g} m")
+    _number(meta, "truncation", path, 0.0, 1e3, low_open=True)
+    _number(meta, "max_weight", path, 1, 255, integer=True)
+    lo = _number(meta, "min_depth", path, 0.0, 1e3)
+    hi = _number(meta, "max_depth", path, 0.0, 1e3)
+    if not lo < hi:
+        raise VolumeError(f"{path}: volume metadata min_depth {lo} is not below max_depth {hi}")
+    if not isinstance(meta.get("color"), bool):
+        raise VolumeError(f"{path}: volume metadata 'color' is {meta.get('color')!r}, expected true or false")
+    if "frames_integrated" in meta:
+        _number(meta, "frames_integrated", path, 0, 2 ** 62, integer=True)
+    if not isinstance(meta.get("frame", ""), (str, type(None))):
+        raise VolumeError(f"{path}: volume metadata 'frame' is {meta.get('frame')!r}, expected a frame name")
+    idx, bw, pv, pw, pc = (arrays[k] for k in ARRAYS)
+    if idx.ndim != 3 or idx.dtype.kind not in "iu" or bw.shape != idx.shape or bw.dtype.kind not in "iu":
+        raise VolumeError(f"{path}: block tables are {idx.dtype} {idx.shape} and {bw.dtype} {bw.shape}, expected "
+                          f"two integer arrays of one 3-D shape")
+    n = pv.shape[0] if pv.ndim == 2 else -1
+    if (pv.ndim != 2 or pv.shape[1] != VOXELS_PER_BLOCK or pv.dtype.kind not in "iu" or pw.shape != pv.shape
+            or pw.dtype.kind not in "iu" or pc.ndim != 3 or pc.shape[1:] != (VOXELS_PER_BLOCK, 3)
+            or pc.shape[0] not in (0, n)):
+        raise VolumeError(f"{path}: voxel pools are {pv.shape}, {pw.shape}, {pc.shape}, expected (n, "
+                          f"{VOXELS_PER_BLOCK}), (n, {VOXELS_PER_BLOCK}) and (n or 0, {VOXELS_PER_BLOCK}, 3)")
+    if idx.size and (int(idx.min()) < -1 or int(idx.max()) >= n):
+        raise VolumeError(f"{path}: block table points at pool rows {int(idx.min())}..{int(idx.max())}, but the "
+                          f"pools hold {n} rows")

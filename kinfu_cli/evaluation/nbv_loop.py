@@ -59,6 +59,7 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from kinfu_cli.attention.gmm_as import GmmActivitySaliency
 from kinfu_cli.core.camera import CameraModel
+from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError, RecordingError
 from kinfu_cli.core.grid import TernaryGrid
 from kinfu_cli.core.pois import DEFAULT_RADIUS
@@ -126,8 +127,7 @@ class LoopConfig:
         if any(explore) and not all(explore):
             raise ConfigError("objects and standard (POI-free exploration) cannot be mixed with poi, random or "
                               f"fixed, got {','.join(self.strategies)}", parameter="strategies")
-        if self.views < 1:
-            raise ConfigError(f"expected at least 1, got {self.views}", parameter="views")
+        check_number(self.views, "views", 1, 1000, integer=True)
         if not (0.002 <= self.voxel_size <= 0.1):
             raise ConfigError(f"expected 0.002 to 0.1 m, got {self.voxel_size}", parameter="voxel_size")
         if self.pois_from not in ("gmm-as", "truth"):
@@ -138,8 +138,15 @@ class LoopConfig:
             raise ConfigError(f"expected at least 1, got {self.scan_frames}", parameter="scan_frames")
         if self.score_width < 8:
             raise ConfigError(f"expected at least 8 pixels, got {self.score_width}", parameter="score_width")
-        if not self.near_margin >= 0:
-            raise ConfigError(f"expected a distance >= 0 m, got {self.near_margin}", parameter="near_margin")
+        check_number(self.near_margin, "near_margin", 0, 10, unit="m")
+        check_number(self.seed, "seed", 0, 2 ** 63 - 1, integer=True)
+        for name in ("width", "height"):  # None: the scene's camera; 0 is not "default"
+            if getattr(self, name) is not None:
+                check_number(getattr(self, name), name, 8, 8192, integer=True, unit="pixels")
+        check_number(self.oscillation_deg, "oscillation_deg", 0, 45, unit="degrees")
+        check_number(self.poi_radius, "poi_radius", 0, 100, low_open=True, unit="m")
+        if self.inc_th is not None:
+            check_number(self.inc_th, "inc_th", 0)
         get_gain(self.gain)
 
 

@@ -39,6 +39,7 @@ import open3d as o3d
 from numba import njit, prange
 from scipy.spatial import cKDTree
 
+from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError, RecordingError, VolumeError
 from kinfu_cli.core.grid import UNKNOWN
 from kinfu_cli.core.progress import progress
@@ -443,7 +444,7 @@ def report_json_of(path: str | os.PathLike) -> dict | None:
         return None
     try:
         return json.loads(p.read_text())
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):
         return None
 
 
@@ -470,11 +471,9 @@ def evaluate_fusion(path: str | os.PathLike, ground_truth: str | os.PathLike, st
     """Score a `kinfu fuse` output folder (mesh.ply [+ volume.npz]) or a mesh file against a `kinfu synth`
     ground-truth folder (module docstring); quiet: no progress bar."""
     for name, val in (("threshold", threshold), ("spacing", spacing)):
-        if not (isinstance(val, (int, float)) and math.isfinite(val) and val > 0):
-            raise ConfigError(f"expected a positive distance in metres, got {val}", parameter=name)
+        check_number(val, name, 0, 10, low_open=True, unit="m")
     for name, val in (("margin", margin), ("min_height", min_height)):
-        if not (isinstance(val, (int, float)) and math.isfinite(val) and val >= 0):
-            raise ConfigError(f"expected a distance >= 0 m, got {val}", parameter=name)
+        check_number(val, name, 0, 10, unit="m")
     t0 = time.perf_counter()
     gt = rec = score = measures = surface = frames = None
     report = report_json_of(path)

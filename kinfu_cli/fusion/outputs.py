@@ -14,23 +14,40 @@ from pathlib import Path
 import numpy as np
 
 from kinfu_cli.core.atomic import atomic_path
+from kinfu_cli.core.errors import VolumeError
 from kinfu_cli.core.grid import save_ternary
 from kinfu_cli.fusion.pipeline import FusionResult
 
 OUTPUTS = ("mesh.ply", "cloud.ply", "volume.npz", "ternary.npz", "report.json")
+_EMPTY_PLY = "ply\nformat ascii 1.0\ncomment kinfu: no surface in the grid\n{elements}end_header\n"
 
 
 def write_fusion_outputs(result: FusionResult, outdir: str | os.PathLike) -> None:
-    """Write mesh.ply, cloud.ply, volume.npz and ternary.npz into outdir (made when missing)."""
+    """Write mesh.ply, cloud.ply, volume.npz and ternary.npz into outdir (made when missing). A grid in which
+    nothing was observed is an error (it sits away from every depth reading); one with observed space but no
+    surface gets valid PLY files without vertices."""
     import open3d as o3d  # heavy: only when writing
 
+    if result.counts.get("occupied", 0) + result.counts.get("empty", 0) == 0 and not result.cleared_spheres:
+        vol = result.volume
+        hi = vol.origin + np.array(vol.shape) * vol.voxel_size
+        box = " x ".join(f"[{a:.3f}, {b:.3f}]" for a, b in zip(vol.origin, hi))
+        raise VolumeError(f"{result.recording}: no depth reading of the {result.frames_used} frames fused falls "
+                          f"inside the grid {box} m: nothing was observed (move or enlarge the grid: origin, size)")
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     with atomic_path(outdir / "mesh.ply") as tmp:
-        if not o3d.io.write_triangle_mesh(str(tmp), result.mesh):
+        if len(result.mesh.vertices) == 0:
+            tmp.write_text(_EMPTY_PLY.format(elements="element vertex 0\nproperty float x\nproperty float y\n"
+                                                      "property float z\nelement face 0\n"
+                                                      "property list uchar int vertex_indices\n"))
+        elif not o3d.io.write_triangle_mesh(str(tmp), result.mesh):
             raise OSError(f"could not write {outdir / 'mesh.ply'}")
     with atomic_path(outdir / "cloud.ply") as tmp:
-        if not o3d.io.write_point_cloud(str(tmp), result.cloud):
+        if len(result.cloud.points) == 0:
+            tmp.write_text(_EMPTY_PLY.format(elements="element vertex 0\nproperty float x\nproperty float y\n"
+                                                      "property float z\n"))
+        elif not o3d.io.write_point_cloud(str(tmp), result.cloud):
             raise OSError(f"could not write {outdir / 'cloud.ply'}")
     result.volume.save(outdir / "volume.npz")
     save_ternary(outdir / "ternary.npz", result.grid)

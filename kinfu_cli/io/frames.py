@@ -16,11 +16,12 @@ import numpy as np
 
 from kinfu_cli.core.errors import ConfigError, RecordingError, TransformError
 from kinfu_cli.io.messages import (POSE_TYPES, camera_info_K, decode_color, decode_depth, header_frame,
-                                   header_stamp_ns, normalize_msgtype, pose_message_to_matrix)
-from kinfu_cli.io.roles import Roles, detect_roles
+                                   header_stamp_ns, normalize_msgtype, pose_message_to_tq)
+from kinfu_cli.io.roles import Roles, detect_roles, require_role_topic
 from kinfu_cli.io.tf_buffer import TfBuffer
 
 POSE_SOURCES = ("tf", "topic", "none")
+MAX_SECONDS = 1e7  # bound of times and tolerances (116 days): stamps in ns stay far inside int64
 
 DROP_NO_POSE = "no camera pose within the TF range"
 DROP_NO_POSE_TOPIC = "no pose message within tolerance"
@@ -81,16 +82,22 @@ class _PosePath:
         self.tf = TfBuffer()
         self.frame = None
         for _, msgtype, log_ns, msg in rec.typed_messages([topic]):
-            T = pose_message_to_matrix(msg, msgtype)
+            trans, quat = pose_message_to_tq(msg, msgtype)
             frame = header_frame(msg).lstrip("/") or "world"
             if self.frame is None:
                 self.frame = frame
             elif frame != self.frame:  # poses in two frames cannot be interpolated into one trajectory
                 raise RecordingError(f"{rec.path}: pose topic {topic} changes frame_id from {self.frame!r} to "
                                      f"{frame!r} at stamp {_stamp(msg, log_ns)} ns; expected one frame")
-            self.tf.add(self.frame, "__camera__", _stamp(msg, log_ns), T)
+            try:  # the checks of a TF transform: finite, unit quaternion, within reach
+                self.tf.add_quat(self.frame, "__camera__", _stamp(msg, log_ns), trans, quat)
+            except TransformError as exc:
+                raise RecordingError(f"{rec.path}: pose topic {topic}: the pose at stamp {_stamp(msg, log_ns)} ns is "
+                                     f"refused ({exc.detail.split(': ', 1)[-1]})") from None
         if self.frame is None:
-            raise RecordingError(f"{rec.path}: pose topic {topic} has no messages")
+            raise RecordingError(f"{rec.path}: pose topic {topic} has no messages" if not info.count else
+                                 f"{rec.path}: pose topic {topic} lists {info.count} messages but none of a pose "
+                                 f"type could be read")
         self.tolerance_ns = tolerance_ns
 
     def pose(self, stamp_ns: int) -> np.ndarray:
@@ -114,8 +121,9 @@ def iter_frames(rec, roles: Roles | None = None, pose_source: str = "tf", pose_t
         raise ConfigError(f"expected one of {', '.join(POSE_SOURCES)}, got {pose_source!r}", parameter="pose_source")
     if every < 1:
         raise ConfigError(f"expected an integer >= 1, got {every}", parameter="every")
-    if tolerance_s < 0:
-        raise ConfigError(f"expected a value >= 0 seconds, got {tolerance_s}", parameter="tolerance_s")
+    tolerance_s = check_seconds(tolerance_s, "tolerance_s", minimum=0.0)
+    start_s = None if start_s is None else check_seconds(start_s, "start_s")
+    end_s = None if end_s is None else check_seconds(end_s, "end_s")
     stats = stats if stats is not None else FrameStats()
     if roles is None:
         if tf is None and pose_source == "tf":
@@ -125,8 +133,11 @@ def iter_frames(rec, roles: Roles | None = None, pose_source: str = "tf", pose_t
     tol_ns = int(round(tolerance_s * 1e9))
     first_info = rec.first_message(roles.info_topic)
     if first_info is None:
-        raise RecordingError(f"{rec.path}: camera info topic {roles.info_topic} has no messages")
-    K, width, height = camera_info_K(first_info, roles.info_topic)
+        count = rec.topics[roles.info_topic].count
+        raise RecordingError(f"{rec.path}: camera info topic {roles.info_topic} has no messages" if not count else
+                             f"{rec.path}: camera info topic {roles.info_topic} lists {count} messages but none "
+                             f"could be read")
+    K, width, height = camera_info_K(first_info, f"{rec.path}: {roles.info_topic}")
     if pose_source == "tf":
         pose_fn = _tf_poses(rec, roles, depth_topic, tf, tol_ns, stats)
     elif pose_source == "topic":
@@ -138,19 +149,32 @@ def iter_frames(rec, roles: Roles | None = None, pose_source: str = "tf", pose_t
     yield from pairer.stream(start_ns, end_ns, every)
 
 
+def check_seconds(value: float, parameter: str, minimum: float = -MAX_SECONDS) -> float:
+    """`value` as a float in [minimum, MAX_SECONDS] seconds; ConfigError naming `parameter` otherwise (NaN, inf,
+    or so large that it overflows nanosecond stamps)."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ConfigError(f"expected a number of seconds, got {value!r}", parameter=parameter) from None
+    if not (minimum <= v <= MAX_SECONDS):
+        raise ConfigError(f"expected a finite number of seconds in [{minimum:g}, {MAX_SECONDS:g}], got {value}",
+                          parameter=parameter)
+    return v
+
+
 def _require_topics(rec, roles: Roles) -> str:
     """The depth topic; RecordingError unless the depth, camera info and (when set) colour topics are there."""
     depth_topic = roles.depth_topic
     if depth_topic is None:
         avail = ", ".join(f"{n} ({i.msgtype})" for n, i in rec.topics.items()) or "none"
         raise RecordingError(f"{rec.path}: no depth image topic found; topics: {avail}", parameter="depth_topic")
-    rec.require_topic(depth_topic, "depth topic")
+    require_role_topic(rec, depth_topic, "depth topic")
     if roles.info_topic is None:
         raise RecordingError(f"{rec.path}: no sensor_msgs/CameraInfo topic for depth topic {depth_topic} "
                              f"(intrinsics are needed)", parameter="info_topic")
-    rec.require_topic(roles.info_topic, "camera info topic")
+    require_role_topic(rec, roles.info_topic, "camera info topic")
     if roles.color_topic is not None:
-        rec.require_topic(roles.color_topic, "colour topic")
+        require_role_topic(rec, roles.color_topic, "colour topic")
     return depth_topic
 
 
@@ -247,7 +271,7 @@ class _FramePairer:
         kept = 0  # depth messages inside the window so far
         for topic, log_ns, msg in self.rec.messages(topics, start_ns=read_start, end_ns=read_end):
             if topic == self.info_topic:
-                self.K, self.width, self.height = camera_info_K(msg, self.info_topic)
+                self.K, self.width, self.height = camera_info_K(msg, f"{self.rec.path}: {self.info_topic}")
                 continue
             stamp = _stamp(msg, log_ns)
             if topic == self.color_topic:
@@ -277,7 +301,7 @@ class _FramePairer:
     def _emit(self, index: int, stamp: int, msg: object) -> RGBDFrame | None:
         """The frame of one depth message, or None (counted in stats) when it has no pose, no valid pixel, or
         no colour while colour is required."""
-        depth = decode_depth(msg, self.depth_topic)
+        depth = decode_depth(msg, f"{self.rec.path}: {self.depth_topic}")
         h, w = depth.shape
         if self.width and self.height and (w, h) != (self.width, self.height):
             raise RecordingError(f"{self.rec.path}: depth image on {self.depth_topic} is {w}x{h} but camera info "
@@ -294,7 +318,7 @@ class _FramePairer:
         if self.color_topic is not None and self.colors:
             best_stamp, best = min(self.colors, key=lambda c: abs(c[0] - stamp))
             if abs(best_stamp - stamp) <= self.tol_ns:
-                color = decode_color(best, self.color_topic)
+                color = decode_color(best, f"{self.rec.path}: {self.color_topic}")
         if color is None:
             if self.require_color:
                 self.stats.drop(DROP_NO_COLOR)

@@ -18,7 +18,7 @@ from kinfu_cli.io.messages import POSE_TYPES, header_frame, header_stamp_ns, pos
 from kinfu_cli.io.polhemus import read_polhemus
 from kinfu_cli.io.recording import Recording, open_recording
 from kinfu_cli.io.roles import detect_roles
-from kinfu_cli.io.tf_buffer import TfBuffer
+from kinfu_cli.io.tf_buffer import QUAT_NORM2_TOLERANCE, TfBuffer
 from kinfu_cli.io.trajectory import Trajectory
 
 TEXT_SUFFIXES = (".traj",)
@@ -91,7 +91,13 @@ def _from_topic(rec: Recording, topic: str, world_frame: str | None, tf: TfBuffe
     stamps_a = np.asarray(stamps, dtype=np.int64)
     T = np.zeros((len(stamps), 4, 4))
     if stamps:
-        T[:, :3, :3] = quaternion_to_matrix(np.asarray(quats, dtype=np.float64))
+        q = np.asarray(quats, dtype=np.float64)
+        n2 = np.einsum("ij,ij->i", q, q)
+        bad = np.flatnonzero(~(np.abs(n2 - 1.0) < QUAT_NORM2_TOLERANCE))  # NaN too
+        if bad.size:
+            raise TrajectoryError(f"{source}: sample {int(bad[0])} has the orientation quaternion "
+                                  f"{q[bad[0]].tolist()}, expected unit length (as tf2 requires)")
+        T[:, :3, :3] = quaternion_to_matrix(q)
         T[:, :3, 3] = np.asarray(trans, dtype=np.float64)
         T[:, 3, 3] = 1.0
     meta = {"topic": topic, "msgtype": info.msgtype}

@@ -6,7 +6,11 @@ Works on messages decoded by rosbags (ROS 1 and ROS 2 field names) and by mcap-r
 
 from __future__ import annotations
 
+import contextlib
+import os
 import struct
+import sys
+from collections.abc import Iterator
 
 import cv2
 import numpy as np
@@ -17,6 +21,54 @@ from kinfu_cli.core.poses import quaternion_to_matrix
 DEPTH_ENCODINGS = ("16UC1", "mono16", "32FC1")
 COLOR_ENCODINGS = ("rgb8", "bgr8", "rgba8", "bgra8", "mono8", "8UC3", "8UC1")
 _PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+# ------------------------------------------------------------------------------------------- image codecs
+@contextlib.contextmanager
+def _c_stderr_silenced() -> Iterator[None]:
+    """Point file descriptor 2 at /dev/null for the block. libpng prints its own "libpng error/warning" lines
+    with fprintf(stderr) (OpenCV leaves libpng's default handlers in place, and no log level reaches them), and
+    OpenCV's logger writes "[ WARN...]" lines there too: on corrupt data they would land before kinfu's one
+    error line. Without a usable descriptor 2 the block just runs."""
+    try:
+        sys.stderr.flush()
+    except (AttributeError, OSError, ValueError):
+        pass
+    try:
+        saved = os.dup(2)
+    except OSError:
+        yield
+        return
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        try:
+            os.dup2(devnull, 2)
+        finally:
+            os.close(devnull)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
+def imdecode_quiet(data: np.ndarray | bytes, flags: int) -> np.ndarray | None:
+    """cv2.imdecode of encoded image bytes (None when they do not decode), without the codec libraries'
+    messages on stderr."""
+    buf = np.frombuffer(data, dtype=np.uint8) if isinstance(data, (bytes, bytearray, memoryview)) else data
+    if buf.size == 0:
+        return None
+    with _c_stderr_silenced():
+        return cv2.imdecode(buf, flags)
+
+
+def imread_quiet(path: str | os.PathLike, flags: int) -> np.ndarray | None:
+    """An image file decoded as cv2.imread would (None when it is missing, unreadable or does not decode),
+    without the codec libraries' messages on stderr."""
+    try:
+        data = np.fromfile(path, dtype=np.uint8)
+    except (OSError, ValueError):
+        return None
+    return imdecode_quiet(data, flags)
 
 
 # ------------------------------------------------------------------------------------------- stamps
@@ -173,8 +225,10 @@ def _decode_compressed_depth(msg: object, topic: str) -> np.ndarray:
     start = raw.find(_PNG_MAGIC)
     if start < 0:
         raise RecordingError(f"{topic}: compressedDepth message holds no PNG data")
-    img = cv2.imdecode(np.frombuffer(raw[start:], dtype=np.uint8), cv2.IMREAD_UNCHANGED)
-    if img is None or img.ndim != 2 or img.dtype != np.uint16:
+    img = imdecode_quiet(np.frombuffer(raw[start:], dtype=np.uint8), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise RecordingError(f"{topic}: compressedDepth PNG could not be decoded (truncated or corrupt image data)")
+    if img.ndim != 2 or img.dtype != np.uint16:
         raise RecordingError(f"{topic}: compressedDepth PNG is not a 16-bit single-channel image")
     enc = fmt.split(";")[0].strip()
     if enc in ("16UC1", "mono16"):
@@ -200,7 +254,7 @@ def decode_color(msg: object, topic: str = "color") -> np.ndarray:
         fmt = str(msg.format)
         if "compresseddepth" in fmt.lower():
             raise RecordingError(f"{topic}: compressed format {fmt!r} is depth, expected a jpeg/png colour image")
-        img = cv2.imdecode(_bytes(msg.data), cv2.IMREAD_COLOR)
+        img = imdecode_quiet(_bytes(msg.data), cv2.IMREAD_COLOR)
         if img is None:
             raise RecordingError(f"{topic}: compressed image (format {fmt!r}) could not be decoded as jpeg/png")
         return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)

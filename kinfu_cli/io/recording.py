@@ -243,10 +243,13 @@ class _RosbagsBackend(_Backend):
         self.fmt = fmt
         self.kind = _KIND_NAMES[fmt]
         open_path = path
-        if fmt == "bag" and path.suffix != ".bag":  # AnyReader picks ROS 1 by the .bag suffix
-            tmp = Path(tempfile.mkdtemp(prefix="kinfu-bag-"))
+        # AnyReader picks the reader by the suffix (.bag: ROS 1, else ROS 2 / MCAP); the format was detected by
+        # the first bytes: a file named otherwise is opened through a symlink with the right suffix
+        want = {"bag": ".bag", "mcap": ".mcap"}.get(fmt)
+        if want is not None and path.is_file() and path.suffix != want:
+            tmp = Path(tempfile.mkdtemp(prefix="kinfu-rec-"))
             stack.callback(shutil.rmtree, tmp, True)
-            open_path = tmp / (path.name + ".bag")
+            open_path = tmp / (path.name + want)
             open_path.symlink_to(path.resolve())
         try:
             # ROS 2 bags before Iron store no message definitions: decode standard types with Humble's

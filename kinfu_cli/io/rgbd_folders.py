@@ -27,6 +27,7 @@ Recordings written by `import_folder` (names documented for users and tests):
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 from dataclasses import dataclass, field
@@ -42,6 +43,7 @@ from kinfu_cli.core.grid import check_up
 from kinfu_cli.core.poses import quaternion_to_matrix
 from kinfu_cli.core.progress import progress
 from kinfu_cli.io.frames import FrameStats, iter_frames
+from kinfu_cli.io.messages import imread_quiet
 from kinfu_cli.io.recording import open_recording
 from kinfu_cli.io.roles import detect_roles
 from kinfu_cli.io.world_up import WORLD_UP_TOPIC
@@ -59,6 +61,11 @@ _INTRINSICS_FILES = ("camera-intrinsics.txt", "intrinsics.K.txt", "intrinsics.tx
 _TUM_K = {"freiburg1": (517.3, 516.5, 318.6, 255.3), "freiburg2": (520.9, 521.0, 325.1, 249.7),
           "freiburg3": (535.4, 539.2, 320.1, 247.6)}
 _TUM_DEFAULT_K = tuple(SENSOR_PRESETS["kinect_v1"][k] for k in ("fx", "fy", "cx", "cy"))  # TUM's "ROS default"
+MIN_RATE_HZ, MAX_RATE_HZ = 1e-3, 1e6
+RIGID_TOLERANCE = 1e-2  # largest |R^T R - I| entry of a pose file's rotation (7-Scenes poses reach ~1e-4)
+MAX_TRANSLATION_M = 1e6
+_PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+_JPEG_MAGIC = b"\xff\xd8\xff"
 
 
 @dataclass
@@ -102,6 +109,19 @@ def _read_matrix(path: Path, shape: tuple[int, int], what: str) -> np.ndarray:
     return M.reshape(shape)
 
 
+def _check_rigid(T: np.ndarray, path: Path) -> None:
+    """RecordingError naming `path` unless the finite 4x4 T is a rigid camera pose (within RIGID_TOLERANCE)."""
+    R = T[:3, :3]
+    err = float(np.abs(R.T @ R - np.eye(3)).max())
+    if err > RIGID_TOLERANCE or np.linalg.det(R) <= 0:
+        raise RecordingError(f"{path}: pose is not a rigid transform (rotation part off orthonormal by {err:.3g}, "
+                             f"det {np.linalg.det(R):.3g}; expected |R^T R - I| <= {RIGID_TOLERANCE:g}, det +1)")
+    if np.abs(T[3] - [0, 0, 0, 1]).max() > 1e-9:
+        raise RecordingError(f"{path}: pose's last row is {T[3].tolist()}, expected [0, 0, 0, 1]")
+    if np.abs(T[:3, 3]).max() > MAX_TRANSLATION_M:
+        raise RecordingError(f"{path}: pose translation {T[:3, 3].tolist()} is beyond {MAX_TRANSLATION_M:g} m")
+
+
 def _read_K(folder: Path, intrinsics: tuple[float, float, float, float] | None,
             intrinsics_source: str) -> tuple[np.ndarray | None, str]:
     """K and where it came from: the caller's intrinsics, else an intrinsics file of the folder or its parent."""
@@ -111,8 +131,9 @@ def _read_K(folder: Path, intrinsics: tuple[float, float, float, float] | None,
     for p in [d / name for d in (folder, folder.parent) for name in _INTRINSICS_FILES]:  # 3DMatch: scene root
         if p.is_file():
             K = _read_matrix(p, (3, 3), "intrinsics")
-            if K[0, 0] <= 0 or K[1, 1] <= 0:
-                raise RecordingError(f"{p}: intrinsics have no positive focal lengths")
+            if not (np.all(np.isfinite(K)) and K[0, 0] > 0 and K[1, 1] > 0):
+                raise RecordingError(f"{p}: intrinsics are not finite with positive focal lengths (fx={K[0, 0]}, "
+                                     f"fy={K[1, 1]})")
             return K, str(p.relative_to(folder.parent)) if p.parent != folder else p.name
     return None, ""
 
@@ -125,8 +146,9 @@ def parse_intrinsics(text: str | None) -> tuple[float, float, float, float] | No
         vals = tuple(float(v) for v in text.split(","))
     except ValueError:
         vals = ()
-    if len(vals) != 4 or vals[0] <= 0 or vals[1] <= 0:
-        raise ConfigError(f"expected fx,fy,cx,cy with positive focal lengths, got {text!r}", parameter="intrinsics")
+    if len(vals) != 4 or not all(math.isfinite(v) for v in vals) or vals[0] <= 0 or vals[1] <= 0:
+        raise ConfigError(f"expected fx,fy,cx,cy (finite numbers, positive focal lengths), got {text!r}",
+                          parameter="intrinsics")
     return vals  # type: ignore[return-value]
 
 
@@ -155,8 +177,9 @@ def scan_folder(path: str | os.PathLike, rate: float = 30.0,
     folder = Path(path)
     if not folder.is_dir():
         raise RecordingError(f"{folder}: not a folder, expected an RGB-D frame folder (7-Scenes or TUM layout)")
-    if rate <= 0:
-        raise ConfigError(f"expected a positive frame rate in Hz, got {rate}", parameter="rate")
+    if not MIN_RATE_HZ <= rate <= MAX_RATE_HZ:  # also refuses NaN; stamps N / rate stay inside int64 ns
+        raise ConfigError(f"expected a frame rate in [{MIN_RATE_HZ:g}, {MAX_RATE_HZ:g}] Hz, got {rate}",
+                          parameter="rate")
     if (folder / "depth.txt").is_file():
         return _scan_tum(folder, intrinsics, intrinsics_source)
     depth_files = sorted((int(m.group(1)), p) for p in folder.iterdir() if (m := _FRAME_RE.match(p.name)))
@@ -182,8 +205,10 @@ def scan_folder(path: str | os.PathLike, rate: float = 30.0,
         T = None
         if pose_path.is_file():
             T = _read_matrix(pose_path, (4, 4), "pose")
-            if not np.all(np.isfinite(T)):
+            if not np.all(np.isfinite(T)):  # 7-Scenes / 3DMatch mark frames without a pose with -inf
                 T, bad_poses = None, bad_poses + 1
+            else:
+                _check_rigid(T, pose_path)
         frames.append(FolderFrame(number, int(round(number / rate * 1e9)), depth_path, color, T))
     if bad_poses:
         notes.append(f"{bad_poses} frames have non-finite poses (no TF written for them)")
@@ -204,11 +229,24 @@ def _read_list(path: Path, ncols: int) -> list[list[str]]:
 
 
 def _stamp_ns(text: str, where: str) -> int:
-    try:
-        sec, _, frac = text.partition(".")
-        return int(sec) * 1_000_000_000 + int((frac + "000000000")[:9])
-    except ValueError:
-        raise RecordingError(f"{where}: timestamp {text!r} is not a number") from None
+    """Seconds as written ("1305031102.175304") -> int ns, exactly; RecordingError naming `where` unless it is a
+    non-negative decimal number of seconds that fits a ROS stamp."""
+    sec, _, frac = text.partition(".")
+    if not (sec.isdigit() and (frac.isdigit() or not frac)) or len(sec) > 10:
+        raise RecordingError(f"{where}: timestamp {text!r} is not a number of seconds in [0, 1e10)")
+    return int(sec) * 1_000_000_000 + int((frac + "000000000")[:9])
+
+
+def _gt_problem(v: np.ndarray) -> str | None:
+    """What is wrong with one ground-truth sample tx ty tz qx qy qz qw (None when nothing)."""
+    if not np.all(np.isfinite(v)):
+        return "not finite"
+    if np.abs(v[:3]).max() > MAX_TRANSLATION_M:
+        return f"translation beyond {MAX_TRANSLATION_M:g} m"
+    n2 = float(np.dot(v[3:7], v[3:7]))
+    if abs(n2 - 1.0) >= 0.01:  # tf2's tolerance on |q|^2
+        return f"quaternion of length {math.sqrt(n2):.4g}"
+    return None
 
 
 def _scan_tum(folder: Path, intrinsics, intrinsics_source: str) -> RGBDFolder:
@@ -226,7 +264,13 @@ def _scan_tum(folder: Path, intrinsics, intrinsics_source: str) -> RGBDFolder:
             vals = np.array([[float(v) for v in r[1:8]] for r in rows], dtype=np.float64)
         except ValueError:
             raise RecordingError(f"{folder / 'groundtruth.txt'}: expected 'stamp tx ty tz qx qy qz qw' numbers") from None
-        gt_st = np.array([_stamp_ns(r[0], str(folder / "groundtruth.txt")) for r in rows], dtype=np.int64)
+        gt_path = folder / "groundtruth.txt"
+        for i, v in enumerate(vals):
+            why = _gt_problem(v)
+            if why:
+                raise RecordingError(f"{gt_path}: sample {i + 1} ({rows[i][0]}): {why}; expected "
+                                     f"'stamp tx ty tz qx qy qz qw' with a unit quaternion")
+        gt_st = np.array([_stamp_ns(r[0], str(gt_path)) for r in rows], dtype=np.int64)
         order = np.argsort(gt_st, kind="stable")
         gt_st, vals = gt_st[order], vals[order]
         gt_T = np.tile(np.eye(4), (len(rows), 1, 1))
@@ -252,9 +296,9 @@ def _scan_tum(folder: Path, intrinsics, intrinsics_source: str) -> RGBDFolder:
 
 def read_depth_mm(frame: FolderFrame, units_per_m: float) -> np.ndarray:
     """The frame's depth PNG as uint16 millimetres (unchanged for mm data; rounded for TUM's 1/5000 m)."""
-    img = cv2.imread(str(frame.depth_path), cv2.IMREAD_UNCHANGED)
+    img = imread_quiet(frame.depth_path, cv2.IMREAD_UNCHANGED)
     if img is None:
-        raise RecordingError(f"{frame.depth_path}: cannot read the depth image (missing or not a PNG)")
+        raise RecordingError(f"{frame.depth_path}: cannot read the depth image (missing, truncated or corrupt PNG)")
     if img.ndim != 2 or img.dtype != np.uint16:
         raise RecordingError(f"{frame.depth_path}: depth must be a single-channel 16-bit PNG, got {img.dtype} "
                              f"with shape {img.shape}")
@@ -285,7 +329,7 @@ def import_folder(src: str | os.PathLike, out: str | os.PathLike, rate: float = 
     out = Path(out)
     kind = format_for(out, fmt)
     compression = ({"mcap": "zstd", "bag": "lz4", "ros2": None}[kind]) if compress else None
-    first = cv2.imread(str(chosen[0].depth_path), cv2.IMREAD_UNCHANGED)
+    first = imread_quiet(chosen[0].depth_path, cv2.IMREAD_UNCHANGED)
     if first is None:
         raise RecordingError(f"{chosen[0].depth_path}: cannot read the depth image")
     height, width = first.shape[:2]
@@ -326,10 +370,14 @@ def import_folder(src: str | os.PathLike, out: str | os.PathLike, rate: float = 
             w.write_camera_info(INFO_TOPIC, stamp, CAMERA_FRAME, folder.K, width, height)
             if color_topic and f.color_path is not None:
                 if color == "compressed":
-                    ext = f.color_path.suffix.lower().lstrip(".")
-                    w.write_compressed_bytes(color_topic, stamp, CAMERA_FRAME, f.color_path.read_bytes(), ext)
+                    data = f.color_path.read_bytes()
+                    img_fmt = ("png" if data.startswith(_PNG_MAGIC) else "jpeg" if data.startswith(_JPEG_MAGIC)
+                               else None)
+                    if img_fmt is None:
+                        raise RecordingError(f"{f.color_path}: not a JPEG or PNG file (first bytes {data[:8]!r})")
+                    w.write_compressed_bytes(color_topic, stamp, CAMERA_FRAME, data, img_fmt)
                 else:
-                    bgr = cv2.imread(str(f.color_path), cv2.IMREAD_COLOR)
+                    bgr = imread_quiet(f.color_path, cv2.IMREAD_COLOR)
                     if bgr is None:
                         raise RecordingError(f"{f.color_path}: cannot read the colour image")
                     w.write_image(color_topic, stamp, CAMERA_FRAME, cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), "rgb8")

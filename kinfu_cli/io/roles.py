@@ -10,6 +10,7 @@ from __future__ import annotations
 import re
 from dataclasses import asdict, dataclass
 
+from kinfu_cli.core.errors import RecordingError, TransformError
 from kinfu_cli.io.messages import DEPTH_ENCODINGS, POSE_TYPES, header_frame
 from kinfu_cli.io.tf_buffer import TfBuffer
 
@@ -17,6 +18,11 @@ IMAGE = "sensor_msgs/msg/Image"
 COMPRESSED = "sensor_msgs/msg/CompressedImage"
 CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
 _WORLD_NAMES = ("world", "map", "odom")
+# message types a topic must carry to play a role (any one of them; a topic may mix types)
+ROLE_TYPES = {"depth topic": (IMAGE, COMPRESSED), "colour topic": (IMAGE, COMPRESSED),
+              "camera info topic": (CAMERA_INFO,), "hand topic": POSE_TYPES}
+_ROLE_PARAMETERS = {"depth topic": "depth_topic", "colour topic": "color_topic", "camera info topic": "info_topic",
+                    "hand topic": "hand_topic"}
 _HAND_WORDS = re.compile(r"hand|wrist|tracker|polhemus|glove", re.I)
 
 
@@ -34,6 +40,18 @@ class Roles:
 
     def as_dict(self) -> dict:
         return asdict(self)
+
+
+def require_role_topic(rec, topic: str, what: str):
+    """TopicInfo of `topic`, which is to play the role `what` (a ROLE_TYPES key): RecordingError naming it when it
+    is missing, or (naming the role's parameter) when it carries none of the role's message types."""
+    info = rec.require_topic(topic, what)
+    types = info.msgtypes or [info.msgtype]
+    if not set(types) & set(ROLE_TYPES[what]):
+        have = ", ".join(t or "messages without a type name" for t in types)
+        raise RecordingError(f"{rec.path}: {what} {topic} carries {have}, expected "
+                             f"{' or '.join(ROLE_TYPES[what])}", parameter=_ROLE_PARAMETERS[what])
+    return info
 
 
 def _common_prefix(a: str, b: str) -> int:
@@ -95,23 +113,51 @@ def _pick_info(rec, depth_topic: str | None) -> str | None:
     return sorted(infos, key=lambda n: (-_common_prefix(n, depth_topic), "depth" not in n.lower(), n))[0]
 
 
-def _pick_world(tf: TfBuffer | None, camera_frame: str | None) -> str | None:
+def _pick_world(rec, tf: TfBuffer | None, camera_frame: str | None) -> str | None:
+    """The world frame: the first of world, map, odom on the camera frame's TF chain, else the chain's root; with
+    no camera frame in TF, the first of those names in the tree, else the first root. TransformError when the
+    camera's chain loops, or stops short of a world/map/odom frame that the tree has (a missing or rejected link:
+    picking the chain's root then would be a silent wrong answer), or when the camera's only links were rejected."""
     if tf is None or not tf.frames():
         return None
-    tree = tf.tree()
-    if camera_frame and camera_frame in tf.frames():
-        chain = [camera_frame]
-        while chain[-1] in tree:
-            chain.append(tree[chain[-1]])
+    frames = set(tf.frames())
+    if camera_frame and camera_frame in frames:
+        try:
+            chain = tf.chain(camera_frame)
+        except TransformError as exc:
+            raise TransformError(f"{rec.path}: camera frame {camera_frame!r}: {exc}") from None
         for name in _WORLD_NAMES:
             if name in chain:
                 return name
+        world = next((name for name in _WORLD_NAMES if name in frames), None)
+        if world is not None:
+            raise TransformError(f"{rec.path}: {tf.broken_chain(camera_frame, world)}; name the world frame to "
+                                 f"use {chain[-1]!r}")
         return chain[-1]
+    if camera_frame:
+        bad = [(p, c, r) for (p, c), r in tf.rejected_links.items() if camera_frame in (p, c)]
+        if bad:
+            p, c, reasons = bad[0]
+            why = "; ".join(f"{n} x {r}" for r, n in reasons.items())
+            raise TransformError(f"{rec.path}: camera frame {camera_frame!r} has no TF link: every transform "
+                                 f"{p!r} -> {c!r} was rejected ({why})")
     for name in _WORLD_NAMES:
-        if name in tf.frames():
+        if name in frames:
             return name
-    roots = sorted({f for f in tf.frames() if f not in tree})
+    roots = sorted(f for f in frames if f not in tf.tree())
     return roots[0] if roots else None
+
+
+def _require_frame(rec, tf: TfBuffer | None, frame: str, what: str, parameter: str,
+                   header_frames: tuple[str, ...] = ()) -> None:
+    """TransformError naming `parameter` unless the explicitly given `frame` is in the TF tree (or one of
+    `header_frames`, the frame_id of the camera's own messages)."""
+    if frame in header_frames or (tf is not None and frame in tf.frames()):
+        return
+    known = tf.frames() if tf is not None else []
+    avail = ", ".join(known[:30]) + (", ..." if len(known) > 30 else "") if known else "none: no TF data"
+    raise TransformError(f"{rec.path}: {what} {frame!r} is not in the TF tree (frames: {avail})",
+                         parameter=parameter)
 
 
 def detect_roles(rec, depth_topic: str | None = None, color_topic: str | None = None,
@@ -125,7 +171,7 @@ def detect_roles(rec, depth_topic: str | None = None, color_topic: str | None = 
     for topic, what in ((depth_topic, "depth topic"), (color_topic, "colour topic"),
                         (info_topic, "camera info topic"), (hand_topic, "hand topic")):
         if topic is not None:
-            rec.require_topic(topic, what)
+            require_role_topic(rec, topic, what)
 
     if depth_topic is None:
         cands = _depth_candidates(rec)
@@ -136,25 +182,33 @@ def detect_roles(rec, depth_topic: str | None = None, color_topic: str | None = 
     if info_topic is None:
         info_topic = _pick_info(rec, depth_topic)
 
-    if camera_frame is None:
-        for topic in (depth_topic, info_topic):
-            if topic is not None:
-                msg = rec.first_message(topic)
-                frame = header_frame(msg).lstrip("/") if msg is not None else ""
-                if frame:
-                    camera_frame = frame
-                    break
+    given_camera = camera_frame
+    header_frames: tuple[str, ...] = ()
+    for topic in (depth_topic, info_topic):
+        if topic is not None and (camera_frame is None or not header_frames):
+            msg = rec.first_message(topic)
+            frame = header_frame(msg).lstrip("/") if msg is not None else ""
+            if frame:
+                header_frames = (frame,)
+                camera_frame = camera_frame or frame
 
     if hand_topic is None:
         poses = [n for n, i in rec.topics.items() if set(POSE_TYPES) & set(i.msgtypes) and i.count > 0]
         named = [n for n in poses if _HAND_WORDS.search(n)]
         hand_topic = named[0] if named else None
 
-    need_tf = world_frame is None or (hand_topic is None and hand_frame is None)
+    need_tf = world_frame is None or (hand_topic is None and hand_frame is None) or bool(
+        given_camera or world_frame or hand_frame)
     if need_tf and tf is None:
         tf = TfBuffer.from_recording(rec)
+    if given_camera:
+        _require_frame(rec, tf, camera_frame, "camera frame", "camera_frame", header_frames)
+    if world_frame:
+        _require_frame(rec, tf, world_frame, "world frame", "world_frame")
+    if hand_frame:
+        _require_frame(rec, tf, hand_frame, "hand frame", "hand_frame")
     if world_frame is None:
-        world_frame = _pick_world(tf, camera_frame)
+        world_frame = _pick_world(rec, tf, camera_frame)
     if hand_topic is None and hand_frame is None and tf is not None:
         hands = [f for f in tf.frames() if re.search(r"hand", f, re.I) and f != camera_frame]
         hand_frame = sorted(hands, key=len)[0] if hands else None

@@ -11,6 +11,7 @@ from pathlib import Path
 
 from ruamel.yaml import YAML  # rosbags' own YAML library (PyYAML is not a dependency)
 
+from kinfu_cli.core.errors import TransformError
 from kinfu_cli.core.progress import progress
 from kinfu_cli.io.frames import FrameStats, iter_frames
 from kinfu_cli.io.recording import Recording, open_recording
@@ -36,7 +37,15 @@ def summarize(rec: Recording, check_frames: dict | None = None, quiet: bool = Tr
               **role_overrides: str | None) -> dict:
     """As recording_summary, on an open Recording."""
     tf = TfBuffer.from_recording(rec)
-    roles = detect_roles(rec, tf=tf, **role_overrides)
+    problem = None
+    try:
+        roles = detect_roles(rec, tf=tf, **role_overrides)
+    except TransformError as exc:  # the camera's TF chain loops or is broken: a summary shows why, frames fail
+        if exc.parameter is not None or (check_frames is not None and check_frames.get("pose_source", "tf") == "tf"):
+            raise  # a named frame that is not there, or frames that need the broken chain
+        problem = str(exc)
+        roles = detect_roles(rec, tf=tf, **{**role_overrides, "world_frame": ""})
+        roles.world_frame = None
     frames = None if check_frames is None else _frame_stats(rec, roles, tf, check_frames, quiet)
     return {
         "path": str(rec.path),
@@ -50,7 +59,9 @@ def summarize(rec: Recording, check_frames: dict | None = None, quiet: bool = Tr
         "topics": [t.as_dict() for t in rec.topics.values()],
         "roles": roles.as_dict(),
         "tf": {"frames": tf.frames(), "tree": tf.tree(), "links": _tf_links(tf), "rejected": dict(tf.rejected),
-               "parent_changes": [list(c) for c in tf.parent_changes]},
+               "rejected_links": [{"parent": p, "child": c, "rejected": dict(r)}
+                                  for (p, c), r in tf.rejected_links.items()],
+               "parent_changes": [list(c) for c in tf.parent_changes], "loops": tf.loops(), "problem": problem},
         "frames": frames,
     }
 
@@ -149,7 +160,7 @@ def _tf_lines(tf: dict) -> list[str]:
         for child, parent in tf["tree"].items():
             children.setdefault(parent, []).append(child)
 
-        def walk(frame: str, depth: int) -> None:
+        def line(frame: str, depth: int) -> str:
             link = links.get(frame)
             if link is None:
                 note = ""
@@ -158,16 +169,27 @@ def _tf_lines(tf: dict) -> list[str]:
             else:
                 rate = f", {link['rate_hz']:.1f} Hz" if link["rate_hz"] else ""
                 note = f"  ({link['samples']} samples{rate})"
-            lines.append("  " + "  " * depth + frame + note)
-            for c in sorted(children.get(frame, [])):
-                walk(c, depth + 1)
+            return "  " + "  " * depth + frame + note
 
-        for root in sorted(f for f in tf["frames"] if f not in tf["tree"]):
-            walk(root, 0)
-    for reason, n in tf.get("rejected", {}).items():
-        lines.append(f"  skipped {n} transforms: {reason}")
+        # depth first from each root, without recursion (a chain may be thousands of links long)
+        stack = [(root, 0) for root in sorted((f for f in tf["frames"] if f not in tf["tree"]), reverse=True)]
+        while stack:
+            frame, depth = stack.pop()
+            lines.append(line(frame, depth))
+            stack.extend((c, depth + 1) for c in sorted(children.get(frame, []), reverse=True))
+    for loop in tf.get("loops", []):
+        lines.append(f"  loop (its frames are not in the tree above): {' -> '.join(loop)}")
+    if tf.get("rejected_links"):
+        for item in tf["rejected_links"]:
+            for reason, n in item["rejected"].items():
+                lines.append(f"  skipped {n} transforms {item['parent']!r} -> {item['child']!r}: {reason}")
+    else:
+        for reason, n in tf.get("rejected", {}).items():
+            lines.append(f"  skipped {n} transforms: {reason}")
     for child, old, new in tf.get("parent_changes", []):
         lines.append(f"  note: {child} changed parent from {old} to {new} (the later link is kept)")
+    if tf.get("problem"):
+        lines.append(f"  problem: {tf['problem']}")
     return lines
 
 

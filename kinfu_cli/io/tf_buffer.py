@@ -1,5 +1,12 @@
 """A TF buffer: static and dynamic transforms, chain lookup between any two frames, interpolation.
 
+Transforms are checked on the way in, as tf2 does: two different non-empty frame names, a finite translation
+(within MAX_TRANSLATION_M of the parent's origin), a finite quaternion of unit length within tf2's tolerance
+(| |q|^2 - 1 | < QUAT_NORM2_TOLERANCE; accepted ones are normalised). A transform failing a check is not
+stored; `add_message` counts it by reason (`rejected`) and by link (`rejected_links`), so a chain broken by
+rejected transforms can be reported naming the link. Chains are walked with a loop check: links that form a
+cycle raise TransformError naming the frames of the loop instead of walking forever.
+
 Each link is stored as `T_parent_child` (maps child coordinates into the parent frame), the convention of
 tf2's TransformStamped (header.frame_id = parent, child_frame_id = child). Between two samples of a dynamic
 link the translation is interpolated linearly and the rotation by slerp. `lookup_many` evaluates a whole
@@ -21,6 +28,8 @@ from kinfu_cli.core.poses import matrix_to_quaternion, quaternion_to_matrix
 from kinfu_cli.io.messages import header_frame, normalize_msgtype, time_to_ns
 
 TF_TYPES = ("tf2_msgs/msg/TFMessage", "tf/msg/tfMessage")
+QUAT_NORM2_TOLERANCE = 0.01  # tf2's QUATERNION_NORMALIZATION_TOLERANCE on | |q|^2 - 1 |
+MAX_TRANSLATION_M = 1e6  # a link longer than this is corrupt data, not a robot (and would overflow products)
 
 
 @dataclass
@@ -76,6 +85,24 @@ def slerp(q0: np.ndarray, q1: np.ndarray, a: np.ndarray) -> np.ndarray:
     return q / np.linalg.norm(q, axis=-1, keepdims=True)
 
 
+def transform_problem(parent: str, child: str, translation: np.ndarray, quat_xyzw: np.ndarray) -> str | None:
+    """Why tf2 (and kinfu) would refuse the transform parent -> child, or None when it is fine."""
+    if not parent or not child or parent == child:
+        return "expected two different, non-empty frame names"
+    if not np.all(np.isfinite(translation)):
+        return "non-finite translation"
+    if float(np.abs(translation).max()) > MAX_TRANSLATION_M:
+        return f"translation beyond {MAX_TRANSLATION_M:g} m"
+    if not np.all(np.isfinite(quat_xyzw)):
+        return "non-finite quaternion"
+    norm2 = float(np.dot(quat_xyzw, quat_xyzw))
+    if norm2 < 1e-18:
+        return "zero quaternion"
+    if abs(norm2 - 1.0) >= QUAT_NORM2_TOLERANCE:
+        return f"quaternion not of unit length (| |q|^2 - 1 | >= {QUAT_NORM2_TOLERANCE:g})"
+    return None
+
+
 def _fmt_s(ns: int) -> str:
     return f"{ns * 1e-9:.3f}"
 
@@ -87,6 +114,7 @@ class TfBuffer:
         self._links: dict[str, _Link] = {}
         self.parent_changes: list[tuple[str, str, str]] = []  # (child, old parent, new parent)
         self.rejected: dict[str, int] = {}  # transforms from messages that were skipped, by reason
+        self.rejected_links: dict[tuple[str, str], dict[str, int]] = {}  # (parent, child) -> reason -> count
 
     # ----------------------------------------------------------------------------------- filling
     def add(self, parent: str, child: str, stamp_ns: int, T: np.ndarray, static: bool = False) -> None:
@@ -97,15 +125,15 @@ class TfBuffer:
         self.add_quat(parent, child, stamp_ns, T[:3, 3], matrix_to_quaternion(T[:3, :3]), static)
 
     def add_quat(self, parent: str, child: str, stamp_ns: int, translation, quat_xyzw, static: bool = False) -> None:
-        """Add a link given as translation (3,) and quaternion (x, y, z, w)."""
+        """Add a link given as translation (3,) and quaternion (x, y, z, w); TransformError (naming the link and
+        what is wrong) for a transform that fails the checks of the module docstring."""
         parent, child = _strip(parent), _strip(child)
-        if not parent or not child or parent == child:
-            raise TransformError(f"TF link {parent!r} -> {child!r}: expected two different, non-empty frame names")
         trans = np.asarray(translation, dtype=np.float64).reshape(3)
         quat = np.asarray(quat_xyzw, dtype=np.float64).reshape(4)
+        reason = transform_problem(parent, child, trans, quat)
+        if reason is not None:
+            raise TransformError(f"TF link {parent!r} -> {child!r}: {reason}")
         norm = float(np.linalg.norm(quat))
-        if not (np.all(np.isfinite(trans)) and np.isfinite(norm) and norm > 1e-9):
-            raise TransformError(f"TF link {parent} -> {child}: non-finite translation or zero quaternion")
         link = self._links.get(child)
         if link is not None and link.parent != parent:
             self.parent_changes.append((child, link.parent, parent))
@@ -118,16 +146,20 @@ class TfBuffer:
         link.add(stamp_ns, trans.tolist(), (quat / norm).tolist())
 
     def add_message(self, msg: object, static: bool = False) -> int:
-        """Add every TransformStamped of a tf2_msgs/TFMessage or tf/tfMessage; returns how many."""
+        """Add every TransformStamped of a tf2_msgs/TFMessage or tf/tfMessage; returns how many. A transform that
+        fails the checks is skipped and counted (`rejected`, `rejected_links`)."""
         n = 0
         for tr in msg.transforms:
             t, r = tr.transform.translation, tr.transform.rotation
+            parent, child = _strip(header_frame(tr)), _strip(str(tr.child_frame_id or ""))
             try:
-                self.add_quat(header_frame(tr), tr.child_frame_id, time_to_ns(tr.header.stamp),
-                              (t.x, t.y, t.z), (r.x, r.y, r.z, r.w), static=static)
+                self.add_quat(parent, child, time_to_ns(tr.header.stamp), (t.x, t.y, t.z), (r.x, r.y, r.z, r.w),
+                              static=static)
             except TransformError as exc:  # one bad transform in a recording does not spoil the others
-                reason = str(exc).split(": ", 1)[-1]
+                reason = exc.detail.split(": ", 1)[-1]
                 self.rejected[reason] = self.rejected.get(reason, 0) + 1
+                per_link = self.rejected_links.setdefault((parent, child), {})
+                per_link[reason] = per_link.get(reason, 0) + 1
                 continue
             n += 1
         return n
@@ -216,16 +248,56 @@ class TfBuffer:
         return _inv(T_anc_tgt) @ T_anc_src
 
     # ----------------------------------------------------------------------------------- internals
-    def _ancestors(self, frame: str) -> list[str]:
+    def chain(self, frame: str) -> list[str]:
+        """`frame`, its parent, the parent's parent, ... up to a root; TransformError naming the frames when the
+        links form a loop."""
+        frame = _strip(frame)
         chain = [frame]
-        seen = {frame}
+        seen = {frame: 0}
         while chain[-1] in self._links:
             parent = self._links[chain[-1]].parent
             if parent in seen:
-                raise TransformError(f"TF tree has a loop through frame {parent!r}")
+                loop = chain[seen[parent]:] + [parent]
+                raise TransformError(f"TF links form a loop: {' -> '.join(reversed(loop))} (parent -> child)")
+            seen[parent] = len(chain)
             chain.append(parent)
-            seen.add(parent)
         return chain
+
+    def loops(self) -> list[list[str]]:
+        """Each loop of links once, as its frames from parent to child (the first again at the end)."""
+        found: list[list[str]] = []
+        done: set[str] = set()
+        for start in sorted(self._links):
+            path: dict[str, int] = {}
+            frame = start
+            while frame in self._links and frame not in done and frame not in path:
+                path[frame] = len(path)
+                frame = self._links[frame].parent
+            if frame in path:  # walked into this walk's own path: a new loop
+                order = list(path)
+                loop = order[path[frame]:][::-1]
+                i = loop.index(min(loop))
+                loop = loop[i:] + loop[:i]
+                found.append(loop + [loop[0]])
+            done.update(path)
+        return found
+
+    def broken_chain(self, frame: str, world: str) -> str:
+        """Why the chain of `frame` does not reach `world`: where it stops and which transforms naming that
+        frame were rejected (for error messages)."""
+        chain = self.chain(frame)
+        top = chain[-1]
+        text = (f"the TF chain of {frame!r} ({' -> '.join(chain)}) stops at {top!r}, which has no parent link, "
+                f"so it does not reach {world!r}")
+        bad = [(p, c, reasons) for (p, c), reasons in self.rejected_links.items() if top in (p, c)]
+        if bad:
+            p, c, reasons = bad[0]
+            why = "; ".join(f"{n} x {r}" for r, n in reasons.items())
+            text += f"; transforms {p!r} -> {c!r} were rejected ({why})"
+        return text
+
+    def _ancestors(self, frame: str) -> list[str]:
+        return self.chain(frame)
 
     def _split_path(self, target: str, source: str) -> tuple[list[str], list[str]]:
         known = set(self.frames())

@@ -11,6 +11,9 @@ import numpy as np
 
 from kinfu_cli.core.errors import TrajectoryError
 
+MAX_POSITION_M = 1e6  # farther from the frame's origin is corrupt data, not a hand or a camera
+MAX_TIME_S = 1e9  # relative times beyond ~30 years: corrupt stamps (and their differences would overflow)
+
 
 @dataclass
 class Trajectory:
@@ -48,6 +51,14 @@ class Trajectory:
         if not np.all(np.isfinite(self.t)) or not np.all(np.isfinite(self.positions)):
             bad = int(np.flatnonzero(~np.isfinite(self.positions).all(axis=1) | ~np.isfinite(self.t))[0])
             raise TrajectoryError(f"{name}: sample {bad} is not finite (NaN or inf)")
+        far = np.abs(self.positions).max(axis=1) > MAX_POSITION_M
+        if far.any():
+            bad = int(np.flatnonzero(far)[0])
+            raise TrajectoryError(f"{name}: sample {bad} is at {self.positions[bad].tolist()} m, more than "
+                                  f"{MAX_POSITION_M:g} m from the origin (expected a hand or camera path)")
+        if np.abs(self.t).max(initial=0.0) > MAX_TIME_S:
+            bad = int(np.flatnonzero(np.abs(self.t) > MAX_TIME_S)[0])
+            raise TrajectoryError(f"{name}: sample {bad} has time {self.t[bad]} s, beyond {MAX_TIME_S:g} s")
         if np.any(np.diff(self.t) <= 0):
             bad = int(np.flatnonzero(np.diff(self.t) <= 0)[0]) + 1
             raise TrajectoryError(f"{name}: timestamps not strictly increasing at sample {bad}")

@@ -50,8 +50,8 @@ PAPER_SPHERE = SphereSpec()
 
 
 def _angles(start: float, stop: float, step: float, *, closed: bool, name: str) -> np.ndarray:
-    if not step > 0:
-        raise ConfigError(f"expected a positive step in degrees, got {step}", parameter=f"{name}_step")
+    if not 0 < step <= 360:  # also refuses NaN and inf
+        raise ConfigError(f"expected a step in (0, 360] degrees, got {step}", parameter=f"{name}_step")
     if stop < start:
         raise ConfigError(f"expected min <= max, got {start} > {stop}", parameter=f"{name}_min/{name}_max")
     n = int(np.floor((stop - start) / step + 1e-9))
@@ -59,6 +59,9 @@ def _angles(start: float, stop: float, step: float, *, closed: bool, name: str) 
     if not closed and vals.size > 1 and np.isclose(vals[-1] - start, 360.0):
         vals = vals[:-1]
     return vals
+
+
+MIN_RADIUS_M, MAX_RADIUS_M = 0.01, 100.0  # viewing sphere radius
 
 
 def sphere_viewpoints(center, radius: float = PAPER_SPHERE.radius, lon_step: float = PAPER_SPHERE.lon_step,
@@ -72,8 +75,9 @@ def sphere_viewpoints(center, radius: float = PAPER_SPHERE.radius, lon_step: flo
     built about z is turned onto it.
     """
     center = np.asarray(center, dtype=np.float64).reshape(3)
-    if not (np.isfinite(radius) and radius > 0):
-        raise ConfigError(f"expected a positive distance in metres, got {radius}", parameter="radius")
+    if not (MIN_RADIUS_M <= radius <= MAX_RADIUS_M):  # also refuses NaN; farther or nearer hangs the ray caster
+        raise ConfigError(f"expected a distance in [{MIN_RADIUS_M:g}, {MAX_RADIUS_M:g}] m, got {radius}",
+                          parameter="radius")
     if not (-90 <= lat_min <= lat_max <= 90):
         raise ConfigError(f"expected -90 <= min <= max <= 90, got {lat_min}, {lat_max}", parameter="lat_min/lat_max")
     lons = np.radians(_angles(0.0, 360.0, lon_step, closed=False, name="lon"))
@@ -110,6 +114,8 @@ def read_candidates(path: str | os.PathLike) -> np.ndarray:
         raise ConfigError(f"{path}: no such candidate file") from None
     except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{path}: not a JSON candidate file ({exc}); expected a list of 4x4 poses") from None
+    except RecursionError:
+        raise ConfigError(f"{path}: JSON nested too deeply to read; expected a list of 4x4 poses") from None
     if isinstance(doc, dict):
         doc = doc.get("poses", doc.get("candidates"))
     if not isinstance(doc, list):

@@ -20,6 +20,7 @@ import numpy as np
 from tqdm import tqdm
 
 from kinfu_cli.core.camera import CameraModel
+from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.grid import TernaryGrid, check_up
 from kinfu_cli.core.poses import matrix_to_quaternion
@@ -64,12 +65,11 @@ class NbvOptions:
     def validate(self) -> None:
         """ConfigError naming the first option out of its range."""
         get_gain(self.gain)
-        if self.poi_radius is not None and not self.poi_radius > 0:
-            raise ConfigError(f"expected a positive radius in metres, got {self.poi_radius}", parameter="poi_radius")
-        if self.inc_th is not None and not self.inc_th >= 0:
-            raise ConfigError(f"expected a non-negative gain, got {self.inc_th}", parameter="inc_th")
-        if self.clearance < 0:
-            raise ConfigError(f"expected a non-negative distance, got {self.clearance}", parameter="clearance")
+        if self.poi_radius is not None:
+            check_number(self.poi_radius, "poi_radius", 0, 100, low_open=True, unit="m")
+        if self.inc_th is not None:
+            check_number(self.inc_th, "inc_th", 0)
+        check_number(self.clearance, "clearance", 0, 100, unit="m")
         if self.up is not None:
             check_up(self.up, "up")
 

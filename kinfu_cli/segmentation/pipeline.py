@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError, VolumeError
 from kinfu_cli.core.grid import TernaryGrid, check_up, read_ternary
 from kinfu_cli.fusion.volume import TernaryVolume, load_volume
@@ -44,17 +45,17 @@ class SegmentOptions:
 
     def validate(self) -> None:
         """ConfigError naming the first option out of its range, before any work is done."""
-        if not self.resolution > 0:
-            raise ConfigError(f"must be > 0 m, got {self.resolution}", parameter="resolution")
+        # a spacing below 0.1 mm thins nothing (open3d refuses it outright): refused rather than used silently
+        check_number(self.resolution, "resolution", 1e-4, 1, unit="m")
+        check_number(self.min_weight, "min_weight", 0, 255)
         if not 0 <= self.msq_height <= 6:
             raise ConfigError(f"expected 0..6, got {self.msq_height}", parameter="msq_height")
-        if not self.msq_mu > 0:
-            raise ConfigError(f"must be > 0 m, got {self.msq_mu}", parameter="msq_mu")
+        check_number(self.msq_mu, "msq_mu", 0, 10, low_open=True, unit="m")
+        check_number(self.msq_trigger, "msq_trigger", 0, 10, unit="m")
         if self.sq_max_points < 10:
             raise ConfigError(f"must be >= 10, got {self.sq_max_points}", parameter="sq_max_points")
         self.segmentation.validate()
-        if not self.isolation_threshold > 0:
-            raise ConfigError(f"must be > 0 m, got {self.isolation_threshold}", parameter="isolation_threshold")
+        check_number(self.isolation_threshold, "isolation_threshold", 0, 10, low_open=True, unit="m")
         if self.superquadrics:
             lo, hi = self.sq_exponent_bounds
             if not 0.0 < lo < hi <= 2.0:

@@ -30,6 +30,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError, VolumeError
 from kinfu_cli.core.grid import check_up
 
@@ -65,8 +66,11 @@ class SegmentationParams:
     def validate(self) -> None:
         """ConfigError naming the first parameter out of its range."""
         for name in ("seed_resolution", "adjacency_radius", "plane_distance"):
-            if not getattr(self, name) > 0:
-                raise ConfigError(f"must be > 0, got {getattr(self, name)}", parameter=name)
+            check_number(getattr(self, name), name, 1e-4, 10, unit="m")
+        for name in ("spatial_importance", "normal_importance"):
+            check_number(getattr(self, name), name, 0, 1e6)
+        check_number(self.sanity_angle_deg, "sanity_angle_deg", 0, 180, unit="degrees")
+        check_number(self.seed, "seed", 0, 2 ** 32 - 1, integer=True)
         if not 0 <= self.concavity_tolerance_deg < 90:
             raise ConfigError(f"expected 0..90 degrees, got {self.concavity_tolerance_deg}",
                               parameter="concavity_tolerance_deg")

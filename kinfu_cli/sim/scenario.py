@@ -476,7 +476,7 @@ def load_ground_truth(folder: str | os.PathLike) -> GroundTruth:
         for c in info["changes"]:
             if np.asarray(c["position"], dtype=float).shape != (3,):
                 raise ValueError("a change position is not [x, y, z]")
-    except (ValueError, KeyError, TypeError) as exc:
+    except (ValueError, KeyError, TypeError, RecursionError) as exc:
         raise RecordingError(f"{path}: not a kinfu synth changes.json ({exc})") from None
     poses_path = folder / "camera_poses.txt"
     if not poses_path.exists():

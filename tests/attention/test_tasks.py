@@ -188,12 +188,14 @@ def test_cli_split_errors_are_one_line_and_leave_no_output(tmp_path, args, expec
 @pytest.mark.parametrize("args, expect", [
     (["--neighbours", "0"], "--neighbours: expected an integer >= 1"),
     (["--time-scale", "-1"], "--time-scale: expected 'duration' or a positive number"),
-    (["--radius", "0"], "--poi-threshold/--radius: expected positive numbers"),
-    (["--reg-time", "-1"], "--reg-space/--reg-time: expected >= 0"),
+    (["--radius", "0"], "--radius: expected a finite number > 0"),
+    (["--reg-time", "-1"], "--reg-time: expected a finite number >= 0"),
+    (["--reg-space", "nan"], "--reg-space: expected a finite number >= 0"),
+    (["--neighbours", "1000000000000"], "--neighbours: expected an integer >= 1 and <= 1000"),
     (["--algorithm", "zvc", "--zvc-r1", "0.3"], "--zvc-r1/--zvc-r2: expected 0 < r1 < r2"),
     (["--algorithm", "zvc", "--zvc-half-width", "-1"], "--zvc-half-width: expected an integer >= 0"),
-    (["--algorithm", "zvc", "--zvc-threshold", "0"], "--zvc-threshold: expected a positive multiplier"),
-    (["--algorithm", "zvc", "--radius", "-1"], "--radius: expected a positive radius"),
+    (["--algorithm", "zvc", "--zvc-threshold", "0"], "--zvc-threshold: expected a finite number > 0"),
+    (["--algorithm", "zvc", "--radius", "-1"], "--radius: expected a finite number > 0"),
 ])
 def test_cli_detector_errors_name_the_flag_before_reading(tmp_path, args, expect):
     """Library errors name detector parameters; `kinfu poi` shows their flags, before opening the input."""

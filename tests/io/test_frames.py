@@ -103,8 +103,8 @@ def test_bad_recordings_raise_clear_errors(tmp_path):
     with open_recording(make_recording(tmp_path / "ok.mcap", n=2)) as rec:
         with pytest.raises(RecordingError, match=r"depth topic '/nope' not found \(available topics: .*/tf"):
             detect_roles(rec, depth_topic="/nope")
-        roles = detect_roles(rec, camera_frame="camera_ir")
-        with pytest.raises(TransformError, match="'camera_ir' is not in the TF tree"):
-            list(iter_frames(rec, roles))
+        with pytest.raises(TransformError, match="'camera_ir' is not in the TF tree") as exc:
+            detect_roles(rec, camera_frame="camera_ir")  # a named frame must exist: no silent fallback
+        assert exc.value.parameter == "camera_frame"
         with pytest.raises(ConfigError, match="every"):
             list(iter_frames(rec, every=0))

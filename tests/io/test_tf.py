@@ -114,3 +114,60 @@ def test_bad_transforms_in_messages_are_skipped_and_counted():
     assert sum(tf.rejected.values()) == 3
     assert any("zero quaternion" in r for r in tf.rejected)
     np.testing.assert_allclose(tf.lookup("world", "a", S)[:3, 3], [1, 2, 3])
+
+
+@pytest.mark.parametrize("translation, quat, reason", [
+    ((0, 0, 0), (np.nan, 0, 0, 1), "non-finite quaternion"),
+    ((0, 0, 0), (0, 0, 0, np.inf), "non-finite quaternion"),
+    ((0, 0, 0), (0, 0, 0, 0), "zero quaternion"),
+    ((0, 0, 0), (0, 0, 0, 2.0), "not of unit length"),
+    ((0, 0, 0), (0, 0, 0, 0.99), "not of unit length"),  # |q|^2 = 0.9801: off by more than tf2's 0.01
+    ((np.inf, 0, 0), (0, 0, 0, 1), "non-finite translation"),
+    ((0, np.nan, 0), (0, 0, 0, 1), "non-finite translation"),
+    ((0, 0, 3e200), (0, 0, 0, 1), "translation beyond"),
+])
+def test_transforms_are_validated_on_the_way_in(translation, quat, reason):
+    tf = TfBuffer()
+    with pytest.raises(TransformError, match=reason) as exc:
+        tf.add_quat("world", "arm", S, translation, quat)
+    assert "'world' -> 'arm'" in str(exc.value) and tf.frames() == []
+    # tf2's tolerance: |q|^2 within 0.01 of 1 is accepted, and stored normalised
+    tf.add_quat("world", "arm", S, (1, 2, 3), (0, 0, 0, 1.004))
+    np.testing.assert_allclose(tf.lookup("world", "arm", S)[:3, :3], np.eye(3), atol=1e-12)
+
+
+def test_rejected_transforms_are_recorded_per_link():
+    from types import SimpleNamespace as NS
+
+    def tr(parent, child, x=0.0, w=1.0):
+        return NS(header=NS(frame_id=parent, stamp=NS(sec=1, nanosec=0)), child_frame_id=child,
+                  transform=NS(translation=NS(x=x, y=0.0, z=0.0), rotation=NS(x=0.0, y=0.0, z=0.0, w=w)))
+
+    tf = TfBuffer()
+    assert tf.add_message(NS(transforms=[tr("world", "base"), tr("base", "arm", w=2.0), tr("base", "arm", x=np.nan),
+                                         tr("arm", "arm")])) == 1
+    assert tf.rejected_links == {("base", "arm"): {"quaternion not of unit length (| |q|^2 - 1 | >= 0.01)": 1,
+                                                   "non-finite translation": 1},
+                                 ("arm", "arm"): {"expected two different, non-empty frame names": 1}}
+    assert tf.tree() == {"base": "world"}
+    # a chain that stops at a frame whose link was rejected says so, naming the link and the reason
+    tf.add("arm", "camera", S, np.eye(4))
+    text = tf.broken_chain("camera", "world")
+    assert "stops at 'arm'" in text and "'world'" in text and "'base' -> 'arm'" in text and "unit length" in text
+
+
+def test_loops_are_detected_not_walked_forever():
+    tf = TfBuffer()
+    for parent, child in [("world", "a"), ("a", "b"), ("b", "c"), ("c", "d"), ("d", "b"), ("x", "y"), ("y", "x")]:
+        tf.add(parent, child, 0, np.eye(4))
+    assert tf.parent_changes == [("b", "a", "d")]  # the later link d -> b replaced a -> b
+    assert tf.loops() == [["b", "c", "d", "b"], ["x", "y", "x"]]
+    for call in (lambda: tf.chain("d"), lambda: tf.lookup("world", "d", 0), lambda: tf.connected("c", "world"),
+                 lambda: tf.time_range("world", "c")):
+        try:
+            result = call()
+        except TransformError as exc:
+            assert "form a loop" in str(exc) and all(f"{f} ->" in str(exc) for f in "bcd")
+        else:
+            assert result is False  # connected() answers instead of raising
+    assert tf.chain("a") == ["a", "world"]
