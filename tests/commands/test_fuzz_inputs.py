@@ -85,8 +85,9 @@ def _check(res, caught: list, c_stderr: str, what: str) -> None:
     assert not c_stderr, f"C code wrote to stderr: {where}"
     assert not caught, f"warnings: {[str(w.message) for w in caught]}: {where}"
     assert "Traceback" not in res.output, where
-    if res.exit_code == 0:
-        assert not res.stderr.strip(), where
+    if res.exit_code == 0:  # success may warn (a damaged recording can give a cut scene), in kinfu's own lines
+        assert all(line.startswith(("kinfu: warning: ", "kinfu: note: ")) for line in res.stderr.splitlines()
+                   if line.strip()), where
         return
     assert res.exit_code == 2, where
     lines = [line for line in res.stderr.splitlines() if line.strip()]
