@@ -18,6 +18,7 @@ import cv2
 import numpy as np
 from scipy.ndimage import binary_dilation
 
+from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError, VolumeError
 from kinfu_cli.core.grid import TernaryGrid, check_up, read_ternary
 from kinfu_cli.core.poses import check_rigid
@@ -28,6 +29,7 @@ from kinfu_cli.fusion.mesh import extract_mesh
 
 BYTES_PER_VOXEL = 3  # v int16 + w uint8
 BYTES_PER_VOXEL_COLOR = 3
+MAX_RANGE_M = 100.0  # bound of depths and truncation: farther is no depth sensor (and overflows float32 casts)
 
 
 def _triple(x, name: str, kind=float) -> tuple:
@@ -87,12 +89,13 @@ class TernaryVolume:
                 raise ConfigError(f"size {size} and resolution {dims} give non-cubic voxels; give a voxel size "
                                   f"instead", parameter="voxel_size")
             voxel_size = size[0] / dims[0]
-        if not (np.isfinite(truncation) and truncation > 0):
-            raise ConfigError(f"truncation: expected a positive distance in metres, got {truncation}")
-        if not (1 <= int(max_weight) <= 255):
-            raise ConfigError(f"max_weight: expected 1..255, got {max_weight}")
-        if not (0 <= min_depth < max_depth):
-            raise ConfigError(f"min_depth/max_depth: expected 0 <= min < max, got {min_depth}, {max_depth}")
+        # finite and of a sensor's size: a 1e300 truncation or depth range overflows the kernels' casts
+        check_number(truncation, "truncation", 0, MAX_RANGE_M, low_open=True, unit="m")
+        check_number(max_weight, "max_weight", 1, 255, integer=True)
+        check_number(min_depth, "min_depth", 0, MAX_RANGE_M, unit="m")
+        check_number(max_depth, "max_depth", 0, MAX_RANGE_M, unit="m")
+        if not min_depth < max_depth:
+            raise ConfigError(f"expected 0 <= min < max, got {min_depth}, {max_depth}", parameter="min_depth/max_depth")
         self.voxel_size = float(voxel_size)
         self.shape = tuple(int(d) for d in dims)
         if origin is None:

@@ -263,7 +263,8 @@ def _scan_tum(folder: Path, intrinsics, intrinsics_source: str) -> RGBDFolder:
         try:
             vals = np.array([[float(v) for v in r[1:8]] for r in rows], dtype=np.float64)
         except ValueError:
-            raise RecordingError(f"{folder / 'groundtruth.txt'}: expected 'stamp tx ty tz qx qy qz qw' numbers") from None
+            raise RecordingError(f"{folder / 'groundtruth.txt'}: expected 'stamp tx ty tz qx qy qz qw' "
+                                 f"numbers") from None
         gt_path = folder / "groundtruth.txt"
         for i, v in enumerate(vals):
             why = _gt_problem(v)

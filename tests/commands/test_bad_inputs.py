@@ -275,7 +275,8 @@ def test_corrupt_images_are_one_line_without_codec_chatter(tmp_path, shared_data
         data[i] ^= 0x55
     (folder / "frame-000002.depth.png").write_bytes(bytes(data))
     capfd.readouterr()
-    one_line_error(run("import", folder, "-o", tmp_path / "a.mcap"), "frame-000002.depth.png", "cannot read the depth image")
+    one_line_error(run("import", folder, "-o", tmp_path / "a.mcap"), "frame-000002.depth.png",
+                   "cannot read the depth image")
     (folder / "frame-000001.color.jpg").write_bytes(b"GIF89a not a jpeg")
     one_line_error(run("import", folder, "-o", tmp_path / "b.mcap"), "frame-000001.color.jpg", "not a JPEG or PNG")
     captured = capfd.readouterr()
