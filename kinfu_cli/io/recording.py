@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Protocol
 
+from mcap.exceptions import DecoderNotFoundError
 from mcap.reader import make_reader
 
 from kinfu_cli.core.errors import RecordingError
@@ -222,11 +223,14 @@ class _Backend(Protocol):
     def messages(self, topics, start_ns, end_ns) -> Iterator[tuple[str, str, int, object]]: ...
 
 
-def _read_error(path: Path, exc: BaseException, kind: str) -> RecordingError:
+def _short_text(exc: BaseException) -> str:
     text = " ".join(str(a) for a in exc.args) or type(exc).__name__
     text = text.replace("\n", " ").strip()
-    if len(text) > 200:
-        text = text[:200] + "..."
+    return text[:200] + "..." if len(text) > 200 else text
+
+
+def _read_error(path: Path, exc: BaseException, kind: str) -> RecordingError:
+    text = _short_text(exc)
     return RecordingError(f"{path}: cannot read {kind} ({text}); the file may be truncated or corrupt")
 
 
@@ -393,5 +397,9 @@ class _McapBackend(_Backend):
                 yield ch.topic, normalize_msgtype(schema.name if schema else ""), msg.log_time, decoded
         except RecordingError:
             raise
+        except DecoderNotFoundError as exc:  # not damage: a channel in an encoding no ROS decoder reads
+            raise RecordingError(f"{self.path}: a channel of this MCAP file cannot be decoded as ROS 1 or ROS 2 "
+                                 f"messages ({_short_text(exc)}); the topics kinfu reads must carry ROS "
+                                 f"messages") from None
         except Exception as exc:
             raise _read_error(self.path, exc, "MCAP file") from None
