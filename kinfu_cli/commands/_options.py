@@ -21,6 +21,7 @@ PARAMETER_FLAGS: dict[str, str] = {
     "oscillation_deg": "--oscillation",
     "region_radius": "--poi-radius",
     "modes": "--mode",
+    "up_tolerance_deg": "--up-tolerance",
 }
 
 

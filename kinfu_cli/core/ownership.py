@@ -29,7 +29,7 @@ class ForeignOutputError(KinfuError):
 def _read_manifest(folder: Path) -> dict[str, dict]:
     try:
         doc = json.loads((folder / MANIFEST).read_text())
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):  # unreadable or damaged: nothing is recorded as kinfu's
         return {}
     files = doc.get("files") if isinstance(doc, dict) else None
     return files if isinstance(files, dict) else {}

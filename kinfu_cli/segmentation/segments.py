@@ -65,6 +65,7 @@ class SegmentationParams:
 
     def validate(self) -> None:
         """ConfigError naming the first parameter out of its range."""
+        check_number(self.up_tolerance_deg, "up_tolerance_deg", 0, 90, unit="deg")
         for name in ("seed_resolution", "adjacency_radius", "plane_distance"):
             check_number(getattr(self, name), name, 1e-4, 10, unit="m")
         for name in ("spatial_importance", "normal_importance"):

@@ -87,18 +87,27 @@ def test_fuse_replaces_its_folder_whole_keeping_user_files(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == [MANIFEST, "fuse"]  # no debris beside it
 
 
-def test_a_killed_fuse_leaves_the_previous_result_whole(tmp_path):
+@pytest.mark.parametrize("moment", ["while fusing", "while writing"])
+def test_a_killed_fuse_leaves_the_previous_result_whole(tmp_path, moment):
     out = tmp_path / "fuse"
-    base = ["fuse", REC, "-o", out, "--size", "1.5", "--resolution", "64", "--quiet"]
-    assert run(*base, "--end", "6.1", "--every", "6").exit_code == 0
+    base = ["fuse", REC, "-o", out, "--size", "1.5", "--quiet"]
+    assert run(*base, "--resolution", "64", "--end", "6.1", "--every", "6").exit_code == 0
     first = (out / "report.json").read_bytes()
     env = dict(os.environ, PYTHONPATH=str(REPO))
-    proc = subprocess.Popen([sys.executable, "-m", "kinfu_cli", *map(str, base)], cwd=tmp_path, env=env,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    time.sleep(4.0)
+    proc = subprocess.Popen([sys.executable, "-m", "kinfu_cli", *map(str, base), "--resolution", "320"], cwd=tmp_path,
+                            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    if moment == "while fusing":
+        time.sleep(3.0)
+    else:  # as soon as the new folder is being written beside the old one
+        while not list(tmp_path.glob(".fuse.*.part")) and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.005)
+    assert proc.poll() is None, "the run ended before it could be killed"
     proc.send_signal(signal.SIGKILL)
     proc.wait(timeout=30)
     assert (out / "report.json").read_bytes() == first  # old result untouched, nothing mixed in
+    assert {p.name for p in out.iterdir()} == {MANIFEST, "report.json", "volume.npz", "ternary.npz", "mesh.ply",
+                                               "cloud.ply"}
     # the next run cleans the debris of the killed one
-    assert run(*base, "--end", "6.1", "--every", "6").exit_code == 0
+    assert run(*base, "--resolution", "64", "--end", "6.1", "--every", "6").exit_code == 0
     assert sorted(p.name for p in tmp_path.iterdir()) == [MANIFEST, "fuse"]
