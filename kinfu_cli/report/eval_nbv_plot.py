@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 
-from kinfu_cli.core.atomic import atomic_path
+from kinfu_cli.report.figures import save_figure
 
 
 def plot_nbv_loop(path: str | os.PathLike, doc: dict) -> None:
@@ -25,9 +25,7 @@ def plot_nbv_loop(path: str | os.PathLike, doc: dict) -> None:
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
         fig.tight_layout()
-        with atomic_path(path) as tmp:
-            fig.savefig(tmp, dpi=90)
-        plt.close(fig)
+        save_figure(fig, path, dpi=90)
         return
     pois = [str(p["id"]) for p in doc["pois"]]
     fig, axes = plt.subplots(1, len(pois), figsize=(5 * len(pois), 3.8), squeeze=False)
@@ -41,6 +39,4 @@ def plot_nbv_loop(path: str | os.PathLike, doc: dict) -> None:
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=90)
-    plt.close(fig)
+    save_figure(fig, path, dpi=90)

@@ -6,10 +6,10 @@ import os
 
 import numpy as np
 
-from kinfu_cli.core.atomic import atomic_path
 from kinfu_cli.core.grid import TernaryGrid
 from kinfu_cli.fusion.up import view_axes
 from kinfu_cli.nbv.ranking import PoiRanking
+from kinfu_cli.report.figures import save_figure
 
 _COLORS = {1: (0.15, 0.15, 0.15), 0: (0.65, 0.65, 0.75), -1: (1.0, 1.0, 1.0)}
 
@@ -74,6 +74,4 @@ def plot_nbv(path: str | os.PathLike, grid: TernaryGrid, rankings: list[PoiRanki
             ax.set_title(f"POI {r.poi_id}: {name}\n{state}, top {len(order)} views", fontsize=9)
             ax.set_aspect("equal")
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=90)
-    plt.close(fig)
+    save_figure(fig, path, dpi=90)

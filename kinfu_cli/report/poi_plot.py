@@ -11,8 +11,8 @@ import os
 
 import numpy as np
 
-from kinfu_cli.core.atomic import atomic_path
 from kinfu_cli.io.trajectory import Trajectory
+from kinfu_cli.report.figures import save_figure
 
 
 def _ellipsoid(mean: np.ndarray, cov: np.ndarray, n: int = 16) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -88,9 +88,7 @@ def plot_pois(path: str | os.PathLike, traj: Trajectory, detector, title: str = 
     _equal_axes(ax, p)
     ax.set_title(title or (traj.source or "hand trajectory"), fontsize=9)
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
 
 
 def plot_task_pois(path: str | os.PathLike, traj: Trajectory, tasks, detectors, workspace=None,
@@ -143,6 +141,4 @@ def plot_task_pois(path: str | os.PathLike, traj: Trajectory, tasks, detectors, 
     ax2.set_title(f"{len(tasks)} task(s) (shaded), {n_pois} POI(s) (dashed)", pad=14)
     ax2.legend(loc="lower right", fontsize=8)
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)

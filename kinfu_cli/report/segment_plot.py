@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from kinfu_cli.core.atomic import atomic_path
 from kinfu_cli.fusion.up import view_axes
+from kinfu_cli.report.figures import save_figure
 from kinfu_cli.segmentation.outputs import saliency_colors, segment_colors
 from kinfu_cli.segmentation.pipeline import SegmentResult
 from kinfu_cli.segmentation.superquadric import SuperquadricFit
@@ -57,8 +57,6 @@ def plot_segments(result: SegmentResult, outdir: str | os.PathLike) -> dict[str,
         fig.suptitle("segments (superquadrics in black)" if name == "segments.png"
                      else "saliency = isolation x roundness (viridis, 0..1)")
         fig.tight_layout()
-        with atomic_path(out / name) as tmp:
-            fig.savefig(tmp, dpi=110)
-        plt.close(fig)
+        save_figure(fig, out / name, dpi=110)
         files[name] = out / name
     return files

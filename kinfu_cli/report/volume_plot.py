@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from kinfu_cli.core.atomic import atomic_path
 from kinfu_cli.core.grid import TernaryGrid
+from kinfu_cli.report.figures import save_figure
 
 COLORS = {1: (0.80, 0.15, 0.10), 0: (0.55, 0.55, 0.55), -1: (1.0, 1.0, 1.0)}
 
@@ -52,8 +52,6 @@ def plot_slices(grid: TernaryGrid, outdir: str | os.PathLike, n: int = 4) -> lis
         fig.suptitle("ternary volume: red occupied, white empty, grey unknown")
         fig.tight_layout()
         path = Path(outdir) / f"slices_{name}.png"
-        with atomic_path(path) as tmp:
-            fig.savefig(tmp, dpi=80)
-        plt.close(fig)
+        save_figure(fig, path, dpi=80)
         out.append(path)
     return out
