@@ -20,14 +20,21 @@ def parse_formats(text: str) -> list[str]:
     return list(dict.fromkeys(items))
 
 
-@click.command("synth", short_help="Write a synthetic tabletop recording (MCAP, bag, ROS 2) with ground truth.")
+@click.command("synth", short_help="Write a synthetic tabletop or room recording (MCAP, bag, ROS 2) with ground truth.")
 @click.option("-o", "--out", "out", required=True, type=click.Path(file_okay=False),
               help="Output folder (gets recording.mcap, recording.bag, recording_ros2/, ground_truth/).")
 @click.option("--seed", default=0, show_default=True, type=int, help="Seed of the scene, camera path, hand and noise.")
-@click.option("--width", default=320, show_default=True, type=int, help="Depth/colour image width (pixels).")
-@click.option("--height", default=240, show_default=True, type=int, help="Depth/colour image height (pixels).")
-@click.option("--frames", default=36, show_default=True, type=int,
-              help="Depth frames in all: 2/3 initial scan, 1/3 after the change.")
+@click.option("--scene", type=click.Choice(["tabletop", "room"]), default="tabletop", show_default=True,
+              help="tabletop: the arm scenario; room: a handheld camera walking a loop through a furnished "
+                   "5 x 4 m room (no arm, no hand).")
+@click.option("--world", type=click.Choice(["z-up", "y-down"]), default="z-up", show_default=True,
+              help="Convention of the world frame (room scene): z-up (REP-103) or y-down (the room rotated so "
+                   "up is -y); declared on /kinfu/world_up.")
+@click.option("--width", default=None, type=int, help="Depth/colour image width (pixels) [320; room 160].")
+@click.option("--height", default=None, type=int, help="Depth/colour image height (pixels) [240; room 120].")
+@click.option("--frames", default=None, type=int,
+              help="Depth frames in all: 2/3 initial scan, 1/3 after the change; room: views along the loop "
+                   "[36; room 30].")
 @click.option("--formats", default="mcap,bag,ros2", show_default=True, help="Containers to write: mcap, bag, ros2.")
 @click.option("--scenario", type=click.Choice(["place", "remove", "pick-and-place"]), default="pick-and-place",
               show_default=True, help="What the hand does between the scan and the after-change views.")
@@ -46,7 +53,7 @@ def parse_formats(text: str) -> list[str]:
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON summary on stdout.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
 @force_option
-def command(out, seed, width, height, frames, formats, scenario, n_objects, hand_rate, frame_rate, noise,
+def command(out, scene, world, seed, width, height, frames, formats, scenario, n_objects, hand_rate, frame_rate, noise,
             depth_format, color_format, jpeg_quality, camera_pose_topic, as_json, quiet, force):
     """Write a synthetic tabletop recording and its ground truth.
 
@@ -59,20 +66,37 @@ def command(out, seed, width, height, frames, formats, scenario, n_objects, hand
     deterministic. With --camera-pose-topic TOPIC the recordings also carry the true camera poses as
     geometry_msgs/PoseStamped (frame world) at every depth frame stamp, for `kinfu fuse --pose topic`.
 
+    --scene room writes a room-scale sequence instead: a 5 x 4 m floor, four 2.5 m walls with a door gap, a
+    table, a sofa and a shelf; a handheld camera about 1.5 m high walks a loop looking across the room (TF
+    world -> camera_optical, no arm, no hand). --world y-down rotates the room and every pose +90 degrees
+    about x (up is -y); the recording declares its up direction on /kinfu/world_up, which fuse trusts.
+    OUT/ground_truth/ then holds scene.ply, changes.json (room extent, up) and camera_poses.txt.
+
     \b
     Example:
       kinfu synth -o sample_data/tabletop
       kinfu synth -o /tmp/small --width 64 --height 48 --frames 6 --formats mcap --scenario place
       kinfu synth -o /tmp/posed --camera-pose-topic /camera/pose
+      kinfu synth -o /tmp/room --scene room --world y-down --formats mcap
     """
+    room = scene == "room"
+    width = width if width is not None else (160 if room else 320)
+    height = height if height is not None else (120 if room else 240)
+    frames = frames if frames is not None else (30 if room else 36)
     claim_outputs({"out": out}, [], force)
     result = synthesize(out, seed=seed, width=width, height=height, frames=frames, formats=parse_formats(formats),
                         scenario=scenario, n_objects=n_objects, hand_rate=hand_rate, frame_rate=frame_rate,
                         noise=noise, depth_format=depth_format, color_format=color_format,
-                        jpeg_quality=jpeg_quality, quiet=quiet, camera_pose_topic=camera_pose_topic)
+                        jpeg_quality=jpeg_quality, quiet=quiet, camera_pose_topic=camera_pose_topic, scene=scene,
+                        world=world)
     summary = result.to_json()
     if as_json:
         click.echo(json.dumps(summary, indent=2))
+    elif room:
+        for p in summary["recordings"]:
+            click.echo(f"wrote {p}")
+        click.echo(f"wrote {summary['ground_truth']}/ (room, {summary['frames']} frames, world {summary['world']}, "
+                   f"up {summary['up']})")
     else:
         for p in summary["recordings"]:
             click.echo(f"wrote {p}")

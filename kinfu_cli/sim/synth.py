@@ -13,9 +13,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.sim.room import WORLDS, RoomScenario, make_room, write_room_ground_truth, write_room_recordings
 from kinfu_cli.sim.scenario import (Scenario, check_camera_pose_topic, make_scenario, recording_topics,
                                     write_ground_truth, write_recordings)
 
+SCENES = ("tabletop", "room")
 FORMAT_NAMES = {"mcap": "recording.mcap", "bag": "recording.bag", "ros2": "recording_ros2"}
 
 
@@ -25,11 +27,17 @@ class SynthResult:
 
     recordings: list[Path]
     ground_truth: Path
-    scenario: Scenario
+    scenario: Scenario | RoomScenario
     camera_pose_topic: str | None = None
 
     def to_json(self) -> dict:
         sc = self.scenario
+        if isinstance(sc, RoomScenario):
+            lo, hi = sc.bounds()
+            return {"recordings": [str(p) for p in self.recordings], "ground_truth": str(self.ground_truth),
+                    "frames": len(sc.frames), "scene": "room", "world": sc.world, "up": sc.up.tolist(),
+                    "room_bounds": [lo.tolist(), hi.tolist()], "seed": sc.seed, "width": sc.width,
+                    "height": sc.height, "camera_pose_topic": self.camera_pose_topic}
         return {"recordings": [str(p) for p in self.recordings], "ground_truth": str(self.ground_truth),
                 "frames": len(sc.frames), "scan_frames": sc.meta["n_scan"], "after_frames": sc.meta["n_after"],
                 "hand_samples": len(sc.hand), "changes": sc.changes, "seed": sc.seed, "scenario": sc.kind,
@@ -40,10 +48,11 @@ def synthesize(out: str | os.PathLike, seed: int = 0, width: int = 320, height: 
                formats: tuple[str, ...] = ("mcap", "bag", "ros2"), scenario: str = "pick-and-place",
                n_objects: int = 4, hand_rate: float = 100.0, frame_rate: float = 5.0, noise: bool = True,
                depth_format: str = "png", color_format: str = "jpeg", jpeg_quality: int = 75, quiet: bool = True,
-               camera_pose_topic: str | None = None) -> SynthResult:
+               camera_pose_topic: str | None = None, scene: str = "tabletop", world: str = "z-up") -> SynthResult:
     """Build the scenario and write the containers named in `formats` (FORMAT_NAMES) and OUT/ground_truth/.
     camera_pose_topic: also write the true camera poses (PoseStamped in `world`) on this topic; quiet: no
-    progress bar."""
+    progress bar. scene: "tabletop" (the arm scenario) or "room" (`sim.room`: a handheld camera walking through a
+    furnished room; `scenario`, `n_objects` and `hand_rate` do not apply); world: "z-up" or "y-down" (room only)."""
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise ConfigError(f"{out} exists and is not a folder", parameter="out")
@@ -56,6 +65,26 @@ def synthesize(out: str | os.PathLike, seed: int = 0, width: int = 320, height: 
     if not 1 <= jpeg_quality <= 100:
         raise ConfigError(f"expected 1..100, got {jpeg_quality}", parameter="jpeg_quality")
     check_camera_pose_topic(camera_pose_topic, depth_format, color_format)
+    if scene not in SCENES:
+        raise ConfigError(f"expected one of {', '.join(SCENES)}, got {scene!r}", parameter="scene")
+    if world not in WORLDS:
+        raise ConfigError(f"expected one of {', '.join(WORLDS)}, got {world!r}", parameter="world")
+    if scene == "room":
+        room = make_room(seed=seed, world=world, width=width, height=height, frames=frames, noise=noise,
+                         frame_rate_hz=frame_rate)
+        paths = [out / FORMAT_NAMES[f] for f in formats]
+        topics = recording_topics(depth_format, color_format, camera_pose_topic)
+        topics.pop("hand")
+        topics.pop("tf_static")
+        write_room_recordings(room, paths, topics, depth_format=depth_format, color_format=color_format,
+                              quiet=quiet, jpeg_quality=jpeg_quality, camera_pose_topic=camera_pose_topic)
+        gt = write_room_ground_truth(room, out / "ground_truth", topics)
+        for p in paths + [gt]:
+            _relax_permissions(p)
+        return SynthResult(paths, gt, room, camera_pose_topic)
+    if world != "z-up":
+        raise ConfigError(f"the tabletop scene is z-up only, got {world!r}; the room scene takes either world",
+                          parameter="world")
     sc = make_scenario(seed=seed, kind=scenario, width=width, height=height, frames=frames, n_objects=n_objects,
                        noise=noise, hand_rate_hz=hand_rate, frame_rate_hz=frame_rate)
     paths = [out / FORMAT_NAMES[f] for f in formats]
