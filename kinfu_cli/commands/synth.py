@@ -55,7 +55,7 @@ def parse_formats(text: str) -> list[str]:
 @force_option
 def command(out, scene, world, seed, width, height, frames, formats, scenario, n_objects, hand_rate, frame_rate, noise,
             depth_format, color_format, jpeg_quality, camera_pose_topic, as_json, quiet, force):
-    """Write a synthetic tabletop recording and its ground truth.
+    """Write a synthetic tabletop recording (or a room-scale sequence) and its ground truth.
 
     A table with boxes, cylinders, spheres and meshes; a 6-joint arm carries a Kinect-like camera (TF chain
     world -> base_link -> link1..link6 -> wrist -> camera_optical) over an arc for the initial scan; a hand
