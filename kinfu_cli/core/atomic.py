@@ -28,9 +28,14 @@ def _ensure_parent(final: Path) -> Path:
     return parent
 
 
-def _clear_debris(parent: Path, pattern: str) -> None:
+# tempfile's random part of a name: 8 characters (mkstemp / mkdtemp). Debris patterns match exactly the
+# names kinfu's temporaries get, so a user's file such as `.report.notes.part.json` is never touched.
+_RANDOM = "[a-z0-9_]" * 8
+
+
+def _clear_debris(parent: Path, *patterns: str) -> None:
     """Remove what a killed earlier run left beside an output: kinfu's own temporary `.part` names only."""
-    for stale in parent.glob(pattern):
+    for stale in (p for pattern in patterns for p in parent.glob(pattern)):
         if stale.is_dir() and not stale.is_symlink():
             shutil.rmtree(stale, ignore_errors=True)
         else:
@@ -48,7 +53,7 @@ def atomic_path(final: str | os.PathLike, suffix: str | None = None) -> Iterator
     final = Path(final)
     parent = _ensure_parent(final)
     suffix = final.suffix if suffix is None else suffix
-    _clear_debris(parent, f".{glob.escape(final.stem)}.*.part{glob.escape(suffix)}")
+    _clear_debris(parent, f".{glob.escape(final.stem)}.{_RANDOM}.part{glob.escape(suffix)}")
     fd, tmp = tempfile.mkstemp(prefix=f".{final.stem}.", suffix=f".part{suffix}", dir=parent)
     os.close(fd)
     tmp_path = Path(tmp)
@@ -79,7 +84,7 @@ def atomic_dir(final: str | os.PathLike) -> Iterator[Path]:
     """
     final = Path(final)
     parent = _ensure_parent(final)
-    _clear_debris(parent, f".{glob.escape(final.name)}.*.part")
+    _clear_debris(parent, f".{glob.escape(final.name)}.{_RANDOM}.part", f".{glob.escape(final.name)}.{_RANDOM}.old.part")
     tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".part", dir=parent))
     os.chmod(tmp, 0o777 & ~_umask())
     try:

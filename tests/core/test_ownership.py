@@ -75,10 +75,18 @@ def test_a_failed_run_leaves_the_old_folder_untouched_and_debris_is_cleaned(tmp_
             write_json(d / "report.json", {"v": 2})
             raise RuntimeError("killed")
     assert (out / "report.json").read_text().count('"v": 1') == 1
-    stale = tmp_path / ".out.k1ll3d.part"  # what a SIGKILLed run leaves
+    stale = tmp_path / ".out.k1ll3d00.part"  # what a SIGKILLed run leaves (mkdtemp: 8 random characters)
     stale.mkdir()
     (stale / "mesh.ply").write_text("half")
     with atomic_dir(out) as d:
         write_json(d / "report.json", {"v": 3})
     assert not stale.exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == [MANIFEST, "out"]
+
+
+def test_debris_cleaning_touches_only_kinfus_temporary_names(tmp_path):
+    (tmp_path / ".report.notes.part.json").write_text("a user's file that merely looks like a temporary")
+    (tmp_path / ".report.ab12cd34.part.json").write_text("half-written by a killed run")
+    write_json(tmp_path / "report.json", {})
+    names = sorted(p.name for p in tmp_path.iterdir())
+    assert names == [MANIFEST, ".report.notes.part.json", "report.json"]
