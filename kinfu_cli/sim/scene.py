@@ -544,11 +544,9 @@ def movable_objects(scene: Scene, clearance: float = 0.01) -> list[SceneObject]:
     return out
 
 
-def scene_label_cloud(scene: Scene, spacing: float = 0.004, seed: int = 0, floor_margin: float = 0.5
-                      ) -> tuple[np.ndarray, np.ndarray]:
+def scene_label_cloud(scene: Scene, spacing: float = 0.004, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """Per-point object labels of the scene's outer surface: points (N, 3) and labels (N,), 0 for the table
-    and the floor (sparser: the table every 1.5 x spacing, the floor every 4 x spacing and only within
-    `floor_margin` of the table), each present
+    and the floor (sparser: the table every 1.5 x spacing, the floor's top every 3 x spacing), each present
     object its label-image label (`scene.label_of`, the `label` of changes.json). Surface hidden inside another
     part (a box's bottom on the table, the shared face of touching boxes, the inner half of a mug's handle) is
     left out, so a labelled point is one a sensor could see."""
@@ -556,14 +554,13 @@ def scene_label_cloud(scene: Scene, spacing: float = 0.004, seed: int = 0, floor
 
     parts: list[tuple[int, o3d.geometry.TriangleMesh, float]] = [(0, scene.table.mesh(), 1.5 * spacing)]
     if scene.floor:
-        parts.append((0, scene.floor_mesh(), 4 * spacing))
+        parts.append((0, scene.floor_mesh(), 3 * spacing))
     parts += [(scene.label_of(o.id), o.mesh, spacing) for o in scene.present_objects]
     pts_all, lab_all = [], []
     for k, (label, mesh, step) in enumerate(parts):
-        pts, _ = sample_surface(np.asarray(mesh.vertices), np.asarray(mesh.triangles), step, seed=seed + k)
-        if scene.floor and k == 1:
-            half = np.asarray(scene.table.size) / 2 + floor_margin
-            pts = pts[np.all(np.abs(pts[:, :2] - np.asarray(scene.table.center)) <= half, axis=1)]
+        pts, nrm = sample_surface(np.asarray(mesh.vertices), np.asarray(mesh.triangles), step, seed=seed + k)
+        if scene.floor and k == 1:  # the floor slab's top face only: nothing sees its sides or underside
+            pts = pts[nrm[:, 2] > 0.5]
         pts_all.append(pts)
         lab_all.append(np.full(len(pts), label, dtype=np.int64))
     pts = np.concatenate(pts_all)
