@@ -10,7 +10,7 @@ import click
 from kinfu_cli.commands._options import claim_outputs, force_option
 from kinfu_cli.commands._output import emit
 from kinfu_cli.core.errors import ConfigError
-from kinfu_cli.evaluation.segment_eval import SWEEP_DEFAULT, evaluate_segments, sweep_segmentation
+from kinfu_cli.evaluation.segment_eval import SWEEP_DEFAULT, evaluate_segments, label_names, sweep_segmentation
 from kinfu_cli.evaluation.segment_tables import format_segment_table, format_sweep_table
 
 group = "eval"
@@ -107,7 +107,7 @@ def command(segments: Path | None, ground_truth: Path | None, t_eval: float, max
     if plot is not None:
         from kinfu_cli.report.segment_eval_plot import plot_segment_errors
 
-        names = {o["object"]: o["name"] for o in doc["per_object"]}
+        names = label_names(doc["input"]["ground_truth"]) | {o["object"]: o["name"] for o in doc["per_object"]}
         doc["plot"] = str(plot_segment_errors(result.points, result.point_errors, result.gt_labels, names, result.up,
                                               plot, title=f"{segments.name}: per-point consistency error "
                                                           f"(BCE {doc['bce']:.3f})"))

@@ -26,7 +26,8 @@ from scipy.spatial import cKDTree
 
 from kinfu_cli.core.errors import ConfigError, KinfuError
 from kinfu_cli.core.progress import progress
-from kinfu_cli.io.labelled_cloud import LabelledCloud, LabelsFileError, read_labelled_cloud
+from kinfu_cli.io.labelled_cloud import (LabelledCloud, LabelsFileError, ply_points, read_labelled_cloud,
+                                         read_ply_vertices)
 from kinfu_cli.evaluation.segments import consistency_errors, score_segmentation
 
 PLANE_GREY = 153  # segments.ply: the support plane's colour (0.6 as uint8); dropped points are black
@@ -46,25 +47,20 @@ class PredictedSegments:
 
 
 def _labels_from_colours(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    import open3d as o3d  # heavy; only the PLY reader is needed
-
-    with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
-        pc = o3d.t.io.read_point_cloud(str(path))
-    if "positions" not in pc.point or pc.point.positions.shape[0] == 0:
-        raise LabelsFileError(f"{path}: no points")
-    if "colors" not in pc.point:
+    vertex = read_ply_vertices(path)
+    names = vertex.dtype.names or ()
+    if not {"red", "green", "blue"} <= set(names):
         raise LabelsFileError(f"{path}: neither a per-point 'label' nor segment colours (expected kinfu segment's "
                               f"segments.ply or a labels file)")
-    col = pc.point.colors.numpy()
-    rgb = np.round(col * 255).astype(np.int64) if col.dtype.kind == "f" else col.astype(np.int64)
+    rgb = np.stack([vertex["red"], vertex["green"], vertex["blue"]], axis=1)
+    rgb = np.round(rgb * 255).astype(np.int64) if rgb.dtype.kind == "f" else rgb.astype(np.int64)
     code = (rgb[:, 0] << 16) | (rgb[:, 1] << 8) | rgb[:, 2]
     uniq, first, inv = np.unique(code, return_index=True, return_inverse=True)
     ids = np.empty(len(uniq), dtype=np.int64)
-    order = np.argsort(first)  # segments numbered in order of first appearance
-    ids[order] = np.arange(1, len(uniq) + 1)
+    ids[np.argsort(first)] = np.arange(1, len(uniq) + 1)  # segments numbered in order of first appearance
     ids[uniq == (PLANE_GREY << 16 | PLANE_GREY << 8 | PLANE_GREY)] = 0
     ids[uniq == 0] = -1
-    return pc.point.positions.numpy().astype(np.float64), ids[inv.ravel()]
+    return ply_points(vertex, path), ids[inv.ravel()]
 
 
 def load_predicted_segments(path: str | os.PathLike) -> PredictedSegments:

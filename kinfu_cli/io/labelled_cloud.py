@@ -74,37 +74,41 @@ def read_labelled_cloud(path: str | os.PathLike) -> LabelledCloud:
             raise LabelsFileError(f"{path}: not a readable .npz ({e})") from None
     if path.suffix.lower() != ".ply":
         raise LabelsFileError(f"{path}: expected a .ply point cloud with a per-point 'label' or a .npz")
-    head = path.read_bytes()[:4096]
-    if not head.startswith(b"ply"):
-        raise LabelsFileError(f"{path}: not a PLY file")
-    if b"end_header" not in head:
-        raise LabelsFileError(f"{path}: PLY header has no end_header")
-    import open3d as o3d  # heavy; only the PLY reader is needed
-
-    with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):  # we report problems ourselves
-        pc = o3d.t.io.read_point_cloud(str(path))
-    names = set(pc.point)
-    if "positions" not in names or pc.point.positions.shape[0] == 0:
-        raise LabelsFileError(f"{path}: no vertices with x, y, z")
+    vertex = read_ply_vertices(path)
+    names = vertex.dtype.names or ()
     field = next((f for f in LABEL_FIELDS if f in names), None)
     if field is None:
-        raise LabelsFileError(f"{path}: no per-point 'label' property (found {', '.join(sorted(names))})")
-    n_header = _declared_vertices(head)
-    pts = pc.point.positions.numpy()
-    if n_header is not None and n_header != len(pts):
-        raise LabelsFileError(f"{path}: header declares {n_header} vertices, {len(pts)} could be read (truncated?)")
-    return _checked(pts, pc.point[field].numpy(), path)
+        raise LabelsFileError(f"{path}: no per-point 'label' property (found {', '.join(names)})")
+    return _checked(ply_points(vertex, path), vertex[field], path)
 
 
-def _declared_vertices(head: bytes) -> int | None:
-    for line in head.split(b"end_header")[0].splitlines():
-        parts = line.split()
-        if len(parts) == 3 and parts[0] == b"element" and parts[1] == b"vertex":
-            try:
-                return int(parts[2])
-            except ValueError:
-                return None
-    return None
+def read_ply_vertices(path: Path) -> np.ndarray:
+    """The vertex element of a PLY file as a numpy structured array (LabelsFileError when unreadable)."""
+    from plyfile import PlyData, PlyParseError  # only labels files need it
+
+    try:
+        with open(path, "rb") as fh:
+            if fh.read(3) != b"ply":
+                raise LabelsFileError(f"{path}: not a PLY file")
+            fh.seek(0)
+            ply = PlyData.read(fh)
+        vertex = ply["vertex"].data
+    except LabelsFileError:
+        raise
+    except KeyError:
+        raise LabelsFileError(f"{path}: PLY file without a vertex element") from None
+    except (PlyParseError, ValueError, EOFError, OSError, IndexError, TypeError) as e:
+        msg = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise LabelsFileError(f"{path}: unreadable PLY (truncated or malformed: {msg})") from None
+    return vertex
+
+
+def ply_points(vertex: np.ndarray, path: Path) -> np.ndarray:
+    """(N, 3) float64 x, y, z of a PLY vertex array."""
+    names = vertex.dtype.names or ()
+    if not {"x", "y", "z"} <= set(names):
+        raise LabelsFileError(f"{path}: vertices lack x, y, z (found {', '.join(names)})")
+    return np.stack([vertex["x"], vertex["y"], vertex["z"]], axis=1).astype(np.float64)
 
 
 def write_labelled_cloud(path: str | os.PathLike, points: np.ndarray, labels: np.ndarray,

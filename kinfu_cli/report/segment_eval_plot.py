@@ -53,16 +53,20 @@ def plot_segment_errors(points: np.ndarray, errors: np.ndarray, gt_labels: np.nd
                     s=3, linewidths=0)
     fig.colorbar(sc, ax=ax, label="consistency error max(E(S,G,p), E(G,S,p))")
     ids = [int(v) for v in np.unique(gt_labels) if v > 0]
-    if ids and len(pts):
+    if ids and len(pts):  # zoom on the true objects (the floor and walls would shrink them to dots)
+        obj = pts[np.isin(gt_labels, ids), :2]
+        lo, hi = obj.min(axis=0) - 0.15, obj.max(axis=0) + 0.15
+        ax.set_xlim(lo[0], hi[0])
+        ax.set_ylim(lo[1], hi[1])
         anchors = np.array([pts[gt_labels == i, :2].mean(axis=0) for i in ids])
-        span = np.ptp(pts[:, :2], axis=0).max() or 1.0
+        span = float(np.max(hi - lo))
         text = [names.get(i, str(i)) for i in ids]
-        wbox = span * 0.012 * max(len(t) for t in text)
-        pos = spread_labels(anchors, (wbox, span * 0.035))
+        wbox = span * 0.013 * max(len(t) for t in text)
+        pos = spread_labels(anchors + [0.0, 0.02 * span], (wbox, span * 0.04), bounds=(lo[1], hi[1]))
         for t, a, p in zip(text, anchors, pos):
             ax.annotate(t, a, xytext=p, fontsize=8, ha="center", va="bottom",
                         bbox={"boxstyle": "round,pad=0.15", "fc": "white", "alpha": 0.8, "lw": 0},
-                        arrowprops={"arrowstyle": "-", "lw": 0.5} if np.linalg.norm(p - a) > 1e-9 else None)
+                        arrowprops={"arrowstyle": "-", "lw": 0.5})
     ax.set_aspect("equal")
     ax.set_xlabel(f"{axes.names[0]} (m)")
     ax.set_ylabel(f"{axes.names[1]} (m)")
