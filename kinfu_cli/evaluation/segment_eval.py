@@ -224,7 +224,7 @@ def _sweep_fields() -> dict[str, type]:
 
 def fuse_segmentation_scene(seed: int, *, resolution: int = 160, size: float = 1.1, width: int = 240,
                             height: int = 180, frames: int = 24):
-    """The volume of the segmentation scene `seed` (the after state of `kinfu synth --scene objects`, fused from
+    """The volume of the segmentation scene `seed` (the after state of the "objects" scene of kinfu synth, fused from
     every camera pose with the sensor noise) and that scene."""
     from kinfu_cli.evaluation.segments import fuse_synthetic_scene
 

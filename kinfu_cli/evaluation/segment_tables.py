@@ -36,8 +36,8 @@ def format_sweep_table(doc: dict) -> str:
     """Per scene and threshold value: boundary P/R/F, BCE, object recall, over/under; then min BCE per scene
     (thesis Table 4.3) and the means over the scenes."""
     name = doc["parameter"]
-    lines = [f"kinfu eval segment --sweep: {name} over {len(doc['values'])} values on {len(doc['scenes'])} generated "
-             f"scenes (synth --scene objects, fused at {doc['fusion']['resolution']}^3 over "
+    lines = [f"kinfu eval segment, sweep: {name} over {len(doc['values'])} values on {len(doc['scenes'])} generated "
+             f"scenes (the synth 'objects' scene, fused at {doc['fusion']['resolution']}^3 over "
              f"{doc['fusion']['size']} m), T_eval {doc['t_eval'] * 100:.1f} cm", "",
              f"  {'scene':>5} {name[:12]:>12} {'bnd P':>6} {'bnd R':>6} {'bnd F':>6} {'BCE':>6} {'obj R':>6} "
              f"{'segs':>5} {'over':>5} {'under':>5}  missed"]

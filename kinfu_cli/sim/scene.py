@@ -464,7 +464,7 @@ def primitive_tabletop_scene(seed: int = 0, n_objects: int = 5, stacked: bool = 
 
 
 def segmentation_scene(seed: int = 0, table: Table | None = None, floor: bool = True) -> Scene:
-    """The segmentation ground-truth tabletop (`kinfu synth --scene objects`): what colour-free segmentation
+    """The segmentation ground-truth tabletop (the "objects" scene of kinfu synth): what colour-free segmentation
     finds hard, each in its own slot of a 3 x 2 grid on the table, slots shuffled and sizes, yaws and places
     jittered by `seed`:
 
