@@ -75,7 +75,10 @@ def align(before: TernaryGrid, after: TernaryGrid, before_name: str = "before",
         picks.append(j[inside[0]:inside[-1] + 1])
     (x0, x1), (y0, y1), (z0, z1) = ranges
     b = before.labels[x0:x1, y0:y1, z0:z1]
-    a = after.labels[np.ix_(*picks)]
+    # equal voxel sizes: consecutive before voxels fall in consecutive after voxels, so the pick is a slice (a view)
+    contiguous = all(np.array_equal(j, np.arange(j[0], j[0] + len(j))) for j in picks)
+    a = (after.labels[tuple(slice(int(j[0]), int(j[-1]) + 1) for j in picks)] if contiguous
+         else after.labels[np.ix_(*picks)])
     offset = np.array([x0, y0, z0], dtype=np.int64)
     return AlignedPair(before=b, after=a, origin=before.origin + offset * vs, voxel_size=vs, offset=offset,
                        observed_before=int(np.count_nonzero(before.labels != UNKNOWN)),

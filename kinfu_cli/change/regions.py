@@ -5,14 +5,14 @@ volume is never a change (it is counted, so an empty answer caused by unobserved
 
 Pose noise: two fusions of one unchanged surface disagree by up to a voxel or so, which would outline every
 surface with a thin sheet of "changes". We erode the free space, not the change mask: a voxel counts as removed
-only when the after volume is empty in its whole 3x3x3 neighbourhood (`margin` such steps; scipy.ndimage
-binary_erosion with the 26-neighbourhood), and as added only when the before volume is empty all around it. So a
+only when the after volume is empty in its whole 3x3x3 neighbourhood (`margin` such steps: a binary erosion of
+the free space with the 26-neighbourhood), and as added only when the before volume is empty all around it. So a
 change must lie at least `margin` voxels from every surface of the other volume, which is what a pose error of
 `margin` voxels can shift. A binary opening of the change mask was rejected: it removes every change thinner
 than three voxels, and the occupied band a TSDF keeps behind a surface (truncation / voxel size voxels, often
 2-3) is exactly that thin, so a real removed object would vanish with the noise.
 
-Regions: 26-connected components (scipy.ndimage.label) of each kind; components smaller than `min_voxels`
+Regions: 26-connected components of each kind (what scipy.ndimage.label gives with a 3x3x3 structure); components smaller than `min_voxels`
 are dropped as noise (counted).
 """
 
@@ -21,12 +21,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
 from kinfu_cli.core.grid import EMPTY, OCCUPIED, UNKNOWN
 
 KINDS = ("removed", "added")
-_CUBE = np.ones((3, 3, 3), dtype=bool)
 
 
 @dataclass
@@ -49,26 +50,41 @@ class ChangeMasks:
     dropped_voxels: int
 
 
-def _crop(masks: list[np.ndarray], grow: int) -> tuple[slice, ...] | None:
-    """The box of every True voxel of `masks`, grown by `grow` voxels (clipped); None when all are False."""
-    any_mask = np.logical_or.reduce(masks)
-    box = []
-    for axis in range(3):
-        others = tuple(a for a in range(3) if a != axis)
-        hit = np.flatnonzero(any_mask.any(axis=others))
-        if hit.size == 0:
-            return None
-        box.append(slice(max(0, int(hit[0]) - grow), min(any_mask.shape[axis], int(hit[-1]) + 1 + grow)))
-    return tuple(box)
+def empty_all_around(labels: np.ndarray, idx: np.ndarray, margin: int) -> np.ndarray:
+    """(N,) bool: voxel idx (N, 3) of `labels` is empty and so is every voxel within `margin` steps of the
+    26-neighbourhood, i.e. within the (2 margin + 1)^3 cube around it; outside the array counts as not empty.
+
+    The same as scipy.ndimage.binary_erosion(labels == EMPTY, 3x3x3 cube, iterations=margin, border_value=0) read
+    at idx (tests/change check it against scipy), but evaluated at the changed voxels only: they are a few
+    thousand in a grid of 10^8, so this is seconds faster than eroding the dense grid.
+    """
+    idx = np.asarray(idx, dtype=np.int64).reshape(-1, 3)
+    shape = np.array(labels.shape, dtype=np.int64)
+    ok = np.ones(len(idx), dtype=bool)
+    steps = np.arange(-margin, margin + 1)
+    for off in np.array(np.meshgrid(steps, steps, steps, indexing="ij")).reshape(3, -1).T:
+        q = idx + off
+        inside = np.all((q >= 0) & (q < shape), axis=1)
+        qc = np.clip(q, 0, shape - 1)
+        ok &= inside & (labels[qc[:, 0], qc[:, 1], qc[:, 2]] == EMPTY)
+    return ok
 
 
-def _empty_all_around(labels: np.ndarray, margin: int) -> np.ndarray:
-    """Empty voxels whose whole neighbourhood within `margin` steps (26-neighbourhood) is empty too; outside the
-    array counts as not empty."""
-    free = labels == EMPTY
-    if margin <= 0:
-        return free
-    return ndimage.binary_erosion(free, structure=_CUBE, iterations=margin, border_value=0)
+def components(idx: np.ndarray) -> list[np.ndarray]:
+    """26-connected components of voxel indices (N, 3), as index arrays.
+
+    The same partition as scipy.ndimage.label with a 3x3x3 structure (tests/change check it), computed on a graph
+    over the changed voxels (neighbours: Chebyshev distance 1, a k-d tree) rather than by labelling the dense box
+    around them, which spans most of a room-sized grid when noise speckles are spread over it.
+    """
+    idx = np.asarray(idx, dtype=np.int64).reshape(-1, 3)
+    if len(idx) == 0:
+        return []
+    pairs = cKDTree(idx).query_pairs(r=1.0, p=np.inf, output_type="ndarray")
+    graph = coo_matrix((np.ones(len(pairs), dtype=np.int8), (pairs[:, 0], pairs[:, 1])), shape=(len(idx),) * 2)
+    n, lab = connected_components(graph, directed=False)
+    order = np.argsort(lab, kind="stable")
+    return np.split(idx[order], np.cumsum(np.bincount(lab, minlength=n))[:-1])
 
 
 def find_changes(before: np.ndarray, after: np.ndarray, margin: int = 1, min_voxels: int = 1) -> ChangeMasks:
@@ -77,30 +93,18 @@ def find_changes(before: np.ndarray, after: np.ndarray, margin: int = 1, min_vox
     raw = {k: int(np.count_nonzero(m)) for k, m in raw_masks.items()}
     unknown = {"occupied_before_unknown_after": int(np.count_nonzero((before == OCCUPIED) & (after == UNKNOWN))),
                "occupied_after_unknown_before": int(np.count_nonzero((before == UNKNOWN) & (after == OCCUPIED)))}
-    box = _crop(list(raw_masks.values()), margin + 1)
     kept = {k: 0 for k in KINDS}
     regions: list[Region] = []
     dropped_regions = dropped_voxels = 0
-    if box is None:
-        return ChangeMasks(raw, kept, unknown, regions, 0, 0)
-    corner = np.array([s.start for s in box], dtype=np.int64)
-    evidence = {"removed": (raw_masks["removed"][box], after[box]), "added": (raw_masks["added"][box], before[box])}
-    for kind, (mask, other) in evidence.items():
-        mask = mask & _empty_all_around(other, margin)
-        kept[kind] = int(np.count_nonzero(mask))
-        if not kept[kind]:
-            continue
-        lab, n = ndimage.label(mask, structure=_CUBE)
-        idx = np.argwhere(lab)  # C order, so the labels below follow the voxels
-        ids = lab[tuple(idx.T)]
-        order = np.argsort(ids, kind="stable")
-        sizes = np.bincount(ids, minlength=n + 1)[1:]
-        groups = np.split(idx[order] + corner, np.cumsum(sizes)[:-1])
-        for size, vox in zip(sizes, groups):
-            if size >= min_voxels:
+    for kind, other in (("removed", after), ("added", before)):
+        idx = np.argwhere(raw_masks[kind])
+        idx = idx[empty_all_around(other, idx, margin)]
+        kept[kind] = len(idx)
+        for vox in components(idx):
+            if len(vox) >= min_voxels:
                 regions.append(Region(kind, vox))
             else:
                 dropped_regions += 1
-                dropped_voxels += int(size)
-    regions.sort(key=lambda r: (-len(r.voxels), KINDS.index(r.kind), tuple(r.voxels[0])))
+                dropped_voxels += len(vox)
+    regions.sort(key=lambda r: (-len(r.voxels), KINDS.index(r.kind), tuple(r.voxels.min(axis=0))))
     return ChangeMasks(raw, kept, unknown, regions, dropped_regions, dropped_voxels)
