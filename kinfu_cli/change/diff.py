@@ -105,6 +105,7 @@ class ChangeResult:
                        "regions": {k: self.count(k) for k in KINDS},
                        "region_voxels": {k: sum(len(r.points) for r in self.regions if r.kind == k) for k in KINDS}},
             "regions": [r.to_json() for r in self.regions],
+            "changes_ply": "changes.ply" if self.regions else None,
             "pois": self.pois,
             "warnings": list(self.warnings),
         }

@@ -1,5 +1,6 @@
 """The files of `kinfu diff`: changes.json, regions/<id>.ply (each region's voxel centres) and changes.ply (every
-region, removed red and added green), each written atomically with open3d's PLY writer."""
+region, removed red and added green; not written when nothing changed), each written atomically with open3d's
+PLY writer."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from kinfu_cli.change.diff import ChangeResult
-from kinfu_cli.core.atomic import atomic_path, write_json
+from kinfu_cli.core.atomic import atomic_dir, atomic_path, write_json
 from kinfu_cli.core.errors import VolumeError
 
 COLOURS = {"removed": (0.9, 0.1, 0.1), "added": (0.1, 0.8, 0.1)}
@@ -27,15 +28,16 @@ def _write_cloud(path: Path, points: np.ndarray, colours: np.ndarray) -> Path:
 
 
 def write_change_outputs(result: ChangeResult, outdir: str | os.PathLike) -> dict[str, Path]:
-    """changes.json, changes.ply and regions/<id>.ply in `outdir`; returns name -> path."""
+    """changes.json, changes.ply (when a region was found) and regions/<id>.ply in `outdir`; returns name -> path."""
     out = Path(outdir)
     files: dict[str, Path] = {}
-    for r in result.regions:
-        name = f"regions/{r.id}.ply"
-        files[name] = _write_cloud(out / name, r.points, np.tile(COLOURS[r.kind], (len(r.points), 1)))
-    pts = [r.points for r in result.regions]
-    cols = [np.tile(COLOURS[r.kind], (len(r.points), 1)) for r in result.regions]
-    files["changes.ply"] = _write_cloud(out / "changes.ply", np.concatenate(pts) if pts else np.zeros((0, 3)),
-                                        np.concatenate(cols) if cols else np.zeros((0, 3)))
+    with atomic_dir(out / "regions") as folder:  # recorded as kinfu's own in the parent, so a rerun may replace it
+        for r in result.regions:
+            path = _write_cloud(folder / f"{r.id}.ply", r.points, np.tile(COLOURS[r.kind], (len(r.points), 1)))
+            files[f"regions/{r.id}.ply"] = out / "regions" / path.name
+    if result.regions:  # open3d writes no empty cloud; changes.json says "changes_ply": null then
+        files["changes.ply"] = _write_cloud(out / "changes.ply", np.concatenate([r.points for r in result.regions]),
+                                            np.concatenate([np.tile(COLOURS[r.kind], (len(r.points), 1))
+                                                            for r in result.regions]))
     files["changes.json"] = write_json(out / "changes.json", result.to_json())
     return files
