@@ -65,13 +65,17 @@ def test_object_edited_out_of_real_frames_is_found_removed_and_little_else(share
     n, d0 = np.array(model[:3]), float(model[3])
     if n[1] < 0:  # orient the desk's normal down (+y in a camera frame): above the desk is n.p + d0 < 0
         n, d0 = -n, -d0
-    after = _volume()
+    after, unchanged = _volume(), _volume()
     edited = 0
     for depth, T in _frames(folder, range(19, 61, 8)):  # other frames: other sensor noise
+        unchanged.integrate(depth, K, T)
         depth, k = _without_object(depth, K, T, (n, d0))
         edited += k
         after.integrate(depth, K, T)
     assert edited > 10_000  # the object is in view
+    control = diff_grids(grid, unchanged.ternary_grid())  # the same scene from other frames: nothing changed
+    assert control.masks.raw["removed"] + control.masks.raw["added"] > 300  # noise the cleaning has to remove
+    assert control.regions == [] and not control.warnings
     r = diff_grids(grid, after.ternary_grid())
     removed = [x for x in r.regions if x.kind == "removed"]
     assert len(removed) >= 1
