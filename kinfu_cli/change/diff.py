@@ -101,6 +101,7 @@ class ChangeResult:
             "parameters": {"margin_voxels": self.params.margin, "min_volume_m3": self.min_voxels * p.voxel_size ** 3,
                            "min_voxels": self.min_voxels, "connectivity": 26},
             "counts": {"changed_voxels": m.raw, "after_erosion": m.kept, "unknown_ignored": m.unknown_ignored,
+                       "unknown_hidden_blobs": m.hidden,
                        "dropped_small_regions": m.dropped_regions, "dropped_small_voxels": m.dropped_voxels,
                        "regions": {k: self.count(k) for k in KINDS},
                        "region_voxels": {k: sum(len(r.points) for r in self.regions if r.kind == k) for k in KINDS}},
@@ -122,12 +123,11 @@ def _warnings(before: TernaryGrid, after: TernaryGrid, names: tuple[str, str], p
     elif pair.overlap < MIN_OVERLAP:
         out.append(f"the volumes overlap little: {100 * pair.overlap:.0f} % of the smaller one's observed voxels "
                    f"are observed in both (below {100 * MIN_OVERLAP:.0f} %); changes elsewhere cannot be seen")
-    hidden = sum(masks.unknown_ignored.values())
-    if n_regions == 0 and hidden >= min_voxels:
-        u = masks.unknown_ignored
-        out.append(f"no change found, but {u['occupied_before_unknown_after']} voxels occupied before are unknown "
-                   f"after and {u['occupied_after_unknown_before']} occupied after are unknown before: changes "
-                   f"there cannot be seen")
+    if n_regions == 0 and sum(masks.hidden.values()):
+        u = masks.hidden
+        out.append(f"no change found, but {u['occupied_before_unknown_after']} voxels occupied before lie in space "
+                   f"unknown after and {u['occupied_after_unknown_before']} occupied after in space unknown before, "
+                   f"in blobs as large as a region: changes there cannot be seen")
     return out
 
 

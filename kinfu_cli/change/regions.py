@@ -1,7 +1,9 @@
 """Changed voxels, cleaned of pose noise, grouped into change regions.
 
 removed = occupied before and empty after; added = empty before and occupied after. A voxel unknown in either
-volume is never a change (it is counted, so an empty answer caused by unobserved space can be reported).
+volume is never a change (it is counted, so an empty answer caused by unobserved space can be reported: `hidden`
+counts the voxels occupied in one volume that lie, by the same cleaning, deep in the other's unknown space, in
+blobs as large as a region).
 
 Pose noise: two fusions of one unchanged surface disagree by up to a voxel or so, which would outline every
 surface with a thin sheet of "changes". We erode the free space, not the change mask: a voxel counts as removed
@@ -45,13 +47,14 @@ class ChangeMasks:
     raw: dict[str, int]  # changed voxels before the erosion, per kind
     kept: dict[str, int]  # after the erosion, per kind
     unknown_ignored: dict[str, int]  # occupied in one volume where the other is unknown
+    hidden: dict[str, int]  # of those, voxels in blobs of min_voxels or more deep in the other's unknown space
     regions: list[Region]
     dropped_regions: int
     dropped_voxels: int
 
 
-def empty_all_around(labels: np.ndarray, idx: np.ndarray, margin: int) -> np.ndarray:
-    """(N,) bool: voxel idx (N, 3) of `labels` is empty and so is every voxel within `margin` steps of the
+def empty_all_around(labels: np.ndarray, idx: np.ndarray, margin: int, label=EMPTY) -> np.ndarray:
+    """(N,) bool: voxel idx (N, 3) of `labels` is empty (`label`) and so is every voxel within `margin` steps of the
     26-neighbourhood, i.e. within the (2 margin + 1)^3 cube around it; outside the array counts as not empty.
 
     The same as scipy.ndimage.binary_erosion(labels == EMPTY, 3x3x3 cube, iterations=margin, border_value=0) read
@@ -66,7 +69,7 @@ def empty_all_around(labels: np.ndarray, idx: np.ndarray, margin: int) -> np.nda
         q = idx + off
         inside = np.all((q >= 0) & (q < shape), axis=1)
         qc = np.clip(q, 0, shape - 1)
-        ok &= inside & (labels[qc[:, 0], qc[:, 1], qc[:, 2]] == EMPTY)
+        ok &= inside & (labels[qc[:, 0], qc[:, 1], qc[:, 2]] == label)
     return ok
 
 
@@ -93,6 +96,12 @@ def find_changes(before: np.ndarray, after: np.ndarray, margin: int = 1, min_vox
     raw = {k: int(np.count_nonzero(m)) for k, m in raw_masks.items()}
     unknown = {"occupied_before_unknown_after": int(np.count_nonzero((before == OCCUPIED) & (after == UNKNOWN))),
                "occupied_after_unknown_before": int(np.count_nonzero((before == UNKNOWN) & (after == OCCUPIED)))}
+    hidden = {}
+    for key, mask, other in (("occupied_before_unknown_after", (before == OCCUPIED) & (after == UNKNOWN), after),
+                             ("occupied_after_unknown_before", (before == UNKNOWN) & (after == OCCUPIED), before)):
+        idx = np.argwhere(mask)  # what could be a change the other volume never saw: the same cleaning
+        hidden[key] = sum(len(c) for c in components(idx[empty_all_around(other, idx, margin, UNKNOWN)])
+                          if len(c) >= min_voxels)
     kept = {k: 0 for k in KINDS}
     regions: list[Region] = []
     dropped_regions = dropped_voxels = 0
@@ -107,4 +116,4 @@ def find_changes(before: np.ndarray, after: np.ndarray, margin: int = 1, min_vox
                 dropped_regions += 1
                 dropped_voxels += len(vox)
     regions.sort(key=lambda r: (-len(r.voxels), KINDS.index(r.kind), tuple(r.voxels.min(axis=0))))
-    return ChangeMasks(raw, kept, unknown, regions, dropped_regions, dropped_voxels)
+    return ChangeMasks(raw, kept, unknown, hidden, regions, dropped_regions, dropped_voxels)

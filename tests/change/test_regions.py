@@ -93,6 +93,8 @@ def test_unknown_space_is_ignored_counted_and_explained():
     r = diff_grids(grid(before), grid(after))
     assert r.regions == []
     assert r.masks.unknown_ignored["occupied_before_unknown_after"] == 8 * 8 * 8 - 4 * 4 * 4
+    assert r.masks.hidden == {"occupied_before_unknown_after": 8 * 8 * 8 - 4 * 4 * 4 - 8 * 8,  # not the bottom
+                              "occupied_after_unknown_before": 0}
     assert any("cannot be seen" in w for w in r.warnings)
 
 
