@@ -16,8 +16,10 @@ import numpy as np
 from kinfu_cli.change.align import AlignedPair, align
 from kinfu_cli.change.regions import KINDS, ChangeMasks, Region, find_changes
 from kinfu_cli.core.checks import check_number
-from kinfu_cli.core.grid import TernaryGrid
-from kinfu_cli.fusion.volume import load_grid
+from kinfu_cli.core.errors import VolumeError
+from kinfu_cli.core.grid import TernaryGrid, read_ternary
+from kinfu_cli.core.volume_file import read_volume_meta
+from kinfu_cli.fusion.volume import load_volume
 
 #: Smallest region kept, in voxels, when no minimum volume is given: a 3 x 3 x 3 block. Pose noise is already
 #: removed by the free-space erosion; what it leaves are sensor speckles and mixed pixels at depth edges, a few
@@ -150,7 +152,17 @@ def diff_volumes(before: str | os.PathLike, after: str | os.PathLike,
     """`diff_grids` on two files (ternary.npz or volume.npz); VolumeError naming the file for a missing or
     foreign file."""
     (params or ChangeParams()).check()  # bad parameters fail before any file is read
-    return diff_grids(load_grid(before), load_grid(after), params, (str(Path(before)), str(Path(after))))
+    return diff_grids(_load(before), _load(after), params, (str(Path(before)), str(Path(after))))
+
+
+def _load(path: str | os.PathLike) -> TernaryGrid:
+    """The grid of a volume.npz or ternary.npz; VolumeError naming the file for anything else."""
+    if read_volume_meta(path) is not None:
+        return load_volume(path).ternary_grid()
+    grid = read_ternary(path)
+    if grid is None:
+        raise VolumeError(f"{path}: neither a volume.npz nor a ternary.npz (expected the output of kinfu fuse)")
+    return grid
 
 
 __all__ = ["ChangeParams", "ChangeRegion", "ChangeResult", "Region", "diff_grids", "diff_volumes"]

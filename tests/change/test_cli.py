@@ -83,10 +83,13 @@ def test_identical_volumes_give_no_region_and_no_warning(pair, tmp_path):
 
 def test_bad_inputs_are_one_line_errors(pair, tmp_path):
     b, a = pair
-    one_line_error(run("diff", tmp_path / "nope.npz", a, "-o", tmp_path / "d"), "nope.npz", "no such file")
+    one_line_error(run("diff", tmp_path / "nope.npz", a, "-o", tmp_path / "d"), "nope.npz", "no such")
     txt = tmp_path / "notes.npz"
     txt.write_text("not a volume")
     one_line_error(run("diff", b, txt, "-o", tmp_path / "d"), "notes.npz")
+    np.savez(tmp_path / "foreign.npz", a=np.zeros(3))
+    one_line_error(run("diff", tmp_path / "foreign.npz", a, "-o", tmp_path / "d"), "foreign.npz",
+                   "neither a volume.npz nor a ternary.npz")
     coarse = tmp_path / "coarse.npz"
     save_ternary(coarse, TernaryGrid(_labels(5), np.zeros(3), 0.02, "world"))
     one_line_error(run("diff", b, coarse, "-o", tmp_path / "d"), "coarse.npz", "voxel size 0.02 m", "0.01 m")
