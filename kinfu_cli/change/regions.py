@@ -94,12 +94,11 @@ def find_changes(before: np.ndarray, after: np.ndarray, margin: int = 1, min_vox
     """Removed and added regions between two label arrays of one shape (see the module docstring)."""
     raw_masks = {"removed": (before == OCCUPIED) & (after == EMPTY), "added": (before == EMPTY) & (after == OCCUPIED)}
     raw = {k: int(np.count_nonzero(m)) for k, m in raw_masks.items()}
-    unknown = {"occupied_before_unknown_after": int(np.count_nonzero((before == OCCUPIED) & (after == UNKNOWN))),
-               "occupied_after_unknown_before": int(np.count_nonzero((before == UNKNOWN) & (after == OCCUPIED)))}
-    hidden = {}
+    unknown, hidden = {}, {}
     for key, mask, other in (("occupied_before_unknown_after", (before == OCCUPIED) & (after == UNKNOWN), after),
                              ("occupied_after_unknown_before", (before == UNKNOWN) & (after == OCCUPIED), before)):
         idx = np.argwhere(mask)  # what could be a change the other volume never saw: the same cleaning
+        unknown[key] = len(idx)
         hidden[key] = sum(len(c) for c in components(idx[empty_all_around(other, idx, margin, UNKNOWN)])
                           if len(c) >= min_voxels)
     kept = {k: 0 for k in KINDS}
