@@ -69,9 +69,9 @@ def read_tum(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
             stamp = int(Decimal(tokens[0]) * 1_000_000_000) if len(tokens) == 8 else 0
         except (ValueError, ArithmeticError):
             vals = []
-        if len(vals) != 8 or not np.all(np.isfinite(vals)):
-            raise TrajectoryError(f"{path}:{n}: expected 8 finite numbers 'timestamp tx ty tz qx qy qz qw', "
-                                  f"got {line[:60]!r}")
+        if len(vals) != 8 or not np.all(np.isfinite(vals)) or not np.linalg.norm(vals[4:]) > 1e-9:
+            raise TrajectoryError(f"{path}:{n}: expected 8 finite numbers 'timestamp tx ty tz qx qy qz qw' (a "
+                                  f"non-zero quaternion), got {line[:60]!r}")
         stamps.append(stamp)
         rows.append(vals)
     data = np.array(rows, dtype=np.float64).reshape(-1, 8)
