@@ -1,4 +1,4 @@
-"""The viewer file (`--viz FILE`): one MCAP of Foxglove messages holding what a run found, to open in Foxglove.
+"""The viewer file (the commands' viz option): one MCAP of Foxglove messages holding what a run found, for Foxglove.
 
 Why MCAP + Foxglove (not a Rerun .rrd): the mcap library is already a dependency (no heavy install), ROS users
 already record and view MCAP in Foxglove, and the messages use Foxglove's own protobuf schemas (the official
