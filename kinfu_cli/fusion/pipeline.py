@@ -84,6 +84,8 @@ class FusionResult:
     grid_sizing: dict = field(default_factory=dict)  # mode given, init or auto (the observed box, budget, cap)
     face_contacts: dict[str, int] = field(default_factory=dict)  # occupied voxels on each face of the grid
     notes: list[str] = field(default_factory=list)  # what the run chose by itself (a command may print them)
+    camera_stamps_ns: list[int] = field(default_factory=list)  # stamp of each frame fused, with ...
+    camera_poses: list[np.ndarray] = field(default_factory=list)  # ... its T_world_camera (trajectory.tum)
 
     def add_time(self, step: str, seconds: float) -> None:
         self.timing[step] = self.timing.get(step, 0.0) + seconds
@@ -265,7 +267,7 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
         depth_filter=depth_filter, every=every, start_s=start_s, end_s=end_s, cleared_spheres=spheres,
         warnings=warnings, grid=grid, counts=counts, bounding_box=bounding_box, mesh=mesh, cloud=cloud,
         timing=timing, started=started, up=up_choice.to_json(), grid_sizing=sizing, face_contacts=faces,
-        notes=notes)
+        notes=notes, camera_stamps_ns=integrator.camera_stamps_ns, camera_poses=integrator.camera_poses)
 
 
 def _check_arguments(pose: str | None, pose_topic: str | None, every: int, max_lost: float, size) -> None:
@@ -443,6 +445,7 @@ class _Integrator:
         self.buffered: list[tuple[RGBDFrame, np.ndarray]] = []  # frames waiting for the grid to be placed
         self.n_place = 1 if mode == "icp" else PLACEMENT_FRAMES
         self.camera_poses: list[np.ndarray] = []  # T_world_camera of every frame integrated (fusion.up)
+        self.camera_stamps_ns: list[int] = []  # and its stamp
         self.intrinsics: dict | None = None  # of the first frame integrated
 
     def add(self, frame: RGBDFrame, depth: np.ndarray) -> None:
@@ -513,6 +516,7 @@ class _Integrator:
         self.prev_given = T_given
         self.used += 1
         self.camera_poses.append(self.prev_T)
+        self.camera_stamps_ns.append(int(frame.stamp_ns))
         if self.intrinsics is None:
             K = np.asarray(frame.K, dtype=np.float64)
             self.intrinsics = {"fx": float(K[0, 0]), "fy": float(K[1, 1]), "cx": float(K[0, 2]),
