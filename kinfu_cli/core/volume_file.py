@@ -137,6 +137,9 @@ def _check(path: Path, meta: object, arrays: dict[str, np.ndarray]) -> None:
     if meta.get("color_mode", "mean") not in COLOR_MODES:
         raise VolumeError(f"{path}: volume metadata 'color_mode' is {meta.get('color_mode')!r}, expected one of "
                           f"{', '.join(COLOR_MODES)}")
+    if meta.get("color_mode") == "mode":
+        _number(meta, "color_hypotheses", path, 1, 16, integer=True)
+        _number(meta, "color_threshold", path, 0.0, 442.0, low_open=True)
     if "frames_integrated" in meta:
         _number(meta, "frames_integrated", path, 0, 2 ** 62, integer=True)
     if not isinstance(meta.get("frame", ""), (str, type(None))):

@@ -44,13 +44,13 @@ def _triple(x, name: str, kind=float) -> tuple:
     return t
 
 
-def worst_case_bytes(shape, color) -> int:
+def worst_case_bytes(shape, color, hypotheses: int = MAX_HYPOTHESES) -> int:
     """Bytes a grid of `shape` voxels needs when every block holds a surface (block tables and full pools).
     color: False, True (mean colour) or "mode" (mean colour plus the mode filter's hypotheses)."""
     nblocks = int(np.prod([(int(d) + kn.B - 1) // kn.B for d in shape]))
     per_voxel = BYTES_PER_VOXEL + (BYTES_PER_VOXEL_COLOR if color else 0)
     if isinstance(color, str) and color == "mode":
-        per_voxel += MAX_HYPOTHESES * BYTES_PER_HYPOTHESIS
+        per_voxel += hypotheses * BYTES_PER_HYPOTHESIS
     return nblocks * (kn.B3 * per_voxel + 5)
 
 
@@ -117,6 +117,8 @@ class TernaryVolume:
         self.color = bool(color)
         self.color_mode = check_color_mode(color_mode) if self.color else "mean"
         self._winners_stale = False  # mode: hypotheses changed since pool_c last got the winners
+        self.mode_hypotheses = MAX_HYPOTHESES  # M and T of the mode filter (color_mode.py); set before integrating
+        self.mode_threshold = MODE_THRESHOLD
         self.nb = np.array([(d + kn.B - 1) // kn.B for d in self.shape], dtype=np.int64)
         self._check_memory()
         self._raylen_cache: dict = {}
@@ -134,7 +136,8 @@ class TernaryVolume:
     # ------------------------------------------------------------------ storage
     @property
     def bytes_worst_case(self) -> int:
-        return worst_case_bytes(self.shape, "mode" if self.color_mode == "mode" else self.color)
+        return worst_case_bytes(self.shape, "mode" if self.color_mode == "mode" else self.color,
+                                self.mode_hypotheses)
 
     def _check_memory(self) -> None:
         need = self.bytes_worst_case
@@ -150,8 +153,8 @@ class TernaryVolume:
         self.pool_w = np.zeros((cap, kn.B3), dtype=np.uint8)
         self.pool_c = np.zeros((cap if self.color else 0, kn.B3, 3), dtype=np.uint8)
         nh = cap if self.color_mode == "mode" else 0
-        self.pool_hc = np.zeros((nh, kn.B3, MAX_HYPOTHESES, 3), dtype=np.uint8)
-        self.pool_hn = np.zeros((nh, kn.B3, MAX_HYPOTHESES), dtype=np.uint8)
+        self.pool_hc = np.zeros((nh, kn.B3, self.mode_hypotheses, 3), dtype=np.uint8)
+        self.pool_hn = np.zeros((nh, kn.B3, self.mode_hypotheses), dtype=np.uint8)
 
     def _ensure_capacity(self, need: int) -> None:
         cap = self.pool_v.shape[0]
@@ -250,7 +253,7 @@ class TernaryVolume:
         kn.integrate_blocks(cls, self.nb, np.array(self.shape, dtype=np.int64), bidx, bw, self.pool_v,
                             self.pool_w, self.pool_c, self.pool_hc, self.pool_hn, self.origin, self.voxel_size,
                             T_cw, fx, fy, cx, cy, w, h, kn.depth_and_raylen(d, self._raylen(K, w, h)),
-                            col.reshape(-1, 3), self.truncation, self.max_weight, work, MODE_THRESHOLD)
+                            col.reshape(-1, 3), self.truncation, self.max_weight, work, float(self.mode_threshold))
         self._winners_stale = self._winners_stale or (self.color_mode == "mode" and col.shape[0] > 0)
         self.frames_integrated += 1
         return {"blocks_carved": int(np.count_nonzero(cls == kn.CARVE)),
@@ -408,6 +411,8 @@ class TernaryVolume:
                 "max_weight": self.max_weight, "min_depth": self.min_depth, "max_depth": self.max_depth,
                 "color": self.color, "color_mode": self.color_mode, "block": kn.B,
                 "frames_integrated": self.frames_integrated,
+                **({"color_hypotheses": self.mode_hypotheses, "color_threshold": self.mode_threshold}
+                   if self.color_mode == "mode" else {}),
                 "frame": self.frame, "up": None if self.up is None else self.up.tolist(),
                 "up_source": self.up_source, "intrinsics": self.intrinsics}
 
@@ -441,6 +446,9 @@ def load_volume(path: str | os.PathLike) -> TernaryVolume:
                         origin=meta["origin"], truncation=meta["truncation"], max_weight=meta["max_weight"],
                         min_depth=meta["min_depth"], max_depth=meta["max_depth"], color=meta["color"],
                         color_mode=meta.get("color_mode", "mean"), _allocate=False)
+    if vol.color_mode == "mode":
+        vol.mode_hypotheses = int(meta.get("color_hypotheses", MAX_HYPOTHESES))
+        vol.mode_threshold = float(meta.get("color_threshold", MODE_THRESHOLD))
     if tuple(vol.shape) != tuple(meta["shape"]) or arrays["block_idx"].shape != tuple(vol.nb):
         raise VolumeError(f"{path}: inconsistent volume file (shape {meta['shape']}, blocks "
                           f"{arrays['block_idx'].shape})")
@@ -460,7 +468,7 @@ def load_volume(path: str | os.PathLike) -> TernaryVolume:
         if (hc is None or hn is None or hc.shape != (n,) + vol.pool_hc.shape[1:]
                 or hn.shape != (n,) + vol.pool_hn.shape[1:]):
             raise VolumeError(f"{path}: colour mode volume without matching hypothesis pools (pool_hc, pool_hn "
-                              f"of {n} rows, {MAX_HYPOTHESES} hypotheses per voxel)")
+                              f"of {n} rows, {vol.mode_hypotheses} hypotheses per voxel)")
         vol.pool_hc[:n] = hc
         vol.pool_hn[:n] = hn
     vol.frames_integrated = int(meta.get("frames_integrated", 0))
