@@ -14,7 +14,7 @@ fills, so meshes, clouds and segmentation use it unchanged.
 
 Deliberate departures from the thesis: counts instead of the image-centre weights w_uv (the mean path counts
 observations too); no position hypotheses and no guided depth filter (the TSDF fuses geometry); M and T are
-small and were chosen on generated sequences (benchmarks/bench_color_mode.py --choose), not taken from the
+small and were chosen on generated sequences (benchmarks/bench_color_mode.py, its choose mode), not taken from the
 thesis (M_max = 10, K sigma_c = 0.025 of the unit cube), whose memory and gain-sensitivity do not suit
 512^3 voxel grids and auto-gain cameras.
 

@@ -178,8 +178,7 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
     direction against gravity (x, y, z); None decides it as fusion.up.choose_up says (the volume's up,
     stored in volume.npz, ternary.npz and the report with its source).
     max_lost: the largest share of tracked frames (icp, hint) that may be lost (not fused) before the run
-    fails. color_mode: "mean" (running mean colour) or "mode" (colour mode filter, fusion/color_mode.py);
-    None: the init volume's, else "mean".
+    fails. color_mode: "mean" or "mode" (fusion/color_mode.py); None: the init volume's, else "mean".
     """
     started = time.perf_counter()
     timing: dict[str, float] = {}
@@ -190,9 +189,7 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
     auto = isinstance(size, str)
     budget = budget_bytes(max_memory)
     spheres = _spheres(clear_spheres, clear_pois, names["clear_spheres"])
-    wanted_mode = None if color_mode is None else check_color_mode(color_mode)
-    if wanted_mode == "mode" and not color:
-        raise ConfigError("the colour mode filter needs colour; it cannot go with color off", parameter="color_mode")
+    wanted_mode = _wanted_color_mode(color_mode, color)
     grid_spec = _GridSpec(1.0 if auto else size, resolution, voxel_size, truncation, max_weight, min_depth,
                           max_depth, color, wanted_mode or "mean")
     depth_filter = DepthFilter(min_depth, max_depth, fill_gaps, bilateral, shadow_filter, shadow_baseline)
@@ -201,12 +198,9 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
     placement = ""
     if init:
         t0 = time.perf_counter()
-        vol = load_volume(init)
+        vol = _load_init(init, wanted_mode)
         timing["load_init"] = time.perf_counter() - t0
         placement = f"{names['init']} {init}"
-        if wanted_mode is not None and vol.color and wanted_mode != vol.color_mode:
-            raise ConfigError(f"{init}: the volume was fused with colour mode {vol.color_mode!r}, not "
-                              f"{wanted_mode!r}; continue it with its own", parameter="color_mode")
         for s in spheres:
             vol.clear_sphere(s["center"], s["radius"])
     else:
@@ -275,6 +269,23 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
         warnings=warnings, grid=grid, counts=counts, bounding_box=bounding_box, mesh=mesh, cloud=cloud,
         timing=timing, started=started, up=up_choice.to_json(), grid_sizing=sizing, face_contacts=faces,
         notes=notes)
+
+
+def _wanted_color_mode(color_mode: str | None, color: bool) -> str | None:
+    mode = None if color_mode is None else check_color_mode(color_mode)
+    if mode == "mode" and not color:
+        raise ConfigError("the colour mode filter needs colour; it cannot go with color off", parameter="color_mode")
+    return mode
+
+
+def _load_init(init, wanted_mode: str | None) -> TernaryVolume:
+    """The volume to continue; it goes on in the colour mode it was fused with: asking for the other one is an
+    error."""
+    vol = load_volume(init)
+    if wanted_mode is not None and vol.color and wanted_mode != vol.color_mode:
+        raise ConfigError(f"{init}: the volume was fused with colour mode {vol.color_mode!r}, not "
+                          f"{wanted_mode!r}; continue it with its own", parameter="color_mode")
+    return vol
 
 
 def _check_arguments(pose: str | None, pose_topic: str | None, every: int, max_lost: float, size) -> None:
