@@ -19,7 +19,7 @@ thesis (M_max = 10, K sigma_c = 0.025 of the unit cube), whose memory and gain-s
 512^3 voxel grids and auto-gain cameras.
 
 Storage, only with color_mode "mode": pool_hc uint8 (n, 512, M, 3) colours and pool_hn uint8 (n, 512, M)
-counts, per stored block (M = 3: 4 bytes per hypothesis, 12 bytes per voxel). A count reaching 255 halves
+counts, per stored block (M = 2: 4 bytes per hypothesis, 8 bytes per voxel). A count reaching 255 halves
 all counts of its voxel, which keeps their ratios.
 """
 
@@ -31,8 +31,11 @@ from numba import njit, prange
 from kinfu_cli.core.errors import ConfigError
 
 COLOR_MODES = ("mean", "mode")
-MAX_HYPOTHESES = 3  # M: colour hypotheses per voxel (chosen on generated sequences, see the module docstring)
-MODE_THRESHOLD = 40.0  # T: RGB distance (0..255) within which a sample joins a hypothesis (chosen likewise)
+# M and T: the least border blur, with the error elsewhere within 1 of the mean's, over M in 2, 3, 4 and T in 15,
+# 25, 40, 60, 90 on three generated tuning sequences (bench_color_mode.py's choose mode; M = 3 and 4 scored the
+# same as 2 at T = 60, so the smaller one)
+MAX_HYPOTHESES = 2  # M: colour hypotheses per voxel
+MODE_THRESHOLD = 60.0  # T: RGB distance (0..255) within which a sample joins a hypothesis
 SIGMA_PER_THRESHOLD = 0.2  # sigma_c = T / 5 in the merge test (thesis: threshold K sigma_c, K = 5)
 
 

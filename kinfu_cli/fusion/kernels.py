@@ -301,8 +301,8 @@ def _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, n
     update loops have no branches and LLVM vectorises them; only the pixel look-up in between is scalar
     (gathers are slower than scalar loads on current x86). error_model="numpy": 1 / z is not checked for
     zero (a voxel at z = 0 fails the z > 0 test anyway), which is what lets the loops vectorise.
-    With colour hypotheses (pool_hn has rows: the mode filter, see color_mode.py) the colour goes to mode_update
-    instead of the running mean.
+    With colour hypotheses (pool_hc / pool_hn not None: the mode filter, see color_mode.py) the colour goes to
+    mode_update instead of the running mean.
     """
     one = np.float32(1.0)
     half = np.float32(0.5)
@@ -349,14 +349,17 @@ def _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, n
         any_color = any_color | (ok & (abs(t) < color_band))
     if not (has_color and any_color):
         return
-    mode = pool_hn.shape[0] > 0
+    if pool_hn is not None:  # None (the mean path): numba prunes this branch at compile time
+        for k in range(B3):
+            p = pix[k]
+            t = sdf[k]
+            if p >= 0 and t > -one and abs(t) < color_band:
+                mode_update(pool_hc, pool_hn, i, k, color_f[p, 0], color_f[p, 1], color_f[p, 2], mode_thr2)
+        return
     for k in range(B3):
         p = pix[k]
         t = sdf[k]
         if p < 0 or not (t > -one and abs(t) < color_band):
-            continue
-        if mode:
-            mode_update(pool_hc, pool_hn, i, k, color_f[p, 0], color_f[p, 1], color_f[p, 2], mode_thr2)
             continue
         # black = never coloured: take the sample, else a running mean that forgets slowly
         fresh = pool_c[i, k, 0] == 0 and pool_c[i, k, 1] == 0 and pool_c[i, k, 2] == 0
@@ -386,8 +389,8 @@ def integrate_blocks(cls, nb, dims, block_idx_flat, block_w_flat, pool_v, pool_w
                      mode_thr):
     """Apply one frame: CARVE blocks in bulk (a weight step for uniform blocks, tsdf = 1 for stored ones);
     VOXEL blocks voxel by voxel (_update_block). `work` lists the blocks to visit; it is cut into one run per
-    worker task, each with its own scratch rows. pool_hc / pool_hn: colour hypotheses of the mode filter (no
-    rows: running mean), mode_thr its colour distance threshold (RGB 0..255 units)."""
+    worker task, each with its own scratch rows. pool_hc / pool_hn: colour hypotheses of the mode filter (None:
+    running mean, compiled without the mode code), mode_thr its colour distance threshold (RGB 0..255 units)."""
     nby, nbz = nb[1], nb[2]
     has_color = pool_c.shape[0] > 0 and color.shape[0] == height * width
     mw = np.int32(max_w)

@@ -251,7 +251,7 @@ class TernaryVolume:
             self._ensure_capacity(self.n_used + need_new)
             self.n_used = kn.allocate_blocks(cls, bidx, bw, self.pool_v, self.pool_w, self.pool_c, self.n_used)
         kn.integrate_blocks(cls, self.nb, np.array(self.shape, dtype=np.int64), bidx, bw, self.pool_v,
-                            self.pool_w, self.pool_c, self.pool_hc, self.pool_hn, self.origin, self.voxel_size,
+                            self.pool_w, self.pool_c, *self._hypotheses(), self.origin, self.voxel_size,
                             T_cw, fx, fy, cx, cy, w, h, kn.depth_and_raylen(d, self._raylen(K, w, h)),
                             col.reshape(-1, 3), self.truncation, self.max_weight, work, float(self.mode_threshold))
         self._winners_stale = self._winners_stale or (self.color_mode == "mode" and col.shape[0] > 0)
@@ -259,6 +259,11 @@ class TernaryVolume:
         return {"blocks_carved": int(np.count_nonzero(cls == kn.CARVE)),
                 "blocks_voxelwise": int(np.count_nonzero(cls == kn.VOXEL)),
                 "blocks_allocated": int(self.n_used)}
+
+    def _hypotheses(self) -> tuple:
+        """The mode filter's pools for the kernels; (None, None) for the mean, whose kernel then lacks the mode
+        code altogether."""
+        return (self.pool_hc, self.pool_hn) if self.color_mode == "mode" else (None, None)
 
     def _frustum_blocks(self, T: np.ndarray, K: np.ndarray, w: int, h: int, far: float):
         """Block index box [lo, hi) holding the viewing frustum up to depth `far` (one block of margin)."""
