@@ -220,3 +220,18 @@ def test_fuse_color_errors_are_one_line(mode_run, sample_dir, tmp_path):
                                    str(mode_run / "volume.npz")])
     assert res.exit_code == 0, res.output
     assert json.loads((tmp_path / "c" / "report.json").read_text())["grid"]["color_mode"] == "mode"
+
+
+def test_a_foreign_colour_mode_in_volume_npz_is_a_volume_error(small, tmp_path):
+    from kinfu_cli.core.errors import VolumeError
+    from kinfu_cli.core.volume_file import read_volume_file, write_volume_file
+
+    vol = _fuse(_volume("mode", 0.008), small[1][:2])
+    vol.save(tmp_path / "v.npz")
+    meta, arrays = read_volume_file(tmp_path / "v.npz")
+    write_volume_file(tmp_path / "bad.npz", {**meta, "color_mode": "median"}, arrays)
+    with pytest.raises(VolumeError, match="color_mode"):
+        load_volume(tmp_path / "bad.npz")
+    write_volume_file(tmp_path / "lost.npz", meta, {k: v for k, v in arrays.items() if k != "pool_hn"})
+    with pytest.raises(VolumeError, match="hypothesis"):
+        load_volume(tmp_path / "lost.npz")
