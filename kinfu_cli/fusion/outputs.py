@@ -95,6 +95,7 @@ def fusion_report(result: FusionResult, extra_outputs: Iterable[str] = ()) -> di
                  "max_depth": depth_filter.max_depth, "placement": result.placement,
                  "blocks_stored": vol.n_blocks_allocated, "memory_MB": round(vol.memory_bytes() / 2**20, 1),
                  "frames_in_volume": vol.frames_integrated,
+                 "color": vol.color, "color_mode": vol.color_mode,
                  "sizing": result.grid_sizing,
                  "face_contacts": result.face_contacts},
         "filters": {"range": [depth_filter.min_depth, depth_filter.max_depth], "fill_gaps": depth_filter.fill_gaps,

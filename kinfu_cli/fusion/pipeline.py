@@ -28,6 +28,7 @@ from kinfu_cli.core.grid import TernaryGrid, check_up
 from kinfu_cli.core.pois import poi_frame_warnings, read_pois
 from kinfu_cli.core.progress import progress
 from kinfu_cli.fusion import filters
+from kinfu_cli.fusion.color_mode import check_color_mode
 from kinfu_cli.fusion.extent import SURVEY_FRAMES, AutoGrid, auto_grid, budget_bytes, face_contacts, survey
 from kinfu_cli.fusion.mesh import mesh_cloud
 from kinfu_cli.fusion.placement import default_origin
@@ -103,12 +104,13 @@ class _GridSpec:
     min_depth: float
     max_depth: float
     color: bool
+    color_mode: str = "mean"
 
     def volume(self, origin) -> TernaryVolume:
         resolution = 512 if self.voxel_size is not None or self.resolution is None else self.resolution
         return TernaryVolume(size=self.size, resolution=resolution, voxel_size=self.voxel_size, origin=origin,
                              truncation=self.truncation, max_weight=self.max_weight, min_depth=self.min_depth,
-                             max_depth=self.max_depth, color=self.color)
+                             max_depth=self.max_depth, color=self.color, color_mode=self.color_mode)
 
 
 @dataclass
@@ -160,7 +162,7 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
                    shadow_filter: bool = False, shadow_baseline: float = 0.08,
                    roles: Mapping[str, str | None] | None = None, quiet: bool = True,
                    argument_names: Mapping[str, str] | None = None, up=None, max_lost: float = 0.10,
-                   max_memory: float | None = None) -> FusionResult:
+                   max_memory: float | None = None, color_mode: str | None = None) -> FusionResult:
     """Fuse the depth frames of `recording` (MCAP, ROS 1 .bag, ROS 2 bag folder) into a TernaryVolume.
 
     Grid: size (m, one or three values, or "auto": a box around what the selected frames observe from their
@@ -178,7 +180,7 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
     direction against gravity (x, y, z); None decides it as fusion.up.choose_up says (the volume's up,
     stored in volume.npz, ternary.npz and the report with its source).
     max_lost: the largest share of tracked frames (icp, hint) that may be lost (not fused) before the run
-    fails.
+    fails. color_mode: "mean" or "mode" (fusion/color_mode.py); None: the init volume's, else "mean".
     """
     started = time.perf_counter()
     timing: dict[str, float] = {}
@@ -189,15 +191,16 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
     auto = isinstance(size, str)
     budget = budget_bytes(max_memory)
     spheres = _spheres(clear_spheres, clear_pois, names["clear_spheres"])
+    wanted_mode = _wanted_color_mode(color_mode, color)
     grid_spec = _GridSpec(1.0 if auto else size, resolution, voxel_size, truncation, max_weight, min_depth,
-                          max_depth, color)
+                          max_depth, color, wanted_mode or "mean")
     depth_filter = DepthFilter(min_depth, max_depth, fill_gaps, bilateral, shadow_filter, shadow_baseline)
 
     vol = None
     placement = ""
     if init:
         t0 = time.perf_counter()
-        vol = load_volume(init)
+        vol = _load_init(init, wanted_mode)
         timing["load_init"] = time.perf_counter() - t0
         placement = f"{names['init']} {init}"
         for s in spheres:
@@ -270,6 +273,23 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
         notes=notes, camera_stamps_ns=integrator.camera_stamps_ns, camera_poses=integrator.camera_poses)
 
 
+def _wanted_color_mode(color_mode: str | None, color: bool) -> str | None:
+    mode = None if color_mode is None else check_color_mode(color_mode)
+    if mode == "mode" and not color:
+        raise ConfigError("the colour mode filter needs colour; it cannot go with color off", parameter="color_mode")
+    return mode
+
+
+def _load_init(init, wanted_mode: str | None) -> TernaryVolume:
+    """The volume to continue; it goes on in the colour mode it was fused with: asking for the other one is an
+    error."""
+    vol = load_volume(init)
+    if wanted_mode is not None and vol.color and wanted_mode != vol.color_mode:
+        raise ConfigError(f"{init}: the volume was fused with colour mode {vol.color_mode!r}, not "
+                          f"{wanted_mode!r}; continue it with its own", parameter="color_mode")
+    return vol
+
+
 def _check_arguments(pose: str | None, pose_topic: str | None, every: int, max_lost: float, size) -> None:
     """ConfigError naming the first argument of fuse_recording out of its range, before anything is read."""
     if pose is not None and pose not in POSE_MODES:
@@ -338,7 +358,8 @@ def _auto_grid(rec: Recording, roles: Roles, plan: _PosePlan, grid_spec: _GridSp
                  if f.T_world_camera is not None and np.all(np.isfinite(f.T_world_camera)))
         grow = 0.0
     return auto_grid(survey(views, lo, hi), voxel_size=voxel_size, resolution=resolution,
-                     truncation=grid_spec.truncation, color=grid_spec.color, budget=budget, origin=origin, grow=grow)
+                     truncation=grid_spec.truncation, budget=budget, origin=origin, grow=grow,
+                     color="mode" if grid_spec.color and grid_spec.color_mode == "mode" else grid_spec.color)
 
 
 def _tracking_verdict(integrator: _Integrator, max_lost: float, recording: str,
