@@ -52,8 +52,11 @@ class SegmentationParams:
     normal_importance: float = 1.0  # alpha_n (thesis ch. 4: 0.5), also in the Flood Fill cost (eq. 4.14)
     color_importance: float = 1.0  # alpha_c (thesis ch. 4: 1.0), RGB in [0, 1]; also in eq. 4.14
     method: str = "lccp"  # "lccp" (supervoxels + LCCP) or "flood-fill" (the thesis's baseline)
-    t_lccp: float | None = 0.3  # LCCP colour pruning T_lccp (eq. 4.15, RGB distance); None = no pruning
-    t_ff: float = 0.15  # Flood Fill threshold T_ff (eq. 4.14)
+    t_lccp: float | None = None  # LCCP colour pruning T_lccp (eq. 4.15, RGB distance); None = no pruning
+    # (tuned on synth seeds 0-3: pruning at 0.3-0.6 only split objects along shading; >= 0.8 prunes nothing)
+    t_ff: float = 0.5  # Flood Fill threshold T_ff (eq. 4.14; tuned on synth seeds 0-3)
+    plane_color_margin: float = 0.01  # object points this close to the support plane join it when their
+    # colour is nearer the plane's than their segment's (m; 0 = off; needs colours)
     kmeans_iterations: int = 3
     adjacency_radius: float = 0.018  # points closer than this connect their supervoxels (m)
     concavity_tolerance_deg: float = 20.0  # LCCP beta_thresh (PCL default 10; fused TSDF normals are noisier)
@@ -77,6 +80,7 @@ class SegmentationParams:
         check_number(self.up_tolerance_deg, "up_tolerance_deg", 0, 90, unit="deg")
         for name in ("seed_resolution", "adjacency_radius", "plane_distance"):
             check_number(getattr(self, name), name, 1e-4, 10, unit="m")
+        check_number(self.plane_color_margin, "plane_color_margin", 0, 10, unit="m")
         for name in ("spatial_importance", "normal_importance", "color_importance"):
             check_number(getattr(self, name), name, 0, 1e6)
         if self.method not in METHODS:
@@ -345,6 +349,25 @@ def _group_percentile(values: np.ndarray, group: np.ndarray, k: int, q: float) -
     return v[start + lo] * (1 - frac) + v[start + hi] * frac
 
 
+def _plane_colour_refine(pts: np.ndarray, col: np.ndarray, labels: np.ndarray, plane: np.ndarray,
+                         params: SegmentationParams) -> int:
+    """Object points within plane_color_margin of the support plane whose colour is nearer the plane's mean
+    colour than their segment's join the plane (in place; returns how many). The fused surface rounds the
+    corner where an object stands, so its foot is neither up-facing nor clearly the object: colour decides."""
+    k = int(labels.max()) + 1
+    if k <= 1:
+        return 0
+    obj = labels > 0
+    mean = _mean_rows(col[labels >= 0], labels[labels >= 0], k)
+    h = pts @ plane[:3] + plane[3]
+    cand = np.flatnonzero(obj & (h < params.plane_color_margin))
+    d_plane = np.linalg.norm(col[cand] - mean[PLANE_LABEL], axis=1)
+    d_own = np.linalg.norm(col[cand] - mean[labels[cand]], axis=1)
+    move = cand[d_plane < d_own]
+    labels[move] = PLANE_LABEL
+    return int(len(move))
+
+
 def segment_cloud(points: np.ndarray, normals: np.ndarray, params: SegmentationParams | None = None,
                   colors: np.ndarray | None = None) -> Segmentation:
     """Segment a surface cloud (N, 3) with outward normals (N, 3) and, optionally, colours (N, 3) RGB in
@@ -426,5 +449,7 @@ def segment_cloud(points: np.ndarray, normals: np.ndarray, params: SegmentationP
             d, j = cKDTree(pts[lab_idx]).query(pts[drop], distance_upper_bound=params.adjacency_radius)
             hit = np.isfinite(d)
             labels[drop[hit]] = labels[lab_idx[j[hit]]]
+    if col is not None and plane is not None and params.plane_color_margin > 0:
+        stats["plane_color_points"] = _plane_colour_refine(pts, col, labels, plane, params)
     stats.update({"segments": int(len(ids)), "dropped_points": int(np.sum(labels == NOISE_LABEL))})
     return Segmentation(pts, nrm, labels, plane, sv_all, k, stats, col)
