@@ -78,3 +78,31 @@ def test_bad_colour_parameters_are_named(name, value):
     with pytest.raises(ConfigError) as e:
         SegmentationParams(**{name: value}).validate()
     assert e.value.parameter == name
+
+
+def test_plots_view_along_the_volume_up_with_colour_bars_and_labels_apart(tmp_path):
+    """A y-down world (up = -y): the support plane is found along it, the three figures are written (top view
+    along the up used, colour bars, colors.png with the surface colours), and labels of segments crowded
+    together do not overlap."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from kinfu_cli.report.segment_plot import place_labels, plot_segments
+
+    pts, nrm, col, _ = block_scene()
+    R = np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])  # z-up scene -> y-down world (z -> -y)
+    opts = SegmentOptions(superquadrics=False, segmentation=SegmentationParams(up=(0.0, -1.0, 0.0), t_lccp=0.3))
+    res = analyse_cloud(pts @ R.T, nrm @ R.T, opts, colors=col)
+    assert res.segmentation.plane is not None and np.allclose(res.segmentation.plane[:3], [0, -1, 0], atol=1e-3)
+    files = plot_segments(res, tmp_path)
+    assert sorted(files) == ["colors.png", "saliency.png", "segments.png"]
+    assert all(p.stat().st_size > 10_000 for p in files.values())
+    fig, ax = plt.subplots()
+    ax.set_xlim(0, 1)
+    ax.set_ylim(0, 1)
+    fig.canvas.draw()
+    boxes = place_labels(ax, [(0.5, 0.5 + 0.002 * i, f"{i}: 0.{i}") for i in range(12)])  # 12 labels, one spot
+    assert not any(boxes[i].overlaps(boxes[j]) for i in range(12) for j in range(i))
+    plt.close(fig)
