@@ -44,6 +44,19 @@ def _up(value: str) -> tuple[float, float, float] | str | None:
 @click.option("--seed-resolution", type=float, default=0.04, show_default=True, help="Supervoxel seed spacing (m).")
 @click.option("--spatial-importance", type=float, default=0.1, show_default=True, help="Supervoxel spatial weight.")
 @click.option("--normal-importance", type=float, default=1.0, show_default=True, help="Supervoxel normal weight.")
+@click.option("--method", type=click.Choice(["lccp", "flood-fill"]), default="lccp", show_default=True,
+              help="Supervoxels merged over convex edges (LCCP), or the thesis's Flood Fill baseline.")
+@click.option("--color-importance", type=float, default=1.0, show_default=True,
+              help="Colour weight (RGB in [0, 1]) in the supervoxels and in the Flood Fill cost.")
+@click.option("--no-color", is_flag=True, help="Ignore the volume's colour (segment by shape alone).")
+@click.option("--t-lccp", type=float, default=None,
+              help="LCCP: cut edges between supervoxels whose mean colours differ more than this (RGB "
+                   "distance, 0..1.73); default no cut.")
+@click.option("--t-ff", type=float, default=0.5, show_default=True,
+              help="Flood Fill: neighbours join when colour-importance*|dc| + normal-importance*(1-n1.n2) is below this.")
+@click.option("--plane-color-margin", type=float, default=0.01, show_default=True,
+              help="Object points this close to the support plane (m) join it when their colour is nearer the "
+                   "plane's; 0 = off.")
 @click.option("--adjacency-radius", type=float, default=0.018, show_default=True,
               help="Points closer than this connect supervoxels (m).")
 @click.option("--concavity-tolerance", type=float, default=20.0, show_default=True,
@@ -75,7 +88,7 @@ def _up(value: str) -> tuple[float, float, float] | str | None:
 @click.option("--json", "as_json", is_flag=True, help="Print segments.json to stdout.")
 @click.option("--quiet", is_flag=True, help="No progress output.")
 def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution, spatial_importance,
-            normal_importance, adjacency_radius, concavity_tolerance, sanity_angle, min_segment_points,
+            normal_importance, method, color_importance, no_color, t_lccp, t_ff, plane_color_margin, adjacency_radius, concavity_tolerance, sanity_angle, min_segment_points,
             plane_distance, up, up_tolerance, isolation_threshold, no_superquadrics, sq_max_points,
             sq_exponent_bounds, sq_cost, multi_sq, msq_trigger, msq_height, msq_mu, seed, plot, as_json,
             quiet, force, viz=None) -> None:
@@ -93,6 +106,8 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
     claim_outputs({"outdir": outdir, "viz": viz}, [volume], force)
     params = SegmentationParams(seed_resolution=seed_resolution, spatial_importance=spatial_importance,
                                 normal_importance=normal_importance, adjacency_radius=adjacency_radius,
+                                method=method, color_importance=color_importance, t_lccp=t_lccp, t_ff=t_ff,
+                                plane_color_margin=plane_color_margin,
                                 concavity_tolerance_deg=concavity_tolerance, sanity_angle_deg=sanity_angle,
                                 min_segment_points=min_segment_points, plane_distance=plane_distance,
                                 up=_up(up), up_tolerance_deg=up_tolerance, seed=seed)
@@ -100,7 +115,7 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
                           superquadrics=not no_superquadrics, sq_max_points=sq_max_points,
                           sq_exponent_bounds=_pair(sq_exponent_bounds, "--sq-exponent-bounds"), sq_cost=sq_cost,
                           multi_sq=multi_sq, msq_trigger=msq_trigger, msq_height=msq_height, msq_mu=msq_mu,
-                          segmentation=params)
+                          color=not no_color, segmentation=params)
     result: SegmentResult | None = None
     for step in progress(["segment", "write"], total=2, desc="segment", quiet=quiet):
         if step == "segment":

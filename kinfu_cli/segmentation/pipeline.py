@@ -41,6 +41,7 @@ class SegmentOptions:
     msq_trigger: float = 0.005  # single-superquadric RMS residual (m) above which the split is tried
     msq_height: int = 3
     msq_mu: float = 0.03
+    color: bool = True  # use the volume's per-voxel colour (when it was fused with colour) in segmentation
     segmentation: SegmentationParams = field(default_factory=SegmentationParams)
 
     def validate(self) -> None:
@@ -177,16 +178,25 @@ def support_plane_warnings(seg: Segmentation, up_source: str) -> list[str]:
             f"segment holds {share:.0%} of the points)"]
 
 
+def color_warnings(seg: Segmentation, options: SegmentOptions) -> list[str]:
+    """Flood Fill asked for on a cloud without colours: it then groups by normals alone."""
+    if options.segmentation.method == "flood-fill" and seg.colors is None:
+        why = "colour is off" if not options.color else "the volume has no colour (fused without it)"
+        return [f"flood fill without colour: {why}, so points are grouped by their normals alone"]
+    return []
+
+
 def analyse_cloud(points: np.ndarray, normals: np.ndarray, options: SegmentOptions | None = None,
-                  timing: dict | None = None, up_source: str = "") -> SegmentResult:
-    """Segment a surface cloud, score saliency, fit superquadrics. up_source: where options.segmentation.up
-    came from (`resolve_up`; for the result and its warnings)."""
+                  timing: dict | None = None, up_source: str = "", colors: np.ndarray | None = None
+                  ) -> SegmentResult:
+    """Segment a surface cloud (colours (N, 3) RGB in [0, 1] or None), score saliency, fit superquadrics.
+    up_source: where options.segmentation.up came from (`resolve_up`; for the result and its warnings)."""
     options = options or SegmentOptions()
     up = options.segmentation.up
     up_source = up_source or ("none" if up is None else "assumed-z" if isinstance(up, str) else "option")
     timing = dict(timing or {})
     t = time.perf_counter()
-    seg = segment_cloud(points, normals, options.segmentation)
+    seg = segment_cloud(points, normals, options.segmentation, colors if options.color else None)
     timing["segmentation"] = time.perf_counter() - t
     t = time.perf_counter()
     sal = segment_saliency(seg.points, seg.labels, b_th=options.isolation_threshold, exclude=(-1, PLANE_LABEL))
@@ -199,8 +209,8 @@ def analyse_cloud(points: np.ndarray, normals: np.ndarray, options: SegmentOptio
         t = time.perf_counter()
         multi = _fit_multi_superquadrics(seg, fits, options)
         timing["multi_superquadrics"] = time.perf_counter() - t
-    return SegmentResult(SurfaceCloud(seg.points, seg.normals), seg, sal, fits, timing, options, multi,
-                         up_source, support_plane_warnings(seg, up_source))
+    return SegmentResult(SurfaceCloud(seg.points, seg.normals, seg.colors), seg, sal, fits, timing, options, multi,
+                         up_source, support_plane_warnings(seg, up_source) + color_warnings(seg, options))
 
 
 def analyse_volume(volume: TernaryVolume | TernaryGrid, options: SegmentOptions | None = None) -> SegmentResult:
@@ -212,7 +222,7 @@ def analyse_volume(volume: TernaryVolume | TernaryGrid, options: SegmentOptions 
     t_surface = time.perf_counter() - t
     if len(cloud) < options.segmentation.min_segment_points:
         raise VolumeError(f"volume surface has only {len(cloud)} points: nothing to segment")
-    return analyse_cloud(cloud.points, cloud.normals, options, {"surface": t_surface}, up_source)
+    return analyse_cloud(cloud.points, cloud.normals, options, {"surface": t_surface}, up_source, cloud.colors)
 
 
 def load_segment_input(path: str | os.PathLike) -> TernaryVolume | TernaryGrid:

@@ -9,13 +9,17 @@ numpy/scipy/open3d:
    support (the table, not the floor); its inliers with a matching normal become segment 0.
 2. Supervoxels (VCCS-like): seeds on a `seed_resolution` grid, then a few k-means rounds where each point
    joins the closest of its 8 spatially nearest seeds under the VCCS distance
-   D^2 = w_s |dx|^2 / R_seed^2 + w_n (1 - n_p . n_s); each supervoxel is then split into its
+   D^2 = w_s |dx|^2 / R_seed^2 + w_n (1 - n_p . n_s) + w_c |c_p - c_s| (the colour term, as PCL's VCCS,
+   only when the cloud has colours: RGB in [0, 1], Euclidean); each supervoxel is then split into its
    spatially connected parts (so one never bridges two objects).
 3. Adjacency: supervoxels touching within `adjacency_radius`.
 4. LCCP: an edge between supervoxels (centroids x1, x2, normals n1, n2, d = (x1 - x2)/|x1 - x2|) is
    convex when (n1 - n2) . d >= 0 and d is not within `sanity_angle_deg` of n1 x n2 (LCCP's sanity
    criterion against singular configurations), or when the normals differ by less than `concavity_tolerance_deg`
-   (smooth surfaces); segments are the connected components over convex edges.
+   (smooth surfaces); with colours, an edge whose supervoxels' mean colours differ by more than `t_lccp`
+   is cut (thesis eq. 4.15: LCCP alone ignores colour); segments are the connected components.
+   method "flood-fill" replaces steps 2-4 by the thesis's baseline (eqs. 4.13-4.14): neighbouring points
+   stay joined when w_c |c1 - c2| + w_n (1 - n1 . n2) < `t_ff`.
 5. Segments that stay within 2 x `plane_distance` of the support plane (its edges and sides) join it.
 6. Segments smaller than `min_segment_points` join their most-connected neighbour; isolated specks join
    the support plane when at its level, a segment within `adjacency_radius`, or are dropped (label -1).
@@ -36,6 +40,10 @@ from kinfu_cli.core.grid import check_up
 
 PLANE_LABEL = 0
 NOISE_LABEL = -1
+METHODS = ("lccp", "flood-fill")
+# an object point near the support plane joins it when its colour is this much nearer the plane's mean colour
+# than its segment's (tuned on synth seeds 0-3: 1.0 / 0.5 / 0.3 gave boundary P 0.931 / 0.954 / 0.929)
+PLANE_COLOR_RATIO = 0.5
 
 
 @dataclass
@@ -44,7 +52,14 @@ class SegmentationParams:
 
     seed_resolution: float = 0.04  # VCCS seed spacing (m; thesis ch. 4 used 0.05 on 1 cm voxels)
     spatial_importance: float = 0.1  # alpha_p
-    normal_importance: float = 1.0  # alpha_n (thesis ch. 4: 0.5; no colour term here, so normals weigh more)
+    normal_importance: float = 1.0  # alpha_n (thesis ch. 4: 0.5), also in the Flood Fill cost (eq. 4.14)
+    color_importance: float = 1.0  # alpha_c (thesis ch. 4: 1.0), RGB in [0, 1]; also in eq. 4.14
+    method: str = "lccp"  # "lccp" (supervoxels + LCCP) or "flood-fill" (the thesis's baseline)
+    t_lccp: float | None = None  # LCCP colour pruning T_lccp (eq. 4.15, RGB distance); None = no pruning
+    # (tuned on synth seeds 0-3: pruning at 0.3-0.6 only split objects along shading; >= 0.8 prunes nothing)
+    t_ff: float = 0.5  # Flood Fill threshold T_ff (eq. 4.14; tuned on synth seeds 0-3)
+    plane_color_margin: float = 0.01  # object points this close to the support plane join it when their
+    # colour is nearer the plane's than their segment's (m; 0 = off; needs colours)
     kmeans_iterations: int = 3
     adjacency_radius: float = 0.018  # points closer than this connect their supervoxels (m)
     concavity_tolerance_deg: float = 20.0  # LCCP beta_thresh (PCL default 10; fused TSDF normals are noisier)
@@ -68,8 +83,14 @@ class SegmentationParams:
         check_number(self.up_tolerance_deg, "up_tolerance_deg", 0, 90, unit="deg")
         for name in ("seed_resolution", "adjacency_radius", "plane_distance"):
             check_number(getattr(self, name), name, 1e-4, 10, unit="m")
-        for name in ("spatial_importance", "normal_importance"):
+        check_number(self.plane_color_margin, "plane_color_margin", 0, 10, unit="m")
+        for name in ("spatial_importance", "normal_importance", "color_importance"):
             check_number(getattr(self, name), name, 0, 1e6)
+        if self.method not in METHODS:
+            raise ConfigError(f"expected one of {', '.join(METHODS)}, got {self.method!r}", parameter="method")
+        if self.t_lccp is not None:
+            check_number(self.t_lccp, "t_lccp", 0, 2)  # the RGB cube's diagonal is sqrt(3)
+        check_number(self.t_ff, "t_ff", 0, 1e6, low_open=True)
         check_number(self.sanity_angle_deg, "sanity_angle_deg", 0, 180, unit="degrees")
         check_number(self.seed, "seed", 0, 2 ** 32 - 1, integer=True)
         if not 0 <= self.concavity_tolerance_deg < 90:
@@ -100,8 +121,9 @@ class Segmentation:
     labels: np.ndarray
     plane: np.ndarray | None
     supervoxels: np.ndarray  # (N,) supervoxel id, -1 on the plane
-    n_supervoxels: int
+    n_supervoxels: int  # 0 for flood fill (no supervoxels)
     stats: dict = field(default_factory=dict)
+    colors: np.ndarray | None = None  # (N, 3) RGB in [0, 1] the segmentation used, None without colour
 
 
 def _ransac_plane(points: np.ndarray, distance: float, iterations: int) -> tuple[np.ndarray, list[int]]:
@@ -180,8 +202,16 @@ def detect_support_plane(points: np.ndarray, normals: np.ndarray, params: Segmen
     return best[1], best[2]
 
 
-def supervoxels(points: np.ndarray, normals: np.ndarray, params: SegmentationParams) -> np.ndarray:
-    """VCCS-like supervoxel id per point (N,), spatially connected, ids 0..K-1."""
+def _mean_rows(values: np.ndarray, lab: np.ndarray, k: int) -> np.ndarray:
+    """Per-label mean of the rows of `values` (N, D) -> (k, D)."""
+    cnt = np.maximum(np.bincount(lab, minlength=k), 1).astype(np.float64)
+    return np.stack([np.bincount(lab, values[:, a], minlength=k) for a in range(values.shape[1])], 1) / cnt[:, None]
+
+
+def supervoxels(points: np.ndarray, normals: np.ndarray, params: SegmentationParams,
+                colors: np.ndarray | None = None) -> np.ndarray:
+    """VCCS-like supervoxel id per point (N,), spatially connected, ids 0..K-1. With colours (RGB in [0, 1])
+    the distance gains PCL's colour term color_importance * |c_p - c_s| (Euclidean in RGB)."""
     n = len(points)
     if n == 0:
         return np.zeros(0, dtype=np.int64)
@@ -189,13 +219,13 @@ def supervoxels(points: np.ndarray, normals: np.ndarray, params: SegmentationPar
     cells = np.floor(points / R).astype(np.int64)
     _, first, inv = np.unique(cells, axis=0, return_index=True, return_inverse=True)
     inv = inv.ravel()
-    # seeds: the point nearest to each cell's centroid
+    # seeds: the centroid of each cell (position, normal, colour)
     k = len(first)
-    cnt = np.bincount(inv, minlength=k).astype(np.float64)
-    cen = np.stack([np.bincount(inv, points[:, a], minlength=k) for a in range(3)], 1) / cnt[:, None]
-    seed_pos = cen
-    seed_nrm = np.stack([np.bincount(inv, normals[:, a], minlength=k) for a in range(3)], 1)
+    seed_pos = _mean_rows(points, inv, k)
+    seed_nrm = _mean_rows(normals, inv, k)
     seed_nrm /= np.maximum(np.linalg.norm(seed_nrm, axis=1, keepdims=True), 1e-12)
+    wc = float(params.color_importance) if colors is not None else 0.0
+    seed_col = _mean_rows(colors, inv, k) if wc > 0 else None
     labels = inv
     ws = params.spatial_importance / R ** 2
     wn = params.normal_importance
@@ -205,41 +235,160 @@ def supervoxels(points: np.ndarray, normals: np.ndarray, params: SegmentationPar
         cand = cand.reshape(n, kk)
         dx = points[:, None, :] - seed_pos[cand]
         dist = ws * np.einsum("ijk,ijk->ij", dx, dx) + wn * (1.0 - np.einsum("ik,ijk->ij", normals, seed_nrm[cand]))
+        if seed_col is not None:
+            dist += wc * np.linalg.norm(colors[:, None, :] - seed_col[cand], axis=2)
         labels = cand[np.arange(n), np.argmin(dist, axis=1)]
         used, labels = np.unique(labels, return_inverse=True)
         labels = labels.ravel()
         k = len(used)
-        cnt = np.bincount(labels, minlength=k).astype(np.float64)
-        seed_pos = np.stack([np.bincount(labels, points[:, a], minlength=k) for a in range(3)], 1) / cnt[:, None]
-        seed_nrm = np.stack([np.bincount(labels, normals[:, a], minlength=k) for a in range(3)], 1)
+        seed_pos = _mean_rows(points, labels, k)
+        seed_nrm = _mean_rows(normals, labels, k)
         seed_nrm /= np.maximum(np.linalg.norm(seed_nrm, axis=1, keepdims=True), 1e-12)
+        if seed_col is not None:
+            seed_col = _mean_rows(colors, labels, k)
     # split into spatially connected parts
     pairs = cKDTree(points).query_pairs(r=params.adjacency_radius, output_type="ndarray")
-    same = labels[pairs[:, 0]] == labels[pairs[:, 1]]
-    p = pairs[same]
-    g = coo_matrix((np.ones(len(p), dtype=np.int8), (p[:, 0], p[:, 1])), shape=(n, n))
-    _, comp = connected_components(g, directed=False)
-    return comp.astype(np.int64)
+    return _components(n, pairs[labels[pairs[:, 0]] == labels[pairs[:, 1]]])
+
+
+def _components(n: int, edges: np.ndarray) -> np.ndarray:
+    """Connected-component id (0..K-1) of each of n nodes over undirected edges (E, 2)."""
+    g = coo_matrix((np.ones(len(edges), dtype=np.int8), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    return connected_components(g, directed=False)[1].astype(np.int64)
 
 
 def _segment_stats(points: np.ndarray, normals: np.ndarray, lab: np.ndarray, k: int):
     cnt = np.bincount(lab, minlength=k).astype(np.float64)
-    cen = np.stack([np.bincount(lab, points[:, a], minlength=k) for a in range(3)], 1) / np.maximum(cnt, 1)[:, None]
-    nrm = np.stack([np.bincount(lab, normals[:, a], minlength=k) for a in range(3)], 1)
+    cen = _mean_rows(points, lab, k)
+    nrm = _mean_rows(normals, lab, k)
     nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-12)
     return cnt, cen, nrm
 
 
-def segment_cloud(points: np.ndarray, normals: np.ndarray, params: SegmentationParams | None = None
-                  ) -> Segmentation:
-    """Segment a surface cloud (N, 3) with outward normals (N, 3). See the module docstring."""
+def lccp_segments(points: np.ndarray, normals: np.ndarray, pairs: np.ndarray, params: SegmentationParams,
+                  colors: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
+    """(segment per point, supervoxel per point, stats): supervoxels joined over convex or smooth edges
+    (module docstring, step 4); with colours, an edge whose supervoxels' mean colours differ by more than
+    t_lccp (RGB in [0, 1], Euclidean; thesis eq. 4.15) is cut whatever its shape. pairs: point pairs closer
+    than adjacency_radius."""
+    sv = supervoxels(points, normals, params, colors)
+    k = int(sv.max()) + 1
+    _, cen, snrm = _segment_stats(points, normals, sv, k)
+    a, b = sv[pairs[:, 0]], sv[pairs[:, 1]]
+    diff = a != b
+    edges = np.unique(np.sort(np.stack([a[diff], b[diff]], 1), axis=1), axis=0).reshape(-1, 2)
+    d = cen[edges[:, 0]] - cen[edges[:, 1]]
+    d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
+    n1, n2 = snrm[edges[:, 0]], snrm[edges[:, 1]]
+    convex = np.einsum("ij,ij->i", n1 - n2, d) >= 0
+    # LCCP sanity criterion: a convex-looking step whose offset d runs along n1 x n2 is a singular
+    # configuration (e.g. two side faces one above the other), not a real convex edge
+    s = np.cross(n1, n2)
+    sn = np.linalg.norm(s, axis=1)
+    singular = np.abs(np.einsum("ij,ij->i", s, d)) > np.cos(np.radians(params.sanity_angle_deg)) * sn
+    convex &= ~singular
+    smooth = np.einsum("ij,ij->i", n1, n2) >= np.cos(np.radians(params.concavity_tolerance_deg))
+    join = convex | smooth
+    pruned = 0
+    if colors is not None and params.t_lccp is not None:
+        scol = _mean_rows(colors, sv, k)
+        far = np.linalg.norm(scol[edges[:, 0]] - scol[edges[:, 1]], axis=1) > params.t_lccp
+        pruned = int(np.sum(join & far))
+        join &= ~far
+    keep = edges[join]
+    stats = {"supervoxels": k, "adjacent_pairs": int(len(edges)), "convex_pairs": int(len(keep)),
+             "color_pruned_pairs": pruned}
+    return _components(k, keep)[sv], sv, stats
+
+
+def flood_fill_segments(normals: np.ndarray, pairs: np.ndarray, params: SegmentationParams,
+                        colors: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+    """(segment per point, stats): the thesis's Flood Fill baseline (eqs. 4.13-4.14): neighbouring points
+    (closer than adjacency_radius) stay joined when color_importance |c1 - c2| + normal_importance
+    (1 - n1 . n2) < t_ff (RGB in [0, 1]); segments are the connected components. Without colours the
+    colour term is 0."""
+    cost = params.normal_importance * (1.0 - np.einsum("ij,ij->i", normals[pairs[:, 0]], normals[pairs[:, 1]]))
+    if colors is not None:
+        cost += params.color_importance * np.linalg.norm(colors[pairs[:, 0]] - colors[pairs[:, 1]], axis=1)
+    keep = pairs[cost < params.t_ff]
+    return _components(len(normals), keep), {"adjacent_pairs": int(len(pairs)), "joined_pairs": int(len(keep))}
+
+
+def _absorb_small(seg: np.ndarray, pairs: np.ndarray, min_points: int) -> np.ndarray:
+    """Segments smaller than min_points join the neighbour segment with most touching point pairs, else -1."""
+    nseg = int(seg.max()) + 1
+    sizes = np.bincount(seg, minlength=nseg)
+    small = sizes < min_points
+    if not small.any():
+        return seg
+    sa, sb = seg[pairs[:, 0]], seg[pairs[:, 1]]
+    m = sa != sb
+    pa = np.concatenate([sa[m], sb[m]])
+    pb = np.concatenate([sb[m], sa[m]])
+    contact = coo_matrix((np.ones(len(pa)), (pa, pb)), shape=(nseg, nseg)).tocsr()
+    target = np.arange(nseg)
+    for s in np.flatnonzero(small)[np.argsort(sizes[small])]:  # loop over small segments, not points
+        row = contact.getrow(s)
+        if row.nnz:
+            cand = row.indices[~small[row.indices]]
+            if len(cand):
+                vals = np.asarray(row[0, cand].todense()).ravel()
+                target[s] = cand[int(np.argmax(vals))]
+                continue
+        target[s] = -1
+    return target[seg]
+
+
+def _group_percentile(values: np.ndarray, group: np.ndarray, k: int, q: float) -> np.ndarray:
+    """np.percentile(values[group == g], q) (linear interpolation) for every group g in 0..k-1, by one sort."""
+    order = np.lexsort((values, group))
+    v = values[order]
+    cnt = np.bincount(group, minlength=k)
+    start = np.concatenate([[0], np.cumsum(cnt)[:-1]])
+    pos = q / 100.0 * (np.maximum(cnt, 1) - 1)
+    lo = np.floor(pos).astype(np.int64)
+    hi = np.minimum(lo + 1, np.maximum(cnt - 1, 0))
+    frac = pos - lo
+    return v[start + lo] * (1 - frac) + v[start + hi] * frac
+
+
+def _plane_colour_refine(pts: np.ndarray, col: np.ndarray, labels: np.ndarray, plane: np.ndarray,
+                         params: SegmentationParams) -> int:
+    """Object points within plane_color_margin of the support plane whose colour is nearer the plane's mean
+    colour than their segment's (by PLANE_COLOR_RATIO) join the plane (in place; returns how many). The fused surface rounds the
+    corner where an object stands, so its foot is neither up-facing nor clearly the object: colour decides."""
+    k = int(labels.max()) + 1
+    if k <= 1:
+        return 0
+    obj = labels > 0
+    mean = _mean_rows(col[labels >= 0], labels[labels >= 0], k)
+    h = pts @ plane[:3] + plane[3]
+    cand = np.flatnonzero(obj & (h < params.plane_color_margin))
+    d_plane = np.linalg.norm(col[cand] - mean[PLANE_LABEL], axis=1)
+    d_own = np.linalg.norm(col[cand] - mean[labels[cand]], axis=1)
+    move = cand[d_plane < PLANE_COLOR_RATIO * d_own]
+    labels[move] = PLANE_LABEL
+    return int(len(move))
+
+
+def segment_cloud(points: np.ndarray, normals: np.ndarray, params: SegmentationParams | None = None,
+                  colors: np.ndarray | None = None) -> Segmentation:
+    """Segment a surface cloud (N, 3) with outward normals (N, 3) and, optionally, colours (N, 3) RGB in
+    [0, 1] (None: the colour terms are off). See the module docstring."""
     params = params or SegmentationParams()
     params.validate()
     pts = np.asarray(points, dtype=np.float64)
     nrm = np.asarray(normals, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] != 3 or nrm.shape != pts.shape:
         raise VolumeError(f"surface cloud: points and normals must be (N, 3), got {pts.shape} and {nrm.shape}")
+    col = None
+    if colors is not None:
+        col = np.asarray(colors, dtype=np.float64)
+        if col.shape != pts.shape:
+            raise VolumeError(f"surface cloud: colours must be (N, 3) like the points, got {col.shape}")
     good = np.all(np.isfinite(pts), axis=1) & np.all(np.isfinite(nrm), axis=1)
+    if col is not None:
+        good &= np.all(np.isfinite(col), axis=1)
     if good.sum() < params.min_segment_points:
         raise VolumeError(f"surface cloud has {int(good.sum())} valid points: too few to segment "
                           f"(need at least min_segment_points = {params.min_segment_points})")
@@ -252,68 +401,30 @@ def segment_cloud(points: np.ndarray, normals: np.ndarray, params: SegmentationP
     rest = np.flatnonzero(good & ~on_plane)
     labels[on_plane] = PLANE_LABEL
     sv_all = np.full(n, -1, dtype=np.int64)
-    stats = {"points": int(n), "plane_points": int(on_plane.sum()), "support_plane_search": search}
+    stats = {"points": int(n), "plane_points": int(on_plane.sum()), "support_plane_search": search,
+             "method": params.method, "colors": col is not None}
     if len(rest) == 0:
-        return Segmentation(pts, nrm, labels, plane, sv_all, 0, stats)
+        return Segmentation(pts, nrm, labels, plane, sv_all, 0, stats, col)
     P, N = pts[rest], nrm[rest]
-    sv = supervoxels(P, N, params)
-    k = int(sv.max()) + 1
-    sv_all[rest] = sv
-    cnt, cen, snrm = _segment_stats(P, N, sv, k)
-    # supervoxel adjacency from point pairs
+    C = None if col is None else col[rest]
     pairs = cKDTree(P).query_pairs(r=params.adjacency_radius, output_type="ndarray")
-    a, b = sv[pairs[:, 0]], sv[pairs[:, 1]]
-    diff = a != b
-    edges = np.unique(np.sort(np.stack([a[diff], b[diff]], 1), axis=1), axis=0)
-    # LCCP convexity
-    if len(edges):
-        d = cen[edges[:, 0]] - cen[edges[:, 1]]
-        d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
-        n1, n2 = snrm[edges[:, 0]], snrm[edges[:, 1]]
-        convex = np.einsum("ij,ij->i", n1 - n2, d) >= 0
-        # LCCP sanity criterion: a convex-looking step whose offset d runs along n1 x n2 is a singular
-        # configuration (e.g. two side faces one above the other), not a real convex edge
-        s = np.cross(n1, n2)
-        sn = np.linalg.norm(s, axis=1)
-        singular = np.abs(np.einsum("ij,ij->i", s, d)) > np.cos(np.radians(params.sanity_angle_deg)) * sn
-        convex &= ~singular
-        smooth = np.einsum("ij,ij->i", n1, n2) >= np.cos(np.radians(params.concavity_tolerance_deg))
-        keep = edges[convex | smooth]
+    if params.method == "flood-fill":
+        seg, grow = flood_fill_segments(N, pairs, params, C)
+        k = 0
     else:
-        keep = edges.reshape(0, 2)
-    g = coo_matrix((np.ones(len(keep), dtype=np.int8), (keep[:, 0], keep[:, 1])), shape=(k, k))
-    _, seg_of_sv = connected_components(g, directed=False)
-    seg = seg_of_sv[sv]
-    # small segments: join the neighbour segment with most touching point pairs, else drop
-    nseg = int(seg.max()) + 1
-    sizes = np.bincount(seg, minlength=nseg)
-    small = sizes < params.min_segment_points
-    if small.any():
-        sa, sb = seg[pairs[:, 0]], seg[pairs[:, 1]]
-        m = sa != sb
-        pa = np.concatenate([sa[m], sb[m]])
-        pb = np.concatenate([sb[m], sa[m]])
-        contact = coo_matrix((np.ones(len(pa)), (pa, pb)), shape=(nseg, nseg)).tocsr()
-        target = np.arange(nseg)
-        for s in np.flatnonzero(small)[np.argsort(sizes[small])]:
-            row = contact.getrow(s)
-            if row.nnz:
-                cand = row.indices[~small[row.indices]]
-                if len(cand):
-                    vals = np.asarray(row[0, cand].todense()).ravel()
-                    target[s] = cand[int(np.argmax(vals))]
-                    continue
-            target[s] = -1
-        seg = target[seg]
+        seg, sv, grow = lccp_segments(P, N, pairs, params, C)
+        k = int(sv.max()) + 1
+        sv_all[rest] = sv
+    stats.update(grow)
+    seg = _absorb_small(seg, pairs, params.min_segment_points)
     # segments that never rise above the support plane (its edges, legs) belong to the support
     if plane is not None:
         h = P @ plane[:3] + plane[3]
-        nseg2 = int(seg.max()) + 1 if len(seg) else 0
-        for sid in range(nseg2):
-            m = seg == sid
-            if m.any() and np.percentile(h[m], 95) < 2 * params.plane_distance:
-                seg[m] = -2  # marker: support
-        support = seg == -2
+        support = np.zeros(len(seg), dtype=bool)
+        if (seg >= 0).any():
+            ids, inv = np.unique(seg[seg >= 0], return_inverse=True)
+            support[seg >= 0] = (_group_percentile(h[seg >= 0], inv.ravel(), len(ids), 95)
+                                 < 2 * params.plane_distance)[inv.ravel()]
         labels[rest[support]] = PLANE_LABEL
         seg = np.where(support, -1, seg)
         keep_rest = ~support
@@ -341,6 +452,7 @@ def segment_cloud(points: np.ndarray, normals: np.ndarray, params: SegmentationP
             d, j = cKDTree(pts[lab_idx]).query(pts[drop], distance_upper_bound=params.adjacency_radius)
             hit = np.isfinite(d)
             labels[drop[hit]] = labels[lab_idx[j[hit]]]
-    stats.update({"supervoxels": k, "adjacent_pairs": int(len(edges)), "convex_pairs": int(len(keep)),
-                  "segments": int(len(ids)), "dropped_points": int(np.sum(labels == NOISE_LABEL))})
-    return Segmentation(pts, nrm, labels, plane, sv_all, k, stats)
+    if col is not None and plane is not None and params.plane_color_margin > 0:
+        stats["plane_color_points"] = _plane_colour_refine(pts, col, labels, plane, params)
+    stats.update({"segments": int(len(ids)), "dropped_points": int(np.sum(labels == NOISE_LABEL))})
+    return Segmentation(pts, nrm, labels, plane, sv_all, k, stats, col)

@@ -5,6 +5,9 @@ marching cubes (scikit-image) over the known voxels only, with normals from the 
 from a ternary grid alone (no TSDF): the centres of occupied voxels with an empty 6-neighbour, normals
 from the gradient of the smoothed occupancy. Only the box around the surface is processed, so a sparse
 scene in a 512^3 grid costs what its surface costs. The result is optionally thinned on a voxel grid.
+A volume fused with colour gives each point a colour (RGB in [0, 1]): the mean of the two known voxels
+whose edge the vertex lies on (black, never coloured, left out), i.e. whatever the volume's colour array holds (running mean today, the
+mode-filtered colour when fusion keeps that instead), averaged again by the thinning.
 """
 
 from __future__ import annotations
@@ -22,10 +25,12 @@ __all__ = ["SurfaceCloud", "surface_from_tsdf", "surface_from_labels", "surface_
 
 @dataclass
 class SurfaceCloud:
-    """points (N, 3) world metres; normals (N, 3) unit, pointing out of the object into free space."""
+    """points (N, 3) world metres; normals (N, 3) unit, pointing out of the object into free space;
+    colors (N, 3) RGB in [0, 1] when the volume was fused with colour, else None."""
 
     points: np.ndarray
     normals: np.ndarray
+    colors: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(len(self.points))
@@ -54,10 +59,12 @@ def _active_box(mask: np.ndarray, pad: int) -> tuple[slice, slice, slice] | None
 
 
 def surface_from_tsdf(tsdf: np.ndarray, weight: np.ndarray, origin, voxel_size: float, *,
-                      min_weight: float = 1.0, resolution: float | None = 0.01) -> SurfaceCloud:
+                      min_weight: float = 1.0, resolution: float | None = 0.01,
+                      color: np.ndarray | None = None) -> SurfaceCloud:
     """Zero crossing of the TSDF among known voxels (w >= min_weight), world coordinates.
 
     tsdf, weight: (X, Y, Z) arrays indexed [x, y, z], voxel centre at origin + (i + 0.5) * voxel_size.
+    color: (X, Y, Z, 3) uint8 RGB of the same voxels, or None (the cloud then has no colours).
     resolution: thin the cloud on this voxel size (m); None keeps every marching-cubes vertex.
     Raises VolumeError when the volume has no observed surface.
     """
@@ -91,7 +98,15 @@ def surface_from_tsdf(tsdf: np.ndarray, weight: np.ndarray, origin, voxel_size: 
     offset = np.array([s.start for s in box], dtype=np.float64)
     pts = np.asarray(origin, dtype=np.float64) + (verts + offset + 0.5) * float(voxel_size)
     nrm = normals.astype(np.float64)
-    cloud = SurfaceCloud(pts, nrm / np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-12))
+    cols = None
+    if color is not None:
+        c = np.asarray(color)[box]
+        lo, hi = lo[ok], hi[ok]
+        ca = c[lo[:, 0], lo[:, 1], lo[:, 2]].astype(np.float64)
+        cb = c[hi[:, 0], hi[:, 1], hi[:, 2]].astype(np.float64)
+        wa, wb = ca.any(axis=1, keepdims=True), cb.any(axis=1, keepdims=True)  # black = never coloured
+        cols = (ca * wa + cb * wb) / (255.0 * np.maximum(wa.astype(np.float64) + wb, 1.0))
+    cloud = SurfaceCloud(pts, nrm / np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-12), cols)
     return downsample(cloud, resolution) if resolution else cloud
 
 
@@ -148,7 +163,8 @@ def _surface_from_blocks(volume, min_weight: float, resolution: float | None, ch
     bsize = int(np.ceil(np.array(volume.shape)[0] / block_idx.shape[0])) if block_idx is not None else 0
     origin = np.asarray(volume.origin, dtype=np.float64)
     vs = float(volume.voxel_size)
-    pts, nrm = [], []
+    with_color = bool(getattr(volume, "color", False))
+    pts, nrm, col = [], [], []
     for x0 in range(int(lo[0]), int(hi[0]), chunk):
         for y0 in range(int(lo[1]), int(hi[1]), chunk):
             for z0 in range(int(lo[2]), int(hi[2]), chunk):
@@ -158,18 +174,20 @@ def _surface_from_blocks(volume, min_weight: float, resolution: float | None, ch
                     b0, b1 = c0 // bsize, -(-c1 // bsize)
                     if not (block_idx[b0[0]:b1[0], b0[1]:b1[1], b0[2]:b1[2]] >= 0).any():
                         continue
-                v, w = volume.tsdf_weights(c0, c1)
+                v, w, *c = volume.tsdf_weights(c0, c1, color=with_color)
                 if min(v.shape) < 2:
                     continue
                 try:
-                    part = surface_from_tsdf(v, w, origin + c0 * vs, vs, min_weight=min_weight, resolution=None)
+                    part = surface_from_tsdf(v, w, origin + c0 * vs, vs, min_weight=min_weight, resolution=None,
+                                             color=c[0] if c else None)
                 except VolumeError:
                     continue
                 pts.append(part.points)
                 nrm.append(part.normals)
+                col.append(part.colors)
     if not pts:
         raise VolumeError("volume has no surface (no zero crossing between occupied and empty voxels)")
-    cloud = SurfaceCloud(np.concatenate(pts), np.concatenate(nrm))
+    cloud = SurfaceCloud(np.concatenate(pts), np.concatenate(nrm), np.concatenate(col) if with_color else None)
     return downsample(cloud, resolution) if resolution else cloud
 
 
@@ -177,7 +195,8 @@ def downsample(cloud: SurfaceCloud, resolution: float) -> SurfaceCloud:
     """Average points and normals per `resolution`-sized voxel (open3d voxel_down_sample)."""
     if resolution is None or resolution <= 0 or len(cloud) == 0:
         return cloud
-    pc = cloud.to_open3d().voxel_down_sample(float(resolution))
+    pc = cloud.to_open3d(cloud.colors).voxel_down_sample(float(resolution))
     nrm = np.asarray(pc.normals)
     nrm = nrm / np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-12)
-    return SurfaceCloud(np.asarray(pc.points).copy(), nrm)
+    cols = np.asarray(pc.colors).copy() if cloud.colors is not None else None
+    return SurfaceCloud(np.asarray(pc.points).copy(), nrm, cols)

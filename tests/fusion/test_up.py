@@ -221,8 +221,10 @@ def test_up_is_decided_at_fusion_and_stored_everywhere(zup_ydown):
 
 
 def _segments(path, *args):
+    # --no-color: these tests compare shape segmentation across world frames; colour moves a few more foot
+    # points of the smallest object to the table on one copy than the other (63 vs 50 points, beyond rel=0.2)
     res = run("segment", path, "-o", path.parent / ("seg" + "".join(args).replace(",", "_")), "--json",
-              "--no-superquadrics", "--quiet", *args)
+              "--no-superquadrics", "--quiet", "--no-color", *args)
     assert res.exit_code == 0, res.output
     return json.loads(res.stdout), res
 
