@@ -136,7 +136,7 @@ def test_detector_params_split_one_flat_set_between_the_detectors():
     assert params == {"gmm-as": {"poi_threshold": 2.0, "radius": 0.3},
                       "zvc": {"r1": 0.05, "threshold": 1.6, "radius": 0.3}}
     literal = detector_params(poi_threshold=2.0, zvc_threshold=1.6, literal=True)
-    assert literal["gmm-as"] == GmmActivitySaliency.LITERAL and literal["zvc"] == {"threshold": 1.72}
+    assert literal["gmm-as"] == GmmActivitySaliency.LITERAL and literal["zvc"] == {"threshold": 1.72, "rule": "ratio"}
     gmm, zvc = make_detector("gmm-as", params["gmm-as"]), make_detector("zvc", params["zvc"])
     assert gmm.get_params()["radius"] == zvc.radius == 0.3 and zvc.r1 == 0.05
     assert make_detector("gmm-as").get_params() == GmmActivitySaliency().get_params()
@@ -185,7 +185,8 @@ def test_cli_poi_zvc_json_stdout(pnp_traj, tmp_path):
     assert res.exit_code == 0, res.output
     doc = json.loads(res.output)
     assert doc["algorithm"] == "zvc" and all(p["gaussian"] is None for p in doc["pois"])
-    assert doc["parameters"]["threshold"] == 1.5 and doc["parameters"]["half_width"] == 4
+    assert doc["parameters"]["rule"] == "relative" and doc["parameters"]["relative"] == 0.25
+    assert doc["parameters"]["half_width"] == 4
 
 
 @pytest.mark.parametrize("args, expect", [
