@@ -223,6 +223,32 @@ def evaluate_dataset(dataset_dir: str | os.PathLike, algorithms: list[str], spee
     return summarise(rows), rows
 
 
+def sample_statement(rows: list[dict]) -> dict:
+    """Which scored users are in-sample: the defaults were chosen on DEFAULTS_CHOSEN_ON (their scores are
+    optimistic); {"users_scored": {user: tasks}, "defaults_chosen_on", "in_sample", "out_of_sample"}."""
+    seen: dict[str, set] = {}
+    for r in rows:
+        seen.setdefault(r.get("user", "unknown"), set()).add((r["group"], r["task"]))
+    users = {u: len(t) for u, t in sorted(seen.items())}
+    return {"users_scored": users, "defaults_chosen_on": list(DEFAULTS_CHOSEN_ON),
+            "in_sample": [u for u in users if u in DEFAULTS_CHOSEN_ON],
+            "out_of_sample": [u for u in users if u not in DEFAULTS_CHOSEN_ON]}
+
+
+def format_sample(sample: dict) -> str:
+    """One line for under the tables: which numbers are in-sample."""
+    scored = ", ".join(f"{u} ({n} tasks)" for u, n in sample["users_scored"].items())
+    ins, outs = sample["in_sample"], sample["out_of_sample"]
+    if not outs:
+        verdict = "ALL IN-SAMPLE (optimistic for a new person)"
+    elif not ins:
+        verdict = "all out-of-sample"
+    else:
+        verdict = f"in-sample: {', '.join(ins)}; out-of-sample: {', '.join(outs)}"
+    return (f"Users scored: {scored}. The defaults were chosen on {', '.join(sample['defaults_chosen_on'])}: "
+            f"{verdict}.")
+
+
 def _pr(p: float, r: float) -> str:
     return f"{100 * p:5.1f} / {100 * r:5.1f}"
 

@@ -252,3 +252,53 @@ def test_tracking_gap_is_not_taken_for_dwell():
     assert to_gt.max() < 0.05 and to_poi.max() < 0.05
     # POI time on the trajectory's clock (after the gap: shifted by the 3 s)
     assert changes[0].t_start + 3.0 - 0.5 <= det.pois_[0].time <= changes[0].t_end + 3.0 + 0.5
+
+
+def test_zvc_rule_follows_the_threshold_and_checks_its_parameters():
+    assert ZeroVelocityCrossing().rule_ == "relative"
+    assert ZeroVelocityCrossing(threshold=1.72).get_params()["rule"] == "ratio"  # the paper's absolute rule
+    assert ZeroVelocityCrossing(rule="ratio").threshold_ == 1.5
+    assert ZeroVelocityCrossing(rule="relative", threshold=1.72).rule_ == "relative"
+    traj, _ = synth_hand_trajectory(random_task("placement", seed=0), seed=0)
+    with pytest.raises(ConfigError, match="^zvc_rule: expected one of relative, ratio"):
+        ZeroVelocityCrossing(rule="fast").fit(traj)
+    with pytest.raises(ConfigError, match="^zvc_relative"):
+        ZeroVelocityCrossing(relative=1.5).fit(traj)
+
+
+def test_zvc_relative_rule_is_blind_to_the_person_speed_and_keeps_quick_grasps():
+    """The relative rule compares the local speed with the task's own: the same path performed faster
+    gives the same slow samples, and pauses played 4x shorter are still found (the ratio rule at the
+    paper's ZVCTh loses them)."""
+    from kinfu_cli.evaluation.poi_loo import quicken_pauses
+
+    for seed in range(3):
+        traj, changes = synth_hand_trajectory(random_task("pick-and-place", seed=seed), seed=seed)
+        ref = np.array([p.position for p in ZeroVelocityCrossing().fit(traj).pois_])
+        fast = np.array([p.position for p in ZeroVelocityCrossing().fit(resample_speed(traj, 2.0)).pois_])
+        assert fast.shape == ref.shape and np.abs(fast - ref).max() < 0.03
+        quick = quicken_pauses(traj, factor=3.0)
+        assert quick.duration < traj.duration
+        to_gt, _ = _dists(ZeroVelocityCrossing().fit(quick).pois_, changes)
+        assert np.all(to_gt < 0.05), f"seed {seed}: quick grasps missed, nearest POI {to_gt}"
+
+
+def test_zvc_slow_limit_is_what_the_mask_compares_with():
+    traj, _ = synth_hand_trajectory(random_task("removal", seed=1), seed=1)
+    for det in (ZeroVelocityCrossing().fit(traj), ZeroVelocityCrossing(threshold=1.5).fit(traj)):
+        np.testing.assert_array_equal(det.slow_, det.speed_r1_ < det.slow_limit_)
+    rel = ZeroVelocityCrossing().fit(traj)
+    assert np.ptp(rel.slow_limit_) == 0.0  # one limit per task: relative x the task's 95th percentile speed
+
+
+def test_cli_zvc_threshold_selects_the_ratio_rule_and_bad_relative_names_its_flag(pnp_traj, tmp_path):
+    src, _ = pnp_traj
+    out = tmp_path / "z.json"
+    res = CliRunner().invoke(cli, ["poi", str(src), "--algorithm", "zvc", "--zvc-threshold", "1.72", "-o", str(out),
+                                   "--quiet"])
+    assert res.exit_code == 0, res.output
+    params = json.loads(out.read_text())["parameters"]
+    assert params["rule"] == "ratio" and params["threshold"] == 1.72
+    res = CliRunner().invoke(cli, ["poi", str(src), "--algorithm", "zvc", "--zvc-relative", "2", "-o",
+                                   str(tmp_path / "y.json"), "--quiet"])
+    assert res.exit_code == 2 and "--zvc-relative" in res.output and "Traceback" not in res.output
