@@ -44,7 +44,7 @@ def detector_options(f):
                      help="GMM-AS 4th coordinate: 'duration' (t normalised to 0..1) or units per second (1 = s)."),
         click.option("--reg-space", default=0.005, show_default=True, type=float,
                      help="GMM-AS spatial std floor (m) added to covariances."),
-        click.option("--reg-time", default=0.1, show_default=True, type=float,
+        click.option("--reg-time", default=0.03, show_default=True, type=float,
                      help="GMM-AS time std floor, in --time-scale units."),
         click.option("--saliency", default="precision", show_default=True,
                      type=click.Choice(["precision", "literal", "weight", "conditional"]),
@@ -65,7 +65,7 @@ def detector_options(f):
                      help="ZVC slow-sample rule: 'relative' (local speed < --zvc-relative x the task's 95th "
                           "percentile speed) or 'ratio' (the paper's eq. 15 with --zvc-threshold) [default: "
                           "relative, or ratio when --zvc-threshold is given]."),
-        click.option("--zvc-relative", default=0.25, show_default=True, type=float,
+        click.option("--zvc-relative", default=0.28, show_default=True, type=float,
                      help="ZVC relative rule: fraction of the task's 95th percentile speed (chosen by "
                           "leave-one-user-out, see attention/zvc.py)."),
         click.option("--zvc-threshold", default=None, type=float,

@@ -11,6 +11,8 @@ Choice rule: the train score of a value is the smallest precision or recall over
 (placements_removals, pick_and_place) the train user has, under every probe; the chosen value is the
 centre of the longest run of consecutive grid values within `TIE` points of the best score (a plateau
 centre is far from both cliffs; the best single value on one user is on an edge by construction).
+The default constant is a value best on every user ("best_on_all_users"; each direction's test score
+then shows how far a value chosen on one person carries to another).
 
 Probes: "none" scores the recorded tasks; "quick-grasp" replays each task with its pauses shortened
 (`quicken_pauses`: a sample moving at v is played 1 + 3·exp(−v / 0.1 m/s) times faster, so a still
@@ -107,7 +109,7 @@ def plateau_centre(values: list[float], scores: list[float], tie: float = TIE) -
 
 
 def leave_one_user_out(dataset_dir: str | os.PathLike, algorithms: list[str] | None = None, workers: int = 1,
-                       probes: tuple[str, ...] = PROBES, quiet: bool = True) -> dict:
+                       probes: tuple[str, ...] = PROBES, quiet: bool = True, studies: tuple = STUDIES) -> dict:
     """Choose each constant of STUDIES on one user, score it on another, every ordered pair of users.
 
     Returns {"users", "probes", "studies": [{"algorithm", "constant", "grid", "train_scores": {user: [...]},
@@ -115,7 +117,7 @@ def leave_one_user_out(dataset_dir: str | os.PathLike, algorithms: list[str] | N
     (percent). A study needs two users with tasks; with fewer, "directions" is empty.
     """
     tasks = find_tasks(dataset_dir)
-    studies = [s for s in STUDIES if algorithms is None or s[0] in algorithms]
+    studies = [s for s in studies if algorithms is None or s[0] in algorithms]
     jobs = [(t, studies, tuple(probes)) for t in tasks]
     rows: list[dict] = []
     if workers <= 1:
@@ -137,8 +139,9 @@ def leave_one_user_out(dataset_dir: str | os.PathLike, algorithms: list[str] | N
 
         groups = {u: sorted({r["group"] for r in sel if r["user"] == u}) for u in users}
         train = {u: [min(min(cell(u, v, p, g)) for p in probes for g in groups[u]) for v in grid] for u in users}
+        best_all = [v for i, v in enumerate(grid) if all(train[u][i] >= max(train[u]) for u in users)]
         study = {"algorithm": alg, "constant": name, "fixed": fixed, "grid": list(grid), "train_scores": train,
-                 "directions": []}
+                 "best_on_all_users": best_all, "directions": []}
         for tr in users:
             chosen = plateau_centre(list(grid), train[tr])
             for te in users:
@@ -166,4 +169,5 @@ def format_loo(doc: dict) -> str:
             cells = "; ".join(f"{p} " + ", ".join(f"{g} {c['precision']:.1f} / {c['recall']:.1f}" for g, c in gs.items())
                               for p, gs in d["test_groups"].items())
             lines.append(f"  chosen on {d['train']}: {d['chosen']:g} -> {d['test']}: {cells}")
+        lines.append("  best on every user: " + (", ".join(f"{v:g}" for v in s["best_on_all_users"]) or "none"))
     return "\n".join(lines)
