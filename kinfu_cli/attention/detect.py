@@ -39,7 +39,7 @@ def detector_params(*, poi_threshold: float | None = None, neighbours: int | Non
                     selection: str | None = None, time_scale: str | float | None = None,
                     reg_space: float | None = None, reg_time: float | None = None, saliency: str | None = None,
                     threshold_mode: str | None = None, resample: int | None = None,
-                    noise_floor: float | None = None, literal: bool = False, zvc_half_width: int | None = None,
+                    noise_floor: float | None = None, merge_distance: float | None = None, literal: bool = False, zvc_half_width: int | None = None,
                     zvc_threshold: float | None = None, zvc_r1: float | None = None, zvc_r2: float | None = None,
                     zvc_rule: str | None = None, zvc_relative: float | None = None,
                     radius: float | None = None) -> dict[str, dict]:
@@ -53,7 +53,8 @@ def detector_params(*, poi_threshold: float | None = None, neighbours: int | Non
     given = {"poi_threshold": poi_threshold, "neighbours": neighbours, "bic_threshold": bic_threshold,
              "max_components": max_components, "selection": selection, "reg_space": reg_space,
              "reg_time": reg_time, "saliency": saliency, "threshold_mode": threshold_mode, "resample": resample,
-             "noise_floor": noise_floor, "time_scale": time_scale, "radius": radius}
+             "noise_floor": noise_floor, "merge_distance": merge_distance, "time_scale": time_scale,
+             "radius": radius}
     gmm_as = {k: v for k, v in given.items() if v is not None}
     zvc = {k: v for k, v in {"half_width": zvc_half_width, "threshold": zvc_threshold, "r1": zvc_r1, "r2": zvc_r2,
                              "rule": zvc_rule, "relative": zvc_relative, "radius": radius}.items()

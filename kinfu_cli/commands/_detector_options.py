@@ -14,7 +14,8 @@ from kinfu_cli.core.pois import DEFAULT_RADIUS
 
 #: Python names of the options `detector_options` adds.
 DETECTOR_OPTIONS = ("poi_threshold", "neighbours", "bic_threshold", "max_components", "selection", "time_scale",
-                    "reg_space", "reg_time", "saliency", "threshold_mode", "resample", "noise_floor", "literal",
+                    "reg_space", "reg_time", "saliency", "threshold_mode", "resample", "noise_floor",
+                    "merge_distance", "literal",
                     "zvc_half_width", "zvc_threshold", "zvc_r1", "zvc_r2", "zvc_rule", "zvc_relative",
                     "radius")
 
@@ -57,9 +58,12 @@ def detector_options(f):
                      help="GMM-AS: resample each trajectory to this many samples (0 = raw samples)."),
         click.option("--noise-floor", default=1.0, show_default=True, type=float,
                      help="GMM-AS: raise the floor to this x the estimated sensor noise, denoising first (0 = off)."),
+        click.option("--merge-distance", default=0.05, show_default=True, type=float,
+                     help="GMM-AS: consecutive POI Gaussians closer than this (m) are one POI (one long pause "
+                          "split in two); 0 = one POI per Gaussian as in the paper."),
         click.option("--literal", is_flag=True,
                      help="The paper read literally: GMM-AS on raw samples, t in s, 1 mm floor, eq. 13 on the "
-                          "spatial covariance, POITh 2.5, sum / 2 Lambda; ZVC's ratio rule with ZVCTh 1.72. Overrides those options."),
+                          "spatial covariance, POITh 2.5, sum / 2 Lambda, no merging; ZVC's ratio rule with ZVCTh 1.72. Overrides those options."),
         click.option("--zvc-half-width", default=4, show_default=True, type=int, help="ZVC B (filter width 2B+1)."),
         click.option("--zvc-rule", default=None, type=click.Choice(["relative", "ratio"]),
                      help="ZVC slow-sample rule: 'relative' (local speed < --zvc-relative x the task's 95th "

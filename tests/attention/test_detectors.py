@@ -185,7 +185,7 @@ def test_cli_poi_zvc_json_stdout(pnp_traj, tmp_path):
     assert res.exit_code == 0, res.output
     doc = json.loads(res.output)
     assert doc["algorithm"] == "zvc" and all(p["gaussian"] is None for p in doc["pois"])
-    assert doc["parameters"]["rule"] == "relative" and doc["parameters"]["relative"] == 0.25
+    assert doc["parameters"]["rule"] == "relative" and doc["parameters"]["relative"] == 0.28
     assert doc["parameters"]["half_width"] == 4
 
 
@@ -250,8 +250,9 @@ def test_tracking_gap_is_not_taken_for_dwell():
     to_gt, to_poi = _dists(det.pois_, changes)
     assert len(det.pois_) == len(ref.pois_) == 1
     assert to_gt.max() < 0.05 and to_poi.max() < 0.05
-    # POI time on the trajectory's clock (after the gap: shifted by the 3 s)
-    assert changes[0].t_start + 3.0 - 0.5 <= det.pois_[0].time <= changes[0].t_end + 3.0 + 0.5
+    # POI times on the trajectory's clock (after the gap: shifted by the 3 s)
+    for p in det.pois_:
+        assert changes[0].t_start + 3.0 - 0.5 <= p.time <= changes[0].t_end + 3.0 + 0.5
 
 
 def test_zvc_rule_follows_the_threshold_and_checks_its_parameters():
@@ -302,3 +303,16 @@ def test_cli_zvc_threshold_selects_the_ratio_rule_and_bad_relative_names_its_fla
     res = CliRunner().invoke(cli, ["poi", str(src), "--algorithm", "zvc", "--zvc-relative", "2", "-o",
                                    str(tmp_path / "y.json"), "--quiet"])
     assert res.exit_code == 2 and "--zvc-relative" in res.output and "Traceback" not in res.output
+
+
+def test_a_long_pause_split_over_two_gaussians_is_one_poi():
+    """The synthetic pause fills 45 % of the task: under the 0.03 x duration time floor it takes two
+    consecutive Gaussians; merge_distance makes them one POI at the change (0 keeps both, the paper)."""
+    traj, changes = synth_hand_trajectory(random_task("placement", seed=3), seed=3)
+    split = GmmActivitySaliency(merge_distance=0.0).fit(traj)
+    merged = GmmActivitySaliency().fit(traj)
+    assert len(split.pois_) == 2 and len(merged.pois_) == 1
+    assert merged.pois_[0].extra["merged_components"] == [p.extra["component"] for p in split.pois_]
+    to_gt, _ = _dists(merged.pois_, changes)
+    assert to_gt.max() < 0.01
+    assert changes[0].t_start <= merged.pois_[0].time <= changes[0].t_end
