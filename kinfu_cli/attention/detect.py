@@ -39,25 +39,29 @@ def detector_params(*, poi_threshold: float | None = None, neighbours: int | Non
                     selection: str | None = None, time_scale: str | float | None = None,
                     reg_space: float | None = None, reg_time: float | None = None, saliency: str | None = None,
                     threshold_mode: str | None = None, resample: int | None = None,
-                    noise_floor: float | None = None, literal: bool = False, zvc_half_width: int | None = None,
+                    noise_floor: float | None = None, merge_distance: float | None = None, literal: bool = False, zvc_half_width: int | None = None,
                     zvc_threshold: float | None = None, zvc_r1: float | None = None, zvc_r2: float | None = None,
+                    zvc_rule: str | None = None, zvc_relative: float | None = None,
                     radius: float | None = None) -> dict[str, dict]:
     """{"gmm-as": {...}, "zvc": {...}}: constructor keywords of both detectors from one flat set.
 
     The names are the GmmActivitySaliency ones, ZVC's with a `zvc_` prefix; `radius` goes to both.
     None leaves the detector's default. `literal` overrides with the paper read literally
-    (GmmActivitySaliency.LITERAL, ZVCTh = PAPER_THRESHOLD).
+    (GmmActivitySaliency.LITERAL; ZVC's ratio rule with ZVCTh = PAPER_THRESHOLD). A zvc_threshold without
+    zvc_rule selects ZVC's ratio rule (the paper's absolute threshold).
     """
     given = {"poi_threshold": poi_threshold, "neighbours": neighbours, "bic_threshold": bic_threshold,
              "max_components": max_components, "selection": selection, "reg_space": reg_space,
              "reg_time": reg_time, "saliency": saliency, "threshold_mode": threshold_mode, "resample": resample,
-             "noise_floor": noise_floor, "time_scale": time_scale, "radius": radius}
+             "noise_floor": noise_floor, "merge_distance": merge_distance, "time_scale": time_scale,
+             "radius": radius}
     gmm_as = {k: v for k, v in given.items() if v is not None}
     zvc = {k: v for k, v in {"half_width": zvc_half_width, "threshold": zvc_threshold, "r1": zvc_r1, "r2": zvc_r2,
-                             "radius": radius}.items() if v is not None}
+                             "rule": zvc_rule, "relative": zvc_relative, "radius": radius}.items()
+           if v is not None}
     if literal:
         gmm_as.update(GmmActivitySaliency.LITERAL)
-        zvc["threshold"] = PAPER_THRESHOLD
+        zvc.update(threshold=PAPER_THRESHOLD, rule="ratio")
     return {"gmm-as": gmm_as, "zvc": zvc}
 
 

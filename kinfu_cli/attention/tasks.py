@@ -3,7 +3,7 @@
 Monica et al. RAS 2016 §4.4/§6: "Task trajectories are automatically recorded when the user hand is
 inside the bounding box of the workspace ... When the hand exits the bounding box, the trajectory is
 analyzed." GMM-AS normalises time by the task duration, resamples every task to a fixed number of
-samples and floors the time std at 0.1 × duration (attention/gmm_as.py), so it must see ONE task at
+samples and floors the time std at a share of the duration (attention/gmm_as.py), so it must see ONE task at
 a time: fed minutes of stream with several actions, the actions blur into a few Gaussians.
 
 A task is a maximal run of samples inside the workspace box (axis-aligned, the trajectory's frame,

@@ -14,8 +14,10 @@ from kinfu_cli.core.pois import DEFAULT_RADIUS
 
 #: Python names of the options `detector_options` adds.
 DETECTOR_OPTIONS = ("poi_threshold", "neighbours", "bic_threshold", "max_components", "selection", "time_scale",
-                    "reg_space", "reg_time", "saliency", "threshold_mode", "resample", "noise_floor", "literal",
-                    "zvc_half_width", "zvc_threshold", "zvc_r1", "zvc_r2", "radius")
+                    "reg_space", "reg_time", "saliency", "threshold_mode", "resample", "noise_floor",
+                    "merge_distance", "literal",
+                    "zvc_half_width", "zvc_threshold", "zvc_r1", "zvc_r2", "zvc_rule", "zvc_relative",
+                    "radius")
 
 
 def _time_scale(value: str) -> str | float:
@@ -43,7 +45,7 @@ def detector_options(f):
                      help="GMM-AS 4th coordinate: 'duration' (t normalised to 0..1) or units per second (1 = s)."),
         click.option("--reg-space", default=0.005, show_default=True, type=float,
                      help="GMM-AS spatial std floor (m) added to covariances."),
-        click.option("--reg-time", default=0.1, show_default=True, type=float,
+        click.option("--reg-time", default=0.03, show_default=True, type=float,
                      help="GMM-AS time std floor, in --time-scale units."),
         click.option("--saliency", default="precision", show_default=True,
                      type=click.Choice(["precision", "literal", "weight", "conditional"]),
@@ -56,12 +58,23 @@ def detector_options(f):
                      help="GMM-AS: resample each trajectory to this many samples (0 = raw samples)."),
         click.option("--noise-floor", default=1.0, show_default=True, type=float,
                      help="GMM-AS: raise the floor to this x the estimated sensor noise, denoising first (0 = off)."),
+        click.option("--merge-distance", default=0.05, show_default=True, type=float,
+                     help="GMM-AS: consecutive POI Gaussians closer than this (m) are one POI (one long pause "
+                          "split in two); 0 = one POI per Gaussian as in the paper."),
         click.option("--literal", is_flag=True,
                      help="The paper read literally: GMM-AS on raw samples, t in s, 1 mm floor, eq. 13 on the "
-                          "spatial covariance, POITh 2.5, sum / 2 Lambda; ZVC with ZVCTh 1.72. Overrides those options."),
+                          "spatial covariance, POITh 2.5, sum / 2 Lambda, no merging; ZVC's ratio rule with ZVCTh 1.72. Overrides those options."),
         click.option("--zvc-half-width", default=4, show_default=True, type=int, help="ZVC B (filter width 2B+1)."),
-        click.option("--zvc-threshold", default=1.5, show_default=True, type=float,
-                     help="ZVC ZVCTh (paper 1.72; 1.5 re-calibrated on users 1+4, see attention/zvc.py)."),
+        click.option("--zvc-rule", default=None, type=click.Choice(["relative", "ratio"]),
+                     help="ZVC slow-sample rule: 'relative' (local speed < --zvc-relative x the task's 95th "
+                          "percentile speed) or 'ratio' (the paper's eq. 15 with --zvc-threshold) [default: "
+                          "relative, or ratio when --zvc-threshold is given]."),
+        click.option("--zvc-relative", default=0.28, show_default=True, type=float,
+                     help="ZVC relative rule: fraction of the task's 95th percentile speed (chosen by "
+                          "leave-one-user-out, see attention/zvc.py)."),
+        click.option("--zvc-threshold", default=None, type=float,
+                     help="ZVC ZVCTh of the paper's absolute ratio rule; giving it selects that rule (paper 1.72; "
+                          "1.5 re-calibrated on users 1+4) [default: 1.5 under --zvc-rule ratio]."),
         click.option("--zvc-r1", default=0.10, show_default=True, type=float, help="ZVC inner radius r1 (m)."),
         click.option("--zvc-r2", default=0.25, show_default=True, type=float, help="ZVC outer radius r2 (m)."),
         click.option("--radius", default=DEFAULT_RADIUS, show_default=True, type=float,

@@ -47,7 +47,8 @@ def command(source, algorithm, hand_topic, hand_frame, world_frame, workspace, s
 
     GMM-AS (Monica et al. 2016, Alg. 3) fits a Gaussian mixture on (x, y, z, t), picks the number of
     Gaussians by BIC, and marks the Gaussians much more salient than their neighbours; ZVC marks
-    where the hand is much slower locally than around it. Input: a Polhemus `.traj` file or a
+    where the hand's local speed falls below a share of the task's own transport speed (--zvc-rule
+    relative, default) or is much slower than around it (the paper's ratio rule, --zvc-threshold). Input: a Polhemus `.traj` file or a
     recording (MCAP, ROS 1 .bag, ROS 2 folder) with a hand pose topic or TF frame. Writes pois.json:
     position, time, saliency, region radius and (GMM-AS) the Gaussian of each POI.
 

@@ -71,8 +71,8 @@ def plot_pois(path: str | os.PathLike, traj: Trajectory, detector, title: str = 
         ax.plot(q[:, 0], q[:, 1], q[:, 2], color="0.3", lw=0.8)
         ax.scatter(q[slow, 0], q[slow, 1], q[slow, 2], s=4, color="tab:orange", label="slow")
         t = traj.t - traj.t[0]
-        ax2.plot(t, detector.speed_r1_ * detector.threshold, label="v(r1) x ZVCTh")
-        ax2.plot(t, detector.speed_r2_, label="v(r2)")
+        ax2.plot(t, detector.speed_r1_, label="v(r1)")
+        ax2.plot(t, detector.slow_limit_, label=f"slow below ({detector.rule_} rule)")
         ax2.fill_between(t, 0, np.where(slow, detector.speed_r2_.max(), 0), color="tab:orange", alpha=0.2)
         ax2.set_xlabel("time (s)")
         ax2.set_ylabel("mean speed (m/s)")

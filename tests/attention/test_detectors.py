@@ -136,7 +136,7 @@ def test_detector_params_split_one_flat_set_between_the_detectors():
     assert params == {"gmm-as": {"poi_threshold": 2.0, "radius": 0.3},
                       "zvc": {"r1": 0.05, "threshold": 1.6, "radius": 0.3}}
     literal = detector_params(poi_threshold=2.0, zvc_threshold=1.6, literal=True)
-    assert literal["gmm-as"] == GmmActivitySaliency.LITERAL and literal["zvc"] == {"threshold": 1.72}
+    assert literal["gmm-as"] == GmmActivitySaliency.LITERAL and literal["zvc"] == {"threshold": 1.72, "rule": "ratio"}
     gmm, zvc = make_detector("gmm-as", params["gmm-as"]), make_detector("zvc", params["zvc"])
     assert gmm.get_params()["radius"] == zvc.radius == 0.3 and zvc.r1 == 0.05
     assert make_detector("gmm-as").get_params() == GmmActivitySaliency().get_params()
@@ -185,7 +185,8 @@ def test_cli_poi_zvc_json_stdout(pnp_traj, tmp_path):
     assert res.exit_code == 0, res.output
     doc = json.loads(res.output)
     assert doc["algorithm"] == "zvc" and all(p["gaussian"] is None for p in doc["pois"])
-    assert doc["parameters"]["threshold"] == 1.5 and doc["parameters"]["half_width"] == 4
+    assert doc["parameters"]["rule"] == "relative" and doc["parameters"]["relative"] == 0.28
+    assert doc["parameters"]["half_width"] == 4
 
 
 @pytest.mark.parametrize("args, expect", [
@@ -249,5 +250,69 @@ def test_tracking_gap_is_not_taken_for_dwell():
     to_gt, to_poi = _dists(det.pois_, changes)
     assert len(det.pois_) == len(ref.pois_) == 1
     assert to_gt.max() < 0.05 and to_poi.max() < 0.05
-    # POI time on the trajectory's clock (after the gap: shifted by the 3 s)
-    assert changes[0].t_start + 3.0 - 0.5 <= det.pois_[0].time <= changes[0].t_end + 3.0 + 0.5
+    # POI times on the trajectory's clock (after the gap: shifted by the 3 s)
+    for p in det.pois_:
+        assert changes[0].t_start + 3.0 - 0.5 <= p.time <= changes[0].t_end + 3.0 + 0.5
+
+
+def test_zvc_rule_follows_the_threshold_and_checks_its_parameters():
+    assert ZeroVelocityCrossing().rule_ == "relative"
+    assert ZeroVelocityCrossing(threshold=1.72).get_params()["rule"] == "ratio"  # the paper's absolute rule
+    assert ZeroVelocityCrossing(rule="ratio").threshold_ == 1.5
+    assert ZeroVelocityCrossing(rule="relative", threshold=1.72).rule_ == "relative"
+    traj, _ = synth_hand_trajectory(random_task("placement", seed=0), seed=0)
+    with pytest.raises(ConfigError, match="^zvc_rule: expected one of relative, ratio"):
+        ZeroVelocityCrossing(rule="fast").fit(traj)
+    with pytest.raises(ConfigError, match="^zvc_relative"):
+        ZeroVelocityCrossing(relative=1.5).fit(traj)
+
+
+def test_zvc_relative_rule_is_blind_to_the_person_speed_and_keeps_quick_grasps():
+    """The relative rule compares the local speed with the task's own: the same path performed faster
+    gives the same slow samples, and pauses played 4x shorter are still found (the ratio rule at the
+    paper's ZVCTh loses them)."""
+    from kinfu_cli.evaluation.poi_loo import quicken_pauses
+
+    for seed in range(3):
+        traj, changes = synth_hand_trajectory(random_task("pick-and-place", seed=seed), seed=seed)
+        ref = np.array([p.position for p in ZeroVelocityCrossing().fit(traj).pois_])
+        fast = np.array([p.position for p in ZeroVelocityCrossing().fit(resample_speed(traj, 2.0)).pois_])
+        assert fast.shape == ref.shape and np.abs(fast - ref).max() < 0.03
+        quick = quicken_pauses(traj, factor=3.0)
+        assert quick.duration < traj.duration
+        to_gt, _ = _dists(ZeroVelocityCrossing().fit(quick).pois_, changes)
+        assert np.all(to_gt < 0.05), f"seed {seed}: quick grasps missed, nearest POI {to_gt}"
+
+
+def test_zvc_slow_limit_is_what_the_mask_compares_with():
+    traj, _ = synth_hand_trajectory(random_task("removal", seed=1), seed=1)
+    for det in (ZeroVelocityCrossing().fit(traj), ZeroVelocityCrossing(threshold=1.5).fit(traj)):
+        np.testing.assert_array_equal(det.slow_, det.speed_r1_ < det.slow_limit_)
+    rel = ZeroVelocityCrossing().fit(traj)
+    assert np.ptp(rel.slow_limit_) == 0.0  # one limit per task: relative x the task's 95th percentile speed
+
+
+def test_cli_zvc_threshold_selects_the_ratio_rule_and_bad_relative_names_its_flag(pnp_traj, tmp_path):
+    src, _ = pnp_traj
+    out = tmp_path / "z.json"
+    res = CliRunner().invoke(cli, ["poi", str(src), "--algorithm", "zvc", "--zvc-threshold", "1.72", "-o", str(out),
+                                   "--quiet"])
+    assert res.exit_code == 0, res.output
+    params = json.loads(out.read_text())["parameters"]
+    assert params["rule"] == "ratio" and params["threshold"] == 1.72
+    res = CliRunner().invoke(cli, ["poi", str(src), "--algorithm", "zvc", "--zvc-relative", "2", "-o",
+                                   str(tmp_path / "y.json"), "--quiet"])
+    assert res.exit_code == 2 and "--zvc-relative" in res.output and "Traceback" not in res.output
+
+
+def test_a_long_pause_split_over_two_gaussians_is_one_poi():
+    """The synthetic pause fills 45 % of the task: under the 0.03 x duration time floor it takes two
+    consecutive Gaussians; merge_distance makes them one POI at the change (0 keeps both, the paper)."""
+    traj, changes = synth_hand_trajectory(random_task("placement", seed=3), seed=3)
+    split = GmmActivitySaliency(merge_distance=0.0).fit(traj)
+    merged = GmmActivitySaliency().fit(traj)
+    assert len(split.pois_) == 2 and len(merged.pois_) == 1
+    assert merged.pois_[0].extra["merged_components"] == [p.extra["component"] for p in split.pois_]
+    to_gt, _ = _dists(merged.pois_, changes)
+    assert to_gt.max() < 0.01
+    assert changes[0].t_start <= merged.pois_[0].time <= changes[0].t_end

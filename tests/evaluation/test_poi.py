@@ -155,3 +155,53 @@ def test_real_subset_regression(shared_data):
             gt = read_ground_truth(t.res_path)
             far += int((np.linalg.norm(p[:, None] - gt[None], axis=2).min(axis=0) >= 0.2).sum())
     assert far == 5
+
+
+def test_task_user_and_the_in_sample_statement(synth_dataset):
+    from kinfu_cli.evaluation.poi import DEFAULTS_CHOSEN_ON, format_sample, sample_statement, task_user
+
+    assert task_user("user4_b_jug3.traj") == "user4" and task_user("run7.traj") == "unknown"
+    assert DEFAULTS_CHOSEN_ON == ("user1", "user4")
+    rows = [{"user": "user1", "group": "g", "task": "a"}, {"user": "user1", "group": "g", "task": "a"},
+            {"user": "user2", "group": "g", "task": "b"}]
+    s = sample_statement(rows)
+    assert s["users_scored"] == {"user1": 1, "user2": 1}
+    assert s["in_sample"] == ["user1"] and s["out_of_sample"] == ["user2"]
+    assert "in-sample: user1; out-of-sample: user2" in format_sample(s)
+    assert "ALL IN-SAMPLE" in format_sample(sample_statement(rows[:1]))
+    res = CliRunner().invoke(cli, ["eval", "poi", str(synth_dataset), "--algorithm", "zvc", "--workers", "1"])
+    assert res.exit_code == 0 and "user9 (6 tasks)" in res.output and "all out-of-sample" in res.output
+    res = CliRunner().invoke(cli, ["eval", "poi", str(synth_dataset), "--algorithm", "zvc", "--workers", "1", "--json"])
+    assert json.loads(res.output)["sample"]["out_of_sample"] == ["user9"]
+
+
+def test_plateau_centre_is_far_from_both_cliffs():
+    from kinfu_cli.evaluation.poi_loo import plateau_centre
+
+    v = [1, 2, 3, 4, 5, 6, 7]
+    assert plateau_centre(v, [90, 99, 99.8, 100, 99.9, 97, 100]) == 4  # the run 3..5 beats the lone 7
+    assert plateau_centre(v, [100] * 7) == 4
+    assert plateau_centre(v[:2], [100, 100]) == 1
+
+
+def test_leave_one_user_out_chooses_on_one_user_and_scores_the_other(tmp_path):
+    from kinfu_cli.evaluation import poi_loo
+
+    for user, seeds in (("user7", (0, 1)), ("user8", (2, 3))):
+        for seed in seeds:
+            traj, changes = synth_hand_trajectory(random_task("pick-and-place", seed=seed), seed=seed)
+            p = tmp_path / "pick_and_place" / f"{user}_obj{seed}.traj"
+            p.parent.mkdir(parents=True, exist_ok=True)
+            write_polhemus(p, traj)
+            (p.parent / (p.name + ".res")).write_text(
+                "".join(f"{c.position[0]} {c.position[1]} {c.position[2]}\n" for c in changes))
+    doc = poi_loo.leave_one_user_out(tmp_path, ["zvc"])
+    assert doc["users"] == ["user7", "user8"] and doc["probes"] == ["none", "quick-grasp"]
+    rel = next(s for s in doc["studies"] if s["constant"] == "relative")
+    assert [(d["train"], d["test"]) for d in rel["directions"]] == [("user7", "user8"), ("user8", "user7")]
+    for d in rel["directions"]:
+        assert d["chosen"] in rel["grid"]
+        assert d["chosen"] == poi_loo.plateau_centre(rel["grid"], rel["train_scores"][d["train"]])
+        # clean synthetic pick-and-place: the chosen value finds both actions of the other user's tasks
+        assert d["test_groups"]["none"]["pick_and_place"]["recall"] == 100.0
+    assert "chosen on user7" in poi_loo.format_loo(doc)
