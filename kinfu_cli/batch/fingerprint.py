@@ -21,10 +21,13 @@ def _stats(path: Path) -> list:
     return [[path.name, st.st_size, st.st_mtime_ns]]
 
 
-def input_fingerprint(stage: str, inputs: Iterable[Path], options: Mapping) -> str:
-    """sha256 of the stage name, the inputs' stat (size + mtime), the options and the kinfu version."""
+def input_fingerprint(stage: str, inputs: Iterable[tuple[str, Path]], options: Mapping) -> str:
+    """sha256 of the stage name, the inputs' stat (size + mtime), the options and the kinfu version.
+
+    inputs: (label, path) pairs; the label (not the path) enters the hash, so an output folder moved or
+    copied whole (stat kept) is still current."""
     doc = {"stage": stage, "version": __version__, "options": dict(options),
-           "inputs": [[str(p), _stats(Path(p))] for p in inputs]}
+           "inputs": [[label, _stats(Path(p))] for label, p in inputs]}
     return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()
 
 

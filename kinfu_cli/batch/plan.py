@@ -110,7 +110,7 @@ def _default_output(source: Path, path: Path) -> Path:
     """The recording's path relative to the plan without its suffix (sessions/day1.mcap -> sessions/day1);
     a recording outside the plan's folder: its name without suffix."""
     try:
-        rel = path.resolve().relative_to(source.parent.resolve())
+        rel = Path(os.path.abspath(path)).relative_to(os.path.abspath(source.parent))
     except ValueError:
         rel = Path(path.name)
     return rel.with_suffix("") if rel.suffix else rel

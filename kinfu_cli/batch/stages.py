@@ -37,8 +37,9 @@ class StageSpec:
     check: Callable[[Path, Path, Mapping], None]
     run: Callable[[Path, Path, Mapping, bool], StageRun]
 
-    def input_paths(self, recording: Path, outdir: Path) -> list[Path]:
-        return [recording if p == RECORDING else outdir / p for p in self.inputs]
+    def input_paths(self, recording: Path, outdir: Path) -> list[tuple[str, Path]]:
+        """(label, path) of each input: RECORDING is the recording, the others are in its output folder."""
+        return [(p, recording if p == RECORDING else outdir / p) for p in self.inputs]
 
 
 def stage_order(table: Mapping[str, StageSpec], wanted: list[str]) -> list[str]:
