@@ -14,6 +14,7 @@ import logging
 import os
 import time
 import uuid
+import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -72,8 +73,11 @@ def connect(scheduler: str | None = None, workers: int | None = None) -> Engine:
     n = default_workers() if workers is None else workers
     if n < 1:
         raise ConfigError(f"expected at least 1, got {n}", parameter="workers")
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
-                           silence_logs=logging.ERROR, env={"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"})
+    with warnings.catch_warnings():  # "port 8787 in use" when another cluster runs: no chatter on stderr
+        warnings.simplefilter("ignore")
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               dashboard_address=None, silence_logs=logging.ERROR,
+                               env={"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"})
     return Engine(Client(cluster, set_as_default=False), cluster, f"local ({n} workers)")
 
 

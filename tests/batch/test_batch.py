@@ -79,8 +79,8 @@ def _statuses(doc: dict) -> dict[str, dict[str, str]]:
 
 def _comparable(doc: dict, root: Path) -> dict:
     """The manifest without timings, fingerprints, output stats, engine, and with paths relative to root."""
-    recs = [{**r, "output": str(Path(r["output"]).relative_to(root)),
-             "stages": {s: {k: v for k, v in e.items() if k not in _VOLATILE} for s, e in r["stages"].items()}}
+    doc = json.loads(json.dumps(doc).replace(str(root), "ROOT"))
+    recs = [{**r, "stages": {s: {k: v for k, v in e.items() if k not in _VOLATILE} for s, e in r["stages"].items()}}
             for r in doc["recordings"]]
     return {**{k: v for k, v in doc.items() if k not in ("engine", "plan", "output")}, "recordings": recs}
 
