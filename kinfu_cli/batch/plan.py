@@ -95,7 +95,7 @@ def _normalise_options(source: Path, where: str, value, table: Mapping[str, Stag
 
 def _expand(source: Path, where: str, pattern: str) -> list[Path]:
     base = source.parent
-    full = pattern if os.path.isabs(pattern) else str(base / pattern)
+    full = os.path.normpath(pattern if os.path.isabs(pattern) else base / pattern)
     if glob.has_magic(pattern):
         found = sorted(Path(p) for p in glob.glob(full, recursive=True))
         if not found:
@@ -174,7 +174,7 @@ def load_plan(source: str | os.PathLike, table: Mapping[str, StageSpec], output:
         if not isinstance(doc.get("output"), str) or not doc["output"].strip():
             raise _fail(source, "output", "no output folder: give 'output' in the plan or on the command line")
         out = Path(doc["output"])
-        out = out if out.is_absolute() else source.parent / out
+        out = out if out.is_absolute() else Path(os.path.normpath(source.parent / out))
     else:
         out = Path(output)
     common = _normalise_options(source, "options", doc.get("options"), table)
