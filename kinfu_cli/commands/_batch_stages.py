@@ -22,13 +22,13 @@ from kinfu_cli.batch.stages import RECORDING, StageRun, StageSpec
 from kinfu_cli.commands._options import PARAMETER_FLAGS
 from kinfu_cli.core.errors import ConfigError, KinfuError
 
-# stage -> (module of the command, options batch sets itself, option whose `true` means "a PNG beside the
-# outputs" (poi and nbv take a path), that PNG's name)
+# stage -> (module of the command, options batch sets itself, options taking an output file whose `true` in the
+# plan means "this file in the recording's output folder"). A viewer output option (a file) goes in the last.
 _COMMANDS = {
-    "fuse": ("fuse", {"output", "json", "quiet", "force", "init", "clear-pois"}, None),
-    "poi": ("poi", {"output", "json", "quiet", "force"}, "pois.png"),
-    "nbv": ("nbv", {"output", "json", "quiet", "force", "pois", "mode"}, "views.png"),
-    "segment": ("segment", {"output", "json", "quiet", "force"}, None),
+    "fuse": ("fuse", {"output", "json", "quiet", "force", "init", "clear-pois"}, {}),
+    "poi": ("poi", {"output", "json", "quiet", "force"}, {"plot": "pois.png"}),
+    "nbv": ("nbv", {"output", "json", "quiet", "force", "pois", "mode"}, {"plot": "views.png"}),
+    "segment": ("segment", {"output", "json", "quiet", "force"}, {}),
 }
 
 
@@ -50,7 +50,7 @@ def _base_args(stage: str, recording: Path, outdir: Path) -> list[str]:
 def _option_args(stage: str, outdir: Path, options: dict) -> list[str]:
     """Plan options ({"voxel-size": 0.02, "bilateral": true, "size": [2, 2, 1]}) as the command's arguments."""
     cmd = _command(stage)
-    _, reserved, png = _COMMANDS[stage]
+    _, reserved, files = _COMMANDS[stage]
     by_flag = {o[2:]: p for p in cmd.params if isinstance(p, click.Option) for o in p.opts if o.startswith("--")}
     args: list[str] = []
     for key, value in options.items():
@@ -60,8 +60,10 @@ def _option_args(stage: str, outdir: Path, options: dict) -> list[str]:
         if param is None:
             raise ConfigError(f"unknown option {key!r} of kinfu {stage}")
         flag = f"--{key}"
-        if key == "plot" and png is not None and isinstance(value, bool):
-            args += [flag, str(outdir / png)] if value else []
+        if key in files:  # one file per recording, in its folder: a path here would be shared by all
+            if not isinstance(value, bool):
+                raise ConfigError(f"option {key!r}: expected true (writes {files[key]}) or false, got {value!r}")
+            args += [flag, str(outdir / files[key])] if value else []
         elif param.is_flag:
             if not isinstance(value, bool):
                 raise ConfigError(f"option {key!r}: expected true or false, got {value!r}")
