@@ -95,3 +95,19 @@ def test_unreadable_plans(folder):
                                                                     '["sessions/day1.mcap"]', "no output folder")):
         with pytest.raises(ConfigError, match=needle):
             load_plan(_plan(folder, text, name), TABLE)
+
+
+def test_the_example_plan_is_valid():
+    """examples/batch_plan.toml names the sample recordings and options every command accepts."""
+    from kinfu_cli.commands._batch_stages import batch_stages
+
+    table = batch_stages()
+    example = Path(__file__).resolve().parents[2] / "examples" / "batch_plan.toml"
+    plan = load_plan(example, table)
+    assert [r.output.name for r in plan.recordings] == ["tabletop_mcap", "tabletop_bag", "tabletop_ros2"]
+    assert plan.stages == ["fuse", "poi", "nbv", "segment"]
+    for rec in plan.recordings:
+        assert rec.path.exists()
+        for s in plan.stages:
+            table[s].check(rec.path, rec.output, rec.stage_options(s))
+    assert plan.recordings[2].stage_options("segment") == {"plot": True, "seed": 1}
