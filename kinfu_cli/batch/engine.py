@@ -73,7 +73,10 @@ def connect(scheduler: str | None = None, workers: int | None = None) -> Engine:
     n = default_workers() if workers is None else workers
     if n < 1:
         raise ConfigError(f"expected at least 1, got {n}", parameter="workers")
-    with warnings.catch_warnings():  # "port 8787 in use" when another cluster runs: no chatter on stderr
+    # no chatter on stderr: "port 8787 in use" when another cluster runs, and multiprocessing's resource
+    # tracker (a process of its own, hence the environment) counting the workers' semaphores after a Ctrl-C
+    os.environ.setdefault("PYTHONWARNINGS", "ignore:resource_tracker:UserWarning")
+    with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
                                dashboard_address=None, silence_logs=logging.ERROR,
