@@ -11,6 +11,7 @@ from kinfu_cli.batch.engine import check_before_work, connect, run_plan
 from kinfu_cli.batch.manifest import MANIFEST_NAME
 from kinfu_cli.batch.plan import load_plan
 from kinfu_cli.commands._batch_stages import batch_stages
+from kinfu_cli.core.errors import ConfigError
 
 
 @click.command("batch", short_help="Run the stages of a plan over many recordings on Dask (resumable).")
@@ -55,6 +56,8 @@ def command(plan: Path, output: Path | None, workers: int | None, scheduler: str
       kinfu batch plan.yaml -o out/batch --workers 4
       kinfu batch plan.toml --scheduler tcp://10.0.0.5:8786
     """
+    if scheduler is not None and workers is not None:
+        raise ConfigError("--workers: sizes the local cluster; with --scheduler the cluster has its own workers")
     table = batch_stages()
     loaded = load_plan(plan, table, output)
     check_before_work(loaded, table, force)

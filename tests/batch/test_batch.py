@@ -188,6 +188,7 @@ def test_bad_input_is_one_line_before_any_work(recordings, tmp_path):
     plan.write_text(PLAN)
     one_line_error(_batch(plan, "--scheduler", "tcp://127.0.0.1:9"), "--scheduler", "cannot reach", "127.0.0.1:9")
     one_line_error(_batch(plan, "--scheduler", "localhost"), "--scheduler", "tcp://host")
+    one_line_error(_batch(plan, "--scheduler", "tcp://127.0.0.1:9", "--workers", "2"), "--workers", "--scheduler")
     assert not out.exists()
     # a file kinfu did not write where a stage would write is refused (unless --force)
     (out / "recs" / "a").mkdir(parents=True)
