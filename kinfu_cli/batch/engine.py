@@ -89,6 +89,19 @@ def _one_line(exc: BaseException) -> str:
     return " ".join(text.split()) or type(exc).__name__
 
 
+def _folder_lock(outdir: Path):
+    """One stage at a time writes into a recording's folder: the stages of one recording share its ownership
+    record (.kinfu-manifest.json), which is read, updated and replaced by each writer. Recordings still run
+    side by side. Outside a Dask worker (tests calling run_task directly) no lock is needed."""
+    try:
+        from distributed import Lock, get_worker
+
+        get_worker()
+    except (ImportError, ValueError):
+        return contextlib.nullcontext()
+    return Lock(f"kinfu-batch:{os.path.abspath(outdir)}")
+
+
 def run_task(spec: StageSpec, recording: Path, outdir: Path, options: Mapping, previous: dict | None,
              force: bool, *upstream: dict) -> dict:
     """One (recording, stage) on a worker: blocked when a needed stage did not finish, skipped when its
@@ -110,7 +123,8 @@ def run_task(spec: StageSpec, recording: Path, outdir: Path, options: Mapping, p
             import numba
 
             numba.set_num_threads(1)
-        done = spec.run(recording, outdir, options, force)
+        with _folder_lock(outdir):
+            done = spec.run(recording, outdir, options, force)
         stats = output_stats(outdir, spec.outputs)
         if stats is None:
             raise KinfuError(f"{spec.name} finished without writing {', '.join(spec.outputs)}")
@@ -156,11 +170,12 @@ def run_plan(plan: Plan, table: Mapping[str, StageSpec], engine: Engine, *, forc
             where[fut.key] = (i, s)
     from dask.distributed import as_completed
 
+    pending = list(futures.values())
     entries: dict = {}
     doc = build_manifest(plan, entries, engine.description)
     write_manifest(manifest_path, doc)
     try:
-        for fut in progress(as_completed(list(futures.values()), loop=engine.client.loop), total=len(futures), desc="batch",
+        for fut in progress(as_completed(pending, loop=engine.client.loop), total=len(pending), desc="batch",
                             quiet=quiet, unit="task"):
             i, s = where[fut.key]
             try:
@@ -169,6 +184,7 @@ def run_plan(plan: Plan, table: Mapping[str, StageSpec], engine: Engine, *, forc
                 entry = {"status": "failed", "seconds": 0.0, "error": _one_line(exc), "fingerprint": None,
                          "outputs": None, "numbers": {}, "warnings": [], "stage": s}
             entry.pop("stage", None)
+            fut.release()  # a finished task's result is not kept on a worker: a lost worker never re-runs it
             entries[(i, s)] = entry
             doc = build_manifest(plan, entries, engine.description)
             write_manifest(manifest_path, doc)
@@ -176,6 +192,6 @@ def run_plan(plan: Plan, table: Mapping[str, StageSpec], engine: Engine, *, forc
                 on_entry({"recording": str(plan.recordings[i].path), "stage": s, **entry})
     except BaseException:
         with contextlib.suppress(Exception):
-            engine.client.cancel(list(futures.values()))
+            engine.client.cancel(pending)
         raise
     return doc
