@@ -4,6 +4,7 @@ Run:  .venv/bin/python benchmarks/bench_fusion.py [--frames N] [--resolution 512
       [--placement scene|camera|both]
 Prints, per data set: frames/s of both (integration only, same process, same frames, the two volumes
 fed alternately frame by frame so that load from other processes hits both alike), the speed ratio,
+the cost of the colour mode filter (a third volume with color_mode "mode", fed alike: time mode / mean),
 and the share of voxels with the same ternary label (over the whole grid and over the voxels either
 volume observed). Then, in fresh subprocesses, the peak RSS (VmHWM) of a 512^3 volume with colour fusing
 the 7-Scenes frames and reading them out (labels, mesh, save), as it comes and with every block stored.
@@ -75,7 +76,7 @@ def _open3d_labels(vol, res):
     return labels.reshape(res, res, res)
 
 
-def compare(name, frames, res, size, trunc, max_depth, placement="scene"):
+def compare(name, frames, res, size, trunc, max_depth, placement="scene", with_mode=True):
     """Both volumes side by side, frame by frame (open3d, then ours, for each frame), so that load from
     other processes on a shared machine hits both alike. Integration calls only are timed.
 
@@ -90,12 +91,17 @@ def compare(name, frames, res, size, trunc, max_depth, placement="scene"):
         origin = frames[0][3][:3, 3] - 0.5 * size
     d, c, K, T = frames[0]
     # JIT warm-up (cached on disk after the first run) on a tiny grid
-    TernaryVolume(size=size, resolution=16, origin=origin, min_depth=0.0, max_depth=max_depth).integrate(d, K, T, c)
+    for cm in ("mean", "mode"):
+        TernaryVolume(size=size, resolution=16, origin=origin, min_depth=0.0, max_depth=max_depth,
+                      color_mode=cm).integrate(d, K, T, c)
     ref = o3d.pipelines.integration.UniformTSDFVolume(
         length=size, resolution=res, sdf_trunc=trunc,
         color_type=o3d.pipelines.integration.TSDFVolumeColorType.RGB8, origin=np.asarray(origin, float).reshape(3, 1))
     ours = TernaryVolume(size=size, resolution=res, origin=origin, truncation=trunc, min_depth=0.0,
                          max_depth=max_depth, color=True)
+    mode = TernaryVolume(size=size, resolution=res, origin=origin, truncation=trunc, min_depth=0.0,
+                         max_depth=max_depth, color=True, color_mode="mode") if with_mode else None
+    t_mode = 0.0
     h, w = d.shape
     t_ref = t_ours = 0.0
     stats = None
@@ -112,6 +118,10 @@ def compare(name, frames, res, size, trunc, max_depth, placement="scene"):
         t2 = time.perf_counter()
         t_ref += t1 - t0
         t_ours += t2 - t1
+        if mode is not None:
+            t3 = time.perf_counter()
+            mode.integrate(d, K, T, c)
+            t_mode += time.perf_counter() - t3
     fps_o3d, fps_ours = len(frames) / t_ref, len(frames) / t_ours
     lab_o3d = _open3d_labels(ref, res)
     del ref
@@ -130,6 +140,10 @@ def compare(name, frames, res, size, trunc, max_depth, placement="scene"):
         "blocks_stored": ours.n_blocks_allocated, "kinfu_grid_MB": round(ours.memory_bytes() / 2**20, 1),
         "last_frame": stats,
     }
+    if mode is not None:
+        result.update(kinfu_mode_fps=round(len(frames) / t_mode, 2), mode_over_mean_time=round(t_mode / t_ours, 2),
+                      kinfu_mode_grid_MB=round(mode.memory_bytes() / 2**20, 1))
+        del mode
     del lab_o3d, lab_ours, same, observed, ours
     gc.collect()
     return result
@@ -184,6 +198,7 @@ def main() -> None:
     ap.add_argument("--skip-synthetic", action="store_true")
     ap.add_argument("--skip-7scenes", action="store_true")
     ap.add_argument("--skip-rss", action="store_true")
+    ap.add_argument("--skip-mode", action="store_true", help="no colour mode filter volume")
     ap.add_argument("--rss-child", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--rss-worst", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args()
@@ -199,7 +214,8 @@ def main() -> None:
         data.append((f"7-Scenes redkitchen 0-{len(frames) - 1}", frames))
     for name, frames in data:
         for placement in placements:
-            print(json.dumps(compare(name, frames, a.resolution, a.size, a.truncation, a.max_depth, placement)),
+            print(json.dumps(compare(name, frames, a.resolution, a.size, a.truncation, a.max_depth, placement,
+                                     not a.skip_mode)),
                   flush=True)
     del data
     if not a.skip_rss:

@@ -15,11 +15,13 @@ labels are 1 occupied, 0 unknown, -1 empty. Every error is a `KinfuError` with a
 """
 
 from kinfu_cli.attention.detect import PoiDetection, detect_pois
+from kinfu_cli.change.diff import ChangeParams, ChangeResult, diff_grids, diff_volumes
 from kinfu_cli.core.camera import SENSOR_PRESETS, CameraModel, preset_intrinsics
 from kinfu_cli.core.errors import KinfuError
 from kinfu_cli.core.grid import EMPTY, OCCUPIED, UNKNOWN, TernaryGrid, load_ternary, save_ternary
 from kinfu_cli.core.pois import Poi, read_pois, write_pois
 from kinfu_cli.core.poses import look_at, matrix_to_quaternion, quaternion_to_matrix
+from kinfu_cli.evaluation.changes import score_change_pois
 from kinfu_cli.fusion.outputs import write_fusion_outputs
 from kinfu_cli.fusion.pipeline import FusionResult, fuse_recording
 from kinfu_cli.fusion.volume import TernaryVolume, load_grid, load_volume
@@ -48,5 +50,7 @@ __all__ = [
     "rank_object_views", "ObjectViews",
     # segments
     "segment_volume", "SegmentOptions", "SegmentResult",
+    # what changed between two volumes, and POIs scored on it
+    "diff_volumes", "diff_grids", "ChangeParams", "ChangeResult", "score_change_pois",
     "KinfuError",
 ]

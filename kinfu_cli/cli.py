@@ -28,7 +28,8 @@ COMMANDS: dict[str, str | dict[str, str]] = {
     "segment": "segment",
     "nbv": "nbv",
     "batch": "batch",
-    "eval": {"poi": "eval_poi", "fusion": "eval_fusion", "nbv": "eval_nbv"},
+    "diff": "diff",
+    "eval": {"poi": "eval_poi", "fusion": "eval_fusion", "nbv": "eval_nbv", "segment": "eval_segment"},
 }
 
 

@@ -6,8 +6,9 @@
 4. `kinfu nbv --clear` — ForgetAround the POIs in the scan volume and rank views around them.
 5. `kinfu fuse --init scan --clear-pois --start T_hand_out` — forget the POI spheres, fuse the
    views taken after the change (without the clearing KinFu keeps the old surface).
-6. `kinfu segment` — segments, saliency and superquadrics of the updated scene.
-7. `kinfu eval fusion` / `kinfu eval nbv` — scores against the generator's ground truth.
+6. `kinfu diff scan after --pois` — what changed (removed / added regions) and how well the POIs point at it.
+7. `kinfu segment` — segments, saliency and superquadrics of the updated scene.
+8. `kinfu eval fusion` / `kinfu eval nbv` — scores against the generator's ground truth.
 
 Every stage is a real `kinfu` sub-command run in-process; a stage whose command does not exist is
 reported as not available, never faked. Exit status 1 when a stage fails.
@@ -58,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"demo: {rec} not found (make it with `kinfu synth -o {data}/tabletop`)", file=sys.stderr)
         return 2
     t_in, t_out = hand_window(rec)
-    scan, fused, seg = out / "scan", out / "fuse", out / "segment"
+    scan, fused, seg, diff = out / "scan", out / "fuse", out / "segment", out / "diff"
     pois, views = out / "pois.json", out / "views.json"
     stages = [
         ("info", ["info", str(rec), "--json"], out / "info.json"),
@@ -68,6 +69,8 @@ def main(argv: list[str] | None = None) -> int:
                  "-o", str(views), "--plot", str(out / "views.png"), "--quiet"], views),
         ("fuse after", ["fuse", str(rec), "-o", str(fused), "--init", str(scan / "volume.npz"),
                         "--clear-pois", str(pois), "--start", f"{t_out:.3f}", "--quiet"], fused),
+        ("diff", ["diff", str(scan / "volume.npz"), str(fused / "volume.npz"), "-o", str(diff), "--pois", str(pois)],
+         diff),
         ("segment", ["segment", str(fused / "volume.npz"), "-o", str(seg), "--plot", "--quiet"], seg),
         ("eval fusion", ["eval", "fusion", str(fused), "--ground-truth", str(gt), "--state", "after",
                          "-o", str(out / "eval_fusion.json"), "--quiet"], out / "eval_fusion.json"),
@@ -88,7 +91,7 @@ def main(argv: list[str] | None = None) -> int:
         if code != 0:
             failed += 1
             print("    " + text.strip().replace("\n", "\n    "))
-        elif name.startswith("eval") or name == "poi":
+        elif name.startswith("eval") or name in ("poi", "diff"):
             tables.append(f"--- {name}\n{text.strip()}")
     summary = _summary(out)
     if summary:
@@ -116,6 +119,14 @@ def _summary(out: Path) -> list[str]:
             if pos is not None:
                 lines.append(f"POI {p.get('id')}: best view at ({pos[0]:.2f}, {pos[1]:.2f}, {pos[2]:.2f}) m, gain "
                              f"{best.get('gain')}")
+    if (out / "diff" / "changes.json").exists():
+        d = json.loads((out / "diff" / "changes.json").read_text())
+        n = d["counts"]["regions"]
+        text = f"changes: {n['removed']} removed, {n['added']} added regions"
+        if d.get("pois"):
+            text += (f"; POIs vs changes precision {100 * d['pois']['precision']:.0f} %, recall "
+                     f"{100 * d['pois']['recall']:.0f} %")
+        lines.append(text + f"; {out / 'diff' / 'changes.ply'}")
     if (out / "segment" / "segments.json").exists():
         s = json.loads((out / "segment" / "segments.json").read_text())["segments"]
         top = max(s, key=lambda x: x.get("saliency") or 0.0, default=None)

@@ -17,7 +17,7 @@ LAYERS: list[set[str]] = [
     {"core"},
     {"io"},
     {"fusion", "sim"},
-    {"attention", "segmentation"},
+    {"attention", "segmentation", "change"},
     {"nbv"},
     {"evaluation"},
     {"api"},

@@ -16,6 +16,7 @@ from kinfu_cli.core.atomic import atomic_dir, write_json
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.fusion.outputs import fusion_report, write_fusion_outputs
 from kinfu_cli.fusion.pipeline import fuse_recording
+from kinfu_cli.report.viewer import write_viewer
 from kinfu_cli.report.volume_plot import plot_slices
 
 # how report.json names the arguments that placed the grid or cleared spheres: by their options
@@ -98,15 +99,21 @@ def _floats(value: str, name: str, n: tuple[int, ...]) -> tuple[float, ...]:
                    "odom, ...) unless the recording says otherwise, else the largest plane below the cameras "
                    "(report.json: up, up_source).")
 @click.option("--no-color", is_flag=True, help="Do not keep colour per voxel.")
+@click.option("--color", "color_mode", type=click.Choice(["mean", "mode"]), default=None,
+              help="Voxel colour: mean (running mean) or mode (a few colour hypotheses per voxel, the most seen "
+                   "wins: sharp colour edges under auto-gain and colour/depth misregistration; thesis ch. 4) "
+                   "[mean; with --init the volume's].")
 @click.option("--plot", is_flag=True, help="Also write PNG slices of the ternary volume.")
+@click.option("--viz", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Also write a viewer file: an MCAP of Foxglove messages (mesh, cloud, camera trajectory and intrinsics); open it in Foxglove.")
 @force_option
 @click.option("--json", "as_json", is_flag=True, help="Print report.json to stdout.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @role_options
 def command(recording: Path, outdir: Path, voxel_size, resolution, size, origin, truncation, max_weight, min_depth,
             max_depth, pose, pose_topic, init, clear_spheres, clear_pois, start_s, end_s, every, tolerance_s,
-            fill_gaps, bilateral, shadow_filter, up, no_color, plot, as_json, quiet, force, max_memory, max_lost,
-            **kwargs) -> None:
+            fill_gaps, bilateral, shadow_filter, up, no_color, color_mode, plot, as_json, quiet, force, max_memory,
+            max_lost, viz=None, **kwargs) -> None:
     """Fuse the depth frames of RECORDING (MCAP, ROS 1 .bag, ROS 2 bag folder) into a KinectFusion TSDF
     volume that keeps unknown / empty / occupied per voxel (Monica et al. 2016, eqs. 1-3): free space in
     front of surfaces becomes known-empty, interiors stay unknown. Writes OUTDIR/mesh.ply (coloured),
@@ -129,7 +136,7 @@ def command(recording: Path, outdir: Path, voxel_size, resolution, size, origin,
       kinfu fuse rec.mcap -o out/icp --pose icp --every 5 --max-lost 5%
       kinfu fuse rec2.mcap -o out/fuse2 --init out/fuse/volume.npz --clear-pois out/poi/pois.json
     """
-    claim_outputs({"outdir": outdir}, [recording, init, clear_pois], force)
+    claim_outputs({"outdir": outdir, "viz": viz}, [recording, init, clear_pois], force)
     if voxel_size is not None and resolution is not None:
         raise ConfigError("--voxel-size and --resolution: give one of them, not both")
     res = None
@@ -151,7 +158,8 @@ def command(recording: Path, outdir: Path, voxel_size, resolution, size, origin,
         clear_pois=str(clear_pois) if clear_pois else None, start_s=start_s, end_s=end_s, every=every,
         tolerance_s=tolerance_s, fill_gaps=fill_gaps, bilateral=bilateral, shadow_filter=shadow_filter,
         roles=role_kwargs(kwargs), quiet=quiet, argument_names=ARGUMENT_FLAGS, max_lost=_share(max_lost),
-        max_memory=max_memory, up=None if isinstance(up_dir := parse_up(up, ("auto",)), str) else up_dir)
+        max_memory=max_memory, color_mode=color_mode,
+        up=None if isinstance(up_dir := parse_up(up, ("auto",)), str) else up_dir)
     if not quiet:
         for note in result.notes:
             click.echo(f"kinfu: note: {note}", err=True)
@@ -162,6 +170,8 @@ def command(recording: Path, outdir: Path, voxel_size, resolution, size, origin,
         result.add_time("write", time.perf_counter() - t0)
         report = fusion_report(result, extra_outputs=plots)
         write_json(tmp / "report.json", report)
+    if viz is not None:
+        write_viewer(viz, fusion=result)
     print_warnings(report)
     if as_json:
         click.echo(json.dumps(report, indent=2, default=str))

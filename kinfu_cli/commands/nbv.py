@@ -18,6 +18,7 @@ from kinfu_cli.nbv.sensor import camera_from_options, camera_source, preset_warn
 from kinfu_cli.nbv.viewpoints import PAPER_SPHERE, SphereSpec
 from kinfu_cli.nbv.workflow import NbvOptions, rank_object_views, rank_poi_views
 from kinfu_cli.report.nbv_plot import plot_nbv
+from kinfu_cli.report.viewer import write_viewer
 
 
 def _table_z_option(value: str):
@@ -83,6 +84,8 @@ def objects_summary_lines(doc: dict) -> list[str]:
 @click.option("-o", "--output", type=click.Path(path_type=Path), default=None, help="Write views.json here.")
 @click.option("--plot", type=click.Path(path_type=Path), default=None,
               help="PNG: volume slices with each POI sphere and its top views as arrows.")
+@click.option("--viz", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Also write a viewer file: an MCAP of Foxglove messages (occupied voxels and each ranked view as a camera frustum); open it in Foxglove.")
 @click.option("--candidates", type=click.Path(path_type=Path), default=None,
               help="JSON list of 4x4 camera-to-world poses to score instead of the viewing sphere.")
 @click.option("--radius", default=PAPER_SPHERE.radius, show_default=True, type=float,
@@ -130,7 +133,7 @@ def objects_summary_lines(doc: dict) -> list[str]:
 @force_option
 def command(volume, pois_path, mode, clear, gain, top, output, plot, candidates, radius, lon_step, lat_min, lat_max,
             lat_step, roll_step, poi_radius, fx, fy, cx, cy, width, height, camera_info, min_range, max_range,
-            vfov_extra, inc_th, table_z, up, clearance, optimistic, exact_rolls, quiet, as_json, force):
+            vfov_extra, inc_th, table_z, up, clearance, optimistic, exact_rolls, quiet, as_json, force, viz=None):
     """Rank candidate views around each POI by the information gain inside S(POI).
 
     Ray casts each candidate (the paper's viewing sphere: d = 0.8 m, longitude 30 deg, latitude
@@ -147,7 +150,7 @@ def command(volume, pois_path, mode, clear, gain, top, output, plot, candidates,
       kinfu nbv volume.npz --pois pois.json --gain entropy --top 5 --json
       kinfu nbv volume.npz --mode objects -o views.json
     """
-    claim_outputs({"output": output, "plot": plot}, [volume, pois_path, candidates, camera_info], force)
+    claim_outputs({"output": output, "plot": plot, "viz": viz}, [volume, pois_path, candidates, camera_info], force)
     t0 = time.perf_counter()
     recorded = volume_intrinsics(volume) if Path(volume).is_file() else None
     cam = camera_from_options(fx, fy, cx, cy, width, height, camera_info, min_range, max_range, vfov_extra,
@@ -163,6 +166,8 @@ def command(volume, pois_path, mode, clear, gain, top, output, plot, candidates,
         doc["camera_source"] = source
         doc["warnings"] = camera_warnings + doc["warnings"]
         doc["seconds"] = round(time.perf_counter() - t0, 3)
+        if viz is not None:
+            write_viewer(viz, views=planned, grid=planned.grid)
         emit(doc, output, as_json, objects_summary_lines)
         return
     if pois_path is None:
@@ -179,5 +184,7 @@ def command(volume, pois_path, mode, clear, gain, top, output, plot, candidates,
     if plot is not None:
         plot_nbv(plot, ranked.grid, ranked.rankings, top=min(top or 5, 5), up=ranked.up)
         doc["plot"] = str(plot)
+    if viz is not None:
+        write_viewer(viz, views=ranked, grid=ranked.grid)
     doc["seconds"] = round(time.perf_counter() - t0, 3)
     emit(doc, output, as_json, summary_lines)

@@ -13,6 +13,7 @@ from kinfu_cli.attention.tasks import MIN_TASK_S, SPLIT_GAP_S
 from kinfu_cli.commands._detector_options import detector_options, detector_params_from
 from kinfu_cli.core.atomic import write_json
 from kinfu_cli.report.poi_plot import plot_pois, plot_task_pois
+from kinfu_cli.report.viewer import write_viewer
 
 
 @click.command("poi", short_help="Points of interest from the hand trajectory (GMM-AS or ZVC).")
@@ -34,12 +35,14 @@ from kinfu_cli.report.poi_plot import plot_pois, plot_task_pois
 @click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="PNG: trajectory, Gaussians coloured by saliency (or ZVC slow segments) and the POIs; "
                    "with several tasks, the tasks in colour and their time spans.")
+@click.option("--viz", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Also write a viewer file: an MCAP of Foxglove messages (hand trajectory and POIs); open it in Foxglove.")
 @click.option("--json", "as_json", is_flag=True, help="Print the pois.json object on stdout.")
 @click.option("--quiet", is_flag=True, help="No progress output.")
 @detector_options
 @force_option
 def command(source, algorithm, hand_topic, hand_frame, world_frame, workspace, split_gap, min_task, output, plot,
-            as_json, quiet, force, **kw):
+            as_json, quiet, force, viz=None, **kw):
     """Find where the person acted (placed, removed, picked an object) from the wrist trajectory.
 
     GMM-AS (Monica et al. 2016, Alg. 3) fits a Gaussian mixture on (x, y, z, t), picks the number of
@@ -61,7 +64,7 @@ def command(source, algorithm, hand_topic, hand_frame, world_frame, workspace, s
       kinfu poi session.mcap --workspace -0.5,-0.8,0.7,0.6,0.4,1.3 --split-gap 1
       kinfu poi user1_cup0.traj --literal --plot literal.png
     """
-    claim_outputs({"output": output, "plot": plot}, [source], force)
+    claim_outputs({"output": output, "plot": plot, "viz": viz}, [source], force)
     params = detector_params_from(kw)[algorithm]
     found = detect_pois(source, algorithm, params, workspace=workspace, split_gap=split_gap, min_task=min_task,
                         hand_topic=hand_topic, hand_frame=hand_frame, world_frame=world_frame, quiet=quiet)
@@ -73,6 +76,8 @@ def command(source, algorithm, hand_topic, hand_frame, world_frame, workspace, s
         else:
             plot_task_pois(plot, found.trajectory, found.tasks, found.detectors, workspace=found.workspace,
                            title=title)
+    if viz is not None:
+        write_viewer(viz, pois=found)
     if as_json:
         click.echo(json.dumps(found.document, indent=2))
     elif not quiet:

@@ -14,6 +14,7 @@ from kinfu_cli.core.atomic import atomic_dir
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.progress import progress
 from kinfu_cli.report.segment_plot import plot_segments
+from kinfu_cli.report.viewer import write_viewer
 from kinfu_cli.segmentation.outputs import write_segment_outputs
 from kinfu_cli.segmentation.pipeline import SegmentOptions, SegmentResult, segment_volume
 from kinfu_cli.segmentation.segments import SegmentationParams
@@ -68,6 +69,8 @@ def _up(value: str) -> tuple[float, float, float] | str | None:
 @click.option("--msq-mu", type=float, default=0.03, show_default=True, help="Dimension difference mu (m).")
 @click.option("--seed", type=int, default=0, show_default=True, help="RANSAC / subsampling seed.")
 @click.option("--plot", is_flag=True, help="Also write segments.png and saliency.png.")
+@click.option("--viz", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Also write a viewer file: an MCAP of Foxglove messages (segments, superquadrics and support plane); open it in Foxglove.")
 @force_option
 @click.option("--json", "as_json", is_flag=True, help="Print segments.json to stdout.")
 @click.option("--quiet", is_flag=True, help="No progress output.")
@@ -75,7 +78,7 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
             normal_importance, adjacency_radius, concavity_tolerance, sanity_angle, min_segment_points,
             plane_distance, up, up_tolerance, isolation_threshold, no_superquadrics, sq_max_points,
             sq_exponent_bounds, sq_cost, multi_sq, msq_trigger, msq_height, msq_mu, seed, plot, as_json,
-            quiet, force) -> None:
+            quiet, force, viz=None) -> None:
     """Segment the surface of VOLUME (a fusion volume.npz or a ternary.npz): support plane, supervoxels
     merged across convex boundaries (LCCP idea), saliency = isolation x roundness (thesis eq. 3.12) and a
     superquadric per segment (Vezzani ch. 7). Writes OUTDIR/segments.ply (coloured by segment),
@@ -87,7 +90,7 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
       kinfu segment out/fuse/volume.npz -o out/segments --plot
       kinfu segment out/fuse/ternary.npz --isolation-threshold 0.01 --json --quiet
     """
-    claim_outputs({"outdir": outdir}, [volume], force)
+    claim_outputs({"outdir": outdir, "viz": viz}, [volume], force)
     params = SegmentationParams(seed_resolution=seed_resolution, spatial_importance=spatial_importance,
                                 normal_importance=normal_importance, adjacency_radius=adjacency_radius,
                                 concavity_tolerance_deg=concavity_tolerance, sanity_angle_deg=sanity_angle,
@@ -107,6 +110,8 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
                 write_segment_outputs(result, tmp)
                 if plot:
                     plot_segments(result, tmp)
+    if viz is not None:
+        write_viewer(viz, segments=result)
     doc = result.to_json()
     print_warnings(doc)
     if as_json:

@@ -24,9 +24,10 @@ def parse_formats(text: str) -> list[str]:
 @click.option("-o", "--out", "out", required=True, type=click.Path(file_okay=False),
               help="Output folder (gets recording.mcap, recording.bag, recording_ros2/, ground_truth/).")
 @click.option("--seed", default=0, show_default=True, type=int, help="Seed of the scene, camera path, hand and noise.")
-@click.option("--scene", type=click.Choice(["tabletop", "room"]), default="tabletop", show_default=True,
+@click.option("--scene", type=click.Choice(["tabletop", "room", "objects"]), default="tabletop", show_default=True,
               help="tabletop: the arm scenario; room: a handheld camera walking a loop through a furnished "
-                   "5 x 4 m room (no arm, no hand).")
+                   "5 x 4 m room (no arm, no hand); objects: the arm scenario on the segmentation ground-truth "
+                   "table (stacked boxes, touching boxes of one colour, a mug, striped objects; no --n-objects).")
 @click.option("--world", type=click.Choice(["z-up", "y-down"]), default="z-up", show_default=True,
               help="Convention of the world frame (room scene): z-up (REP-103) or y-down (the room rotated so "
                    "up is -y); declared on /kinfu/world_up.")
@@ -78,6 +79,7 @@ def command(out, scene, world, seed, width, height, frames, formats, scenario, n
       kinfu synth -o /tmp/small --width 64 --height 48 --frames 6 --formats mcap --scenario place
       kinfu synth -o /tmp/posed --camera-pose-topic /camera/pose
       kinfu synth -o /tmp/room --scene room --world y-down --formats mcap
+      kinfu synth -o /tmp/objects --scene objects --formats mcap
     """
     room = scene == "room"
     width = width if width is not None else (160 if room else 320)

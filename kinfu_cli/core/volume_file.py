@@ -4,7 +4,9 @@ One .npz holding `meta` (a JSON string: format, format_version, shape, voxel_siz
 max_weight, min_depth, max_depth, color, block, frames_integrated, frame, and since the up direction and
 intrinsics are recorded: up (unit [x, y, z] against gravity or null), up_source, intrinsics ({fx, fy, cx, cy,
 width, height} of the depth camera fused, or null); readers treat missing ones as null) and the block-sparse arrays
-`block_idx`, `block_w`, `pool_v`, `pool_w`, `pool_c` (see fusion/kernels.py for their meaning). The
+`block_idx`, `block_w`, `pool_v`, `pool_w`, `pool_c` (see fusion/kernels.py for their meaning). Volumes fused
+with the colour mode filter (meta `color_mode` "mode"; absent means "mean") carry the winning colour in `pool_c`
+and also `pool_hc` (n, 512, M, 3) and `pool_hn` (n, 512, M), the hypotheses (fusion/color_mode.py). The
 reader checks format and version here so every stage reports a foreign file the same way; turning the
 arrays back into a TernaryVolume is fusion's job (`fusion.volume.load_volume`).
 """
@@ -27,6 +29,8 @@ from kinfu_cli.core.errors import VolumeError
 FORMAT = "kinfu-volume"
 FORMAT_VERSION = 1
 ARRAYS = ("block_idx", "block_w", "pool_v", "pool_w", "pool_c")
+OPTIONAL_ARRAYS = ("pool_hc", "pool_hn")  # colour mode filter hypotheses, only with color_mode "mode"
+COLOR_MODES = ("mean", "mode")
 VOXELS_PER_BLOCK = 512  # a pool row: one 8x8x8 block
 MAX_COORDINATE_M = 1e6  # farther than this from the world origin is corrupt data, not a scene
 MAX_VOXELS_PER_AXIS = 1 << 16
@@ -38,7 +42,8 @@ READ_ERRORS = (OSError, ValueError, EOFError, KeyError, TypeError, IndexError, z
 
 def write_volume_file(path: str | os.PathLike, meta: dict, arrays: dict[str, np.ndarray]) -> Path:
     """Write `meta` (JSON-able, with format and format_version) and the block arrays atomically."""
-    return write_npz(path, {"meta": np.array(json.dumps(meta)), **{k: arrays[k] for k in ARRAYS}})
+    extra = {k: arrays[k] for k in OPTIONAL_ARRAYS if k in arrays}
+    return write_npz(path, {"meta": np.array(json.dumps(meta)), **{k: arrays[k] for k in ARRAYS}, **extra})
 
 
 def read_volume_file(path: str | os.PathLike) -> tuple[dict, dict[str, np.ndarray]]:
@@ -60,7 +65,7 @@ def read_volume_file(path: str | os.PathLike) -> tuple[dict, dict[str, np.ndarra
             missing = [k for k in ARRAYS if k not in data.files]
             if missing:
                 raise VolumeError(f"{path}: volume file lacks the arrays {', '.join(missing)}")
-            arrays = {k: data[k] for k in ARRAYS}
+            arrays = {k: data[k] for k in ARRAYS + OPTIONAL_ARRAYS if k in data.files}
     except VolumeError:
         raise
     except READ_ERRORS as exc:
@@ -129,6 +134,12 @@ def _check(path: Path, meta: object, arrays: dict[str, np.ndarray]) -> None:
         raise VolumeError(f"{path}: volume metadata min_depth {lo} is not below max_depth {hi}")
     if not isinstance(meta.get("color"), bool):
         raise VolumeError(f"{path}: volume metadata 'color' is {meta.get('color')!r}, expected true or false")
+    if meta.get("color_mode", "mean") not in COLOR_MODES:
+        raise VolumeError(f"{path}: volume metadata 'color_mode' is {meta.get('color_mode')!r}, expected one of "
+                          f"{', '.join(COLOR_MODES)}")
+    if meta.get("color_mode") == "mode":
+        _number(meta, "color_hypotheses", path, 1, 16, integer=True)
+        _number(meta, "color_threshold", path, 0.0, 442.0, low_open=True)
     if "frames_integrated" in meta:
         _number(meta, "frames_integrated", path, 0, 2 ** 62, integer=True)
     if not isinstance(meta.get("frame", ""), (str, type(None))):

@@ -66,9 +66,8 @@ from kinfu_cli.core.pois import DEFAULT_RADIUS
 from kinfu_cli.core.progress import progress
 from kinfu_cli.evaluation.reconstruction import point_to_mesh_distance
 from kinfu_cli.fusion.volume import TernaryVolume
-from kinfu_cli.nbv.contours import extract_contours
 from kinfu_cli.nbv.gains import get_gain
-from kinfu_cli.nbv.objects import nbv_scorer, plan_object_views, plan_standard_views
+from kinfu_cli.nbv.objects import known_grid, nbv_scorer, plan_object_views, plan_standard_views, volume_contours
 from kinfu_cli.nbv.ranking import default_inc_th, score_views, unknown_in_sphere
 from kinfu_cli.nbv.viewpoints import sphere_viewpoints
 from kinfu_cli.segmentation.pipeline import SegmentOptions, analyse_volume
@@ -114,6 +113,11 @@ class LoopConfig:
     score_fraction: float = 0.01
     exclude_shift: float = 0.05
     exclude_turn_deg: float = 10.0
+    # frames fused at each view of the contour strategies: their contours apply the thesis' W_th = 5 (a voxel is
+    # known once seen 5 times), which KinFu reaches by fusing every frame at 30 Hz while the robot holds the
+    # view and oscillates; 9 frames over the oscillation sweep stand for that dwell (3 frames, the POI loop's
+    # left-centre-right, could never make a voxel known from one view)
+    explore_view_frames: int = 9
 
     def check(self) -> None:
         """ConfigError naming the first field out of range (and the gain when it is unknown)."""
@@ -134,6 +138,7 @@ class LoopConfig:
             raise ConfigError(f"expected gmm-as or truth, got {self.pois_from!r}", parameter="pois_from")
         if self.scan_every < 1:
             raise ConfigError(f"expected at least 1, got {self.scan_every}", parameter="scan_every")
+        check_number(self.explore_view_frames, "explore_view_frames", 1, 1000, integer=True)
         if self.scan_frames < 1:
             raise ConfigError(f"expected at least 1, got {self.scan_frames}", parameter="scan_frames")
         if self.score_width < 8:
@@ -392,12 +397,17 @@ def _fixed_ring(cands: np.ndarray, center: np.ndarray, n: int) -> list[int]:
     return out
 
 
-def _take_view(vol, T_cur, T_goal, mode, sc, cfg, sensor, K, timer, frames: int) -> int:
+def _take_view(vol, T_cur, T_goal, mode, sc, cfg, sensor, K, timer, frames: int,
+               view_frames: int | None = None) -> int:
     """Move to T_goal (KFOM: fusing along the straight path), oscillate, render the after scene, fuse.
-    Returns the updated count of frames fused."""
+    view_frames: frames fused at the view, spread evenly over the oscillation sweep; None: left, centre and
+    right (the centre alone without oscillation). Returns the updated count of frames fused."""
     poses = _path(T_cur, T_goal, cfg.path_step) if mode == "kfom" else []
     osc = cfg.oscillation_deg
-    poses += [T_goal] if osc <= 0 else [_tilt(T_goal, -osc), T_goal, _tilt(T_goal, osc)]
+    if view_frames is None:
+        poses += [T_goal] if osc <= 0 else [_tilt(T_goal, -osc), T_goal, _tilt(T_goal, osc)]
+    else:
+        poses += [_tilt(T_goal, a) if a else T_goal for a in np.linspace(-osc, osc, view_frames)]
     for T in poses:
         t = time.perf_counter()
         depth, _ = sensor.render(sc.render_after, T, frame_seed=10_000 + frames)
@@ -477,8 +487,8 @@ def run_exploration(sc: SimScene, cfg: LoopConfig, quiet: bool = True, scene_nam
     near = near_object_voxels(grid0, sc.object_spheres, cfg.near_margin, sc.table_z)
     near_t = tuple(near.T)
 
-    def unknown_near(v) -> int:
-        return int(np.sum(v.ternary_grid().labels[near_t] == 0))
+    def unknown_near(v) -> int:  # unknown as the planners see it: observed fewer than W_th times
+        return int(np.sum(known_grid(v)[0].labels[near_t] == 0))
 
     u0 = unknown_near(base)
     env_c = grid0.origin + np.array(grid0.shape) * grid0.voxel_size / 2
@@ -491,10 +501,10 @@ def run_exploration(sc: SimScene, cfg: LoopConfig, quiet: bool = True, scene_nam
         curve, cast, secs, scores, segs, frames = [u0], [], [], [], [], 0
         for _ in progress(range(cfg.views), total=cfg.views, desc=strat, quiet=quiet):
             t = time.perf_counter()
-            grid = vol.ternary_grid()
+            grid, _ = known_grid(vol)
             scorer = nbv_scorer(grid, score_cam, cfg.gain, table_z=sc.table_z, reject_unknown=cfg.reject_unknown,
                                 optimistic=cfg.optimistic)
-            contours = extract_contours(grid.labels, grid.origin, grid.voxel_size)
+            contours, _ = volume_contours(vol)
             ex = dict(exclude=np.array(taken).reshape(-1, 4, 4), exclude_shift=cfg.exclude_shift,
                       exclude_turn_deg=cfg.exclude_turn_deg, score_threshold=score_th)
             if strat == "objects":
@@ -509,7 +519,8 @@ def run_exploration(sc: SimScene, cfg: LoopConfig, quiet: bool = True, scene_nam
                 break
             scores.append(float(plan.score))
             segs.append(plan.segment_id)
-            frames = _take_view(vol, T_cur, plan.pose, "kfovp", sc, cfg, sensor, K, timer, frames)
+            frames = _take_view(vol, T_cur, plan.pose, "kfovp", sc, cfg, sensor, K, timer, frames,
+                                cfg.explore_view_frames)
             T_cur = plan.pose
             taken.append(plan.pose)
             t = time.perf_counter()

@@ -95,10 +95,15 @@ def score_pois(pois_xyz: np.ndarray, gt: np.ndarray, radius: float = MATCH_RADIU
         return 0, 0, len(g)
     if len(g) == 0:
         return 0, len(p), 0
-    d = np.linalg.norm(p[:, None, :] - g[None, :, :], axis=2)
-    near = d < radius
+    return score_matches(np.linalg.norm(p[:, None, :] - g[None, :, :], axis=2) < radius)
+
+
+def score_matches(near: np.ndarray) -> tuple[int, int, int]:
+    """(tp, fp, fn) from near (K POIs, M changes), True where a POI is within the match radius of a change: a
+    POI near any change is a true positive, a change near no POI a false negative."""
+    near = np.asarray(near, dtype=bool)
     tp = int(near.any(axis=1).sum())
-    return tp, len(p) - tp, int((~near.any(axis=0)).sum())
+    return tp, near.shape[0] - tp, int((~near.any(axis=0)).sum())
 
 
 def resample_speed(traj: Trajectory, speed: float) -> Trajectory:

@@ -7,6 +7,13 @@
 - Object-level recall: a true object counts as found when one segment holds >= `cover` (80 %) of its
   points and that object is the segment's majority (so one segment swallowing two objects finds
   at most one of them).
+- Bidirectional Consistency Error (Martin 2003, thesis ch. 4.1.2): per point p, E(S1, S2, p) =
+  |R(S1, p) minus R(S2, p)| / |R(S1, p)| with R(S, p) the region of S holding p; BCE = mean over points of
+  max(E(S, G, p), E(G, S, p)), 0 = identical, 1 = worst. A point the segmentation dropped (-1) is a region
+  of its own.
+- Over-/under-segmentation (with `share`, 20 %): a true object (table excluded) is over-segmented when two
+  or more segments each hold >= share of its points; a segment under-segments when it holds >= share of
+  the points of two or more true regions (table included: an object merged into the support plane).
 - Ground-truth labels for a cloud: nearest ground-truth mesh (`objects/<id>.ply`, `table.ply`) within
   a distance, with open3d's RaycastingScene.
 """
@@ -69,6 +76,58 @@ def match_boundaries(points: np.ndarray, b_pred: np.ndarray, b_gt: np.ndarray, t
     return tp
 
 
+def consistency_errors(labels: np.ndarray, gt_labels: np.ndarray) -> np.ndarray:
+    """Per-point max(E(S, G, p), E(G, S, p)) of `labels` against `gt_labels` (same points; -1 in `labels` =
+    dropped, each such point a region of its own)."""
+    lab = np.asarray(labels).astype(np.int64).ravel()
+    gt = np.asarray(gt_labels).astype(np.int64).ravel()
+    if len(lab) != len(gt):
+        raise ConfigError(f"consistency error: {len(lab)} labels but {len(gt)} ground-truth labels")
+    if len(lab) == 0:
+        return np.zeros(0)
+    drop = lab < 0
+    lab = lab.copy()
+    lab[drop] = lab.max(initial=0) + 1 + np.arange(int(drop.sum()))
+    _, s_inv, s_cnt = np.unique(lab, return_inverse=True, return_counts=True)
+    _, g_inv, g_cnt = np.unique(gt, return_inverse=True, return_counts=True)
+    cells, cell_inv, n_sg = np.unique(np.stack([s_inv.ravel(), g_inv.ravel()], axis=1), axis=0,
+                                      return_inverse=True, return_counts=True)
+    s_size, g_size = s_cnt[cells[:, 0]], g_cnt[cells[:, 1]]
+    err = np.maximum((s_size - n_sg) / s_size, (g_size - n_sg) / g_size)
+    return err[cell_inv.ravel()]
+
+
+def consistency_error(labels: np.ndarray, gt_labels: np.ndarray) -> float:
+    """Bidirectional Consistency Error: the mean of `consistency_errors` (0 for no points)."""
+    e = consistency_errors(labels, gt_labels)
+    return float(e.mean()) if len(e) else 0.0
+
+
+def segmentation_counts(labels: np.ndarray, gt_labels: np.ndarray, object_ids, share: float = 0.2,
+                        min_object_points: int = 20) -> dict:
+    """Over-segmented true objects and under-segmenting segments (module docstring), with who is involved."""
+    lab = np.asarray(labels).ravel()
+    gt = np.asarray(gt_labels).ravel()
+    segs, s_inv = np.unique(lab, return_inverse=True)
+    gts, g_inv = np.unique(gt, return_inverse=True)
+    table = np.zeros((len(segs), len(gts)), dtype=np.int64)
+    np.add.at(table, (s_inv.ravel(), g_inv.ravel()), 1)
+    table[segs < 0] = 0  # dropped points are no segment
+    frac = table / np.maximum(table.sum(axis=0, keepdims=True), 1)  # share of each true region per segment
+    big = frac >= share
+    over = []
+    for oid in object_ids:
+        col = np.flatnonzero(gts == oid)
+        if len(col) and table[:, col[0]].sum() >= min_object_points and big[:, col[0]].sum() >= 2:
+            over.append({"object": int(oid), "segments": [int(v) for v in segs[big[:, col[0]]]]})
+    counted = np.asarray([g for g in gts if g >= 0 and table[:, gts == g].sum() >= min_object_points], dtype=gts.dtype)
+    cols = np.isin(gts, counted)
+    under = [{"segment": int(segs[i]), "objects": [int(v) for v in gts[cols & big[i]]]}
+             for i in np.flatnonzero((big[:, cols]).sum(axis=1) >= 2)]
+    return {"over_segmented": len(over), "under_segmenting": len(under), "over": over, "under": under,
+            "share": share}
+
+
 @dataclass
 class SegmentationScore:
     boundary_precision: float
@@ -79,6 +138,11 @@ class SegmentationScore:
     objects_found: int
     objects_total: int
     per_object: list
+    bce: float = float("nan")
+    over_segmented: int = 0  # true objects split into >= 2 pieces of >= `share` each
+    under_segmenting: int = 0  # segments holding >= `share` of >= 2 true regions
+    segments: int = 0  # predicted segments (dropped points excluded)
+    details: dict | None = None  # which objects / segments are over- / under-segmented
 
     def to_json(self) -> dict:
         return dict(self.__dict__)
@@ -86,9 +150,10 @@ class SegmentationScore:
 
 def score_segmentation(points: np.ndarray, labels: np.ndarray, gt_labels: np.ndarray, *, t_eval: float = 0.02,
                        cover: float = 0.8, object_ids=None, min_object_points: int = 20,
-                       ignore_gt: int | None = None) -> SegmentationScore:
+                       ignore_gt: int | None = None, share: float = 0.2) -> SegmentationScore:
     """Score predicted `labels` against `gt_labels` (same points). object_ids: true objects to count
-    (default: every gt label except 0 = table and -1 = unlabelled) with >= min_object_points points."""
+    (default: every gt label except 0 = table and -1 = unlabelled) with >= min_object_points points;
+    share: the piece size of the over- / under-segmentation counts."""
     pts = np.asarray(points, dtype=np.float64)
     lab = np.asarray(labels)
     gt = np.asarray(gt_labels)
@@ -124,8 +189,11 @@ def score_segmentation(points: np.ndarray, labels: np.ndarray, gt_labels: np.nda
         found += int(ok)
         per.append({"object": int(oid), "points": int(c.sum()), "segment": int(segs[best]), "coverage": frac,
                     "found": bool(ok)})
+    counts = segmentation_counts(lab, gt, object_ids, share, min_object_points)
     return SegmentationScore(float(prec), float(rec), int(len(b_pred)), int(len(b_gt)),
-                             float(found / total) if total else 1.0, found, total, per)
+                             float(found / total) if total else 1.0, found, total, per,
+                             consistency_error(lab, gt), counts["over_segmented"], counts["under_segmenting"],
+                             int(np.sum(segs >= 0)), counts)
 
 
 def gt_labels_from_meshes(points: np.ndarray, meshes: dict[int, object], max_distance: float = 0.015
@@ -144,12 +212,14 @@ def gt_labels_from_meshes(points: np.ndarray, meshes: dict[int, object], max_dis
 
 
 def fuse_synthetic_scene(seed: int = 0, *, resolution: int = 256, size: float = 1.6, width: int = 320,
-                         height: int = 240, frames: int = 36, noise: bool = True) -> tuple[TernaryVolume, Scene]:
-    """Fuse the after-change state of the synth scenario `seed` from all its camera poses.
+                         height: int = 240, frames: int = 36, noise: bool = True, layout: str = "tabletop"
+                         ) -> tuple[TernaryVolume, Scene]:
+    """Fuse the after-change state of the synth scenario `seed` (layout: `make_scenario`'s) from all its
+    camera poses.
 
     Returns (volume, scene after the change).
     """
-    sc = make_scenario(seed, width=width, height=height, frames=frames, noise=noise)
+    sc = make_scenario(seed, width=width, height=height, frames=frames, noise=noise, layout=layout)
     after = sc.scene_after
     c = np.array([after.table.center[0], after.table.center[1], after.table.top_z])
     vol = TernaryVolume(size=size, resolution=resolution, origin=c - np.array([size / 2, size / 2, 0.25]),

@@ -28,6 +28,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from kinfu_cli.fusion.color_mode import mode_update
+
 B = 8  # block edge in voxels
 B3 = B * B * B
 V_SCALE = 32767.0
@@ -289,8 +291,8 @@ def _carve_voxels(pool_v, pool_w, i, mw):
 
 
 @njit(cache=True, error_model="numpy")
-def _update_block(pool_v, pool_w, pool_c, i, p0, ex, ey, ez, nx, ny, nz, fx, fy, cx, cy, width, height,
-                  depth_rl, color_f, has_color, trunc, mw, color_band, pix, zz, sdf):
+def _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, nx, ny, nz, fx, fy, cx, cy, width,
+                  height, depth_rl, color_f, has_color, trunc, mw, color_band, mode_thr2, pix, zz, sdf):
     """Projective update of every voxel of stored block i, as three flat loops over its 512 voxels.
 
     p0: camera-frame position of voxel (0, 0, 0); ex / ey / ez: camera-frame step per local x / y / z; nx, ny,
@@ -299,6 +301,8 @@ def _update_block(pool_v, pool_w, pool_c, i, p0, ex, ey, ez, nx, ny, nz, fx, fy,
     update loops have no branches and LLVM vectorises them; only the pixel look-up in between is scalar
     (gathers are slower than scalar loads on current x86). error_model="numpy": 1 / z is not checked for
     zero (a voxel at z = 0 fails the z > 0 test anyway), which is what lets the loops vectorise.
+    With colour hypotheses (pool_hc / pool_hn not None: the mode filter, see color_mode.py) the colour goes to
+    mode_update instead of the running mean.
     """
     one = np.float32(1.0)
     half = np.float32(0.5)
@@ -345,6 +349,13 @@ def _update_block(pool_v, pool_w, pool_c, i, p0, ex, ey, ez, nx, ny, nz, fx, fy,
         any_color = any_color | (ok & (abs(t) < color_band))
     if not (has_color and any_color):
         return
+    if pool_hn is not None:  # None (the mean path): numba prunes this branch at compile time
+        for k in range(B3):
+            p = pix[k]
+            t = sdf[k]
+            if p >= 0 and t > -one and abs(t) < color_band:
+                mode_update(pool_hc, pool_hn, i, k, color_f[p, 0], color_f[p, 1], color_f[p, 2], mode_thr2)
+        return
     for k in range(B3):
         p = pix[k]
         t = sdf[k]
@@ -373,16 +384,19 @@ def depth_and_raylen(depth, raylen):
 
 
 @njit(cache=True, parallel=True)
-def integrate_blocks(cls, nb, dims, block_idx_flat, block_w_flat, pool_v, pool_w, pool_c,
-                     origin, vs, T_cw, fx, fy, cx, cy, width, height, depth_rl, color, trunc, max_w, work):
+def integrate_blocks(cls, nb, dims, block_idx_flat, block_w_flat, pool_v, pool_w, pool_c, pool_hc, pool_hn,
+                     origin, vs, T_cw, fx, fy, cx, cy, width, height, depth_rl, color, trunc, max_w, work,
+                     mode_thr):
     """Apply one frame: CARVE blocks in bulk (a weight step for uniform blocks, tsdf = 1 for stored ones);
     VOXEL blocks voxel by voxel (_update_block). `work` lists the blocks to visit; it is cut into one run per
-    worker task, each with its own scratch rows."""
+    worker task, each with its own scratch rows. pool_hc / pool_hn: colour hypotheses of the mode filter (None:
+    running mean, compiled without the mode code), mode_thr its colour distance threshold (RGB 0..255 units)."""
     nby, nbz = nb[1], nb[2]
     has_color = pool_c.shape[0] > 0 and color.shape[0] == height * width
     mw = np.int32(max_w)
     # colour the voxels within about a voxel of the surface: marching-cubes vertices take the nearest one's
     color_band = np.float32(min(1.0, 1.2 * vs / trunc))
+    mode_thr2 = np.float32(mode_thr * mode_thr)
     ex = np.empty(3, dtype=np.float32)
     ey = np.empty(3, dtype=np.float32)
     ez = np.empty(3, dtype=np.float32)
@@ -419,9 +433,9 @@ def integrate_blocks(cls, nb, dims, block_idx_flat, block_w_flat, pool_v, pool_w
             pz = origin[2] + (bz * B + 0.5) * vs
             for q in range(3):
                 p0[q] = np.float32(T_cw[q, 0] * px + T_cw[q, 1] * py + T_cw[q, 2] * pz + T_cw[q, 3])
-            _update_block(pool_v, pool_w, pool_c, i, p0, ex, ey, ez, min(B, dims[0] - bx * B),
+            _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, min(B, dims[0] - bx * B),
                           min(B, dims[1] - by * B), min(B, dims[2] - bz * B), fx32, fy32, cx32, cy32, width,
-                          height, depth_rl, color, has_color, trunc, mw, color_band, pix, zz, sdf)
+                          height, depth_rl, color, has_color, trunc, mw, color_band, mode_thr2, pix, zz, sdf)
 
 
 @njit(cache=True, parallel=True)

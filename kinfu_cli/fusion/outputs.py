@@ -1,6 +1,7 @@
-"""The files of a fusion run: mesh, surface cloud, volume, ternary labels, and the report (report.json).
+"""The files of a fusion run: mesh, surface cloud, volume, ternary labels, camera trajectory (TUM) and the report
+(report.json).
 
-`write_fusion_outputs(result, outdir)` writes the first four, each atomically; `fusion_report(result)` is the
+`write_fusion_outputs(result, outdir)` writes the first five, each atomically; `fusion_report(result)` is the
 report dict, which the caller writes last (after any plots it adds to the folder, named in extra_outputs).
 """
 
@@ -17,8 +18,9 @@ from kinfu_cli.core.atomic import atomic_path
 from kinfu_cli.core.errors import VolumeError
 from kinfu_cli.core.grid import save_ternary
 from kinfu_cli.fusion.pipeline import FusionResult
+from kinfu_cli.io.tum import write_tum
 
-OUTPUTS = ("mesh.ply", "cloud.ply", "volume.npz", "ternary.npz", "report.json")
+OUTPUTS = ("mesh.ply", "cloud.ply", "volume.npz", "ternary.npz", "trajectory.tum", "report.json")
 _EMPTY_PLY = "ply\nformat ascii 1.0\ncomment kinfu: no surface in the grid\n{elements}end_header\n"
 
 
@@ -51,6 +53,15 @@ def write_fusion_outputs(result: FusionResult, outdir: str | os.PathLike) -> Non
             raise OSError(f"could not write {outdir / 'cloud.ply'}")
     result.volume.save(outdir / "volume.npz")
     save_ternary(outdir / "ternary.npz", result.grid)
+    write_trajectory(result, outdir / "trajectory.tum")
+
+
+def write_trajectory(result: FusionResult, path: str | os.PathLike) -> Path:
+    """The camera pose of every frame fused, at its stamp, as a TUM trajectory (`evo_ape tum` compares it with
+    the recording's poses written by `kinfu export` with trajectory tum)."""
+    return write_tum(path, result.camera_stamps_ns, np.array(result.camera_poses).reshape(-1, 4, 4),
+                     comment=f"kinfu fuse {result.recording}: poses {result.pose_mode} ({result.pose_source}), "
+                             f"frame {result.volume.frame or 'unnamed'}")
 
 
 def fusion_report(result: FusionResult, extra_outputs: Iterable[str] = ()) -> dict:
@@ -84,6 +95,7 @@ def fusion_report(result: FusionResult, extra_outputs: Iterable[str] = ()) -> di
                  "max_depth": depth_filter.max_depth, "placement": result.placement,
                  "blocks_stored": vol.n_blocks_allocated, "memory_MB": round(vol.memory_bytes() / 2**20, 1),
                  "frames_in_volume": vol.frames_integrated,
+                 "color": vol.color, "color_mode": vol.color_mode,
                  "sizing": result.grid_sizing,
                  "face_contacts": result.face_contacts},
         "filters": {"range": [depth_filter.min_depth, depth_filter.max_depth], "fill_gaps": depth_filter.fill_gaps,

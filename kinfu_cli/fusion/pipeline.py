@@ -28,6 +28,7 @@ from kinfu_cli.core.grid import TernaryGrid, check_up
 from kinfu_cli.core.pois import poi_frame_warnings, read_pois
 from kinfu_cli.core.progress import progress
 from kinfu_cli.fusion import filters
+from kinfu_cli.fusion.color_mode import check_color_mode
 from kinfu_cli.fusion.extent import SURVEY_FRAMES, AutoGrid, auto_grid, budget_bytes, face_contacts, survey
 from kinfu_cli.fusion.mesh import mesh_cloud
 from kinfu_cli.fusion.placement import default_origin
@@ -84,6 +85,8 @@ class FusionResult:
     grid_sizing: dict = field(default_factory=dict)  # mode given, init or auto (the observed box, budget, cap)
     face_contacts: dict[str, int] = field(default_factory=dict)  # occupied voxels on each face of the grid
     notes: list[str] = field(default_factory=list)  # what the run chose by itself (a command may print them)
+    camera_stamps_ns: list[int] = field(default_factory=list)  # stamp of each frame fused, with ...
+    camera_poses: list[np.ndarray] = field(default_factory=list)  # ... its T_world_camera (trajectory.tum)
 
     def add_time(self, step: str, seconds: float) -> None:
         self.timing[step] = self.timing.get(step, 0.0) + seconds
@@ -101,12 +104,13 @@ class _GridSpec:
     min_depth: float
     max_depth: float
     color: bool
+    color_mode: str = "mean"
 
     def volume(self, origin) -> TernaryVolume:
         resolution = 512 if self.voxel_size is not None or self.resolution is None else self.resolution
         return TernaryVolume(size=self.size, resolution=resolution, voxel_size=self.voxel_size, origin=origin,
                              truncation=self.truncation, max_weight=self.max_weight, min_depth=self.min_depth,
-                             max_depth=self.max_depth, color=self.color)
+                             max_depth=self.max_depth, color=self.color, color_mode=self.color_mode)
 
 
 @dataclass
@@ -158,7 +162,7 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
                    shadow_filter: bool = False, shadow_baseline: float = 0.08,
                    roles: Mapping[str, str | None] | None = None, quiet: bool = True,
                    argument_names: Mapping[str, str] | None = None, up=None, max_lost: float = 0.10,
-                   max_memory: float | None = None) -> FusionResult:
+                   max_memory: float | None = None, color_mode: str | None = None) -> FusionResult:
     """Fuse the depth frames of `recording` (MCAP, ROS 1 .bag, ROS 2 bag folder) into a TernaryVolume.
 
     Grid: size (m, one or three values, or "auto": a box around what the selected frames observe from their
@@ -176,7 +180,7 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
     direction against gravity (x, y, z); None decides it as fusion.up.choose_up says (the volume's up,
     stored in volume.npz, ternary.npz and the report with its source).
     max_lost: the largest share of tracked frames (icp, hint) that may be lost (not fused) before the run
-    fails.
+    fails. color_mode: "mean" or "mode" (fusion/color_mode.py); None: the init volume's, else "mean".
     """
     started = time.perf_counter()
     timing: dict[str, float] = {}
@@ -187,15 +191,16 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
     auto = isinstance(size, str)
     budget = budget_bytes(max_memory)
     spheres = _spheres(clear_spheres, clear_pois, names["clear_spheres"])
+    wanted_mode = _wanted_color_mode(color_mode, color)
     grid_spec = _GridSpec(1.0 if auto else size, resolution, voxel_size, truncation, max_weight, min_depth,
-                          max_depth, color)
+                          max_depth, color, wanted_mode or "mean")
     depth_filter = DepthFilter(min_depth, max_depth, fill_gaps, bilateral, shadow_filter, shadow_baseline)
 
     vol = None
     placement = ""
     if init:
         t0 = time.perf_counter()
-        vol = load_volume(init)
+        vol = _load_init(init, wanted_mode)
         timing["load_init"] = time.perf_counter() - t0
         placement = f"{names['init']} {init}"
         for s in spheres:
@@ -265,7 +270,24 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
         depth_filter=depth_filter, every=every, start_s=start_s, end_s=end_s, cleared_spheres=spheres,
         warnings=warnings, grid=grid, counts=counts, bounding_box=bounding_box, mesh=mesh, cloud=cloud,
         timing=timing, started=started, up=up_choice.to_json(), grid_sizing=sizing, face_contacts=faces,
-        notes=notes)
+        notes=notes, camera_stamps_ns=integrator.camera_stamps_ns, camera_poses=integrator.camera_poses)
+
+
+def _wanted_color_mode(color_mode: str | None, color: bool) -> str | None:
+    mode = None if color_mode is None else check_color_mode(color_mode)
+    if mode == "mode" and not color:
+        raise ConfigError("the colour mode filter needs colour; it cannot go with color off", parameter="color_mode")
+    return mode
+
+
+def _load_init(init, wanted_mode: str | None) -> TernaryVolume:
+    """The volume to continue; it goes on in the colour mode it was fused with: asking for the other one is an
+    error."""
+    vol = load_volume(init)
+    if wanted_mode is not None and vol.color and wanted_mode != vol.color_mode:
+        raise ConfigError(f"{init}: the volume was fused with colour mode {vol.color_mode!r}, not "
+                          f"{wanted_mode!r}; continue it with its own", parameter="color_mode")
+    return vol
 
 
 def _check_arguments(pose: str | None, pose_topic: str | None, every: int, max_lost: float, size) -> None:
@@ -336,7 +358,8 @@ def _auto_grid(rec: Recording, roles: Roles, plan: _PosePlan, grid_spec: _GridSp
                  if f.T_world_camera is not None and np.all(np.isfinite(f.T_world_camera)))
         grow = 0.0
     return auto_grid(survey(views, lo, hi), voxel_size=voxel_size, resolution=resolution,
-                     truncation=grid_spec.truncation, color=grid_spec.color, budget=budget, origin=origin, grow=grow)
+                     truncation=grid_spec.truncation, budget=budget, origin=origin, grow=grow,
+                     color="mode" if grid_spec.color and grid_spec.color_mode == "mode" else grid_spec.color)
 
 
 def _tracking_verdict(integrator: _Integrator, max_lost: float, recording: str,
@@ -443,6 +466,7 @@ class _Integrator:
         self.buffered: list[tuple[RGBDFrame, np.ndarray]] = []  # frames waiting for the grid to be placed
         self.n_place = 1 if mode == "icp" else PLACEMENT_FRAMES
         self.camera_poses: list[np.ndarray] = []  # T_world_camera of every frame integrated (fusion.up)
+        self.camera_stamps_ns: list[int] = []  # and its stamp
         self.intrinsics: dict | None = None  # of the first frame integrated
 
     def add(self, frame: RGBDFrame, depth: np.ndarray) -> None:
@@ -513,6 +537,7 @@ class _Integrator:
         self.prev_given = T_given
         self.used += 1
         self.camera_poses.append(self.prev_T)
+        self.camera_stamps_ns.append(int(frame.stamp_ns))
         if self.intrinsics is None:
             K = np.asarray(frame.K, dtype=np.float64)
             self.intrinsics = {"fx": float(K[0, 0]), "fy": float(K[1, 1]), "cx": float(K[0, 2]),

@@ -25,10 +25,12 @@ from kinfu_cli.core.poses import check_rigid
 from kinfu_cli.core.volume_file import (FORMAT, FORMAT_VERSION, read_volume_file, read_volume_meta,
                                         write_volume_file)
 from kinfu_cli.fusion import kernels as kn
+from kinfu_cli.fusion.color_mode import MAX_HYPOTHESES, MODE_THRESHOLD, check_color_mode, mode_winners
 from kinfu_cli.fusion.mesh import extract_mesh
 
 BYTES_PER_VOXEL = 3  # v int16 + w uint8
 BYTES_PER_VOXEL_COLOR = 3
+BYTES_PER_HYPOTHESIS = 4  # colour mode filter: uint8 RGB + uint8 count
 MAX_RANGE_M = 100.0  # bound of depths and truncation: farther is no depth sensor (and overflows float32 casts)
 
 
@@ -42,10 +44,14 @@ def _triple(x, name: str, kind=float) -> tuple:
     return t
 
 
-def worst_case_bytes(shape, color: bool) -> int:
-    """Bytes a grid of `shape` voxels needs when every block holds a surface (block tables and full pools)."""
+def worst_case_bytes(shape, color, hypotheses: int = MAX_HYPOTHESES) -> int:
+    """Bytes a grid of `shape` voxels needs when every block holds a surface (block tables and full pools).
+    color: False, True (mean colour) or "mode" (mean colour plus the mode filter's hypotheses)."""
     nblocks = int(np.prod([(int(d) + kn.B - 1) // kn.B for d in shape]))
-    return nblocks * (kn.B3 * (BYTES_PER_VOXEL + (BYTES_PER_VOXEL_COLOR if color else 0)) + 5)
+    per_voxel = BYTES_PER_VOXEL + (BYTES_PER_VOXEL_COLOR if color else 0)
+    if isinstance(color, str) and color == "mode":
+        per_voxel += hypotheses * BYTES_PER_HYPOTHESIS
+    return nblocks * (kn.B3 * per_voxel + 5)
 
 
 def available_bytes() -> int:
@@ -66,12 +72,13 @@ class TernaryVolume:
     size: edge length(s) in metres (one value for a cube); resolution: voxels per axis (one value or three);
     voxel_size: overrides resolution (resolution = ceil(size / voxel_size)); origin: world position of the
     grid's minimum corner (default: grid centred on the world origin); truncation: M_v in metres;
-    max_weight: M_w; min_depth/max_depth: depth readings outside are ignored; color: keep RGB per voxel.
+    max_weight: M_w; min_depth/max_depth: depth readings outside are ignored; color: keep RGB per voxel;
+    color_mode: "mean" (running mean) or "mode" (colour hypotheses, winner takes all: fusion/color_mode.py).
     """
 
     def __init__(self, size=(3.0, 3.0, 3.0), resolution=512, voxel_size: float | None = None,
                  origin=None, truncation: float = 0.03, max_weight: int = 128,
-                 min_depth: float = 0.3, max_depth: float = 4.0, color: bool = True,
+                 min_depth: float = 0.3, max_depth: float = 4.0, color: bool = True, color_mode: str = "mean",
                  _allocate: bool = True) -> None:
         size = _triple(size, "size")
         if not all(np.isfinite(s) and s > 0 for s in size):
@@ -108,6 +115,10 @@ class TernaryVolume:
         self.min_depth = float(min_depth)
         self.max_depth = float(max_depth)
         self.color = bool(color)
+        self.color_mode = check_color_mode(color_mode) if self.color else "mean"
+        self._winners_stale = False  # mode: hypotheses changed since pool_c last got the winners
+        self.mode_hypotheses = MAX_HYPOTHESES  # M and T of the mode filter (color_mode.py); set before integrating
+        self.mode_threshold = MODE_THRESHOLD
         self.nb = np.array([(d + kn.B - 1) // kn.B for d in self.shape], dtype=np.int64)
         self._check_memory()
         self._raylen_cache: dict = {}
@@ -125,7 +136,8 @@ class TernaryVolume:
     # ------------------------------------------------------------------ storage
     @property
     def bytes_worst_case(self) -> int:
-        return worst_case_bytes(self.shape, self.color)
+        return worst_case_bytes(self.shape, "mode" if self.color_mode == "mode" else self.color,
+                                self.mode_hypotheses)
 
     def _check_memory(self) -> None:
         need = self.bytes_worst_case
@@ -140,6 +152,9 @@ class TernaryVolume:
         self.pool_v = np.zeros((cap, kn.B3), dtype=np.int16)
         self.pool_w = np.zeros((cap, kn.B3), dtype=np.uint8)
         self.pool_c = np.zeros((cap if self.color else 0, kn.B3, 3), dtype=np.uint8)
+        nh = cap if self.color_mode == "mode" else 0
+        self.pool_hc = np.zeros((nh, kn.B3, self.mode_hypotheses, 3), dtype=np.uint8)
+        self.pool_hn = np.zeros((nh, kn.B3, self.mode_hypotheses), dtype=np.uint8)
 
     def _ensure_capacity(self, need: int) -> None:
         cap = self.pool_v.shape[0]
@@ -156,6 +171,12 @@ class TernaryVolume:
             pc = np.zeros((new, kn.B3, 3), dtype=np.uint8)
             pc[: self.n_used] = self.pool_c[: self.n_used]
             self.pool_c = pc
+        if self.color_mode == "mode":
+            hc = np.zeros((new,) + self.pool_hc.shape[1:], dtype=np.uint8)
+            hn = np.zeros((new,) + self.pool_hn.shape[1:], dtype=np.uint8)
+            hc[: self.n_used] = self.pool_hc[: self.n_used]
+            hn[: self.n_used] = self.pool_hn[: self.n_used]
+            self.pool_hc, self.pool_hn = hc, hn
         self.pool_v, self.pool_w = pv, pw
 
     @property
@@ -165,7 +186,7 @@ class TernaryVolume:
     def memory_bytes(self) -> int:
         """Bytes held by the grid's arrays (block tables and pools)."""
         return int(self.block_idx.nbytes + self.block_w.nbytes + self.pool_v.nbytes + self.pool_w.nbytes
-                   + self.pool_c.nbytes)
+                   + self.pool_c.nbytes + self.pool_hc.nbytes + self.pool_hn.nbytes)
 
     # ------------------------------------------------------------------ integration
     def _raylen(self, K: np.ndarray, width: int, height: int) -> np.ndarray:
@@ -230,13 +251,19 @@ class TernaryVolume:
             self._ensure_capacity(self.n_used + need_new)
             self.n_used = kn.allocate_blocks(cls, bidx, bw, self.pool_v, self.pool_w, self.pool_c, self.n_used)
         kn.integrate_blocks(cls, self.nb, np.array(self.shape, dtype=np.int64), bidx, bw, self.pool_v,
-                            self.pool_w, self.pool_c, self.origin, self.voxel_size, T_cw, fx, fy, cx, cy, w, h,
-                            kn.depth_and_raylen(d, self._raylen(K, w, h)), col.reshape(-1, 3), self.truncation,
-                            self.max_weight, work)
+                            self.pool_w, self.pool_c, *self._hypotheses(), self.origin, self.voxel_size,
+                            T_cw, fx, fy, cx, cy, w, h, kn.depth_and_raylen(d, self._raylen(K, w, h)),
+                            col.reshape(-1, 3), self.truncation, self.max_weight, work, float(self.mode_threshold))
+        self._winners_stale = self._winners_stale or (self.color_mode == "mode" and col.shape[0] > 0)
         self.frames_integrated += 1
         return {"blocks_carved": int(np.count_nonzero(cls == kn.CARVE)),
                 "blocks_voxelwise": int(np.count_nonzero(cls == kn.VOXEL)),
                 "blocks_allocated": int(self.n_used)}
+
+    def _hypotheses(self) -> tuple:
+        """The mode filter's pools for the kernels; (None, None) for the mean, whose kernel then lacks the mode
+        code altogether."""
+        return (self.pool_hc, self.pool_hn) if self.color_mode == "mode" else (None, None)
 
     def _frustum_blocks(self, T: np.ndarray, K: np.ndarray, w: int, h: int, far: float):
         """Block index box [lo, hi) holding the viewing frustum up to depth `far` (one block of margin)."""
@@ -309,9 +336,17 @@ class TernaryVolume:
         Whole 512^3 grids cost 640 MB here; ask for sub-boxes where possible.
         """
         lo, hi = self._box(lo, hi)
+        if color:
+            self.sync_colors()
         tv, tw, tc = kn.dense_box(lo, hi, self.block_idx, self.block_w, self.pool_v, self.pool_w, self.pool_c,
                                   bool(color))
         return (tv, tw, tc) if color else (tv, tw)
+
+    def sync_colors(self) -> None:
+        """Mode filter: write each voxel's winning hypothesis into the colour pool (a no-op for the mean)."""
+        if self._winners_stale:
+            mode_winners(self.pool_hc, self.pool_hn, self.pool_c, self.n_used)
+            self._winners_stale = False
 
     def tsdf(self, lo=None, hi=None) -> np.ndarray:
         """Dense v (float32 in [-1, 1]; 0 where unknown) over [lo, hi)."""
@@ -379,16 +414,22 @@ class TernaryVolume:
         return {"format": FORMAT, "format_version": FORMAT_VERSION, "shape": list(self.shape),
                 "voxel_size": self.voxel_size, "origin": self.origin.tolist(), "truncation": self.truncation,
                 "max_weight": self.max_weight, "min_depth": self.min_depth, "max_depth": self.max_depth,
-                "color": self.color, "block": kn.B, "frames_integrated": self.frames_integrated,
+                "color": self.color, "color_mode": self.color_mode, "block": kn.B,
+                "frames_integrated": self.frames_integrated,
+                **({"color_hypotheses": self.mode_hypotheses, "color_threshold": self.mode_threshold}
+                   if self.color_mode == "mode" else {}),
                 "frame": self.frame, "up": None if self.up is None else self.up.tolist(),
                 "up_source": self.up_source, "intrinsics": self.intrinsics}
 
     def save(self, path: str | os.PathLike) -> Path:
         """Write one .npz (metadata, block tables, used pool rows) atomically; `load_volume` reads it back."""
         n = self.n_used
-        return write_volume_file(path, self.meta(), {
-            "block_idx": self.block_idx, "block_w": self.block_w, "pool_v": self.pool_v[:n],
-            "pool_w": self.pool_w[:n], "pool_c": self.pool_c[:n] if self.color else self.pool_c[:0]})
+        self.sync_colors()
+        arrays = {"block_idx": self.block_idx, "block_w": self.block_w, "pool_v": self.pool_v[:n],
+                  "pool_w": self.pool_w[:n], "pool_c": self.pool_c[:n] if self.color else self.pool_c[:0]}
+        if self.color_mode == "mode":  # the hypotheses too, so that fusion can go on (init)
+            arrays.update(pool_hc=self.pool_hc[:n], pool_hn=self.pool_hn[:n])
+        return write_volume_file(path, self.meta(), arrays)
 
     def copy(self) -> "TernaryVolume":
         other = TernaryVolume.__new__(TernaryVolume)
@@ -409,7 +450,10 @@ def load_volume(path: str | os.PathLike) -> TernaryVolume:
     vol = TernaryVolume(size=[s * meta["voxel_size"] for s in meta["shape"]], voxel_size=meta["voxel_size"],
                         origin=meta["origin"], truncation=meta["truncation"], max_weight=meta["max_weight"],
                         min_depth=meta["min_depth"], max_depth=meta["max_depth"], color=meta["color"],
-                        _allocate=False)
+                        color_mode=meta.get("color_mode", "mean"), _allocate=False)
+    if vol.color_mode == "mode":
+        vol.mode_hypotheses = int(meta.get("color_hypotheses", MAX_HYPOTHESES))
+        vol.mode_threshold = float(meta.get("color_threshold", MODE_THRESHOLD))
     if tuple(vol.shape) != tuple(meta["shape"]) or arrays["block_idx"].shape != tuple(vol.nb):
         raise VolumeError(f"{path}: inconsistent volume file (shape {meta['shape']}, blocks "
                           f"{arrays['block_idx'].shape})")
@@ -424,6 +468,14 @@ def load_volume(path: str | os.PathLike) -> TernaryVolume:
         if arrays["pool_c"].shape[0] != n:
             raise VolumeError(f"{path}: inconsistent colour pool ({arrays['pool_c'].shape[0]} rows, expected {n})")
         vol.pool_c[:n] = arrays["pool_c"]
+    if vol.color_mode == "mode":
+        hc, hn = arrays.get("pool_hc"), arrays.get("pool_hn")
+        if (hc is None or hn is None or hc.shape != (n,) + vol.pool_hc.shape[1:]
+                or hn.shape != (n,) + vol.pool_hn.shape[1:]):
+            raise VolumeError(f"{path}: colour mode volume without matching hypothesis pools (pool_hc, pool_hn "
+                              f"of {n} rows, {vol.mode_hypotheses} hypotheses per voxel)")
+        vol.pool_hc[:n] = hc
+        vol.pool_hn[:n] = hn
     vol.frames_integrated = int(meta.get("frames_integrated", 0))
     vol.frame = str(meta.get("frame", "") or "")
     try:  # volumes written before the up direction and the intrinsics were recorded have neither

@@ -272,8 +272,34 @@ def plan_standard_views(contours: Contours, scorer: Scorer, region_center, regio
     return plan
 
 
+# thesis W_th (ch. 3, contour extraction): observations before a voxel counts as known at the contours
+W_TH = 5.0
+
+
+def known_grid(volume: TernaryVolume | TernaryGrid, w_th: float = W_TH) -> tuple[TernaryGrid, bool]:
+    """The ternary grid of the object-driven planner (thesis ch. 3): voxels observed fewer than `w_th` times are
+    unknown, for the ray-cast score as for the contours. The flag says whether weights were there to apply it
+    (a ternary grid file has none: then known = observed once)."""
+    grid = volume.ternary_grid() if hasattr(volume, "ternary_grid") else volume
+    if not hasattr(volume, "weights"):
+        return grid, False
+    labels = np.where(volume.weights() >= w_th, grid.labels, np.int8(0))
+    return replace(grid, labels=labels), True
+
+
+def volume_contours(volume: TernaryVolume | TernaryGrid, w_th: float = W_TH) -> tuple[Contours, bool]:
+    """Contours (`nbv.contours`) with the thesis' W_th applied: a voxel is known only once observed `w_th` times, so a
+    surface seen in one or two noisy frames still borders unknown space and keeps its contour points.
+    Needs the fusion weights, which a fused volume (volume.npz) has and a ternary grid (ternary.npz) has not;
+    the flag says whether W_th could be applied (without weights every labelled voxel counts as known)."""
+    grid = volume.ternary_grid() if hasattr(volume, "ternary_grid") else volume
+    weights = volume.weights() if hasattr(volume, "weights") else None
+    contours = extract_contours(grid.labels, grid.origin, grid.voxel_size, weights=weights, w_th=w_th)
+    return contours, weights is not None
+
+
 def plan_object_views_for_volume(volume: TernaryVolume | TernaryGrid, camera: CameraModel, *,
-                                 scorer: Scorer | None = None, score_threshold: float = 0.0, w_th: float = 5.0,
+                                 scorer: Scorer | None = None, score_threshold: float = 0.0, w_th: float = W_TH,
                                  segment_options: SegmentOptions | None = None, table_z: float | None = None,
                                  up=None, **kwargs) -> ObjectPlan:
     """Everything from a volume (fusion TernaryVolume or TernaryGrid): segments (without superquadrics),
@@ -289,9 +315,7 @@ def plan_object_views_for_volume(volume: TernaryVolume | TernaryGrid, camera: Ca
     t_seg = time.perf_counter() - t0
     grid = volume.ternary_grid() if hasattr(volume, "ternary_grid") else volume
     t = time.perf_counter()
-    # contours from the ternary labels (known = w > 0, the fusion ternary rule); pass dense weights to
-    # extract_contours directly to apply a larger W_th
-    contours = extract_contours(grid.labels, grid.origin, grid.voxel_size, w_th=w_th)
+    contours, _ = volume_contours(volume, w_th)
     t_cont = time.perf_counter() - t
     if scorer is None:
         scorer = nbv_scorer(grid, camera, table_z=table_z, up=up)

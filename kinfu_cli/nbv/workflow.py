@@ -27,7 +27,7 @@ from kinfu_cli.core.poses import matrix_to_quaternion
 from kinfu_cli.core.progress import progress_enabled
 from kinfu_cli.fusion.volume import load_grid
 from kinfu_cli.nbv.gains import get_gain
-from kinfu_cli.nbv.objects import ObjectPlan, nbv_scorer, plan_object_views_for_volume
+from kinfu_cli.nbv.objects import W_TH, ObjectPlan, known_grid, nbv_scorer, plan_object_views_for_volume
 from kinfu_cli.nbv.ranking import (PoiRanking, check_region_inside, estimate_table_z, forget_around, load_pois,
                                    rank_poi)
 from kinfu_cli.nbv.raycast import RayVolume
@@ -200,6 +200,7 @@ class ObjectViews:
     warnings: list[str] = field(default_factory=list)
     empty_reason: str | None = None  # why there is no view when that is structural (not "all reconstructed")
     rejected: dict[str, int] = field(default_factory=dict)  # candidate views rejected, per reason
+    w_th: float | None = W_TH  # observations for a voxel to count as known at the contours (None: no weights)
 
     def to_json(self) -> dict:
         """The views.json document of the objects mode: the plan plus each view's position and quaternion."""
@@ -212,7 +213,7 @@ class ObjectViews:
                 "up": self.up.tolist(), "up_source": self.up_source, "candidates_rejected": dict(self.rejected),
                 "empty_reason": self.empty_reason,
                 "voxel_size": self.grid.voxel_size, "shape": list(self.grid.shape),
-                "score_threshold": self.score_threshold, **doc, "warnings": list(self.warnings)}
+                "score_threshold": self.score_threshold, "w_th": self.w_th, **doc, "warnings": list(self.warnings)}
 
 
 def rank_object_views(volume_path: str | os.PathLike, camera: CameraModel, *, gain: str = "unknown",
@@ -227,8 +228,9 @@ def rank_object_views(volume_path: str | os.PathLike, camera: CameraModel, *, ga
     up, up_source = resolve_up(grid, up)
     tz = resolve_table_z(grid, table_z, up)
     tally: dict[str, int] = {}
+    known, _ = known_grid(volume)
     plan = plan_object_views_for_volume(
-        volume, camera, scorer=nbv_scorer(grid, camera, gain=gain, table_z=tz, up=up, tally=tally),
+        volume, camera, scorer=nbv_scorer(known, camera, gain=gain, table_z=tz, up=up, tally=tally),
         score_threshold=score_threshold, table_z=tz, up=up)
     rejected = {k: v for k, v in tally.items() if k not in ("views", "valid")}
     empty = None
@@ -240,5 +242,10 @@ def rank_object_views(volume_path: str | os.PathLike, camera: CameraModel, *, ga
                      f"{len(plan.attempts)} segments tried, none with a contour point")
         elif tally.get("views", 0) and not tally.get("valid", 0):
             empty = rejection_warning("objects", rejected, tally["views"], tz, up, up_source)
+    warnings = [empty] if empty else []
+    weighted = hasattr(volume, "weights")
+    if not weighted:
+        warnings.append(f"{volume_path} has no fusion weights (a ternary grid): W_th = {W_TH:g} is not applied, "
+                        "every observed voxel counts as known; give the fused volume.npz to apply it")
     return ObjectViews(str(volume_path), gain, camera, grid, tz, score_threshold, plan, top, up, up_source,
-                       [empty] if empty else [], empty, rejected)
+                       warnings, empty, rejected, W_TH if weighted else None)

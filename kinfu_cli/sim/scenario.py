@@ -38,10 +38,14 @@ from kinfu_cli.io.trajectory import Trajectory
 from kinfu_cli.io.writers import RecordingWriter
 from kinfu_cli.sim.hand import Action, HandChange, synth_hand_trajectory, write_polhemus
 from kinfu_cli.sim.robot import CAMERA_FRAME, LINKS, WORLD_FRAME, RobotArm
-from kinfu_cli.sim.scene import FLOOR_COLOUR, PALETTE, TABLE_COLOUR, Scene, make_tabletop_scene, random_object
+from kinfu_cli.io.labelled_cloud import write_labelled_cloud
+from kinfu_cli.sim.scene import (FLOOR_COLOUR, PALETTE, TABLE_COLOUR, Scene, make_tabletop_scene, movable_objects,
+                                 random_object, scene_label_cloud, segmentation_scene)
 from kinfu_cli.sim.sensor import DepthSensor, SensorFrame, kinect_v1_intrinsics
 
 KINDS = ("place", "remove", "pick-and-place")
+LAYOUTS = ("tabletop", "objects")  # make_tabletop_scene, or segmentation_scene (n_objects does not apply)
+LABELS_SPACING = 0.004  # ground_truth/labels.ply: one labelled point per 4 mm x 4 mm of object and table surface
 T0_NS = 1_767_225_600_000_000_000  # 2026-01-01T00:00:00Z: fixed, so recordings are reproducible
 
 DEPTH_TOPIC = "/camera/depth/image_raw"
@@ -106,9 +110,12 @@ class Scenario:
 
 def make_scenario(seed: int = 0, kind: str = "pick-and-place", width: int = 320, height: int = 240, frames: int = 36,
                   n_objects: int = 4, noise: bool = True, hand_rate_hz: float = 100.0, frame_rate_hz: float = 5.0,
-                  after_fraction: float = 1 / 3) -> Scenario:
+                  after_fraction: float = 1 / 3, layout: str = "tabletop") -> Scenario:
     """Build a seeded scenario. kind: place | remove | pick-and-place. frames: total depth frames, `after_fraction`
-    of them after the change (at least 1 on each side)."""
+    of them after the change (at least 1 on each side). layout: "tabletop" (`make_tabletop_scene` with n_objects)
+    or "objects" (`segmentation_scene`; only objects standing alone are removed or moved)."""
+    if layout not in LAYOUTS:
+        raise ConfigError(f"expected one of {', '.join(LAYOUTS)}, got {layout!r}", parameter="layout")
     if kind not in KINDS:
         raise ConfigError(f"expected one of {', '.join(KINDS)}, got {kind!r}", parameter="kind")
     if frames < 2:
@@ -121,7 +128,7 @@ def make_scenario(seed: int = 0, kind: str = "pick-and-place", width: int = 320,
     if kind in ("remove", "pick-and-place") and n_objects < 1:
         raise ConfigError(f"the {kind} scenario needs at least one object, got {n_objects}", parameter="n_objects")
     rng = np.random.default_rng([seed, 7])
-    scene = make_tabletop_scene(seed, n_objects)
+    scene = make_tabletop_scene(seed, n_objects) if layout == "tabletop" else segmentation_scene(seed)
     table = scene.table
     region = ((-0.42, 0.42), (-0.25, 0.25))  # where changes happen: well inside the table, seen by the arm
 
@@ -136,7 +143,8 @@ def make_scenario(seed: int = 0, kind: str = "pick-and-place", width: int = 320,
         after = scene.with_change("placement", new, xy)
         moved = [("placement", after.object(new.id))]
     else:
-        candidates = [o for o in scene.objects if region[0][0] <= o.center[0] <= region[0][1]] or list(scene.objects)
+        pool = list(scene.objects) if layout == "tabletop" else movable_objects(scene)
+        candidates = [o for o in pool if region[0][0] <= o.center[0] <= region[0][1]] or pool
         obj = candidates[int(rng.integers(len(candidates)))]
         if kind == "remove":
             after = scene.with_change("removal", obj.id)
@@ -188,7 +196,7 @@ def make_scenario(seed: int = 0, kind: str = "pick-and-place", width: int = 320,
     return Scenario(seed, kind, width, height, K, sensor, robot, scene, after, cam_frames, traj, hand_changes,
                     changes, T0_NS, hand_rate_hz,
                     meta={"n_scan": n_scan, "n_after": n_after, "frame_rate_hz": frame_rate_hz, "noise": noise,
-                          "n_objects": n_objects})
+                          "n_objects": n_objects, **({"layout": layout} if layout != "tabletop" else {})})
 
 
 def rng_for(seed: int, k: int) -> np.random.Generator:
@@ -344,7 +352,8 @@ def check_camera_pose_topic(topic: str | None, depth_format: str = "png", color_
 
 def write_ground_truth(scenario: Scenario, folder: str | os.PathLike, topics: dict | None = None) -> Path:
     """Write ground truth into `folder` (atomically, as a whole): scene_before.ply, scene_after.ply, objects/<id>.ply
-    + table.ply + floor.ply (after state), changes.json, camera_poses.txt, hand.traj (Polhemus format, 100 Hz)."""
+    + table.ply + floor.ply (after state), labels.ply (the after state's surface points with object labels,
+    `io.labelled_cloud`), changes.json, camera_poses.txt, hand.traj (Polhemus format, 100 Hz)."""
     sc = scenario
     with atomic_dir(folder) as tmp:
         for name, scene in (("scene_before.ply", sc.scene_before), ("scene_after.ply", sc.scene_after)):
@@ -356,6 +365,8 @@ def write_ground_truth(scenario: Scenario, folder: str | os.PathLike, topics: di
             _write_mesh(tmp / "objects" / f"{o.id}.ply", m)
         _write_mesh(tmp / "objects" / "table.ply", sc.scene_after.table.mesh().paint_uniform_color(TABLE_COLOUR))
         _write_mesh(tmp / "objects" / "floor.ply", sc.scene_after.floor_mesh().paint_uniform_color(FLOOR_COLOUR))
+        pts, labels = scene_label_cloud(sc.scene_after, spacing=LABELS_SPACING, seed=sc.seed)
+        write_labelled_cloud(tmp / "labels.ply", pts, labels)
         write_json(tmp / "changes.json", ground_truth_json(sc, topics))
         lines = ["# stamp_s (Unix seconds of the depth message) then the true T_world_camera, 16 numbers row-major"]
         for f in sc.frames:
@@ -391,6 +402,7 @@ def ground_truth_json(sc: Scenario, topics: dict | None = None) -> dict:
                    "max_range": sc.sensor.max_range, "noise": sc.meta.get("noise", True)},
         "seed": sc.seed,
         "scenario": sc.kind,
+        **({"layout": sc.meta["layout"]} if sc.meta.get("layout") else {}),
         "t0_ns": sc.t0_ns,
         "frames": {"count": len(sc.frames), "scan": sc.meta.get("n_scan"), "after": sc.meta.get("n_after"),
                    "rate_hz": sc.meta.get("frame_rate_hz"), "first_after": sc.meta.get("n_scan")},

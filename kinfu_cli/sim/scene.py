@@ -11,7 +11,9 @@ distance to the same geometry (analytic, per shape), for ideal TSDF volumes (`ki
 labels (`scene.nearest_labels`).
 
 Layouts: `make_tabletop_scene(seed)` is the synth recording's random tabletop; `primitive_tabletop_scene(seed)` a
-tabletop of boxes, cylinders and spheres with one box stacked on another (segmentation tests); `box_scene()` three
+tabletop of boxes, cylinders and spheres with one box stacked on another (segmentation tests);
+`segmentation_scene(seed)` the segmentation ground-truth tabletop (stacked boxes, touching twins of one colour, a
+mug, striped objects) and `scene_label_cloud(scene)` its labelled surface points; `box_scene()` three
 boxes on a slab at z = 0 (fusion tests). Any other scene is `Scene(table, (resting_object(...), ...))`.
 """
 
@@ -25,7 +27,10 @@ import open3d as o3d
 
 from kinfu_cli.core.errors import ConfigError
 
-SHAPES = ("box", "cylinder", "sphere", "torus", "cone")
+SHAPES = ("box", "cylinder", "sphere", "torus", "cone")  # the random tabletop's shapes (its draws depend on it)
+# a mug: a cylinder body (radius, height) with a handle, a half torus (handle_radius, handle_tube) standing on
+# its +x side in the object frame's x-z plane; only the segmentation scenes use it
+MUG = "mug"
 
 # Distinct, saturated object colours (RGB 0..1); the table is wood-like, the floor grey.
 PALETTE = np.array([
@@ -34,6 +39,9 @@ PALETTE = np.array([
 ])
 TABLE_COLOUR = np.array([0.62, 0.45, 0.28])
 FLOOR_COLOUR = np.array([0.45, 0.45, 0.47])
+
+# SceneObject.texture -> the sensor's albedo pattern code (0 plain, 1 the wood-like stripes)
+TEXTURE_CODES = {"": 0, "stripes": 1}
 
 # Labels used in label images: 0 = nothing hit, 1 = floor, 2 = table, 3.. = objects in scene order.
 LABEL_NONE, LABEL_FLOOR, LABEL_TABLE = 0, 1, 2
@@ -109,6 +117,7 @@ class SceneObject:
     colour: tuple[float, float, float]
     yaw: float = 0.0
     present: bool = True
+    texture: str = ""  # "" plain, "stripes": the sensor's striped albedo (a textured object)
 
     @property
     def footprint_radius(self) -> float:
@@ -138,6 +147,12 @@ class SceneObject:
             return np.hypot(radial - p["torus_radius"], local[..., 2]) - p["tube_radius"]
         if self.shape == "cone":
             return _cone_sdf(radial, local[..., 2], p["radius"], p["height"] / 2)
+        if self.shape == MUG:
+            d = np.stack([radial - p["radius"], np.abs(local[..., 2]) - p["height"] / 2], axis=-1)
+            body = np.linalg.norm(np.maximum(d, 0.0), axis=-1) + np.minimum(d.max(axis=-1), 0.0)
+            hx = local[..., 0] - p["radius"]  # handle: torus about the object's y axis, centred on the body's side
+            handle = np.hypot(np.hypot(hx, local[..., 2]) - p["handle_radius"], local[..., 1]) - p["handle_tube"]
+            return np.minimum(body, handle)
         raise ConfigError(f"unknown shape {self.shape!r}")
 
     def moved_to(self, xy: tuple[float, float], yaw: float | None = None) -> "SceneObject":
@@ -147,7 +162,8 @@ class SceneObject:
     def to_json(self) -> dict:
         return {"id": self.id, "shape": self.shape, "center": [float(c) for c in self.center],
                 "size": [float(s) for s in self.size], "params": {k: float(v) for k, v in self.params.items()},
-                "colour": [float(c) for c in self.colour], "yaw": float(self.yaw)}
+                "colour": [float(c) for c in self.colour], "yaw": float(self.yaw),
+                **({"texture": self.texture} if self.texture else {})}
 
 
 @dataclass
@@ -253,7 +269,7 @@ class Scene:
         add(self.table.mesh(), LABEL_TABLE, TABLE_COLOUR, 1)
         for i, o in enumerate(self.objects):
             if o.present:
-                add(o.mesh, 3 + i, o.colour, 0)
+                add(o.mesh, 3 + i, o.colour, TEXTURE_CODES[o.texture])
         return RaycastTarget(rc, np.asarray(labels, np.int32), np.asarray(albedo), np.asarray(textured, np.int32))
 
     # ---- changes --------------------------------------------------------------------------------
@@ -346,6 +362,8 @@ def shape_size(shape: str, params: dict) -> tuple[float, float, float]:
     if shape == "torus":
         d = 2 * (p["torus_radius"] + p["tube_radius"])
         return d, d, 2 * p["tube_radius"]
+    if shape == MUG:  # symmetric about the body axis, so the handle side sets the x extent on both sides
+        return 2 * (p["radius"] + p["handle_radius"] + p["handle_tube"]), 2 * p["radius"], float(p["height"])
     raise ConfigError(f"unknown shape {shape!r}: expected one of {', '.join(SHAPES)}")
 
 
@@ -445,6 +463,121 @@ def primitive_tabletop_scene(seed: int = 0, n_objects: int = 5, stacked: bool = 
     return Scene(table, tuple(objects), floor=False, seed=seed)
 
 
+def segmentation_scene(seed: int = 0, table: Table | None = None, floor: bool = True) -> Scene:
+    """The segmentation ground-truth tabletop (the "objects" scene of kinfu synth): what colour-free segmentation
+    finds hard, each in its own slot of a 3 x 2 grid on the table, slots shuffled and sizes, yaws and places
+    jittered by `seed`:
+
+    - stacked boxes ("stack_base" with "stack_top" on it, different colours): a concave junction to cut;
+    - two touching boxes of nearly the same colour ("twin_a", "twin_b"), face to face: only the shape's crease
+      separates them;
+    - a mug with a handle ("mug"): one object of two convex parts that must stay one segment;
+    - a striped (textured) box ("textured_box") and a striped cylinder ("textured_can"): colour edges inside one
+      object;
+    - a sphere on its own ("ball"), free to be picked up by the recording's hand.
+
+    The table's +x end (x > 0.2 m) is left free for the recording's change.
+    """
+    table = table or Table()
+    rng = np.random.default_rng([seed, 4242])
+    # five slots for the groups, the ball at the -x end; +x of 0.2 m stays free for the recording's change
+    slots = np.array([[-0.12, -0.14], [0.10, -0.14], [-0.12, 0.14], [0.10, 0.14], [-0.34, 0.14]])
+    slots = slots[rng.permutation(len(slots))]
+    slots = np.vstack([slots, [[-0.36, -0.14]]]) + rng.uniform(-0.02, 0.02, size=(6, 2))
+    slots += np.asarray(table.center)
+    top = table.top_z
+    objects: list[SceneObject] = []
+
+    def jitter(v, rel=0.15):
+        return float(v * rng.uniform(1 - rel, 1 + rel))
+
+    # stacked boxes
+    yaw = float(rng.uniform(-np.pi, np.pi))
+    bx, by, bz = jitter(0.14), jitter(0.11), jitter(0.08)
+    base = resting_object("stack_base", "box", {"x": bx, "y": by, "z": bz}, xy=slots[0], base_z=top, yaw=yaw,
+                          colour=PALETTE[0])
+    objects += [base, resting_object("stack_top", "box", {"x": 0.65 * bx, "y": 0.7 * by, "z": jitter(0.07)},
+                                     xy=slots[0], base_z=top + bz, yaw=yaw + float(rng.uniform(0.3, 0.7)),
+                                     colour=PALETTE[3])]
+    # touching twins of nearly one colour, side by side along their common x axis
+    yaw = float(rng.uniform(-np.pi, np.pi))
+    ax, bx2 = jitter(0.09), jitter(0.08)
+    y_ext, z_a, z_b = jitter(0.10), jitter(0.12), jitter(0.09)
+    axis = np.array([np.cos(yaw), np.sin(yaw)])
+    centre_a = slots[1] - axis * bx2 / 2
+    centre_b = slots[1] + axis * ax / 2
+    twin = np.array([0.20, 0.45, 0.80])
+    objects += [resting_object("twin_a", "box", {"x": ax, "y": y_ext, "z": z_a}, xy=centre_a, base_z=top, yaw=yaw,
+                               colour=twin),
+                resting_object("twin_b", "box", {"x": bx2, "y": y_ext, "z": z_b}, xy=centre_b, base_z=top,
+                               yaw=yaw, colour=twin + 0.04)]
+    # a mug with its handle
+    h = jitter(0.10, 0.1)
+    objects.append(resting_object(MUG, MUG, {"radius": jitter(0.04, 0.1), "height": h, "handle_radius": 0.28 * h,
+                                             "handle_tube": 0.011},
+                                  xy=slots[2], base_z=top, yaw=float(rng.uniform(-np.pi, np.pi)),
+                                  colour=(0.92, 0.90, 0.82)))
+    # textured objects
+    objects.append(dataclasses.replace(
+        resting_object("textured_box", "box", {"x": jitter(0.12), "y": jitter(0.09), "z": jitter(0.10)},
+                       xy=slots[3], base_z=top, yaw=float(rng.uniform(-np.pi, np.pi)), colour=PALETTE[2]),
+        texture="stripes"))
+    objects.append(dataclasses.replace(
+        resting_object("textured_can", "cylinder", {"radius": jitter(0.04, 0.1), "height": jitter(0.13)},
+                       xy=slots[4], base_z=top, colour=PALETTE[5]), texture="stripes"))
+    objects.append(resting_object("ball", "sphere", {"radius": jitter(0.045, 0.1)}, xy=slots[5], base_z=top,
+                                  colour=PALETTE[4]))
+    return Scene(table, tuple(objects), floor, seed)
+
+
+def movable_objects(scene: Scene, clearance: float = 0.01) -> list[SceneObject]:
+    """Present objects standing on the table top on their own (nothing on them, no neighbour within
+    `clearance` of their footprint circle): the ones a hand may pick up without leaving another floating."""
+    out = []
+    present = scene.present_objects
+    for o in present:
+        on_table = abs(o.center[2] - o.size[2] / 2 - scene.table.top_z) < 1e-6
+        alone = all(np.linalg.norm(np.subtract(o.center[:2], p.center[:2])) >= o.footprint_radius
+                    + p.footprint_radius + clearance for p in present if p is not o)
+        if on_table and alone:
+            out.append(o)
+    return out
+
+
+def scene_label_cloud(scene: Scene, spacing: float = 0.004, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Per-point object labels of the scene's outer surface: points (N, 3) and labels (N,), 0 for the table
+    and the floor (sparser: the table every 1.5 x spacing, the floor's top every 3 x spacing), each present
+    object its label-image label (`scene.label_of`, the `label` of changes.json). Surface hidden inside another
+    part (a box's bottom on the table, the shared face of touching boxes, the inner half of a mug's handle) is
+    left out, so a labelled point is one a sensor could see."""
+    from kinfu_cli.sim.sampling import sample_surface  # sampling imports nothing from here; kept local
+
+    parts: list[tuple[int, o3d.geometry.TriangleMesh, float]] = [(0, scene.table.mesh(), 1.5 * spacing)]
+    if scene.floor:
+        parts.append((0, scene.floor_mesh(), 3 * spacing))
+    parts += [(scene.label_of(o.id), o.mesh, spacing) for o in scene.present_objects]
+    pts_all, lab_all = [], []
+    for k, (label, mesh, step) in enumerate(parts):
+        pts, nrm = sample_surface(np.asarray(mesh.vertices), np.asarray(mesh.triangles), step, seed=seed + k)
+        if scene.floor and k == 1:  # the floor slab's top face only: nothing sees its sides or underside
+            pts = pts[nrm[:, 2] > 0.5]
+        pts_all.append(pts)
+        lab_all.append(np.full(len(pts), label, dtype=np.int64))
+    pts = np.concatenate(pts_all)
+    lab = np.concatenate(lab_all)
+    # keep points on the union's outer surface: no part (their own included) reaches more than 1 mm beyond them
+    dist = scene._part_distances(pts)
+    inside = np.min([d for _, d in dist], axis=0) < -1e-3
+    owner = np.asarray([0 if label in (LABEL_FLOOR, LABEL_TABLE) else label for label, _ in dist])
+    # and not on another part's surface (touching faces): another part within 1.5 mm
+    other = np.full(len(pts), np.inf)
+    for (label, d), own in zip(dist, owner):
+        mine = (lab == own)
+        other = np.where(mine, other, np.minimum(other, d))
+    keep = ~inside & (other > 1.5e-3)
+    return pts[keep], lab[keep]
+
+
 def box_scene() -> Scene:
     """Three boxes (up to 25 cm tall) on a 1.2 m square slab whose top is z = 0, no legs, no floor: a fixed scene
     with exact, easily measured geometry (fusion tests and benchmarks)."""
@@ -502,6 +635,13 @@ def _object_mesh(o: SceneObject) -> o3d.geometry.TriangleMesh:
     elif o.shape == "cone":
         m = o3d.geometry.TriangleMesh.create_cone(p["radius"], p["height"], resolution=40)
         m.translate((0.0, 0.0, -p["height"] / 2))  # open3d's cone has its base at z = 0
+    elif o.shape == MUG:
+        m = o3d.geometry.TriangleMesh.create_cylinder(p["radius"], p["height"], resolution=40)
+        handle = o3d.geometry.TriangleMesh.create_torus(p["handle_radius"], p["handle_tube"], radial_resolution=40,
+                                                        tubular_resolution=16)
+        handle.rotate(np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]]), center=(0, 0, 0))  # axis z -> y
+        handle.translate((p["radius"], 0.0, 0.0))
+        m += handle  # the half inside the body is hidden by it (ray casting and the SDF agree on the union)
     else:
         raise ConfigError(f"unknown shape {o.shape!r}")
     c, s = np.cos(o.yaw), np.sin(o.yaw)

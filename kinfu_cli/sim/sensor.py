@@ -20,6 +20,13 @@ with Lambert shading from a fixed light above the table, an ambient term and a l
 colour camera is registered to the depth camera (same intrinsics and pose, as the Kinect's registered mode).
 With `noise=False` depth is exact (float32 ray casting, no quantisation) and colour has no pixel noise.
 
+Photometric nonidealities, off by default (existing sequences do not change; thesis ch. 4 blames the Kinect v2's
+auto-gain and misregistration for colour blur): `gain_jitter` (sigma of the log of a per-frame global gain, as
+auto-exposure changes it from frame to frame), `white_balance_jitter` (sigma of the log of a per-frame, per-channel
+gain) and `misregistration` (du, dv pixels, rotation degrees about the image centre: colour pixel (u, v) sees what
+the depth camera sees at that offset). They draw from their own generator, so turning them on leaves the depth
+noise as it was.
+
 Ray casting is open3d C++, the noise model vectorised numpy, shading a numba kernel.
 """
 
@@ -43,6 +50,7 @@ warnings.filterwarnings("ignore", message="The TBB threading layer requires TBB 
 
 LIGHT_DIR = np.array([0.3, -0.4, 1.0]) / np.linalg.norm([0.3, -0.4, 1.0])  # towards the light, world frame
 BACKGROUND_RGB = np.array([0.08, 0.08, 0.09])
+PHOTO_STREAM = 0x9A1  # seeds the photometric effects' own generator (with the sensor seed and frame seed)
 
 
 def kinect_v1_intrinsics(width: int = 640, height: int = 480) -> np.ndarray:
@@ -107,7 +115,8 @@ class DepthSensor:
                  edge_dropout: float = 0.5, missing_rate: float = 0.005, max_incidence_deg: float = 80.0,
                  edge_jump: float = 0.03, color_noise: float = 2.0 / 255.0,
                  disparity_quantisation: bool = True, ir_focal: float = SENSOR_PRESETS["kinect_v1_ir"]["fx"],
-                 subpixel: int = 8) -> None:
+                 subpixel: int = 8, gain_jitter: float = 0.0, white_balance_jitter: float = 0.0,
+                 misregistration: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
         K = np.asarray(K, dtype=np.float64)
         if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
             raise ConfigError(f"camera intrinsics: expected a 3x3 matrix with positive focal lengths, got {K.tolist()}")
@@ -129,10 +138,21 @@ class DepthSensor:
         self.color_noise = float(color_noise)
         self.disparity_quantisation = bool(disparity_quantisation)
         self.bf = float(baseline) * float(ir_focal) * int(subpixel)  # depth = bf / (disparity in subpixel steps)
+        self.gain_jitter = float(gain_jitter)
+        self.white_balance_jitter = float(white_balance_jitter)
+        mis = tuple(float(x) for x in misregistration)
+        if (len(mis) != 3 or not all(np.isfinite(mis)) or not (0 <= self.gain_jitter < 1)
+                or not (0 <= self.white_balance_jitter < 1)):
+            raise ConfigError(f"photometric effects: expected gain and white balance jitters in [0, 1) and a "
+                              f"misregistration (du, dv, degrees) of finite numbers, got {self.gain_jitter}, "
+                              f"{self.white_balance_jitter}, {misregistration}")
+        self.misregistration = mis
         self._rng = np.random.default_rng(self.seed)
+        self._photo_rng = np.random.default_rng([self.seed, PHOTO_STREAM])
         v, u = np.mgrid[0:self.height, 0:self.width]
         self._u = u.astype(np.float64)
         self._v = v.astype(np.float64)
+        self._color_uv = self._misregistered_pixels() if any(mis) else None
         self._cache: tuple[int, RaycastTarget] | None = None
         self._dcam = pixel_directions(self.K, self._u, self._v)
 
@@ -158,7 +178,8 @@ class DepthSensor:
         hit = self._cast(target, T)
         true_depth = np.where(hit["valid"], hit["t"], 0.0)
         labels = np.where(hit["valid"], target.labels[np.minimum(hit["gid"], len(target.labels) - 1)], LABEL_NONE)
-        color = self._shade(target, hit, rng)
+        color = self._shade(target, hit if self._color_uv is None else self._cast(target, T, *self._color_uv), rng,
+                            self._photometric_gain(frame_seed))
         in_range = (true_depth >= self.min_range) & (true_depth <= self.max_range)
 
         if not self.noise:
@@ -254,7 +275,26 @@ class DepthSensor:
         """World points (n, 3) hit by the pixels in mask."""
         return hit["origin"] + hit["dir"][mask] * hit["t"][mask][:, None]
 
-    def _shade(self, target: RaycastTarget, hit: dict, rng: np.random.Generator) -> np.ndarray:
+    def _misregistered_pixels(self) -> tuple[np.ndarray, np.ndarray]:
+        """Depth-image positions (u, v) the colour pixels look through: rotated about the image centre by the
+        misregistration's angle, then shifted by its (du, dv)."""
+        du, dv, deg = self.misregistration
+        a = np.deg2rad(deg)
+        cu, cv = (self.width - 1) / 2.0, (self.height - 1) / 2.0
+        x, y = self._u - cu, self._v - cv
+        return (cu + du + np.cos(a) * x - np.sin(a) * y, cv + dv + np.sin(a) * x + np.cos(a) * y)
+
+    def _photometric_gain(self, frame_seed: int | None) -> np.ndarray | None:
+        """Per-channel gain (3,) of this frame's auto-exposure and white balance; None when both are off."""
+        if self.gain_jitter <= 0 and self.white_balance_jitter <= 0:
+            return None
+        rng = (np.random.default_rng([self.seed, PHOTO_STREAM, int(frame_seed)]) if frame_seed is not None
+               else self._photo_rng)
+        log_gain = rng.normal(0.0, self.gain_jitter) + rng.normal(0.0, self.white_balance_jitter, 3)
+        return np.exp(log_gain).astype(np.float32)
+
+    def _shade(self, target: RaycastTarget, hit: dict, rng: np.random.Generator,
+               gain: np.ndarray | None = None) -> np.ndarray:
         rgb = _shade_kernel(hit["valid"], hit["gid"], hit["t"], hit["dir"], hit["normals"],
                             np.asarray(hit["origin"], dtype=np.float64), target.albedo.astype(np.float32),
                             target.textured.astype(np.int32), LIGHT_DIR.astype(np.float32),
@@ -268,6 +308,8 @@ class DepthSensor:
                 w = np.stack([1 - uv[:, 0] - uv[:, 1], uv[:, 0], uv[:, 1]], axis=1)
                 albedo = np.einsum("nk,nkc->nc", w, vcol[tris[prim]])
                 rgb[vc] *= (albedo / target.albedo[0]).astype(np.float32)
+        if gain is not None:
+            rgb *= gain
         if self.noise and self.color_noise > 0:
             rgb += rng.standard_normal(rgb.shape, dtype=np.float32) * np.float32(self.color_noise)
         return np.clip(np.round(rgb * 255.0), 0, 255).astype(np.uint8)

@@ -17,7 +17,7 @@ from kinfu_cli.sim.room import WORLDS, RoomScenario, make_room, write_room_groun
 from kinfu_cli.sim.scenario import (Scenario, check_camera_pose_topic, make_scenario, recording_topics,
                                     write_ground_truth, write_recordings)
 
-SCENES = ("tabletop", "room")
+SCENES = ("tabletop", "room", "objects")  # objects: the tabletop scenario on `sim.scene.segmentation_scene`
 FORMAT_NAMES = {"mcap": "recording.mcap", "bag": "recording.bag", "ros2": "recording_ros2"}
 
 
@@ -41,7 +41,8 @@ class SynthResult:
         return {"recordings": [str(p) for p in self.recordings], "ground_truth": str(self.ground_truth),
                 "frames": len(sc.frames), "scan_frames": sc.meta["n_scan"], "after_frames": sc.meta["n_after"],
                 "hand_samples": len(sc.hand), "changes": sc.changes, "seed": sc.seed, "scenario": sc.kind,
-                "width": sc.width, "height": sc.height, "camera_pose_topic": self.camera_pose_topic}
+                "width": sc.width, "height": sc.height, "camera_pose_topic": self.camera_pose_topic,
+                **({"scene": sc.meta["layout"]} if sc.meta.get("layout") else {})}
 
 
 def synthesize(out: str | os.PathLike, seed: int = 0, width: int = 320, height: int = 240, frames: int = 36,
@@ -52,7 +53,9 @@ def synthesize(out: str | os.PathLike, seed: int = 0, width: int = 320, height: 
     """Build the scenario and write the containers named in `formats` (FORMAT_NAMES) and OUT/ground_truth/.
     camera_pose_topic: also write the true camera poses (PoseStamped in `world`) on this topic; quiet: no
     progress bar. scene: "tabletop" (the arm scenario) or "room" (`sim.room`: a handheld camera walking through a
-    furnished room; `scenario`, `n_objects` and `hand_rate` do not apply); world: "z-up" or "y-down" (room only)."""
+    furnished room; `scenario`, `n_objects` and `hand_rate` do not apply) or "objects" (the tabletop scenario on the
+    segmentation ground-truth scene `sim.scene.segmentation_scene`; `n_objects` does not apply); world: "z-up" or
+    "y-down" (room only)."""
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise ConfigError(f"{out} exists and is not a folder", parameter="out")
@@ -86,7 +89,8 @@ def synthesize(out: str | os.PathLike, seed: int = 0, width: int = 320, height: 
         raise ConfigError(f"the tabletop scene is z-up only, got {world!r}; the room scene takes either world",
                           parameter="world")
     sc = make_scenario(seed=seed, kind=scenario, width=width, height=height, frames=frames, n_objects=n_objects,
-                       noise=noise, hand_rate_hz=hand_rate, frame_rate_hz=frame_rate)
+                       noise=noise, hand_rate_hz=hand_rate, frame_rate_hz=frame_rate,
+                       layout="objects" if scene == "objects" else "tabletop")
     paths = [out / FORMAT_NAMES[f] for f in formats]
     write_recordings(sc, paths, depth_format=depth_format, color_format=color_format, quiet=quiet,
                      jpeg_quality=jpeg_quality, camera_pose_topic=camera_pose_topic)

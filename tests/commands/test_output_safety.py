@@ -107,7 +107,7 @@ def test_a_killed_fuse_leaves_the_previous_result_whole(tmp_path, moment):
     proc.wait(timeout=30)
     assert (out / "report.json").read_bytes() == first  # old result untouched, nothing mixed in
     assert {p.name for p in out.iterdir()} == {MANIFEST, "report.json", "volume.npz", "ternary.npz", "mesh.ply",
-                                               "cloud.ply"}
+                                               "cloud.ply", "trajectory.tum"}
     # the next run cleans the debris of the killed one
     assert run(*base, "--resolution", "64", "--end", "6.1", "--every", "6").exit_code == 0
     assert sorted(p.name for p in tmp_path.iterdir()) == [MANIFEST, "fuse"]

@@ -39,7 +39,11 @@ def test_object_driven_views_cast_3_9x_fewer_candidates_for_the_same_reduction(e
     assert obj["unknown_near"][-1] < 0.25 * obj["unknown_near"][0]
     assert obj["unknown_near"][-1] <= 1.1 * std["unknown_near"][-1]
     eq = doc["equal_reduction"]
-    assert eq["reduction_fraction"] > 0.75
+    # with the thesis' W_th = 5 (unknown = seen fewer than 5 times, for planners and measure alike) the standard
+    # plan stalls at a third of the reduction (sample: 79.7k -> 51.4k unknown voxels near the objects in 3 views)
+    # where the object plan reaches 79 % (-> 16.9k); the object plan gets to the standard's level in one view
+    assert eq["reduction_fraction"] > 0.3
+    assert obj["unknown_near"][-1] < 0.5 * std["unknown_near"][-1]
     assert eq["cast_ratio"] >= 3.9, eq
     assert doc["cast_ratio_standard_over_objects"] >= 3.9
     assert doc["time_ratio_standard_over_objects"] > 1.0
@@ -84,7 +88,7 @@ def test_cli_eval_nbv_objects_table_and_json(sample_dir, tmp_path):
     doc = json.loads(out.read_text())
     r = doc["strategies"]["objects"]
     assert doc["kind"] == "exploration" and len(r["unknown_near"]) == 2
-    assert r["unknown_near"][1] < 0.8 * r["unknown_near"][0]
+    assert r["unknown_near"][1] < 0.85 * r["unknown_near"][0]  # W_th = 5 unknown: 71.8k -> 58.0k at 48 px
     assert 0 < r["candidates_cast_total"] <= 2000 and r["segments"][0] is not None
     res = CliRunner().invoke(cli, args + ["--json"])
     assert res.exit_code == 0 and json.loads(res.output)["strategies"]["objects"]["unknown_near"] == r["unknown_near"]

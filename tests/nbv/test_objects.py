@@ -150,3 +150,51 @@ def test_closed_loop_object_views_keep_revealing_voxels_near_objects_on_another_
     assert len(curve) >= 4 and all(b < a for a, b in zip(curve, curve[1:])), curve
     assert curve[-1] < 0.1 * curve[0]
     assert max(obj["candidates_cast"]) <= 1000 and len(set(obj["segments"])) >= 2
+
+
+def _box_volume(repeats: int):
+    """The box scene seen from one pose, its frame integrated `repeats` times (weights 0 or `repeats`)."""
+    from kinfu_cli.core.camera import preset_intrinsics
+    from kinfu_cli.fusion.volume import TernaryVolume
+    from kinfu_cli.sim.paths import orbit_poses
+    from kinfu_cli.sim.scene import box_scene
+    from kinfu_cli.sim.sensor import DepthSensor
+
+    K = preset_intrinsics("kinect_v1", 160, 120)
+    sensor = DepthSensor(K, 160, 120, noise=False)
+    vol = TernaryVolume(size=(0.96, 0.96, 0.384), voxel_size=0.012, origin=(-0.48, -0.48, -0.06), min_depth=0.1,
+                        truncation=0.03, color=False)
+    for T in orbit_poses(1, radius=0.8, height=0.6):
+        d, _ = sensor.render(box_scene(), T)
+        for _ in range(repeats):
+            vol.integrate(d, K, T)
+    return vol
+
+
+def test_volume_contours_apply_w_th_with_the_fusion_weights(tmp_path):
+    """Thesis W_th = 5: voxels observed fewer than 5 times are unknown at the contours. Seen 4 times, the whole
+    observed space is still unknown: no contour; seen 5 times, nearly the same contours as the plain ternary labels
+    (a few voxels at grazing angles or the far edge of the truncation band get less than a full weight)."""
+    from kinfu_cli.core.grid import save_ternary
+    from kinfu_cli.fusion.volume import load_volume
+    from kinfu_cli.nbv.objects import W_TH, volume_contours
+    from kinfu_cli.nbv.workflow import rank_object_views
+
+    assert W_TH == 5
+    weak, strong = _box_volume(4), _box_volume(5)
+    plain = extract_contours(weak.labels(), weak.origin, weak.voxel_size)
+    assert plain.sizes.sum() > 50  # the labels alone (known = observed once) give contours
+    c_weak, applied = volume_contours(weak)
+    assert applied and len(c_weak) == 0
+    c_strong, _ = volume_contours(strong)
+    assert 0.97 * plain.sizes.sum() <= c_strong.sizes.sum() <= plain.sizes.sum()
+    # through the driver: volume.npz carries the weights (applied), ternary.npz does not (said in a warning)
+    weak.save(tmp_path / "volume.npz")
+    cam = CameraModel(fx=40.0, fy=40.0, cx=31.5, cy=23.5, width=64, height=48, min_range=0.3)
+    views = rank_object_views(tmp_path / "volume.npz", cam)
+    assert views.w_th == 5 and views.plan.candidates_total == 0 and "no contour point" in views.empty_reason
+    assert load_volume(tmp_path / "volume.npz").weights().max() == 4
+    save_ternary(tmp_path / "ternary.npz", weak.ternary_grid())
+    views = rank_object_views(tmp_path / "ternary.npz", cam)
+    assert views.w_th is None and views.plan.candidates_total > 0
+    assert any("W_th = 5 is not applied" in w for w in views.warnings)

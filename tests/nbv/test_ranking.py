@@ -222,7 +222,7 @@ def test_cli_objects_mode_plans_views_at_the_contours_of_a_salient_segment(tmp_p
                                    "--fy", "120", "--cx", "79.5", "--cy", "59.5", "--width", "160", "--height", "120",
                                    "--min-range", "0.3", "--quiet"])
     assert res.exit_code == 0, res.output
-    doc = json.loads(res.output)
+    doc = json.loads(res.stdout)
     assert doc["mode"] == "objects" and doc["pose"] is not None and doc["score"] > 0
     assert doc["candidates_evaluated"] < doc["candidates_total"]
     gains = [v["gain"] for v in doc["views"]]

@@ -145,3 +145,56 @@ def test_ideal_depth_is_the_noise_free_image_with_inf_where_nothing_is_hit():
     hit = np.isfinite(z)
     assert z.dtype == np.float32 and 0.2 < hit.mean() < 1.0  # no floor: rays beside the table hit nothing
     assert np.array_equal(z[hit], exact[hit]) and np.all(exact[~hit] == 0)
+
+
+# ---- photometric effects (issue 12: auto-gain and colour-depth misregistration) -------------------------
+
+def _tabletop_view():
+    scene = make_tabletop_scene(seed=2)
+    T = np.eye(4)
+    T[:3, :3] = np.diag([1.0, -1.0, -1.0])
+    T[:3, 3] = (0.0, 0.0, 1.6)
+    return scene, T
+
+
+def test_photometric_effects_are_off_by_default_and_leave_depth_alone():
+    scene, T = _tabletop_view()
+    K = kinect_v1_intrinsics(W, H)
+    plain = DepthSensor(K, W, H, seed=5).render_frame(scene, T, frame_seed=3)
+    same = DepthSensor(K, W, H, seed=5, gain_jitter=0.0, misregistration=(0, 0, 0)).render_frame(scene, T, frame_seed=3)
+    assert np.array_equal(plain.color, same.color) and np.array_equal(plain.depth, same.depth)
+    fx = DepthSensor(K, W, H, seed=5, gain_jitter=0.2, white_balance_jitter=0.05,
+                     misregistration=(2, 1, 0.5)).render_frame(scene, T, frame_seed=3)
+    assert np.array_equal(plain.depth, fx.depth) and np.array_equal(plain.labels, fx.labels)
+    assert not np.array_equal(plain.color, fx.color)
+
+
+def test_gain_scales_each_frame_by_one_factor_per_channel():
+    scene, T = _tabletop_view()
+    K = kinect_v1_intrinsics(W, H)
+    ref = DepthSensor(K, W, H, noise=False).render(scene, T)[1].astype(float)
+    sensor = DepthSensor(K, W, H, noise=False, gain_jitter=0.2, white_balance_jitter=0.05, seed=1)
+    gains = []
+    for _ in range(12):
+        c = sensor.render(scene, T)[1].astype(float)
+        ok = (ref > 40) & (ref < 150) & (c < 250)
+        ratio = np.array([np.median(c[..., k][ok[..., k]] / ref[..., k][ok[..., k]]) for k in range(3)])
+        spread = max(np.percentile(np.abs(c[..., k][ok[..., k]] - ratio[k] * ref[..., k][ok[..., k]]), 99)
+                     for k in range(3))
+        assert spread <= 1.5  # one gain per channel over the whole image (up to rounding)
+        gains.append(ratio)
+    log_g = np.log(np.array(gains))
+    assert 0.1 < log_g.mean(axis=1).std() < 0.35  # frame to frame, about the 0.2 asked for
+    assert np.abs(log_g - log_g.mean(axis=1, keepdims=True)).max() < 0.2  # white balance: small per channel
+
+
+def test_misregistration_shifts_the_colour_image():
+    scene, T = _tabletop_view()
+    K = kinect_v1_intrinsics(W, H)
+    ref = DepthSensor(K, W, H, noise=False).render_frame(scene, T)
+    mis = DepthSensor(K, W, H, noise=False, misregistration=(2.0, -1.0, 0.0)).render_frame(scene, T)
+    assert np.array_equal(ref.depth, mis.depth)
+    # colour pixel (u, v) shows what the depth camera sees at (u + 2, v - 1)
+    assert np.array_equal(mis.color[1:, :-2], ref.color[:-1, 2:])
+    with pytest.raises(ConfigError):
+        DepthSensor(K, W, H, misregistration=(1.0, np.nan, 0.0))

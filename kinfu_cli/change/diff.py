@@ -1,0 +1,168 @@
+"""The `diff_volumes` driver: removed / added change regions between two fused volumes of one place.
+
+Inputs are ternary grids (`ternary.npz`) or fusion volumes (`volume.npz`), in the same world frame with one
+voxel size. The result lists every change region with its kind, centroid, axis-aligned box, volume and voxel
+centres; `to_json()` is changes.json (its keys are documented in README.md, section `kinfu diff`).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from kinfu_cli.change.align import AlignedPair, align
+from kinfu_cli.change.regions import KINDS, ChangeMasks, Region, find_changes
+from kinfu_cli.core.checks import check_number
+from kinfu_cli.core.errors import VolumeError
+from kinfu_cli.core.grid import TernaryGrid, read_ternary
+from kinfu_cli.core.volume_file import read_volume_meta
+from kinfu_cli.fusion.volume import load_volume
+
+#: Smallest region kept, in voxels, when no minimum volume is given: a 3 x 3 x 3 block. Pose noise is already
+#: removed by the free-space erosion; what it leaves are sensor speckles and mixed pixels at depth edges, a few
+#: voxels each, while the smallest object a tabletop task moves (a few centimetres) leaves tens of voxels.
+DEFAULT_MIN_VOXELS = 27
+#: Below this overlap (voxels known in both over the known voxels of the smaller volume) the diff warns.
+MIN_OVERLAP = 0.5
+
+
+@dataclass
+class ChangeParams:
+    """margin: free-space erosion in voxels (pose noise tolerated); min_volume: smallest region kept, m^3 (None:
+    DEFAULT_MIN_VOXELS voxels)."""
+
+    margin: int = 1
+    min_volume: float | None = None
+
+    def min_voxels(self, voxel_size: float) -> int:
+        if self.min_volume is None:
+            return DEFAULT_MIN_VOXELS
+        return max(1, int(np.ceil(self.min_volume / voxel_size ** 3 - 1e-9)))
+
+    def check(self) -> None:
+        check_number(self.margin, "margin", 0, 10, integer=True)
+        if self.min_volume is not None:
+            check_number(self.min_volume, "min_volume", 0, 1e3, unit="m^3")
+
+
+@dataclass
+class ChangeRegion:
+    """A change region in world coordinates: points (N, 3) are its voxel centres."""
+
+    id: int
+    kind: str
+    points: np.ndarray
+    voxel_size: float
+
+    @property
+    def centroid(self) -> np.ndarray:
+        return self.points.mean(axis=0)
+
+    @property
+    def volume(self) -> float:
+        return len(self.points) * self.voxel_size ** 3
+
+    def to_json(self) -> dict:
+        half = self.voxel_size / 2
+        return {"id": self.id, "kind": self.kind, "centroid": [round(float(v), 5) for v in self.centroid],
+                "box_min": [round(float(v), 5) for v in self.points.min(axis=0) - half],
+                "box_max": [round(float(v), 5) for v in self.points.max(axis=0) + half],
+                "volume_m3": float(self.volume), "voxels": int(len(self.points)), "ply": f"regions/{self.id}.ply"}
+
+
+@dataclass
+class ChangeResult:
+    """What `kinfu diff` reports: the regions, the cleaning counts, the common box and the warnings."""
+
+    before: str
+    after: str
+    frame: str
+    pair: AlignedPair
+    masks: ChangeMasks
+    regions: list[ChangeRegion]
+    params: ChangeParams
+    min_voxels: int
+    warnings: list[str] = field(default_factory=list)
+    pois: dict | None = None  # filled by evaluation.changes.score_change_pois
+
+    def count(self, kind: str) -> int:
+        return sum(1 for r in self.regions if r.kind == kind)
+
+    def to_json(self) -> dict:
+        p, m = self.pair, self.masks
+        return {
+            "before": self.before, "after": self.after, "frame": self.frame, "voxel_size": p.voxel_size,
+            "common_box": {"min": [float(v) for v in p.origin],
+                           "max": [float(v) for v in p.origin + np.array(p.shape) * p.voxel_size],
+                           "shape": list(p.shape)},
+            "overlap": {"fraction": round(p.overlap, 4), "observed_before": p.observed_before,
+                        "observed_after": p.observed_after, "observed_both": p.observed_both},
+            "parameters": {"margin_voxels": self.params.margin, "min_volume_m3": self.min_voxels * p.voxel_size ** 3,
+                           "min_voxels": self.min_voxels, "connectivity": 26},
+            "counts": {"changed_voxels": m.raw, "after_erosion": m.kept, "unknown_ignored": m.unknown_ignored,
+                       "unknown_hidden_blobs": m.hidden,
+                       "dropped_small_regions": m.dropped_regions, "dropped_small_voxels": m.dropped_voxels,
+                       "regions": {k: self.count(k) for k in KINDS},
+                       "region_voxels": {k: sum(len(r.points) for r in self.regions if r.kind == k) for k in KINDS}},
+            "regions": [r.to_json() for r in self.regions],
+            "changes_ply": "changes.ply" if self.regions else None,
+            "pois": self.pois,
+            "warnings": list(self.warnings),
+        }
+
+
+def _warnings(before: TernaryGrid, after: TernaryGrid, names: tuple[str, str], pair: AlignedPair,
+              masks: ChangeMasks, n_regions: int, min_voxels: int) -> list[str]:
+    out = []
+    fb, fa = before.frame.lstrip("/"), after.frame.lstrip("/")
+    if fb and fa and fb != fa:
+        out.append(f"{names[0]} is in frame {fb!r}, {names[1]} in {fa!r}; compared at their coordinates as given")
+    if pair.observed_both == 0:
+        out.append(f"no voxel is observed in both {names[0]} and {names[1]}: nothing can be compared")
+    elif pair.overlap < MIN_OVERLAP:
+        out.append(f"the volumes overlap little: {100 * pair.overlap:.0f} % of the smaller one's observed voxels "
+                   f"are observed in both (below {100 * MIN_OVERLAP:.0f} %); changes elsewhere cannot be seen")
+    if n_regions == 0 and sum(masks.hidden.values()):
+        u = masks.hidden
+        out.append(f"no change found, but {u['occupied_before_unknown_after']} voxels occupied before lie in space "
+                   f"unknown after and {u['occupied_after_unknown_before']} occupied after in space unknown before, "
+                   f"in blobs as large as a region: changes there cannot be seen")
+    return out
+
+
+def diff_grids(before: TernaryGrid, after: TernaryGrid, params: ChangeParams | None = None,
+               names: tuple[str, str] = ("before", "after")) -> ChangeResult:
+    """The change regions from `before` to `after` (grids of one place, one voxel size)."""
+    params = params or ChangeParams()
+    params.check()
+    pair = align(before, after, *names)
+    min_voxels = params.min_voxels(pair.voxel_size)
+    masks = find_changes(pair.before, pair.after, margin=params.margin, min_voxels=min_voxels)
+    regions = [ChangeRegion(i, r.kind, pair.centers(r.voxels), pair.voxel_size) for i, r in enumerate(masks.regions)]
+    warnings = _warnings(before, after, names, pair, masks, len(regions), min_voxels)
+    return ChangeResult(names[0], names[1], before.frame or after.frame, pair, masks, regions, params, min_voxels,
+                        warnings)
+
+
+def diff_volumes(before: str | os.PathLike, after: str | os.PathLike,
+                 params: ChangeParams | None = None) -> ChangeResult:
+    """`diff_grids` on two files (ternary.npz or volume.npz); VolumeError naming the file for a missing or
+    foreign file."""
+    (params or ChangeParams()).check()  # bad parameters fail before any file is read
+    return diff_grids(_load(before), _load(after), params, (str(Path(before)), str(Path(after))))
+
+
+def _load(path: str | os.PathLike) -> TernaryGrid:
+    """The grid of a volume.npz or ternary.npz; VolumeError naming the file for anything else."""
+    if read_volume_meta(path) is not None:
+        return load_volume(path).ternary_grid()
+    grid = read_ternary(path)
+    if grid is None:
+        raise VolumeError(f"{path}: neither a volume.npz nor a ternary.npz (expected the output of kinfu fuse)")
+    return grid
+
+
+__all__ = ["ChangeParams", "ChangeRegion", "ChangeResult", "Region", "diff_grids", "diff_volumes"]

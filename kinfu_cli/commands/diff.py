@@ -1,0 +1,97 @@
+"""`kinfu diff`: what changed between two fused volumes of the same place, and how well POIs point at it."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+from kinfu_cli.change.diff import DEFAULT_MIN_VOXELS, ChangeParams, diff_volumes
+from kinfu_cli.change.outputs import write_change_outputs
+from kinfu_cli.commands._options import claim_outputs, force_option
+from kinfu_cli.commands._output import print_warnings
+from kinfu_cli.core.atomic import atomic_dir
+from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.core.pois import poi_frame_warnings, read_pois
+from kinfu_cli.core.progress import progress
+from kinfu_cli.evaluation.changes import score_change_pois
+from kinfu_cli.evaluation.poi import MATCH_RADIUS
+
+
+def _lines(doc: dict, outdir: Path) -> list[str]:
+    c = doc["counts"]
+    lines = [f"{c['regions']['removed']} removed and {c['regions']['added']} added regions "
+             f"(overlap {100 * doc['overlap']['fraction']:.0f} %, {sum(c['unknown_ignored'].values())} voxels "
+             f"unknown in one volume ignored, {c['dropped_small_regions']} small regions dropped) "
+             f"-> {outdir}/changes.json"]
+    for r in doc["regions"][:15]:
+        lines.append(f"  #{r['id']:<3} {r['kind']:<8} centroid ({', '.join(f'{v:.3f}' for v in r['centroid'])}) m  "
+                     f"{r['volume_m3'] * 1e6:9.0f} cm^3  {r['voxels']} voxels")
+    if len(doc["regions"]) > 15:
+        lines.append(f"  ... {len(doc['regions']) - 15} more in changes.json")
+    p = doc["pois"]
+    if p is not None:
+        lines.append(f"POIs vs changes (within {p['radius']:.2f} m): precision {100 * p['precision']:.1f} %, "
+                     f"recall {100 * p['recall']:.1f} %, F1 {100 * p['f1']:.1f} % "
+                     f"(tp {p['tp']}, fp {p['fp']}, fn {p['fn']}; {p['pois']} POIs, {p['changes']} regions)")
+    return lines
+
+
+@click.command("diff", short_help="Removed / added regions between two volumes of one place; POIs scored on them.")
+@click.argument("before", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("after", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("-o", "--output", "outdir", type=click.Path(file_okay=False, path_type=Path), default=Path("diff"),
+              show_default=True, help="Output folder.")
+@click.option("--pois", "pois_path", default=None, type=click.Path(dir_okay=False, path_type=Path),
+              help="pois.json from `kinfu poi`: score each POI against the changes found.")
+@click.option("--match-radius", type=float, default=MATCH_RADIUS, show_default=True,
+              help="A POI within this distance (m) of a change's nearest voxel is a true positive (paper: 0.20).")
+@click.option("--margin", type=int, default=1, show_default=True,
+              help="Pose noise tolerated, voxels: a change must lie this far from every surface of the other volume.")
+@click.option("--min-volume", type=float, default=None,
+              help=f"Smallest region kept (m^3) [default: {DEFAULT_MIN_VOXELS} voxels, a 3x3x3 block].")
+@force_option
+@click.option("--json", "as_json", is_flag=True, help="Print changes.json to stdout.")
+@click.option("--quiet", is_flag=True, help="No progress output.")
+def command(before: Path, after: Path, outdir: Path, pois_path, match_radius, margin, min_volume, force, as_json,
+            quiet) -> None:
+    """Compare BEFORE and AFTER (volume.npz or ternary.npz from `kinfu fuse`, same world frame and voxel size):
+    removed = occupied before and empty after, added = the reverse. Voxels unknown in either are ignored (and
+    counted); a change must be --margin voxels away from every surface of the other volume (pose noise);
+    26-connected changed voxels form a region, regions smaller than --min-volume are dropped. Grids with
+    different origins or shapes are compared on their common box (nearest voxel).
+
+    Writes OUTDIR/changes.json (per region: id, kind, centroid, box_min/box_max, volume_m3, voxels, ply; counts,
+    overlap, warnings), OUTDIR/regions/<id>.ply (the region's voxel centres) and OUTDIR/changes.ply (removed
+    red, added green). With --pois, each POI within --match-radius of a region's nearest voxel is a true
+    positive; regions with no POI near are false negatives; precision, recall and F1 go to changes.json "pois".
+
+    \b
+    Example:
+      kinfu diff out/scan/volume.npz out/fuse/volume.npz -o out/diff --pois out/pois.json
+      kinfu diff before/ternary.npz after/ternary.npz --min-volume 5e-5 --json --quiet
+    """
+    claim_outputs({"outdir": outdir}, [before, after, pois_path], force)
+    params = ChangeParams(margin=margin, min_volume=min_volume)
+    params.check()
+    if not match_radius > 0:
+        raise ConfigError(f"--match-radius: expected a positive distance in metres, got {match_radius}")
+    pois = read_pois(pois_path) if pois_path is not None else None  # a bad POI file fails before any work
+    result = None
+    for step in progress(["diff", "write"], total=2, desc="diff", quiet=quiet):
+        if step == "diff":
+            result = diff_volumes(before, after, params)
+            if pois is not None:
+                score_change_pois(result, pois, radius=match_radius, source=str(pois_path))
+                result.warnings += poi_frame_warnings(pois_path, result.frame, "--pois")
+        else:
+            with atomic_dir(outdir) as tmp:  # the folder appears whole or not at all
+                write_change_outputs(result, tmp)
+    doc = result.to_json()
+    print_warnings(doc)
+    if as_json:
+        click.echo(json.dumps(doc, indent=2, default=float))
+    elif not quiet:
+        for line in _lines(doc, outdir):
+            click.echo(line)

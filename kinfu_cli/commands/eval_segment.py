@@ -1,0 +1,114 @@
+"""`kinfu eval segment`: boundary precision / recall, BCE, object recall and over-/under-segmentation of a
+segmentation against ground-truth labels (thesis ch. 4.1.2), or the PR-curve sweep on generated scenes."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from kinfu_cli.commands._options import claim_outputs, force_option
+from kinfu_cli.commands._output import emit
+from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.evaluation.segment_eval import SWEEP_DEFAULT, evaluate_segments, label_names, sweep_segmentation
+from kinfu_cli.evaluation.segment_tables import format_segment_table, format_sweep_table
+
+group = "eval"
+
+
+def _numbers(text: str, option: str, kind=float) -> list:
+    try:
+        vals = [kind(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise ConfigError(f"{option} {text!r}: expected comma-separated numbers") from None
+    if not vals:
+        raise ConfigError(f"{option} {text!r}: expected at least one number")
+    return vals
+
+
+@click.command("segment", short_help="Segmentation boundary P/R, BCE, object recall vs labels; --sweep: PR curves.")
+@click.argument("segments", required=False, type=click.Path(path_type=Path))
+@click.option("--ground-truth", "ground_truth", type=click.Path(path_type=Path), default=None,
+              help="Labels file (.ply with a per-point integer 'label', or .npz points + labels), or a kinfu synth "
+                   "folder holding ground_truth/labels.ply.")
+@click.option("--t-eval", type=float, default=0.02, show_default=True,
+              help="T_eval (m): neighbourhood radius and boundary matching distance.")
+@click.option("--max-distance", type=float, default=0.015, show_default=True,
+              help="A segmented point takes the label of the nearest ground-truth point within this (m); farther "
+                   "points are not scored (and counted).")
+@click.option("--cover", type=float, default=0.8, show_default=True,
+              help="A true object is found when one segment holds this share of it (and it is that segment's "
+                   "majority).")
+@click.option("--share", type=float, default=0.2, show_default=True,
+              help="Over-/under-segmentation: a piece is at least this share of a true region.")
+@click.option("--sweep", is_flag=True, help="Instead: segment generated scenes over a range of one segmentation "
+                                            "threshold and print / plot boundary PR per scene.")
+@click.option("--sweep-parameter", default=SWEEP_DEFAULT[0], show_default=True,
+              help="The segmentation threshold to sweep (a numeric kinfu segment parameter).")
+@click.option("--sweep-values", default=",".join(f"{v:g}" for v in SWEEP_DEFAULT[1]), show_default=True,
+              help="Its values, comma-separated.")
+@click.option("--scenes", default="0,1,2", show_default=True, help="Seeds of the generated scenes (--sweep).")
+@click.option("--resolution", type=int, default=160, show_default=True,
+              help="Voxels per side of each scene's fusion (--sweep; 1.1 m cube).")
+@click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="PNG: top view of the scored points coloured by consistency error; with --sweep the PR curves.")
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Write the results as JSON here.")
+@click.option("--json", "as_json", is_flag=True, help="Print the results JSON to stdout instead of the table.")
+@click.option("--quiet", is_flag=True, help="No progress output.")
+@force_option
+def command(segments: Path | None, ground_truth: Path | None, t_eval: float, max_distance: float, cover: float,
+            share: float, sweep: bool, sweep_parameter: str, sweep_values: str, scenes: str, resolution: int,
+            plot: Path | None, output: Path | None, as_json: bool, quiet: bool, force: bool) -> None:
+    """Score SEGMENTS (a kinfu segment output folder, its segments.ply, or a labels file) against
+    --ground-truth labels: boundary precision / recall at T_eval on the T_eval neighbourhood graph (thesis
+    eq. 4.16, one-to-one matching within T_eval), Bidirectional Consistency Error, object recall (one segment
+    holds >= --cover of a true object), over-segmented objects and under-segmenting segments. Ground-truth
+    labels reach the segmented points by nearest neighbour within --max-distance; unmatched points are
+    counted, not scored.
+
+    --sweep needs no SEGMENTS: it fuses the generated segmentation scenes (kinfu synth --scene objects,
+    seeds --scenes), segments each over --sweep-values of --sweep-parameter and prints P/R, BCE and object
+    recall per value (minimum BCE per scene as in the thesis' Table 4.3); --plot draws the PR curves.
+
+    \b
+    Example:
+      kinfu synth -o out/objects --scene objects --formats mcap
+      kinfu fuse out/objects/recording.mcap -o out/objects_fused
+      kinfu segment out/objects_fused/volume.npz -o out/objects_segments
+      kinfu eval segment out/objects_segments --ground-truth out/objects/ground_truth/labels.ply --plot top.png
+      kinfu eval segment --sweep --scenes 0,1 --plot pr.png -o sweep.json
+    """
+    if sweep:
+        if segments is not None or ground_truth is not None:
+            raise ConfigError("--sweep makes its own scenes: give no SEGMENTS nor --ground-truth")
+        values = _numbers(sweep_values, "--sweep-values")
+        seeds = _numbers(scenes, "--scenes", int)
+        if not 32 <= resolution <= 512:
+            raise ConfigError(f"--resolution: expected 32..512 voxels, got {resolution}")
+        claim_outputs({"output": output, "plot": plot}, [], force)
+        doc = sweep_segmentation(seeds, sweep_parameter, values, t_eval=t_eval, max_distance=max_distance,
+                                 cover=cover, share=share, resolution=resolution, quiet=quiet)
+        doc["warnings"] = []
+        if plot is not None:
+            from kinfu_cli.report.segment_eval_plot import plot_sweep_pr
+
+            doc["plot"] = str(plot_sweep_pr(doc, plot))
+        emit(doc, output, as_json, lambda d: format_sweep_table(d).splitlines())
+        return
+    if segments is None:
+        raise ConfigError("expected SEGMENTS (a kinfu segment output folder or labelled cloud), or --sweep")
+    if ground_truth is None:
+        raise ConfigError("--ground-truth: a labels file is needed to score SEGMENTS")
+    claim_outputs({"output": output, "plot": plot}, [segments, ground_truth], force)
+    result = evaluate_segments(segments, ground_truth, t_eval=t_eval, max_distance=max_distance, cover=cover,
+                               share=share)
+    doc = result.document
+    if plot is not None:
+        from kinfu_cli.report.segment_eval_plot import plot_segment_errors
+
+        names = label_names(doc["input"]["ground_truth"]) | {o["object"]: o["name"] for o in doc["per_object"]}
+        doc["plot"] = str(plot_segment_errors(result.points, result.point_errors, result.gt_labels, names, result.up,
+                                              plot, title=f"{segments.name}: per-point consistency error "
+                                                          f"(BCE {doc['bce']:.3f})"))
+    emit(doc, output, as_json, lambda d: format_segment_table(d).splitlines())

@@ -1,0 +1,293 @@
+"""`kinfu eval segment`: a segmentation's files against a labels file, and the threshold sweep.
+
+The predicted segments are what `kinfu segment` wrote: its folder (segments.ply, segments.json) or any
+labelled cloud (`io.labelled_cloud`). segments.ply carries the segment as a colour (support plane grey,
+dropped points black, one colour per segment); the colour groups are checked against segments.json's
+point counts. Ground-truth labels are moved onto the segmented points by nearest neighbour within
+`max_distance` (kd-tree); segmented points with no ground-truth point that close are left out and
+counted, as are ground-truth points no segmented point came near (surface the cameras never saw).
+Scores: `evaluation.segments` (boundary P/R at T_eval on the T_eval neighbourhood graph, BCE, object
+recall, over-/under-segmentation).
+
+`sweep_segmentation` is the thesis' PR-curve experiment on generated scenes: fuse each
+`sim.scene.segmentation_scene` once, then segment its surface over a range of one segmentation
+threshold and score every run against the scene's labelled surface.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from kinfu_cli.core.errors import ConfigError, KinfuError
+from kinfu_cli.core.progress import progress
+from kinfu_cli.io.labelled_cloud import (LabelledCloud, LabelsFileError, ply_points, read_labelled_cloud,
+                                         read_ply_vertices)
+from kinfu_cli.evaluation.segments import consistency_errors, score_segmentation
+
+PLANE_GREY = 153  # segments.ply: the support plane's colour (0.6 as uint8); dropped points are black
+SWEEP_DEFAULT = ("concavity_tolerance_deg", (0.0, 5.0, 10.0, 15.0, 20.0, 30.0, 45.0, 60.0))
+
+
+@dataclass
+class PredictedSegments:
+    """A segmentation's points and labels (0 support plane, 1.. segments, -1 dropped), the up direction
+    the segmentation used (None when unknown), where the labels came from, and anything doubtful."""
+
+    points: np.ndarray
+    labels: np.ndarray
+    up: np.ndarray | None
+    source: str
+    warnings: list[str] = field(default_factory=list)
+
+
+def _labels_from_colours(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    vertex = read_ply_vertices(path)
+    names = vertex.dtype.names or ()
+    if not {"red", "green", "blue"} <= set(names):
+        raise LabelsFileError(f"{path}: neither a per-point 'label' nor segment colours (expected kinfu segment's "
+                              f"segments.ply or a labels file)")
+    rgb = np.stack([vertex["red"], vertex["green"], vertex["blue"]], axis=1)
+    rgb = np.round(rgb * 255).astype(np.int64) if rgb.dtype.kind == "f" else rgb.astype(np.int64)
+    code = (rgb[:, 0] << 16) | (rgb[:, 1] << 8) | rgb[:, 2]
+    uniq, first, inv = np.unique(code, return_index=True, return_inverse=True)
+    ids = np.empty(len(uniq), dtype=np.int64)
+    ids[np.argsort(first)] = np.arange(1, len(uniq) + 1)  # segments numbered in order of first appearance
+    ids[uniq == (PLANE_GREY << 16 | PLANE_GREY << 8 | PLANE_GREY)] = 0
+    ids[uniq == 0] = -1
+    return ply_points(vertex, path), ids[inv.ravel()]
+
+
+def load_predicted_segments(path: str | os.PathLike) -> PredictedSegments:
+    """A `kinfu segment` folder, its segments.ply, or a labels file (.ply with `label`, .npz)."""
+    path = Path(path)
+    if path.is_dir():
+        ply = path / "segments.ply"
+        if not ply.is_file():
+            raise LabelsFileError(f"{path}: no segments.ply (expected a kinfu segment output folder)")
+        path = ply
+    if not path.is_file():
+        raise LabelsFileError(f"{path}: no such segments file or folder")
+    warnings: list[str] = []
+    try:
+        cloud = read_labelled_cloud(path)
+        points, labels, source = cloud.points, cloud.labels, "label property"
+    except LabelsFileError as e:
+        if "no per-point 'label'" not in str(e):
+            raise
+        points, labels = _labels_from_colours(path)
+        source = "segment colours"
+    up = None
+    meta = path.parent / "segments.json"
+    if path.name == "segments.ply" and meta.is_file():
+        try:
+            doc = json.loads(meta.read_text())
+        except (OSError, ValueError) as e:
+            raise LabelsFileError(f"{meta}: not readable JSON ({e})") from None
+        if doc.get("up") is not None:
+            up = np.asarray(doc["up"], dtype=float)
+        if source == "segment colours":
+            want = sorted(int(s["point_count"]) for s in doc.get("segments", []) if s.get("kind") == "object")
+            have = sorted(int(n) for n in np.bincount(labels[labels > 0])[1:] if n > 0)
+            if want != have:
+                warnings.append(f"{path}: its {len(have)} segment colours do not match the {len(want)} segments "
+                                f"of {meta} (point counts differ): two segments may share a colour")
+    return PredictedSegments(points, labels, up, source, warnings)
+
+
+def load_ground_truth_labels(path: str | os.PathLike) -> LabelledCloud:
+    """A labels file, or a folder holding labels.ply (a `kinfu synth` ground_truth/ or its parent)."""
+    path = Path(path)
+    if path.is_dir():
+        for cand in (path / "labels.ply", path / "ground_truth" / "labels.ply"):
+            if cand.is_file():
+                return read_labelled_cloud(cand)
+        raise LabelsFileError(f"{path}: no labels.ply here nor in ground_truth/ (kinfu synth writes it; or give a "
+                              f"labels file)")
+    return read_labelled_cloud(path)
+
+
+def label_names(labels_path: str | os.PathLike | None) -> dict[int, str]:
+    """Object names by label from the changes.json beside a kinfu synth labels.ply ({} when there is none)."""
+    if labels_path is None:
+        return {}
+    meta = Path(labels_path).parent / "changes.json"
+    try:
+        doc = json.loads(meta.read_text())
+        return {0: "table"} | {int(o["label"]): str(o["id"]) for o in doc.get("objects", []) if o.get("present_after")}
+    except (OSError, ValueError, KeyError, TypeError):
+        return {}
+
+
+def transfer_labels(src_points: np.ndarray, src_labels: np.ndarray, dst_points: np.ndarray,
+                    max_distance: float) -> tuple[np.ndarray, np.ndarray]:
+    """Label of the nearest source point for each destination point (-1 when none within max_distance),
+    and that distance (inf when none)."""
+    tree = cKDTree(np.asarray(src_points, dtype=np.float64))
+    dist, idx = tree.query(np.asarray(dst_points, dtype=np.float64), distance_upper_bound=max_distance)
+    ok = np.isfinite(dist)
+    out = np.full(len(dst_points), -1, dtype=np.int64)
+    out[ok] = np.asarray(src_labels)[idx[ok]]
+    return out, dist
+
+
+@dataclass
+class SegmentEvalResult:
+    """The results document (JSON-ready) and the evaluated points for plots."""
+
+    document: dict
+    points: np.ndarray  # evaluated segmented points
+    labels: np.ndarray
+    gt_labels: np.ndarray
+    point_errors: np.ndarray  # per-point consistency error max(E(S,G,p), E(G,S,p))
+    up: np.ndarray | None
+
+
+def _check_eval_numbers(t_eval: float, max_distance: float, cover: float, share: float) -> None:
+    for name, v, lo, hi in (("t_eval", t_eval, 0, 1), ("max_distance", max_distance, 0, 1), ("cover", cover, 0, 1),
+                            ("share", share, 0, 0.5)):
+        if not (lo < v <= hi):
+            raise ConfigError(f"expected a number in ({lo}, {hi}], got {v}", parameter=name)
+
+
+def score_labelled_points(points: np.ndarray, labels: np.ndarray, gt: LabelledCloud, *, t_eval: float = 0.02,
+                          max_distance: float = 0.015, cover: float = 0.8, share: float = 0.2,
+                          min_object_points: int = 20) -> tuple[dict, np.ndarray, np.ndarray, np.ndarray]:
+    """Scores of one labelling of `points` against the ground-truth cloud: (document, kept mask,
+    transferred ground-truth labels of the kept points, per-point consistency error)."""
+    gt_lab, _ = transfer_labels(gt.points, gt.labels, points, max_distance)
+    keep = gt_lab >= 0
+    n_keep = int(keep.sum())
+    if n_keep == 0:
+        raise KinfuError(f"no segmented point lies within {max_distance} m of a ground-truth point: are both clouds "
+                         f"in the same world frame?", parameter="max_distance")
+    pts, lab, g = points[keep], labels[keep], gt_lab[keep]
+    sc = score_segmentation(pts, lab, g, t_eval=t_eval, cover=cover, min_object_points=min_object_points,
+                            share=share)
+    # ground truth no segmented point came near: never seen, so not held against the segmentation
+    near, _ = transfer_labels(points, np.zeros(len(points), dtype=np.int64), gt.points, max_distance)
+    unseen = near < 0
+    labelled = gt.labels >= 0
+    doc = {"boundary_precision": sc.boundary_precision, "boundary_recall": sc.boundary_recall,
+           "boundary_f": (2 * sc.boundary_precision * sc.boundary_recall
+                          / max(sc.boundary_precision + sc.boundary_recall, 1e-12)),
+           "bce": sc.bce, "object_recall": sc.object_recall, "objects_found": sc.objects_found,
+           "objects_total": sc.objects_total, "over_segmented": sc.over_segmented,
+           "under_segmenting": sc.under_segmenting, "segments": sc.segments,
+           "boundary_points": {"predicted": sc.boundary_pred, "ground_truth": sc.boundary_gt},
+           "points": {"segmented": int(len(points)), "evaluated": n_keep, "unmatched": int(len(points) - n_keep),
+                      "unmatched_share": float(1 - n_keep / len(points)), "dropped_by_segmentation": int(np.sum(lab < 0)),
+                      "ground_truth": int(labelled.sum()), "ground_truth_unseen": int(np.sum(unseen & labelled)),
+                      "ground_truth_unseen_share": float(np.sum(unseen & labelled) / max(labelled.sum(), 1))},
+           "per_object": sc.per_object, "over": sc.details["over"], "under": sc.details["under"]}
+    return doc, keep, g, consistency_errors(lab, g)
+
+
+def evaluate_segments(segments: str | os.PathLike | PredictedSegments, ground_truth: str | os.PathLike | LabelledCloud,
+                      *, t_eval: float = 0.02, max_distance: float = 0.015, cover: float = 0.8, share: float = 0.2,
+                      min_object_points: int = 20) -> SegmentEvalResult:
+    """Score a segmentation (files or loaded) against ground-truth labels; see the module docstring."""
+    _check_eval_numbers(t_eval, max_distance, cover, share)
+    pred = segments if isinstance(segments, PredictedSegments) else load_predicted_segments(segments)
+    gt = ground_truth if isinstance(ground_truth, LabelledCloud) else load_ground_truth_labels(ground_truth)
+    doc, keep, g, err = score_labelled_points(pred.points, pred.labels, gt, t_eval=t_eval, max_distance=max_distance,
+                                              cover=cover, share=share, min_object_points=min_object_points)
+    warnings = list(pred.warnings)
+    p = doc["points"]
+    if p["unmatched_share"] > 0.1:
+        warnings.append(f"{p['unmatched']} of {p['segmented']} segmented points ({p['unmatched_share']:.0%}) have no "
+                        f"ground-truth point within {max_distance} m and are not scored")
+    document = {"input": {"segments": str(segments) if not isinstance(segments, PredictedSegments) else None,
+                          "ground_truth": str(gt.path) if gt.path else None, "labels_from": pred.source},
+                "t_eval": t_eval, "max_distance": max_distance, "cover": cover, "share": share,
+                "min_object_points": min_object_points, **doc, "warnings": warnings}
+    names = label_names(gt.path)
+    for o in document["per_object"]:
+        o["name"] = names.get(o["object"], str(o["object"]))
+    return SegmentEvalResult(document, pred.points[keep], pred.labels[keep], g, err, pred.up)
+
+
+# ---- the sweep ---------------------------------------------------------------------------------------------
+
+def _sweep_fields() -> dict[str, type]:
+    from kinfu_cli.segmentation.segments import SegmentationParams
+
+    return {f.name: f.type for f in fields(SegmentationParams)
+            if isinstance(getattr(SegmentationParams(), f.name), (int, float))
+            and not isinstance(getattr(SegmentationParams(), f.name), bool)}
+
+
+def fuse_segmentation_scene(seed: int, *, resolution: int = 160, size: float = 1.1, width: int = 240,
+                            height: int = 180, frames: int = 24):
+    """The volume of the segmentation scene `seed` (the after state of the "objects" scene of kinfu synth, fused from
+    every camera pose with the sensor noise) and that scene."""
+    from kinfu_cli.evaluation.segments import fuse_synthetic_scene
+
+    return fuse_synthetic_scene(seed, resolution=resolution, size=size, width=width, height=height, frames=frames,
+                                layout="objects")
+
+
+def sweep_segmentation(seeds=(0, 1, 2), parameter: str = SWEEP_DEFAULT[0], values=SWEEP_DEFAULT[1], *,
+                       t_eval: float = 0.02, max_distance: float = 0.015, cover: float = 0.8, share: float = 0.2,
+                       resolution: int = 160, size: float = 1.1, frames: int = 24, quiet: bool = True) -> dict:
+    """Boundary P/R, BCE, object recall of the segmentation of generated scenes over `values` of one
+    segmentation parameter (a numeric field of SegmentationParams). Returns the JSON-ready document."""
+    from kinfu_cli.segmentation.pipeline import SegmentOptions, analyse_cloud
+    from kinfu_cli.segmentation.surface import surface_from_volume
+    from kinfu_cli.sim.scene import scene_label_cloud
+
+    numeric = _sweep_fields()
+    if parameter not in numeric:
+        raise ConfigError(f"expected a numeric segmentation parameter ({', '.join(sorted(numeric))}), got "
+                          f"{parameter!r}", parameter="sweep_parameter")
+    values = [float(v) for v in values]
+    if not values:
+        raise ConfigError("expected at least one value", parameter="sweep_values")
+    seeds = [int(s) for s in seeds]
+    if not seeds:
+        raise ConfigError("expected at least one scene seed", parameter="scenes")
+    _check_eval_numbers(t_eval, max_distance, cover, share)
+    base = SegmentOptions(superquadrics=False)
+    as_int = numeric[parameter] in (int, "int")
+    opts_by_value = []
+    for v in values:
+        seg = replace(base.segmentation, **{parameter: int(round(v)) if as_int else v}, up=(0.0, 0.0, 1.0))
+        opts = replace(base, segmentation=seg)
+        opts.validate()
+        opts_by_value.append(opts)
+    scenes = []
+    steps = [(s, k) for s in seeds for k in range(len(values) + 1)]
+    cloud = gt = None
+    for seed, k in progress(steps, total=len(steps), desc="sweep", quiet=quiet):
+        if k == 0:
+            vol, scene = fuse_segmentation_scene(seed, resolution=resolution, size=size, frames=frames)
+            cloud = surface_from_volume(vol, min_weight=base.min_weight, resolution=base.resolution)
+            pts, lab = scene_label_cloud(scene)
+            gt = LabelledCloud(pts, lab)
+            scenes.append({"seed": seed, "points": int(len(cloud.points)), "rows": [],
+                           "objects": {str(scene.label_of(o.id)): o.id for o in scene.present_objects}})
+            continue
+        res = analyse_cloud(cloud.points, cloud.normals, opts_by_value[k - 1], up_source="option")
+        doc, *_ = score_labelled_points(res.segmentation.points, res.segmentation.labels, gt, t_eval=t_eval,
+                                        max_distance=max_distance, cover=cover, share=share)
+        scenes[-1]["rows"].append({"value": values[k - 1], **{key: doc[key] for key in (
+            "boundary_precision", "boundary_recall", "boundary_f", "bce", "object_recall", "objects_found",
+            "objects_total", "over_segmented", "under_segmenting", "segments")},
+            "unmatched_share": doc["points"]["unmatched_share"],
+            "missed": [scenes[-1]["objects"].get(str(o["object"]), o["object"]) for o in doc["per_object"]
+                       if not o["found"]]})
+    for s in scenes:
+        s["min_bce"] = min(r["bce"] for r in s["rows"])
+        best = max(s["rows"], key=lambda r: r["boundary_f"])
+        s["best_f"] = {"value": best["value"], "boundary_f": best["boundary_f"]}
+    mean = {key: [float(np.mean([s["rows"][i][key] for s in scenes])) for i in range(len(values))]
+            for key in ("boundary_precision", "boundary_recall", "bce", "object_recall")}
+    return {"parameter": parameter, "values": values, "seeds": seeds, "t_eval": t_eval, "max_distance": max_distance,
+            "cover": cover, "share": share,
+            "fusion": {"resolution": resolution, "size": size, "frames": frames, "scene": "objects"},
+            "scenes": scenes, "mean": mean}

@@ -1,0 +1,58 @@
+"""Text tables of `kinfu eval segment` (one evaluation, or the sweep), from the JSON-ready documents of
+`evaluation.segment_eval`, so a saved results file can be printed again."""
+
+from __future__ import annotations
+
+
+def format_segment_table(doc: dict) -> str:
+    """One segmentation against its ground truth: the thesis' measures, then per true object."""
+    p = doc["points"]
+    lines = [f"kinfu eval segment: {doc['input']['segments']} vs {doc['input']['ground_truth']} "
+             f"(labels from {doc['input']['labels_from']})", "",
+             f"points: {p['evaluated']} of {p['segmented']} segmented points scored ({p['unmatched']} with no "
+             f"ground truth within {doc['max_distance'] * 100:.1f} cm); {p['ground_truth_unseen']} of "
+             f"{p['ground_truth']} ground-truth points unseen ({p['ground_truth_unseen_share']:.0%})", "",
+             f"  {'T_eval':>7} {'bnd P':>6} {'bnd R':>6} {'bnd F':>6} {'BCE':>6} {'obj R':>6} {'found':>6} "
+             f"{'segs':>5} {'over':>5} {'under':>5}",
+             f"  {doc['t_eval'] * 100:5.1f}cm {doc['boundary_precision']:6.3f} {doc['boundary_recall']:6.3f} "
+             f"{doc['boundary_f']:6.3f} {doc['bce']:6.3f} {doc['object_recall']:6.3f} "
+             f"{doc['objects_found']:>3}/{doc['objects_total']:<2} {doc['segments']:5d} {doc['over_segmented']:5d} "
+             f"{doc['under_segmenting']:5d}", "",
+             f"  {'object':>16}  points  best segment  cover  found   (found: one segment holds >= "
+             f"{doc['cover']:.0%} and it is that segment's majority)"]
+    for o in doc["per_object"]:
+        name = f"{o.get('name', o['object'])} ({o['object']})"
+        lines.append(f"  {name[-16:]:>16} {o['points']:7d} {o['segment']:13d} {o['coverage']:6.2f}  "
+                     f"{'yes' if o['found'] else 'no'}")
+    for u in doc["under"]:
+        lines.append(f"  under-segmentation: segment {u['segment']} holds >= {doc['share']:.0%} of true regions "
+                     f"{u['objects']}")
+    for o in doc["over"]:
+        lines.append(f"  over-segmentation: object {o['object']} split over segments {o['segments']}")
+    return "\n".join(lines)
+
+
+def format_sweep_table(doc: dict) -> str:
+    """Per scene and threshold value: boundary P/R/F, BCE, object recall, over/under; then min BCE per scene
+    (thesis Table 4.3) and the means over the scenes."""
+    name = doc["parameter"]
+    lines = [f"kinfu eval segment, sweep: {name} over {len(doc['values'])} values on {len(doc['scenes'])} generated "
+             f"scenes (the synth 'objects' scene, fused at {doc['fusion']['resolution']}^3 over "
+             f"{doc['fusion']['size']} m), T_eval {doc['t_eval'] * 100:.1f} cm", "",
+             f"  {'scene':>5} {name[:12]:>12} {'bnd P':>6} {'bnd R':>6} {'bnd F':>6} {'BCE':>6} {'obj R':>6} "
+             f"{'segs':>5} {'over':>5} {'under':>5}  missed"]
+    for s in doc["scenes"]:
+        for r in s["rows"]:
+            lines.append(f"  {s['seed']:5d} {r['value']:12g} {r['boundary_precision']:6.3f} {r['boundary_recall']:6.3f} "
+                         f"{r['boundary_f']:6.3f} {r['bce']:6.3f} {r['object_recall']:6.3f} {r['segments']:5d} "
+                         f"{r['over_segmented']:5d} {r['under_segmenting']:5d}  {', '.join(map(str, r['missed']))}")
+    lines += ["", "  minimum BCE per scene (thesis Table 4.3) and best boundary F:"]
+    for s in doc["scenes"]:
+        lines.append(f"  scene {s['seed']}: min BCE {s['min_bce']:.3f}; best F {s['best_f']['boundary_f']:.3f} at "
+                     f"{name} = {s['best_f']['value']:g}")
+    m = doc["mean"]
+    lines += ["", f"  mean over scenes {name[:12]:>12} {'bnd P':>6} {'bnd R':>6} {'BCE':>6} {'obj R':>6}"]
+    for i, v in enumerate(doc["values"]):
+        lines.append(f"  {'':16} {v:12g} {m['boundary_precision'][i]:6.3f} {m['boundary_recall'][i]:6.3f} "
+                     f"{m['bce'][i]:6.3f} {m['object_recall'][i]:6.3f}")
+    return "\n".join(lines)

@@ -1,0 +1,127 @@
+"""Labelled point clouds: the segmentation ground-truth format, which a person can also make.
+
+A labels file is a PLY point cloud whose vertices carry x, y, z and an integer scalar `label` (0 = background:
+table, floor, walls; 1.. = one number per object; -1 = not labelled). CloudCompare exports a scalar field named
+`label` as the float property `scalar_label`; both names are read, float values must be whole numbers. Colours
+and normals may be present and are ignored. A `.npz` with `points` (N, 3) and `labels` (N,) is read too.
+`kinfu synth` writes ground_truth/labels.ply in this format; open3d writes it with
+`o3d.t.io.write_point_cloud` after `pcd.point["label"] = labels[:, None].astype(np.int32)`.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from kinfu_cli.core.atomic import atomic_path
+from kinfu_cli.core.errors import KinfuError
+
+LABEL_FIELDS = ("label", "scalar_label")
+
+
+class LabelsFileError(KinfuError):
+    """A labels file that cannot be read as one (one line, naming the file)."""
+
+
+@dataclass
+class LabelledCloud:
+    """points (N, 3) float64 and labels (N,) int64."""
+
+    points: np.ndarray
+    labels: np.ndarray
+    path: Path | None = None
+
+
+def _checked(points: np.ndarray, labels: np.ndarray, path: Path) -> LabelledCloud:
+    pts = np.asarray(points, dtype=np.float64)
+    lab = np.asarray(labels)
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise LabelsFileError(f"{path}: expected points of shape (N, 3), got {pts.shape}")
+    lab = lab.reshape(-1)
+    if len(lab) != len(pts):
+        raise LabelsFileError(f"{path}: {len(pts)} points but {len(lab)} labels")
+    if len(pts) == 0:
+        raise LabelsFileError(f"{path}: no points")
+    if not np.all(np.isfinite(pts)):
+        raise LabelsFileError(f"{path}: {int(np.sum(~np.isfinite(pts).all(axis=1)))} points are not finite")
+    if lab.dtype.kind == "f":
+        if not np.all(np.isfinite(lab)) or np.any(lab != np.round(lab)):
+            raise LabelsFileError(f"{path}: labels must be whole numbers (got fractional or NaN values)")
+    elif lab.dtype.kind not in "iu":
+        raise LabelsFileError(f"{path}: labels must be integers, got {lab.dtype}")
+    lab = lab.astype(np.int64)
+    if lab.min() < -1:
+        raise LabelsFileError(f"{path}: labels must be >= -1 (-1 = not labelled), got {int(lab.min())}")
+    return LabelledCloud(pts, lab, path)
+
+
+def read_labelled_cloud(path: str | os.PathLike) -> LabelledCloud:
+    """A labels file (.ply with a `label` / `scalar_label` vertex property, or .npz with points + labels)."""
+    path = Path(path)
+    if not path.is_file():
+        raise LabelsFileError(f"{path}: no such labels file")
+    if path.suffix.lower() == ".npz":
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                if "points" not in z or "labels" not in z:
+                    raise LabelsFileError(f"{path}: expected arrays 'points' (N, 3) and 'labels' (N,), "
+                                          f"found {', '.join(z.files) or 'none'}")
+                return _checked(z["points"], z["labels"], path)
+        except (OSError, ValueError) as e:
+            raise LabelsFileError(f"{path}: not a readable .npz ({e})") from None
+    if path.suffix.lower() != ".ply":
+        raise LabelsFileError(f"{path}: expected a .ply point cloud with a per-point 'label' or a .npz")
+    vertex = read_ply_vertices(path)
+    names = vertex.dtype.names or ()
+    field = next((f for f in LABEL_FIELDS if f in names), None)
+    if field is None:
+        raise LabelsFileError(f"{path}: no per-point 'label' property (found {', '.join(names)})")
+    return _checked(ply_points(vertex, path), vertex[field], path)
+
+
+def read_ply_vertices(path: Path) -> np.ndarray:
+    """The vertex element of a PLY file as a numpy structured array (LabelsFileError when unreadable)."""
+    from plyfile import PlyData, PlyParseError  # only labels files need it
+
+    try:
+        with open(path, "rb") as fh:
+            if fh.read(3) != b"ply":
+                raise LabelsFileError(f"{path}: not a PLY file")
+            fh.seek(0)
+            ply = PlyData.read(fh)
+        vertex = ply["vertex"].data
+    except LabelsFileError:
+        raise
+    except KeyError:
+        raise LabelsFileError(f"{path}: PLY file without a vertex element") from None
+    except (PlyParseError, ValueError, EOFError, OSError, IndexError, TypeError) as e:
+        msg = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise LabelsFileError(f"{path}: unreadable PLY (truncated or malformed: {msg})") from None
+    return vertex
+
+
+def ply_points(vertex: np.ndarray, path: Path) -> np.ndarray:
+    """(N, 3) float64 x, y, z of a PLY vertex array."""
+    names = vertex.dtype.names or ()
+    if not {"x", "y", "z"} <= set(names):
+        raise LabelsFileError(f"{path}: vertices lack x, y, z (found {', '.join(names)})")
+    return np.stack([vertex["x"], vertex["y"], vertex["z"]], axis=1).astype(np.float64)
+
+
+def write_labelled_cloud(path: str | os.PathLike, points: np.ndarray, labels: np.ndarray,
+                         colors: np.ndarray | None = None) -> Path:
+    """Write a labels file (binary PLY: x, y, z float32, label int32, optional uint8 colours) atomically."""
+    import open3d as o3d  # heavy; only the PLY writer is needed
+
+    path = Path(path)
+    pc = o3d.t.geometry.PointCloud(o3d.core.Tensor(np.asarray(points, dtype=np.float32)))
+    pc.point["label"] = o3d.core.Tensor(np.asarray(labels, dtype=np.int32).reshape(-1, 1))
+    if colors is not None:
+        pc.point["colors"] = o3d.core.Tensor(np.asarray(colors, dtype=np.float32))
+    with atomic_path(path) as tmp:
+        if not o3d.t.io.write_point_cloud(str(tmp), pc, write_ascii=False):
+            raise LabelsFileError(f"{path}: open3d could not write the labelled cloud")
+    return path

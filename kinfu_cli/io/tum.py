@@ -1,0 +1,120 @@
+"""Camera trajectories as TUM RGB-D text files: `timestamp tx ty tz qx qy qz qw`, one pose a line.
+
+The format `evo_ape tum gt.tum est.tum` and the TUM benchmark tools read: the timestamp in seconds (here
+the recording's stamps, so a fused trajectory and the recording's own poses line up), the camera position
+in metres and its orientation as a unit quaternion (x, y, z, w), camera-to-world. Lines starting with `#`
+are comments.
+"""
+
+from __future__ import annotations
+
+import os
+from decimal import Decimal
+from pathlib import Path
+
+import numpy as np
+
+from kinfu_cli.core.atomic import atomic_path
+from kinfu_cli.core.errors import ConfigError, RecordingError, TrajectoryError
+from kinfu_cli.core.poses import check_poses, matrix_to_quaternion, quaternion_to_matrix
+from kinfu_cli.core.progress import progress
+from kinfu_cli.io.frames import FrameStats, iter_frames
+from kinfu_cli.io.recording import open_recording
+from kinfu_cli.io.roles import detect_roles
+
+HEADER = "# timestamp tx ty tz qx qy qz qw"
+
+
+def tum_lines(stamps_ns, poses) -> list[str]:
+    """The TUM lines of (N,) integer nanosecond stamps and (N, 4, 4) camera-to-world poses (N may be 0)."""
+    stamps = np.asarray(stamps_ns, dtype=np.int64).reshape(-1)
+    if stamps.size == 0:
+        return []
+    T = check_poses(poses, "poses")
+    if len(T) != len(stamps):
+        raise TrajectoryError(f"{len(stamps)} stamps for {len(T)} poses")
+    q = matrix_to_quaternion(T[:, :3, :3])
+    t = T[:, :3, 3]
+    # seconds with nanosecond digits, written from the integer stamp (a float64 of 1.7e9 s keeps ~0.2 us only)
+    secs = [f"{s // 1_000_000_000}.{s % 1_000_000_000:09d}" if s >= 0 else f"{s * 1e-9:.9f}" for s in stamps.tolist()]
+    return [f"{s} " + " ".join(f"{v:.9f}" for v in (*p, *r)) for s, p, r in zip(secs, t, q)]
+
+
+def write_tum(path: str | os.PathLike, stamps_ns, poses, comment: str = "") -> Path:
+    """Write a TUM trajectory file atomically (a header comment, then one line per pose)."""
+    lines = [HEADER] + [f"# {c}" for c in comment.splitlines() if c] + tum_lines(stamps_ns, poses)
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        tmp.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def read_tum(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
+    """(N,) integer nanosecond stamps (parsed exactly from the text) and (N, 4, 4) camera-to-world poses of a
+    TUM trajectory file; TrajectoryError naming the file and line for anything that is not 8 numbers or a
+    comment."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise TrajectoryError(f"{path}: cannot read ({getattr(exc, 'strerror', None) or 'not text'})") from None
+    stamps, rows = [], []
+    for n, line in enumerate(text.splitlines(), start=1):
+        line = line.strip()
+        if not line or line.startswith("#"):
+            continue
+        tokens = line.replace(",", " ").split()
+        try:
+            vals = [float(v) for v in tokens]
+            stamp = int(Decimal(tokens[0]) * 1_000_000_000) if len(tokens) == 8 else 0
+        except (ValueError, ArithmeticError):
+            vals = []
+        if len(vals) != 8 or not np.all(np.isfinite(vals)) or not np.linalg.norm(vals[4:]) > 1e-9:
+            raise TrajectoryError(f"{path}:{n}: expected 8 finite numbers 'timestamp tx ty tz qx qy qz qw' (a "
+                                  f"non-zero quaternion), got {line[:60]!r}")
+        stamps.append(stamp)
+        rows.append(vals)
+    data = np.array(rows, dtype=np.float64).reshape(-1, 8)
+    T = np.tile(np.eye(4), (len(data), 1, 1))
+    if len(data):
+        T[:, :3, :3] = quaternion_to_matrix(data[:, 4:8])
+        T[:, :3, 3] = data[:, 1:4]
+    return np.array(stamps, dtype=np.int64), T
+
+
+def recording_trajectory(recording: str | os.PathLike, roles_kw: dict | None = None, pose_source: str = "tf",
+                         pose_topic: str | None = None, tolerance_s: float = 0.05, start_s: float | None = None,
+                         end_s: float | None = None, every: int = 1, quiet: bool = True
+                         ) -> tuple[np.ndarray, np.ndarray, dict]:
+    """The recording's own camera poses (TF world <- camera, or a pose topic) at the stamp of every depth frame
+    `kinfu fuse` would assemble with the same options: (N,) stamps ns, (N, 4, 4) poses, the frame statistics.
+    The ground truth that a fused trajectory.tum is compared with."""
+    if pose_source == "none":
+        raise ConfigError("a trajectory needs camera poses: 'tf' or 'topic'", parameter="pose_source")
+    stats = FrameStats()
+    stamps, poses = [], []
+    with open_recording(recording) as rec:
+        roles = detect_roles(rec, **(roles_kw or {}))
+        total = rec.topics[roles.depth_topic].count if roles.depth_topic in rec.topics else None
+        frames = iter_frames(rec, roles, pose_source=pose_source, pose_topic=pose_topic, tolerance_s=tolerance_s,
+                             start_s=start_s, end_s=end_s, every=every, stats=stats)
+        for f in progress(frames, total=total, desc="trajectory", quiet=quiet, unit="frame"):
+            if f.T_world_camera is not None:
+                stamps.append(f.stamp_ns)
+                poses.append(f.T_world_camera)
+        if not stamps:
+            raise RecordingError(f"{rec.path}: no depth frame with a camera pose (dropped: {stats.dropped or 'none'}, "
+                                 f"depth messages: {stats.depth_messages})")
+        summary = {"recording": str(rec.path), "roles": roles.as_dict(), "stats": stats.as_dict(),
+                   "world_frame": roles.world_frame if pose_source == "tf" else pose_topic}
+    return np.array(stamps, dtype=np.int64), np.array(poses), summary
+
+
+def fused_trajectory(folder: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
+    """The trajectory a `kinfu fuse` output folder holds (its trajectory.tum): (N,) stamps ns, (N, 4, 4) poses."""
+    folder = Path(folder)
+    path = folder / "trajectory.tum"
+    if not path.is_file():
+        what = "a fuse output folder from an older kinfu" if (folder / "report.json").is_file() else "not a fuse output"
+        raise TrajectoryError(f"{folder}: has no trajectory.tum ({what}; run kinfu fuse again)")
+    return read_tum(path)
