@@ -27,6 +27,7 @@ COMMANDS: dict[str, str | dict[str, str]] = {
     "poi": "poi",
     "segment": "segment",
     "nbv": "nbv",
+    "batch": "batch",
     "diff": "diff",
     "eval": {"poi": "eval_poi", "fusion": "eval_fusion", "nbv": "eval_nbv", "segment": "eval_segment"},
 }

@@ -21,6 +21,7 @@ LAYERS: list[set[str]] = [
     {"nbv"},
     {"evaluation"},
     {"api"},
+    {"batch"},
     {"report"},
     {"commands"},
     {"cli"},

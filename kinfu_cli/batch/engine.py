@@ -1,0 +1,197 @@
+"""Run a plan on Dask: one task per (recording, stage), the stage dependencies as the graph.
+
+The client (this process) submits every task up front; a task receives its upstream tasks' results, so
+Dask runs it once they are done, and a task whose upstream failed reports `blocked` without running. The
+client writes manifest.json after every finished task. Workers are processes with one thread each, and a
+task limits numba to one thread, so N workers use N cores. The same code path serves a local cluster
+sized to the machine and an existing `dask.distributed` scheduler (the workers must see the same paths).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import time
+import uuid
+import warnings
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+from kinfu_cli.batch.fingerprint import input_fingerprint, output_stats
+from kinfu_cli.batch.manifest import DONE, MANIFEST_NAME, build_manifest, read_previous, write_manifest
+from kinfu_cli.batch.plan import Plan
+from kinfu_cli.batch.stages import StageSpec
+from kinfu_cli.core.errors import ConfigError, KinfuError
+from kinfu_cli.core.ownership import claim_output
+from kinfu_cli.core.progress import progress
+
+CONNECT_TIMEOUT_S = 5
+
+
+def default_workers() -> int:
+    """The cores this process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
+@dataclass
+class Engine:
+    """A connected Dask client and how to describe it; close() also stops a local cluster it started."""
+
+    client: object
+    cluster: object | None
+    description: str
+
+    def close(self) -> None:
+        with contextlib.suppress(Exception):
+            self.client.close()
+        if self.cluster is not None:
+            with contextlib.suppress(Exception):
+                self.cluster.close()
+
+
+def connect(scheduler: str | None = None, workers: int | None = None) -> Engine:
+    """A client on `scheduler` (tcp://host:port of a running dask.distributed scheduler), or on a new local
+    cluster of `workers` single-threaded worker processes (default: one per core). An unreachable scheduler
+    is a one-line KinfuError naming it, raised before any work."""
+    from dask.distributed import Client, LocalCluster
+
+    if scheduler is not None:
+        if "://" not in scheduler or not scheduler.split("://", 1)[1]:
+            raise ConfigError(f"expected an address like tcp://host:8786, got {scheduler!r}", parameter="scheduler")
+        try:
+            client = Client(scheduler, timeout=CONNECT_TIMEOUT_S, set_as_default=False)
+        except (OSError, TimeoutError, ValueError) as exc:
+            detail = " ".join(str(exc).split()) or type(exc).__name__
+            raise KinfuError(f"cannot reach the Dask scheduler {scheduler} within {CONNECT_TIMEOUT_S} s ({detail})",
+                             parameter="scheduler") from None
+        return Engine(client, None, scheduler)
+    n = default_workers() if workers is None else workers
+    if n < 1:
+        raise ConfigError(f"expected at least 1, got {n}", parameter="workers")
+    # no chatter on stderr: "port 8787 in use" when another cluster runs, and multiprocessing's resource
+    # tracker (a process of its own, hence the environment) counting the workers' semaphores after a Ctrl-C
+    os.environ.setdefault("PYTHONWARNINGS", "ignore:resource_tracker:UserWarning")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               dashboard_address=None, silence_logs=logging.ERROR,
+                               env={"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"})
+    return Engine(Client(cluster, set_as_default=False), cluster, f"local ({n} workers)")
+
+
+def _one_line(exc: BaseException) -> str:
+    text = str(exc) if isinstance(exc, KinfuError) else f"{type(exc).__name__}: {exc}"
+    return " ".join(text.split()) or type(exc).__name__
+
+
+def _folder_lock(outdir: Path):
+    """One stage at a time writes into a recording's folder: the stages of one recording share its ownership
+    record (.kinfu-manifest.json), which is read, updated and replaced by each writer. Recordings still run
+    side by side. Outside a Dask worker (tests calling run_task directly) no lock is needed."""
+    try:
+        from distributed import Lock, get_worker
+
+        get_worker()
+    except (ImportError, ValueError):
+        return contextlib.nullcontext()
+    return Lock(f"kinfu-batch:{os.path.abspath(outdir)}")
+
+
+def run_task(spec: StageSpec, recording: Path, outdir: Path, options: Mapping, previous: dict | None,
+             force: bool, *upstream: dict) -> dict:
+    """One (recording, stage) on a worker: blocked when a needed stage did not finish, skipped when its
+    outputs are current (same input fingerprint, outputs unchanged since recorded), else run. Never raises:
+    a failure is the entry's one-line `error`."""
+    t0 = time.perf_counter()
+    entry = {"status": "failed", "seconds": 0.0, "error": None, "fingerprint": None, "outputs": None,
+             "numbers": {}, "warnings": []}
+    if bad := [u["stage"] for u in upstream if u.get("status") not in DONE]:
+        return {**entry, "status": "blocked", "error": f"needs {', '.join(bad)}, which did not finish",
+                "stage": spec.name}
+    try:
+        fp = input_fingerprint(spec.name, spec.input_paths(recording, outdir), options)
+        if (not force and previous and previous.get("status") in DONE and previous.get("fingerprint") == fp
+                and output_stats(outdir, spec.outputs) == previous.get("outputs")):
+            return {**entry, **{k: previous.get(k) for k in ("numbers", "warnings")}, "status": "skipped",
+                    "fingerprint": fp, "outputs": previous["outputs"], "stage": spec.name}
+        with contextlib.suppress(Exception):  # one numba thread per worker thread: no oversubscription
+            import numba
+
+            numba.set_num_threads(1)
+        with _folder_lock(outdir):
+            done = spec.run(recording, outdir, options, force)
+        stats = output_stats(outdir, spec.outputs)
+        if stats is None:
+            raise KinfuError(f"{spec.name} finished without writing {', '.join(spec.outputs)}")
+        entry.update(status="ok", fingerprint=fp, outputs=stats, numbers=done.numbers, warnings=done.warnings)
+    except Exception as exc:  # recorded in the manifest; the other recordings go on
+        entry["error"] = _one_line(exc)
+    entry["seconds"] = round(time.perf_counter() - t0, 3)
+    entry["stage"] = spec.name
+    return entry
+
+
+def check_before_work(plan: Plan, table: Mapping[str, StageSpec], force: bool) -> None:
+    """Options of every (recording, stage) and every output path, before any task is submitted."""
+    inputs = [r.path for r in plan.recordings]
+    claim_output(plan.output / MANIFEST_NAME, inputs, force=force, parameter="output")
+    for rec in plan.recordings:
+        for s in plan.stages:
+            spec = table[s]
+            try:
+                spec.check(rec.path, rec.output, rec.stage_options(s))
+            except KinfuError as exc:
+                raise ConfigError(f"{plan.source}: {rec.entry}: {s}: {exc}") from None
+            for rel in spec.claims:
+                claim_output(rec.output / rel, inputs, force=force, parameter="output")
+
+
+def run_plan(plan: Plan, table: Mapping[str, StageSpec], engine: Engine, *, force: bool = False,
+             quiet: bool = False, on_entry: Callable[[dict], None] | None = None) -> dict:
+    """Submit the plan's task graph, write manifest.json after each finished task; returns the manifest."""
+    manifest_path = plan.output / MANIFEST_NAME
+    previous = {} if force else read_previous(manifest_path)
+    run_id = uuid.uuid4().hex[:8]
+    futures: dict = {}
+    where: dict = {}
+    for i, rec in enumerate(plan.recordings):
+        for s in plan.stages:
+            spec = table[s]
+            deps = [futures[(i, n)] for n in spec.needs]
+            fut = engine.client.submit(run_task, spec, rec.path, rec.output, rec.stage_options(s),
+                                       previous.get((str(rec.output), s)), force, *deps,
+                                       key=f"kinfu-{s}-{i}-{run_id}", pure=False)
+            futures[(i, s)] = fut
+            where[fut.key] = (i, s)
+    from dask.distributed import as_completed
+
+    pending = list(futures.values())
+    entries: dict = {}
+    doc = build_manifest(plan, entries, engine.description)
+    write_manifest(manifest_path, doc)
+    try:
+        for fut in progress(as_completed(pending, loop=engine.client.loop), total=len(pending), desc="batch",
+                            quiet=quiet, unit="task"):
+            i, s = where[fut.key]
+            try:
+                entry = fut.result()
+            except Exception as exc:  # the worker died or the task could not be run
+                entry = {"status": "failed", "seconds": 0.0, "error": _one_line(exc), "fingerprint": None,
+                         "outputs": None, "numbers": {}, "warnings": [], "stage": s}
+            entry.pop("stage", None)
+            fut.release()  # a finished task's result is not kept on a worker: a lost worker never re-runs it
+            entries[(i, s)] = entry
+            doc = build_manifest(plan, entries, engine.description)
+            write_manifest(manifest_path, doc)
+            if on_entry is not None:
+                on_entry({"recording": str(plan.recordings[i].path), "stage": s, **entry})
+    except BaseException:
+        with contextlib.suppress(Exception):
+            engine.client.cancel(pending)
+        raise
+    return doc

@@ -1,0 +1,62 @@
+"""manifest.json: per recording and stage the status, timing, fingerprint, key numbers and error line.
+
+Written atomically by the client after every finished task, so an interrupted run leaves the record of
+everything that completed and the next run resumes from it.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from kinfu_cli.core.atomic import write_json
+
+MANIFEST_NAME = "manifest.json"
+# stage statuses: ok (ran), skipped (outputs current), failed (error line), blocked (a needed stage failed)
+DONE = ("ok", "skipped")
+
+
+def read_previous(path: Path) -> dict[tuple[str, str], dict]:
+    """{(output folder, stage): entry} of an earlier run's manifest; {} when absent or unreadable."""
+    try:
+        doc = json.loads(Path(path).read_text())
+    except (OSError, ValueError):
+        return {}
+    out = {}
+    for rec in doc.get("recordings", []) if isinstance(doc, dict) else []:
+        if isinstance(rec, dict) and isinstance(rec.get("stages"), dict):
+            for stage, entry in rec["stages"].items():
+                if isinstance(entry, dict):
+                    out[(str(rec.get("output")), stage)] = entry
+    return out
+
+
+def recording_status(stages: dict[str, dict], wanted: list[str]) -> str:
+    """ok when every stage is done, failed when one failed or was blocked, else pending."""
+    states = [stages.get(s, {}).get("status") for s in wanted]
+    if all(s in DONE for s in states):
+        return "ok"
+    if any(s in ("failed", "blocked") for s in states):
+        return "failed"
+    return "pending"
+
+
+def build_manifest(plan, entries: dict[tuple[int, str], dict], engine: str) -> dict:
+    """The manifest document of `plan` with the stage entries known so far."""
+    recs = []
+    for i, rec in enumerate(plan.recordings):
+        stages = {s: entries[(i, s)] for s in plan.stages if (i, s) in entries}
+        status = recording_status(stages, plan.stages)
+        error = next((f"{s}: {e['error']}" for s, e in stages.items() if e.get("status") == "failed"), None)
+        recs.append({"recording": str(rec.path), "output": str(rec.output), "status": status, "error": error,
+                     "stages": stages})
+    done = sum(r["status"] == "ok" for r in recs)
+    failed = sum(r["status"] == "failed" for r in recs)
+    return {"plan": str(plan.source), "output": str(plan.output), "stages": plan.stages, "engine": engine,
+            "summary": {"recordings": len(recs), "done": done, "failed": failed,
+                        "pending": len(recs) - done - failed},
+            "recordings": recs}
+
+
+def write_manifest(path: Path, doc: dict) -> None:
+    write_json(path, doc)

@@ -1,0 +1,80 @@
+"""`kinfu batch`: the stages of a plan over many recordings on Dask, resumable, with manifest.json."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+from kinfu_cli.batch.engine import check_before_work, connect, run_plan
+from kinfu_cli.batch.manifest import MANIFEST_NAME
+from kinfu_cli.batch.plan import load_plan
+from kinfu_cli.commands._batch_stages import batch_stages
+from kinfu_cli.core.errors import ConfigError
+
+
+@click.command("batch", short_help="Run the stages of a plan over many recordings on Dask (resumable).")
+@click.argument("plan", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("-o", "--output", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="Output folder: one sub-folder per recording and manifest.json [the plan's 'output'].")
+@click.option("--workers", type=click.IntRange(min=1), default=None,
+              help="Worker processes of the local cluster, one thread each [one per core].")
+@click.option("--scheduler", default=None, metavar="tcp://HOST:PORT",
+              help="Submit to this running dask.distributed scheduler instead of a local cluster (its workers "
+                   "must see the same paths).")
+@click.option("--force", is_flag=True,
+              help="Redo every stage even when its outputs are current, and write over outputs kinfu did not "
+                   "write (an input is never written over).")
+@click.option("--json", "as_json", is_flag=True, help="Print manifest.json on stdout.")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+def command(plan: Path, output: Path | None, workers: int | None, scheduler: str | None, force: bool, as_json: bool,
+            quiet: bool) -> None:
+    """Run the stages listed in PLAN (TOML or YAML) over every recording it names: one Dask task per
+    (recording, stage), the stage dependencies as the graph (poi needs the recording, segment needs fuse,
+    nbv needs fuse and poi). Each stage is the single command run in-process on a worker with the plan's
+    options, writing what the command writes into OUTPUT/<recording>/ (fuse/, pois.json, views.json,
+    segment/). OUTPUT/manifest.json records per recording and stage the status (ok, skipped, failed,
+    blocked), seconds, key numbers, warnings and the error line, and is rewritten after every task.
+
+    Resumable: a stage whose outputs exist unchanged with the same input fingerprint (inputs' size and
+    modification time, options, kinfu version) is skipped; --force redoes everything. A failing recording
+    does not stop the others; the exit code is 1 when one failed, 2 for a bad plan (checked before any work:
+    unknown stages or options, missing files, globs matching nothing, two recordings with one output folder,
+    an unreachable --scheduler).
+
+    \b
+    Example plan (examples/batch_plan.toml):
+      output = "out/batch"
+      stages = ["fuse", "poi", "nbv", "segment"]
+      recordings = ["sessions/*.mcap", {path = "lab/day2.bag", output = "day2"}]
+      [options.fuse]
+      voxel-size = 0.02
+    \b
+    Example:
+      kinfu batch examples/batch_plan.toml
+      kinfu batch plan.yaml -o out/batch --workers 4
+      kinfu batch plan.toml --scheduler tcp://10.0.0.5:8786
+    """
+    if scheduler is not None and workers is not None:
+        raise ConfigError("--workers: sizes the local cluster; with --scheduler the cluster has its own workers")
+    table = batch_stages()
+    loaded = load_plan(plan, table, output)
+    check_before_work(loaded, table, force)
+    engine = connect(scheduler, workers)
+    try:
+        doc = run_plan(loaded, table, engine, force=force, quiet=quiet)
+    finally:
+        engine.close()
+    if as_json:
+        click.echo(json.dumps(doc, indent=2))
+    s = doc["summary"]
+    where = loaded.output / MANIFEST_NAME
+    ran = sum(e["status"] == "ok" for r in doc["recordings"] for e in r["stages"].values())
+    skipped = sum(e["status"] == "skipped" for r in doc["recordings"] for e in r["stages"].values())
+    if s["failed"]:
+        click.echo(f"kinfu: batch: {s['done']} of {s['recordings']} recordings done, {s['failed']} failed "
+                   f"(see {where})", err=True)
+        click.get_current_context().exit(1)
+    click.echo(f"kinfu: batch: {s['done']} of {s['recordings']} recordings done ({ran} stages run, {skipped} "
+               f"skipped) -> {where}", err=True)
