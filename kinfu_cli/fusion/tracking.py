@@ -46,6 +46,12 @@ MAX_SPEED_M_S = 0.10 * 30
 MAX_TURN_DEG_S = 20.0 * 30
 # re-localisation pyramid: correspondence distances (m), iterations and data-cloud voxel per level; the first
 # level reaches 30 cm (a hand-held camera's motion over a few sub-sampled frames), the last is the tracker's finest
+# projective ICP re-casts the model map from the pose it found, and runs again from there, when that pose is further
+# than this from the one the map was cast from (a large move, as between sub-sampled frames: the first map sees the
+# scene from the wrong place, its occlusions and edges bias the association), at most RECASTS times
+RECAST_M = 0.02
+RECAST_DEG = 2.0
+RECASTS = 0
 # the agreement check looks for the model surface within this many truncation distances of each reading
 AGREEMENT_BAND = 4.0
 RELOCALISE_LEVELS = ((0.30, 15, 0.04), (0.15, 15, 0.04), (0.08, 10, 0.02), (0.04, 10, 0.01))
@@ -84,8 +90,9 @@ class FrameToModelTracker:
                  max_speed: float = MAX_SPEED_M_S, max_turn: float = MAX_TURN_DEG_S, max_jump_m: float = 0.10,
                  max_jump_deg: float = 20.0, model_scale: float = 0.5, min_points: int = 300,
                  agreement_stride: int = 4, relocalise: bool = True, icp: str = "projective",
-                 bilateral: bool = True, band: float = 0.15, max_angle: float = 30.0,
-                 max_condition: float = float("inf"), icp_scale: float = 0.5):
+                 bilateral: bool = True, band: float = 0.15, max_angle: float = 20.0,
+                 max_condition: float = float("inf"), icp_scale: float = 0.5,
+                 projective_iterations=(30, 15, 6), projective_distance: float = 0.10):
         if len(max_distances) != len(iterations):
             raise ConfigError("tracker: max_distances and iterations must have the same length")
         if icp not in ICP_METHODS:
@@ -96,6 +103,8 @@ class FrameToModelTracker:
         self.max_angle = float(max_angle)
         self.max_condition = float(max_condition)
         self.icp_scale = float(icp_scale)
+        self.projective_iterations = tuple(int(x) for x in projective_iterations)
+        self.projective_distance = float(projective_distance)
         self.max_distances = tuple(float(x) for x in max_distances)
         self.iterations = tuple(int(x) for x in iterations)
         self.stride = int(stride)
@@ -186,17 +195,25 @@ class FrameToModelTracker:
         """Projective ICP (fusion.icp) against the model maps ray cast from T_init, then the checks (the
         agreement against the same maps); None when the model shows too little from there."""
         f = self._level(1 / self.icp_scale)  # the finest level ICP uses
-        levels = max(f + len(self.iterations), self._level(self.agreement_stride) + 1)
+        levels = max(f + len(self.projective_iterations), self._level(self.agreement_stride) + 1)
         pyr = data_pyramid(depth, K, levels, volume.min_depth, volume.max_depth, self.bilateral)
         m = min(self._level(1 / self.model_scale), levels - 1)  # the level the model map matches
-        mz, mv, _, state = band_raycast(volume, pyr[m].K, T_init, pyr[m].depth, self.band, tsdf_normals=False)
-        mn = vertex_normals(mv, mz, *T_init[:3, 3], EDGE_JUMP_PER_M)
-        if np.count_nonzero(np.isfinite(mn[..., 0])) < self.min_points // 4 ** m:
-            return None
-        r = projective_icp(pyr[f:], mv, mn, pyr[m].K, T_init, T_init, self.iterations, self.max_distances,
-                           self.max_angle)
+        its = self.projective_iterations
+        dists = (self.projective_distance,) * len(its)
+        T_model = T_init
+        for recast in range(1 + RECASTS):
+            mz, mv, _, state = band_raycast(volume, pyr[m].K, T_model, pyr[m].depth, self.band, tsdf_normals=False)
+            mn = vertex_normals(mv, mz, *T_model[:3, 3], EDGE_JUMP_PER_M)
+            if np.count_nonzero(np.isfinite(mn[..., 0])) < self.min_points // 4 ** m:
+                return None
+            r = projective_icp(pyr[f:], mv, mn, pyr[m].K, T_model, r.T_world_camera if recast else T_init, its, dists,
+                               self.max_angle)
+            moved = np.linalg.inv(T_model) @ r.T_world_camera
+            if np.linalg.norm(moved[:3, 3]) < RECAST_M and _angle_deg(moved[:3, :3]) < RECAST_DEG:
+                break
+            T_model = r.T_world_camera  # a large move: the model seen from where the camera turned out to be
         agreement = model_agreement(pyr[self._level(self.agreement_stride)], r.T_world_camera, mz, state, pyr[m].K,
-                                    T_init, BAND_HIT, BAND_OCCLUDED, volume.truncation)
+                                    T_model, BAND_HIT, BAND_OCCLUDED, volume.truncation)
         return self._checked(r.T_world_camera, r.fitness, r.rmse, volume, depth, K, T_ref, dt_s, r.condition,
                              agreement)
 
