@@ -46,6 +46,12 @@ MAX_SPEED_M_S = 0.10 * 30
 MAX_TURN_DEG_S = 20.0 * 30
 # re-localisation pyramid: correspondence distances (m), iterations and data-cloud voxel per level; the first
 # level reaches 30 cm (a hand-held camera's motion over a few sub-sampled frames), the last is the tracker's finest
+# projective ICP: the largest condition number of the 6x6 system (largest / smallest eigenvalue) trusted. Scenes
+# with 3D structure measure 1e2-1e3 (7-Scenes kitchen median 160, the simulator's box scene up to ~600); a flat
+# wall filling the view ~1e4 (only its borders hold the slide along it)
+MAX_CONDITION = 5e3
+# the narrowest image (pixels) projective ICP's finest level and its model map are made at
+MIN_ICP_WIDTH = 320
 # projective ICP re-casts the model map from the pose it found, and runs again from there, when that pose is further
 # than this from the one the map was cast from (a large move, as between sub-sampled frames: the first map sees the
 # scene from the wrong place, its occlusions and edges bias the association), at most RECASTS times
@@ -91,7 +97,7 @@ class FrameToModelTracker:
                  max_jump_deg: float = 20.0, model_scale: float = 0.5, min_points: int = 300,
                  agreement_stride: int = 4, relocalise: bool = True, icp: str = "projective",
                  bilateral: bool = True, band: float = 0.15, max_angle: float = 20.0,
-                 max_condition: float = float("inf"), icp_scale: float = 0.5,
+                 max_condition: float = MAX_CONDITION, icp_scale: float = 0.5,
                  projective_iterations=(30, 15, 6), projective_distance: float = 0.10):
         if len(max_distances) != len(iterations):
             raise ConfigError("tracker: max_distances and iterations must have the same length")
@@ -194,10 +200,13 @@ class FrameToModelTracker:
     def _projective_attempt(self, volume, depth, K, T_init, T_ref, dt_s) -> TrackResult | None:
         """Projective ICP (fusion.icp) against the model maps ray cast from T_init, then the checks (the
         agreement against the same maps); None when the model shows too little from there."""
-        f = self._level(1 / self.icp_scale)  # the finest level ICP uses
+        # the finest level ICP uses and the level the model map matches: icp_scale / model_scale of the frame, but
+        # never narrower than MIN_ICP_WIDTH pixels (a small frame is tracked at full size)
+        keep = max(0, int(np.floor(np.log2(max(depth.shape[1], 1) / MIN_ICP_WIDTH))))
+        f = min(self._level(1 / self.icp_scale), keep)
         levels = max(f + len(self.projective_iterations), self._level(self.agreement_stride) + 1)
         pyr = data_pyramid(depth, K, levels, volume.min_depth, volume.max_depth, self.bilateral)
-        m = min(self._level(1 / self.model_scale), levels - 1)  # the level the model map matches
+        m = min(self._level(1 / self.model_scale), keep, levels - 1)
         its = self.projective_iterations
         dists = (self.projective_distance,) * len(its)
         T_model = T_init
