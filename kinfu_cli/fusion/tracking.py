@@ -47,9 +47,9 @@ MAX_TURN_DEG_S = 20.0 * 30
 # re-localisation pyramid: correspondence distances (m), iterations and data-cloud voxel per level; the first
 # level reaches 30 cm (a hand-held camera's motion over a few sub-sampled frames), the last is the tracker's finest
 # projective ICP: the largest condition number of the 6x6 system (largest / smallest eigenvalue) trusted. Scenes
-# with 3D structure measure 1e2-1e3 (7-Scenes kitchen median 160, the simulator's box scene up to ~600); a flat
-# wall filling the view ~1e4 (only its borders hold the slide along it)
-MAX_CONDITION = 5e3
+# with 3D structure measure 1e2-1e3 (7-Scenes kitchen median 160, the simulator's box scene 200-700); a flat
+# wall filling a 160x120 view 3.8e3 (only its borders hold the slide along it)
+MAX_CONDITION = 2.5e3
 # the narrowest image (pixels) projective ICP's finest level and its model map are made at
 MIN_ICP_WIDTH = 320
 # projective ICP re-casts the model map from the pose it found, and runs again from there, when that pose is further
