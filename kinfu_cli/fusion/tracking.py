@@ -1,23 +1,31 @@
 """Camera poses for fusion: the paper's hint modes (digest §1.5).
 
 forced: the given pose (robot kinematics / TF), no tracking.
-icp:    frame-to-model point-to-plane ICP (open3d), initialised with the previous estimate moved on at the
+icp:    frame-to-model point-to-plane ICP, initialised with the previous estimate moved on at the
         camera's last velocity (constant-velocity prediction).
 hint:   the same ICP, initialised with the given (TF) pose.
 topic:  the pose from a PoseStamped/Odometry topic, no tracking (forced with another source).
 
-Frame-to-model: the model is the volume ray cast from the initial pose (vertices + normals), the data
-is the new depth image back-projected in the camera frame; ICP estimates T_world_camera directly.
+Frame-to-model: the model is the volume ray cast from the initial pose, the data the new depth image in the
+camera frame; ICP estimates T_world_camera directly. Two ICPs (parameter icp):
+- "projective" (default): KinFu's tracker (fusion.icp): projective data association against the model's
+  vertex / normal maps, cast only in a band around the frame's depths (fusion.raycast.band_raycast), on a
+  3-level pyramid of the bilateral-filtered depth; ~20x faster than open3d's (benchmarks/bench_tracking.py).
+- "open3d": open3d's point-to-plane ICP on clouds (the reference).
+Re-localisation (below) uses open3d's ICP in both cases.
 
-When is a frame lost? ICP always returns some pose; it is kept only when all three checks pass:
-1. fitness (open3d: share of the frame's points with a model point within the finest correspondence
+When is a frame lost? ICP always returns some pose; it is kept only when all the checks pass:
+1. fitness (share of the frame's points with a model correspondence within the finest correspondence
    distance) >= min_fitness: less overlap than that cannot pin a pose down;
 2. agreement >= min_agreement: where the frame and the model ray cast from the new pose both see a surface,
    the share of pixels whose depths differ by less than the volume's truncation distance (a reading within
    the truncation band updates the same surface; beyond, it would add a second one). At a right pose only
    noise, depth edges, occluders and moved objects disagree; a pose a few centimetres off moves whole walls
-   out of the band. This is the check that catches ICP converging to a wrong pose with a fair fitness;
-3. the camera moved no faster than max_speed / max_turn since the last good pose (KinFu's per-frame ICP
+   out of the band. This is the check that catches ICP converging to a wrong pose with a fair fitness
+   (projective ICP measures it against the model maps it tracked against, with no second ray cast);
+3. projective ICP: the condition number of its 6x6 system <= max_condition (degenerate geometry such as a
+   flat wall lets the pose slide along it: such a pose is a guess);
+4. the camera moved no faster than max_speed / max_turn since the last good pose (KinFu's per-frame ICP
    limits of 0.10 m and 20 degrees at 30 Hz, as speeds, so sub-sampled frames may move further).
 When the first attempt fails, the tracker re-localises before declaring the frame lost: a wider
 coarse-to-fine pyramid (30 cm correspondences on a 4 cm cloud down to the finest level) from each of the
@@ -89,6 +97,12 @@ class FrameToModelTracker:
     same limits per frame, used when the time since the last good pose is not known; model_scale: ray-cast
     image size for the ICP target; agreement_stride: pixel step of the agreement check; relocalise: try the
     wider pyramid (RELOCALISE_LEVELS) from every candidate pose before declaring a frame lost.
+    icp: "projective" or "open3d" (module docstring); max_distances / iterations / stride / voxel are open3d's.
+    Projective ICP: projective_iterations per pyramid level (coarse to fine) with correspondences within
+    projective_distance (m) and max_angle (deg) between normals; icp_scale / model_scale: the finest data level
+    and the model map as a share of the frame (never narrower than MIN_ICP_WIDTH); bilateral: filter the depth
+    first (KinFu); band: half-width (m) of the model ray cast around each reading; max_condition (module
+    docstring, check 3).
     """
 
     def __init__(self, max_distances=(0.10, 0.05, 0.02), iterations=(10, 10, 8), stride: int = 2,
