@@ -109,7 +109,8 @@ def main() -> None:
     print("|---|---|---|---|---|---|---|")
     for m in methods:
         e = errors(last[m].est, frames)
-        cond = np.nanmedian(np.asarray(last[m].conditions, dtype=float))
+        c = np.asarray(last[m].conditions, dtype=float)
+        cond = np.nanmedian(c) if np.isfinite(c).any() else float("nan")
         print(f"| {m} | {np.mean(fps[m]):.2f} | {max(fps[m]):.2f} | {100 * np.sqrt(np.mean(e ** 2)):.2f} | "
               f"{100 * e.max():.2f} | {last[m].lost} | {cond:.3g} |")
     if len(methods) == 2:
