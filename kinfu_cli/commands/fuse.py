@@ -78,6 +78,9 @@ def _floats(value: str, name: str, n: tuple[int, ...]) -> tuple[float, ...]:
                    "(0.1 or 10%). Lost frames (ICP fitness < 0.3, depth agreeing with the model on < 75 % of "
                    "the shared pixels, or a jump faster than 3 m/s or 600 deg/s; re-localisation tried first) "
                    "are never fused.")
+@click.option("--icp", type=click.Choice(["projective", "open3d"]), default="projective", show_default=True,
+              help="With --pose icp/hint: the tracker's ICP: projective (KinFu's projective point-to-plane on a "
+                   "depth pyramid, numba, real time) or open3d (point-to-plane on clouds, ~20x slower; reference).")
 @click.option("--init", "init", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Continue fusing into this volume.npz (its grid wins over the grid options).")
 @click.option("--clear-sphere", "clear_spheres", multiple=True, metavar="X,Y,Z,R",
@@ -113,7 +116,7 @@ def _floats(value: str, name: str, n: tuple[int, ...]) -> tuple[float, ...]:
 def command(recording: Path, outdir: Path, voxel_size, resolution, size, origin, truncation, max_weight, min_depth,
             max_depth, pose, pose_topic, init, clear_spheres, clear_pois, start_s, end_s, every, tolerance_s,
             fill_gaps, bilateral, shadow_filter, up, no_color, color_mode, plot, as_json, quiet, force, max_memory,
-            max_lost, viz=None, **kwargs) -> None:
+            max_lost, icp, viz=None, **kwargs) -> None:
     """Fuse the depth frames of RECORDING (MCAP, ROS 1 .bag, ROS 2 bag folder) into a KinectFusion TSDF
     volume that keeps unknown / empty / occupied per voxel (Monica et al. 2016, eqs. 1-3): free space in
     front of surfaces becomes known-empty, interiors stay unknown. Writes OUTDIR/mesh.ply (coloured),
@@ -158,7 +161,7 @@ def command(recording: Path, outdir: Path, voxel_size, resolution, size, origin,
         clear_pois=str(clear_pois) if clear_pois else None, start_s=start_s, end_s=end_s, every=every,
         tolerance_s=tolerance_s, fill_gaps=fill_gaps, bilateral=bilateral, shadow_filter=shadow_filter,
         roles=role_kwargs(kwargs), quiet=quiet, argument_names=ARGUMENT_FLAGS, max_lost=_share(max_lost),
-        max_memory=max_memory, color_mode=color_mode,
+        max_memory=max_memory, color_mode=color_mode, icp=icp,
         up=None if isinstance(up_dir := parse_up(up, ("auto",)), str) else up_dir)
     if not quiet:
         for note in result.notes:

@@ -162,7 +162,8 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
                    shadow_filter: bool = False, shadow_baseline: float = 0.08,
                    roles: Mapping[str, str | None] | None = None, quiet: bool = True,
                    argument_names: Mapping[str, str] | None = None, up=None, max_lost: float = 0.10,
-                   max_memory: float | None = None, color_mode: str | None = None) -> FusionResult:
+                   max_memory: float | None = None, color_mode: str | None = None,
+                   icp: str = "projective") -> FusionResult:
     """Fuse the depth frames of `recording` (MCAP, ROS 1 .bag, ROS 2 bag folder) into a TernaryVolume.
 
     Grid: size (m, one or three values, or "auto": a box around what the selected frames observe from their
@@ -181,6 +182,7 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
     stored in volume.npz, ternary.npz and the report with its source).
     max_lost: the largest share of tracked frames (icp, hint) that may be lost (not fused) before the run
     fails. color_mode: "mean" or "mode" (fusion/color_mode.py); None: the init volume's, else "mean".
+    icp: the tracker's ICP, "projective" (fusion.icp) or "open3d" (tracking.ICP_METHODS).
     """
     started = time.perf_counter()
     timing: dict[str, float] = {}
@@ -229,7 +231,7 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
         stats = FrameStats()
         frames = iter_frames(rec, found, pose_source=plan.source, pose_topic=pose_topic, start_s=start_s,
                              end_s=end_s, every=every, stats=stats, tf=tf, tolerance_s=tolerance_s)
-        integrator = _Integrator(vol, plan.mode, grid_spec, origin, names["origin"], str(rec.path), timing)
+        integrator = _Integrator(vol, plan.mode, grid_spec, origin, names["origin"], str(rec.path), timing, icp)
         # at most this many frames can be tracked (all selected ones): past max_lost of it, fail at once
         count = rec.topics[found.depth_topic].count if found.depth_topic in rec.topics else 0
         bound = -(-count // every)
@@ -446,7 +448,7 @@ class _Integrator:
     takes each camera pose as given or tracks it (icp from the previous pose, hint from the given one)."""
 
     def __init__(self, volume: TernaryVolume | None, mode: str, grid_spec: _GridSpec, origin: tuple | None,
-                 origin_name: str, recording: str, timing: dict[str, float]) -> None:
+                 origin_name: str, recording: str, timing: dict[str, float], icp: str = "projective") -> None:
         self.volume = volume
         self.mode = mode
         self.grid_spec = grid_spec
@@ -454,7 +456,7 @@ class _Integrator:
         self.origin_name = origin_name
         self.recording = recording
         self.timing = timing
-        self.tracker = FrameToModelTracker() if mode in ("icp", "hint") else None
+        self.tracker = FrameToModelTracker(icp=icp) if mode in ("icp", "hint") else None
         self.track_log: list[dict] = []
         self.lost: list[int] = []  # indices of the frames tracking lost (not fused)
         self.placement = ""

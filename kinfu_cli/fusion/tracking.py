@@ -1,23 +1,31 @@
 """Camera poses for fusion: the paper's hint modes (digest §1.5).
 
 forced: the given pose (robot kinematics / TF), no tracking.
-icp:    frame-to-model point-to-plane ICP (open3d), initialised with the previous estimate moved on at the
+icp:    frame-to-model point-to-plane ICP, initialised with the previous estimate moved on at the
         camera's last velocity (constant-velocity prediction).
 hint:   the same ICP, initialised with the given (TF) pose.
 topic:  the pose from a PoseStamped/Odometry topic, no tracking (forced with another source).
 
-Frame-to-model: the model is the volume ray cast from the initial pose (vertices + normals), the data
-is the new depth image back-projected in the camera frame; ICP estimates T_world_camera directly.
+Frame-to-model: the model is the volume ray cast from the initial pose, the data the new depth image in the
+camera frame; ICP estimates T_world_camera directly. Two ICPs (parameter icp):
+- "projective" (default): KinFu's tracker (fusion.icp): projective data association against the model's
+  vertex / normal maps, cast only in a band around the frame's depths (fusion.raycast.band_raycast), on a
+  3-level pyramid of the bilateral-filtered depth; ~20x faster than open3d's (benchmarks/bench_tracking.py).
+- "open3d": open3d's point-to-plane ICP on clouds (the reference).
+Re-localisation (below) uses open3d's ICP in both cases.
 
-When is a frame lost? ICP always returns some pose; it is kept only when all three checks pass:
-1. fitness (open3d: share of the frame's points with a model point within the finest correspondence
+When is a frame lost? ICP always returns some pose; it is kept only when all the checks pass:
+1. fitness (share of the frame's points with a model correspondence within the finest correspondence
    distance) >= min_fitness: less overlap than that cannot pin a pose down;
 2. agreement >= min_agreement: where the frame and the model ray cast from the new pose both see a surface,
    the share of pixels whose depths differ by less than the volume's truncation distance (a reading within
    the truncation band updates the same surface; beyond, it would add a second one). At a right pose only
    noise, depth edges, occluders and moved objects disagree; a pose a few centimetres off moves whole walls
-   out of the band. This is the check that catches ICP converging to a wrong pose with a fair fitness;
-3. the camera moved no faster than max_speed / max_turn since the last good pose (KinFu's per-frame ICP
+   out of the band. This is the check that catches ICP converging to a wrong pose with a fair fitness
+   (projective ICP measures it against the model maps it tracked against, with no second ray cast);
+3. projective ICP: the condition number of its 6x6 system <= max_condition (degenerate geometry such as a
+   flat wall lets the pose slide along it: such a pose is a guess);
+4. the camera moved no faster than max_speed / max_turn since the last good pose (KinFu's per-frame ICP
    limits of 0.10 m and 20 degrees at 30 Hz, as speeds, so sub-sampled frames may move further).
 When the first attempt fails, the tracker re-localises before declaring the frame lost: a wider
 coarse-to-fine pyramid (30 cm correspondences on a 4 cm cloud down to the finest level) from each of the
@@ -35,15 +43,31 @@ from scipy.spatial.transform import Rotation
 
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.fusion.placement import backproject
-from kinfu_cli.fusion.raycast import model_cloud
+from kinfu_cli.fusion.icp import EDGE_JUMP_PER_M, data_pyramid, model_agreement, projective_icp, vertex_normals
+from kinfu_cli.fusion.raycast import BAND_HIT, BAND_OCCLUDED, band_raycast, model_cloud
 
 POSE_MODES = ("forced", "icp", "hint", "topic")
+ICP_METHODS = ("projective", "open3d")
 
 # KinFu's ICP limits per frame (0.10 m, 20 degrees) at its 30 Hz, as speeds
 MAX_SPEED_M_S = 0.10 * 30
 MAX_TURN_DEG_S = 20.0 * 30
 # re-localisation pyramid: correspondence distances (m), iterations and data-cloud voxel per level; the first
 # level reaches 30 cm (a hand-held camera's motion over a few sub-sampled frames), the last is the tracker's finest
+# projective ICP: the largest condition number of the 6x6 system (largest / smallest eigenvalue) trusted. Scenes
+# with 3D structure measure 1e2-1e3 (7-Scenes kitchen median 160, the simulator's box scene 200-700); a flat
+# wall filling a 160x120 view 3.8e3 (only its borders hold the slide along it)
+MAX_CONDITION = 2.5e3
+# the narrowest image (pixels) projective ICP's finest level and its model map are made at
+MIN_ICP_WIDTH = 320
+# projective ICP re-casts the model map from the pose it found, and runs again from there, when that pose is further
+# than this from the one the map was cast from (a large move, as between sub-sampled frames: the first map sees the
+# scene from the wrong place, its occlusions and edges bias the association), at most RECASTS times
+RECAST_M = 0.02
+RECAST_DEG = 2.0
+RECASTS = 0
+# the agreement check looks for the model surface within this many truncation distances of each reading
+AGREEMENT_BAND = 4.0
 RELOCALISE_LEVELS = ((0.30, 15, 0.04), (0.15, 15, 0.04), (0.08, 10, 0.02), (0.04, 10, 0.01))
 
 
@@ -57,6 +81,7 @@ class TrackResult:
     agreement: float = float("nan")  # share of overlapping pixels whose depth agrees with the model
     relocalised: bool = False  # found by the wider re-localisation search, not the first attempt
     attempts: int = 1
+    condition: float = float("nan")  # projective ICP: condition number of the final 6x6 system
 
 
 def _angle_deg(R: np.ndarray) -> float:
@@ -72,15 +97,34 @@ class FrameToModelTracker:
     same limits per frame, used when the time since the last good pose is not known; model_scale: ray-cast
     image size for the ICP target; agreement_stride: pixel step of the agreement check; relocalise: try the
     wider pyramid (RELOCALISE_LEVELS) from every candidate pose before declaring a frame lost.
+    icp: "projective" or "open3d" (module docstring); max_distances / iterations / stride / voxel are open3d's.
+    Projective ICP: projective_iterations per pyramid level (coarse to fine) with correspondences within
+    projective_distance (m) and max_angle (deg) between normals; icp_scale / model_scale: the finest data level
+    and the model map as a share of the frame (never narrower than MIN_ICP_WIDTH); bilateral: filter the depth
+    first (KinFu); band: half-width (m) of the model ray cast around each reading; max_condition (module
+    docstring, check 3).
     """
 
     def __init__(self, max_distances=(0.10, 0.05, 0.02), iterations=(10, 10, 8), stride: int = 2,
                  voxel: float = 0.01, min_fitness: float = 0.3, min_agreement: float = 0.75,
                  max_speed: float = MAX_SPEED_M_S, max_turn: float = MAX_TURN_DEG_S, max_jump_m: float = 0.10,
                  max_jump_deg: float = 20.0, model_scale: float = 0.5, min_points: int = 300,
-                 agreement_stride: int = 4, relocalise: bool = True):
+                 agreement_stride: int = 4, relocalise: bool = True, icp: str = "projective",
+                 bilateral: bool = True, band: float = 0.15, max_angle: float = 20.0,
+                 max_condition: float = MAX_CONDITION, icp_scale: float = 0.5,
+                 projective_iterations=(30, 15, 6), projective_distance: float = 0.10):
         if len(max_distances) != len(iterations):
             raise ConfigError("tracker: max_distances and iterations must have the same length")
+        if icp not in ICP_METHODS:
+            raise ConfigError(f"tracker: icp must be one of {', '.join(ICP_METHODS)}, got {icp!r}", parameter="icp")
+        self.icp = icp
+        self.bilateral = bool(bilateral)
+        self.band = float(band)
+        self.max_angle = float(max_angle)
+        self.max_condition = float(max_condition)
+        self.icp_scale = float(icp_scale)
+        self.projective_iterations = tuple(int(x) for x in projective_iterations)
+        self.projective_distance = float(projective_distance)
         self.max_distances = tuple(float(x) for x in max_distances)
         self.iterations = tuple(int(x) for x in iterations)
         self.stride = int(stride)
@@ -105,32 +149,33 @@ class FrameToModelTracker:
         and dt_s the seconds since it, for the speed check (default: the first candidate, per-frame limits).
         Lost: the first candidate pose is returned with lost=True and the reason.
         """
-        import open3d as o3d  # heavy: only when tracking
-
         inits = [np.asarray(T_init, dtype=np.float64)] if np.ndim(T_init) == 2 else \
             [np.asarray(T, dtype=np.float64) for T in T_init]
         T_ref = inits[0] if T_ref is None else np.asarray(T_ref, dtype=np.float64)
-        pts = backproject(depth, K, np.eye(4), stride=self.stride, min_depth=volume.min_depth,
-                          max_depth=volume.max_depth)
-        if len(pts) < self.min_points:
+        d = np.asarray(depth, dtype=np.float32)
+        s = self.stride
+        ds = d[::s, ::s]
+        if np.count_nonzero((ds >= volume.min_depth) & (ds <= volume.max_depth)) < self.min_points:
             return TrackResult(inits[0].copy(), 0.0, float("nan"), True, "too few depth points")
-        cloud = o3d.geometry.PointCloud()
-        cloud.points = o3d.utility.Vector3dVector(pts)
-        sources: dict[float, o3d.geometry.PointCloud] = {}
-
-        def source(voxel: float):
-            if voxel not in sources:
-                sources[voxel] = cloud.voxel_down_sample(voxel) if voxel > 0 else cloud
-            return sources[voxel]
-
         h, w = depth.shape
-        targets: dict[int, object] = {}
+        cache: dict = {}
+
+        def source(voxel: float):  # open3d's data cloud, down-sampled to `voxel`
+            import open3d as o3d  # heavy: only when tracking
+
+            if "cloud" not in cache:
+                pts = backproject(depth, K, np.eye(4), stride=self.stride, min_depth=volume.min_depth,
+                                  max_depth=volume.max_depth)
+                cache["cloud"] = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
+            if voxel not in cache:
+                cache[voxel] = cache["cloud"].voxel_down_sample(voxel) if voxel > 0 else cache["cloud"]
+            return cache[voxel]
 
         def target(i: int):  # the model seen from candidate i, ray cast when first needed; None: too little
-            if i not in targets:
+            if ("target", i) not in cache:
                 t = model_cloud(volume, K, w, h, inits[i], scale=self.model_scale)
-                targets[i] = t if len(t.points) >= self.min_points else None
-            return targets[i]
+                cache[("target", i)] = t if len(t.points) >= self.min_points else None
+            return cache[("target", i)]
 
         # data-cloud voxel per level: `voxel`, or a quarter of the level's correspondence distance when coarser
         # (coarse levels need no dense cloud; the finest keeps `voxel`: at the model's 2 cm voxel a 2 cm cloud
@@ -138,14 +183,20 @@ class FrameToModelTracker:
         def level_voxel(dist: float) -> float:
             return max(self.voxel, dist / 4) if self.voxel > 0 else 0.0
 
-        fine = [(d, it, level_voxel(d)) for d, it in zip(self.max_distances, self.iterations)]
-        plans = [(0, fine, False)]
-        if self.relocalise:
-            coarse = [(d, it, max(v, level_voxel(d))) for d, it, v in RELOCALISE_LEVELS
-                      if d > self.max_distances[-1]] + fine[-1:]
-            plans += [(i, coarse, True) for i in range(len(inits))]
+        fine = [(d_, it, level_voxel(d_)) for d_, it in zip(self.max_distances, self.iterations)]
         best, attempts = None, 0
+        if self.icp == "projective":
+            best, attempts = self._projective_attempt(volume, d, K, inits[0], T_ref, dt_s), 1
+            if best is None:
+                attempts = 0
+        plans = [(0, fine, False)] if self.icp == "open3d" else []
+        if self.relocalise:
+            coarse = [(d_, it, max(v, level_voxel(d_))) for d_, it, v in RELOCALISE_LEVELS
+                      if d_ > self.max_distances[-1]] + fine[-1:]
+            plans += [(i, coarse, True) for i in range(len(inits))]
         for i, levels, reloc in plans:
+            if best is not None and not best.lost:
+                break
             if target(i) is None:
                 continue
             attempts += 1
@@ -153,8 +204,6 @@ class FrameToModelTracker:
             res.relocalised = reloc
             if best is None or _better(res, best):
                 best = res
-            if not best.lost:
-                break
         if best is None:
             return TrackResult(inits[0].copy(), 0.0, float("nan"), True, "model surface not visible", attempts=0)
         best.attempts = attempts
@@ -162,8 +211,43 @@ class FrameToModelTracker:
             best.T_world_camera = inits[0].copy()
         return best
 
+    def _projective_attempt(self, volume, depth, K, T_init, T_ref, dt_s) -> TrackResult | None:
+        """Projective ICP (fusion.icp) against the model maps ray cast from T_init, then the checks (the
+        agreement against the same maps); None when the model shows too little from there."""
+        # the finest level ICP uses and the level the model map matches: icp_scale / model_scale of the frame, but
+        # never narrower than MIN_ICP_WIDTH pixels (a small frame is tracked at full size)
+        keep = max(0, int(np.floor(np.log2(max(depth.shape[1], 1) / MIN_ICP_WIDTH))))
+        f = min(self._level(1 / self.icp_scale), keep)
+        levels = max(f + len(self.projective_iterations), self._level(self.agreement_stride) + 1)
+        pyr = data_pyramid(depth, K, levels, volume.min_depth, volume.max_depth, self.bilateral)
+        m = min(self._level(1 / self.model_scale), keep, levels - 1)
+        its = self.projective_iterations
+        dists = (self.projective_distance,) * len(its)
+        T_model = T_init
+        for recast in range(1 + RECASTS):
+            mz, mv, _, state = band_raycast(volume, pyr[m].K, T_model, pyr[m].depth, self.band, tsdf_normals=False)
+            mn = vertex_normals(mv, mz, *T_model[:3, 3], EDGE_JUMP_PER_M)
+            if np.count_nonzero(np.isfinite(mn[..., 0])) < self.min_points // 4 ** m:
+                return None
+            r = projective_icp(pyr[f:], mv, mn, pyr[m].K, T_model, r.T_world_camera if recast else T_init, its, dists,
+                               self.max_angle)
+            moved = np.linalg.inv(T_model) @ r.T_world_camera
+            if np.linalg.norm(moved[:3, 3]) < RECAST_M and _angle_deg(moved[:3, :3]) < RECAST_DEG:
+                break
+            T_model = r.T_world_camera  # a large move: the model seen from where the camera turned out to be
+        agreement = model_agreement(pyr[self._level(self.agreement_stride)], r.T_world_camera, mz, state, pyr[m].K,
+                                    T_model, BAND_HIT, BAND_OCCLUDED, volume.truncation)
+        return self._checked(r.T_world_camera, r.fitness, r.rmse, volume, depth, K, T_ref, dt_s, r.condition,
+                             agreement)
+
+    @staticmethod
+    def _level(factor: float) -> int:
+        """The pyramid level whose images are `factor` times smaller than the frame."""
+        return max(0, int(round(np.log2(max(factor, 1.0)))))
+
     def _attempt(self, source, target, T_init, levels, volume, depth, K, T_ref, dt_s) -> TrackResult:
-        """One ICP run over `levels` ((distance, iterations, source voxel), coarse to fine), then the checks."""
+        """One open3d ICP run over `levels` ((distance, iterations, source voxel), coarse to fine), then the
+        checks."""
         import open3d as o3d  # heavy: only when tracking
 
         reg = o3d.pipelines.registration
@@ -174,9 +258,14 @@ class FrameToModelTracker:
             res = reg.registration_icp(source(voxel), target, dist, T, est,
                                        reg.ICPConvergenceCriteria(max_iteration=it))
             T = np.asarray(res.transformation).copy()
-        fitness, rmse = float(res.fitness), float(res.inlier_rmse)
-        agreement = self.agreement(volume, depth, K, T)
-        out = TrackResult(T, fitness, rmse, False, "", agreement)
+        return self._checked(T, float(res.fitness), float(res.inlier_rmse), volume, depth, K, T_ref, dt_s)
+
+    def _checked(self, T, fitness, rmse, volume, depth, K, T_ref, dt_s, condition=float("nan"),
+                 agreement=None) -> TrackResult:
+        """The pose T with the loss checks (module docstring) applied; agreement: when already measured."""
+        if agreement is None:
+            agreement = self.agreement(volume, depth, K, T)
+        out = TrackResult(T, fitness, rmse, False, "", agreement, condition=condition)
         moved = np.linalg.inv(T_ref) @ T
         step_m, step_deg = float(np.linalg.norm(moved[:3, 3])), _angle_deg(moved[:3, :3])
         if dt_s is not None and dt_s > 0:
@@ -187,25 +276,29 @@ class FrameToModelTracker:
             out.lost, out.reason = True, f"fitness {fitness:.2f} < {self.min_fitness}"
         elif not agreement >= self.min_agreement:
             out.lost, out.reason = True, f"depth agrees with the model on {agreement:.2f} < {self.min_agreement}"
+        elif condition > self.max_condition:
+            out.lost, out.reason = True, (f"the scene pins the pose down poorly (condition number {condition:.2g} > "
+                                          f"{self.max_condition:.2g}: e.g. a flat wall)")
         elif step_m > lim_m or step_deg > lim_deg:
             out.lost, out.reason = True, (f"moved {step_m:.2f} m / {step_deg:.0f} deg since the last good pose "
                                           f"(limit {lim_m:.2f} m / {lim_deg:.0f} deg)")
         return out
 
     def agreement(self, volume, depth: np.ndarray, K: np.ndarray, T_world_camera: np.ndarray) -> float:
-        """Share of the pixels (every agreement_stride-th) where both the depth image and the model ray cast
-        from T_world_camera have a surface whose depths differ by less than the volume's truncation; NaN when
-        they share no pixel."""
+        """Share of the pixels (every agreement_stride-th) with a reading where the model ray cast from
+        T_world_camera also has a surface near it (in a band of a few truncations around the reading, or in front
+        of it) whose depth is within the volume's truncation of the reading's; NaN when they share no pixel."""
         s = self.agreement_stride
-        d = np.asarray(depth, dtype=np.float32)[::s, ::s]
+        d = np.ascontiguousarray(np.asarray(depth, dtype=np.float32)[::s, ::s])
+        d = np.where((d >= volume.min_depth) & (d <= volume.max_depth), d, np.float32(0))
         Ks = np.asarray(K, dtype=np.float64).copy()
         Ks[:2] /= s  # pixel (u, v) of this ray-cast image is pixel (s u, s v) of the depth image
-        z, _, _ = volume.raycast(Ks, d.shape[1], d.shape[0], T_world_camera)
-        both = (d > 0) & (z > 0)
+        z, _, _, state = band_raycast(volume, Ks, T_world_camera, d, AGREEMENT_BAND * volume.truncation)
+        both = (state == BAND_HIT) | (state == BAND_OCCLUDED)
         n = int(np.count_nonzero(both))
         if n == 0:
             return float("nan")
-        return float(np.count_nonzero(both & (np.abs(d - z) < volume.truncation)) / n)
+        return float(np.count_nonzero((state == BAND_HIT) & (np.abs(d - z) < volume.truncation)) / n)
 
 
 def _better(a: TrackResult, b: TrackResult) -> bool:
