@@ -185,11 +185,28 @@ def start_poses(target: Superquadric, cons: GraspConstraints, n_starts: int, tow
     return out
 
 
+def _run(prob: _Problem, R0: np.ndarray, x0: np.ndarray, bounds, max_iter: int) -> tuple:
+    """One SLSQP run from (R0, x0): (rank, R0, x, ok, constraint values, message, iterations); rank sorts
+    feasible converged runs first, then by violation, then by cost."""
+    prob.R0, prob._key = R0, None
+    res = minimize(prob.fun, x0, jac=prob.jac, method="SLSQP", bounds=bounds,
+                   constraints=[{"type": "ineq", "fun": prob.con, "jac": prob.con_jac}],
+                   options={"maxiter": max_iter, "ftol": 1e-9})
+    x = res.x
+    cost, g = prob.evaluate(x[None])
+    viol = float(max(0.0, -g[0].min()))
+    ok = bool(res.success) and viol <= CONSTRAINT_TOL and bool(np.all(np.isfinite(x)))
+    if bounds is not None:
+        ok = ok and all(b[0] - 1e-9 <= v <= b[1] + 1e-9 for b, v in zip(bounds[:3], x[:3]))
+    return ((not ok, viol, float(cost[0])), R0, x.copy(), ok, g[0], str(res.message),
+            int(res.nit))
+
+
 def grasp_part(target: Superquadric, hand: HandModel, cons: GraspConstraints, obstacles: list[Superquadric] = (),
-               *, lifting: bool = True, n_starts: int = 4, max_iter: int = 100) -> PartGrasp:
+               *, lifting: bool = True, n_starts: int = 4, max_iter: int = 100, screen_iter: int = 12) -> PartGrasp:
     """The best feasible pose of `hand` on `target` over `n_starts` SLSQP runs; `converged` is False (and the
     pose only the least-violating attempt, not a grasp) when no run satisfies every constraint."""
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     hand_used = hand.lifted(target.size) if lifting else hand
     prob = _Problem(target, list(obstacles), hand_used, cons)
     bounds = None
@@ -200,25 +217,22 @@ def grasp_part(target: Superquadric, hand: HandModel, cons: GraspConstraints, ob
     best = None
     iters = 0
     starts = start_poses(target, cons, n_starts, toward)
-    for R0, p0 in starts:
-        prob.R0, prob._key = R0, None
+    runs = []
+    for R0, p0 in starts:  # short screening runs; only the most promising is run to convergence
         x0 = np.concatenate([p0, np.zeros(3)])
         if bounds is not None:
             x0[:3] = np.clip(x0[:3], [b[0] for b in bounds[:3]], [b[1] for b in bounds[:3]])
-        res = minimize(prob.fun, x0, jac=prob.jac, method="SLSQP", bounds=bounds,
-                       constraints=[{"type": "ineq", "fun": prob.con, "jac": prob.con_jac}],
-                       options={"maxiter": max_iter, "ftol": 1e-10})
-        iters += int(res.nit)
-        x = res.x
-        cost, g = prob.evaluate(x[None])
-        viol = float(max(0.0, -g[0].min()))
-        ok = bool(res.success) and viol <= CONSTRAINT_TOL and np.all(np.isfinite(x))
-        if bounds is not None:
-            ok = ok and all(b[0] - 1e-9 <= v <= b[1] + 1e-9 for b, v in zip(bounds[:3], x[:3]))
-        rank = (not ok, viol if not ok else 0.0, float(cost[0]))
+        runs.append(_run(prob, R0, x0, bounds, screen_iter if len(starts) > 1 else max_iter))
+    runs.sort(key=lambda r: (r[0][1] > CONSTRAINT_TOL, r[0][2]))
+    order = [runs[0]]
+    if len(starts) > 1:
+        (_, R0, x, _, _, _, _) = runs[0]
+        order = [_run(prob, R0, x, bounds, max_iter)] + runs
+    for rank, R0, x, ok, g, message, nit in order:
+        iters += nit
         if best is None or rank < best[0]:
             R = R0 @ Rotation.from_rotvec(x[3:6]).as_matrix()
-            best = (rank, R, x[:3].copy(), ok, g[0], res.message, float(cost[0]))
+            best = (rank, R, x[:3].copy(), ok, g, message, rank[2])
     (_, _, viol), R, p, ok, g, message, scaled = best
     values: dict[str, float] = {}
     for name, v in zip(prob.names, g):
@@ -233,4 +247,5 @@ def grasp_part(target: Superquadric, hand: HandModel, cons: GraspConstraints, ob
     overlap = float(np.sqrt(np.mean(target.radial_distance(Lw) ** 2)))
     obst = float(sum(values[f"obstacle:{k}"] for k in range(len(obstacles))))
     return PartGrasp(R, p, ok, float(scaled * len(prob.L) * prob.vol ** 2), overlap, values, active, obst,
-                     hand_used, str(message), time.perf_counter() - t0, iters, len(starts), viol)
+                     hand_used, str(message), time.perf_counter() - t0, iters, len(starts), viol,
+                     {"cpu_seconds": time.process_time() - c0})
