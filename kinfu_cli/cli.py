@@ -28,7 +28,9 @@ COMMANDS: dict[str, str | dict[str, str]] = {
     "segment": "segment",
     "nbv": "nbv",
     "diff": "diff",
-    "eval": {"poi": "eval_poi", "fusion": "eval_fusion", "nbv": "eval_nbv", "segment": "eval_segment"},
+    "grasp": "grasp",
+    "eval": {"poi": "eval_poi", "fusion": "eval_fusion", "nbv": "eval_nbv", "segment": "eval_segment",
+             "grasp": "eval_grasp"},
 }
 
 

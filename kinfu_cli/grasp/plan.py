@@ -51,7 +51,7 @@ class GraspOptions:
     obstacle_weight: float = 1e-3
     n_starts: int = 4
     max_iter: int = 100
-    segments: list[int] | None = None  # only these segment ids
+    segment_ids: list[int] | None = None  # only these segment ids
 
     def hands(self) -> list[str]:
         return list(HANDS) if self.hand == "both" else [self.hand]
@@ -231,12 +231,12 @@ def plan_grasps(segments: str | os.PathLike | dict, options: GraspOptions | None
     plane = _plane(doc, source)
     parts = segment_parts(doc, source)
     warnings = []
-    if options.segments is not None:
-        missing = [s for s in options.segments if s not in parts]
+    if options.segment_ids is not None:
+        missing = [s for s in options.segment_ids if s not in parts]
         if missing:
             raise ConfigError(f"{source}: no object segment with a superquadric has id {missing[0]} (ids with one: "
-                              f"{sorted(parts)})", parameter="segments")
-        parts = {s: parts[s] for s in options.segments}
+                              f"{sorted(parts)})", parameter="segment_ids")
+        parts = {s: parts[s] for s in options.segment_ids}
     if not parts:
         raise GraspError(f"{source}: no object segment has a superquadric to grasp (run kinfu segment with "
                          f"superquadrics)")
