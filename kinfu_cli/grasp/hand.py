@@ -47,10 +47,23 @@ class HandModel:
         check_number(self.thumb_length, "thumb_length", 0.0, 0.5, unit="m")
         check_number(self.finger_length, "finger_length", 0.0, 0.5, unit="m")
 
-    def lifted(self, object_size: np.ndarray) -> "HandModel":
-        """Lifting rule (7.2.4): when the object's largest semi-axis exceeds H's longest one (a_y), stretch
-        a_y to it, which pulls the centre of H onto the object's centre along that axis."""
-        big = float(np.max(object_size))
+    def lifted(self, object_size: np.ndarray, object_axes: np.ndarray | None = None,
+               cones: tuple = ()) -> "HandModel":
+        """Lifting rule (7.2.4): when the object's largest semi-axis that can lie across the palm exceeds H's
+        longest one (a_y), stretch a_y to it, which pulls the centre of H onto the object's centre along that
+        axis. Which object axis "corresponds" to a_y depends on the orientation cones ([ours]): with a cone
+        on the approach z_h, object axes within 45 deg of its direction cannot lie across the palm; with a
+        cone on y_h, only object axes within its aperture (+ 15 deg) can."""
+        size = np.asarray(object_size, dtype=np.float64)
+        ok = np.ones(3, dtype=bool)
+        if object_axes is not None:
+            for c in cones:
+                cos = np.abs(np.asarray(object_axes).T @ c.unit())
+                if c.axis == "z":
+                    ok &= cos < np.cos(np.radians(45.0))
+                elif c.axis == "y":
+                    ok &= cos >= np.cos(np.radians(min(c.aperture_deg + 15.0, 90.0)))
+        big = float(np.max(size[ok])) if ok.any() else 0.0
         if big <= self.size[1]:
             return self
         return HandModel((self.size[0], big, self.size[2]), self.n_points, self.palm_width, self.thumb_length,

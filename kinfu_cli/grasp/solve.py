@@ -207,7 +207,7 @@ def grasp_part(target: Superquadric, hand: HandModel, cons: GraspConstraints, ob
     """The best feasible pose of `hand` on `target` over `n_starts` SLSQP runs; `converged` is False (and the
     pose only the least-violating attempt, not a grasp) when no run satisfies every constraint."""
     t0, c0 = time.perf_counter(), time.process_time()
-    hand_used = hand.lifted(target.size) if lifting else hand
+    hand_used = hand.lifted(target.size, target.rotation, tuple(cons.cones)) if lifting else hand
     prob = _Problem(target, list(obstacles), hand_used, cons)
     bounds = None
     if cons.workspace is not None:
