@@ -51,6 +51,7 @@ class GraspOptions:
     obstacle_weight: float = 1e-3
     n_starts: int = 4
     max_iter: int = 100
+    poor_overlap: float = 0.03  # m: a chosen grasp whose H stays farther (RMS) from the object is flagged
     segment_ids: list[int] | None = None  # only these segment ids
 
     def hands(self) -> list[str]:
@@ -66,6 +67,7 @@ class GraspOptions:
         check_number(self.obstacle_weight, "obstacle_weight", 0, 1e6)
         check_number(self.n_starts, "n_starts", 1, 50, integer=True)
         check_number(self.max_iter, "max_iter", 1, 10000, integer=True)
+        check_number(self.poor_overlap, "poor_overlap", 0, 10, low_open=True, unit="m")
 
 
 @dataclass
@@ -79,6 +81,7 @@ class ObjectGrasp:
     best_part: int | None
     candidates: list[tuple[str, int, PartGrasp, float]]  # (hand, part, grasp, score)
     pregrasp_distance: float
+    poor_overlap: float
     seconds: float
     cpu_seconds: float
 
@@ -101,6 +104,7 @@ class ObjectGrasp:
         doc.update({"hand": self.best_hand, "target_part": self.best_part, "pose": pose_json(T),
                     "pre_grasp": pose_json(P), "cost": g.cost, "overlap_rms_m": g.overlap_rms,
                     "score": next(s for h, p, c, s in self.candidates if c is g),
+                    "poor_overlap": bool(g.overlap_rms > self.poor_overlap),
                     "active_constraints": g.active, "constraints": g.constraints,
                     "hand_size": list(g.hand.size), "optimiser": {"message": g.message, "iterations": g.iterations,
                                                                   "starts": g.starts}})
@@ -215,7 +219,7 @@ def grasp_object(sid: int, parts: list[Superquadric], plane: np.ndarray | None, 
     ok = [c for c in cands if c[2].converged]
     best = min(ok, key=lambda c: c[3]) if ok else None
     return ObjectGrasp(sid, parts, best[2] if best else None, best[0] if best else None, best[1] if best else None,
-                       cands, options.pregrasp_distance, time.perf_counter() - t0, time.process_time() - c0)
+                       cands, options.pregrasp_distance, options.poor_overlap, time.perf_counter() - t0, time.process_time() - c0)
 
 
 def plan_grasps(segments: str | os.PathLike | dict, options: GraspOptions | None = None, progress=None
@@ -253,6 +257,13 @@ def plan_grasps(segments: str | os.PathLike | dict, options: GraspOptions | None
     objs = [grasp_object(sid, parts[sid], plane, workspaces, options)
             for sid in (progress(ids) if progress is not None else ids)]
     for o in objs:
+        if plane is not None and any(q.center @ plane[:3] + plane[3] < 0 for q in o.parts):
+            warnings.append(f"segment {o.segment}: its superquadric's centre is below the support plane (a poor "
+                            f"fit): its grasp is unreliable")
+        if o.best is not None and o.best.overlap_rms > options.poor_overlap:
+            warnings.append(f"segment {o.segment}: the hand ellipsoid stays {o.best.overlap_rms * 1000:.0f} mm (RMS) "
+                            f"from the object's superquadric (> poor_overlap {options.poor_overlap * 1000:.0f} mm): "
+                            f"a poor grasp, flagged poor_overlap")
         if o.best is None:
             warnings.append(f"segment {o.segment}: no grasp satisfies every constraint (reported with converged "
                             f"false, no pose)")

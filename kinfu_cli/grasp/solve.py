@@ -224,16 +224,18 @@ def grasp_part(target: Superquadric, hand: HandModel, cons: GraspConstraints, ob
             x0[:3] = np.clip(x0[:3], [b[0] for b in bounds[:3]], [b[1] for b in bounds[:3]])
         runs.append(_run(prob, R0, x0, bounds, screen_iter if len(starts) > 1 else max_iter))
     runs.sort(key=lambda r: (r[0][1] > CONSTRAINT_TOL, r[0][2]))
-    order = [runs[0]]
-    if len(starts) > 1:
-        (_, R0, x, _, _, _, _) = runs[0]
-        order = [_run(prob, R0, x, bounds, max_iter)] + runs
+    order = list(runs)
+    if len(starts) > 1:  # refine the best screened run; when it fails, the next ones, until one converges
+        for _, R0, x, _, _, _, _ in runs:
+            order.append(_run(prob, R0, x, bounds, max_iter))
+            if order[-1][3]:
+                break
     for rank, R0, x, ok, g, message, nit in order:
         iters += nit
         if best is None or rank < best[0]:
             R = R0 @ Rotation.from_rotvec(x[3:6]).as_matrix()
             best = (rank, R, x[:3].copy(), ok, g, message, rank[2])
-    (_, _, viol), R, p, ok, g, message, scaled = best
+    (_, viol, _), R, p, ok, g, message, scaled = best
     values: dict[str, float] = {}
     for name, v in zip(prob.names, g):
         values[name] = min(values.get(name, np.inf), float(v))
