@@ -87,20 +87,18 @@ class _Problem:
     def evaluate(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Scaled cost (m,) = mean (F^e1 - 1)^2 over L, and constraint values (m, n_constraints)."""
         R, p = self.poses(X)
-        m = len(X)
-        Lw = p[:, None, :] + np.einsum("mij,lj->mli", R, self.L)
-        r = _f_pow(Lw.reshape(-1, 3), self.target).reshape(m, -1)
+        m, nL = len(X), len(self.L)
+        W = p[:, None, :] + np.matmul(self.all_points, R.transpose(0, 2, 1))  # (m, L + V, 3) world points
+        r = _f_pow(W[:, :nL].reshape(-1, 3), self.target).reshape(m, nL)
         cost = np.mean(r ** 2, axis=1)
         cols = []
         if self.cons.plane is not None:
-            n, d = self.cons.plane[:3], self.cons.plane[3]
-            allw = p[:, None, :] + np.einsum("mij,lj->mli", R, self.all_points)
-            cols.append(allw @ n + d)
+            cols.append(W @ self.cons.plane[:3] + self.cons.plane[3])
         for c in self.cons.cones:
             k = AXES.index(c.axis)
             cols.append((R[:, :, k] @ c.unit() - np.cos(np.radians(c.aperture_deg)))[:, None])
         if self.obstacles:
-            Vw = p[:, None, :] + np.einsum("mij,lj->mli", R, self.V)
+            Vw = W[:, nL:]
             for ob in self.obstacles:
                 val = np.sqrt(np.prod(ob.size)) * _f_pow(Vw.reshape(-1, 3), ob).reshape(m, -1).sum(axis=1)
                 cols.append(val[:, None])
@@ -203,7 +201,7 @@ def _run(prob: _Problem, R0: np.ndarray, x0: np.ndarray, bounds, max_iter: int) 
 
 
 def grasp_part(target: Superquadric, hand: HandModel, cons: GraspConstraints, obstacles: list[Superquadric] = (),
-               *, lifting: bool = True, n_starts: int = 4, max_iter: int = 100, screen_iter: int = 12) -> PartGrasp:
+               *, lifting: bool = True, n_starts: int = 4, max_iter: int = 100, screen_iter: int = 6) -> PartGrasp:
     """The best feasible pose of `hand` on `target` over `n_starts` SLSQP runs; `converged` is False (and the
     pose only the least-violating attempt, not a grasp) when no run satisfies every constraint."""
     t0, c0 = time.perf_counter(), time.process_time()
