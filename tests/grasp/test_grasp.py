@@ -171,3 +171,34 @@ def test_cli_grasps_a_segmented_box_scene(tmp_path):
     lines = [ln for ln in bad.output.splitlines() if ln.strip()]
     assert len(lines) == 1 and lines[0].startswith("kinfu: error:") and "--cone" in lines[0]
     assert not (tmp_path / "b.json").exists()
+
+
+def test_bad_segments_file_is_one_line_error(tmp_path):
+    bad = tmp_path / "segments.json"
+    bad.write_text("{not json")
+    for args, word in (([str(bad)], "not a JSON file"), ([str(tmp_path / "none.json")], "no such file"),
+                       ([str(bad), "--hand-size", "0.03,0.05"], "--hand-size")):
+        if word == "--hand-size":
+            bad.write_text(json.dumps({"segments": []}))
+        r = CliRunner().invoke(cli, ["grasp", *args, "-o", str(tmp_path / "g.json")])
+        lines = [ln for ln in r.output.splitlines() if ln.strip()]
+        assert r.exit_code == 2 and len(lines) == 1 and lines[0].startswith("kinfu: error:"), r.output
+        assert word in lines[0]
+    bad.write_text(json.dumps({"segments": [{"id": 1, "kind": "object", "superquadric": None}]}))
+    r = CliRunner().invoke(cli, ["grasp", str(bad), "-o", str(tmp_path / "g.json")])
+    assert r.exit_code == 2 and "no object segment has a superquadric" in r.output
+    assert not (tmp_path / "g.json").exists()
+
+
+@pytest.mark.slow
+def test_eval_grasp_satisfies_every_constraint_on_generated_objects(tmp_path):
+    out = tmp_path / "e.json"
+    r = CliRunner().invoke(cli, ["eval", "grasp", "--conditions", "none", "--yaws", "1", "--scenes", "", "-o", str(out),
+                                 "--quiet"])
+    assert r.exit_code == 0, r.output
+    doc = json.loads(out.read_text())
+    single = doc["generated"]["summary"]["none/single"]
+    assert single["objects"] == 18 and single["converged_share"] == 1.0 and single["satisfied_share"] == 1.0
+    assert single["plane_penetration_max_m"] <= CONSTRAINT_TOL and single["overlap_rms_median_m"] < 0.008
+    multi = doc["generated"]["summary"]["none/multi"]
+    assert multi["satisfied_share"] == 1.0
