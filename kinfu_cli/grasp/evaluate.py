@@ -148,15 +148,16 @@ def segmented_scene(seed: int) -> dict:
 
 def evaluate_scenes(options: GraspOptions, seeds=(0, 1), progress=None) -> dict:
     """Grasps of every segment of the generated scenes, checked as the generated objects are."""
-    rows = []
+    rows, warnings = [], []
     for seed in (progress(list(seeds)) if progress else seeds):
         doc = segmented_scene(int(seed))
         res = plan_grasps(doc, options)
+        warnings += [f"scene {seed}: {w}" for w in res.warnings]
         for o in res.objects:
             rows.append({"scene": int(seed), "object": f"segment {o.segment}", "parts": len(o.parts),
                          "cpu_seconds": o.cpu_seconds, "hand": o.best_hand,
                          **check_grasp(o, res.plane, options, res.workspaces)})
-    return {"rows": rows, "summary": {"scenes": _summary(rows)} if rows else {}}
+    return {"rows": rows, "summary": {"scenes": _summary(rows)} if rows else {}, "warnings": warnings}
 
 
 def evaluate_grasping(options: GraspOptions | None = None, *, conditions=("none", "top", "side"), yaws: int = 2,
@@ -167,7 +168,8 @@ def evaluate_grasping(options: GraspOptions | None = None, *, conditions=("none"
     doc = {"generated": evaluate_generated(options, conditions, yaws, seed, progress),
            "scenes": evaluate_scenes(options, scenes, progress) if scenes else {"rows": [], "summary": {}},
            "hand": options.hand, "thesis": {"grasp_s_per_object": list(THESIS_GRASP_S), "target_s": 0.05,
-                                            "target_satisfied_share": 1.0}, "warnings": []}
+                                            "target_satisfied_share": 1.0}}
+    doc["warnings"] = list(doc["scenes"].get("warnings", []))
     return doc
 
 
