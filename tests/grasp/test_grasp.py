@@ -202,3 +202,17 @@ def test_eval_grasp_satisfies_every_constraint_on_generated_objects(tmp_path):
     assert single["plane_penetration_max_m"] <= CONSTRAINT_TOL and single["overlap_rms_median_m"] < 0.008
     multi = doc["generated"]["summary"]["none/multi"]
     assert multi["satisfied_share"] == 1.0
+
+
+def test_segments_json_multi_superquadric_parts_are_grasped_with_obstacles():
+    """segments.json of `kinfu segment --multi-sq` holds the parts' parameters: each becomes a target once,
+    per hand, with the other part as obstacle."""
+    name, parts = composite_objects(np.random.default_rng(2))[0]
+    doc = {"segments": [{"id": 7, "kind": "object", "superquadric": parts[0].to_json(),
+                         "multi_superquadric": {"parts": [q.to_json() for q in parts], "planes": []}}],
+           "support_plane": [0, 0, 2, 0]}
+    res = plan_grasps(doc, GraspOptions(hand="both"))
+    g = res.to_json()["grasps"][0]
+    assert g["parts"] == 2 and len(g["candidates"]) == 4 and g["converged"]
+    assert g["target_part"] in (0, 1) and "obstacle:0" in g["constraints"]
+    assert g["constraints"]["obstacle:0"] >= -CONSTRAINT_TOL
