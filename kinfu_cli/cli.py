@@ -29,7 +29,9 @@ COMMANDS: dict[str, str | dict[str, str]] = {
     "nbv": "nbv",
     "batch": "batch",
     "diff": "diff",
-    "eval": {"poi": "eval_poi", "fusion": "eval_fusion", "nbv": "eval_nbv", "segment": "eval_segment"},
+    "grasp": "grasp",
+    "eval": {"poi": "eval_poi", "fusion": "eval_fusion", "nbv": "eval_nbv", "segment": "eval_segment",
+             "grasp": "eval_grasp"},
 }
 
 

@@ -18,7 +18,7 @@ LAYERS: list[set[str]] = [
     {"io"},
     {"fusion", "sim"},
     {"attention", "segmentation", "change"},
-    {"nbv"},
+    {"nbv", "grasp"},
     {"evaluation"},
     {"api"},
     {"batch"},
