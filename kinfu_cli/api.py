@@ -22,13 +22,16 @@ from kinfu_cli.core.grid import EMPTY, OCCUPIED, UNKNOWN, TernaryGrid, load_tern
 from kinfu_cli.core.pois import Poi, read_pois, write_pois
 from kinfu_cli.core.poses import look_at, matrix_to_quaternion, quaternion_to_matrix
 from kinfu_cli.evaluation.changes import score_change_pois
+from kinfu_cli.evaluation.poi_loo import leave_one_user_out
 from kinfu_cli.fusion.outputs import write_fusion_outputs
 from kinfu_cli.fusion.pipeline import FusionResult, fuse_recording
 from kinfu_cli.fusion.volume import TernaryVolume, load_grid, load_volume
+from kinfu_cli.grasp.plan import GraspOptions, plan_grasps
 from kinfu_cli.io.frames import RGBDFrame, iter_frames
 from kinfu_cli.io.hand import load_hand_trajectory
 from kinfu_cli.io.recording import Recording, open_recording
 from kinfu_cli.io.trajectory import Trajectory
+from kinfu_cli.io.tum import read_tum, write_tum
 from kinfu_cli.nbv.ranking import PoiRanking, rank_poi
 from kinfu_cli.nbv.viewpoints import PAPER_SPHERE, SphereSpec
 from kinfu_cli.nbv.workflow import NbvOptions, ObjectViews, PoiViews, rank_object_views, rank_poi_views
@@ -42,14 +45,16 @@ __all__ = [
     "OCCUPIED", "UNKNOWN", "EMPTY", "fuse_recording", "FusionResult", "write_fusion_outputs",
     # cameras and poses
     "CameraModel", "SENSOR_PRESETS", "preset_intrinsics", "look_at", "matrix_to_quaternion",
-    "quaternion_to_matrix",
+    "quaternion_to_matrix", "read_tum", "write_tum",
     # points of interest
-    "detect_pois", "PoiDetection", "Poi", "read_pois", "write_pois",
+    "detect_pois", "PoiDetection", "Poi", "read_pois", "write_pois", "leave_one_user_out",
     # views
     "rank_poi", "PoiRanking", "SphereSpec", "PAPER_SPHERE", "rank_poi_views", "PoiViews", "NbvOptions",
     "rank_object_views", "ObjectViews",
     # segments
     "segment_volume", "SegmentOptions", "SegmentResult",
+    # grasps on the segments' superquadrics
+    "plan_grasps", "GraspOptions",
     # what changed between two volumes, and POIs scored on it
     "diff_volumes", "diff_grids", "ChangeParams", "ChangeResult", "score_change_pois",
     "KinfuError",
