@@ -170,8 +170,8 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
     poses, fusion.extent), resolution (voxels per axis: with a size 512 unless voxel_size, with "auto" over
     the box), voxel_size (m; with "auto" default 3 m / 512, coarser when the grid's worst case exceeds
     max_memory GiB, default half the available memory up to 2 GiB), origin (minimum corner; default centred
-    on what the first frames see, with "auto" the box's corner),
-    truncation, max_weight, min_depth/max_depth (m), color. pose: forced (TF), icp, hint (ICP from TF) or topic
+    on what the first frames see, with "auto" the box's corner), truncation, max_weight, min_depth/max_depth
+    (m), color. pose: forced (TF), icp, hint (ICP from TF) or topic
     (pose_topic); default forced when TF links the camera to the world, else icp. init: a volume.npz to
     continue. clear_spheres (x, y, z, r) and the POIs of clear_pois are forgotten (before fusing with init,
     else after). start_s / end_s (seconds from the recording start), every, tolerance_s: frame selection as
@@ -181,9 +181,8 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
     direction against gravity (x, y, z); None decides it as fusion.up.choose_up says (the volume's up,
     stored in volume.npz, ternary.npz and the report with its source).
     max_lost: the largest share of tracked frames (icp, hint) that may be lost (not fused) before the run
-    fails. color_mode: "mean" or "mode" (fusion/color_mode.py); None: the init volume's, else "mean".
-    icp: the tracker's ICP, "projective" (fusion.icp) or "open3d" (tracking.ICP_METHODS).
-    """
+    fails. color_mode: "mean" or "mode" (fusion/color_mode.py); None: the init volume's, else "mean". icp: the
+    tracker's ICP, "projective" (fusion.icp) or "open3d" (tracking.ICP_METHODS)."""
     started = time.perf_counter()
     timing: dict[str, float] = {}
     names = {"init": "init", "origin": "origin", "clear_spheres": "clear_spheres", "clear_pois": "clear_pois",
