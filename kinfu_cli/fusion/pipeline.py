@@ -196,9 +196,7 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
     grid_spec = _GridSpec(1.0 if auto else size, resolution, voxel_size, truncation, max_weight, min_depth,
                           max_depth, color, wanted_mode or "mean")
     depth_filter = DepthFilter(min_depth, max_depth, fill_gaps, bilateral, shadow_filter, shadow_baseline)
-
-    vol = None
-    placement = ""
+    vol, placement = None, ""
     if init:
         t0 = time.perf_counter()
         vol = _load_init(init, wanted_mode)
