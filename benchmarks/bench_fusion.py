@@ -5,6 +5,8 @@ Run:  .venv/bin/python benchmarks/bench_fusion.py [--frames N] [--resolution 512
 Prints, per data set: frames/s of both (integration only, same process, same frames, the two volumes
 fed alternately frame by frame so that load from other processes hits both alike), the speed ratio,
 the cost of the colour mode filter (a third volume with color_mode "mode", fed alike: time mode / mean),
+OctoMap (pyoctomap, the `[bench]` extra: insertPointCloud with ray casting at the same voxel size) on the
+first --octomap-frames frames (it needs tens of seconds per 640x480 frame, so its fps is extrapolated from those),
 and the share of voxels with the same ternary label (over the whole grid and over the voxels either
 volume observed). Then, in fresh subprocesses, the peak RSS (VmHWM) of a 512^3 volume with colour fusing
 the 7-Scenes frames and reading them out (labels, mesh, save), as it comes and with every block stored.
@@ -76,7 +78,24 @@ def _open3d_labels(vol, res):
     return labels.reshape(res, res, res)
 
 
-def compare(name, frames, res, size, trunc, max_depth, placement="scene", with_mode=True):
+def _world_points(d, K, T, max_depth):
+    """Back-projected valid depth pixels of one frame in the world frame (N, 3) float64."""
+    v, u = np.nonzero((d > 0) & (d <= max_depth))
+    z = d[v, u].astype(np.float64)
+    cam = np.stack([(u - K[0, 2]) * z / K[0, 0], (v - K[1, 2]) * z / K[1, 1], z], axis=1)
+    return cam @ T[:3, :3].T + T[:3, 3]
+
+
+def _octomap_tree(res, size):
+    """An OctoMap OcTree at the grid's voxel size, or the reason it is not available."""
+    try:
+        import pyoctomap
+    except ImportError as exc:  # the [bench] extra is not installed
+        return None, f"pyoctomap not importable ({exc}); pip install -e '.[bench]'"
+    return pyoctomap.OcTree(size / res), None
+
+
+def compare(name, frames, res, size, trunc, max_depth, placement="scene", with_mode=True, octo_frames=0):
     """Both volumes side by side, frame by frame (open3d, then ours, for each frame), so that load from
     other processes on a shared machine hits both alike. Integration calls only are timed.
 
@@ -102,6 +121,8 @@ def compare(name, frames, res, size, trunc, max_depth, placement="scene", with_m
     mode = TernaryVolume(size=size, resolution=res, origin=origin, truncation=trunc, min_depth=0.0,
                          max_depth=max_depth, color=True, color_mode="mode") if with_mode else None
     t_mode = 0.0
+    octo, octo_why = _octomap_tree(res, size) if octo_frames > 0 else (None, "not run")
+    t_octo, t_ours_octo, n_octo, n_octo_points = 0.0, 0.0, 0, 0
     h, w = d.shape
     t_ref = t_ours = 0.0
     stats = None
@@ -118,6 +139,15 @@ def compare(name, frames, res, size, trunc, max_depth, placement="scene", with_m
         t2 = time.perf_counter()
         t_ref += t1 - t0
         t_ours += t2 - t1
+        if octo is not None and n_octo < octo_frames:
+            # full rays from the camera to every valid depth point (free space cleared, endpoints occupied)
+            pts = _world_points(d, K, T, max_depth)
+            t3 = time.perf_counter()
+            octo.insertPointCloud(pts, np.asarray(T[:3, 3], dtype=np.float64), max_range=max_depth)
+            t_octo += time.perf_counter() - t3
+            t_ours_octo += t2 - t1
+            n_octo += 1
+            n_octo_points += len(pts)
         if mode is not None:
             t3 = time.perf_counter()
             mode.integrate(d, K, T, c)
@@ -140,6 +170,16 @@ def compare(name, frames, res, size, trunc, max_depth, placement="scene", with_m
         "blocks_stored": ours.n_blocks_allocated, "kinfu_grid_MB": round(ours.memory_bytes() / 2**20, 1),
         "last_frame": stats,
     }
+    if n_octo:
+        # ratio against kinfu's time on the same frames (the first ones), measured alongside
+        result.update(octomap_frames=n_octo, octomap_points_per_frame=n_octo_points // n_octo,
+                      octomap_s_per_frame=round(t_octo / n_octo, 2), octomap_fps=round(n_octo / t_octo, 4),
+                      octomap_leaf_nodes=int(octo.getNumLeafNodes()),
+                      kinfu_fps_same_frames=round(n_octo / t_ours_octo, 2),
+                      speedup_vs_octomap=round(t_octo / t_ours_octo, 1),
+                      octomap_60_frames_extrapolated_s=round(t_octo / n_octo * len(frames), 1))
+    elif octo_frames > 0:
+        result["octomap"] = octo_why
     if mode is not None:
         result.update(kinfu_mode_fps=round(len(frames) / t_mode, 2), mode_over_mean_time=round(t_mode / t_ours, 2),
                       kinfu_mode_grid_MB=round(mode.memory_bytes() / 2**20, 1))
@@ -199,6 +239,8 @@ def main() -> None:
     ap.add_argument("--skip-7scenes", action="store_true")
     ap.add_argument("--skip-rss", action="store_true")
     ap.add_argument("--skip-mode", action="store_true", help="no colour mode filter volume")
+    ap.add_argument("--octomap-frames", type=int, default=3,
+                    help="frames OctoMap inserts (0: none; its fps is extrapolated from these)")
     ap.add_argument("--rss-child", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--rss-worst", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args()
@@ -215,7 +257,7 @@ def main() -> None:
     for name, frames in data:
         for placement in placements:
             print(json.dumps(compare(name, frames, a.resolution, a.size, a.truncation, a.max_depth, placement,
-                                     not a.skip_mode)),
+                                     not a.skip_mode, a.octomap_frames)),
                   flush=True)
     del data
     if not a.skip_rss:

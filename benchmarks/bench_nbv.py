@@ -129,6 +129,9 @@ def main(argv: list[str] | None = None) -> int:
         "load_average_1min": round(os.getloadavg()[0], 2),
         "fast_shared_rolls_s": round(t_fast, 3), "fast_shared_rolls_cpu_s": round(cpu["{}"], 3),
         "rays_cast_shared": int(fast.rays_cast),
+        # CPU / wall of the best run: about the number of cores kept busy (1.0 = one core; wall also counts
+        # time the scheduler gives to other processes, so read it with load_average_1min)
+        "cores_busy_shared": round(cpu["{}"] / t_fast, 2),
         "fast_exact_rays_s": round(t_exact, 3), "rays_cast_exact": int(exact.rays_cast),
 
         "reference_views_run": int(len(sub)), "reference_s_measured": round(t_ref_sub, 2),

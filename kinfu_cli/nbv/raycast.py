@@ -30,6 +30,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import numba
 from numba import njit, prange
 from scipy.ndimage import distance_transform_cdt
 
@@ -39,6 +40,7 @@ CLS_UNKNOWN = 0
 CLS_OCCUPIED = 1
 CLS_EMPTY_EXIT = 2
 N_TERMS = 4
+_CHUNK = 256  # lattice cells per scheduling chunk of the caster (see _cast_lattice)
 
 
 @dataclass
@@ -452,27 +454,70 @@ def _mark_lattice(glat, goff, gcb, gcheck, fx, fy, cx, cy, r2, cells, gcount):
 
 
 @njit(cache=True, parallel=True)
-def _assign_rays(cells, goff, glat, ray_off, R0s, t0s, fx, fy, cx, cy, dirs, origins):
+def _number_rays(cells, goff, glat, ray_off):
+    """Give the lattice cells kept by `_mark_lattice` consecutive ray numbers (group by group)."""
     for g in prange(goff.shape[0]):
         q = ray_off[g]
-        LW = glat[g, 2]
-        R0 = R0s[g]
-        for c in range(glat[g, 2] * glat[g, 3]):
-            if cells[goff[g] + c] >= 0:
-                cells[goff[g] + c] = q
-                x = (c % LW + glat[g, 0] - cx) / fx
-                y = (c // LW + glat[g, 1] - cy) / fy
-                nrm = math.sqrt(x * x + y * y + 1.0)
-                for a in range(3):
-                    dirs[q, a] = (R0[a, 0] * x + R0[a, 1] * y + R0[a, 2]) / nrm
-                    origins[q, a] = t0s[g, a]
+        for c in range(goff[g], goff[g] + glat[g, 2] * glat[g, 3]):
+            if cells[c] >= 0:
+                cells[c] = q
                 q += 1
 
 
+@njit(cache=True, parallel=True, error_model="numpy")
+def _cast_lattice(labels, bempty, B, lo, vs, cells, goff, glat, R0s, t0s, fx, fy, cx, cy, min_range, max_range,
+                  cen, radius, through, optimistic, p_unknown, chunk, lanes, out_cls, out_vals):
+    """Trace every numbered lattice cell's ray (built here from its group's base pose, so no per-ray
+    origin/direction arrays). Ray costs differ by orders of magnitude (a free-space skip vs a walk through
+    clutter) and numba splits a prange into one contiguous slice per thread, so the cells are cut into
+    small chunks dealt round-robin to `lanes` workers: every worker gets a share of every region."""
+    ncell = cells.shape[0]
+    nchunk = (ncell + chunk - 1) // chunk
+    r2 = radius * radius
+    h = 0.0
+    if 0.0 < p_unknown < 1.0:
+        h = -(p_unknown * math.log2(p_unknown) + (1 - p_unknown) * math.log2(1 - p_unknown))
+    ng = goff.shape[0]
+    for lane in prange(lanes):
+        d = np.empty(3)
+        for k in range(lane, nchunk, lanes):
+            c0 = k * chunk
+            c1 = min(c0 + chunk, ncell)
+            g = np.searchsorted(goff, c0, side="right") - 1
+            for c in range(c0, c1):
+                while g + 1 < ng and c >= goff[g + 1]:
+                    g += 1
+                q = cells[c]
+                if q < 0:
+                    continue
+                LW = glat[g, 2]
+                j = c - goff[g]
+                x = (j % LW + glat[g, 0] - cx) / fx
+                y = (j // LW + glat[g, 1] - cy) / fy
+                nrm = math.sqrt(x * x + y * y + 1.0)
+                for a in range(3):
+                    d[a] = (R0s[g, a, 0] * x + R0s[g, a, 1] * y + R0s[g, a, 2]) / nrm
+                for a in range(N_TERMS):
+                    out_vals[q, a] = 0.0
+                c_, _t = _trace(labels, bempty, B, lo, vs, t0s[g], d, min_range, max_range, cen, r2, through,
+                                optimistic, p_unknown, h, out_vals[q])
+                out_cls[q] = c_
+
+
 @njit(cache=True, parallel=True)
-def _accumulate(Ms, win, vgroup, glat, goff, fx, fy, cx, cy, cells, cls, terms, out_counts, out_terms, npix):
-    """Sum, per view, the results of the lattice rays nearest to its pixels (pixels inside its window)."""
-    for m in prange(Ms.shape[0]):
+def _accumulate(Ms, win, vgroup, glat, goff, fx, fy, cx, cy, cells, cls, terms, out_counts, out_terms, npix,
+                lanes):
+    """Sum, per view, the results of the lattice rays nearest to its pixels (pixels inside its window).
+    Views are dealt round-robin to `lanes` workers (neighbouring views have alike windows)."""
+    for lane in prange(lanes):
+        _accumulate_views(lane, lanes, Ms, win, vgroup, glat, goff, fx, fy, cx, cy, cells, cls, terms, out_counts,
+                          out_terms, npix)
+
+
+@njit(cache=True)
+def _accumulate_views(lane, lanes, Ms, win, vgroup, glat, goff, fx, fy, cx, cy, cells, cls, terms, out_counts,
+                      out_terms, npix):
+    for m in range(lane, Ms.shape[0], lanes):
         g = vgroup[m]
         M = Ms[m]
         lu0, lv0, LW, LH = glat[g, 0], glat[g, 1], glat[g, 2], glat[g, 3]
@@ -621,19 +666,17 @@ def _cast_batch(vol, cam, center, radius, r_ext, flags, p_unknown, batch, out: V
     _mark_lattice(glat, goff, gcb, gcheck, cam.fx, cam.fy, cam.cx, cam.cy, r2, cells, gcount)
     ray_off = np.concatenate([[0], np.cumsum(gcount)[:-1]]).astype(np.int64)
     n = int(gcount.sum())
-    dirs = np.empty((n, 3), np.float64)
-    origins = np.empty((n, 3), np.float64)
-    _assign_rays(cells, goff, glat, ray_off, R0s, t0s, cam.fx, cam.fy, cam.cx, cam.cy, dirs, origins)
+    _number_rays(cells, goff, glat, ray_off)
     cls = np.empty(n, np.int8)
-    tt = np.empty(n, np.float64)
     tm = np.empty((n, N_TERMS), np.float64)
-    _cast_kernel(vol.labels, vol.block_dist, vol.block, vol.origin, vol.voxel_size, origins, dirs,
-                 cam.min_range, min(cam.max_range, 1e30), center, float(radius), bool(through), bool(optimistic),
-                 float(p_unknown), cls, tt, tm)
+    _cast_lattice(vol.labels, vol.block_dist, vol.block, vol.origin, vol.voxel_size, cells, goff, glat, R0s, t0s,
+                  cam.fx, cam.fy, cam.cx, cam.cy, cam.min_range, min(cam.max_range, 1e30), center, float(radius),
+                  bool(through), bool(optimistic), float(p_unknown), _CHUNK, 8 * numba.get_num_threads(), cls, tm)
     counts = np.zeros((len(views), 3), np.int64)
     terms = np.zeros((len(views), N_TERMS), np.float64)
     npix = np.zeros(len(views), np.int64)
-    _accumulate(Ms, win, vgroup, glat, goff, cam.fx, cam.fy, cam.cx, cam.cy, cells, cls, tm, counts, terms, npix)
+    _accumulate(Ms, win, vgroup, glat, goff, cam.fx, cam.fy, cam.cx, cam.cy, cells, cls, tm, counts, terms, npix,
+                min(len(views), 8 * numba.get_num_threads()))
     out.counts[views] = counts
     out.terms[views] = terms
     out.rays[views] = npix
