@@ -1,0 +1,138 @@
+"""A known object as a watertight triangle mesh in its own (model) frame, with open3d's RaycastingScene for
+closest points and unsigned distances (the proximity likelihood of thesis eqs. 4.13-4.17).
+
+Poses are 6-vectors x = [tx, ty, tz, phi, theta, psi] (metres, radians): the model-to-world transform
+p_world = R(x) p_model + t with R = Rz(phi) Ry(theta) Rx(psi) (scipy intrinsic "ZYX"); the thesis does not
+state its Euler convention, this one puts theta (prior std pi/2 in Table 4.1) in the middle.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from kinfu_cli.core.errors import KinfuError
+
+EULER = "ZYX"
+
+
+class LocalizationError(KinfuError):
+    """A model or points file that cannot be used for localisation (one line naming the file)."""
+
+
+def pose_rotations(poses: np.ndarray) -> np.ndarray:
+    """(..., 6) pose vectors -> (..., 3, 3) rotation matrices (model to world)."""
+    poses = np.asarray(poses, dtype=np.float64)
+    flat = poses.reshape(-1, 6)
+    return Rotation.from_euler(EULER, flat[:, 3:6]).as_matrix().reshape(*poses.shape[:-1], 3, 3)
+
+
+def pose_matrix(pose: np.ndarray) -> np.ndarray:
+    """A 4x4 model-to-world transform from one pose vector."""
+    T = np.eye(4)
+    T[:3, :3] = pose_rotations(np.asarray(pose)[None])[0]
+    T[:3, 3] = np.asarray(pose)[:3]
+    return T
+
+
+def matrix_pose(T: np.ndarray) -> np.ndarray:
+    """The pose vector of a 4x4 rigid transform."""
+    return np.concatenate([np.asarray(T)[:3, 3], Rotation.from_matrix(np.asarray(T)[:3, :3]).as_euler(EULER)])
+
+
+@dataclass
+class MeshModel:
+    """vertices (V, 3) and triangles (F, 3) of a closed surface; `name` for reports."""
+
+    vertices: np.ndarray
+    triangles: np.ndarray
+    name: str = "model"
+
+    def __post_init__(self) -> None:
+        import open3d as o3d  # heavy; only the closest-point queries need it
+
+        self.vertices = np.asarray(self.vertices, dtype=np.float64)
+        self.triangles = np.asarray(self.triangles, dtype=np.int64)
+        self._scene = o3d.t.geometry.RaycastingScene()
+        self._scene.add_triangles(o3d.core.Tensor(self.vertices.astype(np.float32)),
+                                  o3d.core.Tensor(self.triangles.astype(np.uint32)))
+        a, b, c = (self.vertices[self.triangles[:, k]] for k in range(3))
+        self.areas = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+
+    @property
+    def diameter(self) -> float:
+        """Diagonal of the axis-aligned bounding box (m)."""
+        return float(np.linalg.norm(self.vertices.max(0) - self.vertices.min(0)))
+
+    def closest_points(self, points: np.ndarray) -> np.ndarray:
+        """(..., 3) model-frame points -> the closest surface points (..., 3)."""
+        import open3d as o3d
+
+        pts = np.asarray(points, dtype=np.float32)
+        res = self._scene.compute_closest_points(o3d.core.Tensor(pts.reshape(-1, 3)))
+        return res["points"].numpy().astype(np.float64).reshape(pts.shape)
+
+    def distances(self, points: np.ndarray) -> np.ndarray:
+        """(..., 3) model-frame points -> unsigned distance to the surface (...)."""
+        import open3d as o3d
+
+        pts = np.asarray(points, dtype=np.float32)
+        return self._scene.compute_distance(o3d.core.Tensor(pts.reshape(-1, 3))).numpy().astype(
+            np.float64).reshape(pts.shape[:-1])
+
+    def world_distances(self, poses: np.ndarray, points: np.ndarray) -> np.ndarray:
+        """Distance of world points (M, 3) to the model at each pose (P, 6) -> (P, M): the points go into the
+        model frame (R^T (y - t)), where the scene lives."""
+        R = pose_rotations(poses)
+        local = np.einsum("pji,pmj->pmi", R, np.asarray(points)[None] - np.asarray(poses)[:, None, :3])
+        return self.distances(local)
+
+    def performance_index(self, pose: np.ndarray, points: np.ndarray) -> float:
+        """I_L of eq. 4.30: mean (unsquared) distance of the measurements to the model at `pose` (m)."""
+        return float(self.world_distances(np.asarray(pose)[None], points)[0].mean())
+
+    def sample_surface(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        """n points uniform by area on the surface (model frame)."""
+        tri = rng.choice(len(self.triangles), size=n, p=self.areas / self.areas.sum())
+        u, v = rng.random(n), rng.random(n)
+        flip = u + v > 1
+        u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
+        a, b, c = (self.vertices[self.triangles[tri, k]] for k in range(3))
+        return a + u[:, None] * (b - a) + v[:, None] * (c - a)
+
+
+def check_mesh(vertices: np.ndarray, triangles: np.ndarray, source: str) -> None:
+    """Refuse an empty or non-watertight mesh: inside / outside and closest points need a closed surface."""
+    if len(vertices) == 0 or len(triangles) == 0:
+        raise LocalizationError(f"{source}: empty mesh (expected a closed triangle mesh)")
+    if not np.all(np.isfinite(vertices)):
+        raise LocalizationError(f"{source}: mesh vertices are not finite")
+    tri = np.sort(np.asarray(triangles), axis=1)
+    edges = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [0, 2]]])
+    _, counts = np.unique(edges, axis=0, return_counts=True)
+    open_edges = int(np.sum(counts != 2))
+    if open_edges:
+        raise LocalizationError(f"{source}: mesh is not watertight ({open_edges} edges not shared by exactly two "
+                                f"triangles; expected a closed surface)")
+
+
+def read_mesh(path: str | os.PathLike) -> MeshModel:
+    """A watertight triangle mesh from a PLY/OBJ/STL file (LocalizationError when unusable)."""
+    import open3d as o3d
+
+    path = Path(path)
+    if not path.is_file():
+        raise LocalizationError(f"{path}: no such mesh file")
+    with open(path, "rb") as fh:
+        head = fh.read(3)
+    if path.suffix.lower() == ".ply" and head != b"ply":
+        raise LocalizationError(f"{path}: not a PLY file")
+    mesh = o3d.io.read_triangle_mesh(str(path), print_progress=False)
+    mesh.remove_duplicated_vertices()
+    v, f = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
+    check_mesh(v, f, str(path))
+    return MeshModel(v, f, name=path.stem)
