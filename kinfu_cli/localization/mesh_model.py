@@ -24,17 +24,30 @@ class LocalizationError(KinfuError):
     """A model or points file that cannot be used for localisation (one line naming the file)."""
 
 
+def euler_matrices(angles: np.ndarray) -> np.ndarray:
+    """(..., 3) intrinsic ZYX angles -> (..., 3, 3) Rz(phi) Ry(theta) Rx(psi), written out in numpy: the filters
+    convert ~10^4 poses per step, where scipy's Rotation.from_euler is ~10x slower (benchmarks/
+    bench_localize.py measures the ratio; tests check equality with scipy)."""
+    a = np.asarray(angles, dtype=np.float64)
+    c, s = np.cos(a), np.sin(a)
+    cz, cy, cx = c[..., 0], c[..., 1], c[..., 2]
+    sz, sy, sx = s[..., 0], s[..., 1], s[..., 2]
+    R = np.empty(a.shape[:-1] + (3, 3))
+    R[..., 0, 0], R[..., 0, 1], R[..., 0, 2] = cz * cy, cz * sy * sx - sz * cx, cz * sy * cx + sz * sx
+    R[..., 1, 0], R[..., 1, 1], R[..., 1, 2] = sz * cy, sz * sy * sx + cz * cx, sz * sy * cx - cz * sx
+    R[..., 2, 0], R[..., 2, 1], R[..., 2, 2] = -sy, cy * sx, cy * cx
+    return R
+
+
 def pose_rotations(poses: np.ndarray) -> np.ndarray:
     """(..., 6) pose vectors -> (..., 3, 3) rotation matrices (model to world)."""
-    poses = np.asarray(poses, dtype=np.float64)
-    flat = poses.reshape(-1, 6)
-    return Rotation.from_euler(EULER, flat[:, 3:6]).as_matrix().reshape(*poses.shape[:-1], 3, 3)
+    return euler_matrices(np.asarray(poses, dtype=np.float64)[..., 3:6])
 
 
 def pose_matrix(pose: np.ndarray) -> np.ndarray:
     """A 4x4 model-to-world transform from one pose vector."""
     T = np.eye(4)
-    T[:3, :3] = pose_rotations(np.asarray(pose)[None])[0]
+    T[:3, :3] = Rotation.from_euler(EULER, np.asarray(pose)[3:6]).as_matrix()
     T[:3, 3] = np.asarray(pose)[:3]
     return T
 
@@ -68,21 +81,89 @@ class MeshModel:
         """Diagonal of the axis-aligned bounding box (m)."""
         return float(np.linalg.norm(self.vertices.max(0) - self.vertices.min(0)))
 
-    def closest_points(self, points: np.ndarray) -> np.ndarray:
-        """(..., 3) model-frame points -> the closest surface points (..., 3)."""
+    def exact_closest_points(self, points: np.ndarray) -> np.ndarray:
+        """(..., 3) model-frame points -> the closest surface points (..., 3), from the BVH."""
         import open3d as o3d
 
         pts = np.asarray(points, dtype=np.float32)
         res = self._scene.compute_closest_points(o3d.core.Tensor(pts.reshape(-1, 3)))
         return res["points"].numpy().astype(np.float64).reshape(pts.shape)
 
-    def distances(self, points: np.ndarray) -> np.ndarray:
-        """(..., 3) model-frame points -> unsigned distance to the surface (...)."""
+    def exact_distances(self, points: np.ndarray, signed: bool = False) -> np.ndarray:
+        """(..., 3) model-frame points -> (signed: negative inside) distance to the surface (...), from the BVH."""
         import open3d as o3d
 
         pts = np.asarray(points, dtype=np.float32)
-        return self._scene.compute_distance(o3d.core.Tensor(pts.reshape(-1, 3))).numpy().astype(
-            np.float64).reshape(pts.shape[:-1])
+        fn = self._scene.compute_signed_distance if signed else self._scene.compute_distance
+        return fn(o3d.core.Tensor(pts.reshape(-1, 3))).numpy().astype(np.float64).reshape(pts.shape[:-1])
+
+    def build_field(self, cells: int = 64, margin: float = 0.3) -> None:
+        """Sample the signed distance on a grid (`cells` per side over the bounding box grown by `margin`
+        diameters) once; `closest_points` / `distances` then interpolate it inside the grid (trilinear) and
+        ask the BVH only outside. The filters make ~10^6 queries per run: the field makes them numpy-fast."""
+        lo = self.vertices.min(0) - margin * self.diameter
+        hi = self.vertices.max(0) + margin * self.diameter
+        step = float((hi - lo).max() / (cells - 1))
+        shape = np.ceil((hi - lo) / step).astype(int) + 1
+        axes = [lo[k] + step * np.arange(shape[k]) for k in range(3)]
+        grid = np.stack(np.meshgrid(*axes, indexing="ij"), -1)
+        self._field = (lo, step, self.exact_distances(grid, signed=True))
+
+    def _field_lookup(self, pts: np.ndarray, gradient: bool):
+        """Trilinear signed distance (and its gradient) at (M, 3) points inside the field; mask of those."""
+        lo, step, sdf = self._field
+        u = (pts - lo) / step
+        inside = np.all((u >= 0) & (u < np.asarray(sdf.shape) - 1.000001), axis=1)
+        u = u[inside]
+        i = np.floor(u).astype(np.int64)
+        f = u - i
+        c = [sdf[i[:, 0] + a, i[:, 1] + b, i[:, 2] + e] for a in (0, 1) for b in (0, 1) for e in (0, 1)]
+        fx, fy, fz = f[:, 0], f[:, 1], f[:, 2]
+        c00, c01 = c[0] * (1 - fz) + c[1] * fz, c[2] * (1 - fz) + c[3] * fz
+        c10, c11 = c[4] * (1 - fz) + c[5] * fz, c[6] * (1 - fz) + c[7] * fz
+        c0, c1 = c00 * (1 - fy) + c01 * fy, c10 * (1 - fy) + c11 * fy
+        value = c0 * (1 - fx) + c1 * fx
+        if not gradient:
+            return value, inside, None
+        gx = (c1 - c0) / step
+        gy = ((c01 - c00) * (1 - fx) + (c11 - c10) * fx) / step
+        dz0 = (c[1] - c[0]) * (1 - fy) + (c[3] - c[2]) * fy
+        dz1 = (c[5] - c[4]) * (1 - fy) + (c[7] - c[6]) * fy
+        gz = (dz0 * (1 - fx) + dz1 * fx) / step
+        return value, inside, np.stack([gx, gy, gz], 1)
+
+    def closest_points(self, points: np.ndarray) -> np.ndarray:
+        """(..., 3) model-frame points -> closest surface points: p - s(p) grad s / |grad s| from the field
+        where built (the BVH where not, or where the gradient vanishes on the medial axis)."""
+        pts = np.asarray(points, dtype=np.float64)
+        if getattr(self, "_field", None) is None:
+            return self.exact_closest_points(pts)
+        flat = pts.reshape(-1, 3)
+        out = np.empty_like(flat)
+        s, inside, g = self._field_lookup(flat, gradient=True)
+        norm = np.linalg.norm(g, axis=1)
+        good = norm > 0.5
+        idx = np.flatnonzero(inside)
+        out[idx[good]] = flat[idx[good]] - (s[good] / norm[good])[:, None] * g[good]
+        rest = np.ones(len(flat), bool)
+        rest[idx[good]] = False
+        if rest.any():
+            out[rest] = self.exact_closest_points(flat[rest])
+        return out.reshape(pts.shape)
+
+    def distances(self, points: np.ndarray) -> np.ndarray:
+        """(..., 3) model-frame points -> unsigned distance to the surface: |trilinear field| where built,
+        the BVH elsewhere."""
+        pts = np.asarray(points, dtype=np.float64)
+        if getattr(self, "_field", None) is None:
+            return self.exact_distances(pts)
+        flat = pts.reshape(-1, 3)
+        out = np.empty(len(flat))
+        s, inside, _ = self._field_lookup(flat, gradient=False)
+        out[inside] = np.abs(s)
+        if (~inside).any():
+            out[~inside] = self.exact_distances(flat[~inside])
+        return out.reshape(pts.shape[:-1])
 
     def world_distances(self, poses: np.ndarray, points: np.ndarray) -> np.ndarray:
         """Distance of world points (M, 3) to the model at each pose (P, 6) -> (P, M): the points go into the
@@ -93,7 +174,8 @@ class MeshModel:
 
     def performance_index(self, pose: np.ndarray, points: np.ndarray) -> float:
         """I_L of eq. 4.30: mean (unsquared) distance of the measurements to the model at `pose` (m)."""
-        return float(self.world_distances(np.asarray(pose)[None], points)[0].mean())
+        R = pose_rotations(np.asarray(pose)[None])[0]
+        return float(self.exact_distances((np.asarray(points) - np.asarray(pose)[:3]) @ R).mean())
 
     def sample_surface(self, n: int, rng: np.random.Generator) -> np.ndarray:
         """n points uniform by area on the surface (model frame)."""
