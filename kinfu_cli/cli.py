@@ -27,7 +27,9 @@ COMMANDS: dict[str, str | dict[str, str]] = {
     "poi": "poi",
     "segment": "segment",
     "nbv": "nbv",
-    "eval": {"poi": "eval_poi", "fusion": "eval_fusion", "nbv": "eval_nbv", "segment": "eval_segment"},
+    "localize": "localize",
+    "eval": {"poi": "eval_poi", "fusion": "eval_fusion", "nbv": "eval_nbv", "segment": "eval_segment",
+             "localize": "eval_localize"},
 }
 
 

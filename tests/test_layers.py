@@ -18,7 +18,7 @@ LAYERS: list[set[str]] = [
     {"io"},
     {"fusion", "sim"},
     {"attention", "segmentation"},
-    {"nbv"},
+    {"nbv", "localization"},
     {"evaluation"},
     {"api"},
     {"report"},

@@ -213,7 +213,12 @@ def read_mesh(path: str | os.PathLike) -> MeshModel:
         head = fh.read(3)
     if path.suffix.lower() == ".ply" and head != b"ply":
         raise LocalizationError(f"{path}: not a PLY file")
-    mesh = o3d.io.read_triangle_mesh(str(path), print_progress=False)
+    level = o3d.utility.get_verbosity_level()
+    o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)  # no reader chatter on stderr
+    try:
+        mesh = o3d.io.read_triangle_mesh(str(path), print_progress=False)
+    finally:
+        o3d.utility.set_verbosity_level(level)
     mesh.remove_duplicated_vertices()
     v, f = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
     check_mesh(v, f, str(path))
