@@ -42,7 +42,7 @@ def _ball(rng: np.random.Generator, n: int, radius: float) -> np.ndarray:
 
 def localize_scaling_series(model: MeshModel, points: np.ndarray, *, x0: np.ndarray | None = None,
                             delta0: float = 0.4, delta_star: float = 0.005, per_region: int = 8,
-                            sigma: float = 0.01, max_particles: int = 4000, seed: int | None = 0
+                            sigma: float = 0.01, max_particles: int = 1000, seed: int | None = 0
                             ) -> BaselineResult:
     """Scaling Series over poses within delta0 (m) of x0, rotations up to a half turn; the rotation distance is
     measured as arc length on the model's bounding sphere (angle x half diameter)."""

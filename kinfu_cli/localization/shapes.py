@@ -102,14 +102,16 @@ def cleaner() -> MeshModel:
 
 @functools.cache
 def robot() -> MeshModel:
-    """A toy robot of boxes: legs, torso, one raised arm, head with an off-centre antenna."""
+    """A toy robot of boxes: legs, torso, one raised arm, a backpack, head with a nose and an off-centre
+    antenna (no symmetry)."""
     def sdf(p):
         parts = [_box(p, (-0.015, 0, 0.04), (0.01, 0.015, 0.04)), _box(p, (0.015, 0, 0.04), (0.01, 0.015, 0.04)),
                  _box(p, (0, 0, 0.115), (0.03, 0.02, 0.04)), _box(p, (-0.04, 0, 0.13), (0.01, 0.012, 0.03)),
                  _box(p, (0.04, 0.02, 0.15), (0.01, 0.03, 0.01)), _box(p, (0, 0, 0.18), (0.02, 0.018, 0.025)),
-                 _cyl_z(p, (0.01, 0, 0.215), 0.004, 0.012)]
+                 _cyl_z(p, (0.01, 0, 0.215), 0.004, 0.012), _box(p, (0, -0.03, 0.125), (0.022, 0.012, 0.028)),
+                 _box(p, (0.008, 0.022, 0.185), (0.006, 0.006, 0.005))]
         return np.minimum.reduce(parts)
-    return _from_sdf("robot", sdf, (-0.05, -0.02, 0), (0.05, 0.05, 0.23))
+    return _from_sdf("robot", sdf, (-0.05, -0.045, 0), (0.05, 0.05, 0.23))
 
 
 @functools.cache
@@ -129,8 +131,16 @@ def _block(p):
     return _box(p, (0, 0, 0.02), (0.04, 0.025, 0.02))
 
 
-@functools.cache
+RECOGNITION_NAMES = ("a_arched", "b_sawtooth", "c_ramp", "d_steps", "e_straight", "f_curved")
+
+
 def recognition_shapes() -> tuple[MeshModel, ...]:
+    """The six recognition blocks in the order of RECOGNITION_NAMES."""
+    return tuple(recognition_shape(n) for n in RECOGNITION_NAMES)
+
+
+@functools.cache
+def recognition_shape(name: str) -> MeshModel:
     """Six wooden-toy-like blocks in three near-identical pairs (ch. 5, Fig. 5.2): (a) arched top, (b) saw-tooth
     top, (c) smooth quarter-round ramp, (d) the same ramp as four steps, (e) straight bottom edge with a
     rectangular notch, (f) the notch with a curved (arched) edge."""
@@ -164,4 +174,8 @@ def recognition_shapes() -> tuple[MeshModel, ...]:
     specs = [("a_arched", arched, hi), ("b_sawtooth", sawtooth, hi), ("c_ramp", ramp, hi),
              ("d_steps", steps, hi), ("e_straight", notch_straight, (0.04, 0.025, 0.05)),
              ("f_curved", notch_curved, (0.04, 0.025, 0.05))]
-    return tuple(_from_sdf(name, f, lo, top, step=0.002, faces=2000) for name, f, top in specs)
+    spec = {n: (f, top) for n, f, top in specs}
+    if name not in spec:
+        raise KeyError(name)
+    f, top = spec[name]
+    return _from_sdf(name, f, lo, top, step=0.002, faces=2000)
