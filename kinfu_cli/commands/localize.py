@@ -61,13 +61,16 @@ def _lines(doc: dict) -> list[str]:
               help="I_L above which the run is reported as not converged (m; default sigma_p).")
 @click.option("--prior", default="centroid", show_default=True,
               help="Prior mean: 'centroid' (model centred on the points), 'zero' (thesis) or x,y,z,phi,theta,psi.")
+@click.option("--beta", type=float, default=2.0, show_default=True,
+              help="Unscented transform beta (Table 4.1 prints 30, which drifts here; see README).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed.")
 @click.option("--json", "as_json", is_flag=True, help="Print pose.json to stdout.")
 @click.option("--quiet", is_flag=True, help="No progress output.")
 @force_option
 def command(model: Path | None, points: Path | None, models: str | None, segments: Path | None,
             segment: int | None, output: Path | None, particles: int, window: int | None, sigma_p: float,
-            max_index: float | None, prior: str, seed: int, as_json: bool, quiet: bool, force: bool) -> None:
+            max_index: float | None, prior: str, beta: float, seed: int, as_json: bool, quiet: bool,
+            force: bool) -> None:
     """Estimate the pose of the mesh MODEL (a closed triangle mesh, PLY/OBJ/STL, in its own frame) from
     POINTS on its surface: a PLY point cloud, a text file of contact points in measurement order (x y z per
     line), or a segment of a fused volume (--segments segments.json --segment ID). Memory Unscented Particle
@@ -101,7 +104,8 @@ def command(model: Path | None, points: Path | None, models: str | None, segment
     inputs = [*model_paths, points, segments]
     claim_outputs({"output": output}, inputs, force)
     check_number(sigma_p, "sigma_p", 0, low_open=True, unit="m")
-    params = MupfParameters(particles=particles, window=window, sigma_p2=sigma_p ** 2, max_index=max_index)
+    params = MupfParameters(particles=particles, window=window, sigma_p2=sigma_p ** 2, max_index=max_index,
+                            beta=beta)
     params.check()
     meshes = [read_mesh(p) for p in model_paths]
     pts = read_segment_points(segments, segment) if segments is not None else read_points(points)

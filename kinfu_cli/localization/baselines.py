@@ -96,11 +96,16 @@ def localize_ransac_icp(model: MeshModel, points: np.ndarray, *, voxel: float = 
         pc.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=5 * voxel, max_nn=30))
         feats.append(reg.compute_fpfh_feature(pc, o3d.geometry.KDTreeSearchParamHybrid(radius=5 * voxel, max_nn=100)))
     dist = 2 * voxel
-    ransac = reg.registration_ransac_based_on_feature_matching(
-        source, target, feats[0], feats[1], True, dist, reg.TransformationEstimationPointToPoint(False), 3,
-        [reg.CorrespondenceCheckerBasedOnDistance(dist)], reg.RANSACConvergenceCriteria(100000, 0.999))
-    icp = reg.registration_icp(source, target, dist, ransac.transformation,
-                               reg.TransformationEstimationPointToPlane())
+    level = o3d.utility.get_verbosity_level()
+    o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)  # its warnings would reach stdout
+    try:
+        ransac = reg.registration_ransac_based_on_feature_matching(
+            source, target, feats[0], feats[1], True, dist, reg.TransformationEstimationPointToPoint(False), 3,
+            [reg.CorrespondenceCheckerBasedOnDistance(dist)], reg.RANSACConvergenceCriteria(100000, 0.999))
+        icp = reg.registration_icp(source, target, dist, ransac.transformation,
+                                   reg.TransformationEstimationPointToPlane())
+    finally:
+        o3d.utility.set_verbosity_level(level)
     T_world_model = np.linalg.inv(icp.transformation)  # ICP maps measurements (world) into the model frame
     pose = matrix_pose(T_world_model)
     return BaselineResult(pose, model.performance_index(pose, points), time.perf_counter() - start)

@@ -8,7 +8,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from kinfu_cli.localization.mesh_model import MeshModel, pose_matrix
@@ -43,11 +42,11 @@ def pose_errors(estimate: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
 
 
 def add_s(model: MeshModel, estimate: np.ndarray, truth: np.ndarray, samples: np.ndarray) -> float:
-    """Mean distance from the model's surface samples at the true pose to the nearest sample at the estimated
-    pose (m): zero for the true pose and for any pose the object's symmetry makes look the same."""
-    a = samples @ truth[:3, :3].T + truth[:3, 3]
-    b = samples @ estimate[:3, :3].T + estimate[:3, 3]
-    return float(cKDTree(b).query(a)[0].mean())
+    """Mean distance from the model's surface samples at the true pose to the mesh surface at the estimated
+    pose (m, exact BVH distances): zero for the true pose and for any pose the object's symmetry makes look
+    the same."""
+    world = samples @ truth[:3, :3].T + truth[:3, 3]
+    return float(model.exact_distances((world - estimate[:3, 3]) @ estimate[:3, :3]).mean())
 
 
 def estimate_matrix(pose: np.ndarray | None) -> np.ndarray | None:
