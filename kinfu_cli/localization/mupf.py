@@ -34,7 +34,7 @@ class MupfParameters:
     resampling. max_index: an estimate whose I_L exceeds it (m; None: sigma_p) is reported as not converged.
     beta: Table 4.1 prints 30; with it this filter drifts into wrong poses (the central sigma point's
     W0^(c) = 30.25 inflates the innovation covariance), so the default is the standard Gaussian value 2 —
-    `kinfu eval localize --beta 30` measures both (README)."""
+    the localisation evaluation measures both (README)."""
 
     particles: int = 700
     window: int | None = None

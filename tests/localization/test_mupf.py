@@ -55,17 +55,17 @@ def test_field_distances_match_the_bvh_near_the_surface():
 
 
 def test_non_symmetric_mesh_localised_from_a_known_offset():
-    """0.05 m and 30 deg off the prior mean, 30 points with 1 mm noise, 150 particles: at least 4 of 5 seeds
-    within 25 deg and 20 mm of the truth with I_L under 8 mm (the run's own quality index). Loose on purpose:
-    with Table 4.1's sigma_p = 1 cm the filter's samples scatter by about that much (see README)."""
+    """0.05 m and 30 deg off the prior mean, 40 points with 1 mm noise, 300 particles: at least 4 of 5 seeds
+    within 15 deg and 10 mm of the truth with I_L under 5 mm (the run's own quality index). (A tetrahedron
+    touched only on its faces has near-fits a face-swap away: one seed of five lands there, I_L 3.5 mm.)"""
     m = scalene()
     m.build_field()
     T = _offset_pose()
     good = 0
     for seed in range(5):
-        r = localize_mupf(m, _observe(m, T, 30, seed), NARROW, seed=seed)
+        r = localize_mupf(m, _observe(m, T, 40, seed), replace(NARROW, particles=300), seed=seed)
         rot, tra = pose_errors(pose_matrix(r.pose), T)
-        good += rot < 25 and tra < 0.02 and r.index < 0.008 and r.converged
+        good += rot < 15 and tra < 0.01 and r.index < 0.005 and r.converged
     assert good >= 4
 
 
