@@ -26,7 +26,7 @@ def _names(text: str, allowed, option: str) -> list[str]:
     return vals
 
 
-@click.command("localize", short_help="MUPF vs Scaling Series vs RANSAC+ICP (thesis Table 4.2); recognition 6/6.")
+@click.command("localize", short_help="MUPF vs Scaling Series vs RANSAC+ICP (thesis Table 4.2); recognition (ch. 5).")
 @click.option("--shapes", default=",".join(SIMULATION_SHAPES), show_default=True, help="Generated meshes to use.")
 @click.option("--trials", type=int, default=50, show_default=True, help="Trials per shape (thesis: 50).")
 @click.option("--methods", default=",".join(METHODS), show_default=True, help="Methods to run on each trial.")
