@@ -30,8 +30,9 @@ COMMANDS: dict[str, str | dict[str, str]] = {
     "batch": "batch",
     "diff": "diff",
     "grasp": "grasp",
+    "localize": "localize",
     "eval": {"poi": "eval_poi", "fusion": "eval_fusion", "nbv": "eval_nbv", "segment": "eval_segment",
-             "grasp": "eval_grasp"},
+             "grasp": "eval_grasp", "localize": "eval_localize"},
 }
 
 

@@ -18,7 +18,7 @@ LAYERS: list[set[str]] = [
     {"io"},
     {"fusion", "sim"},
     {"attention", "segmentation", "change"},
-    {"nbv", "grasp"},
+    {"nbv", "grasp", "localization"},
     {"evaluation"},
     {"api"},
     {"batch"},
