@@ -12,6 +12,7 @@ import numpy as np
 from kinfu_cli.segmentation import multi_superquadric as msq
 from kinfu_cli.segmentation.shape_samples import COMPOSITES, composite_cloud, primitive_cloud
 
+FIT: dict = {}
 MUS = (0.01, 0.015, 0.02, 0.03, 0.04, 0.05, 0.06)
 
 
@@ -24,12 +25,12 @@ def main(n_seeds: int = 3) -> None:
             rng = np.random.default_rng(seed)
             pts = primitive_cloud(name, rng) if name in ("box", "cylinder") else composite_cloud(name, rng)[0]
             t = time.perf_counter()
-            root = msq.build_superquadric_tree(pts)
+            root = msq.build_superquadric_tree(pts, **FIT)
             secs.append(time.perf_counter() - t)
             row = []
             for mu in MUS:
                 msq.select_splitting_planes(root, mu)
-                row.append(len(msq.final_superquadrics(root, pts, mu).parts))
+                row.append(len(msq.final_superquadrics(root, pts, mu, **FIT).parts))
             counts.append(row)
         c = np.array(counts)
         cells = ["/".join(str(v) for v in c[:, j]) for j in range(len(MUS))]

@@ -8,7 +8,8 @@
    superquadrics have `different_dimensions`; then the child closest to the node's brother (the children's
    uncle) is compared with that uncle, and the result decides the grandfather's plane (similar: not
    splitting, different: splitting), which its own test no longer overrides (Fig. 8.8: a coarse sibling
-   differs even when the higher cut runs through a uniform region).
+   differs even when the higher cut runs through a uniform region). A node decided that way still passes
+   its own uncle test up (ours: else a badly fitted coarse node decides its parent's plane alone).
 3. Final superquadrics (Alg. 6): the cloud is cut by the splitting planes (a plane acts on the region that
    holds its node, widened by every ancestor plane that is not splitting), regions below `min_points` join
    their nearest region, and each region reuses its tree superquadric when it equals a tree node's points,
@@ -175,12 +176,15 @@ def select_splitting_planes(root: SQNode, mu: float) -> None:
         for node, parent, uncle in levels[h]:
             if id(node) in votes:  # a grandchild's uncle test decided this plane
                 node.splitting, node.decided = any(votes[id(node)]), True
-            if node.decided or len(node.children) != 2 or any(c.fit is None for c in node.children):
+            if len(node.children) != 2 or any(c.fit is None for c in node.children):
                 continue
             left, right = node.children
             if not different_dimensions(left.fit, right.fit, mu):
                 continue
-            node.splitting = True
+            if not node.decided:
+                node.splitting = True
+            # the uncle test runs even when this plane was decided from below: the vote it passes up is about
+            # the grandfather's plane, which a coarse (badly fitted) node would otherwise decide alone
             if parent is None or uncle is None or uncle.fit is None:
                 continue
             nephew = min((left, right), key=lambda c: np.linalg.norm(
