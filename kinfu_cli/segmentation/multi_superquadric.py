@@ -63,6 +63,7 @@ class MultiSuperquadric:
     planes: list[tuple[np.ndarray, np.ndarray]]  # the splitting planes used
     refitted: list[bool] = field(default_factory=list)  # per part: True when Alg. 6 fitted a new superquadric
     mu: float = 0.0
+    part_indices: list[np.ndarray] = field(default_factory=list)  # per part: indices into the finite points
 
     def to_json(self) -> dict:
         return {"parts": [p.to_json() for p in self.parts], "mu": self.mu, "refitted": list(self.refitted),
@@ -234,7 +235,7 @@ def final_superquadrics(root: SQNode, pts: np.ndarray, mu: float, min_points: in
     pts = pts[np.all(np.isfinite(pts), axis=1)]
     regions = _merge_small(_regions(root, pts, np.ones(len(pts), dtype=bool)), pts, int(min_points))
     by_points = {tuple(n.index.tolist()): n for n in root.nodes() if n.fit is not None}
-    parts, part_points, refitted = [], [], []
+    parts, part_points, refitted, part_indices = [], [], [], []
     for r in regions:
         idx = np.flatnonzero(r)
         node = by_points.get(tuple(idx.tolist()))
@@ -244,10 +245,11 @@ def final_superquadrics(root: SQNode, pts: np.ndarray, mu: float, min_points: in
         parts.append(fit)
         part_points.append(pts[idx])
         refitted.append(node is None)
+        part_indices.append(idx)
     planes = [n.plane for n in root.nodes() if n.splitting]
     if not parts:
-        parts, part_points, refitted = [root.fit], [pts], [False]
-    return MultiSuperquadric(parts, part_points, root, planes, refitted, float(mu))
+        parts, part_points, refitted, part_indices = [root.fit], [pts], [False], [np.arange(len(pts))]
+    return MultiSuperquadric(parts, part_points, root, planes, refitted, float(mu), part_indices)
 
 
 def fit_multi_superquadric(points: np.ndarray, *, height: int = 3, mu: float = 0.03, min_points: int = 30,
