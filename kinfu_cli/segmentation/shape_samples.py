@@ -71,10 +71,10 @@ def random_primitive_dims(kind: str, rng: np.random.Generator) -> dict:
 
 
 def primitive_cloud(kind: str, rng: np.random.Generator, *, n: int = 1500, noise: float = 0.001,
-                    partial: bool = False) -> np.ndarray:
-    """Points (about n, 3) on a randomly sized, placed and rotated primitive of that kind; `partial` keeps the
-    side seen by 1-3 sensors above the object (as a table-top scan sees it)."""
-    mesh = _mesh(kind, random_primitive_dims(kind, rng))
+                    partial: bool = False, dims: dict | None = None) -> np.ndarray:
+    """Points (about n, 3) on a randomly placed and rotated primitive of that kind, randomly sized unless `dims`
+    is given; `partial` keeps the side seen by 1-3 sensors above the object (as a table-top scan sees it)."""
+    mesh = _mesh(kind, dims if dims is not None else random_primitive_dims(kind, rng))
     pts, nrm = _sample(mesh, 3 * n if partial else n, int(rng.integers(1 << 30)))
     R = Rotation.random(random_state=int(rng.integers(1 << 30))).as_matrix()
     pts, nrm = pts @ R.T, nrm @ R.T
