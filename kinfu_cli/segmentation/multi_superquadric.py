@@ -1,14 +1,23 @@
 """Multi-superquadric model of a non-convex segment (Vezzani 2019 thesis, ch. 8.1, Algs. 4-6).
 
-1. Superquadric tree (Alg. 4) of height H: every node holds a part of the cloud and its superquadric;
-   it is cut by the plane through the part's barycentre whose normal is the part's principal axis (the
-   direction of largest spread, so an elongated part is cut across its length), and each half is fitted.
-2. Splitting planes (Alg. 5, simplified): a node's plane is "splitting" when its two children's
-   superquadrics have different dimensions: their axes are paired by direction, the pair most aligned
-   with the line between the two centres is skipped (the "contiguous" axes, which a cut always
-   shortens), and the others differ by more than `mu` (m).
-3. Regions (Alg. 6): walking down from the root, a non-splitting plane keeps its node whole (its
-   superquadric is reused); a splitting one continues into both children.
+1. Superquadric tree (Alg. 4) of height H: every node holds a part of the cloud and its superquadric; it
+   is cut by the plane through the part's barycentre perpendicular to its principal axis (the direction
+   of largest spread, which is the thesis' "axis of maximum inertia" read as the axis the mass is spread
+   along, so an elongated part is cut across its length), and each half is fitted.
+2. Splitting planes (Alg. 5), bottom-up from h = H-1: a node's plane is splitting when its children's
+   superquadrics have `different_dimensions`; then the child closest to the node's brother (the children's
+   uncle) is compared with that uncle, and the result decides the grandfather's plane (similar: not
+   splitting, different: splitting), which its own test no longer overrides (Fig. 8.8: a coarse sibling
+   differs even when the higher cut runs through a uniform region). A node decided that way still passes
+   its own uncle test up (ours: else a badly fitted coarse node decides its parent's plane alone).
+3. Final superquadrics (Alg. 6): the cloud is cut by the splitting planes (a plane acts on the region that
+   holds its node, widened by every ancestor plane that is not splitting), regions below `min_points` join
+   their nearest region, and each region reuses its tree superquadric when it equals a tree node's points,
+   else gets a new fit.
+
+Not in the thesis, our choices: the "contiguous" test (no tolerance given there) and the tie-break when
+the two children of one node disagree about their grandfather (splitting wins: over-segmentation is still
+usable for grasping, a missed part is not).
 """
 
 from __future__ import annotations
@@ -17,19 +26,33 @@ import itertools
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.segmentation.superquadric import SegmentError, SuperquadricFit, fit_superquadric
 
+CONTIGUOUS_DEG = 35.0  # the centre link within this angle of a paired axis: the axes lie on one line
+
 
 @dataclass
 class SQNode:
+    """A tree node: its points (indices into the segment's cloud), superquadric, cut plane and children."""
+
     points: np.ndarray
     fit: SuperquadricFit | None
     depth: int
     plane: tuple[np.ndarray, np.ndarray] | None = None  # (point, normal)
     children: list["SQNode"] = field(default_factory=list)
     splitting: bool = False
+    index: np.ndarray | None = None  # indices of `points` in the segment's cloud
+    decided: bool = False  # set by a grandchild's uncle test (Alg. 5 lines 14-17): the own test is skipped
+
+    def nodes(self) -> list["SQNode"]:
+        """This node and all below it, depth first."""
+        out = [self]
+        for c in self.children:
+            out += c.nodes()
+        return out
 
 
 @dataclass
@@ -38,74 +61,207 @@ class MultiSuperquadric:
     part_points: list[np.ndarray]
     tree: SQNode
     planes: list[tuple[np.ndarray, np.ndarray]]  # the splitting planes used
+    refitted: list[bool] = field(default_factory=list)  # per part: True when Alg. 6 fitted a new superquadric
+    mu: float = 0.0
+    part_indices: list[np.ndarray] = field(default_factory=list)  # per part: indices into the finite points
 
     def to_json(self) -> dict:
-        return {"parts": [p.to_json() for p in self.parts],
+        return {"parts": [p.to_json() for p in self.parts], "mu": self.mu, "refitted": list(self.refitted),
                 "planes": [{"point": p.tolist(), "normal": n.tolist()} for p, n in self.planes]}
 
 
+def paired_axes(a: SuperquadricFit, b: SuperquadricFit) -> tuple[int, ...]:
+    """perm[i] = the axis of b parallel to axis i of a (the largest total |dot product|, thesis R_r^l)."""
+    C = np.abs(a.superquadric.rotation.T @ b.superquadric.rotation)
+    return max(itertools.permutations(range(3)), key=lambda p: sum(C[i, p[i]] for i in range(3)))
+
+
+def contiguous_axis(a: SuperquadricFit, b: SuperquadricFit, perm: tuple[int, ...], mu: float) -> int:
+    """The pair index i whose axes lie on one line with two extremes close, or -1.
+
+    On one line: the line between the centres is within CONTIGUOUS_DEG of a's axis i. Extremes close: the
+    gap between the facing ends along that axis is below max(mu, a quarter of the two semi-axes' sum)."""
+    sa, sb = a.superquadric, b.superquadric
+    link = sb.center - sa.center
+    n = float(np.linalg.norm(link))
+    if n < 1e-9:
+        return -1
+    along = sa.rotation.T @ link  # the link in a's frame
+    i = int(np.argmax(np.abs(along)))
+    if abs(along[i]) / n < np.cos(np.radians(CONTIGUOUS_DEG)):
+        return -1
+    reach = sa.size[i] + sb.size[perm[i]]
+    return i if abs(abs(along[i]) - reach) < max(mu, 0.25 * reach) else -1
+
+
 def different_dimensions(a: SuperquadricFit, b: SuperquadricFit, mu: float) -> bool:
-    """True when two superquadrics differ by more than `mu` along a paired, non-contiguous axis."""
-    A, B = a.superquadric.rotation, b.superquadric.rotation
-    C = np.abs(A.T @ B)
-    perm = max(itertools.permutations(range(3)), key=lambda p: sum(C[i, p[i]] for i in range(3)))
-    link = b.superquadric.center - a.superquadric.center
-    n = np.linalg.norm(link)
-    skip = int(np.argmax(np.abs(A.T @ (link / n)))) if n > 1e-9 else -1
-    da = 2 * a.superquadric.size
-    db = 2 * b.superquadric.size
-    return any(abs(da[i] - db[perm[i]]) > mu for i in range(3) if i != skip)
+    """Thesis differentDimensions: pair the parallel axes, skip the contiguous pair, and report whether any
+    other pair's dimensions (full lengths, m) differ by `mu` or more."""
+    perm = paired_axes(a, b)
+    skip = contiguous_axis(a, b, perm, mu)
+    da, db = 2 * a.superquadric.size, 2 * b.superquadric.size
+    return any(abs(da[i] - db[perm[i]]) >= mu for i in range(3) if i != skip)
 
 
-def _build(points: np.ndarray, depth: int, height: int, min_points: int, fit_kwargs: dict) -> SQNode:
+# -------------------------------------------------------------------------------------------- Alg. 4
+def _fit_or_none(points: np.ndarray, fit_kwargs: dict) -> SuperquadricFit | None:
+    """The part's fit, None when degenerate. Unless the caller bounds the size, a semi-axis stays below
+    0.6 x the part's largest extent: a cut part is an open shell, and a free fit of an open shell can
+    grow into the open side (a half-disc fitted as a twice-wider shape), which fakes a dimension change."""
+    kw = dict(fit_kwargs)
+    if kw.get("max_size") is None and len(points) >= 3:
+        centred = points - points.mean(axis=0)
+        _, _, vt = np.linalg.svd(centred, full_matrices=False)
+        local = centred @ vt.T
+        kw["max_size"] = max(0.6 * float(np.ptp(local, axis=0).max()), 0.01)
     try:
-        fit = fit_superquadric(points, **fit_kwargs)
+        return fit_superquadric(points, **kw)
     except SegmentError:
-        fit = None
-    node = SQNode(points, fit, depth)
-    if depth >= height or fit is None or len(points) < 2 * min_points:
+        return None
+
+
+def _build(pts: np.ndarray, index: np.ndarray, depth: int, height: int, min_points: int, fit_kwargs: dict
+           ) -> SQNode:
+    points = pts[index]
+    node = SQNode(points, _fit_or_none(points, fit_kwargs), depth, index=index)
+    if depth >= height or node.fit is None or len(index) < 2 * min_points:
         return node
-    mu_ = points.mean(axis=0)
-    w, v = np.linalg.eigh(np.cov((points - mu_).T))
+    bary = points.mean(axis=0)
+    _, v = np.linalg.eigh(np.cov((points - bary).T))
     normal = v[:, -1]
-    side = (points - mu_) @ normal > 0
+    side = (points - bary) @ normal > 0
     if side.sum() < min_points or (~side).sum() < min_points:
         return node
-    node.plane = (mu_, normal)
-    node.children = [_build(points[~side], depth + 1, height, min_points, fit_kwargs),
-                     _build(points[side], depth + 1, height, min_points, fit_kwargs)]
+    node.plane = (bary, normal)
+    node.children = [_build(pts, index[~side], depth + 1, height, min_points, fit_kwargs),
+                     _build(pts, index[side], depth + 1, height, min_points, fit_kwargs)]
     return node
 
 
-def _mark(node: SQNode, mu: float) -> None:
-    for c in node.children:
-        _mark(c, mu)
-    if len(node.children) == 2 and all(c.fit is not None for c in node.children):
-        node.splitting = different_dimensions(node.children[0].fit, node.children[1].fit, mu)
+def build_superquadric_tree(points: np.ndarray, *, height: int = 3, min_points: int = 30, **fit_kwargs) -> SQNode:
+    """Alg. 4: the superquadric tree of height `height` (a node with fewer than 2 x min_points is a leaf)."""
+    if not 0 <= int(height) <= 6:
+        raise ConfigError(f"expected 0..6, got {height}", parameter="height")
+    if int(min_points) < 10:
+        raise ConfigError(f"expected at least 10 points per region, got {min_points}", parameter="min_points")
+    pts = np.asarray(points, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise SegmentError(f"multi-superquadric: points must be (N, 3), got shape {pts.shape}")
+    pts = pts[np.all(np.isfinite(pts), axis=1)]
+    if len(pts) < int(min_points):
+        raise SegmentError(f"multi-superquadric: the segment has {len(pts)} finite points, need at least "
+                           f"min_points = {min_points}")
+    root = _build(pts, np.arange(len(pts)), 0, int(height), int(min_points), fit_kwargs)
+    if root.fit is None:
+        raise SegmentError(f"multi-superquadric: the segment ({len(pts)} points) cannot be fitted at all")
+    return root
 
 
-def _regions(node: SQNode, parts: list, planes: list) -> None:
+# -------------------------------------------------------------------------------------------- Alg. 5
+def select_splitting_planes(root: SQNode, mu: float) -> None:
+    """Alg. 5 on the tree (sets `splitting` on every node with a plane; the tree can be re-used per mu)."""
+    if not mu > 0:
+        raise ConfigError(f"must be > 0 m, got {mu}", parameter="mu")
+    levels: dict[int, list[tuple[SQNode, SQNode | None, SQNode | None]]] = {}
+
+    def walk(node: SQNode, parent: SQNode | None, brother: SQNode | None) -> None:
+        node.splitting, node.decided = False, False
+        levels.setdefault(node.depth, []).append((node, parent, brother))
+        if len(node.children) == 2:
+            walk(node.children[0], node, node.children[1])
+            walk(node.children[1], node, node.children[0])
+
+    walk(root, None, None)
+    votes: dict[int, list[bool]] = {}
+    for h in sorted(levels, reverse=True):
+        for node, parent, uncle in levels[h]:
+            if id(node) in votes:  # a grandchild's uncle test decided this plane
+                node.splitting, node.decided = any(votes[id(node)]), True
+            if len(node.children) != 2 or any(c.fit is None for c in node.children):
+                continue
+            left, right = node.children
+            if not different_dimensions(left.fit, right.fit, mu):
+                continue
+            if not node.decided:
+                node.splitting = True
+            # the uncle test runs even when this plane was decided from below: the vote it passes up is about
+            # the grandfather's plane, which a coarse (badly fitted) node would otherwise decide alone
+            if parent is None or uncle is None or uncle.fit is None:
+                continue
+            nephew = min((left, right), key=lambda c: np.linalg.norm(
+                c.fit.superquadric.center - uncle.fit.superquadric.center))
+            votes.setdefault(id(parent), []).append(different_dimensions(nephew.fit, uncle.fit, mu))
+
+
+# -------------------------------------------------------------------------------------------- Alg. 6
+def _regions(node: SQNode, pts: np.ndarray, mask: np.ndarray) -> list[np.ndarray]:
+    """Cut `mask` (a region holding this node) by the splitting planes at and below the node."""
+    if len(node.children) != 2:
+        return [mask]
+    left, right = node.children
     if node.splitting:
-        planes.append(node.plane)
-        for c in node.children:
-            _regions(c, parts, planes)
-    else:
-        parts.append(node)
+        point, normal = node.plane
+        side = (pts - point) @ normal > 0
+        return _regions(left, pts, mask & ~side) + _regions(right, pts, mask & side)
+    out = []
+    for m in _regions(left, pts, mask):  # a plane that does not split: the children's planes cut the whole
+        out += _regions(right, pts, m)
+    return out
+
+
+def _merge_small(regions: list[np.ndarray], pts: np.ndarray, min_points: int) -> list[np.ndarray]:
+    """Regions below min_points join the region of their nearest point outside them."""
+    regions = [r for r in regions if r.any()]
+    while len(regions) > 1:
+        sizes = [int(r.sum()) for r in regions]
+        k = int(np.argmin(sizes))
+        if sizes[k] >= min_points:
+            break
+        small = regions.pop(k)
+        label = np.full(len(pts), -1)
+        for j, r in enumerate(regions):
+            label[r] = j
+        others = np.flatnonzero(label >= 0)
+        _, nn = cKDTree(pts[others]).query(pts[small], k=1)
+        target = np.bincount(label[others[nn]], minlength=len(regions))
+        regions[int(np.argmax(target))] = regions[int(np.argmax(target))] | small
+    return regions
+
+
+def final_superquadrics(root: SQNode, pts: np.ndarray, mu: float, min_points: int = 30, **fit_kwargs
+                        ) -> MultiSuperquadric:
+    """Alg. 6 for a tree whose planes were selected by `select_splitting_planes`."""
+    pts = np.asarray(pts, dtype=np.float64)
+    pts = pts[np.all(np.isfinite(pts), axis=1)]
+    regions = _merge_small(_regions(root, pts, np.ones(len(pts), dtype=bool)), pts, int(min_points))
+    by_points = {tuple(n.index.tolist()): n for n in root.nodes() if n.fit is not None}
+    parts, part_points, refitted, part_indices = [], [], [], []
+    for r in regions:
+        idx = np.flatnonzero(r)
+        node = by_points.get(tuple(idx.tolist()))
+        fit = node.fit if node is not None else _fit_or_none(pts[idx], fit_kwargs)
+        if fit is None:
+            continue  # a degenerate sliver: its points stay unmodelled rather than badly modelled
+        parts.append(fit)
+        part_points.append(pts[idx])
+        refitted.append(node is None)
+        part_indices.append(idx)
+    planes = [n.plane for n in root.nodes() if n.splitting]
+    if not parts:
+        parts, part_points, refitted, part_indices = [root.fit], [pts], [False], [np.arange(len(pts))]
+    return MultiSuperquadric(parts, part_points, root, planes, refitted, float(mu), part_indices)
 
 
 def fit_multi_superquadric(points: np.ndarray, *, height: int = 3, mu: float = 0.03, min_points: int = 30,
                            **fit_kwargs) -> MultiSuperquadric:
-    """Split a segment into superquadric parts (thesis H = 3, mu = 0.03 m for noisy clouds)."""
-    if height < 0 or height > 6:
-        raise ConfigError(f"expected 0..6, got {height}", parameter="height")
+    """Split a segment into superquadric parts, Algs. 4-6 (thesis H = 3, mu = 0.03 m for noisy clouds).
+
+    fit_kwargs go to `fit_superquadric` for every node and region. Raises SegmentError when the segment has
+    fewer than min_points points or cannot be fitted at all, ConfigError for a bad height, mu or min_points.
+    """
     if not mu > 0:
         raise ConfigError(f"must be > 0 m, got {mu}", parameter="mu")
     pts = np.asarray(points, dtype=np.float64)
-    root = _build(pts, 0, int(height), int(min_points), fit_kwargs)
-    if root.fit is None:
-        raise SegmentError(f"multi-superquadric: the segment ({len(pts)} points) cannot be fitted at all")
-    _mark(root, float(mu))
-    nodes: list[SQNode] = []
-    planes: list = []
-    _regions(root, nodes, planes)
-    return MultiSuperquadric([n.fit for n in nodes], [n.points for n in nodes], root, planes)
+    root = build_superquadric_tree(pts, height=height, min_points=min_points, **fit_kwargs)
+    select_splitting_planes(root, float(mu))
+    return final_superquadrics(root, pts, float(mu), int(min_points), **fit_kwargs)

@@ -320,7 +320,8 @@ def fit_superquadric(points: np.ndarray, *, max_points: int = 200, outlier_filte
     """Fit one superquadric to a segment's points (N, 3) metres.
 
     max_points: subsample for the optimiser (thesis 50; more points average the noise better);
-    exponent_bounds: (lo, hi) for e1, e2 (thesis [0.1, 1.9]; a shape prior narrows it);
+    exponent_bounds: (lo, hi) for both e1 and e2 (thesis [0.1, 1.9]), or ((lo1, hi1), (lo2, hi2)) per
+    exponent (the shape prior's eq. 7.11 bounds, `shape_prior.exponent_bounds`);
     axis_candidates: how many box axes to try as the superquadric z axis (1 = longest PCA axis only);
     cost: "volume" (thesis eq. 7.2 with the radial F^e1 form, default: the volume factor keeps partial
     views from growing into the unseen side) or "radial" (distance along the ray through the centre:
@@ -337,9 +338,12 @@ def fit_superquadric(points: np.ndarray, *, max_points: int = 200, outlier_filte
         raise SegmentError(f"superquadric fit: segment has {len(pts)} finite points, need at least 10")
     if cost not in ("radial", "volume"):
         raise ConfigError(f"expected 'radial' or 'volume', got {cost!r}", parameter="cost")
-    lo_e, hi_e = float(exponent_bounds[0]), float(exponent_bounds[1])
-    if not (0.0 < lo_e < hi_e <= 2.0):
-        raise ConfigError(f"expected 0 < lo < hi <= 2, got {exponent_bounds}", parameter="exponent_bounds")
+    eb = np.asarray(exponent_bounds, dtype=np.float64)
+    if eb.shape == (2,):
+        eb = np.stack([eb, eb])  # the same (lo, hi) for e1 and e2
+    if eb.shape != (2, 2) or not np.all((0.0 < eb[:, 0]) & (eb[:, 0] < eb[:, 1]) & (eb[:, 1] <= 2.0)):
+        raise ConfigError(f"expected (lo, hi) or ((lo1, hi1), (lo2, hi2)) with 0 < lo < hi <= 2, got "
+                          f"{exponent_bounds}", parameter="exponent_bounds")
     keep = remove_outliers(pts) if outlier_filter else np.ones(len(pts), dtype=bool)
     kept = pts[keep]
     n_out = int(len(pts) - len(kept))
@@ -353,8 +357,8 @@ def fit_superquadric(points: np.ndarray, *, max_points: int = 200, outlier_filte
     local = (sub - center0) @ axes
     max_sz = float(max_size) if max_size is not None else 1.5 * extent
     half_c = np.maximum(half, min_size * 1.5)
-    lb = np.concatenate([[min_size] * 3, [lo_e, lo_e], -np.full(3, extent), [-np.pi] * 3])
-    ub = np.concatenate([[max_sz] * 3, [hi_e, hi_e], np.full(3, extent), [np.pi] * 3])
+    lb = np.concatenate([[min_size] * 3, eb[:, 0], -np.full(3, extent), [-np.pi] * 3])
+    ub = np.concatenate([[max_sz] * 3, eb[:, 1], np.full(3, extent), [np.pi] * 3])
     # Candidate z axes (longest box axis first); each gets a short screening run, the best is refined.
     perms = [(1, 2, 0), (0, 2, 1), (0, 1, 2)][: max(1, min(3, axis_candidates))]
     runs = []
@@ -364,8 +368,8 @@ def fit_superquadric(points: np.ndarray, *, max_points: int = 200, outlier_filte
             P[:, 0] *= -1
         pts_p = local @ P
         a0 = np.clip(half_c[list(perm)], min_size * 1.5, max_sz * 0.9)
-        e0 = float(np.clip(1.0, lo_e + 1e-3, hi_e - 1e-3))
-        x0 = np.concatenate([a0, [e0, e0], np.zeros(3), np.zeros(3)])
+        e0 = np.clip(1.0, eb[:, 0] + 1e-3, eb[:, 1] - 1e-3)
+        x0 = np.concatenate([a0, e0, np.zeros(3), np.zeros(3)])
         res = _solve(pts_p, x0, lb, ub, cost, screen_nfev if len(perms) > 1 else max_nfev)
         runs.append((float(res.cost), res, P, pts_p))
     runs.sort(key=lambda r: r[0])

@@ -1,0 +1,52 @@
+"""Multi-superquadric split (Algs. 4-6) on generated composites of known parts: the number of superquadrics
+per mu (m), against the true number of parts, over a few seeds; more parts than true = over-segmentation;
+"purity" = the worst part's share of points from its main true part, worst over the seeds.
+
+    PYTHONPATH=$PWD python benchmarks/bench_multi_superquadric.py [n_seeds]
+"""
+
+import sys
+import time
+
+import numpy as np
+
+from kinfu_cli.segmentation import multi_superquadric as msq
+from kinfu_cli.segmentation.shape_samples import COMPOSITES, composite_cloud, primitive_cloud
+
+FIT: dict = {}
+MUS = (0.01, 0.015, 0.02, 0.03, 0.04, 0.05, 0.06)
+
+
+def main(n_seeds: int = 3) -> None:
+    shapes = dict(COMPOSITES, box=1, cylinder=1)
+    print("shape     parts  " + "  ".join(f"mu={m:<5}" for m in MUS) + "  tree s")
+    for name, true_parts in shapes.items():
+        counts, secs, purity = [], [], []
+        for seed in range(n_seeds):
+            rng = np.random.default_rng(seed)
+            if name in ("box", "cylinder"):
+                pts = primitive_cloud(name, rng)
+                labels = np.zeros(len(pts), dtype=int)
+            else:
+                pts, labels = composite_cloud(name, rng)
+            t = time.perf_counter()
+            root = msq.build_superquadric_tree(pts, **FIT)
+            secs.append(time.perf_counter() - t)
+            row, prow = [], []
+            for mu in MUS:
+                msq.select_splitting_planes(root, mu)
+                model = msq.final_superquadrics(root, pts, mu, **FIT)
+                row.append(len(model.parts))
+                # purity: the share of each part's points from its main true part (worst part)
+                prow.append(min(np.bincount(labels[i]).max() / len(i) for i in model.part_indices))
+            counts.append(row)
+            purity.append(prow)
+        c = np.array(counts)
+        cells = ["/".join(str(v) for v in c[:, j]) for j in range(len(MUS))]
+        print(f"{name:9} {true_parts:5}  " + "  ".join(f"{s:8}" for s in cells) + f"  {np.mean(secs):.2f}")
+        pur = np.array(purity).min(axis=0)
+        print(f"{'  purity':15}  " + "  ".join(f"{p:8.2f}" for p in pur))
+
+
+if __name__ == "__main__":
+    main(int(sys.argv[1]) if len(sys.argv) > 1 else 3)

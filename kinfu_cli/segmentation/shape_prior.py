@@ -1,0 +1,135 @@
+"""Shape prior (Vezzani 2019 thesis, ch. 7.3): classify a segment as box / cylinder / sphere / generic and
+bound the superquadric exponents around the class's values (eq. 7.11).
+
+The thesis classifies images with ResNet + SVM; we classify the point cloud with a scikit-learn random
+forest on geometric features: the sorted extents and the exponents of a free superquadric fit, its residual,
+and statistics of local curvature (surface variation) and of how the normals line up with the fit's axes
+(a box's normals cluster on three axes, a cylinder's on one, a sphere's on none).
+
+The package ships the training set's features (`shape_prior_features.npz`, generated primitives with a
+fixed seed by `training_set`; rebuild it with `python -m kinfu_cli.segmentation.shape_prior`), and the
+forest is trained from them on first use (about 0.2 s, fixed seed): a features file does not depend on the
+scikit-learn version the way a pickled model does, and loading it runs no pickled code.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.segmentation.superquadric import E_MAX, E_MIN, SegmentError, SuperquadricFit, fit_superquadric
+
+CLASSES = ("box", "cylinder", "sphere", "generic")
+# generated primitive kind -> class ("sphere" is the rounded class of eq. 7.11: e1 = e2 = 1, any semi-axes)
+KIND_CLASS = {"box": "box", "cylinder": "cylinder", "sphere": "sphere", "ellipsoid": "sphere",
+              "cone": "generic", "capsule": "generic"}
+# eq. 7.11: class exponents (e1, e2) in our order (e1 acts on the z axis: a cylinder along z is (0.1, 1.0);
+# the thesis writes (lambda4, lambda5) = (1.0, 0.1) in its own axis convention) and the margins
+# (Delta_l, Delta_u); the thesis' example uses Delta_l = 0, Delta_u = 0.4 for the box.
+PRIOR_EXPONENTS = {"box": (0.1, 0.1), "cylinder": (0.1, 1.0), "sphere": (1.0, 1.0)}
+DELTA_LOWER = 0.4
+DELTA_UPPER = 0.4
+FEATURES_FILE = Path(__file__).with_name("shape_prior_features.npz")
+MIN_POINTS = 30
+FEATURE_NAMES = ("extent_mid_ratio", "extent_min_ratio", "e1", "e2", "residual_ratio", "variation_mean",
+                 "variation_std", "variation_p90", "edge_share", "normal_axis_mean", "normal_axis_p10",
+                 "normal_z_mean")
+
+
+def exponent_bounds(shape_class: str) -> tuple[tuple[float, float], tuple[float, float]]:
+    """Eq. 7.11: ((lo1, hi1), (lo2, hi2)) = class exponents -/+ (Delta_l, Delta_u), clipped to [0.1, 1.9];
+    "generic" gets the default [0.1, 1.9] for both."""
+    if shape_class not in CLASSES:
+        raise ConfigError(f"expected one of {', '.join(CLASSES)}, got {shape_class!r}", parameter="shape_class")
+    if shape_class == "generic":
+        return (E_MIN, E_MAX), (E_MIN, E_MAX)
+    return tuple((max(E_MIN, e - DELTA_LOWER), min(E_MAX, e + DELTA_UPPER))  # type: ignore[return-value]
+                 for e in PRIOR_EXPONENTS[shape_class])
+
+
+def shape_features(points: np.ndarray, fit: SuperquadricFit | None = None, k: int = 16) -> np.ndarray:
+    """The FEATURE_NAMES vector of a segment (N, 3) m; `fit` is its free superquadric fit (made if absent).
+
+    Raises SegmentError for fewer than MIN_POINTS finite points."""
+    pts = np.asarray(points, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise SegmentError(f"shape prior: points must be (N, 3), got shape {pts.shape}")
+    pts = pts[np.all(np.isfinite(pts), axis=1)]
+    if len(pts) < MIN_POINTS:
+        raise SegmentError(f"shape prior: the segment has {len(pts)} finite points, need at least "
+                           f"{MIN_POINTS} (points)")
+    fit = fit if fit is not None else fit_superquadric(pts)
+    sq = fit.superquadric
+    dims = np.sort(2 * sq.size)[::-1]
+    # local PCA on k neighbours: surface variation l0 / (l0 + l1 + l2) and the normal (smallest eigenvector)
+    sub = pts if len(pts) <= 1500 else pts[np.random.default_rng(0).choice(len(pts), 1500, replace=False)]
+    _, nn = cKDTree(pts).query(sub, k=min(k, len(pts)))
+    nb = pts[nn] - pts[nn].mean(axis=1, keepdims=True)
+    w, v = np.linalg.eigh(np.einsum("nki,nkj->nij", nb, nb))
+    variation = w[:, 0] / np.maximum(w.sum(axis=1), 1e-18)
+    normals_local = np.abs(v[:, :, 0] @ sq.rotation)  # |components| in the superquadric frame
+    axis_align = normals_local.max(axis=1)
+    return np.array([dims[1] / dims[0], dims[2] / dims[0], sq.exponents[0], sq.exponents[1],
+                     fit.residual / dims[0], variation.mean(), variation.std(), np.percentile(variation, 90),
+                     float(np.mean(variation > 0.02)), axis_align.mean(), np.percentile(axis_align, 10),
+                     normals_local[:, 2].mean()])
+
+
+def training_set(n_per_kind: int = 60, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Features (M, F) and class indices (M,) of generated primitives: every kind of KIND_CLASS, half full
+    surfaces and half partial views, random sizes (3-20 cm) and poses, 1 mm noise."""
+    from kinfu_cli.segmentation.shape_samples import primitive_cloud  # generation only, not needed to predict
+
+    rng = np.random.default_rng(seed)
+    X, y = [], []
+    for kind, cls in KIND_CLASS.items():
+        for i in range(int(n_per_kind)):
+            pts = primitive_cloud(kind, rng, n=int(rng.integers(400, 1500)), noise=float(rng.uniform(0.0005, 0.002)),
+                                  partial=bool(i % 2))
+            X.append(shape_features(pts))
+            y.append(CLASSES.index(cls))
+    return np.asarray(X), np.asarray(y)
+
+
+def save_training_set(path: Path = FEATURES_FILE, n_per_kind: int = 60, seed: int = 0) -> Path:
+    X, y = training_set(n_per_kind, seed)
+    np.savez_compressed(path, X=X, y=y, feature_names=np.array(FEATURE_NAMES), classes=np.array(CLASSES),
+                        seed=seed, n_per_kind=n_per_kind)
+    return path
+
+
+@lru_cache(maxsize=2)
+def load_classifier(path: str = str(FEATURES_FILE)):
+    """The random forest trained on the packaged features (fixed seed: the same model every time)."""
+    from sklearn.ensemble import RandomForestClassifier
+
+    with np.load(path) as data:
+        if tuple(data["feature_names"].tolist()) != FEATURE_NAMES:
+            raise ConfigError(f"{path}: features {data['feature_names'].tolist()} do not match this version; "
+                              f"rebuild it with save_training_set", parameter="path")
+        X, y = data["X"], data["y"]
+    return RandomForestClassifier(n_estimators=150, min_samples_leaf=2, random_state=0, n_jobs=1).fit(X, y)
+
+
+def classify_shape(points: np.ndarray, fit: SuperquadricFit | None = None) -> tuple[str, dict[str, float]]:
+    """The segment's class and the class probabilities."""
+    proba = load_classifier().predict_proba(shape_features(points, fit)[None, :])[0]
+    return CLASSES[int(np.argmax(proba))], {c: float(p) for c, p in zip(CLASSES, proba)}
+
+
+def fit_with_prior(points: np.ndarray, **fit_kwargs) -> tuple[SuperquadricFit, str]:
+    """Classify from a free fit, then re-fit inside the class's eq. 7.11 exponent bounds ("generic" keeps the
+    free fit). Returns the fit and the class."""
+    free = fit_superquadric(points, **fit_kwargs)
+    cls, _ = classify_shape(points, free)
+    if cls == "generic":
+        return free, cls
+    return fit_superquadric(points, **{**fit_kwargs, "exponent_bounds": exponent_bounds(cls)}), cls
+
+
+if __name__ == "__main__":  # rebuild the packaged training features
+    print(save_training_set())
