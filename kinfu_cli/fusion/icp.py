@@ -178,6 +178,31 @@ def vertex_normals(vert, d, ox, oy, oz, jump):
     return norm
 
 
+@njit(cache=True, inline="always")
+def _project_vertex(vert, v, u, R, t, R_cw, t_cw, fx, fy, cx, cy, mw, mh):
+    """Data vertex (v, u) moved by the pose (R, t) into the world, and the model pixel it projects to:
+    (ok, world x, y, z, depth in the model camera, pixel column, row); ok False for a missing vertex, a point
+    behind the model camera or outside its image."""
+    x0 = vert[v, u, 0]
+    if not (x0 == x0):
+        return False, 0.0, 0.0, 0.0, 0.0, -1, -1
+    x1 = vert[v, u, 1]
+    x2 = vert[v, u, 2]
+    px = R[0, 0] * x0 + R[0, 1] * x1 + R[0, 2] * x2 + t[0]
+    py = R[1, 0] * x0 + R[1, 1] * x1 + R[1, 2] * x2 + t[1]
+    pz = R[2, 0] * x0 + R[2, 1] * x1 + R[2, 2] * x2 + t[2]
+    qx = R_cw[0, 0] * px + R_cw[0, 1] * py + R_cw[0, 2] * pz + t_cw[0]
+    qy = R_cw[1, 0] * px + R_cw[1, 1] * py + R_cw[1, 2] * pz + t_cw[1]
+    qz = R_cw[2, 0] * px + R_cw[2, 1] * py + R_cw[2, 2] * pz + t_cw[2]
+    if qz <= 0.0:
+        return False, px, py, pz, qz, -1, -1
+    mu = int(math.floor(fx * qx / qz + cx + 0.5))
+    mv = int(math.floor(fy * qy / qz + cy + 0.5))
+    if mu < 0 or mv < 0 or mu >= mw or mv >= mh:
+        return False, px, py, pz, qz, -1, -1
+    return True, px, py, pz, qz, mu, mv
+
+
 @njit(cache=True, parallel=True, fastmath=True)
 def _normal_equations(vert, norm, R, t, model_v, model_n, R_cw, t_cw, fx, fy, cx, cy, max_dist2, min_cos, nchunks):
     """Sums of the point-to-plane normal equations over the data vertices with a projective correspondence.
@@ -196,22 +221,8 @@ def _normal_equations(vert, norm, R, t, model_v, model_n, R_cw, t_cw, fx, fy, cx
         J = np.zeros(6)
         for v in range(c * step, min(h, (c + 1) * step)):
             for u in range(w):
-                x0 = vert[v, u, 0]
-                if not (x0 == x0):
-                    continue
-                x1 = vert[v, u, 1]
-                x2 = vert[v, u, 2]
-                px = R[0, 0] * x0 + R[0, 1] * x1 + R[0, 2] * x2 + t[0]
-                py = R[1, 0] * x0 + R[1, 1] * x1 + R[1, 2] * x2 + t[1]
-                pz = R[2, 0] * x0 + R[2, 1] * x1 + R[2, 2] * x2 + t[2]
-                qx = R_cw[0, 0] * px + R_cw[0, 1] * py + R_cw[0, 2] * pz + t_cw[0]
-                qy = R_cw[1, 0] * px + R_cw[1, 1] * py + R_cw[1, 2] * pz + t_cw[1]
-                qz = R_cw[2, 0] * px + R_cw[2, 1] * py + R_cw[2, 2] * pz + t_cw[2]
-                if qz <= 0.0:
-                    continue
-                mu = int(math.floor(fx * qx / qz + cx + 0.5))
-                mv = int(math.floor(fy * qy / qz + cy + 0.5))
-                if mu < 0 or mv < 0 or mu >= mw or mv >= mh:
+                ok, px, py, pz, qz, mu, mv = _project_vertex(vert, v, u, R, t, R_cw, t_cw, fx, fy, cx, cy, mw, mh)
+                if not ok:
                     continue
                 nx = model_n[mv, mu, 0]
                 if not (nx == nx):
@@ -336,22 +347,8 @@ def _agreement_counts(vert, R, t, mdepth, mstate, R_cw, t_cw, fx, fy, cx, cy, hi
     agree = np.zeros(h, dtype=np.int64)
     for v in prange(h):
         for u in range(w):
-            x0 = vert[v, u, 0]
-            if not (x0 == x0):
-                continue
-            x1 = vert[v, u, 1]
-            x2 = vert[v, u, 2]
-            px = R[0, 0] * x0 + R[0, 1] * x1 + R[0, 2] * x2 + t[0]
-            py = R[1, 0] * x0 + R[1, 1] * x1 + R[1, 2] * x2 + t[1]
-            pz = R[2, 0] * x0 + R[2, 1] * x1 + R[2, 2] * x2 + t[2]
-            qx = R_cw[0, 0] * px + R_cw[0, 1] * py + R_cw[0, 2] * pz + t_cw[0]
-            qy = R_cw[1, 0] * px + R_cw[1, 1] * py + R_cw[1, 2] * pz + t_cw[1]
-            qz = R_cw[2, 0] * px + R_cw[2, 1] * py + R_cw[2, 2] * pz + t_cw[2]
-            if qz <= 0.0:
-                continue
-            mu = int(math.floor(fx * qx / qz + cx + 0.5))
-            mv = int(math.floor(fy * qy / qz + cy + 0.5))
-            if mu < 0 or mv < 0 or mu >= mw or mv >= mh:
+            ok, px, py, pz, qz, mu, mv = _project_vertex(vert, v, u, R, t, R_cw, t_cw, fx, fy, cx, cy, mw, mh)
+            if not ok:
                 continue
             s = mstate[mv, mu]
             if s == hit:
