@@ -25,10 +25,10 @@ from kinfu_cli.core.errors import ConfigError, KinfuError
 # stage -> (module of the command, options batch sets itself, options taking an output file whose `true` in the
 # plan means "this file in the recording's output folder"). A viewer output option (a file) goes in the last.
 _COMMANDS = {
-    "fuse": ("fuse", {"output", "json", "quiet", "force", "init", "clear-pois"}, {}),
-    "poi": ("poi", {"output", "json", "quiet", "force"}, {"plot": "pois.png"}),
-    "nbv": ("nbv", {"output", "json", "quiet", "force", "pois", "mode"}, {"plot": "views.png"}),
-    "segment": ("segment", {"output", "json", "quiet", "force"}, {}),
+    "fuse": ("fuse", {"output", "json", "quiet", "force", "init", "clear-pois"}, {"viz": "fuse.mcap"}),
+    "poi": ("poi", {"output", "json", "quiet", "force"}, {"plot": "pois.png", "viz": "pois.mcap"}),
+    "nbv": ("nbv", {"output", "json", "quiet", "force", "pois", "mode"}, {"plot": "views.png", "viz": "views.mcap"}),
+    "segment": ("segment", {"output", "json", "quiet", "force"}, {"viz": "segment.mcap"}),
 }
 
 

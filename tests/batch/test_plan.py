@@ -111,3 +111,16 @@ def test_the_example_plan_is_valid():
         for s in plan.stages:
             table[s].check(rec.path, rec.output, rec.stage_options(s))
     assert plan.recordings[2].stage_options("segment") == {"plot": True, "seed": 1}
+
+
+def test_viewer_files_are_one_per_recording_and_stage(tmp_path):
+    """`viz = true` in a plan's stage options writes that stage's viewer file into the recording's folder."""
+    from kinfu_cli.commands._batch_stages import _option_args
+
+    out = tmp_path / "rec"
+    assert _option_args("fuse", out, {"viz": True}) == ["--viz", str(out / "fuse.mcap")]
+    assert _option_args("nbv", out, {"viz": True, "plot": True}) == ["--viz", str(out / "views.mcap"), "--plot",
+                                                                     str(out / "views.png")]
+    assert _option_args("segment", out, {"viz": False}) == []
+    with pytest.raises(ConfigError, match="expected true"):
+        _option_args("poi", out, {"viz": "elsewhere.mcap"})
