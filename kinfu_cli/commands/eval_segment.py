@@ -10,7 +10,8 @@ import click
 from kinfu_cli.commands._options import claim_outputs, force_option
 from kinfu_cli.commands._output import emit
 from kinfu_cli.core.errors import ConfigError
-from kinfu_cli.evaluation.segment_eval import SWEEP_DEFAULT, evaluate_segments, label_names, sweep_segmentation
+from kinfu_cli.evaluation.segment_eval import (SWEEP_DEFAULT, default_sweep_values, evaluate_segments, label_names,
+                                               sweep_segmentation)
 from kinfu_cli.evaluation.segment_tables import format_segment_table, format_sweep_table
 
 group = "eval"
@@ -45,11 +46,22 @@ def _numbers(text: str, option: str, kind=float) -> list:
                                             "threshold and print / plot boundary PR per scene.")
 @click.option("--sweep-parameter", default=SWEEP_DEFAULT[0], show_default=True,
               help="The segmentation threshold to sweep (a numeric kinfu segment parameter).")
-@click.option("--sweep-values", default=",".join(f"{v:g}" for v in SWEEP_DEFAULT[1]), show_default=True,
-              help="Its values, comma-separated.")
+@click.option("--sweep-values", default=None,
+              help="Its values, comma-separated [default: t_lccp 0.1,0.15,0.2,0.3,0.4,0.6,2 (2 prunes nothing); "
+                   "t_ff 0.1,0.2,0.3,0.5,0.7,1; others " + ",".join(f"{v:g}" for v in SWEEP_DEFAULT[1]) + "].")
+@click.option("--method", type=click.Choice(["lccp", "flood-fill"]), default=None,
+              help="Segmentation method of the sweep [default: flood-fill for t_ff, else lccp].")
+@click.option("--color", "color", default="mean,mode", show_default=True,
+              help="Sweep: fuse each scene with these colour modes, comma-separated: mean (running mean, 'not "
+                   "enhanced'), mode (mode filter), none (no colour: shape only).")
+@click.option("--photometric/--no-photometric", default=True, show_default=True,
+              help="Sweep: render the colour images with the simulator's auto-gain, white-balance jitter and "
+                   "colour-depth misregistration (what the mode filter is for).")
+@click.option("--scene", "layouts", default="objects", show_default=True,
+              help="Sweep: generated scene layouts, comma-separated: objects, tabletop (kinfu synth --scene).")
 @click.option("--scenes", default="0,1,2", show_default=True, help="Seeds of the generated scenes (--sweep).")
 @click.option("--resolution", type=int, default=160, show_default=True,
-              help="Voxels per side of each scene's fusion (--sweep; 1.1 m cube).")
+              help="Sweep: voxels per 1.1 m (the objects scene's cube; tabletop scenes fuse 1.6 m at that voxel).")
 @click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="PNG: top view of the scored points coloured by consistency error; with --sweep the PR curves.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=None,
@@ -58,7 +70,8 @@ def _numbers(text: str, option: str, kind=float) -> list:
 @click.option("--quiet", is_flag=True, help="No progress output.")
 @force_option
 def command(segments: Path | None, ground_truth: Path | None, t_eval: float, max_distance: float, cover: float,
-            share: float, sweep: bool, sweep_parameter: str, sweep_values: str, scenes: str, resolution: int,
+            share: float, sweep: bool, sweep_parameter: str, sweep_values: str | None, method: str | None, color: str,
+            photometric: bool, layouts: str, scenes: str, resolution: int,
             plot: Path | None, output: Path | None, as_json: bool, quiet: bool, force: bool) -> None:
     """Score SEGMENTS (a kinfu segment output folder, its segments.ply, or a labels file) against
     --ground-truth labels: boundary precision / recall at T_eval on the T_eval neighbourhood graph (thesis
@@ -67,9 +80,11 @@ def command(segments: Path | None, ground_truth: Path | None, t_eval: float, max
     labels reach the segmented points by nearest neighbour within --max-distance; unmatched points are
     counted, not scored.
 
-    --sweep needs no SEGMENTS: it fuses the generated segmentation scenes (kinfu synth --scene objects,
-    seeds --scenes), segments each over --sweep-values of --sweep-parameter and prints P/R, BCE and object
-    recall per value (minimum BCE per scene as in the thesis' Table 4.3); --plot draws the PR curves.
+    --sweep needs no SEGMENTS: it fuses the generated scenes (kinfu synth --scene objects, seeds --scenes)
+    once per --color mode, segments each over --sweep-values of --sweep-parameter (t_lccp: LCCP colour
+    pruning, t_ff: Flood Fill, as in the thesis' Figs. 4.10-4.11) and prints P/R, BCE and object recall per
+    value (minimum BCE per scene as in the thesis' Table 4.3) and the means per colour mode; --plot draws
+    the PR curves.
 
     \b
     Example:
@@ -77,18 +92,22 @@ def command(segments: Path | None, ground_truth: Path | None, t_eval: float, max
       kinfu fuse out/objects/recording.mcap -o out/objects_fused
       kinfu segment out/objects_fused/volume.npz -o out/objects_segments
       kinfu eval segment out/objects_segments --ground-truth out/objects/ground_truth/labels.ply --plot top.png
-      kinfu eval segment --sweep --scenes 0,1 --plot pr.png -o sweep.json
+      kinfu eval segment --sweep --sweep-parameter t_ff --scenes 4,5 --plot pr.png -o sweep.json
     """
     if sweep:
         if segments is not None or ground_truth is not None:
             raise ConfigError("--sweep makes its own scenes: give no SEGMENTS nor --ground-truth")
-        values = _numbers(sweep_values, "--sweep-values")
+        values = (_numbers(sweep_values, "--sweep-values") if sweep_values is not None
+                  else default_sweep_values(sweep_parameter))
         seeds = _numbers(scenes, "--scenes", int)
+        colors = [c.strip() for c in color.split(",") if c.strip()]
+        scene_layouts = [c.strip() for c in layouts.split(",") if c.strip()]
         if not 32 <= resolution <= 512:
             raise ConfigError(f"--resolution: expected 32..512 voxels, got {resolution}")
         claim_outputs({"output": output, "plot": plot}, [], force)
-        doc = sweep_segmentation(seeds, sweep_parameter, values, t_eval=t_eval, max_distance=max_distance,
-                                 cover=cover, share=share, resolution=resolution, quiet=quiet)
+        doc = sweep_segmentation(seeds, sweep_parameter, values, method=method, colors=colors, layouts=scene_layouts,
+                                 photometric=photometric, t_eval=t_eval, max_distance=max_distance, cover=cover,
+                                 share=share, resolution=resolution, quiet=quiet)
         doc["warnings"] = []
         if plot is not None:
             from kinfu_cli.report.segment_eval_plot import plot_sweep_pr

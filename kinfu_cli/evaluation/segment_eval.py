@@ -32,6 +32,9 @@ from kinfu_cli.evaluation.segments import consistency_errors, score_segmentation
 
 PLANE_GREY = 153  # segments.ply: the support plane's colour (0.6 as uint8); dropped points are black
 SWEEP_DEFAULT = ("concavity_tolerance_deg", (0.0, 5.0, 10.0, 15.0, 20.0, 30.0, 45.0, 60.0))
+# values swept by default per parameter (colour distances: RGB in [0, 1], the cube's diagonal is sqrt(3); a
+# T_lccp of 2 prunes nothing, the unpruned LCCP)
+SWEEP_VALUES = {"t_lccp": (0.1, 0.15, 0.2, 0.3, 0.4, 0.6, 2.0), "t_ff": (0.1, 0.2, 0.3, 0.5, 0.7, 1.0)}
 
 
 @dataclass
@@ -217,29 +220,53 @@ def evaluate_segments(segments: str | os.PathLike | PredictedSegments, ground_tr
 def _sweep_fields() -> dict[str, type]:
     from kinfu_cli.segmentation.segments import SegmentationParams
 
-    return {f.name: f.type for f in fields(SegmentationParams)
-            if isinstance(getattr(SegmentationParams(), f.name), (int, float))
-            and not isinstance(getattr(SegmentationParams(), f.name), bool)}
+    out = {f.name: f.type for f in fields(SegmentationParams)
+           if isinstance(getattr(SegmentationParams(), f.name), (int, float))
+           and not isinstance(getattr(SegmentationParams(), f.name), bool)}
+    return out | {"t_lccp": float}  # off (None) by default, a number when swept
+
+
+def sweep_method(parameter: str, method: str | None = None) -> str:
+    """The segmentation method a sweep runs: given, or the one the parameter belongs to (T_ff: Flood Fill)."""
+    return method or ("flood-fill" if parameter == "t_ff" else "lccp")
+
+
+def default_sweep_values(parameter: str) -> tuple[float, ...]:
+    """The values swept when none are given."""
+    return SWEEP_VALUES.get(parameter, SWEEP_DEFAULT[1])
+
+
+# The generated scenes: each layout's fusion cube (m); the voxel is 1.1 m / `resolution` in both
+SCENE_SIZES = {"objects": 1.1, "tabletop": 1.6}
 
 
 def fuse_segmentation_scene(seed: int, *, resolution: int = 160, size: float = 1.1, width: int = 240,
-                            height: int = 180, frames: int = 24):
-    """The volume of the segmentation scene `seed` (the after state of the "objects" scene of kinfu synth, fused from
-    every camera pose with the sensor noise) and that scene."""
-    from kinfu_cli.evaluation.segments import fuse_synthetic_scene
+                            height: int = 180, frames: int = 24, layout: str = "objects", colors=("none",),
+                            photometric: bool = False):
+    """The volumes of the generated scene `seed` (the after state of kinfu synth's `layout` scene, fused from every
+    camera pose with the sensor noise), one per colour mode in `colors`, and that scene."""
+    from kinfu_cli.evaluation.segments import fuse_synthetic_volumes
 
-    return fuse_synthetic_scene(seed, resolution=resolution, size=size, width=width, height=height, frames=frames,
-                                layout="objects")
+    return fuse_synthetic_volumes(seed, colors=colors, resolution=resolution, size=size, width=width, height=height,
+                                  frames=frames, layout=layout, photometric=photometric)
 
 
-def sweep_segmentation(seeds=(0, 1, 2), parameter: str = SWEEP_DEFAULT[0], values=SWEEP_DEFAULT[1], *,
-                       t_eval: float = 0.02, max_distance: float = 0.015, cover: float = 0.8, share: float = 0.2,
-                       resolution: int = 160, size: float = 1.1, frames: int = 24, quiet: bool = True) -> dict:
-    """Boundary P/R, BCE, object recall of the segmentation of generated scenes over `values` of one
-    segmentation parameter (a numeric field of SegmentationParams). Returns the JSON-ready document."""
-    from kinfu_cli.segmentation.pipeline import SegmentOptions, analyse_cloud
-    from kinfu_cli.segmentation.surface import surface_from_volume
-    from kinfu_cli.sim.scene import scene_label_cloud
+def _sweep_options(parameter: str, values: list[float], method: str, color: bool, as_int: bool) -> list:
+    from kinfu_cli.segmentation.pipeline import SegmentOptions
+
+    base = SegmentOptions(superquadrics=False, color=color)
+    out = []
+    for v in values:
+        seg = replace(base.segmentation, **{parameter: int(round(v)) if as_int else v}, method=method,
+                      up=(0.0, 0.0, 1.0))
+        opts = replace(base, segmentation=seg)
+        opts.validate()
+        out.append(opts)
+    return out
+
+
+def _check_sweep_inputs(parameter: str, values, seeds, layouts, colors) -> tuple[list, list, list, list]:
+    from kinfu_cli.evaluation.segments import COLOR_CHOICES
 
     numeric = _sweep_fields()
     if parameter not in numeric:
@@ -251,43 +278,80 @@ def sweep_segmentation(seeds=(0, 1, 2), parameter: str = SWEEP_DEFAULT[0], value
     seeds = [int(s) for s in seeds]
     if not seeds:
         raise ConfigError("expected at least one scene seed", parameter="scenes")
+    layouts = list(dict.fromkeys(layouts))
+    if not layouts or any(lay not in SCENE_SIZES for lay in layouts):
+        raise ConfigError(f"expected scene layouts among {', '.join(SCENE_SIZES)}, got {layouts}", parameter="layouts")
+    colors = list(dict.fromkeys(colors))
+    if not colors or any(c not in COLOR_CHOICES for c in colors):
+        raise ConfigError(f"expected colour modes among {', '.join(COLOR_CHOICES)}, got {colors}", parameter="color")
+    return values, seeds, layouts, colors
+
+
+ROW_KEYS = ("boundary_precision", "boundary_recall", "boundary_f", "bce", "object_recall", "objects_found",
+            "objects_total", "over_segmented", "under_segmenting", "segments")
+
+
+def sweep_segmentation(seeds=(0, 1, 2), parameter: str = SWEEP_DEFAULT[0], values=None, *,
+                       method: str | None = None, colors=("mean", "mode"), layouts=("objects",), photometric: bool = True,
+                       t_eval: float = 0.02, max_distance: float = 0.015, cover: float = 0.8, share: float = 0.2,
+                       resolution: int = 160, size: float | None = None, frames: int = 24,
+                       quiet: bool = True) -> dict:
+    """Boundary P/R, BCE, object recall of the segmentation of generated scenes over `values` of one
+    segmentation parameter (a numeric field of SegmentationParams; t_lccp and t_ff as in thesis Figs.
+    4.10-4.11), for every scene layout x seed x colour mode ("none", "mean", "mode": the volume fused without
+    colour, with the running mean, with the mode filter; photometric: the simulator's colour effects on).
+    size: the fusion cube (default SCENE_SIZES per layout; the voxel stays 1.1 m / resolution).
+    Returns the JSON-ready document."""
+    from kinfu_cli.segmentation.pipeline import analyse_cloud
+    from kinfu_cli.segmentation.surface import surface_from_volume
+    from kinfu_cli.sim.scene import scene_label_cloud
+
+    values = default_sweep_values(parameter) if values is None else values
+    values, seeds, layouts, colors = _check_sweep_inputs(parameter, values, seeds, layouts, colors)
     _check_eval_numbers(t_eval, max_distance, cover, share)
-    base = SegmentOptions(superquadrics=False)
-    as_int = numeric[parameter] in (int, "int")
-    opts_by_value = []
-    for v in values:
-        seg = replace(base.segmentation, **{parameter: int(round(v)) if as_int else v}, up=(0.0, 0.0, 1.0))
-        opts = replace(base, segmentation=seg)
-        opts.validate()
-        opts_by_value.append(opts)
+    method = sweep_method(parameter, method)
+    as_int = _sweep_fields()[parameter] in (int, "int")
+    opts = {c: _sweep_options(parameter, values, method, c != "none", as_int) for c in colors}
     scenes = []
-    steps = [(s, k) for s in seeds for k in range(len(values) + 1)]
-    cloud = gt = None
-    for seed, k in progress(steps, total=len(steps), desc="sweep", quiet=quiet):
-        if k == 0:
-            vol, scene = fuse_segmentation_scene(seed, resolution=resolution, size=size, frames=frames)
-            cloud = surface_from_volume(vol, min_weight=base.min_weight, resolution=base.resolution)
+    steps = [(lay, s, c, k) for lay in layouts for s in seeds for c in [None, *colors]
+             for k in ([0] if c is None else range(len(values)))]
+    vols = gt = objects = None
+    clouds: dict = {}
+    for lay, seed, c, k in progress(steps, total=len(steps), desc="sweep", quiet=quiet):
+        if c is None:  # a new scene: fuse it once per colour mode from the same images
+            cube = size or SCENE_SIZES[lay]
+            res_l = max(16, int(round(resolution * cube / 1.1))) if size is None else resolution
+            vols, scene = fuse_segmentation_scene(seed, resolution=res_l, size=cube, frames=frames, layout=lay,
+                                                  colors=colors, photometric=photometric)
+            clouds = {m: surface_from_volume(v, min_weight=opts[m][0].min_weight, resolution=opts[m][0].resolution)
+                      for m, v in vols.items()}
             pts, lab = scene_label_cloud(scene)
             gt = LabelledCloud(pts, lab)
-            scenes.append({"seed": seed, "points": int(len(cloud.points)), "rows": [],
-                           "objects": {str(scene.label_of(o.id)): o.id for o in scene.present_objects}})
+            objects = {str(scene.label_of(o.id)): o.id for o in scene.present_objects}
             continue
-        res = analyse_cloud(cloud.points, cloud.normals, opts_by_value[k - 1], up_source="option")
+        if k == 0:
+            scenes.append({"layout": lay, "seed": seed, "color": c, "points": int(len(clouds[c].points)),
+                           "rows": [], "objects": objects})
+        cloud = clouds[c]
+        res = analyse_cloud(cloud.points, cloud.normals, opts[c][k], up_source="option", colors=cloud.colors)
         doc, *_ = score_labelled_points(res.segmentation.points, res.segmentation.labels, gt, t_eval=t_eval,
                                         max_distance=max_distance, cover=cover, share=share)
-        scenes[-1]["rows"].append({"value": values[k - 1], **{key: doc[key] for key in (
-            "boundary_precision", "boundary_recall", "boundary_f", "bce", "object_recall", "objects_found",
-            "objects_total", "over_segmented", "under_segmenting", "segments")},
-            "unmatched_share": doc["points"]["unmatched_share"],
-            "missed": [scenes[-1]["objects"].get(str(o["object"]), o["object"]) for o in doc["per_object"]
-                       if not o["found"]]})
+        scenes[-1]["rows"].append({"value": values[k], **{key: doc[key] for key in ROW_KEYS},
+                                   "unmatched_share": doc["points"]["unmatched_share"],
+                                   "missed": [objects.get(str(o["object"]), o["object"]) for o in doc["per_object"]
+                                              if not o["found"]]})
     for s in scenes:
         s["min_bce"] = min(r["bce"] for r in s["rows"])
         best = max(s["rows"], key=lambda r: r["boundary_f"])
         s["best_f"] = {"value": best["value"], "boundary_f": best["boundary_f"]}
-    mean = {key: [float(np.mean([s["rows"][i][key] for s in scenes])) for i in range(len(values))]
-            for key in ("boundary_precision", "boundary_recall", "bce", "object_recall")}
-    return {"parameter": parameter, "values": values, "seeds": seeds, "t_eval": t_eval, "max_distance": max_distance,
+    means = {}
+    for c in colors:
+        group = [s for s in scenes if s["color"] == c]
+        means[c] = {key: [float(np.mean([s["rows"][i][key] for s in group])) for i in range(len(values))]
+                    for key in ("boundary_precision", "boundary_recall", "boundary_f", "bce", "object_recall")}
+    return {"parameter": parameter, "method": method, "values": values, "seeds": seeds, "layouts": layouts,
+            "colors": colors, "photometric": photometric, "t_eval": t_eval, "max_distance": max_distance,
             "cover": cover, "share": share,
-            "fusion": {"resolution": resolution, "size": size, "frames": frames, "scene": "objects"},
-            "scenes": scenes, "mean": mean}
+            "fusion": {"resolution": resolution, "voxel_m": (size or 1.1) / resolution, "frames": frames,
+                       "sizes": {lay: size or SCENE_SIZES[lay] for lay in layouts}},
+            "scenes": scenes, "means": means}

@@ -32,27 +32,37 @@ def format_segment_table(doc: dict) -> str:
     return "\n".join(lines)
 
 
+def _scene_name(s: dict) -> str:
+    return f"{s.get('layout', 'objects')} {s['seed']} {s.get('color', '')}".strip()
+
+
 def format_sweep_table(doc: dict) -> str:
-    """Per scene and threshold value: boundary P/R/F, BCE, object recall, over/under; then min BCE per scene
-    (thesis Table 4.3) and the means over the scenes."""
+    """Per scene (layout, seed, colour mode) and threshold value: boundary P/R/F, BCE, object recall,
+    over/under; then min BCE per scene (thesis Table 4.3) and the means over the scenes per colour mode."""
     name = doc["parameter"]
-    lines = [f"kinfu eval segment, sweep: {name} over {len(doc['values'])} values on {len(doc['scenes'])} generated "
-             f"scenes (the synth 'objects' scene, fused at {doc['fusion']['resolution']}^3 over "
-             f"{doc['fusion']['size']} m), T_eval {doc['t_eval'] * 100:.1f} cm", "",
-             f"  {'scene':>5} {name[:12]:>12} {'bnd P':>6} {'bnd R':>6} {'bnd F':>6} {'BCE':>6} {'obj R':>6} "
+    sizes = doc["fusion"].get("sizes", {})
+    lines = [f"kinfu eval segment, sweep: {name} ({doc.get('method', 'lccp')}) over {len(doc['values'])} values on "
+             f"{len(doc['scenes'])} generated scene volumes (synth {', '.join(doc.get('layouts', ['objects']))} "
+             f"seeds {', '.join(map(str, doc['seeds']))}; colour {', '.join(doc.get('colors', ['none']))}"
+             f"{', photometric effects' if doc.get('photometric') else ''}; voxel "
+             f"{doc['fusion'].get('voxel_m', 0) * 1000:.1f} mm, cubes "
+             f"{', '.join(f'{k} {v} m' for k, v in sizes.items())}), T_eval {doc['t_eval'] * 100:.1f} cm", "",
+             f"  {'scene':>16} {name[:12]:>12} {'bnd P':>6} {'bnd R':>6} {'bnd F':>6} {'BCE':>6} {'obj R':>6} "
              f"{'segs':>5} {'over':>5} {'under':>5}  missed"]
     for s in doc["scenes"]:
         for r in s["rows"]:
-            lines.append(f"  {s['seed']:5d} {r['value']:12g} {r['boundary_precision']:6.3f} {r['boundary_recall']:6.3f} "
-                         f"{r['boundary_f']:6.3f} {r['bce']:6.3f} {r['object_recall']:6.3f} {r['segments']:5d} "
-                         f"{r['over_segmented']:5d} {r['under_segmenting']:5d}  {', '.join(map(str, r['missed']))}")
+            lines.append(f"  {_scene_name(s):>16} {r['value']:12g} {r['boundary_precision']:6.3f} "
+                         f"{r['boundary_recall']:6.3f} {r['boundary_f']:6.3f} {r['bce']:6.3f} {r['object_recall']:6.3f} "
+                         f"{r['segments']:5d} {r['over_segmented']:5d} {r['under_segmenting']:5d}  "
+                         f"{', '.join(map(str, r['missed']))}")
     lines += ["", "  minimum BCE per scene (thesis Table 4.3) and best boundary F:"]
     for s in doc["scenes"]:
-        lines.append(f"  scene {s['seed']}: min BCE {s['min_bce']:.3f}; best F {s['best_f']['boundary_f']:.3f} at "
+        lines.append(f"  {_scene_name(s)}: min BCE {s['min_bce']:.3f}; best F {s['best_f']['boundary_f']:.3f} at "
                      f"{name} = {s['best_f']['value']:g}")
-    m = doc["mean"]
-    lines += ["", f"  mean over scenes {name[:12]:>12} {'bnd P':>6} {'bnd R':>6} {'BCE':>6} {'obj R':>6}"]
-    for i, v in enumerate(doc["values"]):
-        lines.append(f"  {'':16} {v:12g} {m['boundary_precision'][i]:6.3f} {m['boundary_recall'][i]:6.3f} "
-                     f"{m['bce'][i]:6.3f} {m['object_recall'][i]:6.3f}")
+    lines += ["", f"  mean over scenes {'colour':>6} {name[:12]:>12} {'bnd P':>6} {'bnd R':>6} {'bnd F':>6} {'BCE':>6} "
+                  f"{'obj R':>6}"]
+    for c, m in doc["means"].items():
+        for i, v in enumerate(doc["values"]):
+            lines.append(f"  {'':16} {c:>6} {v:12g} {m['boundary_precision'][i]:6.3f} {m['boundary_recall'][i]:6.3f} "
+                         f"{m['boundary_f'][i]:6.3f} {m['bce'][i]:6.3f} {m['object_recall'][i]:6.3f}")
     return "\n".join(lines)

@@ -211,23 +211,52 @@ def gt_labels_from_meshes(points: np.ndarray, meshes: dict[int, object], max_dis
     return np.where(dist[np.arange(len(points)), best] <= max_distance, lab, -1)
 
 
-def fuse_synthetic_scene(seed: int = 0, *, resolution: int = 256, size: float = 1.6, width: int = 320,
-                         height: int = 240, frames: int = 36, noise: bool = True, layout: str = "tabletop"
-                         ) -> tuple[TernaryVolume, Scene]:
+# The simulator's photometric effects used for the colour comparisons (as benchmarks/bench_color_mode.py):
+# per-frame auto-gain, white-balance drift and colour-depth misregistration, the blur the mode filter is for.
+PHOTOMETRIC = {"gain_jitter": 0.15, "white_balance_jitter": 0.04, "misregistration": (1.5, -1.0, 0.3)}
+COLOR_CHOICES = ("none", "mean", "mode")  # "none": fused without colour (segmentation by shape alone)
+
+
+def fuse_synthetic_volumes(seed: int = 0, *, colors=("none",), resolution: int = 256, size: float = 1.6,
+                           width: int = 320, height: int = 240, frames: int = 36, noise: bool = True,
+                           layout: str = "tabletop", photometric: bool = False
+                           ) -> tuple[dict[str, TernaryVolume], Scene]:
     """Fuse the after-change state of the synth scenario `seed` (layout: `make_scenario`'s) from all its
-    camera poses.
+    camera poses, once per colour mode in `colors` (COLOR_CHOICES) from the same rendered images.
+    photometric: render with PHOTOMETRIC (else the sensor's clean colours).
+
+    Returns ({colour mode: volume}, scene after the change).
+    """
+    from kinfu_cli.sim.sensor import DepthSensor
+
+    bad = [c for c in colors if c not in COLOR_CHOICES]
+    if bad or not colors:
+        raise ConfigError(f"expected colour modes among {', '.join(COLOR_CHOICES)}, got {list(colors)}",
+                          parameter="colors")
+    sc = make_scenario(seed, width=width, height=height, frames=frames, noise=noise, layout=layout)
+    after = sc.scene_after
+    sensor = DepthSensor(sc.K, width, height, noise=noise, seed=seed, **PHOTOMETRIC) if photometric else sc.sensor
+    c = np.array([after.table.center[0], after.table.center[1], after.table.top_z])
+    vols = {m: TernaryVolume(size=size, resolution=resolution, origin=c - np.array([size / 2, size / 2, 0.25]),
+                             color=m != "none", color_mode="mean" if m == "none" else m) for m in dict.fromkeys(colors)}
+    for k, f in enumerate(sc.frames):
+        depth, rgb = sensor.render(after, f.T_world_camera, frame_seed=k)
+        for m, vol in vols.items():
+            vol.integrate(depth, sc.K, f.T_world_camera, None if m == "none" else rgb)
+    return vols, after
+
+
+def fuse_synthetic_scene(seed: int = 0, *, resolution: int = 256, size: float = 1.6, width: int = 320,
+                         height: int = 240, frames: int = 36, noise: bool = True, layout: str = "tabletop",
+                         color: str = "none", photometric: bool = False) -> tuple[TernaryVolume, Scene]:
+    """`fuse_synthetic_volumes` for one colour mode ("none" = without colour, "mean", "mode").
 
     Returns (volume, scene after the change).
     """
-    sc = make_scenario(seed, width=width, height=height, frames=frames, noise=noise, layout=layout)
-    after = sc.scene_after
-    c = np.array([after.table.center[0], after.table.center[1], after.table.top_z])
-    vol = TernaryVolume(size=size, resolution=resolution, origin=c - np.array([size / 2, size / 2, 0.25]),
-                        color=False)
-    for k, f in enumerate(sc.frames):
-        depth, _ = sc.sensor.render(after, f.T_world_camera, frame_seed=k)
-        vol.integrate(depth, sc.K, f.T_world_camera)
-    return vol, after
+    vols, after = fuse_synthetic_volumes(seed, colors=(color,), resolution=resolution, size=size, width=width,
+                                         height=height, frames=frames, noise=noise, layout=layout,
+                                         photometric=photometric)
+    return vols[color], after
 
 
 def scene_gt_labels(points: np.ndarray, scene: Scene, max_distance: float = 0.015) -> tuple[np.ndarray, dict[int, str]]:

@@ -76,8 +76,9 @@ def plot_segment_errors(points: np.ndarray, errors: np.ndarray, gt_labels: np.nd
 
 
 def plot_sweep_pr(doc: dict, path: str | os.PathLike) -> Path:
-    """Boundary precision/recall curves of the sweep document, one per scene, each point a threshold value;
-    the best-F value of each scene labelled."""
+    """Boundary precision/recall curves of the sweep document: thin, one per scene volume (colour = scene,
+    line style = colour mode), each point a threshold value; thick, the mean per colour mode (as thesis Figs.
+    4.10-4.11: "not enhanced" mean colour against the mode filter), its best-F value labelled."""
     import matplotlib  # heavy; only needed to plot
 
     matplotlib.use("Agg")
@@ -85,24 +86,39 @@ def plot_sweep_pr(doc: dict, path: str | os.PathLike) -> Path:
 
     fig, ax = plt.subplots(figsize=(7, 6))
     cmap = plt.get_cmap("tab10")
-    best = []
-    for k, s in enumerate(doc["scenes"]):
+    styles = {"mode": "-", "mean": "--", "none": ":"}
+    mean_colours = {"mode": "black", "mean": "tab:red", "none": "tab:gray"}
+    scene_ids = list(dict.fromkeys((s.get("layout", "objects"), s["seed"]) for s in doc["scenes"]))
+    pts = []
+    for s in doc["scenes"]:
+        k = scene_ids.index((s.get("layout", "objects"), s["seed"]))
         r = np.array([[row["boundary_recall"], row["boundary_precision"]] for row in s["rows"]])
-        ax.plot(r[:, 0], r[:, 1], "-o", ms=4, color=cmap(k % 10), label=f"scene {s['seed']}")
-        i = int(np.argmax([row["boundary_f"] for row in s["rows"]]))
-        best.append((r[i], f"{s['seed']}: {doc['parameter']} {s['rows'][i]['value']:g}", cmap(k % 10)))
-    lo = min(0.5, min(min(b[0]) for b in best) - 0.05) if best else 0.5
+        pts.append(r)
+        c = s.get("color", "none")
+        ax.plot(r[:, 0], r[:, 1], styles.get(c, "-"), marker="o", ms=2.5, lw=0.8, alpha=0.45, color=cmap(k % 10),
+                label=f"{s.get('layout', 'objects')} {s['seed']}" if c == doc["scenes"][0].get("color", "none")
+                else None)
+    best = []
+    for c, m in doc.get("means", {}).items():
+        r = np.stack([m["boundary_recall"], m["boundary_precision"]], axis=1)
+        pts.append(r)
+        ax.plot(r[:, 0], r[:, 1], styles.get(c, "-"), marker="s", ms=5, lw=2.2, color=mean_colours.get(c, "k"),
+                label=f"mean, {c} colour" if c != "none" else "mean, no colour")
+        i = int(np.argmax(m["boundary_f"]))
+        best.append((r[i], f"{c}: {doc['parameter']} {doc['values'][i]:g}", mean_colours.get(c, "k")))
+    allp = np.concatenate(pts) if pts else np.ones((1, 2))
+    lo = min(0.5, float(allp.min()) - 0.05)
     ax.set_xlim(lo, 1.01)
     ax.set_ylim(lo, 1.01)
     if best:
-        pos = spread_labels(np.array([b[0] for b in best]) + [0.0, 0.02], (0.3, 0.03), bounds=(lo, 1.01))
+        pos = spread_labels(np.array([b[0] for b in best]) + [0.0, 0.02], (0.25, 0.03), bounds=(lo, 1.01))
         for (a, t, c), p in zip(best, pos):
-            ax.annotate(t, a, xytext=p, fontsize=7, color=c, ha="center",
+            ax.annotate(t, a, xytext=p, fontsize=8, color=c, ha="center",
                         arrowprops={"arrowstyle": "-", "lw": 0.5, "color": c})
     ax.set_xlabel(f"boundary recall (T_eval = {doc['t_eval'] * 100:.0f} cm)")
     ax.set_ylabel("boundary precision")
-    ax.set_title(f"segmentation PR over {doc['parameter']}")
+    ax.set_title(f"segmentation PR over {doc['parameter']} ({doc.get('method', 'lccp')})")
     ax.grid(alpha=0.3)
-    ax.legend(loc="lower left", fontsize=8)
+    ax.legend(loc="lower left", fontsize=7)
     fig.tight_layout()
     return save_figure(fig, path, dpi=110)

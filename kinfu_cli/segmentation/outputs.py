@@ -1,5 +1,6 @@
 """The files of `kinfu segment`: segments.ply and saliency.ply (the surface cloud coloured by segment and
-by saliency) and segments.json, each written atomically. The colours are shared with the PNG renders."""
+by saliency; segments.ply also holds the integer per-point `label`, a labels file) and segments.json, each
+written atomically. The colours are shared with the PNG renders."""
 
 from __future__ import annotations
 
@@ -48,9 +49,14 @@ def write_segment_outputs(result: SegmentResult, outdir: str | os.PathLike) -> d
     files: dict[str, Path] = {}
     for name, col in (("segments.ply", segment_colors(seg.labels)),
                       ("saliency.ply", saliency_colors(seg.labels, result.saliency))):
-        pc = SurfaceCloud(seg.points, seg.normals).to_open3d(col)
+        pc = o3d.t.geometry.PointCloud.from_legacy(SurfaceCloud(seg.points, seg.normals).to_open3d())
+        # colours as uint8 (what PLY viewers expect); segments.ply also carries the segment as an integer
+        # `label` (0 support plane, 1.. segments, -1 dropped) so readers need not decode colours
+        pc.point["colors"] = o3d.core.Tensor(np.round(np.clip(col, 0, 1) * 255).astype(np.uint8))
+        if name == "segments.ply":
+            pc.point["label"] = o3d.core.Tensor(np.asarray(seg.labels, dtype=np.int32).reshape(-1, 1))
         with atomic_path(out / name) as tmp:
-            if not o3d.io.write_point_cloud(str(tmp), pc, write_ascii=False):
+            if not o3d.t.io.write_point_cloud(str(tmp), pc, write_ascii=False):
                 raise VolumeError(f"{out / name}: open3d could not write the point cloud")
         files[name] = out / name
     files["segments.json"] = write_json(out / "segments.json", result.to_json())

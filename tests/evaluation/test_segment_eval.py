@@ -151,8 +151,8 @@ def test_eval_segment_end_to_end(small_scene, tmp_path):
     assert r.exit_code == 0, r.output
     assert "bnd P" in r.output and "BCE" in r.output
     doc = json.loads(out.read_text())
-    assert doc["input"]["labels_from"] == "segment colours" and not doc["warnings"]
-    # the colour groups of segments.ply are the segmentation's labels: same scores as from memory
+    assert doc["input"]["labels_from"] == "label property" and not doc["warnings"]
+    # segments.ply's labels are the segmentation's: same scores as from memory
     mem = evaluate_segments(PredictedSegments(res.segmentation.points, res.segmentation.labels, None, "memory"),
                             read_labelled_cloud(root / "labels.ply"))
     for key in ("boundary_precision", "boundary_recall", "bce", "object_recall", "over_segmented",
@@ -178,6 +178,16 @@ def test_segments_json_mismatch_is_a_warning(small_scene, tmp_path):
 
     seg = tmp_path / "seg"
     shutil.copytree(root / "seg", seg)
+    # an older segments.ply (colours only, no label property): the colour groups are the segments
+    import open3d as o3d
+
+    o3d.io.write_point_cloud(str(seg / "segments.ply"), o3d.io.read_point_cloud(str(seg / "segments.ply")))
+    pred = load_predicted_segments(seg)
+    assert pred.source == "segment colours" and not pred.warnings
+    mem = evaluate_segments(PredictedSegments(res.segmentation.points, res.segmentation.labels, None, "memory"),
+                            read_labelled_cloud(root / "labels.ply")).document
+    old = evaluate_segments(pred, read_labelled_cloud(root / "labels.ply")).document
+    assert old["boundary_f"] == pytest.approx(mem["boundary_f"], abs=1e-6) and old["bce"] == pytest.approx(mem["bce"])
     doc = json.loads((seg / "segments.json").read_text())
     doc["segments"][0]["point_count"] += 1
     (seg / "segments.json").write_text(json.dumps(doc))
@@ -185,9 +195,57 @@ def test_segments_json_mismatch_is_a_warning(small_scene, tmp_path):
     assert pred.warnings and "share a colour" in pred.warnings[0]
 
 
+def test_mode_filter_and_mean_differ_on_photometric_scenes():
+    """The sweep's volumes: one render, fused with the mean and the mode filter; with the simulator's gain /
+    white-balance jitter and misregistration their surface colours differ, the geometry does not."""
+    from kinfu_cli.evaluation.segments import fuse_synthetic_volumes
+    from kinfu_cli.segmentation.surface import surface_from_volume
+
+    vols, scene = fuse_synthetic_volumes(3, colors=("none", "mean", "mode"), resolution=64, size=1.1, width=96,
+                                         height=72, frames=6, layout="objects", photometric=True)
+    clouds = {m: surface_from_volume(v, resolution=0.02) for m, v in vols.items()}
+    assert clouds["none"].colors is None and clouds["mean"].colors is not None
+    assert len(clouds["mean"].points) == len(clouds["mode"].points) == len(clouds["none"].points)
+    assert np.allclose(clouds["mean"].points, clouds["mode"].points)
+    diff = np.linalg.norm(clouds["mean"].colors - clouds["mode"].colors, axis=1)
+    assert np.mean(diff > 0.02) > 0.05  # mode picks one observed colour where the mean blends
+
+
+def test_cli_sweep_over_t_ff_with_mean_and_mode(tmp_path):
+    """A tiny Flood Fill sweep: one row per value for each colour volume, a stricter T_ff never gives fewer
+    segments, the table and the PR curves (one mean curve per colour mode)."""
+    out = tmp_path / "sweep.json"
+    r = CliRunner().invoke(cli, ["eval", "segment", "--sweep", "--sweep-parameter", "t_ff", "--sweep-values",
+                                 "0.15,1.0", "--scenes", "1", "--resolution", "64", "-o", str(out), "--plot",
+                                 str(tmp_path / "pr.png"), "--quiet"])
+    assert r.exit_code == 0, r.output
+    doc = json.loads(out.read_text())
+    assert doc["method"] == "flood-fill" and doc["colors"] == ["mean", "mode"] and doc["photometric"]
+    assert [(s["layout"], s["seed"], s["color"]) for s in doc["scenes"]] == [("objects", 1, "mean"),
+                                                                            ("objects", 1, "mode")]
+    for s in doc["scenes"]:
+        assert [row["value"] for row in s["rows"]] == [0.15, 1.0]
+        assert s["rows"][0]["segments"] >= s["rows"][1]["segments"]
+        assert all(0 <= row["boundary_precision"] <= 1 and 0 <= row["bce"] <= 1 for row in s["rows"])
+    assert set(doc["means"]) == {"mean", "mode"} and len(doc["means"]["mode"]["boundary_f"]) == 2
+    assert "objects 1 mode" in r.output and "mean over scenes" in r.output
+    assert (tmp_path / "pr.png").stat().st_size > 10_000
+
+
+@pytest.mark.parametrize("args, flag", [(["--color", "mean,best"], "--color"), (["--scene", "kitchen"], "--scene"),
+                                        (["--sweep-parameter", "method"], "--sweep-parameter"),
+                                        (["--sweep-parameter", "t_lccp", "--sweep-values", "3"], "t_lccp")])
+def test_bad_sweep_options_are_one_line_errors(tmp_path, args, flag):
+    r = CliRunner().invoke(cli, ["eval", "segment", "--sweep", "--resolution", "32", "--scenes", "0",
+                                 "-o", str(tmp_path / "s.json"), *args])
+    one_line_error(r, flag)
+    assert not (tmp_path / "s.json").exists()
+
+
 @pytest.mark.slow
 def test_sweep_gives_pr_points_per_value(tmp_path):
-    doc = sweep_segmentation((2,), "concavity_tolerance_deg", (5.0, 40.0), resolution=128, size=1.1, frames=12)
+    doc = sweep_segmentation((2,), "concavity_tolerance_deg", (5.0, 40.0), colors=("none",), resolution=128,
+                             size=1.1, frames=12)
     rows = doc["scenes"][0]["rows"]
     assert [r["value"] for r in rows] == [5.0, 40.0]
     # a looser convexity threshold merges more: never more segments

@@ -168,6 +168,18 @@ def test_cli_segment_writes_outputs_from_a_ternary_file(tmp_path, scenes):
     pc = o3d.io.read_point_cloud(str(out / "segments.ply"))
     assert len(pc.points) == doc["points"] and pc.has_colors()
     assert (out / "saliency.ply").exists()
+    # segments.ply is a labels file: an integer `label` per point, each segment's count as segments.json says,
+    # and the colours still tell the segments apart (viewers show them as 0..1 floats)
+    from kinfu_cli.io.labelled_cloud import read_labelled_cloud
+
+    lab = read_labelled_cloud(out / "segments.ply").labels
+    assert lab.dtype.kind == "i" and len(lab) == doc["points"]
+    counts = {int(v): int(n) for v, n in zip(*np.unique(lab, return_counts=True))}
+    assert {o["id"]: counts.get(o["id"]) for o in objs} == {o["id"]: o["point_count"] for o in objs}
+    assert counts.get(0, 0) > 0  # the support plane
+    col = np.round(np.asarray(pc.colors) * 255).astype(int)
+    assert len(np.unique(col[lab == objs[0]["id"]], axis=0)) == 1
+    assert np.all(col[lab == 0] == 153)
 
 
 def test_cli_segment_bad_input_exits_2_without_outputs(tmp_path):
