@@ -13,6 +13,7 @@ arrays back into a TernaryVolume is fusion's job (`fusion.volume.load_volume`).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -51,6 +52,7 @@ def read_volume_file(path: str | os.PathLike) -> tuple[dict, dict[str, np.ndarra
     path = Path(path)
     if not path.exists():
         raise VolumeError(f"{path}: no such volume file")
+    _check_npz(path)
     try:
         with np.load(path, allow_pickle=False) as data:
             if "meta" not in data.files:
@@ -81,6 +83,7 @@ def read_volume_meta(path: str | os.PathLike) -> dict | None:
     path = Path(path)
     if not path.exists():
         raise VolumeError(f"{path}: no such volume file")
+    _check_npz(path)
     try:
         with np.load(path, allow_pickle=False) as data:
             meta = json.loads(str(data["meta"])) if "meta" in data.files else None
@@ -90,6 +93,15 @@ def read_volume_meta(path: str | os.PathLike) -> dict | None:
     if meta is not None and not isinstance(meta, dict):
         raise VolumeError(f"{path}: volume metadata is not a JSON object")
     return meta
+
+
+def _check_npz(path: Path) -> None:
+    """An .npz is a zip archive: anything else (a JSON, a PLY) is named as such, before numpy's loader falls back
+    to pickles and reports that instead."""
+    with contextlib.suppress(OSError), open(path, "rb") as f:
+        head = f.read(4)
+        if head and head not in (b"PK\x03\x04", b"PK\x05\x06"):  # an empty file: numpy's "truncated" below
+            raise VolumeError(f"{path}: not an .npz file (expected a volume.npz or ternary.npz that kinfu wrote)")
 
 
 def _short(exc: BaseException) -> str:

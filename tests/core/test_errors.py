@@ -34,3 +34,16 @@ def test_cli_shows_the_flag_of_a_library_parameter(volume, args, line):
     res = CliRunner().invoke(cli, ["nbv", str(volume), "--mode", "objects", *args])
     assert res.exit_code == 2
     assert res.output.strip().splitlines() == [res.output.strip()] and res.output.startswith(line), res.output
+
+
+def test_a_file_that_is_not_an_npz_is_named_as_such(tmp_path):
+    """A JSON given where a volume is expected: named as not an .npz, not numpy's pickle advice."""
+    from kinfu_cli.core.errors import VolumeError
+    from kinfu_cli.core.volume_file import read_volume_file, read_volume_meta
+
+    p = tmp_path / "pois.json"
+    p.write_text('{"pois": []}')
+    for read in (read_volume_file, read_volume_meta):
+        with pytest.raises(VolumeError, match=r"not an \.npz file") as err:
+            read(p)
+        assert "pickle" not in str(err.value)
