@@ -11,7 +11,7 @@ from kinfu_cli.commands._options import claim_outputs, force_option
 from kinfu_cli.commands._output import emit
 from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError
-from kinfu_cli.localization.localize import localize_points
+from kinfu_cli.localization.localize import MAX_POINTS, localize_points
 from kinfu_cli.localization.mesh_model import read_mesh
 from kinfu_cli.localization.mupf import MupfParameters
 from kinfu_cli.localization.points import read_points, read_segment_points
@@ -63,13 +63,16 @@ def _lines(doc: dict) -> list[str]:
               help="Prior mean: 'centroid' (model centred on the points), 'zero' (thesis) or x,y,z,phi,theta,psi.")
 @click.option("--beta", type=float, default=2.0, show_default=True,
               help="Unscented transform beta (Table 4.1 prints 30, which drifts here; see README).")
+@click.option("--max-points", type=int, default=MAX_POINTS, show_default=True,
+              help="Thin more points than this to this many, in their order (the thesis runs on 100 points of a "
+                   "cloud; a fused segment has thousands); 0 = all.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed.")
 @click.option("--json", "as_json", is_flag=True, help="Print pose.json to stdout.")
 @click.option("--quiet", is_flag=True, help="No progress output.")
 @force_option
 def command(model: Path | None, points: Path | None, models: str | None, segments: Path | None,
             segment: int | None, output: Path | None, particles: int, window: int | None, sigma_p: float,
-            max_index: float | None, prior: str, beta: float, seed: int, as_json: bool, quiet: bool,
+            max_index: float | None, prior: str, beta: float, max_points: int, seed: int, as_json: bool, quiet: bool,
             force: bool) -> None:
     """Estimate the pose of the mesh MODEL (a closed triangle mesh, PLY/OBJ/STL, in its own frame) from
     POINTS on its surface: a PLY point cloud, a text file of contact points in measurement order (x y z per
@@ -109,7 +112,8 @@ def command(model: Path | None, points: Path | None, models: str | None, segment
     params.check()
     meshes = [read_mesh(p) for p in model_paths]
     pts = read_segment_points(segments, segment) if segments is not None else read_points(points)
-    result = localize_points(meshes, pts, params, prior=_prior(prior), seed=seed, quiet=quiet)
+    result = localize_points(meshes, pts, params, prior=_prior(prior), seed=seed, quiet=quiet,
+                             max_points=max_points)
     doc = result.to_json()
     doc["input"] = {"models": [str(p) for p in model_paths],
                     "points": str(points) if points is not None else f"{segments} segment {segment}"}

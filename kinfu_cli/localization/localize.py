@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.localization.mesh_model import MeshModel
 from kinfu_cli.localization.mupf import MupfParameters, MupfResult, check_points, localize_mupf, parameters_json
@@ -55,15 +56,26 @@ class LocalizationResult:
         return doc
 
 
+# points the filter runs on at most: thesis ch. 5 localises objects from 100 points of the filtered cloud
+MAX_POINTS = 100
+
+
 def localize_points(models: list[MeshModel], points: np.ndarray, params: MupfParameters = MupfParameters(), *,
-                    prior: str | np.ndarray = "centroid", seed: int | None = 0, quiet: bool = True
-                    ) -> LocalizationResult:
+                    prior: str | np.ndarray = "centroid", seed: int | None = 0, quiet: bool = True,
+                    max_points: int = MAX_POINTS) -> LocalizationResult:
     """MUPF for each model on the same points. prior "centroid" puts the prior mean's position at the points'
     centroid minus the model's (the thesis' x0 = 0 assumes points around the model origin); "zero" is the
-    thesis' null vector; or a 6-vector."""
+    thesis' null vector; or a 6-vector. max_points: more points than this (a fused segment has thousands, and
+    the filter takes them one at a time) are thinned to this many, in their order, seeded (0: all)."""
     if not models:
         raise ConfigError("expected at least one model", parameter="models")
     pts = check_points(points)
+    check_number(max_points, "max_points", 0, integer=True)
+    thinned = 0 < max_points < len(pts)
+    n_given = len(pts)
+    if thinned:
+        keep = np.sort(np.random.default_rng(seed).choice(len(pts), max_points, replace=False))
+        pts = pts[keep]
     params.check()
     if params.window is not None and params.window > len(pts):
         raise ConfigError(f"window {params.window} exceeds the {len(pts)} points", parameter="window")
@@ -86,6 +98,9 @@ def localize_points(models: list[MeshModel], points: np.ndarray, params: MupfPar
     if not results[res.chosen].converged:
         res.warnings.append(f"MUPF did not converge: I_L {results[res.chosen].index:.4f} m > max_index "
                             f"{results[res.chosen].max_index:.4f} m (no pose reported)")
+    if thinned:
+        res.warnings.append(f"used {len(pts)} of the {n_given} points, spread over them in their order "
+                            f"(max_points; the thesis runs the filter on 100 points of a cloud)")
     if len(pts) < 10:
         res.warnings.append(f"only {len(pts)} points: the pose may be ambiguous (the thesis uses 15-62)")
     spread = float(np.linalg.norm(pts - pts.mean(0), axis=1).max())

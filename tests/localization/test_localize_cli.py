@@ -152,3 +152,21 @@ def test_eval_localize_small_run(tmp_path):
         assert s["trials"] == 2 and 0 <= s["successes"] <= 2 and s["mean_index_m"] >= 0
     assert doc["thesis"]["mupf"]["tetrahedron"][4] == 50
     one_line_error(CliRunner().invoke(cli, ["eval", "localize", "--shapes", "sphere"]), "--shapes")
+
+
+def test_many_points_are_thinned_in_order_and_said(files):
+    """A fused segment gives thousands of points and the filter takes one at a time: more than --max-points
+    (default 100, the thesis' cloud size) are thinned, kept in their measurement order, with a warning."""
+    tmp, mesh, _ = files
+    pts = _points(n=400, seed=1)
+    txt = tmp / "many.txt"
+    np.savetxt(txt, pts)
+    out = tmp / "pose.json"
+    res = CliRunner().invoke(cli, ["localize", str(mesh), str(txt), "-o", str(out), *FAST, "--max-index", "1",
+                                   "--max-points", "30"])
+    assert res.exit_code == 0, res.output
+    doc = json.loads(out.read_text())
+    assert doc["points"] == 30 and doc["window"] == 15
+    assert any("used 30 of the 400 points" in w for w in doc["warnings"])
+    res = CliRunner().invoke(cli, ["localize", str(mesh), str(txt), "-o", str(out), *FAST, "--max-points", "-1"])
+    assert res.exit_code == 2 and "--max-points" in res.output
