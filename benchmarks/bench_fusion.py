@@ -25,7 +25,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
@@ -35,7 +34,9 @@ from kinfu_cli.fusion import kernels as kn  # noqa: E402
 from kinfu_cli.fusion.placement import default_origin  # noqa: E402
 from kinfu_cli.fusion.volume import TernaryVolume  # noqa: E402
 
-SEVEN = REPO.parent / "shared" / "data" / "rgbd-7scenes-redkitchen"
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _seven_scenes import SEVEN, seven_scenes_frames  # noqa: E402
+
 
 
 def synthetic_frames(n: int, width: int = 640, height: int = 480):
@@ -50,21 +51,6 @@ def synthetic_frames(n: int, width: int = 640, height: int = 480):
     out = []
     for T in orbit_poses(n, radius=1.0, height=0.8, span_deg=120):
         d, c = sensor.render(scene, T)
-        out.append((d, c, K, T))
-    return out
-
-
-def seven_scenes_frames(n: int):
-    K = np.loadtxt(SEVEN / "camera-intrinsics.txt")
-    out = []
-    for i in range(n):
-        p = SEVEN / f"frame-{i:06d}.depth.png"
-        if not p.exists():
-            break
-        raw = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
-        d = np.where((raw > 0) & (raw < 65535), raw.astype(np.float32) / 1000.0, 0).astype(np.float32)
-        c = cv2.cvtColor(cv2.imread(str(SEVEN / f"frame-{i:06d}.color.jpg")), cv2.COLOR_BGR2RGB)
-        T = np.loadtxt(SEVEN / f"frame-{i:06d}.pose.txt")
         out.append((d, c, K, T))
     return out
 

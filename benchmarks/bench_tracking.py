@@ -17,7 +17,6 @@ import sys
 import time
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
@@ -28,22 +27,15 @@ from kinfu_cli.fusion.placement import default_origin  # noqa: E402
 from kinfu_cli.fusion.tracking import FrameToModelTracker, predict_pose  # noqa: E402
 from kinfu_cli.fusion.volume import TernaryVolume  # noqa: E402
 
-SEVEN = REPO.parent / "shared" / "data" / "rgbd-7scenes-redkitchen"
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _seven_scenes import SEVEN, seven_scenes_frames  # noqa: E402
+
 DT = 1 / 30
 
 
 def kitchen(n: int):
-    K = np.loadtxt(SEVEN / "camera-intrinsics.txt")
-    out = []
-    for i in range(n):
-        p = SEVEN / f"frame-{i:06d}.depth.png"
-        if not p.exists():
-            break
-        raw = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
-        d = np.where(raw < 65535, raw.astype(np.float32) / 1000.0, 0).astype(np.float32)
-        d = fill_gaps(range_filter(d, 0.3, 4.0), 2)[0]
-        out.append((d, K, np.loadtxt(SEVEN / f"frame-{i:06d}.pose.txt")))
-    return out
+    """Frames 0..n-1 as (depth filtered as `kinfu fuse` does: range, fill-gaps 2; K; recorded pose)."""
+    return [(fill_gaps(range_filter(d, 0.3, 4.0), 2)[0], K, T) for d, _, K, T in seven_scenes_frames(n, color=False)]
 
 
 class Run:
