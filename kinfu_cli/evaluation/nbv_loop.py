@@ -501,10 +501,11 @@ def run_exploration(sc: SimScene, cfg: LoopConfig, quiet: bool = True, scene_nam
         curve, cast, secs, scores, segs, frames = [u0], [], [], [], [], 0
         for _ in progress(range(cfg.views), total=cfg.views, desc=strat, quiet=quiet):
             t = time.perf_counter()
-            grid, _ = known_grid(vol)
+            weights = vol.weights()  # one extraction for the score and the contours
+            grid, _ = known_grid(vol, weights=weights)
             scorer = nbv_scorer(grid, score_cam, cfg.gain, table_z=sc.table_z, reject_unknown=cfg.reject_unknown,
                                 optimistic=cfg.optimistic)
-            contours, _ = volume_contours(vol)
+            contours, _ = volume_contours(vol, weights=weights)
             ex = dict(exclude=np.array(taken).reshape(-1, 4, 4), exclude_shift=cfg.exclude_shift,
                       exclude_turn_deg=cfg.exclude_turn_deg, score_threshold=score_th)
             if strat == "objects":

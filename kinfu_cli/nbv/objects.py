@@ -276,24 +276,34 @@ def plan_standard_views(contours: Contours, scorer: Scorer, region_center, regio
 W_TH = 5.0
 
 
-def known_grid(volume: TernaryVolume | TernaryGrid, w_th: float = W_TH) -> tuple[TernaryGrid, bool]:
+def _weights(volume, weights: np.ndarray | None) -> np.ndarray | None:
+    """The dense fusion weights: the caller's when it has them already (one extraction serves score and
+    contours), else the volume's; None for a ternary grid."""
+    if weights is not None or not hasattr(volume, "weights"):
+        return weights
+    return volume.weights()
+
+
+def known_grid(volume: TernaryVolume | TernaryGrid, w_th: float = W_TH, weights: np.ndarray | None = None
+               ) -> tuple[TernaryGrid, bool]:
     """The ternary grid of the object-driven planner (thesis ch. 3): voxels observed fewer than `w_th` times are
     unknown, for the ray-cast score as for the contours. The flag says whether weights were there to apply it
     (a ternary grid file has none: then known = observed once)."""
     grid = volume.ternary_grid() if hasattr(volume, "ternary_grid") else volume
-    if not hasattr(volume, "weights"):
+    weights = _weights(volume, weights)
+    if weights is None:
         return grid, False
-    labels = np.where(volume.weights() >= w_th, grid.labels, np.int8(0))
-    return replace(grid, labels=labels), True
+    return replace(grid, labels=np.where(weights >= w_th, grid.labels, np.int8(0))), True
 
 
-def volume_contours(volume: TernaryVolume | TernaryGrid, w_th: float = W_TH) -> tuple[Contours, bool]:
+def volume_contours(volume: TernaryVolume | TernaryGrid, w_th: float = W_TH, weights: np.ndarray | None = None
+                    ) -> tuple[Contours, bool]:
     """Contours (`nbv.contours`) with the thesis' W_th applied: a voxel is known only once observed `w_th` times, so a
     surface seen in one or two noisy frames still borders unknown space and keeps its contour points.
     Needs the fusion weights, which a fused volume (volume.npz) has and a ternary grid (ternary.npz) has not;
     the flag says whether W_th could be applied (without weights every labelled voxel counts as known)."""
     grid = volume.ternary_grid() if hasattr(volume, "ternary_grid") else volume
-    weights = volume.weights() if hasattr(volume, "weights") else None
+    weights = _weights(volume, weights)
     contours = extract_contours(grid.labels, grid.origin, grid.voxel_size, weights=weights, w_th=w_th)
     return contours, weights is not None
 
@@ -301,7 +311,7 @@ def volume_contours(volume: TernaryVolume | TernaryGrid, w_th: float = W_TH) -> 
 def plan_object_views_for_volume(volume: TernaryVolume | TernaryGrid, camera: CameraModel, *,
                                  scorer: Scorer | None = None, score_threshold: float = 0.0, w_th: float = W_TH,
                                  segment_options: SegmentOptions | None = None, table_z: float | None = None,
-                                 up=None, **kwargs) -> ObjectPlan:
+                                 up=None, weights: np.ndarray | None = None, **kwargs) -> ObjectPlan:
     """Everything from a volume (fusion TernaryVolume or TernaryGrid): segments (without superquadrics),
     contours, NBV scoring; `kwargs` go to `plan_object_views`. up: the world's up (table_z is the table's
     height along it); default the volume's, else z."""
@@ -313,12 +323,12 @@ def plan_object_views_for_volume(volume: TernaryVolume | TernaryGrid, camera: Ca
         opts = replace(opts, segmentation=replace(opts.segmentation, up=tuple(float(v) for v in up)))
     segments = analyse_volume(volume, opts)
     t_seg = time.perf_counter() - t0
-    grid = volume.ternary_grid() if hasattr(volume, "ternary_grid") else volume
     t = time.perf_counter()
-    contours, _ = volume_contours(volume, w_th)
+    weights = _weights(volume, weights)
+    contours, _ = volume_contours(volume, w_th, weights)
     t_cont = time.perf_counter() - t
     if scorer is None:
-        scorer = nbv_scorer(grid, camera, table_z=table_z, up=up)
+        scorer = nbv_scorer(known_grid(volume, w_th, weights)[0], camera, table_z=table_z, up=up)
     plan = plan_object_views(segments, contours, scorer, score_threshold=score_threshold, up=up, **kwargs)
     plan.timing.update({"segmentation": t_seg, "contours": t_cont, "total": time.perf_counter() - t0})
     return plan

@@ -228,9 +228,10 @@ def rank_object_views(volume_path: str | os.PathLike, camera: CameraModel, *, ga
     up, up_source = resolve_up(grid, up)
     tz = resolve_table_z(grid, table_z, up)
     tally: dict[str, int] = {}
-    known, _ = known_grid(volume)
+    weights = volume.weights() if hasattr(volume, "weights") else None  # one extraction for score and contours
+    known, _ = known_grid(volume, weights=weights)
     plan = plan_object_views_for_volume(
-        volume, camera, scorer=nbv_scorer(known, camera, gain=gain, table_z=tz, up=up, tally=tally),
+        volume, camera, scorer=nbv_scorer(known, camera, gain=gain, table_z=tz, up=up, tally=tally), weights=weights,
         score_threshold=score_threshold, table_z=tz, up=up)
     rejected = {k: v for k, v in tally.items() if k not in ("views", "valid")}
     empty = None
