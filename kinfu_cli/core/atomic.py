@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from kinfu_cli.core.errors import KinfuError
-from kinfu_cli.core.ownership import owned_entries, record_written
+from kinfu_cli.core.ownership import MANIFEST, owned_entries, record_tree, record_written
 
 
 def _ensure_parent(final: Path) -> Path:
@@ -89,6 +89,7 @@ def atomic_dir(final: str | os.PathLike) -> Iterator[Path]:
     os.chmod(tmp, 0o777 & ~_umask())
     try:
         yield tmp
+        record_tree(tmp)  # everything in it is kinfu's now; foreign entries are carried over only below
         if final.exists():
             _replace_folder(tmp, final)
         else:
@@ -102,23 +103,47 @@ def atomic_dir(final: str | os.PathLike) -> Iterator[Path]:
 def _replace_folder(new: Path, final: Path) -> None:
     """Swap the finished folder `new` in for `final`, keeping the entries of `final` kinfu did not write.
 
-    A file `final` (a kinfu output, or one the caller was told to overwrite) is replaced. A foreign entry
-    with the name of a new output stops the swap: the new outputs stay in `new` and the error says so."""
+    A file `final` (a kinfu output, or one the caller was told to overwrite) is replaced. Foreign entries are
+    carried over at any depth: a user's file inside a kinfu-written subfolder (one with its own manifest)
+    survives too. A foreign entry with the name of a new output stops the swap: the new outputs stay in `new`
+    and the error says so."""
     if not final.is_dir():
         final.unlink()
         os.replace(new, final)
         return
-    mine = owned_entries(final)
-    foreign = [e for e in final.iterdir() if e.name not in mine]
-    clash = [e.name for e in foreign if (new / e.name).exists()]
+    moves, clash = _foreign_moves(final, new)
     if clash:
         raise KinfuError(f"{final}: {', '.join(sorted(clash))} there was not written by kinfu and would be replaced")
-    for entry in foreign:
-        os.replace(entry, new / entry.name)
+    for src, dst in moves:
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        os.replace(src, dst)
     old = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".old.part", dir=final.parent))
     os.replace(final, old / final.name)
     os.replace(new, final)
     shutil.rmtree(old, ignore_errors=True)
+
+
+def _foreign_moves(old: Path, new: Path, rel: str = "") -> tuple[list[tuple[Path, Path]], list[str]]:
+    """(source, destination) of every entry under `old` kinfu did not write, and the names that clash with
+    new outputs. A kinfu-written subfolder is searched only when it records its own entries (a manifest);
+    one without (written before per-folder records) is kinfu's whole, as it always was."""
+    mine = owned_entries(old)
+    moves: list[tuple[Path, Path]] = []
+    clash: list[str] = []
+    for entry in old.iterdir():
+        target = new / entry.name
+        if entry.name not in mine:
+            if target.exists() or target.is_symlink():
+                clash.append(rel + entry.name)
+            else:
+                moves.append((entry, target))
+        elif entry.is_dir() and not entry.is_symlink() and (entry / MANIFEST).is_file():
+            if target.exists() and not target.is_dir():
+                continue  # a kinfu folder replaced by a kinfu file: nothing of the user's can be inside a file
+            sub_moves, sub_clash = _foreign_moves(entry, target, rel + entry.name + "/")
+            moves += sub_moves
+            clash += sub_clash
+    return moves, clash
 
 
 def _umask() -> int:

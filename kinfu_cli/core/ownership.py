@@ -59,6 +59,29 @@ def record_written(path: str | os.PathLike) -> None:
             os.unlink(tmp)
 
 
+def record_tree(folder: str | os.PathLike) -> None:
+    """Record every entry under `folder` (just written by kinfu, whatever library wrote each file) in the
+    manifest of the folder that holds it, so a later run can tell kinfu's files from a user's at any depth.
+
+    Best effort, like `record_written`."""
+    folder = Path(folder)
+    for sub in [p for p in folder.rglob("*") if p.is_dir() and not p.is_symlink()] + [folder]:
+        files = _read_manifest(sub)
+        entries = [e for e in sub.iterdir() if e.name != MANIFEST and not e.name.startswith(f"{MANIFEST}.")]
+        if all(e.name in files for e in entries):
+            continue
+        for e in entries:
+            files.setdefault(e.name, _stat_entry(e))
+        try:
+            fd, tmp = tempfile.mkstemp(prefix=f"{MANIFEST}.", suffix=".part", dir=sub)
+            with os.fdopen(fd, "w") as fh:
+                json.dump({"written_by": "kinfu", "files": files}, fh, indent=1, sort_keys=True)
+            os.replace(tmp, sub / MANIFEST)
+        except OSError:
+            with contextlib.suppress(Exception):
+                os.unlink(tmp)
+
+
 def written_by_kinfu(path: str | os.PathLike) -> bool:
     """True when kinfu wrote `path` and nobody changed it since (see the module docstring)."""
     path = Path(path)

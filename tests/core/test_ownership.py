@@ -90,3 +90,30 @@ def test_debris_cleaning_touches_only_kinfus_temporary_names(tmp_path):
     write_json(tmp_path / "report.json", {})
     names = sorted(p.name for p in tmp_path.iterdir())
     assert names == [MANIFEST, ".report.notes.part.json", "report.json"]
+
+
+def test_a_users_file_inside_a_kinfu_subfolder_survives_a_rerun_and_stale_outputs_do_not(tmp_path):
+    import numpy as np  # the subfolder's files come from a writer that knows nothing of manifests
+
+    out = tmp_path / "out"
+    with atomic_dir(out) as d:
+        (d / "regions").mkdir()
+        for i in range(3):
+            np.save(d / "regions" / f"{i}.npy", np.zeros(i + 1))
+        write_json(d / "report.json", {"v": 1})
+    (out / "regions" / "my_notes.txt").write_text("mine")
+    with atomic_dir(out) as d:
+        (d / "regions").mkdir()
+        np.save(d / "regions" / "0.npy", np.ones(2))
+        write_json(d / "report.json", {"v": 2})
+    assert sorted(p.name for p in (out / "regions").iterdir() if p.name != MANIFEST) == ["0.npy", "my_notes.txt"]
+    assert (out / "regions" / "my_notes.txt").read_text() == "mine"
+    assert np.load(out / "regions" / "0.npy").tolist() == [1.0, 1.0]  # the new output, not the old one
+    (out / "regions" / "my_notes.txt").unlink()
+    (out / "regions" / "0.npy").unlink()
+    (out / "regions" / "0.npy").write_text("the user's own file now, under an output's name")
+    with pytest.raises(KinfuError, match="regions/0.npy there was not written by kinfu"):
+        with atomic_dir(out) as d:
+            (d / "regions").mkdir()
+            np.save(d / "regions" / "0.npy", np.ones(2))
+    assert (out / "regions" / "0.npy").read_text().startswith("the user's")
