@@ -35,6 +35,30 @@ COMMANDS: dict[str, str | dict[str, str]] = {
              "grasp": "eval_grasp", "localize": "eval_localize"},
 }
 
+# each command's one-line help, so `kinfu --help` lists them without importing every stage (a test keeps
+# these equal to the commands' own first docstring lines)
+SUMMARIES: dict[str, str] = {
+    "info": "Show topics, rates, time span, detected roles and TF tree of a recording.",
+    "import": "Convert an RGB-D frame folder (7-Scenes/3DMatch, TUM) into MCAP/bag/ROS 2.",
+    "export": "Write a recording's RGB-D frames as a frame folder, or a TUM trajectory.",
+    "synth": "Write a synthetic tabletop or room recording (MCAP, bag, ROS 2) with ground truth.",
+    "fuse": "Fuse depth frames into a ternary TSDF volume, mesh and cloud.",
+    "poi": "Points of interest from the hand trajectory (GMM-AS or ZVC).",
+    "segment": "Segments, saliency and superquadrics of a fused volume.",
+    "nbv": "Rank next-best views around each POI by information gain.",
+    "batch": "Run the stages of a plan over many recordings on Dask (resumable).",
+    "diff": "Removed / added regions between two volumes of one place; POIs scored on them.",
+    "grasp": "Grasp poses for segmented objects from their superquadrics.",
+    "localize": "Pose of a known mesh from surface points (MUPF); --models: recognition.",
+    "eval": "Score results against ground truth, tables like the papers'.",
+    "eval poi": "Score GMM-AS / ZVC POIs on a hand data set (paper Tables 2-4).",
+    "eval fusion": "Reconstruction error and object measures (paper Table 1) vs ground truth.",
+    "eval nbv": "Closed NBV loop in simulation: POI views vs random/fixed, objects vs standard.",
+    "eval segment": "Segmentation boundary P/R, BCE, object recall vs labels; --sweep: PR curves.",
+    "eval grasp": "Grasp constraint satisfaction, overlap, penetration and time.",
+    "eval localize": "MUPF vs Scaling Series vs RANSAC+ICP (thesis Table 4.2); recognition (ch. 5).",
+}
+
 
 class _LazyGroup(click.Group):
     """A group whose sub-commands are imported from their modules when first used."""
@@ -46,6 +70,17 @@ class _LazyGroup(click.Group):
 
     def list_commands(self, ctx: click.Context) -> list[str]:
         return sorted(self.modules)
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        """The command list from SUMMARIES: help stays fast, no stage is imported for it."""
+        prefix = "" if ctx.parent is None else f"{ctx.info_name} "
+        names = self.list_commands(ctx)
+        limit = formatter.width - 6 - max(map(len, names), default=0)  # as click's own listing
+        rows = [(name, click.Command(name, help=SUMMARIES[prefix + name]).get_short_help_str(limit) if prefix + name in SUMMARIES
+                 else self.get_command(ctx, name).get_short_help_str(limit)) for name in names]
+        if rows:
+            with formatter.section("Commands"):
+                formatter.write_dl(rows)
 
     def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
         if name in self.commands:
