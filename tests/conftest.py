@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -9,6 +10,23 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 SAMPLE = REPO / "sample_data"
 SHARED_DATA = REPO.parent / "shared" / "data"
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_sessionstart(session):
+    """With xdist workers, compile the numba kernels once first (tests/warm_kernels.py says why);
+    KINFU_NO_WARM=1 skips it."""
+    config = session.config
+    if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
+        return
+    if os.environ.get("KINFU_NO_WARM") or os.environ.get("NUMBA_DISABLE_JIT"):
+        return
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("warm_kernels", Path(__file__).with_name("warm_kernels.py"))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    module.warm()
 
 
 def shared_path(*parts: str) -> Path:
