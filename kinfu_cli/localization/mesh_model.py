@@ -122,9 +122,18 @@ class MeshModel:
 
     def world_distances(self, poses: np.ndarray, points: np.ndarray) -> np.ndarray:
         """Distance of world points (M, 3) to the model at each pose (P, 6) -> (P, M): the points go into the
-        model frame (R^T (y - t)), where the scene lives."""
+        model frame (R^T (y - t)), where the scene lives (a numba kernel over the field when built)."""
+        poses = np.asarray(poses, dtype=np.float64)
         R = pose_rotations(poses)
-        local = np.einsum("pji,pmj->pmi", R, np.asarray(points)[None] - np.asarray(poses)[:, None, :3])
+        if self.field is not None:
+            from kinfu_cli.localization.ukf import pose_distances
+
+            f = self.field
+            out = np.empty((len(poses), len(points)))
+            pose_distances(np.ascontiguousarray(poses[:, :3]), np.ascontiguousarray(R),
+                           np.ascontiguousarray(points, dtype=np.float64), f.lo, f.step, f.sdf, f.normals, out)
+            return out
+        local = np.einsum("pji,pmj->pmi", R, np.asarray(points)[None] - poses[:, None, :3])
         return self.distances(local)
 
     def performance_index(self, pose: np.ndarray, points: np.ndarray) -> float:

@@ -33,22 +33,35 @@ class MupfParameters:
     """Table 4.1 (simulation): Q, P0 (diagonals; m^2, rad^2), sigma_p^2 (m^2), the unscented transform's
     alpha, beta, kappa, N particles; window m (None: ceil(L/2), the choice of ch. 5) and t0 = 2 steps without
     resampling. max_index: an estimate whose I_L exceeds it (m; None: sigma_p) is reported as not converged.
-    beta: Table 4.1 prints 30; with it this filter drifts into wrong poses (the central sigma point's
-    W0^(c) = 30.25 inflates the innovation covariance), so the default is the standard Gaussian value 2 —
-    the localisation evaluation measures both (README)."""
+    Measured departures, each with the value that restores the thesis (README, "Localisation"):
+    - rotation "local": sigma points, corrections and proposal samples perturb the rotation by a rotation
+      vector at the particle ("euler": the thesis' Euler-angle state, wrapped in the MAP differences);
+    - divide_by_proposal False: eq. 4.18's division by N(x_hat; x_bar, P) (without the transition density of
+      Alg. 1 that would cancel it) multiplies every weight by exp(|z|^2 / 2) det(P)^(1/2), noise that left an
+      effective sample size of 1-7 of 700 at every step (True: the thesis);
+    - map_candidates "both": the MAP of eq. 4.28 is taken over the particles x_hat and their UKF means x_bar
+      ("particles": x_hat only, the thesis);
+    - literal_estimate_weights False: eq. 4.24's second division by the proposal density is dropped (Remark 1's
+      derivation multiplies the weights of eq. 4.19 by the likelihood powers only).
+    proposal "mean" / resample_ess < 1 are the authors' released code (particle = UKF mean moved by the random
+    walk of eq. 4.12; resampling only below an effective sample size of resample_ess N), measured worse here."""
 
     particles: int = 700
     window: int | None = None
     t0: int = 2
     alpha: float = 1.0
-    beta: float = 2.0
+    beta: float = 30.0
     kappa: float = 2.0
     sigma_p2: float = 1e-4
     q_diag: tuple[float, ...] = (1e-5, 1e-5, 1e-5, 1e-4, 1e-4, 1e-4)
     p0_diag: tuple[float, ...] = (0.04, 0.04, 0.04, math.pi ** 2, (math.pi / 2) ** 2, math.pi ** 2)
     max_index: float | None = None
     rotation: str = "local"
+    divide_by_proposal: bool = False
+    map_candidates: str = "both"
     literal_estimate_weights: bool = False
+    proposal: str = "sample"
+    resample_ess: float = 1.0
 
     def check(self) -> None:
         check_number(self.particles, "particles", 1, integer=True)
@@ -58,6 +71,11 @@ class MupfParameters:
         check_number(self.alpha, "alpha", 0, low_open=True)
         if self.rotation not in ("local", "euler"):
             raise ConfigError(f"expected 'local' or 'euler', got {self.rotation!r}", parameter="rotation")
+        if self.map_candidates not in ("both", "particles"):
+            raise ConfigError(f"expected 'both' or 'particles', got {self.map_candidates!r}", parameter="map_candidates")
+        if self.proposal not in ("sample", "mean"):
+            raise ConfigError(f"expected 'sample' or 'mean', got {self.proposal!r}", parameter="proposal")
+        check_number(self.resample_ess, "resample_ess", 0, 1)
         check_number(self.sigma_p2, "sigma_p2", 0, low_open=True, unit="m^2")
         if self.max_index is not None:
             check_number(self.max_index, "max_index", 0, low_open=True, unit="m")
@@ -74,6 +92,10 @@ class MupfParameters:
         wm[0] = lam / (N_X + lam)
         wc[0] = lam / (N_X + lam) + (1 - self.alpha ** 2 + self.beta)
         return wm, wc, N_X + lam
+
+
+# the weights and MAP candidates exactly as printed (eqs. 4.18, 4.24, 4.28)
+PAPER_WEIGHTS = {"divide_by_proposal": True, "literal_estimate_weights": True, "map_candidates": "particles"}
 
 
 @dataclass
@@ -123,10 +145,11 @@ def _systematic_resample(log_w: np.ndarray, rng: np.random.Generator) -> np.ndar
 
 def localize_mupf(model: MeshModel, points: np.ndarray, params: MupfParameters = MupfParameters(), *,
                   x0: np.ndarray | None = None, seed: int | None = 0, quiet: bool = True,
-                  track_index: bool = False) -> MupfResult:
+                  track_index: bool = False, observer=None) -> MupfResult:
     """Run Alg. 2 over `points` (L, 3, world frame, in measurement order) for `model`; x0 is the prior mean
     (the 6-D null vector by default, as in the thesis' tests). track_index computes I_L of the MAP estimate
-    after every step (slower: an O(N^2) MAP per step)."""
+    after every step (slower: an O(N^2) MAP per step). observer(step, t_hat, R_hat, log_w) sees the proposal
+    samples and their normalised log weights after every step (diagnostics)."""
     params.check()
     ys = np.ascontiguousarray(check_points(points))
     L = len(ys)
@@ -143,9 +166,11 @@ def localize_mupf(model: MeshModel, points: np.ndarray, params: MupfParameters =
     t, e, R = _initial_particles(x0, params, rng)
     P = np.broadcast_to(np.diag(params.p0_diag), (n, N_X, N_X)).copy()
     t_hat, e_hat, R_hat = np.empty_like(t), np.empty_like(e), np.empty_like(R)
+    t_bar, e_bar, R_bar = np.empty_like(t), np.empty_like(e), np.empty_like(R)
     P_new, chol = np.empty_like(P), np.empty_like(P)
     log_q, log_l, log_l_est = np.empty(n), np.empty(n), np.empty(n)
     sig2 = params.sigma_p2
+    log_w_prev = np.full(n, -math.log(n))
     history: list[float] = []
     best = (x0[:3], pose_rotations(x0[None])[0])
     for step in progress(range(1, L + 1), total=L, desc=f"MUPF {model.name}", quiet=quiet, unit="point"):
@@ -154,23 +179,34 @@ def localize_mupf(model: MeshModel, points: np.ndarray, params: MupfParameters =
         # estimation weights (eq. 4.24): l(y_k)^(m - t + k - 1) on top of the propagated weights
         expo = (m - step + np.arange(k_bar, step + 1) - 1).astype(np.float64)
         z = rng.standard_normal((n, N_X))
-        ukf.mupf_step(mode, t, e, R, P, q_diag, ys[step - 1], window, expo, z, wm, wc, spread, sig2, f.lo, f.step,
-                      f.sdf, f.normals, t_hat, e_hat, R_hat, P_new, chol, log_q, log_l, log_l_est)
-        log_w = _normalised(log_l - log_q)  # eqs. 4.18-4.19 (w_{t-1} = 1/N after every step)
+        ukf.mupf_step(mode, params.proposal == "sample", t, e, R, P, q_diag, ys[step - 1], window, expo, z, wm, wc, spread, sig2, f.lo, f.step,
+                      f.sdf, f.normals, t_bar, e_bar, R_bar, t_hat, e_hat, R_hat, P_new, chol, log_q, log_l, log_l_est)
+        # eqs. 4.18-4.19: w_t = w_{t-1} l_window / q
+        log_w = _normalised(log_w_prev + log_l - (log_q if params.divide_by_proposal else 0.0))
+        if observer is not None:
+            observer(step, t_hat, R_hat, log_w)
         if step == L or track_index:
             extra = log_q if params.literal_estimate_weights else 0.0
             log_w_bar = _normalised(log_w + log_l_est - extra)
-            scores = np.empty(n)
-            ukf.map_scores(mode, t_hat, e_hat, R_hat, chol, log_w_bar, scores)
+            # candidates: the particles x_hat (eq. 4.28) and, with map_candidates "both", their UKF means x_bar
+            if params.map_candidates == "both":
+                tc, ec, Rc = (np.concatenate(p) for p in ((t_hat, t_bar), (e_hat, e_bar), (R_hat, R_bar)))
+            else:
+                tc, ec, Rc = t_hat, e_hat, R_hat
+            scores = np.empty(len(tc))
+            ukf.map_scores(mode, tc, ec, Rc, t_hat, e_hat, R_hat, chol, log_w_bar, scores)
             j = int(np.argmax(scores))
-            best = (t_hat[j].copy(), R_hat[j].copy())
+            best = (tc[j].copy(), Rc[j].copy())
             if track_index:
                 history.append(model.performance_index(_pose_vector(*best), ys))
-        if step > params.t0:  # resampling after t0 steps (Alg. 2 lines 27-30)
+        ess = 1.0 / np.exp(2 * log_w).sum()
+        if step > params.t0 and ess <= params.resample_ess * n:  # resampling after t0 steps (Alg. 2 l. 27-30)
             idx = _systematic_resample(log_w, rng)
             t, e, R, P = t_hat[idx], e_hat[idx], R_hat[idx], P_new[idx]
+            log_w_prev = np.full(n, -math.log(n))
         else:
             t, e, R, P = t_hat.copy(), e_hat.copy(), R_hat.copy(), P_new.copy()
+            log_w_prev = log_w if step > params.t0 else np.full(n, -math.log(n))
     seconds = time.perf_counter() - start
     pose = _pose_vector(*best)
     index = model.performance_index(pose, ys)

@@ -147,8 +147,9 @@ def ukf_correct(P, D, H, y, wm, wc, sig2, dx, Pn):
 
 
 @njit(cache=True)
-def compose(mode, t, e, R, d, t_out, e_out, R_out):
-    """The pose (t, e, R) perturbed by d (6,) into (t_out, e_out, R_out) (module docstring: EULER / LOCAL)."""
+def compose(mode, t, e, R, d, t_out, e_out, R_out, dR):
+    """The pose (t, e, R) perturbed by d (6,) into (t_out, e_out, R_out) (module docstring: EULER / LOCAL);
+    dR (3, 3) is scratch."""
     for k in range(3):
         t_out[k] = t[k] + d[k]
     if mode == EULER:
@@ -156,7 +157,6 @@ def compose(mode, t, e, R, d, t_out, e_out, R_out):
             e_out[k] = e[k] + d[3 + k]
         euler_zyx(e_out[0], e_out[1], e_out[2], R_out)
     else:
-        dR = np.empty((3, 3))
         expmap(d[3], d[4], d[5], dR)
         for a in range(3):
             for b in range(3):
@@ -166,12 +166,12 @@ def compose(mode, t, e, R, d, t_out, e_out, R_out):
 
 
 @njit(cache=True)
-def point_distance(t, R, y, lo, step, sdf, normals, h):
-    """Distance of the world point y to the model at (t, R); the closest surface point (world) into h."""
+def point_distance(t, R, y, lo, step, sdf, normals, h, c):
+    """Distance of the world point y to the model at (t, R); the closest surface point (world) into h (c (3,) is
+    scratch)."""
     q0 = R[0, 0] * (y[0] - t[0]) + R[1, 0] * (y[1] - t[1]) + R[2, 0] * (y[2] - t[2])
     q1 = R[0, 1] * (y[0] - t[0]) + R[1, 1] * (y[1] - t[1]) + R[2, 1] * (y[2] - t[2])
     q2 = R[0, 2] * (y[0] - t[0]) + R[1, 2] * (y[1] - t[1]) + R[2, 2] * (y[2] - t[2])
-    c = np.empty(3)
     d = lookup(q0, q1, q2, lo, step, sdf, normals, c)
     for a in range(3):
         h[a] = R[a, 0] * c[0] + R[a, 1] * c[1] + R[a, 2] * c[2] + t[a]
@@ -179,12 +179,15 @@ def point_distance(t, R, y, lo, step, sdf, normals, h):
 
 
 @njit(cache=True, parallel=True)
-def mupf_step(mode, t, e, R, P, q_diag, y, window, expo, z, wm, wc, spread, sig2, lo, step, sdf, normals,
-              t_hat, e_hat, R_hat, P_new, chol, log_q, log_l, log_l_est):
+def mupf_step(mode, sample, t, e, R, P, q_diag, y, window, expo, z, wm, wc, spread, sig2, lo, step, sdf, normals,
+              t_bar, e_bar, R_bar, t_hat, e_hat, R_hat, P_new, chol, log_q, log_l, log_l_est):
     """One step of Alg. 2 for every particle i (in parallel): time update P + Q, sigma points, proximity
-    measurement prediction h = closest surface point to y (eq. 4.17), Kalman correction, the proposal sample
+    measurement prediction h = closest surface point to y (eq. 4.17), Kalman correction (x_bar into t_bar,
+    e_bar, R_bar), the proposal sample
     x_hat = x_bar (+) chol(P) z_i, its log proposal density (log_q, without the 2 pi constant), and the window's
-    log likelihoods: plain sum (log_l, eq. 4.18) and weighted by expo (log_l_est, eq. 4.24)."""
+    log likelihoods: plain sum (log_l, eq. 4.18) and weighted by expo (log_l_est, eq. 4.24). sample False: the
+    particle is the UKF mean itself (x_hat = x_bar, log_q = 0) and z drives the random walk of eq. 4.12 instead,
+    x_{t|t-1} = x_{t-1|t-1} + sqrt(Q) z, before the sigma points (the authors' released code)."""
     n_part = t.shape[0]
     ns = 2 * N_X + 1
     for i in prange(n_part):
@@ -194,28 +197,44 @@ def mupf_step(mode, t, e, R, P, q_diag, y, window, expo, z, wm, wc, spread, sig2
         D = np.empty((ns, N_X))
         sigma_offsets(Pp, spread, D)
         H = np.empty((ns, 3))
-        ts, es, Rs = np.empty(3), np.empty(3), np.empty((3, 3))
+        ts, es, Rs, dR, c = np.empty(3), np.empty(3), np.empty((3, 3)), np.empty((3, 3)), np.empty(3)
+        tp, ep, Rp = np.empty(3), np.empty(3), np.empty((3, 3))
+        if sample:
+            tp[:] = t[i]
+            ep[:] = e[i]
+            Rp[:, :] = R[i]
+        else:
+            w = np.empty(N_X)
+            for k in range(N_X):
+                w[k] = math.sqrt(q_diag[k]) * z[i, k]
+            compose(mode, t[i], e[i], R[i], w, tp, ep, Rp, dR)
         for j in range(ns):
-            compose(mode, t[i], e[i], R[i], D[j], ts, es, Rs)
-            point_distance(ts, Rs, y, lo, step, sdf, normals, H[j])
+            compose(mode, tp, ep, Rp, D[j], ts, es, Rs, dR)
+            point_distance(ts, Rs, y, lo, step, sdf, normals, H[j], c)
         dx = np.empty(N_X)
         Pn = np.empty((N_X, N_X))
         ukf_correct(Pp, D, H, y, wm, wc, sig2, dx, Pn)
-        tb, eb, Rb = np.empty(3), np.empty(3), np.empty((3, 3))
-        compose(mode, t[i], e[i], R[i], dx, tb, eb, Rb)
+        tb, eb, Rb = t_bar[i], e_bar[i], R_bar[i]
+        compose(mode, tp, ep, Rp, dx, tb, eb, Rb, dR)
         L = chol[i]
         cholesky_floor(Pn, L)
-        s = L @ z[i]
-        compose(mode, tb, eb, Rb, s, t_hat[i], e_hat[i], R_hat[i])
         P_new[i] = Pn
-        lq = 0.0
-        for k in range(N_X):
-            lq += -0.5 * z[i, k] * z[i, k] - math.log(L[k, k])
-        log_q[i] = lq
+        if sample:
+            s = L @ z[i]
+            compose(mode, tb, eb, Rb, s, t_hat[i], e_hat[i], R_hat[i], dR)
+            lq = 0.0
+            for k in range(N_X):
+                lq += -0.5 * z[i, k] * z[i, k] - math.log(L[k, k])
+            log_q[i] = lq
+        else:
+            t_hat[i, :] = tb
+            e_hat[i, :] = eb
+            R_hat[i, :, :] = Rb
+            log_q[i] = 0.0
         h = np.empty(3)
         acc, acc_est = 0.0, 0.0
         for k in range(window.shape[0]):
-            d = point_distance(t_hat[i], R_hat[i], window[k], lo, step, sdf, normals, h)
+            d = point_distance(t_hat[i], R_hat[i], window[k], lo, step, sdf, normals, h, c)
             ll = -0.5 * d * d / sig2
             acc += ll
             acc_est += expo[k] * ll
@@ -229,9 +248,10 @@ def _wrap(a):
 
 
 @njit(cache=True, parallel=True)
-def map_scores(mode, t, e, R, chol, log_w, out):
-    """Eq. 4.29 in logs: out[j] = log sum_i w_i N(x_j; x_i, P_i), the difference x_j (-) x_i taken in the
-    particles' parameterisation (EULER: angles wrapped to (-pi, pi]; LOCAL: log(R_j R_i^T)). O(N^2)."""
+def map_scores(mode, tc, ec, Rc, t, e, R, chol, log_w, out):
+    """Eq. 4.29 in logs at candidate poses c: out[j] = log sum_i w_i N(c_j; x_i, P_i), the difference c_j (-) x_i
+    taken in the particles' parameterisation (EULER: angles wrapped to (-pi, pi]; LOCAL: log(R_cj R_i^T)).
+    O(N x candidates)."""
     n = t.shape[0]
     log_det = np.empty(n)
     for i in range(n):
@@ -239,7 +259,7 @@ def map_scores(mode, t, e, R, chol, log_w, out):
         for k in range(N_X):
             s += math.log(chol[i, k, k])
         log_det[i] = s
-    for j in prange(n):
+    for j in prange(tc.shape[0]):
         d = np.empty(N_X)
         zv = np.empty(N_X)
         M = np.empty((3, 3))
@@ -247,14 +267,14 @@ def map_scores(mode, t, e, R, chol, log_w, out):
         terms = np.empty(n)
         for i in range(n):
             for k in range(3):
-                d[k] = t[j, k] - t[i, k]
+                d[k] = tc[j, k] - t[i, k]
             if mode == EULER:
                 for k in range(3):
-                    d[3 + k] = _wrap(e[j, k] - e[i, k])
+                    d[3 + k] = _wrap(ec[j, k] - e[i, k])
             else:
                 for a in range(3):
                     for b in range(3):
-                        M[a, b] = R[j, a, 0] * R[i, b, 0] + R[j, a, 1] * R[i, b, 1] + R[j, a, 2] * R[i, b, 2]
+                        M[a, b] = Rc[j, a, 0] * R[i, b, 0] + Rc[j, a, 1] * R[i, b, 1] + Rc[j, a, 2] * R[i, b, 2]
                 logmap(M, w)
                 d[3], d[4], d[5] = w[0], w[1], w[2]
             q = 0.0
@@ -273,6 +293,6 @@ def map_scores(mode, t, e, R, chol, log_w, out):
 def pose_distances(t, R, points, lo, step, sdf, normals, out):
     """out[p, k] = distance of world point k to the model at pose p (t (P, 3), R (P, 3, 3))."""
     for p in prange(t.shape[0]):
-        h = np.empty(3)
+        h, c = np.empty(3), np.empty(3)
         for k in range(points.shape[0]):
-            out[p, k] = point_distance(t[p], R[p], points[k], lo, step, sdf, normals, h)
+            out[p, k] = point_distance(t[p], R[p], points[k], lo, step, sdf, normals, h, c)

@@ -78,5 +78,5 @@ def test_map_density_joins_euler_aliases_and_local_twins():
     log_w = np.log(np.full(n, 1 / 3))
     for mode in (ukf.EULER, ukf.LOCAL):
         out = np.empty(n)
-        ukf.map_scores(mode, t, e, R, chol, log_w, out)
+        ukf.map_scores(mode, t, e, R, t, e, R, chol, log_w, out)
         assert out[0] == pytest.approx(out[1]) and out[0] > out[2] + 0.5
