@@ -37,8 +37,8 @@ class MupfParameters:
     - rotation "local": sigma points, corrections and proposal samples perturb the rotation by a rotation
       vector at the particle ("euler": the thesis' Euler-angle state, wrapped in the MAP differences);
     - divide_by_proposal False: eq. 4.18's division by N(x_hat; x_bar, P) (without the transition density of
-      Alg. 1 that would cancel it) multiplies every weight by exp(|z|^2 / 2) det(P)^(1/2), noise that left an
-      effective sample size of 1-7 of 700 at every step (True: the thesis);
+      Alg. 1 that would cancel it) multiplies every weight by exp(|z|^2 / 2) det(P)^(1/2), noise unrelated to
+      the fit that favours unconverged particles; without it more tuning trials succeeded (True: the thesis);
     - map_candidates "both": the MAP of eq. 4.28 is taken over the particles x_hat and their UKF means x_bar
       ("particles": x_hat only, the thesis);
     - literal_estimate_weights False: eq. 4.24's second division by the proposal density is dropped (Remark 1's

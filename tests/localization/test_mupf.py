@@ -117,3 +117,4 @@ def test_trial_protocol_offsets():
         assert 45 <= np.rad2deg(Rotation.from_matrix(tr.matrix[:3, :3]).magnitude()) <= 90 + 1e-9
         assert t.performance_index(np.concatenate([off, Rotation.from_matrix(tr.matrix[:3, :3]).as_euler("ZYX")]),
                                    tr.points) < 1e-6
+
