@@ -154,8 +154,8 @@ def format_localization_table(doc: dict) -> str:
             if th is not None:
                 ref = "   " + ", ".join("-" if v is None else (f"{v * 1000:.1f}" if i == 2 else f"{v:g}")
                                         for i, v in enumerate(th))
-            lines.append(f"{name:<12}{method:<15}{s['rms_rotation_error_deg']:8.2f}{s['rms_translation_error_m']:8.4f}"
-                         f"{s['mean_index_m'] * 1000:8.2f}{s['mean_seconds']:6.2f} /{s['max_seconds']:5.1f}"
+            lines.append(f"{name:<12}{method:<15}{s['rms_rotation_error_deg']:8.2f}{s['rms_translation_error_m']:8.4g}"
+                         f"{s['mean_index_m'] * 1000:8.4g}{s['mean_seconds']:6.2f} /{s['max_seconds']:5.1f}"
                          f"{s['mean_cpu_seconds']:7.2f}"
                          f"{s['successes']:>4}/{s['trials']:<3}{ref}")
     rec = doc.get("recognition")
