@@ -12,7 +12,7 @@ from kinfu_cli.commands._output import emit
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.localization.evaluate import METHODS, evaluate_localization, evaluate_recognition, \
     format_localization_table
-from kinfu_cli.localization.mupf import MupfParameters
+from kinfu_cli.localization.mupf import PAPER_WEIGHTS, MupfParameters
 from kinfu_cli.localization.shapes import SIMULATION_SHAPES
 
 group = "eval"
@@ -36,8 +36,13 @@ def _names(text: str, allowed, option: str) -> list[str]:
               help="Recognition trials per object (0: skip recognition).")
 @click.option("--recognition-points", type=int, default=170, show_default=True,
               help="Points per recognition trial (thesis: about 170).")
-@click.option("--beta", type=float, default=2.0, show_default=True,
-              help="Unscented transform beta (Table 4.1 prints 30, which drifts here; see README).")
+@click.option("--beta", type=float, default=30.0, show_default=True, help="Unscented transform beta (Table 4.1).")
+@click.option("--rotation", type=click.Choice(["local", "euler"]), default="local", show_default=True,
+              help="Rotation perturbation of sigma points and samples: a rotation vector at each particle, or the "
+                   "thesis' Euler-angle state (see README).")
+@click.option("--paper-weights", is_flag=True,
+              help="Weights exactly as eqs. 4.18 / 4.24 (divided by the proposal density) and the MAP over the "
+                   "particles only (see README).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write the results as JSON here.")
@@ -45,7 +50,7 @@ def _names(text: str, allowed, option: str) -> list[str]:
 @click.option("--quiet", is_flag=True, help="No progress output.")
 @force_option
 def command(shapes: str, trials: int, methods: str, noise: float, particles: int, recognition_trials: int,
-            recognition_points: int, beta: float, seed: int, output: Path | None, as_json: bool, quiet: bool,
+            recognition_points: int, beta: float, rotation: str, paper_weights: bool, seed: int, output: Path | None, as_json: bool, quiet: bool,
             force: bool) -> None:
     """Reproduce the thesis' simulation (Vezzani 2019 Table 4.2): on generated box, tetrahedron, cleaner,
     robot and helmet meshes, --trials true poses offset 0.05-0.1 m along one axis and 45-90 deg about one
@@ -62,7 +67,8 @@ def command(shapes: str, trials: int, methods: str, noise: float, particles: int
     names = _names(shapes, list(SIMULATION_SHAPES), "--shapes")
     meths = _names(methods, list(METHODS), "--methods")
     claim_outputs({"output": output}, [], force)
-    params = MupfParameters(particles=particles, beta=beta)
+    params = MupfParameters(particles=particles, beta=beta, rotation=rotation,
+                            **(PAPER_WEIGHTS if paper_weights else {}))
     params.check()
     doc = evaluate_localization(names, trials=trials, noise=noise, params=params, methods=meths, seed=seed,
                                 quiet=quiet)

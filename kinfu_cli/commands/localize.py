@@ -13,7 +13,7 @@ from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.localization.localize import MAX_POINTS, localize_points
 from kinfu_cli.localization.mesh_model import read_mesh
-from kinfu_cli.localization.mupf import MupfParameters
+from kinfu_cli.localization.mupf import PAPER_WEIGHTS, MupfParameters
 from kinfu_cli.localization.points import read_points, read_segment_points
 
 
@@ -61,8 +61,13 @@ def _lines(doc: dict) -> list[str]:
               help="I_L above which the run is reported as not converged (m; default sigma_p).")
 @click.option("--prior", default="centroid", show_default=True,
               help="Prior mean: 'centroid' (model centred on the points), 'zero' (thesis) or x,y,z,phi,theta,psi.")
-@click.option("--beta", type=float, default=2.0, show_default=True,
-              help="Unscented transform beta (Table 4.1 prints 30, which drifts here; see README).")
+@click.option("--beta", type=float, default=30.0, show_default=True, help="Unscented transform beta (Table 4.1).")
+@click.option("--rotation", type=click.Choice(["local", "euler"]), default="local", show_default=True,
+              help="Rotation perturbation of sigma points and samples: a rotation vector at each particle, or the "
+                   "thesis' Euler-angle state (see README).")
+@click.option("--paper-weights", is_flag=True,
+              help="Weights exactly as eqs. 4.18 / 4.24 (divided by the proposal density) and the MAP over the "
+                   "particles only (see README).")
 @click.option("--max-points", type=int, default=MAX_POINTS, show_default=True,
               help="Thin more points than this to this many, in their order (the thesis runs on 100 points of a "
                    "cloud; a fused segment has thousands); 0 = all.")
@@ -72,7 +77,7 @@ def _lines(doc: dict) -> list[str]:
 @force_option
 def command(model: Path | None, points: Path | None, models: str | None, segments: Path | None,
             segment: int | None, output: Path | None, particles: int, window: int | None, sigma_p: float,
-            max_index: float | None, prior: str, beta: float, max_points: int, seed: int, as_json: bool, quiet: bool,
+            max_index: float | None, prior: str, beta: float, rotation: str, paper_weights: bool, max_points: int, seed: int, as_json: bool, quiet: bool,
             force: bool) -> None:
     """Estimate the pose of the mesh MODEL (a closed triangle mesh, PLY/OBJ/STL, in its own frame) from
     POINTS on its surface: a PLY point cloud, a text file of contact points in measurement order (x y z per
@@ -108,7 +113,7 @@ def command(model: Path | None, points: Path | None, models: str | None, segment
     claim_outputs({"output": output}, inputs, force)
     check_number(sigma_p, "sigma_p", 0, low_open=True, unit="m")
     params = MupfParameters(particles=particles, window=window, sigma_p2=sigma_p ** 2, max_index=max_index,
-                            beta=beta)
+                            beta=beta, rotation=rotation, **(PAPER_WEIGHTS if paper_weights else {}))
     params.check()
     meshes = [read_mesh(p) for p in model_paths]
     pts = read_segment_points(segments, segment) if segments is not None else read_points(points)

@@ -59,8 +59,8 @@ def localize_scaling_series(model: MeshModel, points: np.ndarray, *, x0: np.ndar
         n = len(pos) * per_region
         new_pos = np.repeat(pos, per_region, axis=0) + _ball(rng, n, delta)
         turn = _ball(rng, n, min(delta / radius, math.pi))
-        new_rot = Rotation.from_rotvec(turn) * Rotation.concatenate([rot[i] for i in np.repeat(
-            np.arange(len(rot)), per_region)]) if len(rot) > 1 else Rotation.from_rotvec(turn) * rot
+        parents = Rotation.from_quat(rot.as_quat()[np.repeat(np.arange(len(rot)), per_region)])
+        new_rot = Rotation.from_rotvec(turn) * parents
         delta *= zoom
         tau = (delta / delta_star) ** 2
         poses = np.concatenate([new_pos, new_rot.as_euler(EULER)], axis=1)

@@ -4,6 +4,7 @@ same measurements, and the ch. 5 recognition experiment on six near-identical ge
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import replace
 
 import numpy as np
@@ -43,6 +44,8 @@ def _summary(rows: list[dict]) -> dict:
             "mean_index_m": float(np.mean([r["index_m"] for r in rows])),
             "mean_add_s_m": float(np.mean([r["add_s_m"] for r in rows])),
             "mean_seconds": float(sec.mean()), "max_seconds": float(sec.max()),
+            "mean_cpu_seconds": float(np.mean([r["cpu_seconds"] for r in rows])),
+            "max_cpu_seconds": float(np.max([r["cpu_seconds"] for r in rows])),
             "converged": int(sum(r.get("converged", True) for r in rows))}
 
 
@@ -89,16 +92,21 @@ def evaluate_localization(names=tuple(shapes.SIMULATION_SHAPES), *, trials: int 
         trial = make_trial(model, L, noise, rng)
         s = int(rng.integers(2 ** 31))
         if "mupf" in methods:
+            c = time.process_time()
             r = localize_mupf(model, trial.points, replace(params, window=m), seed=s)
             per[name]["mupf"].append(_row(model, samples, name, trial, r.pose, r.index, r.seconds,
-                                          converged=r.converged))
+                                          converged=r.converged, cpu_seconds=time.process_time() - c))
         if "scaling_series" in methods:
+            c = time.process_time()
             b = localize_scaling_series(model, trial.points, seed=s)
             per[name]["scaling_series"].append(_row(model, samples, name, trial, b.pose, b.index, b.seconds,
-                                                    particles_evaluated=b.evaluated, capped=b.capped))
+                                                    particles_evaluated=b.evaluated, capped=b.capped,
+                                                    cpu_seconds=time.process_time() - c))
         if "ransac_icp" in methods:
+            c = time.process_time()
             b = localize_ransac_icp(model, trial.points, seed=s)
-            per[name]["ransac_icp"].append(_row(model, samples, name, trial, b.pose, b.index, b.seconds))
+            per[name]["ransac_icp"].append(_row(model, samples, name, trial, b.pose, b.index, b.seconds,
+                                                cpu_seconds=time.process_time() - c))
     for name in names:
         doc["shapes"][name] = {m: {"summary": _summary(rows), "trials": rows} for m, rows in per[name].items()}
     return doc
@@ -136,7 +144,7 @@ def evaluate_recognition(*, trials: int = 1, n_points: int = 170, noise: float =
 def format_localization_table(doc: dict) -> str:
     """The Table 4.2 / 4.4 layout: per shape and method, RMS error (deg, m), mean I_L, mean / max time and
     successes, with the thesis' row beside ours; then the recognition confusion (when run)."""
-    lines = [f"{'shape':<12}{'method':<15}{'err deg':>8}{'err m':>8}{'I_L mm':>8}{'time s':>13}{'succ.':>8}"
+    lines = [f"{'shape':<12}{'method':<15}{'err deg':>8}{'err m':>8}{'I_L mm':>8}{'time s':>13}{'cpu s':>7}{'succ.':>8}"
              f"   thesis (deg, m, I_L mm, s, succ./50)"]
     for name, per in doc.get("shapes", {}).items():
         for method, block in per.items():
@@ -146,8 +154,9 @@ def format_localization_table(doc: dict) -> str:
             if th is not None:
                 ref = "   " + ", ".join("-" if v is None else (f"{v * 1000:.1f}" if i == 2 else f"{v:g}")
                                         for i, v in enumerate(th))
-            lines.append(f"{name:<12}{method:<15}{s['rms_rotation_error_deg']:8.2f}{s['rms_translation_error_m']:8.4f}"
-                         f"{s['mean_index_m'] * 1000:8.2f}{s['mean_seconds']:6.2f} /{s['max_seconds']:5.1f}"
+            lines.append(f"{name:<12}{method:<15}{s['rms_rotation_error_deg']:8.2f}{s['rms_translation_error_m']:8.4g}"
+                         f"{s['mean_index_m'] * 1000:8.4g}{s['mean_seconds']:6.2f} /{s['max_seconds']:5.1f}"
+                         f"{s['mean_cpu_seconds']:7.2f}"
                          f"{s['successes']:>4}/{s['trials']:<3}{ref}")
     rec = doc.get("recognition")
     if rec and rec["total"]:

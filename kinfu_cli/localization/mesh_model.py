@@ -16,6 +16,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from kinfu_cli.core.errors import KinfuError
+from kinfu_cli.localization.distance_field import sample_field
 
 EULER = "ZYX"
 
@@ -70,6 +71,7 @@ class MeshModel:
 
         self.vertices = np.asarray(self.vertices, dtype=np.float64)
         self.triangles = np.asarray(self.triangles, dtype=np.int64)
+        self.field = None  # a DistanceField once build_field ran
         self._scene = o3d.t.geometry.RaycastingScene()
         self._scene.add_triangles(o3d.core.Tensor(self.vertices.astype(np.float32)),
                                   o3d.core.Tensor(self.triangles.astype(np.uint32)))
@@ -98,78 +100,40 @@ class MeshModel:
         return fn(o3d.core.Tensor(pts.reshape(-1, 3))).numpy().astype(np.float64).reshape(pts.shape[:-1])
 
     def build_field(self, cells: int = 64, margin: float = 0.3) -> None:
-        """Sample the signed distance on a grid (`cells` per side over the bounding box grown by `margin`
-        diameters) once; `closest_points` / `distances` then interpolate it inside the grid (trilinear) and
-        ask the BVH only outside. The filters make ~10^6 queries per run: the field makes them numpy-fast."""
-        lo = self.vertices.min(0) - margin * self.diameter
-        hi = self.vertices.max(0) + margin * self.diameter
-        step = float((hi - lo).max() / (cells - 1))
-        shape = np.ceil((hi - lo) / step).astype(int) + 1
-        axes = [lo[k] + step * np.arange(shape[k]) for k in range(3)]
-        grid = np.stack(np.meshgrid(*axes, indexing="ij"), -1)
-        self._field = (lo, step, self.exact_distances(grid, signed=True))
-
-    def _field_lookup(self, pts: np.ndarray, gradient: bool):
-        """Trilinear signed distance (and its gradient) at (M, 3) points inside the field; mask of those."""
-        lo, step, sdf = self._field
-        u = (pts - lo) / step
-        inside = np.all((u >= 0) & (u < np.asarray(sdf.shape) - 1.000001), axis=1)
-        u = u[inside]
-        i = np.floor(u).astype(np.int64)
-        f = u - i
-        c = [sdf[i[:, 0] + a, i[:, 1] + b, i[:, 2] + e] for a in (0, 1) for b in (0, 1) for e in (0, 1)]
-        fx, fy, fz = f[:, 0], f[:, 1], f[:, 2]
-        c00, c01 = c[0] * (1 - fz) + c[1] * fz, c[2] * (1 - fz) + c[3] * fz
-        c10, c11 = c[4] * (1 - fz) + c[5] * fz, c[6] * (1 - fz) + c[7] * fz
-        c0, c1 = c00 * (1 - fy) + c01 * fy, c10 * (1 - fy) + c11 * fy
-        value = c0 * (1 - fx) + c1 * fx
-        if not gradient:
-            return value, inside, None
-        gx = (c1 - c0) / step
-        gy = ((c01 - c00) * (1 - fx) + (c11 - c10) * fx) / step
-        dz0 = (c[1] - c[0]) * (1 - fy) + (c[3] - c[2]) * fy
-        dz1 = (c[5] - c[4]) * (1 - fy) + (c[7] - c[6]) * fy
-        gz = (dz0 * (1 - fx) + dz1 * fx) / step
-        return value, inside, np.stack([gx, gy, gz], 1)
+        """Sample the signed distance and closest-point normals on a grid (`cells` per side over the bounding
+        box grown by `margin` diameters) once (`distance_field`); `closest_points` / `distances` and the filters'
+        kernels then look it up. Idempotent for the same arguments."""
+        if getattr(self, "_field_args", None) == (cells, margin):
+            return
+        self.field = sample_field(self.vertices, lambda g: self.exact_distances(g, signed=True),
+                                  self.exact_closest_points, cells, margin)
+        self._field_args = (cells, margin)
 
     def closest_points(self, points: np.ndarray) -> np.ndarray:
-        """(..., 3) model-frame points -> closest surface points: p - s(p) grad s / |grad s| from the field
-        where built (the BVH where not, or where the gradient vanishes on the medial axis)."""
-        pts = np.asarray(points, dtype=np.float64)
-        if getattr(self, "_field", None) is None:
-            return self.exact_closest_points(pts)
-        flat = pts.reshape(-1, 3)
-        out = np.empty_like(flat)
-        s, inside, g = self._field_lookup(flat, gradient=True)
-        norm = np.linalg.norm(g, axis=1)
-        good = norm > 0.5
-        idx = np.flatnonzero(inside)
-        out[idx[good]] = flat[idx[good]] - (s[good] / norm[good])[:, None] * g[good]
-        rest = np.ones(len(flat), bool)
-        rest[idx[good]] = False
-        if rest.any():
-            out[rest] = self.exact_closest_points(flat[rest])
-        return out.reshape(pts.shape)
+        """(..., 3) model-frame points -> closest surface points: from the field when built, else the BVH."""
+        field = getattr(self, "field", None)
+        return self.exact_closest_points(points) if field is None else field.closest_points(points)
 
     def distances(self, points: np.ndarray) -> np.ndarray:
-        """(..., 3) model-frame points -> unsigned distance to the surface: |trilinear field| where built,
-        the BVH elsewhere."""
-        pts = np.asarray(points, dtype=np.float64)
-        if getattr(self, "_field", None) is None:
-            return self.exact_distances(pts)
-        flat = pts.reshape(-1, 3)
-        out = np.empty(len(flat))
-        s, inside, _ = self._field_lookup(flat, gradient=False)
-        out[inside] = np.abs(s)
-        if (~inside).any():
-            out[~inside] = self.exact_distances(flat[~inside])
-        return out.reshape(pts.shape[:-1])
+        """(..., 3) model-frame points -> unsigned distance to the surface: from the field when built, else the
+        BVH."""
+        field = getattr(self, "field", None)
+        return self.exact_distances(points) if field is None else field.distances(points)
 
     def world_distances(self, poses: np.ndarray, points: np.ndarray) -> np.ndarray:
         """Distance of world points (M, 3) to the model at each pose (P, 6) -> (P, M): the points go into the
-        model frame (R^T (y - t)), where the scene lives."""
+        model frame (R^T (y - t)), where the scene lives (a numba kernel over the field when built)."""
+        poses = np.asarray(poses, dtype=np.float64)
         R = pose_rotations(poses)
-        local = np.einsum("pji,pmj->pmi", R, np.asarray(points)[None] - np.asarray(poses)[:, None, :3])
+        if self.field is not None:
+            from kinfu_cli.localization.ukf import pose_distances
+
+            f = self.field
+            out = np.empty((len(poses), len(points)))
+            pose_distances(np.ascontiguousarray(poses[:, :3]), np.ascontiguousarray(R),
+                           np.ascontiguousarray(points, dtype=np.float64), f.lo, f.step, f.sdf, f.normals, out)
+            return out
+        local = np.einsum("pji,pmj->pmi", R, np.asarray(points)[None] - poses[:, None, :3])
         return self.distances(local)
 
     def performance_index(self, pose: np.ndarray, points: np.ndarray) -> float:

@@ -21,7 +21,8 @@ import numpy as np
 from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.progress import progress
-from kinfu_cli.localization.mesh_model import MeshModel, pose_matrix, pose_rotations
+from kinfu_cli.localization import ukf
+from kinfu_cli.localization.mesh_model import MeshModel, matrix_pose, pose_matrix, pose_rotations
 
 N_X = 6
 MIN_POINTS = 3  # three points fix a rigid pose of a generic surface; fewer leave a continuum of poses
@@ -32,20 +33,35 @@ class MupfParameters:
     """Table 4.1 (simulation): Q, P0 (diagonals; m^2, rad^2), sigma_p^2 (m^2), the unscented transform's
     alpha, beta, kappa, N particles; window m (None: ceil(L/2), the choice of ch. 5) and t0 = 2 steps without
     resampling. max_index: an estimate whose I_L exceeds it (m; None: sigma_p) is reported as not converged.
-    beta: Table 4.1 prints 30; with it this filter drifts into wrong poses (the central sigma point's
-    W0^(c) = 30.25 inflates the innovation covariance), so the default is the standard Gaussian value 2 —
-    the localisation evaluation measures both (README)."""
+    Measured departures, each with the value that restores the thesis (README, "Localisation"):
+    - rotation "local": sigma points, corrections and proposal samples perturb the rotation by a rotation
+      vector at the particle ("euler": the thesis' Euler-angle state, wrapped in the MAP differences);
+    - divide_by_proposal False: eq. 4.18's division by N(x_hat; x_bar, P) (without the transition density of
+      Alg. 1 that would cancel it) multiplies every weight by exp(|z|^2 / 2) det(P)^(1/2), noise unrelated to
+      the fit that favours unconverged particles; without it more tuning trials succeeded (True: the thesis);
+    - map_candidates "both": the MAP of eq. 4.28 is taken over the particles x_hat and their UKF means x_bar
+      ("particles": x_hat only, the thesis);
+    - literal_estimate_weights False: eq. 4.24's second division by the proposal density is dropped (Remark 1's
+      derivation multiplies the weights of eq. 4.19 by the likelihood powers only).
+    proposal "mean" / resample_ess < 1 are the authors' released code (particle = UKF mean moved by the random
+    walk of eq. 4.12; resampling only below an effective sample size of resample_ess N), measured worse here."""
 
     particles: int = 700
     window: int | None = None
     t0: int = 2
     alpha: float = 1.0
-    beta: float = 2.0
+    beta: float = 30.0
     kappa: float = 2.0
     sigma_p2: float = 1e-4
     q_diag: tuple[float, ...] = (1e-5, 1e-5, 1e-5, 1e-4, 1e-4, 1e-4)
     p0_diag: tuple[float, ...] = (0.04, 0.04, 0.04, math.pi ** 2, (math.pi / 2) ** 2, math.pi ** 2)
     max_index: float | None = None
+    rotation: str = "local"
+    divide_by_proposal: bool = False
+    map_candidates: str = "both"
+    literal_estimate_weights: bool = False
+    proposal: str = "sample"
+    resample_ess: float = 1.0
 
     def check(self) -> None:
         check_number(self.particles, "particles", 1, integer=True)
@@ -53,6 +69,13 @@ class MupfParameters:
             check_number(self.window, "window", 1, integer=True)
         check_number(self.t0, "t0", 0, integer=True)
         check_number(self.alpha, "alpha", 0, low_open=True)
+        if self.rotation not in ("local", "euler"):
+            raise ConfigError(f"expected 'local' or 'euler', got {self.rotation!r}", parameter="rotation")
+        if self.map_candidates not in ("both", "particles"):
+            raise ConfigError(f"expected 'both' or 'particles', got {self.map_candidates!r}", parameter="map_candidates")
+        if self.proposal not in ("sample", "mean"):
+            raise ConfigError(f"expected 'sample' or 'mean', got {self.proposal!r}", parameter="proposal")
+        check_number(self.resample_ess, "resample_ess", 0, 1)
         check_number(self.sigma_p2, "sigma_p2", 0, low_open=True, unit="m^2")
         if self.max_index is not None:
             check_number(self.max_index, "max_index", 0, low_open=True, unit="m")
@@ -69,6 +92,10 @@ class MupfParameters:
         wm[0] = lam / (N_X + lam)
         wc[0] = lam / (N_X + lam) + (1 - self.alpha ** 2 + self.beta)
         return wm, wc, N_X + lam
+
+
+# the weights and MAP candidates exactly as printed (eqs. 4.18, 4.24, 4.28)
+PAPER_WEIGHTS = {"divide_by_proposal": True, "literal_estimate_weights": True, "map_candidates": "particles"}
 
 
 @dataclass
@@ -101,41 +128,95 @@ def check_points(points: np.ndarray, source: str = "points") -> np.ndarray:
     return pts
 
 
-def _safe_cholesky(P: np.ndarray) -> np.ndarray:
-    """Batched Cholesky of (N, 6, 6) covariances; ones that lost positive definiteness in the update are
-    symmetrised and their eigenvalues floored first."""
-    P = 0.5 * (P + np.swapaxes(P, -1, -2))
-    try:
-        return np.linalg.cholesky(P)
-    except np.linalg.LinAlgError:
-        w, V = np.linalg.eigh(P)
-        w = np.maximum(w, 1e-12 * np.maximum(w.max(axis=-1, keepdims=True), 1e-12))
-        return np.linalg.cholesky(np.einsum("nij,nj,nkj->nik", V, w, V))
+def _initial_particles(x0: np.ndarray, params: MupfParameters, rng: np.random.Generator):
+    """x_{0|0} ~ N(x0, P0) (Alg. 2 line 2) as positions, Euler angles and their rotation matrices."""
+    x = x0 + rng.standard_normal((params.particles, N_X)) * np.sqrt(np.asarray(params.p0_diag))
+    return np.ascontiguousarray(x[:, :3]), np.ascontiguousarray(x[:, 3:]), pose_rotations(x)
 
 
-def _closest_world(model: MeshModel, poses: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """h(x) of eq. 4.17 for poses (..., 6) and one measurement y (3,): the closest surface point, world frame."""
-    R = pose_rotations(poses)
-    local = np.einsum("...ji,...j->...i", R, y - poses[..., :3])
-    return np.einsum("...ij,...j->...i", R, model.closest_points(local)) + poses[..., :3]
+def _systematic_resample(log_w: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Indices drawn with probability w (Alg. 2 line 29), by systematic sampling (lower variance than
+    multinomial, the same expectation; the authors' code does the same)."""
+    n = len(log_w)
+    c = np.cumsum(np.exp(log_w))
+    c[-1] = 1.0
+    return np.minimum(np.searchsorted(c, (rng.random() + np.arange(n)) / n), n - 1)
 
 
-def _log_gauss(diff: np.ndarray, chol: np.ndarray) -> np.ndarray:
-    """log N(diff; 0, L L^T) for diff (N, 6), chol (N, 6, 6)."""
-    z = np.linalg.solve(chol, diff[..., None])[..., 0]
-    return -0.5 * np.sum(z * z, axis=-1) - np.log(np.diagonal(chol, axis1=-2, axis2=-1)).sum(-1) \
-        - 0.5 * N_X * math.log(2 * math.pi)
+def localize_mupf(model: MeshModel, points: np.ndarray, params: MupfParameters = MupfParameters(), *,
+                  x0: np.ndarray | None = None, seed: int | None = 0, quiet: bool = True,
+                  track_index: bool = False, observer=None) -> MupfResult:
+    """Run Alg. 2 over `points` (L, 3, world frame, in measurement order) for `model`; x0 is the prior mean
+    (the 6-D null vector by default, as in the thesis' tests). track_index computes I_L of the MAP estimate
+    after every step (slower: an O(N^2) MAP per step). observer(step, t_hat, R_hat, log_w) sees the proposal
+    samples and their normalised log weights after every step (diagnostics)."""
+    params.check()
+    ys = np.ascontiguousarray(check_points(points))
+    L = len(ys)
+    m = params.window if params.window is not None else max(1, math.ceil(L / 2))
+    rng = np.random.default_rng(seed)
+    n = params.particles
+    wm, wc, spread = params.unscented_weights()
+    mode = ukf.LOCAL if params.rotation == "local" else ukf.EULER
+    q_diag = np.asarray(params.q_diag, dtype=np.float64)
+    x0 = np.zeros(N_X) if x0 is None else np.asarray(x0, dtype=np.float64)
+    model.build_field()
+    f = model.field
+    start = time.perf_counter()
+    t, e, R = _initial_particles(x0, params, rng)
+    P = np.broadcast_to(np.diag(params.p0_diag), (n, N_X, N_X)).copy()
+    t_hat, e_hat, R_hat = np.empty_like(t), np.empty_like(e), np.empty_like(R)
+    t_bar, e_bar, R_bar = np.empty_like(t), np.empty_like(e), np.empty_like(R)
+    P_new, chol = np.empty_like(P), np.empty_like(P)
+    log_q, log_l, log_l_est = np.empty(n), np.empty(n), np.empty(n)
+    sig2 = params.sigma_p2
+    log_w_prev = np.full(n, -math.log(n))
+    history: list[float] = []
+    best = (x0[:3], pose_rotations(x0[None])[0])
+    for step in progress(range(1, L + 1), total=L, desc=f"MUPF {model.name}", quiet=quiet, unit="point"):
+        k_bar = max(step - m + 1, 1)
+        window = ys[k_bar - 1:step]
+        # estimation weights (eq. 4.24): l(y_k)^(m - t + k - 1) on top of the propagated weights
+        expo = (m - step + np.arange(k_bar, step + 1) - 1).astype(np.float64)
+        z = rng.standard_normal((n, N_X))
+        ukf.mupf_step(mode, params.proposal == "sample", t, e, R, P, q_diag, ys[step - 1], window, expo, z, wm, wc, spread, sig2, f.lo, f.step,
+                      f.sdf, f.normals, t_bar, e_bar, R_bar, t_hat, e_hat, R_hat, P_new, chol, log_q, log_l, log_l_est)
+        # eqs. 4.18-4.19: w_t = w_{t-1} l_window / q
+        log_w = _normalised(log_w_prev + log_l - (log_q if params.divide_by_proposal else 0.0))
+        if observer is not None:
+            observer(step, t_hat, R_hat, log_w)
+        if step == L or track_index:
+            extra = log_q if params.literal_estimate_weights else 0.0
+            log_w_bar = _normalised(log_w + log_l_est - extra)
+            # candidates: the particles x_hat (eq. 4.28) and, with map_candidates "both", their UKF means x_bar
+            if params.map_candidates == "both":
+                tc, ec, Rc = (np.concatenate(p) for p in ((t_hat, t_bar), (e_hat, e_bar), (R_hat, R_bar)))
+            else:
+                tc, ec, Rc = t_hat, e_hat, R_hat
+            scores = np.empty(len(tc))
+            ukf.map_scores(mode, tc, ec, Rc, t_hat, e_hat, R_hat, chol, log_w_bar, scores)
+            j = int(np.argmax(scores))
+            best = (tc[j].copy(), Rc[j].copy())
+            if track_index:
+                history.append(model.performance_index(_pose_vector(*best), ys))
+        ess = 1.0 / np.exp(2 * log_w).sum()
+        if step > params.t0 and ess <= params.resample_ess * n:  # resampling after t0 steps (Alg. 2 l. 27-30)
+            idx = _systematic_resample(log_w, rng)
+            t, e, R, P = t_hat[idx], e_hat[idx], R_hat[idx], P_new[idx]
+            log_w_prev = np.full(n, -math.log(n))
+        else:
+            t, e, R, P = t_hat.copy(), e_hat.copy(), R_hat.copy(), P_new.copy()
+            log_w_prev = log_w if step > params.t0 else np.full(n, -math.log(n))
+    seconds = time.perf_counter() - start
+    pose = _pose_vector(*best)
+    index = model.performance_index(pose, ys)
+    max_index = params.max_index if params.max_index is not None else math.sqrt(sig2)
+    return MupfResult(pose=pose, index=index, converged=bool(index <= max_index),
+                      max_index=max_index, seconds=seconds, window=m, index_history=history)
 
 
-def map_estimate(x_hat: np.ndarray, chol: np.ndarray, log_w_bar: np.ndarray) -> int:
-    """Eqs. 4.28-4.29: the particle j maximising sum_i w_bar_i N(x_hat_j; x_hat_i, P_i) (O(N^2))."""
-    inv = np.linalg.inv(chol)  # (N, 6, 6), L_i^-1
-    diff = x_hat[None, :, :] - x_hat[:, None, :]  # [i, j] = x_j - x_i
-    z = np.einsum("iab,ijb->ija", inv, diff)
-    log_n = -0.5 * np.sum(z * z, axis=-1) - np.log(np.diagonal(chol, axis1=-2, axis2=-1)).sum(-1)[:, None]
-    score = log_n + log_w_bar[:, None]
-    peak = score.max(axis=0)
-    return int(np.argmax(peak + np.log(np.exp(score - peak).sum(axis=0))))
+def _pose_vector(t: np.ndarray, R: np.ndarray) -> np.ndarray:
+    return np.concatenate([t, matrix_pose(np.block([[R, t[:, None]], [np.zeros((1, 3)), np.ones((1, 1))]]))[3:]])
 
 
 def _normalised(log_w: np.ndarray) -> np.ndarray:
@@ -144,74 +225,6 @@ def _normalised(log_w: np.ndarray) -> np.ndarray:
     if not np.isfinite(peak):
         return np.full(len(log_w), -math.log(len(log_w)))
     return log_w - (peak + math.log(np.exp(log_w - peak).sum()))
-
-
-def localize_mupf(model: MeshModel, points: np.ndarray, params: MupfParameters = MupfParameters(), *,
-                  x0: np.ndarray | None = None, seed: int | None = 0, quiet: bool = True,
-                  track_index: bool = False) -> MupfResult:
-    """Run Alg. 2 over `points` (L, 3, world frame, in measurement order) for `model`; x0 is the prior mean
-    (the 6-D null vector by default, as in the thesis' tests). track_index computes I_L of the MAP estimate
-    after every step (slower: an O(N^2) MAP per step)."""
-    params.check()
-    ys = check_points(points)
-    L = len(ys)
-    m = params.window if params.window is not None else max(1, math.ceil(L / 2))
-    rng = np.random.default_rng(seed)
-    n = params.particles
-    wm, wc, spread = params.unscented_weights()
-    Q = np.diag(params.q_diag)
-    x0 = np.zeros(N_X) if x0 is None else np.asarray(x0, dtype=np.float64)
-    start = time.perf_counter()
-    x = x0 + rng.standard_normal((n, N_X)) * np.sqrt(np.asarray(params.p0_diag))
-    P = np.broadcast_to(np.diag(params.p0_diag), (n, N_X, N_X)).copy()
-    log_w = np.full(n, -math.log(n))
-    sig2 = params.sigma_p2
-    history: list[float] = []
-    best = x0
-    for t in progress(range(1, L + 1), total=L, desc=f"MUPF {model.name}", quiet=quiet, unit="point"):
-        y = ys[t - 1]
-        # 1) UKF time update, sigma points, measurement prediction and correction (per particle)
-        P_pred = P + Q
-        S = _safe_cholesky(spread * P_pred)  # columns are the sigma offsets
-        offsets = np.concatenate([np.zeros((n, 1, N_X)), np.swapaxes(S, 1, 2), -np.swapaxes(S, 1, 2)], axis=1)
-        X = x[:, None, :] + offsets  # (n, 13, 6)
-        H = _closest_world(model, X, y)  # (n, 13, 3)
-        y_bar = np.einsum("s,nsk->nk", wm, H)
-        dY = H - y_bar[:, None]
-        dX = X - x[:, None]  # the weighted sigma mean is x itself
-        Syy = np.einsum("s,nsa,nsb->nab", wc, dY, dY) + sig2 * np.eye(3)
-        Pxy = np.einsum("s,nsa,nsb->nab", wc, dX, dY)
-        K = np.linalg.solve(Syy, np.swapaxes(Pxy, 1, 2)).swapaxes(1, 2)  # Pxy Syy^-1 (Syy symmetric)
-        x_bar = x + np.einsum("nab,nb->na", K, y - y_bar)
-        P = P_pred - np.einsum("nab,nbc,ndc->nad", K, Syy, K)
-        # 2) proposal samples and memory weights (eqs. 4.18-4.20)
-        chol = _safe_cholesky(P)
-        z = rng.standard_normal((n, N_X))
-        x_hat = x_bar + np.einsum("nab,nb->na", chol, z)
-        log_q = -0.5 * np.sum(z * z, axis=1) - np.log(np.diagonal(chol, axis1=1, axis2=2)).sum(1)
-        k_bar = max(t - m + 1, 1)
-        d = model.world_distances(x_hat, ys[k_bar - 1:t])  # (n, window)
-        log_l = -0.5 * d * d / sig2
-        log_w = _normalised(log_w + log_l.sum(1) - log_q)
-        # 3) estimation weights (eq. 4.24) and MAP (eq. 4.28), at the last step (or every step when tracked)
-        if t == L or track_index:
-            expo = m - t + np.arange(k_bar, t + 1) - 1
-            log_w_bar = _normalised(log_w + log_l @ expo - log_q)
-            best = x_hat[map_estimate(x_hat, chol, log_w_bar)]
-            if track_index:
-                history.append(model.performance_index(best, ys))
-        # 4) resampling after t0 steps
-        if t > params.t0:
-            idx = rng.choice(n, size=n, p=np.exp(log_w))
-            x, P = x_hat[idx], P[idx]
-        else:
-            x = x_hat
-        log_w = np.full(n, -math.log(n))
-    seconds = time.perf_counter() - start
-    index = model.performance_index(best, ys)
-    max_index = params.max_index if params.max_index is not None else math.sqrt(sig2)
-    return MupfResult(pose=np.asarray(best, dtype=np.float64), index=index, converged=bool(index <= max_index),
-                      max_index=max_index, seconds=seconds, window=m, index_history=history)
 
 
 def parameters_json(params: MupfParameters) -> dict:
