@@ -17,6 +17,7 @@ import uuid
 import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 from kinfu_cli.batch.fingerprint import input_fingerprint, output_stats
@@ -53,6 +54,35 @@ class Engine:
             with contextlib.suppress(Exception):
                 self.cluster.close()
 
+    def trial_map(self, desc: str = "trials", quiet: bool = False):
+        """A `core.trials.TrialMap` running each trial as one task on this cluster (see map_trials)."""
+        return partial(self.map_trials, desc=desc, quiet=quiet)
+
+    def map_trials(self, fn: Callable, items, shared=None, *, desc: str = "trials", quiet: bool = False) -> list:
+        """[fn(shared, item) for item in items] as one task per item, in the order of `items`, with a progress
+        bar over tasks. `shared` is scattered once (each worker receives it once, not once per trial). A trial
+        raising KinfuError raises the same error here, its parameter kept; any other failure cancels the rest."""
+        from dask.distributed import as_completed
+
+        items = list(items)
+        if not items:
+            return []
+        run_id = uuid.uuid4().hex[:8]
+        shared_f = self.client.scatter(shared, broadcast=True, hash=False) if shared is not None else None
+        futures = [self.client.submit(_trial, fn, shared_f, item, key=f"kinfu-trial-{i}-{run_id}", pure=False)
+                   for i, item in enumerate(items)]
+        try:
+            for fut in progress(as_completed(futures, loop=self.client.loop), total=len(futures), desc=desc,
+                                quiet=quiet, unit="trial"):
+                status, *rest = fut.result()
+                if status == "error":
+                    cls, detail, parameter = rest
+                    raise cls(detail, parameter=parameter)
+            return [f.result()[1] for f in futures]
+        finally:
+            with contextlib.suppress(Exception):
+                self.client.cancel(futures + ([shared_f] if shared_f is not None else []))
+
 
 def connect(scheduler: str | None = None, workers: int | None = None) -> Engine:
     """A client on `scheduler` (tcp://host:port of a running dask.distributed scheduler), or on a new local
@@ -82,6 +112,19 @@ def connect(scheduler: str | None = None, workers: int | None = None) -> Engine:
                                dashboard_address=None, silence_logs=logging.ERROR,
                                env={"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"})
     return Engine(Client(cluster, set_as_default=False), cluster, f"local ({n} workers)")
+
+
+def _trial(fn: Callable, shared, item):
+    """One trial on a worker: numba on one thread (a worker thread is a core); a KinfuError comes back as data
+    (a pickled exception loses its keyword arguments, hence the parameter the command line names)."""
+    with contextlib.suppress(Exception):
+        import numba
+
+        numba.set_num_threads(1)
+    try:
+        return ("ok", fn(shared, item))
+    except KinfuError as exc:
+        return ("error", type(exc), exc.detail, exc.parameter)
 
 
 def _one_line(exc: BaseException) -> str:
