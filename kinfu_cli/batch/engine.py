@@ -145,11 +145,10 @@ def _folder_lock(outdir: Path):
     return Lock(f"kinfu-batch:{os.path.abspath(outdir)}")
 
 
-def run_task(spec: StageSpec, recording: Path, outdir: Path, options: Mapping, previous: dict | None,
-             force: bool, *upstream: dict) -> dict:
+def run_task(spec: StageSpec, rec, options: Mapping, previous: dict | None, force: bool, *upstream: dict) -> dict:
     """One (recording, stage) on a worker: blocked when a needed stage did not finish, skipped when its
     outputs are current (same input fingerprint, outputs unchanged since recorded), else run. Never raises:
-    a failure is the entry's one-line `error`."""
+    a failure is the entry's one-line `error`. `rec` is the plan's PlanRecording."""
     t0 = time.perf_counter()
     entry = {"status": "failed", "seconds": 0.0, "error": None, "fingerprint": None, "outputs": None,
              "numbers": {}, "warnings": []}
@@ -157,9 +156,10 @@ def run_task(spec: StageSpec, recording: Path, outdir: Path, options: Mapping, p
         return {**entry, "status": "blocked", "error": f"needs {', '.join(bad)}, which did not finish",
                 "stage": spec.name}
     try:
-        fp = input_fingerprint(spec.name, spec.input_paths(recording, outdir), options)
+        outdir, outputs = rec.output, spec.outputs_of(rec)
+        fp = input_fingerprint(spec.name, spec.input_paths(rec), options)
         if (not force and previous and previous.get("status") in DONE and previous.get("fingerprint") == fp
-                and output_stats(outdir, spec.outputs) == previous.get("outputs")):
+                and output_stats(outdir, outputs) == previous.get("outputs")):
             return {**entry, **{k: previous.get(k) for k in ("numbers", "warnings")}, "status": "skipped",
                     "fingerprint": fp, "outputs": previous["outputs"], "stage": spec.name}
         with contextlib.suppress(Exception):  # one numba thread per worker thread: no oversubscription
@@ -167,10 +167,10 @@ def run_task(spec: StageSpec, recording: Path, outdir: Path, options: Mapping, p
 
             numba.set_num_threads(1)
         with _folder_lock(outdir):
-            done = spec.run(recording, outdir, options, force)
-        stats = output_stats(outdir, spec.outputs)
+            done = spec.run(rec, options, force)
+        stats = output_stats(outdir, outputs)
         if stats is None:
-            raise KinfuError(f"{spec.name} finished without writing {', '.join(spec.outputs)}")
+            raise KinfuError(f"{spec.name} finished without writing {', '.join(outputs)}")
         entry.update(status="ok", fingerprint=fp, outputs=stats, numbers=done.numbers, warnings=done.warnings)
     except Exception as exc:  # recorded in the manifest; the other recordings go on
         entry["error"] = _one_line(exc)
@@ -184,13 +184,13 @@ def check_before_work(plan: Plan, table: Mapping[str, StageSpec], force: bool) -
     inputs = [r.path for r in plan.recordings]
     claim_output(plan.output / MANIFEST_NAME, inputs, force=force, parameter="output")
     for rec in plan.recordings:
-        for s in plan.stages:
+        for s in rec.stages:
             spec = table[s]
             try:
-                spec.check(rec.path, rec.output, rec.stage_options(s))
+                spec.check(rec, rec.stage_options(s))
             except KinfuError as exc:
                 raise ConfigError(f"{plan.source}: {rec.entry}: {s}: {exc}") from None
-            for rel in spec.claims:
+            for rel in spec.claims_of(rec):
                 claim_output(rec.output / rel, inputs, force=force, parameter="output")
 
 
@@ -202,11 +202,14 @@ def run_plan(plan: Plan, table: Mapping[str, StageSpec], engine: Engine, *, forc
     run_id = uuid.uuid4().hex[:8]
     futures: dict = {}
     where: dict = {}
-    for i, rec in enumerate(plan.recordings):
-        for s in plan.stages:
+    for s in plan.stages:  # pipeline order: what a task waits for is submitted before it
+        for i, rec in enumerate(plan.recordings):
+            if s not in rec.stages:
+                continue
             spec = table[s]
-            deps = [futures[(i, n)] for n in spec.needs]
-            fut = engine.client.submit(run_task, spec, rec.path, rec.output, rec.stage_options(s),
+            deps = [futures[(i, n)] for n in (*spec.needs, *spec.wants) if n in rec.stages]
+            deps += [futures[(j, n)] for stage, j, n in rec.after if stage == s]
+            fut = engine.client.submit(run_task, spec, rec, rec.stage_options(s),
                                        previous.get((str(rec.output), s)), force, *deps,
                                        key=f"kinfu-{s}-{i}-{run_id}", pure=False)
             futures[(i, s)] = fut

@@ -12,11 +12,11 @@ from kinfu_cli.batch.stages import RECORDING, StageRun, StageSpec
 from kinfu_cli.core.errors import ConfigError
 
 
-def _noop_check(recording, outdir, options):
+def _noop_check(rec, options):
     return None
 
 
-def _noop_run(recording, outdir, options, force):
+def _noop_run(rec, options, force):
     return StageRun()
 
 
@@ -108,8 +108,8 @@ def test_the_example_plan_is_valid():
     assert plan.stages == ["fuse", "poi", "nbv", "segment"]
     for rec in plan.recordings:
         assert rec.path.exists()
-        for s in plan.stages:
-            table[s].check(rec.path, rec.output, rec.stage_options(s))
+        for s in rec.stages:
+            table[s].check(rec, rec.stage_options(s))
     assert plan.recordings[2].stage_options("segment") == {"plot": True, "seed": 1}
 
 
