@@ -109,7 +109,7 @@ def connect(scheduler: str | None = None, workers: int | None = None) -> Engine:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                               dashboard_address=None, silence_logs=logging.ERROR,
+                               dashboard_address=None, silence_logs=logging.CRITICAL,
                                env={"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"})
     return Engine(Client(cluster, set_as_default=False), cluster, f"local ({n} workers)")
 
