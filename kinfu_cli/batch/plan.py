@@ -9,7 +9,8 @@
     voxel-size = 0.02
 
 A recording entry may replace the plan's `stages` with its own, name the `before` of its diff (another
-recording of the plan, whose fused volume is used and which runs first, or a volume.npz / ternary.npz) and the
+recording of the plan named by its output folder or path, whose fused volume is used and which is fused first,
+or a volume.npz / ternary.npz) and the
 `ground-truth` of its evaluations (default: the ground_truth folder beside the recording, kinfu synth's
 layout). Paths are relative to the plan file. Everything is checked before any work: unknown keys or stages, a
 stage without the stages it needs, a stage without its inputs (diff without `before`, an evaluation without
@@ -186,26 +187,35 @@ def _recordings(source: Path, doc: dict, output: Path, table, stages: list[str])
     return out
 
 
-def _before(source: Path, i: int, rec: PlanRecording, value, recs: list[PlanRecording]) -> tuple[Path, tuple]:
-    """The volume a diff compares with and the task it waits for: another recording of the plan (its fused
-    volume, after its fuse) or a volume file."""
+def _before(source: Path, i: int, rec: PlanRecording, value, recs: list[PlanRecording], out: Path
+            ) -> tuple[Path, tuple]:
+    """The volume a diff compares with and the task it waits for: another recording of the plan, named by its
+    output folder or its path (its fused volume, after its fuse), or a volume file."""
     where = rec.entry.split(" ")[0]
     if not isinstance(value, str) or not value.strip():
-        raise _fail(source, where, "before: expected the path of a recording of this plan or of a volume.npz")
+        raise _fail(source, where, "before: expected a recording of this plan (its output folder or path) or the "
+                                   "path of a volume.npz")
     full = Path(os.path.normpath(value if os.path.isabs(value) else source.parent / value))
-    for j, other in enumerate(recs):
-        if os.path.abspath(other.path) == os.path.abspath(full):
-            if j == i:
-                raise _fail(source, where, "before: names the recording itself")
-            if "fuse" not in other.stages:
-                raise _fail(source, where, f"before: {value} is not fused in this plan (its stages lack fuse)")
-            return other.output / "fuse" / "volume.npz", (("diff", j, "fuse"),)
+    named = [j for j, o in enumerate(recs) if os.path.normpath(o.output) == os.path.normpath(out / value)]
+    named = named or [j for j, o in enumerate(recs) if os.path.abspath(o.path) == os.path.abspath(full)]
+    if len(named) > 1:
+        raise _fail(source, where, f"before: {value} is the path of {len(named)} recordings of this plan; name "
+                                   "one by its output folder")
+    if named:
+        (j,) = named
+        other = recs[j]
+        if j == i:
+            raise _fail(source, where, "before: names the recording itself")
+        if "fuse" not in other.stages:
+            raise _fail(source, where, f"before: {value} is not fused in this plan (its stages lack fuse)")
+        return other.output / "fuse" / "volume.npz", (("diff", j, "fuse"),)
     if full.is_file() and full.suffix == ".npz":
         return full, ()
     raise _fail(source, where, f"before: {value}: no such recording in this plan nor volume file (.npz)")
 
 
-def _links(source: Path, pairs: list[tuple[PlanRecording, dict]], viz: str | None) -> list[PlanRecording]:
+def _links(source: Path, pairs: list[tuple[PlanRecording, dict]], viz: str | None, output: Path
+           ) -> list[PlanRecording]:
     """Each recording with its links resolved (diff's before, the evaluations' ground truth, the viewer file)
     and a check that every stage it has finds its inputs."""
     recs = [r for r, _ in pairs]
@@ -217,7 +227,7 @@ def _links(source: Path, pairs: list[tuple[PlanRecording, dict]], viz: str | Non
         if "before" in e:
             if "diff" not in rec.stages:
                 raise _fail(source, where, "before: given, but diff is not among the recording's stages")
-            links["before"], after = _before(source, i, rec, e["before"], recs)
+            links["before"], after = _before(source, i, rec, e["before"], recs, output)
         elif "diff" in rec.stages:
             raise _fail(source, where, "diff needs 'before' (a recording of this plan or a volume.npz); or give "
                                        "this recording its own 'stages' without diff")
@@ -274,7 +284,7 @@ def load_plan(source: str | os.PathLike, table: Mapping[str, StageSpec], output:
     if viz is not None and VIZ_STAGE not in table:
         raise _fail(source, "viz", "this stage table has no viewer stage")
     common = _normalise_options(source, "options", doc.get("options"), table)
-    recs = _links(source, _recordings(source, doc, out, table, stages), viz)
+    recs = _links(source, _recordings(source, doc, out, table, stages), viz, out)
     merged = []
     for r in recs:
         opts = {s: {**common.get(s, {}), **r.options.get(s, {})} for s in r.stages}

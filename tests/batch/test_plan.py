@@ -104,13 +104,18 @@ def test_the_example_plan_is_valid():
     table = batch_stages()
     example = Path(__file__).resolve().parents[2] / "examples" / "batch_plan.toml"
     plan = load_plan(example, table)
-    assert [r.output.name for r in plan.recordings] == ["tabletop_mcap", "tabletop_bag", "tabletop_ros2"]
-    assert plan.stages == ["fuse", "poi", "nbv", "segment"]
+    assert [r.output.name for r in plan.recordings] == ["tabletop_mcap", "tabletop_bag", "tabletop_ros2",
+                                                        "tabletop_after"]
+    assert plan.stages == ["fuse", "poi", "nbv", "segment", "diff", "eval-fusion", "eval-poi", "viz"]
     for rec in plan.recordings:
-        assert rec.path.exists()
+        assert rec.path.exists() and rec.links["ground_truth"].is_dir()
         for s in rec.stages:
             table[s].check(rec, rec.stage_options(s))
-    assert plan.recordings[2].stage_options("segment") == {"plot": True, "seed": 1}
+    assert plan.recordings[2].stage_options("segment") == {"plot": True, "seed": 1, "viz": True}
+    after = plan.recordings[3]
+    assert after.stages == ("fuse", "poi", "diff", "eval-poi", "viz")
+    assert after.links["before"] == plan.recordings[0].output / "fuse" / "volume.npz"
+    assert after.stage_options("fuse") == {"voxel-size": 0.01, "start": 11.04, "viz": True}
 
 
 def test_viewer_files_are_one_per_recording_and_stage(tmp_path):
