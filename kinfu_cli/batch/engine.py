@@ -152,16 +152,18 @@ def run_task(spec: StageSpec, rec, options: Mapping, previous: dict | None, forc
     t0 = time.perf_counter()
     entry = {"status": "failed", "seconds": 0.0, "error": None, "fingerprint": None, "outputs": None,
              "numbers": {}, "warnings": []}
-    if bad := [u["stage"] for u in upstream if u.get("status") not in DONE]:
+    if bad := [u["stage"] if u.get("folder") in (None, str(rec.output)) else f"{u['stage']} of {u['folder']}"
+               for u in upstream if u.get("status") not in DONE]:
         return {**entry, "status": "blocked", "error": f"needs {', '.join(bad)}, which did not finish",
-                "stage": spec.name}
+                "stage": spec.name, "folder": str(rec.output)}
     try:
         outdir, outputs = rec.output, spec.outputs_of(rec)
         fp = input_fingerprint(spec.name, spec.input_paths(rec), options)
         if (not force and previous and previous.get("status") in DONE and previous.get("fingerprint") == fp
                 and output_stats(outdir, outputs) == previous.get("outputs")):
             return {**entry, **{k: previous.get(k) for k in ("numbers", "warnings")}, "status": "skipped",
-                    "fingerprint": fp, "outputs": previous["outputs"], "stage": spec.name}
+                    "fingerprint": fp, "outputs": previous["outputs"], "stage": spec.name,
+                    "folder": str(rec.output)}
         with contextlib.suppress(Exception):  # one numba thread per worker thread: no oversubscription
             import numba
 
@@ -175,7 +177,7 @@ def run_task(spec: StageSpec, rec, options: Mapping, previous: dict | None, forc
     except Exception as exc:  # recorded in the manifest; the other recordings go on
         entry["error"] = _one_line(exc)
     entry["seconds"] = round(time.perf_counter() - t0, 3)
-    entry["stage"] = spec.name
+    entry["stage"], entry["folder"] = spec.name, str(rec.output)
     return entry
 
 
@@ -230,6 +232,7 @@ def run_plan(plan: Plan, table: Mapping[str, StageSpec], engine: Engine, *, forc
                 entry = {"status": "failed", "seconds": 0.0, "error": _one_line(exc), "fingerprint": None,
                          "outputs": None, "numbers": {}, "warnings": [], "stage": s}
             entry.pop("stage", None)
+            entry.pop("folder", None)
             fut.release()  # a finished task's result is not kept on a worker: a lost worker never re-runs it
             entries[(i, s)] = entry
             doc = build_manifest(plan, entries, engine.description)

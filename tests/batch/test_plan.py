@@ -205,3 +205,15 @@ def test_viz_adds_one_viewer_stage_per_recording(lab):
     for bad in ("sub/x.mcap", "x.ply", ""):
         with pytest.raises(ConfigError, match="viz: expected a file name ending .mcap"):
             load_plan(p, table, viz=bad)
+
+
+def test_a_diff_blocked_by_the_other_recordings_fuse_names_it(lab):
+    from kinfu_cli.batch.engine import run_task
+
+    p = _plan(lab, 'output = "out"\nstages = ["fuse"]\nrecordings = ["sessions/day1.mcap", {path = "sessions/day2.mcap", '
+                   'stages = ["fuse", "diff"], before = "sessions/day1.mcap"}]\n')
+    day1, day2 = load_plan(p, _full_table()).recordings
+    own = {"stage": "fuse", "status": "ok", "folder": str(day2.output)}
+    other = {"stage": "fuse", "status": "failed", "folder": str(day1.output)}
+    entry = run_task(_full_table()["diff"], day2, {}, None, False, own, other)
+    assert entry["status"] == "blocked" and entry["error"] == f"needs fuse of {day1.output}, which did not finish"
