@@ -17,6 +17,7 @@ import uuid
 import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 from kinfu_cli.batch.fingerprint import input_fingerprint, output_stats
@@ -53,6 +54,35 @@ class Engine:
             with contextlib.suppress(Exception):
                 self.cluster.close()
 
+    def trial_map(self, desc: str = "trials", quiet: bool = False):
+        """A `core.trials.TrialMap` running each trial as one task on this cluster (see map_trials)."""
+        return partial(self.map_trials, desc=desc, quiet=quiet)
+
+    def map_trials(self, fn: Callable, items, shared=None, *, desc: str = "trials", quiet: bool = False) -> list:
+        """[fn(shared, item) for item in items] as one task per item, in the order of `items`, with a progress
+        bar over tasks. `shared` is scattered once (each worker receives it once, not once per trial). A trial
+        raising KinfuError raises the same error here, its parameter kept; any other failure cancels the rest."""
+        from dask.distributed import as_completed
+
+        items = list(items)
+        if not items:
+            return []
+        run_id = uuid.uuid4().hex[:8]
+        shared_f = self.client.scatter(shared, broadcast=True, hash=False) if shared is not None else None
+        futures = [self.client.submit(_trial, fn, shared_f, item, key=f"kinfu-trial-{i}-{run_id}", pure=False)
+                   for i, item in enumerate(items)]
+        try:
+            for fut in progress(as_completed(futures, loop=self.client.loop), total=len(futures), desc=desc,
+                                quiet=quiet, unit="trial"):
+                status, *rest = fut.result()
+                if status == "error":
+                    cls, detail, parameter = rest
+                    raise cls(detail, parameter=parameter)
+            return [f.result()[1] for f in futures]
+        finally:
+            with contextlib.suppress(Exception):
+                self.client.cancel(futures + ([shared_f] if shared_f is not None else []))
+
 
 def connect(scheduler: str | None = None, workers: int | None = None) -> Engine:
     """A client on `scheduler` (tcp://host:port of a running dask.distributed scheduler), or on a new local
@@ -79,9 +109,22 @@ def connect(scheduler: str | None = None, workers: int | None = None) -> Engine:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                               dashboard_address=None, silence_logs=logging.ERROR,
+                               dashboard_address=None, silence_logs=logging.CRITICAL,
                                env={"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"})
     return Engine(Client(cluster, set_as_default=False), cluster, f"local ({n} workers)")
+
+
+def _trial(fn: Callable, shared, item):
+    """One trial on a worker: numba on one thread (a worker thread is a core); a KinfuError comes back as data
+    (a pickled exception loses its keyword arguments, hence the parameter the command line names)."""
+    with contextlib.suppress(Exception):
+        import numba
+
+        numba.set_num_threads(1)
+    try:
+        return ("ok", fn(shared, item))
+    except KinfuError as exc:
+        return ("error", type(exc), exc.detail, exc.parameter)
 
 
 def _one_line(exc: BaseException) -> str:
@@ -102,37 +145,39 @@ def _folder_lock(outdir: Path):
     return Lock(f"kinfu-batch:{os.path.abspath(outdir)}")
 
 
-def run_task(spec: StageSpec, recording: Path, outdir: Path, options: Mapping, previous: dict | None,
-             force: bool, *upstream: dict) -> dict:
+def run_task(spec: StageSpec, rec, options: Mapping, previous: dict | None, force: bool, *upstream: dict) -> dict:
     """One (recording, stage) on a worker: blocked when a needed stage did not finish, skipped when its
     outputs are current (same input fingerprint, outputs unchanged since recorded), else run. Never raises:
-    a failure is the entry's one-line `error`."""
+    a failure is the entry's one-line `error`. `rec` is the plan's PlanRecording."""
     t0 = time.perf_counter()
     entry = {"status": "failed", "seconds": 0.0, "error": None, "fingerprint": None, "outputs": None,
              "numbers": {}, "warnings": []}
-    if bad := [u["stage"] for u in upstream if u.get("status") not in DONE]:
+    if bad := [u["stage"] if u.get("folder") in (None, str(rec.output)) else f"{u['stage']} of {u['folder']}"
+               for u in upstream if u.get("status") not in DONE]:
         return {**entry, "status": "blocked", "error": f"needs {', '.join(bad)}, which did not finish",
-                "stage": spec.name}
+                "stage": spec.name, "folder": str(rec.output)}
     try:
-        fp = input_fingerprint(spec.name, spec.input_paths(recording, outdir), options)
+        outdir, outputs = rec.output, spec.outputs_of(rec)
+        fp = input_fingerprint(spec.name, spec.input_paths(rec), options)
         if (not force and previous and previous.get("status") in DONE and previous.get("fingerprint") == fp
-                and output_stats(outdir, spec.outputs) == previous.get("outputs")):
+                and output_stats(outdir, outputs) == previous.get("outputs")):
             return {**entry, **{k: previous.get(k) for k in ("numbers", "warnings")}, "status": "skipped",
-                    "fingerprint": fp, "outputs": previous["outputs"], "stage": spec.name}
+                    "fingerprint": fp, "outputs": previous["outputs"], "stage": spec.name,
+                    "folder": str(rec.output)}
         with contextlib.suppress(Exception):  # one numba thread per worker thread: no oversubscription
             import numba
 
             numba.set_num_threads(1)
         with _folder_lock(outdir):
-            done = spec.run(recording, outdir, options, force)
-        stats = output_stats(outdir, spec.outputs)
+            done = spec.run(rec, options, force)
+        stats = output_stats(outdir, outputs)
         if stats is None:
-            raise KinfuError(f"{spec.name} finished without writing {', '.join(spec.outputs)}")
+            raise KinfuError(f"{spec.name} finished without writing {', '.join(outputs)}")
         entry.update(status="ok", fingerprint=fp, outputs=stats, numbers=done.numbers, warnings=done.warnings)
     except Exception as exc:  # recorded in the manifest; the other recordings go on
         entry["error"] = _one_line(exc)
     entry["seconds"] = round(time.perf_counter() - t0, 3)
-    entry["stage"] = spec.name
+    entry["stage"], entry["folder"] = spec.name, str(rec.output)
     return entry
 
 
@@ -141,13 +186,13 @@ def check_before_work(plan: Plan, table: Mapping[str, StageSpec], force: bool) -
     inputs = [r.path for r in plan.recordings]
     claim_output(plan.output / MANIFEST_NAME, inputs, force=force, parameter="output")
     for rec in plan.recordings:
-        for s in plan.stages:
+        for s in rec.stages:
             spec = table[s]
             try:
-                spec.check(rec.path, rec.output, rec.stage_options(s))
+                spec.check(rec, rec.stage_options(s))
             except KinfuError as exc:
                 raise ConfigError(f"{plan.source}: {rec.entry}: {s}: {exc}") from None
-            for rel in spec.claims:
+            for rel in spec.claims_of(rec):
                 claim_output(rec.output / rel, inputs, force=force, parameter="output")
 
 
@@ -159,11 +204,14 @@ def run_plan(plan: Plan, table: Mapping[str, StageSpec], engine: Engine, *, forc
     run_id = uuid.uuid4().hex[:8]
     futures: dict = {}
     where: dict = {}
-    for i, rec in enumerate(plan.recordings):
-        for s in plan.stages:
+    for s in plan.stages:  # pipeline order: what a task waits for is submitted before it
+        for i, rec in enumerate(plan.recordings):
+            if s not in rec.stages:
+                continue
             spec = table[s]
-            deps = [futures[(i, n)] for n in spec.needs]
-            fut = engine.client.submit(run_task, spec, rec.path, rec.output, rec.stage_options(s),
+            deps = [futures[(i, n)] for n in (*spec.needs, *spec.wants) if n in rec.stages]
+            deps += [futures[(j, n)] for stage, j, n in rec.after if stage == s]
+            fut = engine.client.submit(run_task, spec, rec, rec.stage_options(s),
                                        previous.get((str(rec.output), s)), force, *deps,
                                        key=f"kinfu-{s}-{i}-{run_id}", pure=False)
             futures[(i, s)] = fut
@@ -184,6 +232,7 @@ def run_plan(plan: Plan, table: Mapping[str, StageSpec], engine: Engine, *, forc
                 entry = {"status": "failed", "seconds": 0.0, "error": _one_line(exc), "fingerprint": None,
                          "outputs": None, "numbers": {}, "warnings": [], "stage": s}
             entry.pop("stage", None)
+            entry.pop("folder", None)
             fut.release()  # a finished task's result is not kept on a worker: a lost worker never re-runs it
             entries[(i, s)] = entry
             doc = build_manifest(plan, entries, engine.description)

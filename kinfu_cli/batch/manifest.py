@@ -45,11 +45,11 @@ def build_manifest(plan, entries: dict[tuple[int, str], dict], engine: str) -> d
     """The manifest document of `plan` with the stage entries known so far."""
     recs = []
     for i, rec in enumerate(plan.recordings):
-        stages = {s: entries[(i, s)] for s in plan.stages if (i, s) in entries}
-        status = recording_status(stages, plan.stages)
+        stages = {s: entries[(i, s)] for s in rec.stages if (i, s) in entries}
+        status = recording_status(stages, list(rec.stages))
         error = next((f"{s}: {e['error']}" for s, e in stages.items() if e.get("status") == "failed"), None)
         recs.append({"recording": str(rec.path), "output": str(rec.output), "status": status, "error": error,
-                     "stages": stages})
+                     "stages": stages, **({"viewer": str(rec.links["viz"])} if "viz" in rec.links else {})})
     done = sum(r["status"] == "ok" for r in recs)
     failed = sum(r["status"] == "failed" for r in recs)
     return {"plan": str(plan.source), "output": str(plan.output), "stages": plan.stages, "engine": engine,

@@ -2,7 +2,10 @@
 
 The engine is generic: the caller hands it a table of `StageSpec` (the command line builds it from the
 commands themselves, so a batch stage writes exactly what the single command writes). Paths are relative to
-the recording's output folder; RECORDING stands for the recording itself.
+the recording's output folder; RECORDING stands for the recording itself, "<name>" for the plan recording's
+link `name` (a path the plan resolves: the `before` volume of diff, the `ground_truth` folder of the evaluations,
+the combined `viz` file). Inputs, outputs and claims are tuples, or functions of the plan recording when they
+depend on its stages (the viewer file combines the viewer files of the stages the recording has).
 """
 
 from __future__ import annotations
@@ -10,6 +13,7 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 RECORDING = "<recording>"
 
@@ -22,24 +26,48 @@ class StageRun:
     warnings: list = field(default_factory=list)
 
 
+def _per(value, rec) -> tuple[str, ...]:
+    return tuple(value(rec)) if callable(value) else tuple(value)
+
+
 @dataclass(frozen=True)
 class StageSpec:
-    """One stage. `check(recording, outdir, options)` raises KinfuError for bad options before any work;
-    `run(recording, outdir, options, force)` does the work (module-level functions: they travel to workers
-    by reference). `claims`: the paths it writes (checked for ownership before any work); `outputs`: files
-    whose presence and stat say the stage is complete; `inputs`: what its fingerprint covers."""
+    """One stage. `check(rec, options)` raises KinfuError for bad options before any work; `run(rec, options,
+    force)` does the work (module-level functions: they travel to workers by reference); `rec` is the plan's
+    PlanRecording (path, output folder, stages, links). `claims`: the paths it writes (checked for ownership
+    before any work); `outputs`: files whose presence and stat say the stage is complete; `inputs`: what its
+    fingerprint covers; `needs`: stages of the same recording it runs after (the plan must list them);
+    `wants`: stages it runs after when the recording has them (it reads their outputs if present);
+    `links`: the plan recording links it needs (the plan checks they resolve)."""
 
     name: str
     needs: tuple[str, ...]
-    inputs: tuple[str, ...]
-    outputs: tuple[str, ...]
-    claims: tuple[str, ...]
-    check: Callable[[Path, Path, Mapping], None]
-    run: Callable[[Path, Path, Mapping, bool], StageRun]
+    inputs: tuple[str, ...] | Callable
+    outputs: tuple[str, ...] | Callable
+    claims: tuple[str, ...] | Callable
+    check: Callable[[Any, Mapping], None]
+    run: Callable[[Any, Mapping, bool], StageRun]
+    wants: tuple[str, ...] = ()
+    links: tuple[str, ...] = ()
 
-    def input_paths(self, recording: Path, outdir: Path) -> list[tuple[str, Path]]:
-        """(label, path) of each input: RECORDING is the recording, the others are in its output folder."""
-        return [(p, recording if p == RECORDING else outdir / p) for p in self.inputs]
+    def input_paths(self, rec) -> list[tuple[str, Path]]:
+        """(label, path) of each input: RECORDING is the recording, "<link>" a link of the plan recording, the
+        others are in its output folder."""
+        out = []
+        for p in _per(self.inputs, rec):
+            if p == RECORDING:
+                out.append((p, rec.path))
+            elif p.startswith("<") and p.endswith(">"):
+                out.append((p, rec.links[p[1:-1]]))
+            else:
+                out.append((p, rec.output / p))
+        return out
+
+    def outputs_of(self, rec) -> tuple[str, ...]:
+        return _per(self.outputs, rec)
+
+    def claims_of(self, rec) -> tuple[str, ...]:
+        return _per(self.claims, rec)
 
 
 def stage_order(table: Mapping[str, StageSpec], wanted: list[str]) -> list[str]:

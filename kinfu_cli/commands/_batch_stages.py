@@ -29,7 +29,12 @@ _COMMANDS = {
     "poi": ("poi", {"output", "json", "quiet", "force"}, {"plot": "pois.png", "viz": "pois.mcap"}),
     "nbv": ("nbv", {"output", "json", "quiet", "force", "pois", "mode"}, {"plot": "views.png", "viz": "views.mcap"}),
     "segment": ("segment", {"output", "json", "quiet", "force"}, {"viz": "segment.mcap"}),
+    "diff": ("diff", {"output", "json", "quiet", "force", "pois"}, {}),
+    "eval-fusion": ("eval_fusion", {"output", "json", "quiet", "force", "ground-truth"},
+                    {"error-mesh": "eval_fusion_error.ply"}),
 }
+#: the viewer file each stage writes with `viz = true` (the combined viewer file is made from these)
+VIEWER_FILES = {stage: files["viz"] for stage, (_, _, files) in _COMMANDS.items() if "viz" in files}
 
 
 def _command(stage: str) -> click.Command:
@@ -38,13 +43,25 @@ def _command(stage: str) -> click.Command:
     return importlib.import_module(f"kinfu_cli.commands.{_COMMANDS[stage][0]}").command
 
 
-def _base_args(stage: str, recording: Path, outdir: Path) -> list[str]:
-    """The positional input and the outputs of the stage's command for one recording."""
+def _base_args(stage: str, rec) -> list[str]:
+    """The positional inputs and the outputs of the stage's command for one plan recording."""
+    outdir = rec.output
     volume = str(outdir / "fuse" / "volume.npz")
-    return {"fuse": [str(recording), "-o", str(outdir / "fuse")],
-            "poi": [str(recording), "-o", str(outdir / "pois.json")],
-            "nbv": [volume, "--pois", str(outdir / "pois.json"), "-o", str(outdir / "views.json")],
-            "segment": [volume, "-o", str(outdir / "segment")]}[stage]
+    if stage == "fuse":
+        return [str(rec.path), "-o", str(outdir / "fuse")]
+    if stage == "poi":
+        return [str(rec.path), "-o", str(outdir / "pois.json")]
+    if stage == "nbv":
+        return [volume, "--pois", str(outdir / "pois.json"), "-o", str(outdir / "views.json")]
+    if stage == "segment":
+        return [volume, "-o", str(outdir / "segment")]
+    if stage == "diff":  # POIs scored against the changes when the recording has them
+        pois = ["--pois", str(outdir / "pois.json")] if "poi" in rec.stages else []
+        return [str(rec.links["before"]), volume, "-o", str(outdir / "diff"), *pois]
+    if stage == "eval-fusion":
+        return [str(outdir / "fuse"), "--ground-truth", str(rec.links["ground_truth"]), "-o",
+                str(outdir / "eval_fusion.json")]
+    raise KeyError(stage)
 
 
 def _option_args(stage: str, outdir: Path, options: dict) -> list[str]:
@@ -81,16 +98,20 @@ def _option_args(stage: str, outdir: Path, options: dict) -> list[str]:
     return args
 
 
-def _args(stage: str, recording: Path, outdir: Path, options: dict, force: bool) -> list[str]:
-    return (_base_args(stage, recording, outdir) + _option_args(stage, outdir, options) + ["--quiet"]
+def _args(stage: str, rec, options: dict, force: bool) -> list[str]:
+    return (_base_args(stage, rec) + _option_args(stage, rec.output, options) + ["--quiet"]
             + (["--force"] if force else []))
 
 
-def check_stage(stage: str, recording: Path, outdir: Path, options: dict) -> None:
+def _prog(stage: str) -> str:
+    return f"kinfu {stage.replace('-', ' ')}"
+
+
+def check_stage(stage: str, rec, options: dict) -> None:
     """Parse the stage's arguments with its command (types, choices, ranges) without running it."""
     cmd = _command(stage)
     try:
-        cmd.make_context(f"kinfu {stage}", _args(stage, recording, outdir, options, False))
+        cmd.make_context(_prog(stage), _args(stage, rec, options, False))
     except click.ClickException as exc:
         raise ConfigError(" ".join(exc.format_message().split())) from None
 
@@ -104,15 +125,14 @@ def _flag_message(cmd: click.Command, exc: KinfuError) -> str:
     return f"{flags}: {exc.detail}"
 
 
-def run_stage(stage: str, recording: Path, outdir: Path, options: dict, force: bool) -> StageRun:
+def run_stage(stage: str, rec, options: dict, force: bool) -> StageRun:
     """Run the stage's command in this process (its warnings captured, nothing printed); KinfuError with the
     command's one-line message when it fails."""
     cmd = _command(stage)
     err = io.StringIO()
     try:
         with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
-            cmd.main(_args(stage, recording, outdir, options, force), prog_name=f"kinfu {stage}",
-                     standalone_mode=False)
+            cmd.main(_args(stage, rec, options, force), prog_name=_prog(stage), standalone_mode=False)
     except KinfuError as exc:
         raise KinfuError(_flag_message(cmd, exc)) from None
     except click.ClickException as exc:
@@ -122,7 +142,7 @@ def run_stage(stage: str, recording: Path, outdir: Path, options: dict, force: b
         raise KinfuError(where + str(exc.strerror or exc)) from None
     prefix = "kinfu: warning: "
     warnings = [line[len(prefix):] for line in err.getvalue().splitlines() if line.startswith(prefix)]
-    return StageRun(numbers=_NUMBERS[stage](outdir), warnings=warnings)
+    return StageRun(numbers=_NUMBERS[stage](rec.output), warnings=warnings)
 
 
 def _read(path: Path) -> dict:
@@ -159,13 +179,111 @@ _NUMBERS = {"fuse": _fuse_numbers, "poi": _poi_numbers, "nbv": _nbv_numbers, "se
 
 def batch_stages() -> dict[str, StageSpec]:
     """The stage table in pipeline order (a stage comes after the stages it needs)."""
-    def spec(name, needs, inputs, outputs, claims):
+    def spec(name, needs, inputs, outputs, claims, **kw):
         return StageSpec(name=name, needs=needs, inputs=inputs, outputs=outputs, claims=claims,
-                         check=partial(check_stage, name), run=partial(run_stage, name))
+                         check=kw.pop("check", partial(check_stage, name)), run=kw.pop("run", partial(run_stage, name)),
+                         **kw)
 
+    volume = "fuse/volume.npz"
     return {
-        "fuse": spec("fuse", (), (RECORDING,), ("fuse/volume.npz", "fuse/report.json"), ("fuse",)),
+        "fuse": spec("fuse", (), (RECORDING,), (volume, "fuse/report.json"), ("fuse",)),
         "poi": spec("poi", (), (RECORDING,), ("pois.json",), ("pois.json",)),
-        "nbv": spec("nbv", ("fuse", "poi"), ("fuse/volume.npz", "pois.json"), ("views.json",), ("views.json",)),
-        "segment": spec("segment", ("fuse",), ("fuse/volume.npz",), ("segment/segments.json",), ("segment",)),
+        "nbv": spec("nbv", ("fuse", "poi"), (volume, "pois.json"), ("views.json",), ("views.json",)),
+        "segment": spec("segment", ("fuse",), (volume,), ("segment/segments.json",), ("segment",)),
+        "diff": spec("diff", ("fuse",), _diff_inputs, ("diff/changes.json",), ("diff",), wants=("poi",),
+                     links=("before",)),
+        "eval-fusion": spec("eval-fusion", ("fuse",), (volume, "fuse/mesh.ply", "<ground_truth>"),
+                            ("eval_fusion.json",), ("eval_fusion.json",), links=("ground_truth",)),
+        "eval-poi": spec("eval-poi", ("poi",), ("pois.json", "<ground_truth>"), (EVAL_POI_FILE,), (EVAL_POI_FILE,),
+                         links=("ground_truth",), check=check_eval_poi, run=run_eval_poi),
+        "viz": spec("viz", (), _viz_parts, _viz_output, _viz_output, wants=tuple(VIEWER_FILES), links=("viz",),
+                    check=check_viz, run=run_viz),
     }
+
+
+def _diff_inputs(rec) -> tuple[str, ...]:
+    return ("<before>", "fuse/volume.npz", *(("pois.json",) if "poi" in rec.stages else ()))
+
+
+def _viz_output(rec) -> tuple[str, ...]:
+    return (rec.links["viz"].name,)
+
+
+def _diff_numbers(outdir: Path) -> dict:
+    d = _read(outdir / "diff" / "changes.json")
+    out = {"removed": d["counts"]["regions"]["removed"], "added": d["counts"]["regions"]["added"]}
+    if d.get("pois") is not None:
+        out.update(poi_precision=d["pois"]["precision"], poi_recall=d["pois"]["recall"])
+    return out
+
+
+def _eval_fusion_numbers(outdir: Path) -> dict:
+    r = _read(outdir / "eval_fusion.json")["reconstruction"]
+    return {"precision": r["precision"], "completeness": r["completeness"], "fscore": r["fscore"],
+            "accuracy_mean_m": r["accuracy"].get("mean")}
+
+
+_NUMBERS.update({"diff": _diff_numbers, "eval-fusion": _eval_fusion_numbers})
+
+EVAL_POI_FILE = "eval_poi.json"
+
+
+def _eval_poi_radius(options: dict) -> float:
+    from kinfu_cli.evaluation.poi import MATCH_RADIUS
+
+    if unknown := set(options) - {"match-radius"}:
+        raise ConfigError(f"unknown option {sorted(unknown)[0]!r} of eval-poi (known: match-radius)")
+    radius = options.get("match-radius", MATCH_RADIUS)
+    if isinstance(radius, bool) or not isinstance(radius, (int, float)) or not radius > 0:
+        raise ConfigError(f"option 'match-radius': expected a positive distance in metres, got {radius!r}")
+    return float(radius)
+
+
+def check_eval_poi(rec, options: dict) -> None:
+    _eval_poi_radius(options)
+
+
+def run_eval_poi(rec, options: dict, force: bool) -> StageRun:
+    """The recording's POIs (pois.json) scored against its true changes (ground_truth/changes.json) with the
+    paper's rule: a POI within the radius of a change is a true positive (RAS 2016 Sec. 6.2)."""
+    import numpy as np
+
+    from kinfu_cli.core.atomic import write_json
+    from kinfu_cli.core.pois import read_pois
+    from kinfu_cli.evaluation.poi import score_pois
+    from kinfu_cli.sim.scenario import load_ground_truth
+
+    radius = _eval_poi_radius(options)
+    pois = read_pois(rec.output / "pois.json")
+    changes = np.asarray(load_ground_truth(rec.links["ground_truth"]).change_positions, dtype=float).reshape(-1, 3)
+    tp, fp, fn = score_pois(np.array([p.position for p in pois]).reshape(-1, 3), changes, radius)
+    doc = {"pois": len(pois), "changes": len(changes), "radius": radius, "tp": tp, "fp": fp, "fn": fn,
+           "precision": tp / (tp + fp) if tp + fp else 0.0,
+           "recall": (len(changes) - fn) / len(changes) if len(changes) else 0.0,
+           "ground_truth": str(rec.links["ground_truth"]), "pois_file": str(rec.output / "pois.json")}
+    out = rec.output / EVAL_POI_FILE
+    write_json(out, doc)  # atomic, recorded as kinfu's
+    return StageRun(numbers={k: doc[k] for k in ("precision", "recall", "tp", "fp", "fn")})
+
+
+def _viz_parts(rec) -> tuple[str, ...]:
+    return tuple(VIEWER_FILES[s] for s in rec.stages if s in VIEWER_FILES)
+
+
+def check_viz(rec, options: dict) -> None:
+    if options:
+        raise ConfigError(f"the viewer stage takes no options, got {', '.join(sorted(options))}")
+
+
+def run_viz(rec, options: dict, force: bool) -> StageRun:
+    """The recording's one viewer file, combined from the viewer files its stages wrote."""
+    from kinfu_cli.report.viewer_merge import merge_viewers
+
+    out = rec.links["viz"]
+    summary = merge_viewers(out, [rec.output / p for p in _viz_parts(rec)])  # atomic, recorded as kinfu's
+    warnings = []
+    if len(summary["frames"]) > 1:
+        warnings.append(f"{out.name}: the stages' results are in different frames ({', '.join(summary['frames'])})"
+                        " and will not line up")
+    return StageRun(numbers={"messages": sum(summary["topics"].values()), "topics": len(summary["topics"]),
+                             "restamped": summary["restamped"]}, warnings=warnings)

@@ -23,31 +23,43 @@ from kinfu_cli.core.errors import ConfigError
 @click.option("--scheduler", default=None, metavar="tcp://HOST:PORT",
               help="Submit to this running dask.distributed scheduler instead of a local cluster (its workers "
                    "must see the same paths).")
+@click.option("--viz", default=None, metavar="FILE.mcap",
+              help="Also write one viewer file of this name into each recording's folder: its stages' results "
+                   "(mesh, camera and hand trajectories, POIs, ranked views, segments) in one MCAP for Foxglove "
+                   "[the plan's 'viz'].")
 @click.option("--force", is_flag=True,
               help="Redo every stage even when its outputs are current, and write over outputs kinfu did not "
                    "write (an input is never written over).")
 @click.option("--json", "as_json", is_flag=True, help="Print manifest.json on stdout.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-def command(plan: Path, output: Path | None, workers: int | None, scheduler: str | None, force: bool, as_json: bool,
-            quiet: bool) -> None:
+def command(plan: Path, output: Path | None, workers: int | None, scheduler: str | None, viz: str | None,
+            force: bool, as_json: bool, quiet: bool) -> None:
     """Run the stages listed in PLAN (TOML or YAML) over every recording it names: one Dask task per
     (recording, stage), the stage dependencies as the graph (poi needs the recording, segment needs fuse,
-    nbv needs fuse and poi). Each stage is the single command run in-process on a worker with the plan's
-    options, writing what the command writes into OUTPUT/<recording>/ (fuse/, pois.json, views.json,
-    segment/). OUTPUT/manifest.json records per recording and stage the status (ok, skipped, failed,
-    blocked), seconds, key numbers, warnings and the error line, and is rewritten after every task.
+    nbv needs fuse and poi, diff needs fuse and its `before`, eval-fusion needs fuse, eval-poi needs poi).
+    Each stage is the single command run in-process on a worker with the plan's options, writing what the
+    command writes into OUTPUT/<recording>/: fuse/, pois.json, views.json, segment/, diff/ (`kinfu diff`
+    against the recording's `before`: another recording of the plan or a volume.npz; with --pois when the
+    recording has poi), eval_fusion.json (`kinfu eval fusion` against its ground truth) and eval_poi.json
+    (its POIs against the true changes, 0.20 m rule). Evaluations find the ground truth in the
+    ground_truth/ folder beside the recording (kinfu synth's layout) or the entry's `ground-truth`.
+    --viz FILE.mcap writes OUTPUT/<recording>/FILE.mcap, one viewer file combining the viewer files its
+    stages write (fuse.mcap, pois.mcap, views.mcap, segment.mcap). OUTPUT/manifest.json records per
+    recording and stage the status (ok, skipped, failed, blocked), seconds, key numbers, warnings and the
+    error line, and is rewritten after every task.
 
     Resumable: a stage whose outputs exist unchanged with the same input fingerprint (inputs' size and
     modification time, options, kinfu version) is skipped; --force redoes everything. A failing recording
     does not stop the others; the exit code is 1 when one failed, 2 for a bad plan (checked before any work:
-    unknown stages or options, missing files, globs matching nothing, two recordings with one output folder,
-    an unreachable --scheduler).
+    unknown stages or options, missing files, globs matching nothing, a diff without `before`, an evaluation
+    without ground truth, two recordings with one output folder, an unreachable --scheduler).
 
     \b
     Example plan (examples/batch_plan.toml):
       output = "out/batch"
       stages = ["fuse", "poi", "nbv", "segment"]
-      recordings = ["sessions/*.mcap", {path = "lab/day2.bag", output = "day2"}]
+      recordings = ["sessions/*.mcap", {path = "lab/day2.bag", output = "day2"},
+                    {path = "lab/day3.bag", stages = ["fuse", "poi", "diff"], before = "lab/day2.bag"}]
       [options.fuse]
       voxel-size = 0.02
     \b
@@ -55,11 +67,12 @@ def command(plan: Path, output: Path | None, workers: int | None, scheduler: str
       kinfu batch examples/batch_plan.toml
       kinfu batch plan.yaml -o out/batch --workers 4
       kinfu batch plan.toml --scheduler tcp://10.0.0.5:8786
+      kinfu batch plan.toml --viz viewer.mcap
     """
     if scheduler is not None and workers is not None:
         raise ConfigError("--workers: sizes the local cluster; with --scheduler the cluster has its own workers")
     table = batch_stages()
-    loaded = load_plan(plan, table, output)
+    loaded = load_plan(plan, table, output, viz)
     check_before_work(loaded, table, force)
     engine = connect(scheduler, workers)
     try:

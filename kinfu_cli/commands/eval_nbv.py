@@ -6,6 +6,7 @@ from pathlib import Path
 
 import click
 
+from kinfu_cli.commands._engine import scheduler_option, trial_engine
 from kinfu_cli.commands._options import claim_outputs, force_option
 from kinfu_cli.commands._output import emit
 from kinfu_cli.core.pois import DEFAULT_RADIUS
@@ -60,12 +61,15 @@ group = "eval"
 @click.option("-o", "--output", type=click.Path(path_type=Path), default=None, help="Write the result JSON here.")
 @click.option("--plot", type=click.Path(path_type=Path), default=None,
               help="PNG: unknown voxels in each POI sphere vs views (the paper's Fig. 20).")
+@click.option("--workers", type=click.IntRange(min=1), default=None,
+              help="Run the strategy trials on a local Dask cluster of this many processes [in this process].")
+@scheduler_option
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @click.option("--json", "as_json", is_flag=True, help="Print the result JSON on stdout.")
 @force_option
 def command(scene, strategies, views, mode, voxel_size, gain, inc_th, poi_radius, pois_from, poi, optimistic,
             oscillation, width, height, scan_every, lon_step, lat_step, roll_step, scan_frames, near_margin,
-            score_width, reject_unknown, no_noise, seed, output, plot, quiet, as_json, force):
+            score_width, reject_unknown, no_noise, seed, output, plot, workers, scheduler, quiet, as_json, force):
     """Run the paper's Algorithm 1 on a simulated scene and compare view strategies.
 
     SCENE is a `kinfu synth` ground_truth folder (or the recording folder holding it) or a mesh file
@@ -80,11 +84,15 @@ def command(scene, strategies, views, mode, voxel_size, gain, inc_th, poi_radius
     true objects after each view, candidate views ray-cast and planning time, and how many candidates
     each needed for the same reduction.
 
+    --workers N / --scheduler tcp://HOST:PORT run each (strategy, mode) trial as a task on a local Dask
+    cluster / a running dask.distributed cluster (the engine of `kinfu batch`); the results are the same.
+
     \b
     Example:
       kinfu eval nbv sample_data/tabletop/ground_truth --views 4 --plot out/nbv_loop.png
       kinfu eval nbv sample_data/tabletop --strategy poi,random --mode both --voxel-size 0.015 --json
       kinfu eval nbv sample_data/tabletop --strategy objects,standard --width 160 --height 120
+      kinfu eval nbv sample_data/tabletop --strategy poi,random,fixed --mode both --workers 2
     """
     claim_outputs({"output": output, "plot": plot}, [scene], force)
     modes = ("kfovp", "kfom") if mode == "both" else (mode,)
@@ -95,7 +103,9 @@ def command(scene, strategies, views, mode, voxel_size, gain, inc_th, poi_radius
                      sphere=dict(lon_step=lon_step, lat_step=lat_step, roll_step=roll_step),
                      poi=tuple(poi) if poi else None, scan_frames=scan_frames, near_margin=near_margin,
                      score_width=score_width, reject_unknown=reject_unknown)
-    doc = run_loop(scene, cfg, quiet=quiet)
+    cfg.check()  # bad values fail before connecting to a cluster
+    with trial_engine(scheduler, workers, desc="eval nbv", quiet=quiet) as tmap:
+        doc = run_loop(scene, cfg, quiet=quiet, map_trials=tmap)
     if plot is not None:
         plot_nbv_loop(plot, doc)
         doc["plot"] = str(plot)

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import click
 
+from kinfu_cli.commands._engine import scheduler_option, trial_engine
 from kinfu_cli.commands._detector_options import detector_options, detector_params_from
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.evaluation.poi import evaluate_dataset, format_sample, format_tables, sample_statement
@@ -34,13 +35,14 @@ def _floats(option: str, value: str | None) -> list[float]:
 @click.option("--seed", default=0, show_default=True, type=int, help="Seed of the added noise.")
 @click.option("--workers", default=None, type=click.IntRange(min=1),
               help="Processes [default: number of CPUs, at most 8].")
+@scheduler_option
 @click.option("--loo", is_flag=True,
               help="Leave-one-user-out instead: choose each default constant on one user, score it on another "
                    "(kinfu_cli/evaluation/poi_loo.py); detector options are ignored.")
 @click.option("--json", "as_json", is_flag=True, help="Print machine-readable results on stdout.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @detector_options
-def command(dataset_dir, algorithm, speed, noise, seed, workers, loo, as_json, quiet, **kw):
+def command(dataset_dir, algorithm, speed, noise, seed, workers, scheduler, loo, as_json, quiet, **kw):
     """Run GMM-AS and/or ZVC on every *.traj with a *.traj.res beside it and score them.
 
     Tasks are grouped by sub-folder (placements_removals, pick_and_place). A POI within 0.20 m of a
@@ -58,6 +60,9 @@ def command(dataset_dir, algorithm, speed, noise, seed, workers, loo, as_json, q
     "in_sample": [...], "out_of_sample": [...]} (the defaults were chosen on users 1 and 4: their
     scores are in-sample), also printed under the tables.
 
+    --scheduler runs the (task, setting) trials as tasks on a running dask.distributed cluster (the engine of
+    `kinfu batch`) instead of local processes; the results are the same.
+
     --loo chooses each default constant on one user and scores it on the other (every ordered pair of
     users in DATASET_DIR), on the recorded tasks and with their pauses shortened; --json prints that
     document instead.
@@ -68,6 +73,7 @@ def command(dataset_dir, algorithm, speed, noise, seed, workers, loo, as_json, q
       kinfu eval poi DATA --algorithm gmm-as --speed 0.25,0.5,1,2,4 --noise 0.001,0.025,0.05 --workers 2
       kinfu eval poi DATA --algorithm zvc --json
       kinfu eval poi DATA --loo --workers 2
+      kinfu eval poi DATA --speed 0.25,0.5,1,2,4 --scheduler tcp://10.0.0.5:8786
     """
     speeds = _floats("--speed", speed) or [1.0]
     noises = _floats("--noise", noise)
@@ -77,15 +83,16 @@ def command(dataset_dir, algorithm, speed, noise, seed, workers, loo, as_json, q
         raise ConfigError(f"--noise: expected standard deviations >= 0 metres, got {noise!r}")
     params = detector_params_from(kw)
     algorithms = ["gmm-as", "zvc"] if algorithm == "both" else [algorithm]
-    if workers is None:
-        workers = max(1, min(8, os.cpu_count() or 1))
-    if loo:
-        from kinfu_cli.evaluation.poi_loo import format_loo, leave_one_user_out
-        doc = leave_one_user_out(dataset_dir, algorithms, workers=workers, quiet=quiet)
-        click.echo(json.dumps(doc, indent=2) if as_json else format_loo(doc))
-        return
-    results, rows = evaluate_dataset(dataset_dir, algorithms, speeds, noises, workers=workers, params=params,
-                                      seed=seed, quiet=quiet)
+    with trial_engine(scheduler, workers if scheduler is not None else None, desc="eval poi", quiet=quiet) as tmap:
+        if workers is None:
+            workers = max(1, min(8, os.cpu_count() or 1))
+        if loo:
+            from kinfu_cli.evaluation.poi_loo import format_loo, leave_one_user_out
+            doc = leave_one_user_out(dataset_dir, algorithms, workers=workers, quiet=quiet, map_trials=tmap)
+            click.echo(json.dumps(doc, indent=2) if as_json else format_loo(doc))
+            return
+        results, rows = evaluate_dataset(dataset_dir, algorithms, speeds, noises, workers=workers, params=params,
+                                          seed=seed, quiet=quiet, map_trials=tmap)
     sample = sample_statement(rows)
     if as_json:
         doc = dict(results[0]) if len(results) == 1 else {"results": results}

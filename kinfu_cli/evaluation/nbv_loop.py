@@ -51,6 +51,7 @@ import math
 import os
 import time
 from dataclasses import asdict, dataclass, field
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -64,6 +65,7 @@ from kinfu_cli.core.errors import ConfigError, RecordingError
 from kinfu_cli.core.grid import TernaryGrid
 from kinfu_cli.core.pois import DEFAULT_RADIUS
 from kinfu_cli.core.progress import progress
+from kinfu_cli.core.trials import TrialMap, serial_trials
 from kinfu_cli.evaluation.reconstruction import point_to_mesh_distance
 from kinfu_cli.fusion.volume import TernaryVolume
 from kinfu_cli.nbv.gains import get_gain
@@ -304,6 +306,41 @@ def _initial_scan(sc: SimScene, cfg: LoopConfig, sensor, K: np.ndarray, poses, m
     return vol, n_int
 
 
+@dataclass
+class LoopTrials:
+    """What every trial of one run shares: the config, the volume after the initial scan (and ForgetAround),
+    the POIs, and how to get the scene. It pickles without the scene (open3d meshes do not pickle): a worker
+    process rebuilds it once with `load` and keeps it for its later trials; progress bars stay off there."""
+
+    cfg: LoopConfig
+    base: TernaryVolume
+    load: object  # () -> SimScene, a picklable callable (functools.partial of a module-level function)
+    pois: np.ndarray | None = None
+    extra: dict = field(default_factory=dict)
+    scene: tuple | None = None  # (SimScene, sensor, K, camera) once set up in this process
+    quiet: bool = True
+
+    def __getstate__(self) -> dict:
+        return {**self.__dict__, "scene": None, "quiet": True}
+
+    def setup(self) -> tuple:
+        """(SimScene, DepthSensor, K, CameraModel), built on first use in this process."""
+        if self.scene is None:
+            sc = self.load()
+            self.scene = (sc, *_sensor_setup(sc, self.cfg))
+        return self.scene
+
+
+def _strategy_trial(trials: LoopTrials, item: tuple[str, str]) -> tuple[dict, dict]:
+    """One (strategy, mode) of the POI loop from a copy of the shared volume -> (its result, its timings)."""
+    strat, mode = item
+    sc, sensor, K, cam = trials.setup()
+    timer = _Timer()
+    run = _run_strategy(strat, mode, trials.base.copy(), trials.pois, sc, trials.cfg, sensor, K, cam,
+                        dict(trials.cfg.sphere), sc.table_z, timer)
+    return run, timer.t
+
+
 class _Timer:
     def __init__(self) -> None:
         self.t: dict[str, float] = {}
@@ -312,11 +349,15 @@ class _Timer:
         self.t[key] = self.t.get(key, 0.0) + dt
 
 
-def run_loop(scene_path: str | os.PathLike, cfg: LoopConfig, quiet: bool = True) -> dict:
-    """Run the closed loop; returns the result document (see the module docstring)."""
+def run_loop(scene_path: str | os.PathLike, cfg: LoopConfig, quiet: bool = True,
+             map_trials: TrialMap | None = None) -> dict:
+    """Run the closed loop; returns the result document (see the module docstring). map_trials: run the
+    (strategy, mode) trials through this map (a Dask cluster) instead of one after the other here; each is
+    independent and seeded, so the document is the same (its timings aside)."""
     cfg.check()
     if cfg.strategies and all(s in EXPLORE for s in cfg.strategies):
-        return run_exploration(load_scene(scene_path, cfg), cfg, quiet=quiet, scene_name=str(scene_path))
+        return run_exploration(load_scene(scene_path, cfg), cfg, quiet=quiet, scene_name=str(scene_path),
+                               map_trials=map_trials, load=partial(load_scene, scene_path, cfg))
     timer = _Timer()
     t0 = time.perf_counter()
     sc = load_scene(scene_path, cfg)
@@ -343,14 +384,13 @@ def run_loop(scene_path: str | os.PathLike, cfg: LoopConfig, quiet: bool = True)
         base.clear_sphere(p, cfg.poi_radius)
     timer.add("clear", time.perf_counter() - t)
 
-    sphere = dict(cfg.sphere)
-    table_z = sc.table_z
+    trials = LoopTrials(cfg, base, partial(load_scene, scene_path, cfg), pois=pois, scene=(sc, sensor, K, cam))
+    items = [(strat, mode) for mode in cfg.modes for strat in cfg.strategies]
     runs = {}
-    for mode in cfg.modes:
-        for strat in cfg.strategies:
-            name = strat if len(cfg.modes) == 1 else f"{strat}-{mode}"
-            runs[name] = _run_strategy(strat, mode, base.copy(), pois, sc, cfg, sensor, K, cam, sphere, table_z,
-                                       timer)
+    for (strat, mode), (run, times) in zip(items, (map_trials or serial_trials)(_strategy_trial, items, trials)):
+        runs[strat if len(cfg.modes) == 1 else f"{strat}-{mode}"] = run
+        for k, v in times.items():
+            timer.add(k, v)
     doc = {
         "scene": str(scene_path), "config": _cfg_doc(cfg), "camera": cam.to_dict(),
         "volume": {"shape": list(base.shape), "voxel_size": base.voxel_size, "origin": base.origin.tolist()},
@@ -457,7 +497,7 @@ def near_object_voxels(grid: TernaryGrid, spheres: np.ndarray, margin: float,
 
 
 def run_exploration(sc: SimScene, cfg: LoopConfig, quiet: bool = True, scene_name: str | None = None,
-                    log=None) -> dict:
+                    log=None, map_trials: TrialMap | None = None, load=None) -> dict:
     """POI-free whole-scene exploration (thesis ch. 3, Table 3.1 / Fig. 3.17): from a short initial scan
     (the first `scan_frames` scan poses, one side of the table) each strategy of `cfg.strategies` takes up to
     `views` NBVs, each rendered with the simulated Kinect and fused as in the POI loop. ``objects``: contour
@@ -465,7 +505,9 @@ def run_exploration(sc: SimScene, cfg: LoopConfig, quiet: bool = True, scene_nam
     ``standard``: every contour viewpoint scored on the whole volume. Both skip views already taken (within
     `exclude_shift` m and `exclude_turn_deg`), score with the same ray caster on a `score_width`-wide image
     of the sensor's field of view and ranges, and stop when the best score < `score_fraction` of its pixels.
-    Measured after each view: unknown voxels inside the true objects' bounding spheres + `near_margin`."""
+    Measured after each view: unknown voxels inside the true objects' bounding spheres + `near_margin`.
+    map_trials: run the strategies through this map (a Dask cluster; `load` rebuilds `sc` in a worker, a
+    picklable callable) instead of one after the other here."""
     if sc.object_spheres is None or len(sc.object_spheres) == 0:
         raise ConfigError(f"{scene_name or sc.name}: the objects and standard strategies need the true objects of "
                           "a kinfu synth ground_truth folder (objects/*.ply); a bare mesh has none",
@@ -486,54 +528,22 @@ def run_exploration(sc: SimScene, cfg: LoopConfig, quiet: bool = True, scene_nam
     grid0 = base.ternary_grid()
     near = near_object_voxels(grid0, sc.object_spheres, cfg.near_margin, sc.table_z)
     near_t = tuple(near.T)
-
-    def unknown_near(v) -> int:  # unknown as the planners see it: observed fewer than W_th times
-        return int(np.sum(known_grid(v)[0].labels[near_t] == 0))
-
-    u0 = unknown_near(base)
+    u0 = _unknown_near(base, near_t)
     env_c = grid0.origin + np.array(grid0.shape) * grid0.voxel_size / 2
     env_r = float(np.linalg.norm(np.array(grid0.shape) * grid0.voxel_size) / 2)
+    if map_trials is not None and load is None:
+        raise ValueError("run_exploration: map_trials needs `load`, the scene's picklable loader")
+    trials = LoopTrials(cfg, base, load, scene=(sc, sensor, K, cam), quiet=quiet,
+                        extra=dict(near_t=near_t, u0=u0, env_c=env_c, env_r=env_r, score_cam=score_cam,
+                                   score_th=score_th, start=scan[-1]))
     runs = {}
-    for strat in cfg.strategies:
-        vol = base.copy()
-        T_cur = scan[-1].copy()
-        taken: list[np.ndarray] = []
-        curve, cast, secs, scores, segs, frames = [u0], [], [], [], [], 0
-        for _ in progress(range(cfg.views), total=cfg.views, desc=strat, quiet=quiet):
-            t = time.perf_counter()
-            weights = vol.weights()  # one extraction for the score and the contours
-            grid, _ = known_grid(vol, weights=weights)
-            scorer = nbv_scorer(grid, score_cam, cfg.gain, table_z=sc.table_z, reject_unknown=cfg.reject_unknown,
-                                optimistic=cfg.optimistic)
-            contours, _ = volume_contours(vol, weights=weights)
-            ex = dict(exclude=np.array(taken).reshape(-1, 4, 4), exclude_shift=cfg.exclude_shift,
-                      exclude_turn_deg=cfg.exclude_turn_deg, score_threshold=score_th)
-            if strat == "objects":
-                plan = plan_object_views(analyse_volume(vol, SegmentOptions(superquadrics=False)), contours, scorer,
-                                         **ex)
-            else:
-                plan = plan_standard_views(contours, scorer, env_c, env_r, **ex)
-            secs.append(time.perf_counter() - t)
-            timer.add("plan", secs[-1])
-            cast.append(int(plan.candidates_evaluated))
-            if plan.pose is None:
-                break
-            scores.append(float(plan.score))
-            segs.append(plan.segment_id)
-            frames = _take_view(vol, T_cur, plan.pose, "kfovp", sc, cfg, sensor, K, timer, frames,
-                                cfg.explore_view_frames)
-            T_cur = plan.pose
-            taken.append(plan.pose)
-            t = time.perf_counter()
-            curve.append(unknown_near(vol))
-            timer.add("measure", time.perf_counter() - t)
-        runs[strat] = {"strategy": strat, "unknown_near": curve, "candidates_cast": cast,
-                       "candidates_cast_total": int(sum(cast)), "planning_seconds": [round(x, 3) for x in secs],
-                       "planning_seconds_total": round(float(sum(secs)), 3), "scores": scores,
-                       "segments": segs, "views_taken": len(curve) - 1, "frames_fused": frames,
-                       "poses": [T.tolist() for T in taken]}
+    for strat, (run, times) in zip(cfg.strategies, (map_trials or serial_trials)(_explore_trial, cfg.strategies,
+                                                                                 trials)):
+        runs[strat] = run
+        for k, v in times.items():
+            timer.add(k, v)
         if log is not None:
-            log(strat, runs[strat])
+            log(strat, run)
     doc = {"scene": scene_name or sc.name, "kind": "exploration", "config": _cfg_doc(cfg),
            "camera": cam.to_dict(), "score_camera": score_cam.to_dict(), "score_threshold": score_th,
            "volume": {"shape": list(base.shape), "voxel_size": base.voxel_size, "origin": base.origin.tolist()},
@@ -545,6 +555,54 @@ def run_exploration(sc: SimScene, cfg: LoopConfig, quiet: bool = True, scene_nam
     doc["time_s"] = {k: round(v, 3) for k, v in timer.t.items()}
     doc["time_s"]["total"] = round(time.perf_counter() - t0, 3)
     return doc
+
+
+def _unknown_near(vol, near_t: tuple) -> int:
+    """Unknown voxels near the objects as the planners see them: observed fewer than W_th times."""
+    return int(np.sum(known_grid(vol)[0].labels[near_t] == 0))
+
+
+def _explore_trial(trials: LoopTrials, strat: str) -> tuple[dict, dict]:
+    """One exploration strategy (objects or standard) from a copy of the initial scan -> (result, timings)."""
+    sc, sensor, K, _ = trials.setup()
+    cfg, x, timer = trials.cfg, trials.extra, _Timer()
+    vol = trials.base.copy()
+    T_cur = np.array(x["start"], dtype=float)
+    taken: list[np.ndarray] = []
+    curve, cast, secs, scores, segs, frames = [x["u0"]], [], [], [], [], 0
+    for _ in progress(range(cfg.views), total=cfg.views, desc=strat, quiet=trials.quiet):
+        t = time.perf_counter()
+        weights = vol.weights()  # one extraction for the score and the contours
+        grid, _ = known_grid(vol, weights=weights)
+        scorer = nbv_scorer(grid, x["score_cam"], cfg.gain, table_z=sc.table_z, reject_unknown=cfg.reject_unknown,
+                            optimistic=cfg.optimistic)
+        contours, _ = volume_contours(vol, weights=weights)
+        ex = dict(exclude=np.array(taken).reshape(-1, 4, 4), exclude_shift=cfg.exclude_shift,
+                  exclude_turn_deg=cfg.exclude_turn_deg, score_threshold=x["score_th"])
+        if strat == "objects":
+            plan = plan_object_views(analyse_volume(vol, SegmentOptions(superquadrics=False)), contours, scorer, **ex)
+        else:
+            plan = plan_standard_views(contours, scorer, x["env_c"], x["env_r"], **ex)
+        secs.append(time.perf_counter() - t)
+        timer.add("plan", secs[-1])
+        cast.append(int(plan.candidates_evaluated))
+        if plan.pose is None:
+            break
+        scores.append(float(plan.score))
+        segs.append(plan.segment_id)
+        frames = _take_view(vol, T_cur, plan.pose, "kfovp", sc, cfg, sensor, K, timer, frames,
+                            cfg.explore_view_frames)
+        T_cur = plan.pose
+        taken.append(plan.pose)
+        t = time.perf_counter()
+        curve.append(_unknown_near(vol, x["near_t"]))
+        timer.add("measure", time.perf_counter() - t)
+    run = {"strategy": strat, "unknown_near": curve, "candidates_cast": cast,
+           "candidates_cast_total": int(sum(cast)), "planning_seconds": [round(v, 3) for v in secs],
+           "planning_seconds_total": round(float(sum(secs)), 3), "scores": scores,
+           "segments": segs, "views_taken": len(curve) - 1, "frames_fused": frames,
+           "poses": [T.tolist() for T in taken]}
+    return run, timer.t
 
 
 def compare_exploration(runs: dict) -> dict:

@@ -35,6 +35,7 @@ from kinfu_cli.attention.detect import make_detector
 from kinfu_cli.core.errors import ConfigError, TrajectoryError
 from kinfu_cli.core.pois import DEFAULT_RADIUS
 from kinfu_cli.core.progress import progress
+from kinfu_cli.core.trials import TrialMap
 from kinfu_cli.io.polhemus import read_ground_truth, read_polhemus
 from kinfu_cli.io.trajectory import Trajectory
 
@@ -167,6 +168,11 @@ def _run_job(job: tuple) -> list[dict]:
     return out
 
 
+def _job_trial(_shared, job: tuple) -> list[dict]:
+    """_run_job as a trial of a `core.trials.TrialMap` (the job carries everything it needs)."""
+    return _run_job(job)
+
+
 def _summary(rows: list[dict]) -> dict:
     tp = sum(r["tp"] for r in rows)
     fp = sum(r["fp"] for r in rows)
@@ -205,10 +211,13 @@ def settings_for(speeds: list[float], noises: list[float]) -> list[tuple[float, 
 
 def evaluate_dataset(dataset_dir: str | os.PathLike, algorithms: list[str], speeds: list[float] | None = None,
                      noises: list[float] | None = None, workers: int = 1, params: dict | None = None,
-                     seed: int = 0, quiet: bool = True) -> tuple[list[dict], list[dict]]:
+                     seed: int = 0, quiet: bool = True, map_trials: TrialMap | None = None,
+                     ) -> tuple[list[dict], list[dict]]:
     """Run every task under every setting; returns (summaries, per-task rows).
 
     params: {"gmm-as": {...constructor kwargs...}, "zvc": {...}} (attention.detect.detector_params).
+    map_trials: run the (task, setting) trials through this map (a Dask cluster) instead of `workers`
+    local processes; the rows are the same, in the same order.
     """
     tasks = find_tasks(dataset_dir)
     settings = settings_for(speeds or [1.0], noises or [])
@@ -216,7 +225,10 @@ def evaluate_dataset(dataset_dir: str | os.PathLike, algorithms: list[str], spee
         make_detector(alg, (params or {}).get(alg)).check_params()  # bad options fail before any work
     jobs = [(t, s, n, seed, list(algorithms), dict(params or {})) for s, n in settings for t in tasks]
     rows: list[dict] = []
-    if workers <= 1 or len(jobs) < 4:
+    if map_trials is not None:
+        for res in map_trials(_job_trial, jobs):
+            rows.extend(res)
+    elif workers <= 1 or len(jobs) < 4:
         for job in progress(jobs, total=len(jobs), desc="eval poi", quiet=quiet, unit="task"):
             rows.extend(_run_job(job))
     else:

@@ -31,6 +31,7 @@ import numpy as np
 
 from kinfu_cli.attention.detect import make_detector
 from kinfu_cli.core.progress import progress
+from kinfu_cli.core.trials import TrialMap
 from kinfu_cli.evaluation.poi import find_tasks, score_pois, task_user
 from kinfu_cli.io.polhemus import read_ground_truth, read_polhemus
 from kinfu_cli.io.trajectory import Trajectory
@@ -85,6 +86,11 @@ def _run_task(job: tuple) -> list[dict]:
     return out
 
 
+def _task_trial(_shared, job: tuple) -> list[dict]:
+    """_run_task as a trial of a `core.trials.TrialMap`."""
+    return _run_task(job)
+
+
 def _pr(rows: list[dict]) -> tuple[float, float]:
     tp, fp = sum(r["tp"] for r in rows), sum(r["fp"] for r in rows)
     ch, fn = sum(r["changes"] for r in rows), sum(r["fn"] for r in rows)
@@ -109,18 +115,23 @@ def plateau_centre(values: list[float], scores: list[float], tie: float = TIE) -
 
 
 def leave_one_user_out(dataset_dir: str | os.PathLike, algorithms: list[str] | None = None, workers: int = 1,
-                       probes: tuple[str, ...] = PROBES, quiet: bool = True, studies: tuple = STUDIES) -> dict:
+                       probes: tuple[str, ...] = PROBES, quiet: bool = True, studies: tuple = STUDIES,
+                       map_trials: TrialMap | None = None) -> dict:
     """Choose each constant of STUDIES on one user, score it on another, every ordered pair of users.
 
     Returns {"users", "probes", "studies": [{"algorithm", "constant", "grid", "train_scores": {user: [...]},
     "directions": [{"train", "test", "chosen", "test_groups": {probe: {group: {"precision", "recall"}}}}]}]}
-    (percent). A study needs two users with tasks; with fewer, "directions" is empty.
+    (percent). A study needs two users with tasks; with fewer, "directions" is empty. map_trials: run the
+    per-task jobs through this map (a Dask cluster) instead of `workers` local processes.
     """
     tasks = find_tasks(dataset_dir)
     studies = [s for s in studies if algorithms is None or s[0] in algorithms]
     jobs = [(t, studies, tuple(probes)) for t in tasks]
     rows: list[dict] = []
-    if workers <= 1:
+    if map_trials is not None:
+        for res in map_trials(_task_trial, jobs):
+            rows.extend(res)
+    elif workers <= 1:
         for job in progress(jobs, total=len(jobs), desc="eval poi loo", quiet=quiet, unit="task"):
             rows.extend(_run_task(job))
     else:

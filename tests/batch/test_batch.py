@@ -47,17 +47,6 @@ def recordings(tmp_path_factory) -> Path:
     return base
 
 
-@pytest.fixture(scope="module")
-def scheduler():
-    """The address of a 2-worker LocalCluster (processes, one thread each), like a lab's cluster."""
-    from dask.distributed import LocalCluster
-
-    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
-                           silence_logs=50)
-    yield cluster.scheduler_address
-    cluster.close()
-
-
 def _workspace(recordings: Path, tmp: Path, plan: str = PLAN) -> Path:
     """A plan folder whose recs/ links to the shared recordings; returns the plan path."""
     (tmp / "recs").symlink_to(recordings / "recs", target_is_directory=True)

@@ -12,11 +12,11 @@ from kinfu_cli.batch.stages import RECORDING, StageRun, StageSpec
 from kinfu_cli.core.errors import ConfigError
 
 
-def _noop_check(recording, outdir, options):
+def _noop_check(rec, options):
     return None
 
 
-def _noop_run(recording, outdir, options, force):
+def _noop_run(rec, options, force):
     return StageRun()
 
 
@@ -104,13 +104,18 @@ def test_the_example_plan_is_valid():
     table = batch_stages()
     example = Path(__file__).resolve().parents[2] / "examples" / "batch_plan.toml"
     plan = load_plan(example, table)
-    assert [r.output.name for r in plan.recordings] == ["tabletop_mcap", "tabletop_bag", "tabletop_ros2"]
-    assert plan.stages == ["fuse", "poi", "nbv", "segment"]
+    assert [r.output.name for r in plan.recordings] == ["tabletop_mcap", "tabletop_bag", "tabletop_ros2",
+                                                        "tabletop_after"]
+    assert plan.stages == ["fuse", "poi", "nbv", "segment", "diff", "eval-fusion", "eval-poi", "viz"]
     for rec in plan.recordings:
-        assert rec.path.exists()
-        for s in plan.stages:
-            table[s].check(rec.path, rec.output, rec.stage_options(s))
-    assert plan.recordings[2].stage_options("segment") == {"plot": True, "seed": 1}
+        assert rec.path.exists() and rec.links["ground_truth"].is_dir()
+        for s in rec.stages:
+            table[s].check(rec, rec.stage_options(s))
+    assert plan.recordings[2].stage_options("segment") == {"plot": True, "seed": 1, "viz": True}
+    after = plan.recordings[3]
+    assert after.stages == ("fuse", "poi", "diff", "eval-poi", "viz")
+    assert after.links["before"] == plan.recordings[0].output / "fuse" / "volume.npz"
+    assert after.stage_options("fuse") == {"voxel-size": 0.01, "start": 11.04, "viz": True}
 
 
 def test_viewer_files_are_one_per_recording_and_stage(tmp_path):
@@ -124,3 +129,91 @@ def test_viewer_files_are_one_per_recording_and_stage(tmp_path):
     assert _option_args("segment", out, {"viz": False}) == []
     with pytest.raises(ConfigError, match="expected true"):
         _option_args("poi", out, {"viz": "elsewhere.mcap"})
+
+
+@pytest.fixture
+def lab(folder):
+    """sessions/ plus a kinfu synth layout (synth/recording.mcap beside synth/ground_truth/) and a volume file."""
+    (folder / "synth" / "ground_truth").mkdir(parents=True)
+    (folder / "synth" / "recording.mcap").write_bytes(b"x")
+    (folder / "old.npz").write_bytes(b"x")
+    return folder
+
+
+def _full_table():
+    from kinfu_cli.commands._batch_stages import batch_stages
+
+    return batch_stages()
+
+
+def test_diff_before_and_ground_truth_links(lab):
+    p = _plan(lab, 'output = "out"\nstages = ["fuse", "poi", "eval-poi"]\nrecordings = [\n'
+                   '  {path = "synth/recording.mcap", output = "s"},\n'
+                   '  {path = "sessions/day2.mcap", stages = ["fuse", "poi", "diff"], before = "synth/recording.mcap"},\n'
+                   '  {path = "sessions/day1.mcap", stages = ["fuse", "diff", "eval-fusion"], before = "old.npz", '
+                   'ground-truth = "synth/ground_truth"}]\n')
+    plan = load_plan(p, _full_table())
+    s, day2, day1 = plan.recordings
+    assert s.stages == ("fuse", "poi", "eval-poi") and s.links == {"ground_truth": lab / "synth" / "ground_truth"}
+    # diff after the other recording's fuse, on its volume; POIs scored when the recording has them
+    assert day2.stages == ("fuse", "poi", "diff") and day2.links["before"] == s.output / "fuse" / "volume.npz"
+    assert day2.after == (("diff", 0, "fuse"),)
+    table = _full_table()
+    assert [label for label, _ in table["diff"].input_paths(day2)] == ["<before>", "fuse/volume.npz", "pois.json"]
+    assert day1.links == {"before": lab / "old.npz", "ground_truth": lab / "synth" / "ground_truth"}
+    assert day1.after == () and plan.stages == ["fuse", "poi", "diff", "eval-fusion", "eval-poi"]
+    assert [label for label, _ in table["diff"].input_paths(day1)] == ["<before>", "fuse/volume.npz"]
+
+
+@pytest.mark.parametrize("recordings, needles", [
+    ('[{path = "sessions/day1.mcap", stages = ["fuse", "diff"]}]', ["recordings[0]", "diff needs 'before'"]),
+    ('[{path = "sessions/day1.mcap", before = "old.npz"}]', ["recordings[0]", "diff is not among"]),
+    ('[{path = "sessions/day1.mcap", stages = ["fuse", "diff"], before = "sessions/day1.mcap"}]', ["itself"]),
+    ('[{path = "sessions/day1.mcap", stages = ["poi"]}, {path = "sessions/day2.mcap", stages = ["fuse", "diff"], '
+     'before = "sessions/day1.mcap"}]', ["recordings[1]", "not fused in this plan"]),
+    ('[{path = "sessions/day1.mcap", stages = ["fuse", "diff"], before = "gone.npz"}]', ["gone.npz", "no such"]),
+    ('[{path = "sessions/day1.mcap", stages = ["fuse", "eval-fusion"]}]',
+     ["recordings[0]", "eval-fusion need(s) ground truth", "sessions/ground_truth"]),
+    ('[{path = "synth/recording.mcap", stages = ["eval-poi"]}]', ["recordings[0].stages", "eval-poi needs poi"]),
+    ('[{path = "synth/recording.mcap", ground-truth = "nowhere"}]', ["ground-truth", "nowhere", "no such folder"]),
+    ('[{path = "synth/recording.mcap", stages = ["fuse", "viz"]}]', ["unknown stage 'viz'", "viz = "]),
+])
+def test_missing_inputs_of_diff_and_eval_are_one_line(lab, recordings, needles):
+    p = _plan(lab, f'output = "out"\nstages = ["fuse"]\nrecordings = {recordings}\n')
+    with pytest.raises(ConfigError) as info:
+        load_plan(p, _full_table())
+    msg = str(info.value)
+    assert "\n" not in msg and msg.startswith(str(p))
+    for n in needles:
+        assert n in msg, (n, msg)
+
+
+def test_viz_adds_one_viewer_stage_per_recording(lab):
+    p = _plan(lab, 'output = "out"\nstages = ["fuse", "poi", "nbv"]\nviz = "scene.mcap"\nrecordings = [\n'
+                   '  "sessions/day1.mcap", {path = "sessions/day2.mcap", stages = ["fuse", "diff"], before = "old.npz"}]\n'
+                   '[options.nbv]\nviz = false\n')
+    table = _full_table()
+    plan = load_plan(p, table)
+    a, b = plan.recordings
+    assert a.stages == ("fuse", "poi", "nbv", "viz") and a.links["viz"] == a.output / "scene.mcap"
+    # every stage with a viewer file of its own writes it (the plan's false is overridden): viz combines them
+    assert all(a.stage_options(s)["viz"] is True for s in ("fuse", "poi", "nbv"))
+    assert [label for label, _ in table["viz"].input_paths(a)] == ["fuse.mcap", "pois.mcap", "views.mcap"]
+    assert table["viz"].outputs_of(a) == ("scene.mcap",) and table["viz"].claims_of(b) == ("scene.mcap",)
+    assert [label for label, _ in table["viz"].input_paths(b)] == ["fuse.mcap"]
+    assert load_plan(p, table, viz="other.mcap").recordings[0].links["viz"].name == "other.mcap"  # the CLI wins
+    for bad in ("sub/x.mcap", "x.ply", ""):
+        with pytest.raises(ConfigError, match="viz: expected a file name ending .mcap"):
+            load_plan(p, table, viz=bad)
+
+
+def test_a_diff_blocked_by_the_other_recordings_fuse_names_it(lab):
+    from kinfu_cli.batch.engine import run_task
+
+    p = _plan(lab, 'output = "out"\nstages = ["fuse"]\nrecordings = ["sessions/day1.mcap", {path = "sessions/day2.mcap", '
+                   'stages = ["fuse", "diff"], before = "sessions/day1.mcap"}]\n')
+    day1, day2 = load_plan(p, _full_table()).recordings
+    own = {"stage": "fuse", "status": "ok", "folder": str(day2.output)}
+    other = {"stage": "fuse", "status": "failed", "folder": str(day1.output)}
+    entry = run_task(_full_table()["diff"], day2, {}, None, False, own, other)
+    assert entry["status"] == "blocked" and entry["error"] == f"needs fuse of {day1.output}, which did not finish"

@@ -1,0 +1,16 @@
+"""The Dask cluster the batch and eval-scheduler tests submit to."""
+
+from __future__ import annotations
+
+import pytest
+
+
+@pytest.fixture(scope="session")
+def scheduler():
+    """The address of a 2-worker LocalCluster (processes, one thread each), like a lab's cluster."""
+    from dask.distributed import LocalCluster
+
+    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+                           silence_logs=50)
+    yield cluster.scheduler_address
+    cluster.close()
