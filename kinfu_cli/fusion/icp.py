@@ -7,7 +7,7 @@ by the current pose estimate, is projected into the model image; the model pixel
 correspondence (no search), kept when the two points are within max_distance and their normals within
 max_angle. Each iteration solves the 6x6 normal equations of the point-to-plane error linearised around the
 current pose (parallel over pixel rows, one partial sum per row chunk) and applies the small motion found, a
-rotation vector turned into a matrix by scipy, to the left of the pose. Coarse-to-fine: the coarse levels
+rotation vector turned into a matrix by OpenCV's Rodrigues, to the left of the pose. Coarse-to-fine: the coarse levels
 converge from further, the finest pins the pose.
 
 The system's condition number (largest over smallest eigenvalue of the 6x6 matrix) is returned: a scene that
@@ -24,7 +24,6 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 from numba import njit, prange
-from scipy.spatial.transform import Rotation
 
 from kinfu_cli.core.camera import scaled_intrinsics
 
@@ -273,11 +272,14 @@ def _normal_equations(vert, norm, R, t, model_v, model_n, R_cw, t_cw, fx, fy, cx
     return out
 
 
+_UPPER = np.triu_indices(6)  # computed once: np.triu_indices costs more than the 6x6 solve
+
+
 def _system(sums: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, int]:
     """(A, b, sum r^2, count) from the summed N_SUMS row."""
     A = np.zeros((6, 6))
-    A[np.triu_indices(6)] = sums[:21]
-    A = A + np.triu(A, 1).T
+    A[_UPPER] = sums[:21]
+    A.T[_UPPER] = sums[:21]
     return A, sums[21:27], float(sums[27]), int(sums[28])
 
 
@@ -295,6 +297,8 @@ def projective_icp(levels: list[DataLevel], model_v: np.ndarray, model_n: np.nda
     fine (the last entries are the finest level). A level stops early when an iteration moves the pose less than
     `converged` (rad and m). timing: seconds added per phase ("reduce WxH" per level: association and normal
     equations; "solve": the 6x6 solves and pose updates)."""
+    import cv2  # heavy: only when tracking
+
     if len(iterations) != len(max_distance) or len(iterations) > len(levels):
         raise ValueError("projective_icp: one iterations and max_distance entry per pyramid level")
     Tm_inv = np.linalg.inv(np.asarray(T_model, dtype=np.float64))
@@ -333,7 +337,7 @@ def projective_icp(levels: list[DataLevel], model_v: np.ndarray, model_n: np.nda
                 break
             used += 1
             step = np.eye(4)
-            step[:3, :3] = Rotation.from_rotvec(xi[:3]).as_matrix()
+            step[:3, :3] = cv2.Rodrigues(xi[:3])[0]  # scipy's Rotation: 8x slower for one vector
             step[:3, 3] = xi[3:]
             T = step @ T
             clock["solve"] = clock.get("solve", 0.0) + time.perf_counter() - t0

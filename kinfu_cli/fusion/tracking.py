@@ -61,6 +61,8 @@ MAX_TURN_DEG_S = 20.0 * 30
 MAX_CONDITION = 2.5e3
 # the narrowest image (pixels) projective ICP's finest level and its model map are made at
 MIN_ICP_WIDTH = 320
+# ... and the narrowest model map
+MIN_MODEL_WIDTH = 160
 # projective ICP re-casts the model map from the pose it found, and runs again from there, when that pose is further
 # than this from the one the map was cast from (a large move, as between sub-sampled frames: the first map sees the
 # scene from the wrong place, its occlusions and edges bias the association), at most RECASTS times
@@ -224,13 +226,12 @@ class FrameToModelTracker:
         agreement against the same maps); None when the model shows too little from there."""
         # the finest level ICP uses and the level the model map matches: icp_scale / model_scale of the frame, but
         # never narrower than MIN_ICP_WIDTH pixels (a small frame is tracked at full size)
-        keep = max(0, int(np.floor(np.log2(max(depth.shape[1], 1) / MIN_ICP_WIDTH))))
-        f = min(self._level(1 / self.icp_scale), keep)
+        f = min(self._level(1 / self.icp_scale), self._narrowest(depth.shape[1], MIN_ICP_WIDTH))
         levels = max(f + len(self.projective_iterations), self._level(self.agreement_stride) + 1)
         clock = self.timing
         pyr = data_pyramid(depth, K, levels, volume.min_depth, volume.max_depth, self.bilateral,
                            first=min(f, self._level(self.agreement_stride)), timing=clock)
-        m = min(self._level(1 / self.model_scale), keep, levels - 1)
+        m = min(self._level(1 / self.model_scale), self._narrowest(depth.shape[1], MIN_MODEL_WIDTH), levels - 1)
         its = self.projective_iterations
         dists = (self.projective_distance,) * len(its)
         T_model = T_init
@@ -255,6 +256,11 @@ class FrameToModelTracker:
         _add(clock, "agreement", time.perf_counter() - t0)
         return self._checked(r.T_world_camera, r.fitness, r.rmse, volume, depth, K, T_ref, dt_s, r.condition,
                              agreement)
+
+    @staticmethod
+    def _narrowest(width: int, min_width: int) -> int:
+        """The coarsest pyramid level of a `width`-pixel frame still at least min_width pixels wide (0 at least)."""
+        return max(0, int(np.floor(np.log2(max(width, 1) / min_width))))
 
     @staticmethod
     def _level(factor: float) -> int:
