@@ -200,8 +200,10 @@ def _band_kernel(dims, block_idx, block_w, pool_v, pool_w, origin, vs, trunc, T_
                         c0, okc = _trilinear(block_idx, block_w, pool_v, pool_w, dims,
                                                 (px - origin[0]) * inv_vs - 0.5, (py - origin[1]) * inv_vs - 0.5,
                                                 (pz - origin[2]) * inv_vs - 0.5)
-                        if oka and okc and a0 > 0.0 and c0 <= 0.0:
-                            th = prev_t + (t - prev_t) * a0 / (a0 - c0)
+                        if oka and okc and a0 > c0:
+                            # the crossing of the trilinear TSDF, interpolated or (when the nearest voxels' sign
+                            # change and the trilinear one disagree, half the rays) extrapolated by up to a voxel
+                            th = min(max(prev_t + (t - prev_t) * a0 / (a0 - c0), prev_t - vs), t + vs)
                         else:
                             th = prev_t + (t - prev_t) * prev_v / (prev_v - v)
                     hx = o[0] + d[0] * th

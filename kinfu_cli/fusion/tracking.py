@@ -70,7 +70,10 @@ RECAST_M = 0.02
 RECAST_DEG = 2.0
 RECASTS = 0
 # projective ICP stops iterating a pyramid level when one step moves the pose less than this (rad and m)
-ICP_CONVERGED = 1e-6
+ICP_CONVERGED = 1e-4
+# projective ICP's model maps as a share of the frame's size (never narrower than MIN_MODEL_WIDTH): KinFu casts them
+# at full size; a quarter (160x120 for 640x480 frames) tracks the 7-Scenes kitchen as well at a third of the cost
+MAP_SCALE = 0.25
 # the agreement check looks for the model surface within this many truncation distances of each reading
 AGREEMENT_BAND = 4.0
 RELOCALISE_LEVELS = ((0.30, 15, 0.04), (0.15, 15, 0.04), (0.08, 10, 0.02), (0.04, 10, 0.01))
@@ -100,12 +103,12 @@ class FrameToModelTracker:
     for the data cloud; voxel: down-sampling of the data cloud (m); min_fitness, min_agreement, max_speed
     (m/s), max_turn (deg/s): the checks a pose must pass (module docstring); max_jump_m / max_jump_deg: the
     same limits per frame, used when the time since the last good pose is not known; model_scale: ray-cast
-    image size for the ICP target; agreement_stride: pixel step of the agreement check; relocalise: try the
+    image size for open3d's ICP target (and re-localisation's); agreement_stride: pixel step of the agreement check; relocalise: try the
     wider pyramid (RELOCALISE_LEVELS) from every candidate pose before declaring a frame lost.
     icp: "projective" or "open3d" (module docstring); max_distances / iterations / stride / voxel are open3d's.
     Projective ICP: projective_iterations per pyramid level (coarse to fine) with correspondences within
-    projective_distance (m) and max_angle (deg) between normals; icp_scale / model_scale: the finest data level
-    and the model map as a share of the frame (never narrower than MIN_ICP_WIDTH); bilateral: filter the depth
+    projective_distance (m) and max_angle (deg) between normals; icp_scale: the finest data level as a share of
+    the frame (never narrower than MIN_ICP_WIDTH); map_scale: the model maps' (MAP_SCALE); bilateral: filter the depth
     first (KinFu); band: half-width (m) of the model ray cast around each reading; max_condition (module
     docstring, check 3); icp_converged: a pyramid level stops iterating when a step moves the pose less than
     this (rad and m). timing: seconds spent per phase (filter, pyramid, raycast, model normals, reduce WxH per
@@ -120,7 +123,7 @@ class FrameToModelTracker:
                  bilateral: bool = True, band: float = 0.15, max_angle: float = 20.0,
                  max_condition: float = MAX_CONDITION, icp_scale: float = 0.5,
                  projective_iterations=(30, 15, 6), projective_distance: float = 0.10,
-                 icp_converged: float = ICP_CONVERGED):
+                 icp_converged: float = ICP_CONVERGED, map_scale: float = MAP_SCALE):
         if len(max_distances) != len(iterations):
             raise ConfigError("tracker: max_distances and iterations must have the same length")
         if icp not in ICP_METHODS:
@@ -134,6 +137,7 @@ class FrameToModelTracker:
         self.projective_iterations = tuple(int(x) for x in projective_iterations)
         self.projective_distance = float(projective_distance)
         self.icp_converged = float(icp_converged)
+        self.map_scale = float(map_scale)
         self.timing: dict[str, float] = {}  # seconds per phase of projective tracking, summed over the frames
         self.max_distances = tuple(float(x) for x in max_distances)
         self.iterations = tuple(int(x) for x in iterations)
@@ -224,14 +228,14 @@ class FrameToModelTracker:
     def _projective_attempt(self, volume, depth, K, T_init, T_ref, dt_s) -> TrackResult | None:
         """Projective ICP (fusion.icp) against the model maps ray cast from T_init, then the checks (the
         agreement against the same maps); None when the model shows too little from there."""
-        # the finest level ICP uses and the level the model map matches: icp_scale / model_scale of the frame, but
-        # never narrower than MIN_ICP_WIDTH pixels (a small frame is tracked at full size)
+        # the finest level ICP uses and the level the model map matches: icp_scale / map_scale of the frame, but
+        # never narrower than MIN_ICP_WIDTH / MIN_MODEL_WIDTH pixels (a small frame is tracked at full size)
         f = min(self._level(1 / self.icp_scale), self._narrowest(depth.shape[1], MIN_ICP_WIDTH))
         levels = max(f + len(self.projective_iterations), self._level(self.agreement_stride) + 1)
         clock = self.timing
         pyr = data_pyramid(depth, K, levels, volume.min_depth, volume.max_depth, self.bilateral,
                            first=min(f, self._level(self.agreement_stride)), timing=clock)
-        m = min(self._level(1 / self.model_scale), self._narrowest(depth.shape[1], MIN_MODEL_WIDTH), levels - 1)
+        m = min(self._level(1 / self.map_scale), self._narrowest(depth.shape[1], MIN_MODEL_WIDTH), levels - 1)
         its = self.projective_iterations
         dists = (self.projective_distance,) * len(its)
         T_model = T_init
