@@ -10,7 +10,7 @@ Frame-to-model: the model is the volume ray cast from the initial pose, the data
 camera frame; ICP estimates T_world_camera directly. Two ICPs (parameter icp):
 - "projective" (default): KinFu's tracker (fusion.icp): projective data association against the model's
   vertex / normal maps, cast only in a band around the frame's depths (fusion.raycast.band_raycast), on a
-  3-level pyramid of the bilateral-filtered depth; ~20x faster than open3d's (benchmarks/bench_tracking.py).
+  3-level pyramid of the bilateral-filtered depth; 30x faster than open3d's (benchmarks/bench_tracking.py).
 - "open3d": open3d's point-to-plane ICP on clouds (the reference).
 Re-localisation (below) uses open3d's ICP in both cases.
 
