@@ -9,7 +9,8 @@ the tracker's calls (including its model ray casts and loss checks: "tracking fp
 integration of the frame ("track+fuse fps", what `kinfu fuse --pose icp` does per frame, less reading the
 recording). Prints per method: fps (mean over the runs, and the best of --repeat runs), CPU ms per frame
 (all threads; on a loaded machine the honest measure: a frame needing C ms of CPU runs at >= 1000 / C fps on an
-idle one even with no parallelism at all), ATE RMS / max (cm) against the recorded poses, frames lost, the speed ratio, and for the
+idle one even with no parallelism at all), ATE RMS / max (cm) against the recorded poses, frames lost, the speed
+ratio, and for the
 projective tracker the wall time per phase (FrameToModelTracker.timing). A method name may carry tracker
 options as `name:key=value+key=value` (e.g. `projective:model_scale=0.25+band=0.1`) to compare settings in one process.
 Not a test: the numbers go into the tracking report.
@@ -139,7 +140,8 @@ def main() -> None:
         c = np.asarray(last[m].conditions, dtype=float)
         cond = np.nanmedian(c) if np.isfinite(c).any() else float("nan")
         print(f"| {m} | {np.mean(fps[m]):.2f} | {max(fps[m]):.2f} | {np.mean(fused[m]):.2f} | "
-              f"{1000 * np.mean(cpu[m]):.1f} | {1000 * np.mean(fused_cpu[m]):.1f} | {100 * np.sqrt(np.mean(e ** 2)):.2f} | {100 * e.max():.2f} | "
+              f"{1000 * np.mean(cpu[m]):.1f} | {1000 * np.mean(fused_cpu[m]):.1f} | "
+              f"{100 * np.sqrt(np.mean(e ** 2)):.2f} | {100 * e.max():.2f} | "
               f"{last[m].lost} | {cond:.3g} |")
     for m in methods:
         if phases[m]:

@@ -103,13 +103,14 @@ class FrameToModelTracker:
     for the data cloud; voxel: down-sampling of the data cloud (m); min_fitness, min_agreement, max_speed
     (m/s), max_turn (deg/s): the checks a pose must pass (module docstring); max_jump_m / max_jump_deg: the
     same limits per frame, used when the time since the last good pose is not known; model_scale: ray-cast
-    image size for open3d's ICP target (and re-localisation's); agreement_stride: pixel step of the agreement check; relocalise: try the
-    wider pyramid (RELOCALISE_LEVELS) from every candidate pose before declaring a frame lost.
+    image size for open3d's ICP target (and re-localisation's); agreement_stride: pixel step of the agreement
+    check; relocalise: try the wider pyramid (RELOCALISE_LEVELS) from every candidate pose before declaring a
+    frame lost.
     icp: "projective" or "open3d" (module docstring); max_distances / iterations / stride / voxel are open3d's.
     Projective ICP: projective_iterations per pyramid level (coarse to fine) with correspondences within
     projective_distance (m) and max_angle (deg) between normals; icp_scale: the finest data level as a share of
-    the frame (never narrower than MIN_ICP_WIDTH); map_scale: the model maps' (MAP_SCALE); bilateral: filter the depth
-    first (KinFu); band: half-width (m) of the model ray cast around each reading; max_condition (module
+    the frame (never narrower than MIN_ICP_WIDTH); map_scale: the model maps' (MAP_SCALE); bilateral: filter the
+    depth first (KinFu); band: half-width (m) of the model ray cast around each reading; max_condition (module
     docstring, check 3); icp_converged: a pyramid level stops iterating when a step moves the pose less than
     this (rad and m). timing: seconds spent per phase (filter, pyramid, raycast, model normals, reduce WxH per
     level, solve, agreement), summed over the frames tracked.
