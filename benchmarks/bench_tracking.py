@@ -10,9 +10,9 @@ integration of the frame ("track+fuse fps", what `kinfu fuse --pose icp` does pe
 recording). Prints per method: fps (mean over the runs, and the best of --repeat runs), CPU ms per frame
 (all threads; on a loaded machine the honest measure: a frame needing C ms of CPU runs at >= 1000 / C fps on an
 idle one even with no parallelism at all), ATE RMS / max (cm) against the recorded poses, frames lost, the speed
-ratio, and for the
-projective tracker the wall time per phase (FrameToModelTracker.timing). A method name may carry tracker
-options as `name:key=value+key=value` (e.g. `projective:model_scale=0.25+band=0.1`) to compare settings in one process.
+ratio, and for the projective tracker the wall time per phase (FrameToModelTracker.timing). A method name may
+carry tracker options as `name:key=value+key=value` (e.g. `projective:map_scale=0.5+icp_converged=1e-6`, the
+session-4 settings) to compare settings in one process.
 Not a test: the numbers go into the tracking report.
 """
 
