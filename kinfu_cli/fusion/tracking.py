@@ -10,7 +10,7 @@ Frame-to-model: the model is the volume ray cast from the initial pose, the data
 camera frame; ICP estimates T_world_camera directly. Two ICPs (parameter icp):
 - "projective" (default): KinFu's tracker (fusion.icp): projective data association against the model's
   vertex / normal maps, cast only in a band around the frame's depths (fusion.raycast.band_raycast), on a
-  3-level pyramid of the bilateral-filtered depth; 30x faster than open3d's (benchmarks/bench_tracking.py).
+  3-level pyramid of the bilateral-filtered depth; 12-30x faster than open3d's (benchmarks/bench_tracking.py).
 - "open3d": open3d's point-to-plane ICP on clouds (the reference).
 Re-localisation (below) uses open3d's ICP in both cases.
 
@@ -61,8 +61,8 @@ MAX_TURN_DEG_S = 20.0 * 30
 MAX_CONDITION = 2.5e3
 # the narrowest image (pixels) projective ICP's finest level and its model map are made at
 MIN_ICP_WIDTH = 320
-# ... and the narrowest model map
-MIN_MODEL_WIDTH = 160
+# ... and the narrowest model map (160 px, from 320 px frames, lost the sample recording's hint-mode track: 4 cm off)
+MIN_MODEL_WIDTH = 320
 # projective ICP re-casts the model map from the pose it found, and runs again from there, when that pose is further
 # than this from the one the map was cast from (a large move, as between sub-sampled frames: the first map sees the
 # scene from the wrong place, its occlusions and edges bias the association), at most RECASTS times
@@ -71,9 +71,9 @@ RECAST_DEG = 2.0
 RECASTS = 0
 # projective ICP stops iterating a pyramid level when one step moves the pose less than this (rad and m)
 ICP_CONVERGED = 1e-4
-# projective ICP's model maps as a share of the frame's size (never narrower than MIN_MODEL_WIDTH): KinFu casts them
-# at full size; a quarter (160x120 for 640x480 frames) tracks the 7-Scenes kitchen as well at a third of the cost
-MAP_SCALE = 0.25
+# projective ICP's model maps as a share of the frame's size (never narrower than MIN_MODEL_WIDTH); KinFu casts them
+# at full size
+MAP_SCALE = 0.5
 # the agreement check looks for the model surface within this many truncation distances of each reading
 AGREEMENT_BAND = 4.0
 RELOCALISE_LEVELS = ((0.30, 15, 0.04), (0.15, 15, 0.04), (0.08, 10, 0.02), (0.04, 10, 0.01))
