@@ -7,7 +7,7 @@ by the current pose estimate, is projected into the model image; the model pixel
 correspondence (no search), kept when the two points are within max_distance and their normals within
 max_angle. Each iteration solves the 6x6 normal equations of the point-to-plane error linearised around the
 current pose (parallel over pixel rows, one partial sum per row chunk) and applies the small motion found, a
-rotation vector turned into a matrix by scipy, to the left of the pose. Coarse-to-fine: the coarse levels
+rotation vector turned into a matrix by OpenCV's Rodrigues, to the left of the pose. Coarse-to-fine: the coarse levels
 converge from further, the finest pins the pose.
 
 The system's condition number (largest over smallest eigenvalue of the 6x6 matrix) is returned: a scene that
@@ -18,12 +18,12 @@ along such a direction is a guess.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 
 import numba
 import numpy as np
 from numba import njit, prange
-from scipy.spatial.transform import Rotation
 
 from kinfu_cli.core.camera import scaled_intrinsics
 
@@ -40,11 +40,12 @@ N_SUMS = 29  # 21 upper-triangle entries of J^T J, 6 of J^T r, sum r^2, inlier c
 
 @dataclass
 class DataLevel:
-    """One pyramid level of the frame: vertices and normals (H, W, 3) float32 in the camera frame (NaN: none),
-    depth (H, W) float32 (0: none) and the intrinsics of this level."""
+    """One pyramid level of the frame: vertices and normals (H, W, 3) float32 in the camera frame (NaN: none;
+    None on levels below the pyramid's `first`, which only carry depth), depth (H, W) float32 (0: none) and the
+    intrinsics of this level."""
     depth: np.ndarray
-    vertices: np.ndarray
-    normals: np.ndarray
+    vertices: np.ndarray | None
+    normals: np.ndarray | None
     K: np.ndarray
 
     @property
@@ -68,23 +69,31 @@ class IcpResult:
 
 
 def data_pyramid(depth: np.ndarray, K: np.ndarray, n_levels: int, min_depth: float, max_depth: float,
-                 bilateral: bool = True) -> list[DataLevel]:
-    """Vertex / normal maps of the depth image at full, half, quarter ... resolution (finest first)."""
+                 bilateral: bool = True, first: int = 0, timing: dict | None = None) -> list[DataLevel]:
+    """Vertex / normal maps of the depth image at full, half, quarter ... resolution (finest first); levels
+    below `first` (finer than the tracker uses) carry only their depth. timing: seconds added under "filter"
+    and "pyramid"."""
     import cv2  # heavy: only when tracking
 
+    t0 = time.perf_counter()
     d = np.asarray(depth, dtype=np.float32)
     d = np.where((d >= min_depth) & (d <= max_depth), d, np.float32(0))
     if bilateral:
         f = cv2.bilateralFilter(d, 5, BILATERAL_SIGMA_M, BILATERAL_SIGMA_PX)
         d = np.where(d > 0, f, np.float32(0)).astype(np.float32)
+    t1 = time.perf_counter()
     levels = []
     Kl = np.asarray(K, dtype=np.float64)
     for lev in range(n_levels):
         if lev:
             d = _halve(d)
             Kl = scaled_intrinsics(Kl, 0.5)
-        v, n = _vertex_normal_maps(d, Kl[0, 0], Kl[1, 1], Kl[0, 2], Kl[1, 2], EDGE_JUMP_PER_M)
+        v, n = (None, None) if lev < first else \
+            _vertex_normal_maps(d, Kl[0, 0], Kl[1, 1], Kl[0, 2], Kl[1, 2], EDGE_JUMP_PER_M)
         levels.append(DataLevel(d, v, n, Kl))
+    if timing is not None:
+        timing["filter"] = timing.get("filter", 0.0) + t1 - t0
+        timing["pyramid"] = timing.get("pyramid", 0.0) + time.perf_counter() - t1
     return levels
 
 
@@ -263,11 +272,14 @@ def _normal_equations(vert, norm, R, t, model_v, model_n, R_cw, t_cw, fx, fy, cx
     return out
 
 
+_UPPER = np.triu_indices(6)  # computed once: np.triu_indices costs more than the 6x6 solve
+
+
 def _system(sums: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, int]:
     """(A, b, sum r^2, count) from the summed N_SUMS row."""
     A = np.zeros((6, 6))
-    A[np.triu_indices(6)] = sums[:21]
-    A = A + np.triu(A, 1).T
+    A[_UPPER] = sums[:21]
+    A.T[_UPPER] = sums[:21]
     return A, sums[21:27], float(sums[27]), int(sums[28])
 
 
@@ -278,10 +290,15 @@ def _condition(A: np.ndarray) -> float:
 
 def projective_icp(levels: list[DataLevel], model_v: np.ndarray, model_n: np.ndarray, K_model: np.ndarray,
                    T_model: np.ndarray, T_init: np.ndarray, iterations=(10, 5, 4), max_distance=(0.10, 0.10, 0.10),
-                   max_angle_deg: float = 30.0, min_correspondences: int = 6) -> IcpResult:
+                   max_angle_deg: float = 30.0, min_correspondences: int = 6, converged: float = CONVERGED,
+                   timing: dict | None = None) -> IcpResult:
     """Pose (world <- camera) of the frame `levels` (finest first) against the model maps ray cast from T_model
     (world <- model camera) with K_model, from T_init. iterations and max_distance (m) per level, coarse to
-    fine (the last entries are the finest level)."""
+    fine (the last entries are the finest level). A level stops early when an iteration moves the pose less than
+    `converged` (rad and m). timing: seconds added per phase ("reduce WxH" per level: association and normal
+    equations; "solve": the 6x6 solves and pose updates)."""
+    import cv2  # heavy: only when tracking
+
     if len(iterations) != len(max_distance) or len(iterations) > len(levels):
         raise ValueError("projective_icp: one iterations and max_distance entry per pyramid level")
     Tm_inv = np.linalg.inv(np.asarray(T_model, dtype=np.float64))
@@ -290,18 +307,26 @@ def projective_icp(levels: list[DataLevel], model_v: np.ndarray, model_n: np.nda
     min_cos = math.cos(math.radians(max_angle_deg))
     nchunks = 4 * numba.get_num_threads()
     T = np.asarray(T_init, dtype=np.float64).copy()
+    clock = {} if timing is None else timing
     used = 0
 
     def sums(level: DataLevel, dist: float) -> np.ndarray:
-        return _normal_equations(level.vertices, level.normals, np.ascontiguousarray(T[:3, :3]),
-                                 np.ascontiguousarray(T[:3, 3]), model_v, model_n, R_cw, t_cw, fx, fy, cx, cy,
-                                 dist * dist, min_cos, nchunks).sum(axis=0)
+        t0 = time.perf_counter()
+        out = _normal_equations(level.vertices, level.normals, np.ascontiguousarray(T[:3, :3]),
+                                np.ascontiguousarray(T[:3, 3]), model_v, model_n, R_cw, t_cw, fx, fy, cx, cy,
+                                dist * dist, min_cos, nchunks).sum(axis=0)
+        key = f"reduce {level.depth.shape[1]}x{level.depth.shape[0]}"
+        clock[key] = clock.get(key, 0.0) + time.perf_counter() - t0
+        return out
 
     n = len(iterations)
+    last = None  # the finest level's sums when its last iteration moved the pose by less than `converged`
     for i in range(n):  # coarse to fine
         level = levels[n - 1 - i]
         for _ in range(iterations[i]):
-            A, b, _, count = _system(sums(level, max_distance[i]))
+            s = sums(level, max_distance[i])
+            t0 = time.perf_counter()
+            A, b, _, count = _system(s)
             if count < min_correspondences:
                 break
             try:
@@ -312,13 +337,16 @@ def projective_icp(levels: list[DataLevel], model_v: np.ndarray, model_n: np.nda
                 break
             used += 1
             step = np.eye(4)
-            step[:3, :3] = Rotation.from_rotvec(xi[:3]).as_matrix()
+            step[:3, :3] = cv2.Rodrigues(xi[:3])[0]  # scipy's Rotation: 8x slower for one vector
             step[:3, 3] = xi[3:]
             T = step @ T
-            if np.linalg.norm(xi[:3]) < CONVERGED and np.linalg.norm(xi[3:]) < CONVERGED:
+            clock["solve"] = clock.get("solve", 0.0) + time.perf_counter() - t0
+            if np.linalg.norm(xi[:3]) < converged and np.linalg.norm(xi[3:]) < converged:
+                last = s if i == n - 1 else None
                 break
-    # the finest level at the returned pose: how many vertices found a correspondence, how well they fit
-    A, b, r2, count = _system(sums(levels[0], max_distance[-1]))
+    # the finest level at the returned pose: how many vertices found a correspondence, how well they fit (the
+    # sums of its converged last iteration stand for them: the pose moved by less than `converged` since)
+    A, b, r2, count = _system(sums(levels[0], max_distance[-1]) if last is None else last)
     rmse = math.sqrt(r2 / count) if count else float("nan")
     cond = _condition(A) if count >= min_correspondences else float("inf")
     return IcpResult(T, count, levels[0].n_valid, rmse, cond, used)

@@ -10,7 +10,7 @@ Frame-to-model: the model is the volume ray cast from the initial pose, the data
 camera frame; ICP estimates T_world_camera directly. Two ICPs (parameter icp):
 - "projective" (default): KinFu's tracker (fusion.icp): projective data association against the model's
   vertex / normal maps, cast only in a band around the frame's depths (fusion.raycast.band_raycast), on a
-  3-level pyramid of the bilateral-filtered depth; ~20x faster than open3d's (benchmarks/bench_tracking.py).
+  3-level pyramid of the bilateral-filtered depth; 12-30x faster than open3d's (benchmarks/bench_tracking.py).
 - "open3d": open3d's point-to-plane ICP on clouds (the reference).
 Re-localisation (below) uses open3d's ICP in both cases.
 
@@ -35,6 +35,7 @@ TF hint and the last good pose); the best attempt that passes the checks wins.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -60,12 +61,19 @@ MAX_TURN_DEG_S = 20.0 * 30
 MAX_CONDITION = 2.5e3
 # the narrowest image (pixels) projective ICP's finest level and its model map are made at
 MIN_ICP_WIDTH = 320
+# ... and the narrowest model map (160 px, from 320 px frames, lost the sample recording's hint-mode track: 4 cm off)
+MIN_MODEL_WIDTH = 320
 # projective ICP re-casts the model map from the pose it found, and runs again from there, when that pose is further
 # than this from the one the map was cast from (a large move, as between sub-sampled frames: the first map sees the
 # scene from the wrong place, its occlusions and edges bias the association), at most RECASTS times
 RECAST_M = 0.02
 RECAST_DEG = 2.0
 RECASTS = 0
+# projective ICP stops iterating a pyramid level when one step moves the pose less than this (rad and m)
+ICP_CONVERGED = 1e-4
+# projective ICP's model maps as a share of the frame's size (never narrower than MIN_MODEL_WIDTH); KinFu casts them
+# at full size
+MAP_SCALE = 0.5
 # the agreement check looks for the model surface within this many truncation distances of each reading
 AGREEMENT_BAND = 4.0
 RELOCALISE_LEVELS = ((0.30, 15, 0.04), (0.15, 15, 0.04), (0.08, 10, 0.02), (0.04, 10, 0.01))
@@ -95,14 +103,17 @@ class FrameToModelTracker:
     for the data cloud; voxel: down-sampling of the data cloud (m); min_fitness, min_agreement, max_speed
     (m/s), max_turn (deg/s): the checks a pose must pass (module docstring); max_jump_m / max_jump_deg: the
     same limits per frame, used when the time since the last good pose is not known; model_scale: ray-cast
-    image size for the ICP target; agreement_stride: pixel step of the agreement check; relocalise: try the
-    wider pyramid (RELOCALISE_LEVELS) from every candidate pose before declaring a frame lost.
+    image size for open3d's ICP target (and re-localisation's); agreement_stride: pixel step of the agreement
+    check; relocalise: try the wider pyramid (RELOCALISE_LEVELS) from every candidate pose before declaring a
+    frame lost.
     icp: "projective" or "open3d" (module docstring); max_distances / iterations / stride / voxel are open3d's.
     Projective ICP: projective_iterations per pyramid level (coarse to fine) with correspondences within
-    projective_distance (m) and max_angle (deg) between normals; icp_scale / model_scale: the finest data level
-    and the model map as a share of the frame (never narrower than MIN_ICP_WIDTH); bilateral: filter the depth
-    first (KinFu); band: half-width (m) of the model ray cast around each reading; max_condition (module
-    docstring, check 3).
+    projective_distance (m) and max_angle (deg) between normals; icp_scale: the finest data level as a share of
+    the frame (never narrower than MIN_ICP_WIDTH); map_scale: the model maps' (MAP_SCALE); bilateral: filter the
+    depth first (KinFu); band: half-width (m) of the model ray cast around each reading; max_condition (module
+    docstring, check 3); icp_converged: a pyramid level stops iterating when a step moves the pose less than
+    this (rad and m). timing: seconds spent per phase (filter, pyramid, raycast, model normals, reduce WxH per
+    level, solve, agreement), summed over the frames tracked.
     """
 
     def __init__(self, max_distances=(0.10, 0.05, 0.02), iterations=(10, 10, 8), stride: int = 2,
@@ -112,7 +123,8 @@ class FrameToModelTracker:
                  agreement_stride: int = 4, relocalise: bool = True, icp: str = "projective",
                  bilateral: bool = True, band: float = 0.15, max_angle: float = 20.0,
                  max_condition: float = MAX_CONDITION, icp_scale: float = 0.5,
-                 projective_iterations=(30, 15, 6), projective_distance: float = 0.10):
+                 projective_iterations=(30, 15, 6), projective_distance: float = 0.10,
+                 icp_converged: float = ICP_CONVERGED, map_scale: float = MAP_SCALE):
         if len(max_distances) != len(iterations):
             raise ConfigError("tracker: max_distances and iterations must have the same length")
         if icp not in ICP_METHODS:
@@ -125,6 +137,9 @@ class FrameToModelTracker:
         self.icp_scale = float(icp_scale)
         self.projective_iterations = tuple(int(x) for x in projective_iterations)
         self.projective_distance = float(projective_distance)
+        self.icp_converged = float(icp_converged)
+        self.map_scale = float(map_scale)
+        self.timing: dict[str, float] = {}  # seconds per phase of projective tracking, summed over the frames
         self.max_distances = tuple(float(x) for x in max_distances)
         self.iterations = tuple(int(x) for x in iterations)
         self.stride = int(stride)
@@ -214,31 +229,43 @@ class FrameToModelTracker:
     def _projective_attempt(self, volume, depth, K, T_init, T_ref, dt_s) -> TrackResult | None:
         """Projective ICP (fusion.icp) against the model maps ray cast from T_init, then the checks (the
         agreement against the same maps); None when the model shows too little from there."""
-        # the finest level ICP uses and the level the model map matches: icp_scale / model_scale of the frame, but
-        # never narrower than MIN_ICP_WIDTH pixels (a small frame is tracked at full size)
-        keep = max(0, int(np.floor(np.log2(max(depth.shape[1], 1) / MIN_ICP_WIDTH))))
-        f = min(self._level(1 / self.icp_scale), keep)
+        # the finest level ICP uses and the level the model map matches: icp_scale / map_scale of the frame, but
+        # never narrower than MIN_ICP_WIDTH / MIN_MODEL_WIDTH pixels (a small frame is tracked at full size)
+        f = min(self._level(1 / self.icp_scale), self._narrowest(depth.shape[1], MIN_ICP_WIDTH))
         levels = max(f + len(self.projective_iterations), self._level(self.agreement_stride) + 1)
-        pyr = data_pyramid(depth, K, levels, volume.min_depth, volume.max_depth, self.bilateral)
-        m = min(self._level(1 / self.model_scale), keep, levels - 1)
+        clock = self.timing
+        pyr = data_pyramid(depth, K, levels, volume.min_depth, volume.max_depth, self.bilateral,
+                           first=min(f, self._level(self.agreement_stride)), timing=clock)
+        m = min(self._level(1 / self.map_scale), self._narrowest(depth.shape[1], MIN_MODEL_WIDTH), levels - 1)
         its = self.projective_iterations
         dists = (self.projective_distance,) * len(its)
         T_model = T_init
         for recast in range(1 + RECASTS):
+            t0 = time.perf_counter()
             mz, mv, _, state = band_raycast(volume, pyr[m].K, T_model, pyr[m].depth, self.band, tsdf_normals=False)
+            t1 = time.perf_counter()
             mn = vertex_normals(mv, mz, *T_model[:3, 3], EDGE_JUMP_PER_M)
+            _add(clock, "raycast", t1 - t0)
+            _add(clock, "model normals", time.perf_counter() - t1)
             if np.count_nonzero(np.isfinite(mn[..., 0])) < self.min_points // 4 ** m:
                 return None
             r = projective_icp(pyr[f:], mv, mn, pyr[m].K, T_model, r.T_world_camera if recast else T_init, its, dists,
-                               self.max_angle)
+                               self.max_angle, converged=self.icp_converged, timing=clock)
             moved = np.linalg.inv(T_model) @ r.T_world_camera
             if np.linalg.norm(moved[:3, 3]) < RECAST_M and _angle_deg(moved[:3, :3]) < RECAST_DEG:
                 break
             T_model = r.T_world_camera  # a large move: the model seen from where the camera turned out to be
+        t0 = time.perf_counter()
         agreement = model_agreement(pyr[self._level(self.agreement_stride)], r.T_world_camera, mz, state, pyr[m].K,
                                     T_model, BAND_HIT, BAND_OCCLUDED, volume.truncation)
+        _add(clock, "agreement", time.perf_counter() - t0)
         return self._checked(r.T_world_camera, r.fitness, r.rmse, volume, depth, K, T_ref, dt_s, r.condition,
                              agreement)
+
+    @staticmethod
+    def _narrowest(width: int, min_width: int) -> int:
+        """The coarsest pyramid level of a `width`-pixel frame still at least min_width pixels wide (0 at least)."""
+        return max(0, int(np.floor(np.log2(max(width, 1) / min_width))))
 
     @staticmethod
     def _level(factor: float) -> int:
@@ -299,6 +326,10 @@ class FrameToModelTracker:
         if n == 0:
             return float("nan")
         return float(np.count_nonzero((state == BAND_HIT) & (np.abs(d - z) < volume.truncation)) / n)
+
+
+def _add(clock: dict, phase: str, seconds: float) -> None:
+    clock[phase] = clock.get(phase, 0.0) + seconds
 
 
 def _better(a: TrackResult, b: TrackResult) -> bool:
