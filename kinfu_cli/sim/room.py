@@ -40,6 +40,10 @@ DOOR = (0.6, 1.5, 2.0)  # door gap in the +y wall: x from 0.6 to 1.5 m, 2.0 m hi
 CAMERA_HEIGHT = 1.5
 WALL_COLOUR = np.array([0.85, 0.82, 0.75])
 MAX_RANGE = 7.0  # the far wall is up to ~6.4 m away
+# labels.npz / changes.json "labels": a part's object is its name before "_" (the table's top and legs are one
+# table); floor, walls and lintel are the background (0)
+ROOM_OBJECTS = ("table", "sofa", "shelf")
+LABELS_VOXEL = 0.02  # labels.npz voxel (m): the room's 70 m2 of surface at 2 cm
 
 
 def world_rotation(world: str) -> np.ndarray:
@@ -108,11 +112,25 @@ class RoomScenario:
             m.transform(self.W)
         return m
 
+    def part_distances(self, points: np.ndarray) -> list[tuple[int, np.ndarray]]:
+        """(label, signed distance) of each part box to world points (N, 3): 0 background, 1.. ROOM_OBJECTS."""
+        from kinfu_cli.sim.scene import _box_sdf  # the box distance the tabletop scenes use
+
+        q = np.asarray(points, dtype=np.float64) @ self.W[:3, :3]  # world -> z-up room frame (W is a rotation)
+        return [(room_label(name), _box_sdf(q - np.asarray(ctr), np.asarray(ext) / 2))
+                for name, ext, ctr, _ in self.parts]
+
     def render(self, i: int) -> SensorFrame:
         """Frame i (rendered in the room frame: the images do not depend on the world convention)."""
         if self._target is None:
             self._target = mesh_target(self.mesh())
         return self.sensor.render_frame(self._target, self.frames[i].T_room_camera, frame_seed=i)
+
+
+def room_label(part_name: str) -> int:
+    """The object label of a room part (ROOM_OBJECTS order from 1; 0 for floor, walls, lintel)."""
+    name = part_name.split("_")[0]
+    return ROOM_OBJECTS.index(name) + 1 if name in ROOM_OBJECTS else 0
 
 
 def room_parts(seed: int = 0) -> list[tuple[str, tuple, tuple, np.ndarray]]:
@@ -205,15 +223,20 @@ def write_room_recordings(room: RoomScenario, paths: list[str | os.PathLike], to
 
 
 def write_room_ground_truth(room: RoomScenario, folder: str | os.PathLike, topics: dict) -> Path:
-    """scene.ply (the room in the recording's world), changes.json and camera_poses.txt, atomically."""
+    """scene.ply (the room in the recording's world), changes.json, camera_poses.txt and labels.npz (per-voxel
+    object labels, `sim.voxel_labels`, LABELS_VOXEL; changes.json's "labels" names them), atomically."""
+    from kinfu_cli.sim.voxel_labels import write_voxel_labels
+
     lo, hi = room.bounds()
     with atomic_dir(folder) as tmp:
+        write_voxel_labels(tmp / "labels.npz", room.part_distances, lo, hi, LABELS_VOXEL)
         m = room.mesh(world=True)
         if not o3d.io.write_triangle_mesh(str(tmp / "scene.ply"), m, write_ascii=False, compressed=False,
                                           write_vertex_normals=False, print_progress=False):
             raise ConfigError(f"{tmp / 'scene.ply'}: could not write the mesh")
         write_json(tmp / "changes.json", {
-            "changes": [], "objects": [], "scenario": "room", "seed": room.seed, "t0_ns": room.meta["t0_ns"],
+            "changes": [], "objects": [], "scenario": "room",
+            "labels": {"0": "background", **{str(k + 1): n for k, n in enumerate(ROOM_OBJECTS)}}, "seed": room.seed, "t0_ns": room.meta["t0_ns"],
             "world": room.world, "up": room.up.tolist(),
             "room": {"interior_size": list(ROOM_SIZE), "wall_thickness": WALL_THICKNESS,
                      "bounds_min": lo.tolist(), "bounds_max": hi.tolist(),
