@@ -67,7 +67,7 @@ class SegmentationParams:
     t_ff: float = 0.5  # Flood Fill threshold T_ff (eq. 4.14; tuned on synth seeds 0-3)
     plane_color_margin: float = 0.01  # object points this close to the support plane join it when their
     # colour is nearer the plane's than their segment's (m; 0 = off; needs colours)
-    # concave plane cuts (module docstring, step 4b; tuned on synth seeds 0, 1, 8-11; None = off, the thesis' LCCP)
+    # concave plane cuts (module docstring, step 4b; tuned on synth seeds 0, 1, 8-11; None or 0 = off: the thesis' LCCP)
     cut_concave_fraction: float | None = 0.3
     cut_min_angle_deg: float = 40.0
     cut_min_ratio: float = 0.4
@@ -106,7 +106,7 @@ class SegmentationParams:
             check_number(self.t_lccp, "t_lccp", 0, 2)  # the RGB cube's diagonal is sqrt(3)
         check_number(self.t_ff, "t_ff", 0, 1e6, low_open=True)
         if self.cut_concave_fraction is not None:
-            check_number(self.cut_concave_fraction, "cut_concave_fraction", 0, 1, low_open=True)
+            check_number(self.cut_concave_fraction, "cut_concave_fraction", 0, 1)
         check_number(self.cut_min_angle_deg, "cut_min_angle_deg", 0, 180, unit="degrees")
         check_number(self.cut_min_ratio, "cut_min_ratio", 0, 1)
         check_number(self.cut_candidates, "cut_candidates", 1, 10_000, integer=True)
@@ -372,7 +372,7 @@ def concave_plane_cuts(points: np.ndarray, normals: np.ndarray, seg: np.ndarray,
                        params: SegmentationParams) -> tuple[np.ndarray, int]:
     """(segments after the concave plane cuts, number of cuts): module docstring, step 4b. seg: segment per
     point (>= 0); pairs: point pairs closer than adjacency_radius. The pieces are re-split into connected parts."""
-    if params.cut_concave_fraction is None or params.cut_rounds == 0 or len(pairs) == 0:
+    if not params.cut_concave_fraction or params.cut_rounds == 0 or len(pairs) == 0:  # None or 0: off
         return seg, 0
     rng = np.random.default_rng(params.seed)
     concave = _concave_pairs(points, normals, pairs, params.cut_min_angle_deg)

@@ -236,7 +236,8 @@ def write_room_ground_truth(room: RoomScenario, folder: str | os.PathLike, topic
             raise ConfigError(f"{tmp / 'scene.ply'}: could not write the mesh")
         write_json(tmp / "changes.json", {
             "changes": [], "objects": [], "scenario": "room",
-            "labels": {"0": "background", **{str(k + 1): n for k, n in enumerate(ROOM_OBJECTS)}}, "seed": room.seed, "t0_ns": room.meta["t0_ns"],
+            "labels": {"0": "background", **{str(k + 1): n for k, n in enumerate(ROOM_OBJECTS)}},
+            "seed": room.seed, "t0_ns": room.meta["t0_ns"],
             "world": room.world, "up": room.up.tolist(),
             "room": {"interior_size": list(ROOM_SIZE), "wall_thickness": WALL_THICKNESS,
                      "bounds_min": lo.tolist(), "bounds_max": hi.tolist(),

@@ -39,8 +39,8 @@ from kinfu_cli.io.writers import RecordingWriter
 from kinfu_cli.sim.hand import Action, HandChange, synth_hand_trajectory, write_polhemus
 from kinfu_cli.sim.robot import CAMERA_FRAME, LINKS, WORLD_FRAME, RobotArm
 from kinfu_cli.io.labelled_cloud import write_labelled_cloud
-from kinfu_cli.sim.scene import (FLOOR_COLOUR, LABEL_FLOOR, LABEL_TABLE, PALETTE, TABLE_COLOUR, Scene, make_tabletop_scene, movable_objects,
-                                 random_object, scene_label_cloud, segmentation_scene)
+from kinfu_cli.sim.scene import (FLOOR_COLOUR, LABEL_FLOOR, LABEL_TABLE, PALETTE, TABLE_COLOUR, Scene,
+                                 make_tabletop_scene, movable_objects, random_object, scene_label_cloud, segmentation_scene)
 from kinfu_cli.sim.sensor import DepthSensor, SensorFrame, kinect_v1_intrinsics
 
 KINDS = ("place", "remove", "pick-and-place")
