@@ -68,10 +68,10 @@ class SegmentationParams:
     plane_color_margin: float = 0.01  # object points this close to the support plane join it when their
     # colour is nearer the plane's than their segment's (m; 0 = off; needs colours)
     # concave plane cuts (module docstring, step 4b; tuned on synth seeds 0, 1, 8-11; None or 0 = off: the thesis' LCCP)
-    cut_concave_fraction: float | None = 0.3
-    cut_min_angle_deg: float = 40.0
+    cut_concave_fraction: float | None = 0.35
+    cut_min_angle_deg: float = 30.0
     cut_min_ratio: float = 0.4
-    cut_candidates: int = 40
+    cut_candidates: int = 200
     cut_rounds: int = 3
     kmeans_iterations: int = 3
     adjacency_radius: float = 0.018  # points closer than this connect their supervoxels (m)
