@@ -26,7 +26,7 @@ numpy/scipy/open3d:
    the plane separates, at least `cut_concave_fraction` are concave (normals bent by more than
    `cut_min_angle_deg`), and the smaller piece holds at least `cut_min_ratio` of the larger (a mug's handle, one
    fifth of the body, is a part, not an object); up to `cut_rounds` rounds, the best of `cut_candidates` sampled
-   face planes per segment and round.
+   face planes per segment and round; only segments whose bounding-box diagonal is at most `cut_max_size`.
 5. Segments that stay within 2 x `plane_distance` of the support plane (its edges and sides) join it.
 6. Segments smaller than `min_segment_points` join their most-connected neighbour; isolated specks join
    the support plane when at its level, a segment within `adjacency_radius`, or are dropped (label -1).
@@ -73,6 +73,9 @@ class SegmentationParams:
     cut_min_ratio: float = 0.4
     cut_candidates: int = 200
     cut_rounds: int = 3
+    cut_max_size: float = 0.4  # only segments whose box diagonal is at most this are cut (m): two graspable
+    # objects side by side; a large concave thing (a box on its side, a shelf) keeps its inner corners (chosen on
+    # rgbd-tabletop-box: its cuts were all in segments of 0.45-0.6 m; the synth merged twins and stacks are 0.3 m)
     kmeans_iterations: int = 3
     adjacency_radius: float = 0.018  # points closer than this connect their supervoxels (m)
     concavity_tolerance_deg: float = 20.0  # LCCP beta_thresh (PCL default 10; fused TSDF normals are noisier)
@@ -111,6 +114,7 @@ class SegmentationParams:
         check_number(self.cut_min_ratio, "cut_min_ratio", 0, 1)
         check_number(self.cut_candidates, "cut_candidates", 1, 10_000, integer=True)
         check_number(self.cut_rounds, "cut_rounds", 0, 100, integer=True)
+        check_number(self.cut_max_size, "cut_max_size", 0, 100, unit="m")
         check_number(self.sanity_angle_deg, "sanity_angle_deg", 0, 180, unit="degrees")
         check_number(self.seed, "seed", 0, 2 ** 32 - 1, integer=True)
         if not 0 <= self.concavity_tolerance_deg < 90:
@@ -387,8 +391,10 @@ def concave_plane_cuts(points: np.ndarray, normals: np.ndarray, seg: np.ndarray,
             inseg = same & (a == s)
             if np.count_nonzero(concave & inseg) < 3:
                 continue
-            share, plus = _best_face_cut(points, normals, np.flatnonzero(seg == s), pairs[inseg], concave[inseg],
-                                         params, rng)
+            idx = np.flatnonzero(seg == s)
+            if np.linalg.norm(np.ptp(points[idx], axis=0)) > params.cut_max_size:
+                continue
+            share, plus = _best_face_cut(points, normals, idx, pairs[inseg], concave[inseg], params, rng)
             if plus is not None and share >= params.cut_concave_fraction:
                 seg[plus] = seg.max() + 1
                 cuts += 1
