@@ -404,29 +404,33 @@ def concave_plane_cuts(points: np.ndarray, normals: np.ndarray, seg: np.ndarray,
     return _components(len(points), pairs[keep]), cuts
 
 
-def _absorb_small(seg: np.ndarray, pairs: np.ndarray, min_points: int) -> np.ndarray:
-    """Segments smaller than min_points join the neighbour segment with most touching point pairs, else -1."""
-    nseg = int(seg.max()) + 1
-    sizes = np.bincount(seg, minlength=nseg)
-    small = sizes < min_points
-    if not small.any():
-        return seg
-    sa, sb = seg[pairs[:, 0]], seg[pairs[:, 1]]
-    m = sa != sb
-    pa = np.concatenate([sa[m], sb[m]])
-    pb = np.concatenate([sb[m], sa[m]])
-    contact = coo_matrix((np.ones(len(pa)), (pa, pb)), shape=(nseg, nseg)).tocsr()
-    target = np.arange(nseg)
-    for s in np.flatnonzero(small)[np.argsort(sizes[small])]:  # loop over small segments, not points
-        row = contact.getrow(s)
-        if row.nnz:
-            cand = row.indices[~small[row.indices]]
-            if len(cand):
-                vals = np.asarray(row[0, cand].todense()).ravel()
-                target[s] = cand[int(np.argmax(vals))]
-                continue
-        target[s] = -1
-    return target[seg]
+def _absorb_small(seg: np.ndarray, pairs: np.ndarray, min_points: int, rounds: int = 8) -> np.ndarray:
+    """Segments smaller than min_points join the touching segment they share most point pairs with, a large one
+    when they touch one, else a small one (fragments merge with each other, round by round); segments still
+    small and touching nothing are dropped (-1)."""
+    seg = seg.copy()
+    for _ in range(rounds):
+        nseg = int(seg.max()) + 1
+        sizes = np.bincount(seg[seg >= 0], minlength=nseg)
+        small = (sizes > 0) & (sizes < min_points)
+        if not small.any():
+            return seg
+        sa, sb = seg[pairs[:, 0]], seg[pairs[:, 1]]
+        m = (sa != sb) & (sa >= 0) & (sb >= 0)
+        c = coo_matrix((np.ones(2 * m.sum()), (np.r_[sa[m], sb[m]], np.r_[sb[m], sa[m]])),
+                       shape=(nseg, nseg)).tocsr().tocoo()  # duplicates summed: point pairs per segment pair
+        from_small = small[c.row]
+        row, col = c.row[from_small], c.col[from_small]
+        w = c.data[from_small] * np.where(small[col], 1.0, 1e9)  # a large neighbour first
+        if not len(row):
+            break
+        order = np.lexsort((-w, row))
+        first = order[np.r_[True, row[order][1:] != row[order][:-1]]]
+        edges = np.stack([row[first], col[first]], 1)
+        seg = np.where(seg >= 0, _components(nseg, edges)[np.maximum(seg, 0)], -1)
+    nseg = int(seg.max()) + 1 if (seg >= 0).any() else 0
+    sizes = np.bincount(seg[seg >= 0], minlength=nseg)
+    return np.where((seg >= 0) & (sizes[np.maximum(seg, 0)] >= min_points), seg, -1)
 
 
 def _group_percentile(values: np.ndarray, group: np.ndarray, k: int, q: float) -> np.ndarray:
