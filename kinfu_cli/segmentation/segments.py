@@ -28,8 +28,9 @@ numpy/scipy/open3d:
    fifth of the body, is a part, not an object); up to `cut_rounds` rounds, the best of `cut_candidates` sampled
    face planes per segment and round; only segments whose bounding-box diagonal is at most `cut_max_size`.
 5. Segments that stay within 2 x `plane_distance` of the support plane (its edges and sides) join it.
-6. Segments smaller than `min_segment_points` join their most-connected neighbour; isolated specks join
-   the support plane when at its level, a segment within `adjacency_radius`, or are dropped (label -1).
+6. Segments smaller than `min_segment_points` join their most-connected neighbour (a large one first; fragments
+   merge with each other); isolated specks join the support plane when at its level, a segment within
+   `adjacency_radius`, or are dropped (label -1).
 """
 
 from __future__ import annotations
@@ -67,7 +68,7 @@ class SegmentationParams:
     t_ff: float = 0.5  # Flood Fill threshold T_ff (eq. 4.14; tuned on synth seeds 0-3)
     plane_color_margin: float = 0.01  # object points this close to the support plane join it when their
     # colour is nearer the plane's than their segment's (m; 0 = off; needs colours)
-    # concave plane cuts (module docstring, step 4b; tuned on synth seeds 0, 1, 8-11; None or 0 = off: the thesis' LCCP)
+    # concave plane cuts (module docstring, step 4b; tuned on synth seeds 0, 1, 8-11; None or 0 = off)
     cut_concave_fraction: float | None = 0.35
     cut_min_angle_deg: float = 30.0
     cut_min_ratio: float = 0.4
@@ -80,8 +81,8 @@ class SegmentationParams:
     adjacency_radius: float = 0.018  # points closer than this connect their supervoxels (m)
     concavity_tolerance_deg: float = 20.0  # LCCP beta_thresh (PCL default 10; fused TSDF normals are noisier)
     sanity_angle_deg: float = 60.0  # LCCP sanity criterion threshold (PCL default)
-    min_segment_points: int = 50  # smaller segments join their most-connected neighbour (50 cm2 at the 1 cm cloud;
-    # chosen on synth seeds 0, 1, 8-11 (50 = 100 > 20) and rgbd-tabletop-box (object segments 24 -> 12 at 5 mm))
+    min_segment_points: int = 50  # smaller segments merge into a neighbour (50 cm2 at the 1 cm cloud;
+    # chosen on synth seeds 0, 1, 8-11 (50 = 100 > 20) and rgbd-tabletop-box (object segments 17 -> 11 at 5 mm))
     plane_distance: float = 0.01  # RANSAC inlier distance (m)
     plane_iterations: int = 1000
     # expected support-plane normal (x, y, z); None = any plane; "auto" = the volume's up where the pipeline
