@@ -7,7 +7,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from kinfu_cli.evaluation.segment_eval import PredictedSegments, evaluate_segments, load_ground_truth_labels
-from kinfu_cli.io.labelled_cloud import read_labelled_cloud, write_labelled_cloud
+from kinfu_cli.io.labelled_cloud import read_labelled_cloud
 from kinfu_cli.sim.room import ROOM_OBJECTS, make_room, write_room_ground_truth
 from kinfu_cli.sim.scenario import LABELS_VOXEL, make_scenario, write_scene_voxel_labels
 from kinfu_cli.sim.scene import scene_label_cloud
@@ -51,12 +51,12 @@ def test_voxel_labels_match_the_labelled_surface_points(objects_labels):
     assert doc["object_recall"] == 1.0 and doc["boundary_recall"] >= 0.9 and doc["boundary_precision"] >= 0.9
 
 
-def test_room_ground_truth_has_voxel_labels(tmp_path):
-    """The room scene gets labels.npz: background 0 (floor, walls) and table, sofa, shelf, named in changes.json;
-    the table's voxels lie in its box, standing on the floor up to its 0.75 m top."""
+def test_room_ground_truth_has_labels(tmp_path):
+    """The room scene gets labels.ply: background 0 (floor, walls) and table, sofa, shelf, named in changes.json;
+    the table's points lie in its box, standing on the floor up to its 0.75 m top, none inside another part."""
     room = make_room(0, width=32, height=24, frames=3)
     gt = write_room_ground_truth(room, tmp_path / "gt", {})
-    cloud = load_ground_truth_labels(gt)  # the folder: labels.npz (the room has no labels.ply)
+    cloud = load_ground_truth_labels(gt)
     assert set(np.unique(cloud.labels)) == {0, 1, 2, 3}
     import json
     names = json.loads((gt / "changes.json").read_text())["labels"]
@@ -64,3 +64,4 @@ def test_room_ground_truth_has_voxel_labels(tmp_path):
     table = cloud.points[cloud.labels == 1] @ room.W[:3, :3]  # back to the z-up room frame
     assert table[:, 2].min() < 0.05 and 0.74 < table[:, 2].max() < 0.78
     assert np.ptp(table[:, 0]) < 1.05 and np.ptp(table[:, 1]) < 0.75
+    assert np.min([d for _, d in room.part_distances(cloud.points)], axis=0).min() >= -1e-3
