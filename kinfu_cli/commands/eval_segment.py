@@ -30,8 +30,9 @@ def _numbers(text: str, option: str, kind=float) -> list:
 @click.command("segment", short_help="Segmentation boundary P/R, BCE, object recall vs labels; --sweep: PR curves.")
 @click.argument("segments", required=False, type=click.Path(path_type=Path))
 @click.option("--ground-truth", "ground_truth", type=click.Path(path_type=Path), default=None,
-              help="Labels file (.ply with a per-point integer 'label', or .npz points + labels), or a kinfu synth "
-                   "folder holding ground_truth/labels.ply.")
+              help="Labels file (.ply with a per-point integer 'label', or .npz points + labels such as kinfu "
+                   "synth's per-voxel labels.npz), or a kinfu synth folder holding ground_truth/labels.ply or "
+                   "labels.npz.")
 @click.option("--t-eval", type=float, default=0.02, show_default=True,
               help="T_eval (m): neighbourhood radius and boundary matching distance.")
 @click.option("--max-distance", type=float, default=0.015, show_default=True,

@@ -54,6 +54,9 @@ def _up(value: str) -> tuple[float, float, float] | str | None:
                    "distance, 0..1.73); default no cut.")
 @click.option("--t-ff", type=float, default=0.5, show_default=True,
               help="Flood Fill: neighbours join when colour-importance*|dc| + normal-importance*(1-n1.n2) is below this.")
+@click.option("--concave-cut", type=float, default=0.35, show_default=True,
+              help="LCCP: cut a segment along the plane of a face at a concave crease when at least this share of "
+                   "the point pairs the plane separates are concave (touching boxes); 0 = off (the thesis' LCCP).")
 @click.option("--plane-color-margin", type=float, default=0.01, show_default=True,
               help="Object points this close to the support plane (m) join it when their colour is nearer the "
                    "plane's; 0 = off.")
@@ -62,7 +65,7 @@ def _up(value: str) -> tuple[float, float, float] | str | None:
 @click.option("--concavity-tolerance", type=float, default=20.0, show_default=True,
               help="LCCP: concave edges flatter than this (deg) still merge.")
 @click.option("--sanity-angle", type=float, default=60.0, show_default=True, help="LCCP sanity criterion (deg).")
-@click.option("--min-segment-points", type=int, default=20, show_default=True,
+@click.option("--min-segment-points", type=int, default=50, show_default=True,
               help="Smaller segments join a neighbour or are dropped.")
 @click.option("--plane-distance", type=float, default=0.01, show_default=True, help="Support plane RANSAC inlier distance (m).")
 @click.option("--up", default="auto", show_default=True,
@@ -88,7 +91,7 @@ def _up(value: str) -> tuple[float, float, float] | str | None:
 @click.option("--json", "as_json", is_flag=True, help="Print segments.json to stdout.")
 @click.option("--quiet", is_flag=True, help="No progress output.")
 def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution, spatial_importance,
-            normal_importance, method, color_importance, no_color, t_lccp, t_ff, plane_color_margin, adjacency_radius, concavity_tolerance, sanity_angle, min_segment_points,
+            normal_importance, method, color_importance, no_color, t_lccp, t_ff, concave_cut, plane_color_margin, adjacency_radius, concavity_tolerance, sanity_angle, min_segment_points,
             plane_distance, up, up_tolerance, isolation_threshold, no_superquadrics, sq_max_points,
             sq_exponent_bounds, sq_cost, multi_sq, msq_trigger, msq_height, msq_mu, seed, plot, as_json,
             quiet, force, viz=None) -> None:
@@ -107,7 +110,7 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
     params = SegmentationParams(seed_resolution=seed_resolution, spatial_importance=spatial_importance,
                                 normal_importance=normal_importance, adjacency_radius=adjacency_radius,
                                 method=method, color_importance=color_importance, t_lccp=t_lccp, t_ff=t_ff,
-                                plane_color_margin=plane_color_margin,
+                                plane_color_margin=plane_color_margin, cut_concave_fraction=concave_cut or None,
                                 concavity_tolerance_deg=concavity_tolerance, sanity_angle_deg=sanity_angle,
                                 min_segment_points=min_segment_points, plane_distance=plane_distance,
                                 up=_up(up), up_tolerance_deg=up_tolerance, seed=seed)

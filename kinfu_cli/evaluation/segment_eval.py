@@ -104,25 +104,29 @@ def load_predicted_segments(path: str | os.PathLike) -> PredictedSegments:
 
 
 def load_ground_truth_labels(path: str | os.PathLike) -> LabelledCloud:
-    """A labels file, or a folder holding labels.ply (a `kinfu synth` ground_truth/ or its parent)."""
+    """A labels file, or a folder holding labels.ply or labels.npz (a `kinfu synth` ground_truth/ or its parent;
+    the per-point labels.ply first, the room scene has only the per-voxel labels.npz)."""
     path = Path(path)
     if path.is_dir():
-        for cand in (path / "labels.ply", path / "ground_truth" / "labels.ply"):
-            if cand.is_file():
-                return read_labelled_cloud(cand)
-        raise LabelsFileError(f"{path}: no labels.ply here nor in ground_truth/ (kinfu synth writes it; or give a "
-                              f"labels file)")
+        for cand in (path / name for name in ("labels.ply", "labels.npz")):
+            for c in (cand, cand.parent / "ground_truth" / cand.name):
+                if c.is_file():
+                    return read_labelled_cloud(c)
+        raise LabelsFileError(f"{path}: no labels.ply or labels.npz here nor in ground_truth/ (kinfu synth writes "
+                              f"them; or give a labels file)")
     return read_labelled_cloud(path)
 
 
 def label_names(labels_path: str | os.PathLike | None) -> dict[int, str]:
-    """Object names by label from the changes.json beside a kinfu synth labels.ply ({} when there is none)."""
+    """Object names by label from the changes.json beside a kinfu synth labels.ply / labels.npz ({} when none)."""
     if labels_path is None:
         return {}
     meta = Path(labels_path).parent / "changes.json"
     try:
         doc = json.loads(meta.read_text())
-        return {0: "table"} | {int(o["label"]): str(o["id"]) for o in doc.get("objects", []) if o.get("present_after")}
+        names = {int(k): str(v) for k, v in doc.get("labels", {}).items()}  # the room scene names its labels
+        return ({0: "table"} | names | {int(o["label"]): str(o["id"]) for o in doc.get("objects", [])
+                                         if o.get("present_after")})
     except (OSError, ValueError, KeyError, TypeError):
         return {}
 

@@ -20,9 +20,17 @@ numpy/scipy/open3d:
    is cut (thesis eq. 4.15: LCCP alone ignores colour); segments are the connected components.
    method "flood-fill" replaces steps 2-4 by the thesis's baseline (eqs. 4.13-4.14): neighbouring points
    stay joined when w_c |c1 - c2| + w_n (1 - n1 . n2) < `t_ff`.
+4b. Concave plane cuts (after CPC, Schoeler et al. 2015; not in the thesis): an LCCP segment still joined across a
+   concave crease through some flat or convex path (two touching boxes whose front faces are one plane; a box whose
+   top overhangs its base) is cut by the plane of a face at one of its concave point pairs when, of the point pairs
+   the plane separates, at least `cut_concave_fraction` are concave (normals bent by more than
+   `cut_min_angle_deg`), and the smaller piece holds at least `cut_min_ratio` of the larger (a mug's handle, one
+   fifth of the body, is a part, not an object); up to `cut_rounds` rounds, the best of `cut_candidates` sampled
+   face planes per segment and round; only segments whose bounding-box diagonal is at most `cut_max_size`.
 5. Segments that stay within 2 x `plane_distance` of the support plane (its edges and sides) join it.
-6. Segments smaller than `min_segment_points` join their most-connected neighbour; isolated specks join
-   the support plane when at its level, a segment within `adjacency_radius`, or are dropped (label -1).
+6. Segments smaller than `min_segment_points` join their most-connected neighbour (a large one first; fragments
+   merge with each other); isolated specks join the support plane when at its level, a segment within
+   `adjacency_radius`, or are dropped (label -1).
 """
 
 from __future__ import annotations
@@ -60,11 +68,21 @@ class SegmentationParams:
     t_ff: float = 0.5  # Flood Fill threshold T_ff (eq. 4.14; tuned on synth seeds 0-3)
     plane_color_margin: float = 0.01  # object points this close to the support plane join it when their
     # colour is nearer the plane's than their segment's (m; 0 = off; needs colours)
+    # concave plane cuts (module docstring, step 4b; tuned on synth seeds 0, 1, 8-11; None or 0 = off)
+    cut_concave_fraction: float | None = 0.35
+    cut_min_angle_deg: float = 30.0
+    cut_min_ratio: float = 0.4
+    cut_candidates: int = 200
+    cut_rounds: int = 3
+    cut_max_size: float = 0.4  # only segments whose box diagonal is at most this are cut (m): two graspable
+    # objects side by side; a large concave thing (a box on its side, a shelf) keeps its inner corners (chosen on
+    # rgbd-tabletop-box: its cuts were all in segments of 0.45-0.6 m; the synth merged twins and stacks are 0.3 m)
     kmeans_iterations: int = 3
     adjacency_radius: float = 0.018  # points closer than this connect their supervoxels (m)
     concavity_tolerance_deg: float = 20.0  # LCCP beta_thresh (PCL default 10; fused TSDF normals are noisier)
     sanity_angle_deg: float = 60.0  # LCCP sanity criterion threshold (PCL default)
-    min_segment_points: int = 20
+    min_segment_points: int = 50  # smaller segments merge into a neighbour (50 cm2 at the 1 cm cloud;
+    # chosen on synth seeds 0, 1, 8-11 (50 = 100 > 20) and rgbd-tabletop-box (object segments 17 -> 11 at 5 mm))
     plane_distance: float = 0.01  # RANSAC inlier distance (m)
     plane_iterations: int = 1000
     # expected support-plane normal (x, y, z); None = any plane; "auto" = the volume's up where the pipeline
@@ -91,6 +109,13 @@ class SegmentationParams:
         if self.t_lccp is not None:
             check_number(self.t_lccp, "t_lccp", 0, 2)  # the RGB cube's diagonal is sqrt(3)
         check_number(self.t_ff, "t_ff", 0, 1e6, low_open=True)
+        if self.cut_concave_fraction is not None:
+            check_number(self.cut_concave_fraction, "cut_concave_fraction", 0, 1)
+        check_number(self.cut_min_angle_deg, "cut_min_angle_deg", 0, 180, unit="degrees")
+        check_number(self.cut_min_ratio, "cut_min_ratio", 0, 1)
+        check_number(self.cut_candidates, "cut_candidates", 1, 10_000, integer=True)
+        check_number(self.cut_rounds, "cut_rounds", 0, 100, integer=True)
+        check_number(self.cut_max_size, "cut_max_size", 0, 100, unit="m")
         check_number(self.sanity_angle_deg, "sanity_angle_deg", 0, 180, unit="degrees")
         check_number(self.seed, "seed", 0, 2 ** 32 - 1, integer=True)
         if not 0 <= self.concavity_tolerance_deg < 90:
@@ -314,29 +339,99 @@ def flood_fill_segments(normals: np.ndarray, pairs: np.ndarray, params: Segmenta
     return _components(len(normals), keep), {"adjacent_pairs": int(len(pairs)), "joined_pairs": int(len(keep))}
 
 
-def _absorb_small(seg: np.ndarray, pairs: np.ndarray, min_points: int) -> np.ndarray:
-    """Segments smaller than min_points join the neighbour segment with most touching point pairs, else -1."""
-    nseg = int(seg.max()) + 1
-    sizes = np.bincount(seg, minlength=nseg)
-    small = sizes < min_points
-    if not small.any():
-        return seg
-    sa, sb = seg[pairs[:, 0]], seg[pairs[:, 1]]
-    m = sa != sb
-    pa = np.concatenate([sa[m], sb[m]])
-    pb = np.concatenate([sb[m], sa[m]])
-    contact = coo_matrix((np.ones(len(pa)), (pa, pb)), shape=(nseg, nseg)).tocsr()
-    target = np.arange(nseg)
-    for s in np.flatnonzero(small)[np.argsort(sizes[small])]:  # loop over small segments, not points
-        row = contact.getrow(s)
-        if row.nnz:
-            cand = row.indices[~small[row.indices]]
-            if len(cand):
-                vals = np.asarray(row[0, cand].todense()).ravel()
-                target[s] = cand[int(np.argmax(vals))]
+def _concave_pairs(points: np.ndarray, normals: np.ndarray, pairs: np.ndarray, min_angle_deg: float) -> np.ndarray:
+    """Point pairs across a concave crease: LCCP's convexity test fails and the normals differ by > min_angle_deg."""
+    d = points[pairs[:, 0]] - points[pairs[:, 1]]
+    d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
+    n1, n2 = normals[pairs[:, 0]], normals[pairs[:, 1]]
+    convex = np.einsum("ij,ij->i", n1 - n2, d) >= 0
+    return ~convex & (np.einsum("ij,ij->i", n1, n2) < np.cos(np.radians(min_angle_deg)))
+
+
+def _best_face_cut(points: np.ndarray, normals: np.ndarray, idx: np.ndarray, seg_pairs: np.ndarray,
+                   concave: np.ndarray, params: SegmentationParams, rng: np.random.Generator
+                   ) -> tuple[float, np.ndarray | None]:
+    """(concave share of the separated pairs, mask over the points of the + side) of the best face plane among
+    `cut_candidates` concave pairs of one segment (points idx, its pairs seg_pairs), or (0, None)."""
+    cand = seg_pairs[concave]
+    best: tuple[float, np.ndarray | None] = (0.0, None)
+    tol = params.plane_distance / 2  # the face's own points, within noise of its plane, stay on its side
+    n_seg = len(idx)
+    side = np.zeros(len(points), dtype=bool)
+    for i in rng.choice(len(cand), size=min(params.cut_candidates, len(cand)), replace=False):
+        for p in cand[i]:
+            plus = (points[idx] - points[p]) @ normals[p] > tol
+            n_plus = int(plus.sum())
+            small, large = sorted((n_plus, n_seg - n_plus))
+            if small < max(params.min_segment_points, params.cut_min_ratio * large):
                 continue
-        target[s] = -1
-    return target[seg]
+            side[idx] = plus
+            cross = side[seg_pairs[:, 0]] != side[seg_pairs[:, 1]]
+            share = float(concave[cross].mean()) if cross.any() else 0.0
+            if share > best[0]:
+                best = (share, side.copy())
+    return best
+
+
+def concave_plane_cuts(points: np.ndarray, normals: np.ndarray, seg: np.ndarray, pairs: np.ndarray,
+                       params: SegmentationParams) -> tuple[np.ndarray, int]:
+    """(segments after the concave plane cuts, number of cuts): module docstring, step 4b. seg: segment per
+    point (>= 0); pairs: point pairs closer than adjacency_radius. The pieces are re-split into connected parts."""
+    if not params.cut_concave_fraction or params.cut_rounds == 0 or len(pairs) == 0:  # None or 0: off
+        return seg, 0
+    rng = np.random.default_rng(params.seed)
+    concave = _concave_pairs(points, normals, pairs, params.cut_min_angle_deg)
+    seg = seg.copy()
+    cuts = 0
+    for _ in range(params.cut_rounds):
+        a = seg[pairs[:, 0]]
+        same = a == seg[pairs[:, 1]]
+        hit = np.unique(a[same & concave])
+        before = cuts
+        for s in hit:
+            inseg = same & (a == s)
+            if np.count_nonzero(concave & inseg) < 3:
+                continue
+            idx = np.flatnonzero(seg == s)
+            if np.linalg.norm(np.ptp(points[idx], axis=0)) > params.cut_max_size:
+                continue
+            share, plus = _best_face_cut(points, normals, idx, pairs[inseg], concave[inseg], params, rng)
+            if plus is not None and share >= params.cut_concave_fraction:
+                seg[plus] = seg.max() + 1
+                cuts += 1
+        if cuts == before:
+            break
+    keep = seg[pairs[:, 0]] == seg[pairs[:, 1]]
+    return _components(len(points), pairs[keep]), cuts
+
+
+def _absorb_small(seg: np.ndarray, pairs: np.ndarray, min_points: int, rounds: int = 8) -> np.ndarray:
+    """Segments smaller than min_points join the touching segment they share most point pairs with, a large one
+    when they touch one, else a small one (fragments merge with each other, round by round); segments still
+    small and touching nothing are dropped (-1)."""
+    seg = seg.copy()
+    for _ in range(rounds):
+        nseg = int(seg.max()) + 1
+        sizes = np.bincount(seg[seg >= 0], minlength=nseg)
+        small = (sizes > 0) & (sizes < min_points)
+        if not small.any():
+            return seg
+        sa, sb = seg[pairs[:, 0]], seg[pairs[:, 1]]
+        m = (sa != sb) & (sa >= 0) & (sb >= 0)
+        c = coo_matrix((np.ones(2 * m.sum()), (np.r_[sa[m], sb[m]], np.r_[sb[m], sa[m]])),
+                       shape=(nseg, nseg)).tocsr().tocoo()  # duplicates summed: point pairs per segment pair
+        from_small = small[c.row]
+        row, col = c.row[from_small], c.col[from_small]
+        w = c.data[from_small] * np.where(small[col], 1.0, 1e9)  # a large neighbour first
+        if not len(row):
+            break
+        order = np.lexsort((-w, row))
+        first = order[np.r_[True, row[order][1:] != row[order][:-1]]]
+        edges = np.stack([row[first], col[first]], 1)
+        seg = np.where(seg >= 0, _components(nseg, edges)[np.maximum(seg, 0)], -1)
+    nseg = int(seg.max()) + 1 if (seg >= 0).any() else 0
+    sizes = np.bincount(seg[seg >= 0], minlength=nseg)
+    return np.where((seg >= 0) & (sizes[np.maximum(seg, 0)] >= min_points), seg, -1)
 
 
 def _group_percentile(values: np.ndarray, group: np.ndarray, k: int, q: float) -> np.ndarray:
@@ -413,6 +508,7 @@ def segment_cloud(points: np.ndarray, normals: np.ndarray, params: SegmentationP
         k = 0
     else:
         seg, sv, grow = lccp_segments(P, N, pairs, params, C)
+        seg, grow["plane_cuts"] = concave_plane_cuts(P, N, seg, pairs, params)
         k = int(sv.max()) + 1
         sv_all[rest] = sv
     stats.update(grow)

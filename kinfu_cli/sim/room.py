@@ -40,6 +40,10 @@ DOOR = (0.6, 1.5, 2.0)  # door gap in the +y wall: x from 0.6 to 1.5 m, 2.0 m hi
 CAMERA_HEIGHT = 1.5
 WALL_COLOUR = np.array([0.85, 0.82, 0.75])
 MAX_RANGE = 7.0  # the far wall is up to ~6.4 m away
+# labels.ply / changes.json "labels": a part's object is its name before "_" (the table's top and legs are one
+# table); floor, walls and lintel are the background (0)
+ROOM_OBJECTS = ("table", "sofa", "shelf")
+LABELS_SPACING = 0.01  # labels.ply: one labelled point per 1 cm x 1 cm of the room's visible surface
 
 
 def world_rotation(world: str) -> np.ndarray:
@@ -108,11 +112,40 @@ class RoomScenario:
             m.transform(self.W)
         return m
 
+    def part_distances(self, points: np.ndarray) -> list[tuple[int, np.ndarray]]:
+        """(label, signed distance) of each part box to world points (N, 3): 0 background, 1.. ROOM_OBJECTS."""
+        from kinfu_cli.sim.scene import _box_sdf  # the box distance the tabletop scenes use
+
+        q = np.asarray(points, dtype=np.float64) @ self.W[:3, :3]  # world -> z-up room frame (W is a rotation)
+        return [(room_label(name), _box_sdf(q - np.asarray(ctr), np.asarray(ext) / 2))
+                for name, ext, ctr, _ in self.parts]
+
+    def label_cloud(self, spacing: float = LABELS_SPACING) -> tuple[np.ndarray, np.ndarray]:
+        """Labelled surface points (world (N, 3), labels (N,)) of the parts: each box's faces sampled every
+        `spacing`, minus points inside another part (a leg's foot in the floor, wall ends in each other)."""
+        from kinfu_cli.sim.sampling import sample_surface
+
+        pts, lab = [], []
+        for k, (name, ext, ctr, _) in enumerate(self.parts):
+            box = o3d.geometry.TriangleMesh.create_box(*ext).translate(np.asarray(ctr) - np.asarray(ext) / 2)
+            p, _ = sample_surface(np.asarray(box.vertices), np.asarray(box.triangles), spacing, seed=self.seed + k)
+            pts.append(p @ self.W[:3, :3].T)
+            lab.append(np.full(len(p), room_label(name), dtype=np.int64))
+        pts, lab = np.concatenate(pts), np.concatenate(lab)
+        inside = np.min([d for _, d in self.part_distances(pts)], axis=0) < -1e-3
+        return pts[~inside], lab[~inside]
+
     def render(self, i: int) -> SensorFrame:
         """Frame i (rendered in the room frame: the images do not depend on the world convention)."""
         if self._target is None:
             self._target = mesh_target(self.mesh())
         return self.sensor.render_frame(self._target, self.frames[i].T_room_camera, frame_seed=i)
+
+
+def room_label(part_name: str) -> int:
+    """The object label of a room part (ROOM_OBJECTS order from 1; 0 for floor, walls, lintel)."""
+    name = part_name.split("_")[0]
+    return ROOM_OBJECTS.index(name) + 1 if name in ROOM_OBJECTS else 0
 
 
 def room_parts(seed: int = 0) -> list[tuple[str, tuple, tuple, np.ndarray]]:
@@ -205,15 +238,23 @@ def write_room_recordings(room: RoomScenario, paths: list[str | os.PathLike], to
 
 
 def write_room_ground_truth(room: RoomScenario, folder: str | os.PathLike, topics: dict) -> Path:
-    """scene.ply (the room in the recording's world), changes.json and camera_poses.txt, atomically."""
+    """scene.ply (the room in the recording's world), changes.json, camera_poses.txt and labels.ply (per-point
+    object labels of the visible surface, `label_cloud`; changes.json's "labels" names them), atomically.
+    (Per-voxel labels cost the room's whole 70 m2 band of voxels, over a minute: `sim.voxel_labels` with
+    `part_distances` makes them on demand.)"""
+    from kinfu_cli.io.labelled_cloud import write_labelled_cloud
+
     lo, hi = room.bounds()
     with atomic_dir(folder) as tmp:
+        write_labelled_cloud(tmp / "labels.ply", *room.label_cloud())
         m = room.mesh(world=True)
         if not o3d.io.write_triangle_mesh(str(tmp / "scene.ply"), m, write_ascii=False, compressed=False,
                                           write_vertex_normals=False, print_progress=False):
             raise ConfigError(f"{tmp / 'scene.ply'}: could not write the mesh")
         write_json(tmp / "changes.json", {
-            "changes": [], "objects": [], "scenario": "room", "seed": room.seed, "t0_ns": room.meta["t0_ns"],
+            "changes": [], "objects": [], "scenario": "room",
+            "labels": {"0": "background", **{str(k + 1): n for k, n in enumerate(ROOM_OBJECTS)}},
+            "seed": room.seed, "t0_ns": room.meta["t0_ns"],
             "world": room.world, "up": room.up.tolist(),
             "room": {"interior_size": list(ROOM_SIZE), "wall_thickness": WALL_THICKNESS,
                      "bounds_min": lo.tolist(), "bounds_max": hi.tolist(),

@@ -1,0 +1,73 @@
+"""Concave plane cuts (segments.concave_plane_cuts): two touching same-colour boxes whose front faces are one
+plane are one LCCP segment; the cut along the taller box's face separates them."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from kinfu_cli.segmentation.segments import SegmentationParams, segment_cloud
+
+STEP = 0.01
+
+
+def _face_points(lo, hi, axis, side):
+    """Grid points on one face of the box lo..hi with the outward normal along +-axis."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    ax = [a for a in range(3) if a != axis]
+    u = np.arange(lo[ax[0]] + STEP / 2, hi[ax[0]], STEP)
+    v = np.arange(lo[ax[1]] + STEP / 2, hi[ax[1]], STEP)
+    g = np.stack(np.meshgrid(u, v, indexing="ij"), -1).reshape(-1, 2)
+    p = np.zeros((len(g), 3))
+    p[:, ax[0]], p[:, ax[1]] = g[:, 0], g[:, 1]
+    p[:, axis] = hi[axis] if side > 0 else lo[axis]
+    n = np.zeros_like(p)
+    n[:, axis] = side
+    return p, n
+
+
+def _boxes_on_table(boxes, hidden):
+    """Surface points + normals of boxes standing on a table (z = 0), minus the faces listed in hidden."""
+    pts, nrm = [], []
+    x = np.arange(-0.4, 0.4, STEP)
+    t = np.stack(np.meshgrid(x, x, indexing="ij"), -1).reshape(-1, 2)
+    inside = np.zeros(len(t), bool)
+    for lo, hi in boxes:
+        inside |= np.all((t >= np.asarray(lo[:2])) & (t <= np.asarray(hi[:2])), axis=1)
+    pts.append(np.c_[t[~inside], np.zeros((~inside).sum())])
+    nrm.append(np.tile([0.0, 0.0, 1.0], ((~inside).sum(), 1)))
+    for k, (lo, hi) in enumerate(boxes):
+        for axis in range(3):
+            for side in (-1, 1):
+                if (axis == 2 and side < 0) or (k, axis, side) in hidden:
+                    continue
+                p, n = _face_points(lo, hi, axis, side)
+                pts.append(p)
+                nrm.append(n)
+    return np.concatenate(pts), np.concatenate(nrm)
+
+
+def _objects(points, normals, **params):
+    seg = segment_cloud(points, normals, SegmentationParams(up=(0.0, 0.0, 1.0), **params))
+    return seg, [int(s) for s in np.unique(seg.labels) if s > 0]
+
+
+def test_touching_twins_are_cut_along_the_taller_face():
+    a = ((-0.10, -0.05, 0.0), (0.0, 0.05, 0.12))
+    b = ((0.0, -0.05, 0.0), (0.08, 0.05, 0.09))
+    pts, nrm = _boxes_on_table([a, b], hidden={(1, 0, -1)})
+    seen = ~((np.abs(pts[:, 0]) < 1e-9) & (pts[:, 2] < 0.09))  # the touching faces: a's side above b stays
+    pts, nrm = pts[seen], nrm[seen]
+    _, merged = _objects(pts, nrm, cut_concave_fraction=None)
+    assert len(merged) == 1  # LCCP alone: the coplanar front and back faces join them
+    # exact box faces: only the pairs right at the crease are concave (11 % of the separated pairs); a fused
+    # surface rounds the crease over a few voxels (40-58 % on the synth objects scenes, default 0.3)
+    seg, objs = _objects(pts, nrm, cut_concave_fraction=0.1)
+    assert len(objs) == 2 and seg.stats["plane_cuts"] >= 1
+    for lo, hi in (a, b):
+        own = np.all((seg.points > np.asarray(lo) + 0.005) & (seg.points < np.asarray(hi) - 0.005), axis=1)
+        own |= np.all((seg.points >= np.asarray(lo)) & (seg.points <= np.asarray(hi)), axis=1) & (seg.labels > 0)
+        ids, counts = np.unique(seg.labels[own & (seg.labels > 0)], return_counts=True)
+        assert counts.max() >= 0.9 * counts.sum()  # each box is (almost all) one segment
+    pa = np.all((seg.points >= a[0]) & (seg.points <= (a[1][0] - 0.006, 0.05, 0.12)), axis=1) & (seg.labels > 0)
+    pb = np.all((seg.points >= (0.006, -0.05, 0.0)) & (seg.points <= b[1]), axis=1) & (seg.labels > 0)
+    assert set(np.unique(seg.labels[pa])).isdisjoint(np.unique(seg.labels[pb]))
