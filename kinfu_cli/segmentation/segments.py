@@ -405,33 +405,45 @@ def concave_plane_cuts(points: np.ndarray, normals: np.ndarray, seg: np.ndarray,
     return _components(len(points), pairs[keep]), cuts
 
 
-def _absorb_small(seg: np.ndarray, pairs: np.ndarray, min_points: int, rounds: int = 8) -> np.ndarray:
-    """Segments smaller than min_points join the touching segment they share most point pairs with, a large one
-    when they touch one, else a small one (fragments merge with each other, round by round); segments still
-    small and touching nothing are dropped (-1)."""
+def _absorb_small(seg: np.ndarray, pairs: np.ndarray, min_points: int) -> np.ndarray:
+    """Segments smaller than min_points join the large segment they share most point pairs with. Fragments that
+    touch no large segment merge with the fragments they touch, and the merged piece is kept when it reaches
+    min_points (a thin object cut into slivers), else dropped (-1); it never joins a large segment in a second
+    round, which would carry table-edge specks into a neighbouring object."""
     seg = seg.copy()
-    for _ in range(rounds):
-        nseg = int(seg.max()) + 1
-        sizes = np.bincount(seg[seg >= 0], minlength=nseg)
-        small = (sizes > 0) & (sizes < min_points)
-        if not small.any():
-            return seg
-        sa, sb = seg[pairs[:, 0]], seg[pairs[:, 1]]
-        m = (sa != sb) & (sa >= 0) & (sb >= 0)
-        c = coo_matrix((np.ones(2 * m.sum()), (np.r_[sa[m], sb[m]], np.r_[sb[m], sa[m]])),
-                       shape=(nseg, nseg)).tocsr().tocoo()  # duplicates summed: point pairs per segment pair
-        from_small = small[c.row]
-        row, col = c.row[from_small], c.col[from_small]
-        w = c.data[from_small] * np.where(small[col], 1.0, 1e9)  # a large neighbour first
-        if not len(row):
-            break
-        order = np.lexsort((-w, row))
-        first = order[np.r_[True, row[order][1:] != row[order][:-1]]]
-        edges = np.stack([row[first], col[first]], 1)
-        seg = np.where(seg >= 0, _components(nseg, edges)[np.maximum(seg, 0)], -1)
     nseg = int(seg.max()) + 1 if (seg >= 0).any() else 0
     sizes = np.bincount(seg[seg >= 0], minlength=nseg)
+    small = (sizes > 0) & (sizes < min_points)
+    if not small.any():
+        return seg
+    sa, sb = seg[pairs[:, 0]], seg[pairs[:, 1]]
+    m = (sa != sb) & (sa >= 0) & (sb >= 0)
+    c = coo_matrix((np.ones(2 * m.sum()), (np.r_[sa[m], sb[m]], np.r_[sb[m], sa[m]])),
+                   shape=(nseg, nseg)).tocsr().tocoo()  # duplicates summed: point pairs per segment pair
+    to_large = small[c.row] & ~small[c.col]
+    row, col, w = c.row[to_large], c.col[to_large], c.data[to_large]
+    order = np.lexsort((-w, row))
+    first = order[np.r_[True, row[order][1:] != row[order][:-1]]] if len(order) else order
+    target = np.arange(nseg)
+    target[row[first]] = col[first]
+    lonely = small & (target == np.arange(nseg))  # touching no large segment
+    both = lonely[c.row] & lonely[c.col]
+    comp = _components(nseg, np.stack([c.row[both], c.col[both]], 1))
+    rep = np.full(int(comp.max()) + 1, nseg)
+    np.minimum.at(rep, comp, np.arange(nseg))  # a merged piece keeps its smallest member's id
+    target = np.where(lonely, rep[comp], target)
+    seg = np.where(seg >= 0, target[np.maximum(seg, 0)], -1)
+    sizes = np.bincount(seg[seg >= 0], minlength=nseg)
     return np.where((seg >= 0) & (sizes[np.maximum(seg, 0)] >= min_points), seg, -1)
+
+
+def _below_objects(seg: np.ndarray, h: np.ndarray, limit: float) -> np.ndarray:
+    """Points of segments whose 95th-percentile height over the support plane is below `limit`."""
+    out = np.zeros(len(seg), dtype=bool)
+    if (seg >= 0).any():
+        ids, inv = np.unique(seg[seg >= 0], return_inverse=True)
+        out[seg >= 0] = (_group_percentile(h[seg >= 0], inv.ravel(), len(ids), 95) < limit)[inv.ravel()]
+    return out
 
 
 def _group_percentile(values: np.ndarray, group: np.ndarray, k: int, q: float) -> np.ndarray:
@@ -512,19 +524,18 @@ def segment_cloud(points: np.ndarray, normals: np.ndarray, params: SegmentationP
         k = int(sv.max()) + 1
         sv_all[rest] = sv
     stats.update(grow)
-    seg = _absorb_small(seg, pairs, params.min_segment_points)
-    # segments that never rise above the support plane (its edges, legs) belong to the support
+    # segments that never rise above the support plane (its edges, legs) belong to the support: decided before
+    # small segments merge (a speck of table edge must not join the object beside it) and again after
     if plane is not None:
         h = P @ plane[:3] + plane[3]
-        support = np.zeros(len(seg), dtype=bool)
-        if (seg >= 0).any():
-            ids, inv = np.unique(seg[seg >= 0], return_inverse=True)
-            support[seg >= 0] = (_group_percentile(h[seg >= 0], inv.ravel(), len(ids), 95)
-                                 < 2 * params.plane_distance)[inv.ravel()]
+        support = _below_objects(seg, h, 2 * params.plane_distance)
+        seg = _absorb_small(np.where(support, -1, seg), pairs, params.min_segment_points)
+        support |= _below_objects(seg, h, 2 * params.plane_distance)
         labels[rest[support]] = PLANE_LABEL
         seg = np.where(support, -1, seg)
         keep_rest = ~support
     else:
+        seg = _absorb_small(seg, pairs, params.min_segment_points)
         keep_rest = np.ones(len(seg), dtype=bool)
     # relabel 1..K by decreasing size
     valid = (seg >= 0) & keep_rest
