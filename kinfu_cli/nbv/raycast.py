@@ -27,6 +27,7 @@ pixel grid onto itself). Only rays that can reach a voxel of S are cast when `re
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -175,7 +176,8 @@ def _clampi(v, a, b):
 @njit(cache=True, error_model="numpy")
 def _trace(labels, bdist, B, lo, vs, p, d, min_range, max_range, cen, r2, through, optimistic, p_unknown, h_unknown,
            vals):
-    """Walk one ray (p origin, d unit direction). Fills vals[0:4]; returns (class, t of the first hit).
+    """Walk one ray (p origin, d unit direction). Fills vals[0:4]; returns (class, t of the first hit, block
+    skips, voxel steps).
 
     One long function on purpose: it is the innermost loop of every NBV command, and the walk state
     (voxel, next boundaries, visibility) crossing between the empty-block skip and the voxel walk stays
@@ -191,7 +193,7 @@ def _trace(labels, bdist, B, lo, vs, p, d, min_range, max_range, cen, r2, throug
     eps = 1e-12
     if abs(dx) < eps:
         if px < lx or px > lx + n0 * vs:
-            return CLS_EMPTY_EXIT, np.inf
+            return CLS_EMPTY_EXIT, np.inf, 0, 0
         ivx = np.inf
     else:
         ivx = 1.0 / dx
@@ -200,7 +202,7 @@ def _trace(labels, bdist, B, lo, vs, p, d, min_range, max_range, cen, r2, throug
         t1 = min(t1, max(ta, tb))
     if abs(dy) < eps:
         if py < ly or py > ly + n1 * vs:
-            return CLS_EMPTY_EXIT, np.inf
+            return CLS_EMPTY_EXIT, np.inf, 0, 0
         ivy = np.inf
     else:
         ivy = 1.0 / dy
@@ -209,7 +211,7 @@ def _trace(labels, bdist, B, lo, vs, p, d, min_range, max_range, cen, r2, throug
         t1 = min(t1, max(ta, tb))
     if abs(dz) < eps:
         if pz < lz or pz > lz + n2 * vs:
-            return CLS_EMPTY_EXIT, np.inf
+            return CLS_EMPTY_EXIT, np.inf, 0, 0
         ivz = np.inf
     else:
         ivz = 1.0 / dz
@@ -217,7 +219,7 @@ def _trace(labels, bdist, B, lo, vs, p, d, min_range, max_range, cen, r2, throug
         t0 = max(t0, min(ta, tb))
         t1 = min(t1, max(ta, tb))
     if t0 >= t1:
-        return CLS_EMPTY_EXIT, np.inf
+        return CLS_EMPTY_EXIT, np.inf, 0, 0
     sx = 1 if dx > eps else (-1 if dx < -eps else 0)
     sy = 1 if dy > eps else (-1 if dy < -eps else 0)
     sz = 1 if dz > eps else (-1 if dz < -eps else 0)
@@ -235,10 +237,12 @@ def _trace(labels, bdist, B, lo, vs, p, d, min_range, max_range, cen, r2, throug
     thit = np.inf
     vis = 1.0
     prev_unknown_in_s = False
+    nb = nv = 0  # block skips and voxel steps taken (for the benchmark's statistics)
     while True:
         bx, by, bz = ix // B, iy // B, iz // B
         D = bdist[bx, by, bz]
         if D > 0:
+            nb += 1
             # the cube of blocks [b - D + 1, b + D - 1] is empty: leave it in one step
             D1 = D - 1
             ex = np.inf
@@ -289,6 +293,7 @@ def _trace(labels, bdist, B, lo, vs, p, d, min_range, max_range, cen, r2, throug
         # walk voxel by voxel through this non-empty block
         xb0, yb0, zb0 = bx * B, by * B, bz * B  # this block's voxel range [b0, b0 + B) per axis
         while True:
+            nv += 1
             lab = labels[ix, iy, iz]
             in_s = False
             dist2 = 0.0
@@ -312,18 +317,18 @@ def _trace(labels, bdist, B, lo, vs, p, d, min_range, max_range, cen, r2, throug
                     else:
                         cls = CLS_OCCUPIED
                     if not through:
-                        return cls, thit
+                        return cls, thit, nb, nv
                 if lab == 0:
                     if in_s:
                         vals[3] += vis * h_unknown
                     vis *= 1.0 - p_unknown
                     prev_unknown_in_s = in_s
                     if vis < 1e-7:
-                        return cls, thit
+                        return cls, thit, nb, nv
                 else:
                     if prev_unknown_in_s:
                         vals[2] = 1.0
-                    return cls, thit
+                    return cls, thit, nb, nv
             else:
                 prev_unknown_in_s = False
             if tmx <= tmy and tmx <= tmz:
@@ -331,24 +336,24 @@ def _trace(labels, bdist, B, lo, vs, p, d, min_range, max_range, cen, r2, throug
                 ix += sx
                 tmx += tdx
                 if ix < 0 or ix >= n0:
-                    return cls, thit
+                    return cls, thit, nb, nv
             elif tmy <= tmz:
                 tcur = tmy
                 iy += sy
                 tmy += tdy
                 if iy < 0 or iy >= n1:
-                    return cls, thit
+                    return cls, thit, nb, nv
             else:
                 tcur = tmz
                 iz += sz
                 tmz += tdz
                 if iz < 0 or iz >= n2:
-                    return cls, thit
+                    return cls, thit, nb, nv
             if tcur >= t1:
-                return cls, thit
+                return cls, thit, nb, nv
             if ix < xb0 or ix >= xb0 + B or iy < yb0 or iy >= yb0 + B or iz < zb0 or iz >= zb0 + B:
                 break
-    return cls, thit
+    return cls, thit, nb, nv
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
@@ -362,8 +367,8 @@ def _cast_kernel(labels, bempty, B, lo, vs, origins, dirs, min_range, max_range,
     for r in prange(n):
         for c in range(N_TERMS):
             out_vals[r, c] = 0.0
-        c_, t_ = _trace(labels, bempty, B, lo, vs, origins[r], dirs[r], min_range, max_range, cen, r2,
-                        through, optimistic, p_unknown, h, out_vals[r])
+        c_, t_, _nb, _nv = _trace(labels, bempty, B, lo, vs, origins[r], dirs[r], min_range, max_range, cen, r2,
+                                  through, optimistic, p_unknown, h, out_vals[r])
         out_cls[r] = c_
         out_t[r] = t_
 
@@ -466,7 +471,7 @@ def _number_rays(cells, goff, glat, ray_off):
 
 @njit(cache=True, parallel=True, error_model="numpy")
 def _cast_lattice(labels, bempty, B, lo, vs, cells, goff, glat, R0s, t0s, fx, fy, cx, cy, min_range, max_range,
-                  cen, radius, through, optimistic, p_unknown, chunk, lanes, out_cls, out_vals):
+                  cen, radius, through, optimistic, p_unknown, chunk, lanes, out_cls, out_vals, steps):
     """Trace every numbered lattice cell's ray (built here from its group's base pose, so no per-ray
     origin/direction arrays). Ray costs differ by orders of magnitude (a free-space skip vs a walk through
     clutter) and numba splits a prange into one contiguous slice per thread, so the cells are cut into
@@ -499,9 +504,11 @@ def _cast_lattice(labels, bempty, B, lo, vs, cells, goff, glat, R0s, t0s, fx, fy
                     d[a] = (R0s[g, a, 0] * x + R0s[g, a, 1] * y + R0s[g, a, 2]) / nrm
                 for a in range(N_TERMS):
                     out_vals[q, a] = 0.0
-                c_, _t = _trace(labels, bempty, B, lo, vs, t0s[g], d, min_range, max_range, cen, r2, through,
-                                optimistic, p_unknown, h, out_vals[q])
+                c_, _t, nb, nv = _trace(labels, bempty, B, lo, vs, t0s[g], d, min_range, max_range, cen, r2, through,
+                                        optimistic, p_unknown, h, out_vals[q])
                 out_cls[q] = c_
+                steps[lane, 0] += nb
+                steps[lane, 1] += nv
 
 
 @njit(cache=True, parallel=True)
@@ -563,12 +570,15 @@ def _accumulate_views(lane, lanes, Ms, win, vgroup, glat, goff, fx, fy, cx, cy, 
 @dataclass
 class ViewRays:
     """Per-view sums over the pixels considered: counts (V, 3) of rays ending on unknown / occupied /
-    empty-exit, terms (V, 4) summed gain terms, rays (V,) pixels considered, rays_cast rays traced."""
+    empty-exit, terms (V, 4) summed gain terms, rays (V,) pixels considered, rays_cast rays traced;
+    block_steps / voxel_steps: empty-block skips and single-voxel steps the traced rays took in all."""
 
     counts: np.ndarray
     terms: np.ndarray
     rays: np.ndarray
     rays_cast: int
+    block_steps: int = 0
+    voxel_steps: int = 0
 
 
 def group_views(poses: np.ndarray, tol: float = 1e-6) -> list[np.ndarray]:
@@ -599,14 +609,16 @@ def _pixel_window(R, t, cam, center, r_ext, restrict) -> tuple[int, int, int, in
 
 def cast_views(vol: RayVolume, poses: np.ndarray, camera, center, radius: float, *, through: bool = False,
                optimistic: bool = False, restrict: bool = True, share_rolls: bool = True, p_unknown: float = 0.5,
-               batch_cells: int = 12_000_000, progress_cb=None) -> ViewRays:
+               batch_cells: int = 12_000_000, progress_cb=None, timings: dict | None = None) -> ViewRays:
     """Cast the rays of every view (camera-to-world `poses` (V, 4, 4)) and sum them per view.
 
     `restrict`: only pixels whose ray passes within radius + half a voxel diagonal of `center` (the
     only ones that can add gain); the counts then cover those pixels. `share_rolls`: views that differ
     only by roll reuse the first view's rays (nearest lattice ray). `optimistic`: unknown voxels
-    outside S do not stop rays (see `cast_rays`). `progress_cb(n)` after each batch.
+    outside S do not stop rays (see `cast_rays`). `progress_cb(n)` after each batch. `timings`: when a
+    dict, seconds per phase (setup, mark, cast, accumulate) are added to it (for the benchmark).
     """
+    tick = _Ticker(timings)
     cam = camera.widened()
     poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
     V = poses.shape[0]
@@ -640,14 +652,33 @@ def cast_views(vol: RayVolume, poses: np.ndarray, camera, center, radius: float,
         batch.append((g[ok], Ms[ok], win[ok], (lu0, lv0, LW, LH), cb, check, R0, t0))
         used += LW * LH
         if used >= batch_cells:
-            _cast_batch(vol, cam, center, radius, r_ext, (through, optimistic), p_unknown, batch, out, progress_cb)
+            tick("setup")
+            _cast_batch(vol, cam, center, radius, r_ext, (through, optimistic), p_unknown, batch, out, progress_cb,
+                        tick)
             batch, used = [], 0
+    tick("setup")
     if batch:
-        _cast_batch(vol, cam, center, radius, r_ext, (through, optimistic), p_unknown, batch, out, progress_cb)
+        _cast_batch(vol, cam, center, radius, r_ext, (through, optimistic), p_unknown, batch, out, progress_cb, tick)
     return out
 
 
-def _cast_batch(vol, cam, center, radius, r_ext, flags, p_unknown, batch, out: ViewRays, progress_cb) -> None:
+class _Ticker:
+    """Adds the wall seconds since the last call to `timings[phase]` and the CPU seconds (all threads) to
+    `timings[phase + "_cpu"]` (nothing when timings is None)."""
+
+    def __init__(self, timings: dict | None):
+        self.timings = timings
+        self.t, self.c = time.perf_counter(), time.process_time()
+
+    def __call__(self, phase: str) -> None:
+        if self.timings is not None:
+            now, cpu = time.perf_counter(), time.process_time()
+            self.timings[phase] = self.timings.get(phase, 0.0) + now - self.t
+            self.timings[phase + "_cpu"] = self.timings.get(phase + "_cpu", 0.0) + cpu - self.c
+            self.t, self.c = now, cpu
+
+
+def _cast_batch(vol, cam, center, radius, r_ext, flags, p_unknown, batch, out: ViewRays, progress_cb, tick) -> None:
     through, optimistic = flags
     views = np.concatenate([b[0] for b in batch])
     Ms = np.ascontiguousarray(np.concatenate([b[1] for b in batch]))
@@ -667,11 +698,17 @@ def _cast_batch(vol, cam, center, radius, r_ext, flags, p_unknown, batch, out: V
     ray_off = np.concatenate([[0], np.cumsum(gcount)[:-1]]).astype(np.int64)
     n = int(gcount.sum())
     _number_rays(cells, goff, glat, ray_off)
+    tick("mark")
     cls = np.empty(n, np.int8)
     tm = np.empty((n, N_TERMS), np.float64)
+    lanes = 8 * numba.get_num_threads()
+    steps = np.zeros((lanes, 2), np.int64)
     _cast_lattice(vol.labels, vol.block_dist, vol.block, vol.origin, vol.voxel_size, cells, goff, glat, R0s, t0s,
                   cam.fx, cam.fy, cam.cx, cam.cy, cam.min_range, min(cam.max_range, 1e30), center, float(radius),
-                  bool(through), bool(optimistic), float(p_unknown), _CHUNK, 8 * numba.get_num_threads(), cls, tm)
+                  bool(through), bool(optimistic), float(p_unknown), _CHUNK, lanes, cls, tm, steps)
+    out.block_steps += int(steps[:, 0].sum())
+    out.voxel_steps += int(steps[:, 1].sum())
+    tick("cast")
     counts = np.zeros((len(views), 3), np.int64)
     terms = np.zeros((len(views), N_TERMS), np.float64)
     npix = np.zeros(len(views), np.int64)
@@ -681,5 +718,6 @@ def _cast_batch(vol, cam, center, radius, r_ext, flags, p_unknown, batch, out: V
     out.terms[views] = terms
     out.rays[views] = npix
     out.rays_cast += n
+    tick("accumulate")
     if progress_cb:
         progress_cb(len(views))
