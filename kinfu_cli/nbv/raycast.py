@@ -173,27 +173,25 @@ def _clampi(v, a, b):
     return a if v < a else (b if v > b else v)
 
 
-@njit(cache=True, error_model="numpy")
-def _trace(labels, bdist, B, lo, vs, p, d, min_range, max_range, cen, r2, through, optimistic, p_unknown, h_unknown,
-           vals):
-    """Walk one ray (p origin, d unit direction). Fills vals[0:4]; returns (class, t of the first hit, block
-    skips, voxel steps).
+@njit(cache=True, error_model="numpy", inline="always")
+def _trace(labels, bdist, B, lx, ly, lz, vs, px, py, pz, dx, dy, dz, min_range, max_range, ccx, ccy, ccz, r2, through,
+           optimistic, p_unknown, h_unknown):
+    """Walk one ray (origin p, unit direction d, the volume's corner l, S's centre cc); returns (class, t of the
+    first hit, the 4 gain terms, block skips, voxel steps). Scalars in and out, and inlined: an array view
+    per ray costs atomic reference counts that the threads fight over.
 
     One long function on purpose: it is the innermost loop of every NBV command, and the walk state
     (voxel, next boundaries, visibility) crossing between the empty-block skip and the voxel walk stays
     in registers only while both live in one compiled loop.
     """
     n0, n1, n2 = labels.shape
-    px, py, pz = p[0], p[1], p[2]
-    dx, dy, dz = d[0], d[1], d[2]
-    lx, ly, lz = lo[0], lo[1], lo[2]
     # clip to the volume box and the range
     t0 = 0.0
     t1 = max_range
     eps = 1e-12
     if abs(dx) < eps:
         if px < lx or px > lx + n0 * vs:
-            return CLS_EMPTY_EXIT, np.inf, 0, 0
+            return CLS_EMPTY_EXIT, np.inf, 0.0, 0.0, 0.0, 0.0, 0, 0
         ivx = np.inf
     else:
         ivx = 1.0 / dx
@@ -202,7 +200,7 @@ def _trace(labels, bdist, B, lo, vs, p, d, min_range, max_range, cen, r2, throug
         t1 = min(t1, max(ta, tb))
     if abs(dy) < eps:
         if py < ly or py > ly + n1 * vs:
-            return CLS_EMPTY_EXIT, np.inf, 0, 0
+            return CLS_EMPTY_EXIT, np.inf, 0.0, 0.0, 0.0, 0.0, 0, 0
         ivy = np.inf
     else:
         ivy = 1.0 / dy
@@ -211,7 +209,7 @@ def _trace(labels, bdist, B, lo, vs, p, d, min_range, max_range, cen, r2, throug
         t1 = min(t1, max(ta, tb))
     if abs(dz) < eps:
         if pz < lz or pz > lz + n2 * vs:
-            return CLS_EMPTY_EXIT, np.inf, 0, 0
+            return CLS_EMPTY_EXIT, np.inf, 0.0, 0.0, 0.0, 0.0, 0, 0
         ivz = np.inf
     else:
         ivz = 1.0 / dz
@@ -219,7 +217,7 @@ def _trace(labels, bdist, B, lo, vs, p, d, min_range, max_range, cen, r2, throug
         t0 = max(t0, min(ta, tb))
         t1 = min(t1, max(ta, tb))
     if t0 >= t1:
-        return CLS_EMPTY_EXIT, np.inf, 0, 0
+        return CLS_EMPTY_EXIT, np.inf, 0.0, 0.0, 0.0, 0.0, 0, 0
     sx = 1 if dx > eps else (-1 if dx < -eps else 0)
     sy = 1 if dy > eps else (-1 if dy < -eps else 0)
     sz = 1 if dz > eps else (-1 if dz < -eps else 0)
@@ -237,6 +235,7 @@ def _trace(labels, bdist, B, lo, vs, p, d, min_range, max_range, cen, r2, throug
     thit = np.inf
     vis = 1.0
     prev_unknown_in_s = False
+    v0 = v1 = v2 = v3 = 0.0
     nb = nv = 0  # block skips and voxel steps taken (for the benchmark's statistics)
     while True:
         bx, by, bz = ix // B, iy // B, iz // B
@@ -299,9 +298,9 @@ def _trace(labels, bdist, B, lo, vs, p, d, min_range, max_range, cen, r2, throug
             dist2 = 0.0
             if lab != -1:
                 if tcur >= min_range:
-                    qx = lx + (ix + 0.5) * vs - cen[0]
-                    qy = ly + (iy + 0.5) * vs - cen[1]
-                    qz = lz + (iz + 0.5) * vs - cen[2]
+                    qx = lx + (ix + 0.5) * vs - ccx
+                    qy = ly + (iy + 0.5) * vs - ccy
+                    qz = lz + (iz + 0.5) * vs - ccz
                     dist2 = qx * qx + qy * qy + qz * qz
                     in_s = dist2 <= r2
                 if optimistic and lab == 0 and not in_s:
@@ -312,23 +311,23 @@ def _trace(labels, bdist, B, lo, vs, p, d, min_range, max_range, cen, r2, throug
                     if lab == 0:
                         cls = CLS_UNKNOWN
                         if in_s:
-                            vals[0] = 1.0
-                            vals[1] = 1.0 / (tcur * tcur)
+                            v0 = 1.0
+                            v1 = 1.0 / (tcur * tcur)
                     else:
                         cls = CLS_OCCUPIED
                     if not through:
-                        return cls, thit, nb, nv
+                        return cls, thit, v0, v1, v2, v3, nb, nv
                 if lab == 0:
                     if in_s:
-                        vals[3] += vis * h_unknown
+                        v3 += vis * h_unknown
                     vis *= 1.0 - p_unknown
                     prev_unknown_in_s = in_s
                     if vis < 1e-7:
-                        return cls, thit, nb, nv
+                        return cls, thit, v0, v1, v2, v3, nb, nv
                 else:
                     if prev_unknown_in_s:
-                        vals[2] = 1.0
-                    return cls, thit, nb, nv
+                        v2 = 1.0
+                    return cls, thit, v0, v1, v2, v3, nb, nv
             else:
                 prev_unknown_in_s = False
             if tmx <= tmy and tmx <= tmz:
@@ -336,24 +335,24 @@ def _trace(labels, bdist, B, lo, vs, p, d, min_range, max_range, cen, r2, throug
                 ix += sx
                 tmx += tdx
                 if ix < 0 or ix >= n0:
-                    return cls, thit, nb, nv
+                    return cls, thit, v0, v1, v2, v3, nb, nv
             elif tmy <= tmz:
                 tcur = tmy
                 iy += sy
                 tmy += tdy
                 if iy < 0 or iy >= n1:
-                    return cls, thit, nb, nv
+                    return cls, thit, v0, v1, v2, v3, nb, nv
             else:
                 tcur = tmz
                 iz += sz
                 tmz += tdz
                 if iz < 0 or iz >= n2:
-                    return cls, thit, nb, nv
+                    return cls, thit, v0, v1, v2, v3, nb, nv
             if tcur >= t1:
-                return cls, thit, nb, nv
+                return cls, thit, v0, v1, v2, v3, nb, nv
             if ix < xb0 or ix >= xb0 + B or iy < yb0 or iy >= yb0 + B or iz < zb0 or iz >= zb0 + B:
                 break
-    return cls, thit, nb, nv
+    return cls, thit, v0, v1, v2, v3, nb, nv
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
@@ -365,12 +364,13 @@ def _cast_kernel(labels, bempty, B, lo, vs, origins, dirs, min_range, max_range,
     if 0.0 < p_unknown < 1.0:
         h = -(p_unknown * math.log2(p_unknown) + (1 - p_unknown) * math.log2(1 - p_unknown))
     for r in prange(n):
-        for c in range(N_TERMS):
-            out_vals[r, c] = 0.0
-        c_, t_, _nb, _nv = _trace(labels, bempty, B, lo, vs, origins[r], dirs[r], min_range, max_range, cen, r2,
-                                  through, optimistic, p_unknown, h, out_vals[r])
+        c_, t_, v0, v1, v2, v3, _nb, _nv = _trace(labels, bempty, B, lo[0], lo[1], lo[2], vs, origins[r, 0],
+                                                  origins[r, 1], origins[r, 2], dirs[r, 0], dirs[r, 1], dirs[r, 2],
+                                                  min_range, max_range, cen[0], cen[1], cen[2], r2, through,
+                                                  optimistic, p_unknown, h)
         out_cls[r] = c_
         out_t[r] = t_
+        out_vals[r, 0], out_vals[r, 1], out_vals[r, 2], out_vals[r, 3] = v0, v1, v2, v3
 
 
 @dataclass
@@ -460,41 +460,43 @@ def _mark_templates(tlat, loff, tcb, tcheck, fx, fy, cx, cy, r2, lut, tcount):
 
 
 @njit(cache=True, parallel=True)
-def _fill_templates(tlat, loff, lut, tcount, toff, tview, woff, Ms, win, fx, fy, cx, cy, tcell, W):
+def _fill_templates(tlat, loff, lut, tcount, toff, tview, vtmpl, woff, Ms, win, fx, fy, cx, cy, tcell, W):
     """Per template: the lattice cell of each local ray (`tcell`) and, per view k of the template, how
-    many of its pixels (inside its window) have that ray as nearest lattice ray (W[woff + ray * K + k])."""
+    many of its pixels (inside its window) have that ray as nearest lattice ray (W[woff + ray * K + k]).
+    Parallel over views (a pole position holds 96 of them), each writing its own column of W."""
     for t in prange(tlat.shape[0]):
-        lu0, lv0, LW, LH = tlat[t, 0], tlat[t, 1], tlat[t, 2], tlat[t, 3]
-        n = tcount[t]
-        K = tview[t + 1] - tview[t]
+        LW, LH = tlat[t, 2], tlat[t, 3]
         for c in range(LW * LH):
             r = lut[loff[t] + c]
             if r >= 0:
                 tcell[toff[t] + r] = c
-        for k in range(K):
-            m = tview[t] + k
-            M = Ms[m]
-            du0, du1, du2 = M[0, 0] / fx, M[1, 0] / fx, M[2, 0] / fx  # change of the ray per pixel along u
-            for vv in range(win[m, 1], win[m, 3] + 1):
-                y = (vv - cy) / fy
-                x = (win[m, 0] - cx) / fx
-                dx = M[0, 0] * x + M[0, 1] * y + M[0, 2]
-                dy = M[1, 0] * x + M[1, 1] * y + M[1, 2]
-                dz = M[2, 0] * x + M[2, 1] * y + M[2, 2]
-                for uu in range(win[m, 0], win[m, 2] + 1):
-                    if dz > 1e-12:
-                        iz = 1.0 / dz
-                        # nearest lattice cell (a 45 deg roll maps a line of pixels onto cell edges: the
-                        # rounding noise of the template's rotation picks the side)
-                        lu = int(math.floor(fx * dx * iz + cx + 0.5)) - lu0
-                        lv = int(math.floor(fy * dy * iz + cy + 0.5)) - lv0
-                        if lu >= 0 and lv >= 0 and lu < LW and lv < LH:
-                            r = lut[loff[t] + lv * LW + lu]
-                            if r >= 0:
-                                W[woff[t] + r * K + k] += 1.0
-                    dx += du0
-                    dy += du1
-                    dz += du2
+    for m in prange(Ms.shape[0]):
+        t = vtmpl[m]
+        lu0, lv0, LW, LH = tlat[t, 0], tlat[t, 1], tlat[t, 2], tlat[t, 3]
+        K = tview[t + 1] - tview[t]
+        k = m - tview[t]
+        M = Ms[m]
+        du0, du1, du2 = M[0, 0] / fx, M[1, 0] / fx, M[2, 0] / fx  # change of the ray per pixel along u
+        for vv in range(win[m, 1], win[m, 3] + 1):
+            y = (vv - cy) / fy
+            x = (win[m, 0] - cx) / fx
+            dx = M[0, 0] * x + M[0, 1] * y + M[0, 2]
+            dy = M[1, 0] * x + M[1, 1] * y + M[1, 2]
+            dz = M[2, 0] * x + M[2, 1] * y + M[2, 2]
+            for uu in range(win[m, 0], win[m, 2] + 1):
+                if dz > 1e-12:
+                    iz = 1.0 / dz
+                    # nearest lattice cell (a 45 deg roll maps a line of pixels onto cell edges: the
+                    # rounding noise of the template's rotation picks the side)
+                    lu = int(math.floor(fx * dx * iz + cx + 0.5)) - lu0
+                    lv = int(math.floor(fy * dy * iz + cy + 0.5)) - lv0
+                    if lu >= 0 and lv >= 0 and lu < LW and lv < LH:
+                        r = lut[loff[t] + lv * LW + lu]
+                        if r >= 0:
+                            W[woff[t] + r * K + k] += 1.0
+                dx += du0
+                dy += du1
+                dz += du2
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
@@ -512,8 +514,9 @@ def _cast_lattice(labels, bdist, B, lo, vs, ray_off, gtmpl, tlat, toff, tcell, R
     if 0.0 < p_unknown < 1.0:
         h = -(p_unknown * math.log2(p_unknown) + (1 - p_unknown) * math.log2(1 - p_unknown))
     ng = ray_off.shape[0]
+    lx, ly, lz, ccx, ccy, ccz = lo[0], lo[1], lo[2], cen[0], cen[1], cen[2]
     for lane in prange(lanes):
-        d = np.empty(3)
+        nbs = nvs = 0
         for k in range(lane, nchunk, lanes):
             q0 = k * chunk
             q1 = min(q0 + chunk, n)
@@ -526,16 +529,19 @@ def _cast_lattice(labels, bdist, B, lo, vs, ray_off, gtmpl, tlat, toff, tcell, R
                 LW = tlat[t, 2]
                 x = (c % LW + tlat[t, 0] - cx) / fx
                 y = (c // LW + tlat[t, 1] - cy) / fy
-                nrm = math.sqrt(x * x + y * y + 1.0)
-                for a in range(3):
-                    d[a] = (R0s[g, a, 0] * x + R0s[g, a, 1] * y + R0s[g, a, 2]) / nrm
-                for a in range(N_TERMS):
-                    out_vals[q, a] = 0.0
-                c_, _t, nb, nv = _trace(labels, bdist, B, lo, vs, t0s[g], d, min_range, max_range, cen, r2, through,
-                                        optimistic, p_unknown, h, out_vals[q])
+                inrm = 1.0 / math.sqrt(x * x + y * y + 1.0)
+                dx = (R0s[g, 0, 0] * x + R0s[g, 0, 1] * y + R0s[g, 0, 2]) * inrm
+                dy = (R0s[g, 1, 0] * x + R0s[g, 1, 1] * y + R0s[g, 1, 2]) * inrm
+                dz = (R0s[g, 2, 0] * x + R0s[g, 2, 1] * y + R0s[g, 2, 2]) * inrm
+                c_, _t, v0, v1, v2, v3, nb, nv = _trace(labels, bdist, B, lx, ly, lz, vs, t0s[g, 0], t0s[g, 1],
+                                                        t0s[g, 2], dx, dy, dz, min_range, max_range, ccx, ccy, ccz,
+                                                        r2, through, optimistic, p_unknown, h)
                 out_cls[q] = c_
-                steps[lane, 0] += nb
-                steps[lane, 1] += nv
+                out_vals[q, 0], out_vals[q, 1], out_vals[q, 2], out_vals[q, 3] = v0, v1, v2, v3
+                nbs += nb
+                nvs += nv
+        steps[lane, 0] = nbs
+        steps[lane, 1] = nvs
 
 
 @njit(cache=True, parallel=True)
@@ -574,7 +580,8 @@ def _accumulate(ray_off, gtmpl, gview, tcount, tview, woff, W, cls, terms, out_c
 class ViewRays:
     """Per-view sums over the pixels considered: counts (V, 3) of rays ending on unknown / occupied /
     empty-exit, terms (V, 4) summed gain terms, rays (V,) pixels considered, rays_cast rays traced;
-    block_steps / voxel_steps: empty-block skips and single-voxel steps the traced rays took in all."""
+    block_steps / voxel_steps: empty-block skips and single-voxel steps the traced rays took in all;
+    templates: lattice templates built (groups with the same geometry about their sensor share one)."""
 
     counts: np.ndarray
     terms: np.ndarray
@@ -582,6 +589,7 @@ class ViewRays:
     rays_cast: int
     block_steps: int = 0
     voxel_steps: int = 0
+    templates: int = 0
 
 
 def group_views(poses: np.ndarray, tol: float = 1e-6) -> list[np.ndarray]:
@@ -722,7 +730,9 @@ def _build_templates(cam, r_ext, groups: list[_Group]) -> list[dict]:
     woff = np.concatenate([[0], np.cumsum(wsize)[:-1]]).astype(np.int64)
     tcell = np.empty(int(tcount.sum()), np.int32)
     W = np.zeros(int(wsize.sum()), np.float32)
-    _fill_templates(tlat, loff, lut, tcount, toff, tview, woff, np.ascontiguousarray(np.concatenate([g.Ms for g in groups])),
+    vtmpl = np.repeat(np.arange(len(groups), dtype=np.int64), K)
+    _fill_templates(tlat, loff, lut, tcount, toff, tview, vtmpl, woff,
+                    np.ascontiguousarray(np.concatenate([g.Ms for g in groups])),
                     np.ascontiguousarray(np.concatenate([g.win for g in groups])), cam.fx, cam.fy, cam.cx, cam.cy,
                     tcell, W)
     return [{"lat": g.lat, "n": int(tcount[i]), "K": int(K[i]), "tcell": tcell[toff[i]:toff[i] + tcount[i]],
@@ -740,6 +750,7 @@ def _cast_batch(vol, cam, center, radius, r_ext, flags, p_unknown, batch: list[_
             new[g.key] = g
     if new:
         cache.update(zip(new, _build_templates(cam, r_ext, list(new.values()))))
+        out.templates += len(new)
     keys = list(dict.fromkeys(g.key for g in batch))
     for k in [k for k in cache if k not in set(keys)]:
         del cache[k]
