@@ -330,27 +330,31 @@ def _trace(labels, bdist, B, lx, ly, lz, vs, px, py, pz, dx, dy, dz, min_range, 
                     return cls, thit, v0, v1, v2, v3, nb, nv
             else:
                 prev_unknown_in_s = False
+            # one step; only the axis that moved can leave the volume or this block
             if tmx <= tmy and tmx <= tmz:
                 tcur = tmx
                 ix += sx
                 tmx += tdx
                 if ix < 0 or ix >= n0:
                     return cls, thit, v0, v1, v2, v3, nb, nv
+                left = ix < xb0 or ix >= xb0 + B
             elif tmy <= tmz:
                 tcur = tmy
                 iy += sy
                 tmy += tdy
                 if iy < 0 or iy >= n1:
                     return cls, thit, v0, v1, v2, v3, nb, nv
+                left = iy < yb0 or iy >= yb0 + B
             else:
                 tcur = tmz
                 iz += sz
                 tmz += tdz
                 if iz < 0 or iz >= n2:
                     return cls, thit, v0, v1, v2, v3, nb, nv
+                left = iz < zb0 or iz >= zb0 + B
             if tcur >= t1:
                 return cls, thit, v0, v1, v2, v3, nb, nv
-            if ix < xb0 or ix >= xb0 + B or iy < yb0 or iy >= yb0 + B or iz < zb0 or iz >= zb0 + B:
+            if left:
                 break
     return cls, thit, v0, v1, v2, v3, nb, nv
 
