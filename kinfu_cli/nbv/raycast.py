@@ -27,6 +27,7 @@ pixel grid onto itself). Only rays that can reach a voxel of S are cast when `re
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,7 +41,7 @@ CLS_UNKNOWN = 0
 CLS_OCCUPIED = 1
 CLS_EMPTY_EXIT = 2
 N_TERMS = 4
-_CHUNK = 256  # lattice cells per scheduling chunk of the caster (see _cast_lattice)
+_CHUNK = 256  # rays per scheduling chunk of the caster (see _cast_lattice)
 
 
 @dataclass
@@ -172,26 +173,25 @@ def _clampi(v, a, b):
     return a if v < a else (b if v > b else v)
 
 
-@njit(cache=True, error_model="numpy")
-def _trace(labels, bdist, B, lo, vs, p, d, min_range, max_range, cen, r2, through, optimistic, p_unknown, h_unknown,
-           vals):
-    """Walk one ray (p origin, d unit direction). Fills vals[0:4]; returns (class, t of the first hit).
+@njit(cache=True, error_model="numpy", inline="always")
+def _trace(labels, bdist, B, lx, ly, lz, vs, px, py, pz, dx, dy, dz, min_range, max_range, ccx, ccy, ccz, r2, through,
+           optimistic, p_unknown, h_unknown):
+    """Walk one ray (origin p, unit direction d, the volume's corner l, S's centre cc); returns (class, t of the
+    first hit, the 4 gain terms, block skips, voxel steps). Scalars in and out, and inlined: an array view
+    per ray costs atomic reference counts that the threads fight over.
 
     One long function on purpose: it is the innermost loop of every NBV command, and the walk state
     (voxel, next boundaries, visibility) crossing between the empty-block skip and the voxel walk stays
     in registers only while both live in one compiled loop.
     """
     n0, n1, n2 = labels.shape
-    px, py, pz = p[0], p[1], p[2]
-    dx, dy, dz = d[0], d[1], d[2]
-    lx, ly, lz = lo[0], lo[1], lo[2]
     # clip to the volume box and the range
     t0 = 0.0
     t1 = max_range
     eps = 1e-12
     if abs(dx) < eps:
         if px < lx or px > lx + n0 * vs:
-            return CLS_EMPTY_EXIT, np.inf
+            return CLS_EMPTY_EXIT, np.inf, 0.0, 0.0, 0.0, 0.0, 0, 0
         ivx = np.inf
     else:
         ivx = 1.0 / dx
@@ -200,7 +200,7 @@ def _trace(labels, bdist, B, lo, vs, p, d, min_range, max_range, cen, r2, throug
         t1 = min(t1, max(ta, tb))
     if abs(dy) < eps:
         if py < ly or py > ly + n1 * vs:
-            return CLS_EMPTY_EXIT, np.inf
+            return CLS_EMPTY_EXIT, np.inf, 0.0, 0.0, 0.0, 0.0, 0, 0
         ivy = np.inf
     else:
         ivy = 1.0 / dy
@@ -209,7 +209,7 @@ def _trace(labels, bdist, B, lo, vs, p, d, min_range, max_range, cen, r2, throug
         t1 = min(t1, max(ta, tb))
     if abs(dz) < eps:
         if pz < lz or pz > lz + n2 * vs:
-            return CLS_EMPTY_EXIT, np.inf
+            return CLS_EMPTY_EXIT, np.inf, 0.0, 0.0, 0.0, 0.0, 0, 0
         ivz = np.inf
     else:
         ivz = 1.0 / dz
@@ -217,7 +217,7 @@ def _trace(labels, bdist, B, lo, vs, p, d, min_range, max_range, cen, r2, throug
         t0 = max(t0, min(ta, tb))
         t1 = min(t1, max(ta, tb))
     if t0 >= t1:
-        return CLS_EMPTY_EXIT, np.inf
+        return CLS_EMPTY_EXIT, np.inf, 0.0, 0.0, 0.0, 0.0, 0, 0
     sx = 1 if dx > eps else (-1 if dx < -eps else 0)
     sy = 1 if dy > eps else (-1 if dy < -eps else 0)
     sz = 1 if dz > eps else (-1 if dz < -eps else 0)
@@ -235,10 +235,13 @@ def _trace(labels, bdist, B, lo, vs, p, d, min_range, max_range, cen, r2, throug
     thit = np.inf
     vis = 1.0
     prev_unknown_in_s = False
+    v0 = v1 = v2 = v3 = 0.0
+    nb = nv = 0  # block skips and voxel steps taken (for the benchmark's statistics)
     while True:
         bx, by, bz = ix // B, iy // B, iz // B
         D = bdist[bx, by, bz]
         if D > 0:
+            nb += 1
             # the cube of blocks [b - D + 1, b + D - 1] is empty: leave it in one step
             D1 = D - 1
             ex = np.inf
@@ -289,14 +292,15 @@ def _trace(labels, bdist, B, lo, vs, p, d, min_range, max_range, cen, r2, throug
         # walk voxel by voxel through this non-empty block
         xb0, yb0, zb0 = bx * B, by * B, bz * B  # this block's voxel range [b0, b0 + B) per axis
         while True:
+            nv += 1
             lab = labels[ix, iy, iz]
             in_s = False
             dist2 = 0.0
             if lab != -1:
                 if tcur >= min_range:
-                    qx = lx + (ix + 0.5) * vs - cen[0]
-                    qy = ly + (iy + 0.5) * vs - cen[1]
-                    qz = lz + (iz + 0.5) * vs - cen[2]
+                    qx = lx + (ix + 0.5) * vs - ccx
+                    qy = ly + (iy + 0.5) * vs - ccy
+                    qz = lz + (iz + 0.5) * vs - ccz
                     dist2 = qx * qx + qy * qy + qz * qz
                     in_s = dist2 <= r2
                 if optimistic and lab == 0 and not in_s:
@@ -307,48 +311,52 @@ def _trace(labels, bdist, B, lo, vs, p, d, min_range, max_range, cen, r2, throug
                     if lab == 0:
                         cls = CLS_UNKNOWN
                         if in_s:
-                            vals[0] = 1.0
-                            vals[1] = 1.0 / (tcur * tcur)
+                            v0 = 1.0
+                            v1 = 1.0 / (tcur * tcur)
                     else:
                         cls = CLS_OCCUPIED
                     if not through:
-                        return cls, thit
+                        return cls, thit, v0, v1, v2, v3, nb, nv
                 if lab == 0:
                     if in_s:
-                        vals[3] += vis * h_unknown
+                        v3 += vis * h_unknown
                     vis *= 1.0 - p_unknown
                     prev_unknown_in_s = in_s
                     if vis < 1e-7:
-                        return cls, thit
+                        return cls, thit, v0, v1, v2, v3, nb, nv
                 else:
                     if prev_unknown_in_s:
-                        vals[2] = 1.0
-                    return cls, thit
+                        v2 = 1.0
+                    return cls, thit, v0, v1, v2, v3, nb, nv
             else:
                 prev_unknown_in_s = False
+            # one step; only the axis that moved can leave the volume or this block
             if tmx <= tmy and tmx <= tmz:
                 tcur = tmx
                 ix += sx
                 tmx += tdx
                 if ix < 0 or ix >= n0:
-                    return cls, thit
+                    return cls, thit, v0, v1, v2, v3, nb, nv
+                left = ix < xb0 or ix >= xb0 + B
             elif tmy <= tmz:
                 tcur = tmy
                 iy += sy
                 tmy += tdy
                 if iy < 0 or iy >= n1:
-                    return cls, thit
+                    return cls, thit, v0, v1, v2, v3, nb, nv
+                left = iy < yb0 or iy >= yb0 + B
             else:
                 tcur = tmz
                 iz += sz
                 tmz += tdz
                 if iz < 0 or iz >= n2:
-                    return cls, thit
+                    return cls, thit, v0, v1, v2, v3, nb, nv
+                left = iz < zb0 or iz >= zb0 + B
             if tcur >= t1:
-                return cls, thit
-            if ix < xb0 or ix >= xb0 + B or iy < yb0 or iy >= yb0 + B or iz < zb0 or iz >= zb0 + B:
+                return cls, thit, v0, v1, v2, v3, nb, nv
+            if left:
                 break
-    return cls, thit
+    return cls, thit, v0, v1, v2, v3, nb, nv
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
@@ -360,12 +368,13 @@ def _cast_kernel(labels, bempty, B, lo, vs, origins, dirs, min_range, max_range,
     if 0.0 < p_unknown < 1.0:
         h = -(p_unknown * math.log2(p_unknown) + (1 - p_unknown) * math.log2(1 - p_unknown))
     for r in prange(n):
-        for c in range(N_TERMS):
-            out_vals[r, c] = 0.0
-        c_, t_ = _trace(labels, bempty, B, lo, vs, origins[r], dirs[r], min_range, max_range, cen, r2,
-                        through, optimistic, p_unknown, h, out_vals[r])
+        c_, t_, v0, v1, v2, v3, _nb, _nv = _trace(labels, bempty, B, lo[0], lo[1], lo[2], vs, origins[r, 0],
+                                                  origins[r, 1], origins[r, 2], dirs[r, 0], dirs[r, 1], dirs[r, 2],
+                                                  min_range, max_range, cen[0], cen[1], cen[2], r2, through,
+                                                  optimistic, p_unknown, h)
         out_cls[r] = c_
         out_t[r] = t_
+        out_vals[r, 0], out_vals[r, 1], out_vals[r, 2], out_vals[r, 3] = v0, v1, v2, v3
 
 
 @dataclass
@@ -430,101 +439,47 @@ def _cone_bbox(ax, az, sin_a, f, c, size):
 
 
 @njit(cache=True, parallel=True)
-def _mark_lattice(glat, goff, gcb, gcheck, fx, fy, cx, cy, r2, cells, gcount):
-    """Per group: lattice cells whose ray (in the base view) can reach S get 0, others -1; count them."""
-    for g in prange(goff.shape[0]):
-        lu0, lv0, LW, LH = glat[g, 0], glat[g, 1], glat[g, 2], glat[g, 3]
-        cb = gcb[g]
+def _mark_templates(tlat, loff, tcb, tcheck, fx, fy, cx, cy, r2, lut, tcount):
+    """Per template: lattice cells whose ray (in the base view) can reach S get consecutive local ray
+    numbers in `lut`, the others -1; tcount = rays per template."""
+    for t in prange(tlat.shape[0]):
+        lu0, lv0, LW, LH = tlat[t, 0], tlat[t, 1], tlat[t, 2], tlat[t, 3]
+        cb = tcb[t]
         cbn2 = cb[0] * cb[0] + cb[1] * cb[1] + cb[2] * cb[2]
         n = 0
         for c in range(LW * LH):
             ok = True
-            if gcheck[g]:
+            if tcheck[t]:
                 x = (c % LW + lu0 - cx) / fx
                 y = (c // LW + lv0 - cy) / fy
                 proj = cb[0] * x + cb[1] * y + cb[2]
                 if proj <= 0 or cbn2 - proj * proj / (x * x + y * y + 1.0) > r2:
                     ok = False
             if ok:
-                cells[goff[g] + c] = 0
+                lut[loff[t] + c] = n
                 n += 1
             else:
-                cells[goff[g] + c] = -1
-        gcount[g] = n
+                lut[loff[t] + c] = -1
+        tcount[t] = n
 
 
 @njit(cache=True, parallel=True)
-def _number_rays(cells, goff, glat, ray_off):
-    """Give the lattice cells kept by `_mark_lattice` consecutive ray numbers (group by group)."""
-    for g in prange(goff.shape[0]):
-        q = ray_off[g]
-        for c in range(goff[g], goff[g] + glat[g, 2] * glat[g, 3]):
-            if cells[c] >= 0:
-                cells[c] = q
-                q += 1
-
-
-@njit(cache=True, parallel=True, error_model="numpy")
-def _cast_lattice(labels, bempty, B, lo, vs, cells, goff, glat, R0s, t0s, fx, fy, cx, cy, min_range, max_range,
-                  cen, radius, through, optimistic, p_unknown, chunk, lanes, out_cls, out_vals):
-    """Trace every numbered lattice cell's ray (built here from its group's base pose, so no per-ray
-    origin/direction arrays). Ray costs differ by orders of magnitude (a free-space skip vs a walk through
-    clutter) and numba splits a prange into one contiguous slice per thread, so the cells are cut into
-    small chunks dealt round-robin to `lanes` workers: every worker gets a share of every region."""
-    ncell = cells.shape[0]
-    nchunk = (ncell + chunk - 1) // chunk
-    r2 = radius * radius
-    h = 0.0
-    if 0.0 < p_unknown < 1.0:
-        h = -(p_unknown * math.log2(p_unknown) + (1 - p_unknown) * math.log2(1 - p_unknown))
-    ng = goff.shape[0]
-    for lane in prange(lanes):
-        d = np.empty(3)
-        for k in range(lane, nchunk, lanes):
-            c0 = k * chunk
-            c1 = min(c0 + chunk, ncell)
-            g = np.searchsorted(goff, c0, side="right") - 1
-            for c in range(c0, c1):
-                while g + 1 < ng and c >= goff[g + 1]:
-                    g += 1
-                q = cells[c]
-                if q < 0:
-                    continue
-                LW = glat[g, 2]
-                j = c - goff[g]
-                x = (j % LW + glat[g, 0] - cx) / fx
-                y = (j // LW + glat[g, 1] - cy) / fy
-                nrm = math.sqrt(x * x + y * y + 1.0)
-                for a in range(3):
-                    d[a] = (R0s[g, a, 0] * x + R0s[g, a, 1] * y + R0s[g, a, 2]) / nrm
-                for a in range(N_TERMS):
-                    out_vals[q, a] = 0.0
-                c_, _t = _trace(labels, bempty, B, lo, vs, t0s[g], d, min_range, max_range, cen, r2, through,
-                                optimistic, p_unknown, h, out_vals[q])
-                out_cls[q] = c_
-
-
-@njit(cache=True, parallel=True)
-def _accumulate(Ms, win, vgroup, glat, goff, fx, fy, cx, cy, cells, cls, terms, out_counts, out_terms, npix,
-                lanes):
-    """Sum, per view, the results of the lattice rays nearest to its pixels (pixels inside its window).
-    Views are dealt round-robin to `lanes` workers (neighbouring views have alike windows)."""
-    for lane in prange(lanes):
-        _accumulate_views(lane, lanes, Ms, win, vgroup, glat, goff, fx, fy, cx, cy, cells, cls, terms, out_counts,
-                          out_terms, npix)
-
-
-@njit(cache=True)
-def _accumulate_views(lane, lanes, Ms, win, vgroup, glat, goff, fx, fy, cx, cy, cells, cls, terms, out_counts,
-                      out_terms, npix):
-    for m in range(lane, Ms.shape[0], lanes):
-        g = vgroup[m]
+def _fill_templates(tlat, loff, lut, tcount, toff, tview, vtmpl, woff, Ms, win, fx, fy, cx, cy, tcell, W):
+    """Per template: the lattice cell of each local ray (`tcell`) and, per view k of the template, how
+    many of its pixels (inside its window) have that ray as nearest lattice ray (W[woff + ray * K + k]).
+    Parallel over views (a pole position holds 96 of them), each writing its own column of W."""
+    for t in prange(tlat.shape[0]):
+        LW, LH = tlat[t, 2], tlat[t, 3]
+        for c in range(LW * LH):
+            r = lut[loff[t] + c]
+            if r >= 0:
+                tcell[toff[t] + r] = c
+    for m in prange(Ms.shape[0]):
+        t = vtmpl[m]
+        lu0, lv0, LW, LH = tlat[t, 0], tlat[t, 1], tlat[t, 2], tlat[t, 3]
+        K = tview[t + 1] - tview[t]
+        k = m - tview[t]
         M = Ms[m]
-        lu0, lv0, LW, LH = glat[g, 0], glat[g, 1], glat[g, 2], glat[g, 3]
-        off = goff[g]
-        c0 = c1 = c2 = 0
-        t0 = t1 = t2 = t3 = 0.0
-        n = 0
         du0, du1, du2 = M[0, 0] / fx, M[1, 0] / fx, M[2, 0] / fx  # change of the ray per pixel along u
         for vv in range(win[m, 1], win[m, 3] + 1):
             y = (vv - cy) / fy
@@ -535,40 +490,110 @@ def _accumulate_views(lane, lanes, Ms, win, vgroup, glat, goff, fx, fy, cx, cy, 
             for uu in range(win[m, 0], win[m, 2] + 1):
                 if dz > 1e-12:
                     iz = 1.0 / dz
+                    # nearest lattice cell (a 45 deg roll maps a line of pixels onto cell edges: the
+                    # rounding noise of the template's rotation picks the side)
                     lu = int(math.floor(fx * dx * iz + cx + 0.5)) - lu0
                     lv = int(math.floor(fy * dy * iz + cy + 0.5)) - lv0
                     if lu >= 0 and lv >= 0 and lu < LW and lv < LH:
-                        q = cells[off + lv * LW + lu]
-                        if q >= 0:
-                            n += 1
-                            k = cls[q]
-                            if k == 0:
-                                c0 += 1
-                            elif k == 1:
-                                c1 += 1
-                            else:
-                                c2 += 1
-                            t0 += terms[q, 0]
-                            t1 += terms[q, 1]
-                            t2 += terms[q, 2]
-                            t3 += terms[q, 3]
+                        r = lut[loff[t] + lv * LW + lu]
+                        if r >= 0:
+                            W[woff[t] + r * K + k] += 1.0
                 dx += du0
                 dy += du1
                 dz += du2
-        out_counts[m, 0], out_counts[m, 1], out_counts[m, 2] = c0, c1, c2
-        out_terms[m, 0], out_terms[m, 1], out_terms[m, 2], out_terms[m, 3] = t0, t1, t2, t3
-        npix[m] = n
+
+
+@njit(cache=True, parallel=True, error_model="numpy")
+def _cast_lattice(labels, bdist, B, lo, vs, ray_off, gtmpl, tlat, toff, tcell, R0s, t0s, fx, fy, cx, cy, min_range,
+                  max_range, cen, radius, through, optimistic, p_unknown, chunk, lanes, out_cls, out_vals, steps):
+    """Trace every ray of every group (built here from its template's lattice cell and the group's base
+    pose, so no per-ray origin/direction arrays). Ray costs differ by orders of magnitude (a free-space
+    skip vs a walk through clutter) and numba splits a prange into one contiguous slice per thread, so
+    the rays are cut into small chunks dealt round-robin to `lanes` workers: every worker gets a share
+    of every region."""
+    n = out_cls.shape[0]
+    nchunk = (n + chunk - 1) // chunk
+    r2 = radius * radius
+    h = 0.0
+    if 0.0 < p_unknown < 1.0:
+        h = -(p_unknown * math.log2(p_unknown) + (1 - p_unknown) * math.log2(1 - p_unknown))
+    ng = ray_off.shape[0]
+    lx, ly, lz, ccx, ccy, ccz = lo[0], lo[1], lo[2], cen[0], cen[1], cen[2]
+    for lane in prange(lanes):
+        nbs = nvs = 0
+        for k in range(lane, nchunk, lanes):
+            q0 = k * chunk
+            q1 = min(q0 + chunk, n)
+            g = np.searchsorted(ray_off, q0, side="right") - 1
+            for q in range(q0, q1):
+                while g + 1 < ng and q >= ray_off[g + 1]:
+                    g += 1
+                t = gtmpl[g]
+                c = tcell[toff[t] + q - ray_off[g]]
+                LW = tlat[t, 2]
+                x = (c % LW + tlat[t, 0] - cx) / fx
+                y = (c // LW + tlat[t, 1] - cy) / fy
+                inrm = 1.0 / math.sqrt(x * x + y * y + 1.0)
+                dx = (R0s[g, 0, 0] * x + R0s[g, 0, 1] * y + R0s[g, 0, 2]) * inrm
+                dy = (R0s[g, 1, 0] * x + R0s[g, 1, 1] * y + R0s[g, 1, 2]) * inrm
+                dz = (R0s[g, 2, 0] * x + R0s[g, 2, 1] * y + R0s[g, 2, 2]) * inrm
+                c_, _t, v0, v1, v2, v3, nb, nv = _trace(labels, bdist, B, lx, ly, lz, vs, t0s[g, 0], t0s[g, 1],
+                                                        t0s[g, 2], dx, dy, dz, min_range, max_range, ccx, ccy, ccz,
+                                                        r2, through, optimistic, p_unknown, h)
+                out_cls[q] = c_
+                out_vals[q, 0], out_vals[q, 1], out_vals[q, 2], out_vals[q, 3] = v0, v1, v2, v3
+                nbs += nb
+                nvs += nv
+        steps[lane, 0] = nbs
+        steps[lane, 1] = nvs
+
+
+@njit(cache=True, parallel=True)
+def _accumulate(ray_off, gtmpl, gview, tcount, tview, woff, W, cls, terms, out_counts, out_terms, npix):
+    """Per group: each view's sums are its template's pixel weights times the group's ray results (the
+    group's views are the output rows gview[g] ... in the template's view order)."""
+    for g in prange(ray_off.shape[0]):
+        t = gtmpl[g]
+        n = tcount[t]
+        K = tview[t + 1] - tview[t]
+        acc = np.zeros((K, 8))
+        q0 = ray_off[g]
+        w0 = woff[t]
+        for r in range(n):
+            q = q0 + r
+            c = cls[q]
+            a0, a1, a2, a3 = terms[q, 0], terms[q, 1], terms[q, 2], terms[q, 3]
+            for k in range(K):
+                w = W[w0 + r * K + k]
+                acc[k, c] += w
+                acc[k, 3] += w * a0
+                acc[k, 4] += w * a1
+                acc[k, 5] += w * a2
+                acc[k, 6] += w * a3
+                acc[k, 7] += w
+        for k in range(K):
+            m = gview[g] + k
+            for a in range(3):
+                out_counts[m, a] = int(acc[k, a])
+            for a in range(N_TERMS):
+                out_terms[m, a] = acc[k, 3 + a]
+            npix[m] = int(acc[k, 7])
 
 
 @dataclass
 class ViewRays:
     """Per-view sums over the pixels considered: counts (V, 3) of rays ending on unknown / occupied /
-    empty-exit, terms (V, 4) summed gain terms, rays (V,) pixels considered, rays_cast rays traced."""
+    empty-exit, terms (V, 4) summed gain terms, rays (V,) pixels considered, rays_cast rays traced;
+    block_steps / voxel_steps: empty-block skips and single-voxel steps the traced rays took in all;
+    templates: lattice templates built (groups with the same geometry about their sensor share one)."""
 
     counts: np.ndarray
     terms: np.ndarray
     rays: np.ndarray
     rays_cast: int
+    block_steps: int = 0
+    voxel_steps: int = 0
+    templates: int = 0
 
 
 def group_views(poses: np.ndarray, tol: float = 1e-6) -> list[np.ndarray]:
@@ -597,16 +622,39 @@ def _pixel_window(R, t, cam, center, r_ext, restrict) -> tuple[int, int, int, in
     return u0, v0, u1, v1
 
 
+@dataclass
+class _Group:
+    """Views sharing a sensor position and optical axis: output rows `views`, rolls `Ms` relative to the
+    base view (R0, t0), pixel windows `win`, and the key of their template (geometry relative to t0)."""
+
+    views: np.ndarray
+    Ms: np.ndarray
+    win: np.ndarray
+    lat: tuple[int, int, int, int]
+    cb: np.ndarray
+    check: bool
+    R0: np.ndarray
+    t0: np.ndarray
+    key: tuple
+
+
+def _template_key(lat, cb, check, Ms, win) -> tuple:
+    """Groups with equal keys share lattice marks and pixel weights (rounding only merges float noise)."""
+    return (lat, check, (np.round(cb, 9) + 0.0).tobytes(), (np.round(Ms, 12) + 0.0).tobytes(), win.tobytes())
+
+
 def cast_views(vol: RayVolume, poses: np.ndarray, camera, center, radius: float, *, through: bool = False,
                optimistic: bool = False, restrict: bool = True, share_rolls: bool = True, p_unknown: float = 0.5,
-               batch_cells: int = 12_000_000, progress_cb=None) -> ViewRays:
+               batch_cells: int = 12_000_000, progress_cb=None, timings: dict | None = None) -> ViewRays:
     """Cast the rays of every view (camera-to-world `poses` (V, 4, 4)) and sum them per view.
 
     `restrict`: only pixels whose ray passes within radius + half a voxel diagonal of `center` (the
     only ones that can add gain); the counts then cover those pixels. `share_rolls`: views that differ
     only by roll reuse the first view's rays (nearest lattice ray). `optimistic`: unknown voxels
-    outside S do not stop rays (see `cast_rays`). `progress_cb(n)` after each batch.
+    outside S do not stop rays (see `cast_rays`). `progress_cb(n)` after each batch. `timings`: when a
+    dict, seconds per phase (setup, mark, cast, accumulate) are added to it (for the benchmark).
     """
+    tick = _Ticker(timings)
     cam = camera.widened()
     poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
     V = poses.shape[0]
@@ -614,7 +662,8 @@ def cast_views(vol: RayVolume, poses: np.ndarray, camera, center, radius: float,
     r_ext = float(radius) + vol.voxel_size * math.sqrt(3.0) / 2.0
     out = ViewRays(np.zeros((V, 3), np.int64), np.zeros((V, N_TERMS)), np.zeros(V, np.int64), 0)
     groups = group_views(poses) if share_rolls else [np.array([i]) for i in range(V)]
-    batch: list[tuple] = []
+    batch: list[_Group] = []
+    cache: dict = {}
     used = 0
     for g in groups:
         R0, t0 = poses[g[0], :3, :3], poses[g[0], :3, 3]
@@ -626,60 +675,126 @@ def cast_views(vol: RayVolume, poses: np.ndarray, camera, center, radius: float,
             progress_cb(int((~ok).sum()))
         if not ok.any():
             continue
+        Ms, win = np.ascontiguousarray(Ms[ok]), np.ascontiguousarray(win[ok])
         # lattice window: the pixel windows' corners mapped into the base view (an affine map for a roll)
-        cu = np.stack([win[ok, 0], win[ok, 2], win[ok, 0], win[ok, 2]], axis=1).astype(np.float64)
-        cv = np.stack([win[ok, 1], win[ok, 1], win[ok, 3], win[ok, 3]], axis=1).astype(np.float64)
-        d = np.einsum("nij,nkj->nki", Ms[ok], np.stack([(cu - cam.cx) / cam.fx, (cv - cam.cy) / cam.fy,
-                                                          np.ones_like(cu)], axis=-1))
+        cu = np.stack([win[:, 0], win[:, 2], win[:, 0], win[:, 2]], axis=1).astype(np.float64)
+        cv = np.stack([win[:, 1], win[:, 1], win[:, 3], win[:, 3]], axis=1).astype(np.float64)
+        d = np.einsum("nij,nkj->nki", Ms, np.stack([(cu - cam.cx) / cam.fx, (cv - cam.cy) / cam.fy,
+                                                      np.ones_like(cu)], axis=-1))
         pu = cam.fx * d[..., 0] / d[..., 2] + cam.cx
         pv = cam.fy * d[..., 1] / d[..., 2] + cam.cy
         lu0, lv0 = int(np.floor(pu.min())) - 1, int(np.floor(pv.min())) - 1
-        LW, LH = int(np.ceil(pu.max())) + 2 - lu0, int(np.ceil(pv.max())) + 2 - lv0
+        lat = (lu0, lv0, int(np.ceil(pu.max())) + 2 - lu0, int(np.ceil(pv.max())) + 2 - lv0)
         cb = R0.T @ (center - t0)
         check = bool(restrict and np.linalg.norm(cb) > r_ext)
-        batch.append((g[ok], Ms[ok], win[ok], (lu0, lv0, LW, LH), cb, check, R0, t0))
-        used += LW * LH
+        batch.append(_Group(g[ok], Ms, win, lat, cb, check, R0, t0, _template_key(lat, cb, check, Ms, win)))
+        used += lat[2] * lat[3]
         if used >= batch_cells:
-            _cast_batch(vol, cam, center, radius, r_ext, (through, optimistic), p_unknown, batch, out, progress_cb)
+            tick("setup")
+            _cast_batch(vol, cam, center, radius, r_ext, (through, optimistic), p_unknown, batch, cache, out,
+                        progress_cb, tick)
             batch, used = [], 0
+    tick("setup")
     if batch:
-        _cast_batch(vol, cam, center, radius, r_ext, (through, optimistic), p_unknown, batch, out, progress_cb)
+        _cast_batch(vol, cam, center, radius, r_ext, (through, optimistic), p_unknown, batch, cache, out,
+                    progress_cb, tick)
     return out
 
 
-def _cast_batch(vol, cam, center, radius, r_ext, flags, p_unknown, batch, out: ViewRays, progress_cb) -> None:
+class _Ticker:
+    """Adds the wall seconds since the last call to `timings[phase]` and the CPU seconds (all threads) to
+    `timings[phase + "_cpu"]` (nothing when timings is None)."""
+
+    def __init__(self, timings: dict | None):
+        self.timings = timings
+        self.t, self.c = time.perf_counter(), time.process_time()
+
+    def __call__(self, phase: str) -> None:
+        if self.timings is not None:
+            now, cpu = time.perf_counter(), time.process_time()
+            self.timings[phase] = self.timings.get(phase, 0.0) + now - self.t
+            self.timings[phase + "_cpu"] = self.timings.get(phase + "_cpu", 0.0) + cpu - self.c
+            self.t, self.c = now, cpu
+
+
+def _build_templates(cam, r_ext, groups: list[_Group]) -> list[dict]:
+    """Lattice marks and pixel weights of each group's template (one per group given)."""
+    tlat = np.array([g.lat for g in groups], dtype=np.int64).reshape(-1, 4)
+    size = tlat[:, 2] * tlat[:, 3]
+    loff = np.concatenate([[0], np.cumsum(size)[:-1]]).astype(np.int64)
+    lut = np.empty(int(size.sum()), np.int32)
+    tcount = np.zeros(len(groups), np.int64)
+    _mark_templates(tlat, loff, np.array([g.cb for g in groups], dtype=np.float64).reshape(-1, 3),
+                    np.array([g.check for g in groups], dtype=np.bool_), cam.fx, cam.fy, cam.cx, cam.cy,
+                    r_ext * r_ext, lut, tcount)
+    K = np.array([len(g.views) for g in groups], dtype=np.int64)
+    tview = np.concatenate([[0], np.cumsum(K)]).astype(np.int64)
+    toff = np.concatenate([[0], np.cumsum(tcount)[:-1]]).astype(np.int64)
+    wsize = tcount * K
+    woff = np.concatenate([[0], np.cumsum(wsize)[:-1]]).astype(np.int64)
+    tcell = np.empty(int(tcount.sum()), np.int32)
+    W = np.zeros(int(wsize.sum()), np.float32)
+    vtmpl = np.repeat(np.arange(len(groups), dtype=np.int64), K)
+    _fill_templates(tlat, loff, lut, tcount, toff, tview, vtmpl, woff,
+                    np.ascontiguousarray(np.concatenate([g.Ms for g in groups])),
+                    np.ascontiguousarray(np.concatenate([g.win for g in groups])), cam.fx, cam.fy, cam.cx, cam.cy,
+                    tcell, W)
+    return [{"lat": g.lat, "n": int(tcount[i]), "K": int(K[i]), "tcell": tcell[toff[i]:toff[i] + tcount[i]],
+             "W": W[woff[i]:woff[i] + wsize[i]]} for i, g in enumerate(groups)]
+
+
+def _cast_batch(vol, cam, center, radius, r_ext, flags, p_unknown, batch: list[_Group], cache: dict, out: ViewRays,
+                progress_cb, tick) -> None:
+    """Cast one batch of groups: build the templates not cached yet, trace every group's rays, sum per
+    view. The cache keeps only this batch's templates afterwards (a sphere's one template lives on)."""
     through, optimistic = flags
-    views = np.concatenate([b[0] for b in batch])
-    Ms = np.ascontiguousarray(np.concatenate([b[1] for b in batch]))
-    win = np.ascontiguousarray(np.concatenate([b[2] for b in batch]))
-    vgroup = np.concatenate([np.full(len(b[0]), i, np.int64) for i, b in enumerate(batch)])
-    glat = np.array([b[3] for b in batch], dtype=np.int64)
-    gsize = glat[:, 2] * glat[:, 3]
-    goff = np.concatenate([[0], np.cumsum(gsize)[:-1]]).astype(np.int64)
-    gcb = np.array([b[4] for b in batch], dtype=np.float64)
-    gcheck = np.array([b[5] for b in batch], dtype=np.bool_)
-    R0s = np.ascontiguousarray(np.array([b[6] for b in batch], dtype=np.float64))
-    t0s = np.ascontiguousarray(np.array([b[7] for b in batch], dtype=np.float64))
-    r2 = r_ext * r_ext
-    cells = np.empty(int(gsize.sum()), np.int32)
-    gcount = np.zeros(len(batch), np.int64)
-    _mark_lattice(glat, goff, gcb, gcheck, cam.fx, cam.fy, cam.cx, cam.cy, r2, cells, gcount)
+    new: dict = {}
+    for g in batch:
+        if g.key not in cache and g.key not in new:
+            new[g.key] = g
+    if new:
+        cache.update(zip(new, _build_templates(cam, r_ext, list(new.values()))))
+        out.templates += len(new)
+    keys = list(dict.fromkeys(g.key for g in batch))
+    for k in [k for k in cache if k not in set(keys)]:
+        del cache[k]
+    tid = {k: i for i, k in enumerate(keys)}
+    tms = [cache[k] for k in keys]
+    tlat = np.array([t["lat"] for t in tms], dtype=np.int64).reshape(-1, 4)
+    tcount = np.array([t["n"] for t in tms], dtype=np.int64)
+    K = np.array([t["K"] for t in tms], dtype=np.int64)
+    tview = np.concatenate([[0], np.cumsum(K)]).astype(np.int64)
+    toff = np.concatenate([[0], np.cumsum(tcount)[:-1]]).astype(np.int64)
+    woff = np.concatenate([[0], np.cumsum(tcount * K)[:-1]]).astype(np.int64)
+    tcell = np.concatenate([t["tcell"] for t in tms])
+    W = np.concatenate([t["W"] for t in tms])
+    gtmpl = np.array([tid[g.key] for g in batch], dtype=np.int64)
+    gcount = tcount[gtmpl]
     ray_off = np.concatenate([[0], np.cumsum(gcount)[:-1]]).astype(np.int64)
+    views = np.concatenate([g.views for g in batch])
+    gview = np.concatenate([[0], np.cumsum([len(g.views) for g in batch])[:-1]]).astype(np.int64)
+    R0s = np.ascontiguousarray(np.array([g.R0 for g in batch], dtype=np.float64))
+    t0s = np.ascontiguousarray(np.array([g.t0 for g in batch], dtype=np.float64))
     n = int(gcount.sum())
-    _number_rays(cells, goff, glat, ray_off)
+    tick("mark")
     cls = np.empty(n, np.int8)
     tm = np.empty((n, N_TERMS), np.float64)
-    _cast_lattice(vol.labels, vol.block_dist, vol.block, vol.origin, vol.voxel_size, cells, goff, glat, R0s, t0s,
-                  cam.fx, cam.fy, cam.cx, cam.cy, cam.min_range, min(cam.max_range, 1e30), center, float(radius),
-                  bool(through), bool(optimistic), float(p_unknown), _CHUNK, 8 * numba.get_num_threads(), cls, tm)
+    lanes = 8 * numba.get_num_threads()
+    steps = np.zeros((lanes, 2), np.int64)
+    _cast_lattice(vol.labels, vol.block_dist, vol.block, vol.origin, vol.voxel_size, ray_off, gtmpl, tlat, toff,
+                  tcell, R0s, t0s, cam.fx, cam.fy, cam.cx, cam.cy, cam.min_range, min(cam.max_range, 1e30), center,
+                  float(radius), bool(through), bool(optimistic), float(p_unknown), _CHUNK, lanes, cls, tm, steps)
+    out.block_steps += int(steps[:, 0].sum())
+    out.voxel_steps += int(steps[:, 1].sum())
+    tick("cast")
     counts = np.zeros((len(views), 3), np.int64)
     terms = np.zeros((len(views), N_TERMS), np.float64)
     npix = np.zeros(len(views), np.int64)
-    _accumulate(Ms, win, vgroup, glat, goff, cam.fx, cam.fy, cam.cx, cam.cy, cells, cls, tm, counts, terms, npix,
-                min(len(views), 8 * numba.get_num_threads()))
+    _accumulate(ray_off, gtmpl, gview, tcount, tview, woff, W, cls, tm, counts, terms, npix)
     out.counts[views] = counts
     out.terms[views] = terms
     out.rays[views] = npix
     out.rays_cast += n
+    tick("accumulate")
     if progress_cb:
         progress_cb(len(views))

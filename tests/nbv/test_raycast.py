@@ -8,7 +8,7 @@ import pytest
 from kinfu_cli.core.grid import EMPTY, OCCUPIED, UNKNOWN, TernaryGrid
 from kinfu_cli.core.camera import CameraModel
 from kinfu_cli.nbv.raycast import (CLS_EMPTY_EXIT, CLS_OCCUPIED, CLS_UNKNOWN, RayVolume, cast_rays, cast_views,
-                                   knowledge_map)
+                                   group_views, knowledge_map)
 from kinfu_cli.nbv.ranking import forget_around
 from kinfu_cli.nbv.reference import reference_views
 from kinfu_cli.core.poses import look_at
@@ -216,3 +216,27 @@ def test_reference_converges_to_exact_traversal_as_its_step_shrinks():
     assert err[0.5] > err[0.125] > err[1 / 32]
     assert err[1 / 32] < 0.003
     assert err[1 / 32] < 0.4 * err[0.5]
+
+
+def test_sphere_positions_share_one_template_and_match_casting_each_position_alone():
+    """All positions of the viewing sphere see S alike relative to their sensor, so they share one lattice
+    template (plus one for the pole, where all longitudes meet); the sums equal casting position by position.
+    The principal point is off the pixel grid's symmetry so no pixel ties between two lattice rays."""
+    g, poi = cluttered_scene(seed=5)
+    vol = RayVolume.from_grid(g)
+    cam = CameraModel(110.0, 110.0, 63.3, 47.2, 128, 96, min_range=0.3, max_range=3.0)
+    poses = sphere_viewpoints(poi, 0.8, lon_step=90, lat_step=30, roll_step=45)
+    shared = cast_views(vol, poses, cam, poi, 0.2, through=True)
+    assert shared.templates == 2
+    alone_counts = np.zeros_like(shared.counts)
+    alone_terms = np.zeros_like(shared.terms)
+    built = 0
+    groups = group_views(poses)  # the rolls of one position (all longitudes' rolls at the pole)
+    for idx in groups:
+        r = cast_views(vol, poses[idx], cam, poi, 0.2, through=True)
+        alone_counts[idx], alone_terms[idx] = r.counts, r.terms
+        built += r.templates
+    assert built == len(groups) == 3 * 4 + 1
+    assert np.array_equal(shared.counts, alone_counts)
+    assert np.allclose(shared.terms, alone_terms, rtol=1e-12, atol=1e-9)
+    assert shared.rays_cast > 0 and shared.voxel_steps > 0 and shared.block_steps > 0
