@@ -64,7 +64,10 @@ def true_extents(kind: str, dims: dict) -> np.ndarray:
 
 
 def prior_size_error(n: int, partial: bool) -> None:
-    """Max relative extent error of the fit, free vs with the prior, on known primitives (random pose)."""
+    """Max relative extent error of the fit, free vs with the prior (as `kinfu segment` applies it), on known
+    primitives (random pose)."""
+    from kinfu_cli.segmentation.pipeline import SegmentOptions, _fit_one
+
     rng = np.random.default_rng(4242)
     print(f"{'partial views' if partial else 'full surfaces'}: max relative extent error")
     print("kind      free fit median/p90   with prior median/p90   class correct")
@@ -75,8 +78,8 @@ def prior_size_error(n: int, partial: bool) -> None:
             pts = primitive_cloud(kind, rng, partial=partial, dims=dims)
             truth = true_extents(kind, dims)
             f = fit_superquadric(pts)
-            g, cls = sp.fit_with_prior(pts)
-            ok += cls == kind
+            g, c = _fit_one(pts, SegmentOptions())
+            ok += c.name == kind
             free.append(np.max(np.abs(np.sort(2 * f.superquadric.size) - truth) / truth))
             prior.append(np.max(np.abs(np.sort(2 * g.superquadric.size) - truth) / truth))
         print(f"{kind:9} {np.median(free):8.3f} / {np.percentile(free, 90):.3f}     "
