@@ -1,6 +1,7 @@
 """Multi-superquadric split (Algs. 4-6) on generated composites of known parts: the number of superquadrics
 per mu (m), against the true number of parts, over a few seeds; more parts than true = over-segmentation;
-"purity" = the worst part's share of points from its main true part, worst over the seeds.
+"purity" = the worst part's share of points from its main true part, worst over the seeds; then the mu range
+per shape where every seed gives the true count.
 
     PYTHONPATH=$PWD python benchmarks/bench_multi_superquadric.py [n_seeds]
 """
@@ -17,11 +18,25 @@ FIT: dict = {}
 MUS = (0.01, 0.015, 0.02, 0.03, 0.04, 0.05, 0.06)
 
 
+def exact_range(counts: np.ndarray, true_parts: int) -> str:
+    """The mu values at which every seed gives the true number of parts, as 'lo-hi' runs."""
+    ok = np.all(counts == true_parts, axis=0)
+    runs, start = [], None
+    for j, good in enumerate(list(ok) + [False]):
+        if good and start is None:
+            start = j
+        if not good and start is not None:
+            runs.append(f"{MUS[start]}-{MUS[j - 1]}" if j - 1 > start else f"{MUS[start]}")
+            start = None
+    return ", ".join(runs) or "none"
+
+
 def main(n_seeds: int = 3) -> None:
     shapes = dict(COMPOSITES, box=1, cylinder=1)
+    ranges = {}
     print("shape     parts  " + "  ".join(f"mu={m:<5}" for m in MUS) + "  tree s")
     for name, true_parts in shapes.items():
-        counts, secs, purity = [], [], []
+        counts, secs, purity, reach = [], [], [], []
         for seed in range(n_seeds):
             rng = np.random.default_rng(seed)
             if name in ("box", "cylinder"):
@@ -32,6 +47,11 @@ def main(n_seeds: int = 3) -> None:
             t = time.perf_counter()
             root = msq.build_superquadric_tree(pts, **FIT)
             secs.append(time.perf_counter() - t)
+            if true_parts > 1:  # can any tree node isolate the smaller part? its best share in a node holding
+                small = np.argmin(np.bincount(labels))  # at least half of that part's points
+                held = [(labels[n.index] == small).mean() for n in root.nodes()
+                        if np.sum(labels[n.index] == small) >= 0.5 * np.sum(labels == small)]
+                reach.append(max(held))
             row, prow = [], []
             for mu in MUS:
                 msq.select_splitting_planes(root, mu)
@@ -46,6 +66,13 @@ def main(n_seeds: int = 3) -> None:
         print(f"{name:9} {true_parts:5}  " + "  ".join(f"{s:8}" for s in cells) + f"  {np.mean(secs):.2f}")
         pur = np.array(purity).min(axis=0)
         print(f"{'  purity':15}  " + "  ".join(f"{p:8.2f}" for p in pur))
+        ranges[name] = exact_range(c, true_parts)
+        if reach:
+            print(f"{'  best node':15}  the smaller part is at most {min(reach):.2f} of a tree node holding half "
+                  f"of it (worst seed)")
+    print(f"mu (m) where all {n_seeds} seeds give the true part count:")
+    for name, r in ranges.items():
+        print(f"  {name:9} {r}")
 
 
 if __name__ == "__main__":

@@ -4,6 +4,7 @@ cylinders, spheres, cones, tori, mugs); plus the size error of the fit with and 
 on partial views of known primitives.
 
     PYTHONPATH=$PWD python benchmarks/bench_shape_prior.py [n_per_kind] [n_scenes] [n_size]
+    PYTHONPATH=$PWD python benchmarks/bench_shape_prior.py pipeline [n_scenes]   # inside kinfu segment
 """
 
 import sys
@@ -63,7 +64,10 @@ def true_extents(kind: str, dims: dict) -> np.ndarray:
 
 
 def prior_size_error(n: int, partial: bool) -> None:
-    """Max relative extent error of the fit, free vs with the prior, on known primitives (random pose)."""
+    """Max relative extent error of the fit, free vs with the prior (as `kinfu segment` applies it), on known
+    primitives (random pose)."""
+    from kinfu_cli.segmentation.pipeline import SegmentOptions, _fit_one
+
     rng = np.random.default_rng(4242)
     print(f"{'partial views' if partial else 'full surfaces'}: max relative extent error")
     print("kind      free fit median/p90   with prior median/p90   class correct")
@@ -74,15 +78,79 @@ def prior_size_error(n: int, partial: bool) -> None:
             pts = primitive_cloud(kind, rng, partial=partial, dims=dims)
             truth = true_extents(kind, dims)
             f = fit_superquadric(pts)
-            g, cls = sp.fit_with_prior(pts)
-            ok += cls == kind
+            g, c = _fit_one(pts, SegmentOptions())
+            ok += c.name == kind
             free.append(np.max(np.abs(np.sort(2 * f.superquadric.size) - truth) / truth))
             prior.append(np.max(np.abs(np.sort(2 * g.superquadric.size) - truth) / truth))
         print(f"{kind:9} {np.median(free):8.3f} / {np.percentile(free, 90):.3f}     "
               f"{np.median(prior):8.3f} / {np.percentile(prior, 90):.3f}        {ok}/{n}")
 
 
+def scene_segments(build, seed: int, voxel: float = 0.006):
+    """The segments `kinfu segment`'s pipeline finds on the exact TSDF of a generated scene (superquadrics off),
+    and per object that one segment holds mostly (>= 80 % of the segment's points, the object's largest
+    segment): [(object, segment points)]."""
+    from kinfu_cli.segmentation.pipeline import SegmentOptions, analyse_cloud
+    from kinfu_cli.segmentation.surface import surface_from_tsdf
+    from kinfu_cli.sim.tsdf import scene_tsdf
+
+    scene = build(seed=seed)
+    t = scene.table
+    lo = np.array([t.center[0] - t.size[0] / 2 - 0.1, t.center[1] - t.size[1] / 2 - 0.1, t.top_z - 0.1])
+    hi = np.array([t.center[0] + t.size[0] / 2 + 0.1, t.center[1] + t.size[1] / 2 + 0.1, t.top_z + 0.35])
+    shape = np.ceil((hi - lo) / voxel).astype(int) + 1
+    tsdf, w = scene_tsdf(scene, lo, voxel, shape)
+    cloud = surface_from_tsdf(tsdf, w, lo, voxel)
+    res = analyse_cloud(cloud.points, cloud.normals, SegmentOptions(superquadrics=False))
+    seg = res.segmentation
+    truth = scene.nearest_labels(seg.points, max_distance=0.01)
+    out = []
+    for o in scene.present_objects:
+        lab = scene.label_of(o.id)
+        ids, counts = np.unique(seg.labels[(truth == lab) & (seg.labels > 0)], return_counts=True)
+        if not len(ids):
+            continue
+        sid = ids[np.argmax(counts)]
+        pts = seg.points[seg.labels == sid]
+        if np.mean(truth[seg.labels == sid] == lab) >= 0.8 and len(pts) >= sp.MIN_POINTS:
+            out.append((o, pts))
+    return out
+
+
+def pipeline_prior(n_scenes: int) -> None:
+    """Shape prior inside `kinfu segment` (pipeline segments, not ground-truth labels): class accuracy, and the
+    max relative extent error of the segment's superquadric against the object's true extents, without the
+    prior (free exponents in [0.1, 1.9]) and with it (the class's eq. 7.11 bounds)."""
+    from kinfu_cli.segmentation.pipeline import SegmentOptions, _fit_one
+
+    rows = []
+    for seed in range(n_scenes):
+        for build in (primitive_tabletop_scene, make_tabletop_scene, segmentation_scene):
+            for o, pts in scene_segments(build, 200 + seed):
+                truth = np.sort(o.size)
+                errs, cls = [], None
+                for on in (False, True):
+                    fit, c = _fit_one(pts, SegmentOptions(shape_prior=on))
+                    cls = c.name if c is not None else cls
+                    errs.append(float(np.max(np.abs(np.sort(2 * fit.superquadric.size) - truth) / truth)))
+                rows.append((o.shape, SCENE_CLASS.get(o.shape, "generic"), cls, *errs))
+    true = [r[1] for r in rows]
+    got = [r[2] for r in rows]
+    print(f"pipeline segments of synthetic scenes (seeds 200-{199 + n_scenes}): class accuracy "
+          f"{np.mean([a == b for a, b in zip(true, got)]):.3f} on {len(rows)} segments")
+    print(confusion(true, got))
+    print("object shape   n   size error without prior median/p90   with prior median/p90")
+    for shape in sorted({r[0] for r in rows}) + ["all"]:
+        sel = [r for r in rows if shape in ("all", r[0])]
+        a, b = np.array([r[3] for r in sel]), np.array([r[4] for r in sel])
+        print(f"{shape:12} {len(sel):3}   {np.median(a):8.3f} / {np.percentile(a, 90):.3f}"
+              f"                  {np.median(b):8.3f} / {np.percentile(b, 90):.3f}")
+
+
 if __name__ == "__main__":
+    if len(sys.argv) > 1 and sys.argv[1] == "pipeline":
+        pipeline_prior(int(sys.argv[2]) if len(sys.argv) > 2 else 3)
+        sys.exit()
     held_out(int(sys.argv[1]) if len(sys.argv) > 1 else 20)
     scenes(int(sys.argv[2]) if len(sys.argv) > 2 else 3)
     for part in (False, True):

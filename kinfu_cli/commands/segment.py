@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import click
@@ -10,7 +11,9 @@ import click
 from kinfu_cli.commands._options import claim_outputs, force_option
 from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.commands._up import parse_up
-from kinfu_cli.core.atomic import atomic_dir
+from kinfu_cli.core.atomic import atomic_dir, write_json
+from kinfu_cli.grasp.constraints import parse_cone
+from kinfu_cli.grasp.plan import GraspError, GraspOptions, plan_grasps
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.progress import progress
 from kinfu_cli.report.segment_plot import plot_segments
@@ -33,6 +36,32 @@ def _up(value: str) -> tuple[float, float, float] | str | None:
     if isinstance(v, str):
         return None if v == "none" else v
     return tuple(float(x) for x in v)  # type: ignore[return-value]
+
+
+def _grasp_options(hand: str, cones: tuple[str, ...], starts: int, no_superquadrics: bool) -> GraspOptions:
+    """--grasp's options, checked before any work (cone presets are re-made on the support plane found)."""
+    if no_superquadrics:
+        raise ConfigError("--grasp needs the superquadrics: drop --no-superquadrics")
+    try:
+        opts = GraspOptions(hand=hand, cones=[parse_cone(c, (0.0, 0.0, 1.0)) for c in cones], n_starts=starts)
+        opts.validate()
+    except ConfigError as exc:  # name the segment command's flags, not kinfu grasp's
+        flag = {"cones": "--grasp-cone", "n_starts": "--grasp-starts"}.get(exc.parameter, "--grasp")
+        raise ConfigError(f"{flag}: {exc.detail}") from None
+    return opts
+
+
+def _grasps(segments: dict, options: GraspOptions, cones: tuple[str, ...]) -> dict:
+    """grasps.json for the segments just found; no object to grasp gives an empty list and a warning."""
+    plane = segments.get("support_plane")
+    up = plane[:3] if plane is not None else (0.0, 0.0, 1.0)
+    options = replace(options, cones=[parse_cone(c, up) for c in cones])
+    try:
+        out = plan_grasps(segments, options).to_json()
+    except GraspError as exc:
+        return {"source": "segments.json", "grasps": [], "warnings": [f"no grasps: {exc}"]}
+    out["source"] = "segments.json"
+    return out
 
 
 @click.command("segment", short_help="Segments, saliency and superquadrics of a fused volume.")
@@ -83,6 +112,18 @@ def _up(value: str) -> tuple[float, float, float] | str | None:
               help="Single-fit RMS residual (m) above which --multi-sq splits.")
 @click.option("--msq-height", type=int, default=3, show_default=True, help="Superquadric tree height H.")
 @click.option("--msq-mu", type=float, default=0.03, show_default=True, help="Dimension difference mu (m).")
+@click.option("--shape-prior/--no-shape-prior", default=True, show_default=True,
+              help="Classify each segment (box / cylinder / sphere / generic) and fit its superquadric inside the "
+                   "class's exponent bounds (thesis eq. 7.11).")
+@click.option("--grasp", "grasp", is_flag=True,
+              help="Also write grasps.json beside segments.json: kinfu grasp on the segments (its defaults, and "
+                   "the --grasp-* options below).")
+@click.option("--grasp-hand", type=click.Choice(["right", "left", "both"]), default="both", show_default=True,
+              help="With --grasp: as kinfu grasp --hand.")
+@click.option("--grasp-cone", "grasp_cones", multiple=True,
+              help="With --grasp: as kinfu grasp --cone ('top', 'side' or 'AXIS:dx,dy,dz:deg'; repeatable).")
+@click.option("--grasp-starts", type=int, default=4, show_default=True,
+              help="With --grasp: optimiser starts per candidate, as kinfu grasp --starts.")
 @click.option("--seed", type=int, default=0, show_default=True, help="RANSAC / subsampling seed.")
 @click.option("--plot", is_flag=True, help="Also write segments.png and saliency.png.")
 @click.option("--viz", type=click.Path(dir_okay=False, path_type=Path), default=None,
@@ -94,19 +135,23 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
             normal_importance, method, color_importance, no_color, t_lccp, t_ff, concave_cut, plane_color_margin, adjacency_radius, concavity_tolerance, sanity_angle, min_segment_points,
             plane_distance, up, up_tolerance, isolation_threshold, no_superquadrics, sq_max_points,
             sq_exponent_bounds, sq_cost, multi_sq, msq_trigger, msq_height, msq_mu, seed, plot, as_json,
-            quiet, force, viz=None) -> None:
+            quiet, force, viz=None, shape_prior=True, grasp=False, grasp_hand="both", grasp_cones=(),
+            grasp_starts=4) -> None:
     """Segment the surface of VOLUME (a fusion volume.npz or a ternary.npz): support plane, supervoxels
     merged across convex boundaries (LCCP idea), saliency = isolation x roundness (thesis eq. 3.12) and a
     superquadric per segment (Vezzani ch. 7). Writes OUTDIR/segments.ply (coloured by segment),
     saliency.ply (coloured by saliency) and segments.json (per segment: id, point count, centroid,
-    oriented box, isolation, roundness, saliency, superquadric parameters and residual).
+    oriented box, isolation, roundness, saliency, superquadric parameters and residual, shape class);
+    with --grasp also grasps.json (kinfu grasp's output for these segments).
 
     \b
     Example:
       kinfu segment out/fuse/volume.npz -o out/segments --plot
       kinfu segment out/fuse/ternary.npz --isolation-threshold 0.01 --json --quiet
+      kinfu segment out/fuse/volume.npz -o out/segments --grasp --grasp-hand right --grasp-cone top
     """
     claim_outputs({"outdir": outdir, "viz": viz}, [volume], force)
+    grasp_options = _grasp_options(grasp_hand, grasp_cones, grasp_starts, no_superquadrics) if grasp else None
     params = SegmentationParams(seed_resolution=seed_resolution, spatial_importance=spatial_importance,
                                 normal_importance=normal_importance, adjacency_radius=adjacency_radius,
                                 method=method, color_importance=color_importance, t_lccp=t_lccp, t_ff=t_ff,
@@ -118,20 +163,28 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
                           superquadrics=not no_superquadrics, sq_max_points=sq_max_points,
                           sq_exponent_bounds=_pair(sq_exponent_bounds, "--sq-exponent-bounds"), sq_cost=sq_cost,
                           multi_sq=multi_sq, msq_trigger=msq_trigger, msq_height=msq_height, msq_mu=msq_mu,
-                          color=not no_color, segmentation=params)
+                          color=not no_color, segmentation=params, shape_prior=shape_prior)
     result: SegmentResult | None = None
-    for step in progress(["segment", "write"], total=2, desc="segment", quiet=quiet):
+    grasps: dict | None = None
+    steps = ["segment"] + (["grasp"] if grasp else []) + ["write"]
+    for step in progress(steps, total=len(steps), desc="segment", quiet=quiet):
         if step == "segment":
             result = segment_volume(volume, opts)
+        elif step == "grasp":
+            grasps = _grasps(result.to_json(), grasp_options, grasp_cones)
         else:
             with atomic_dir(outdir) as tmp:  # the folder appears whole or not at all
                 write_segment_outputs(result, tmp)
+                if grasps is not None:
+                    write_json(tmp / "grasps.json", grasps)
                 if plot:
                     plot_segments(result, tmp)
     if viz is not None:
         write_viewer(viz, segments=result)
     doc = result.to_json()
     print_warnings(doc)
+    if grasps is not None:
+        print_warnings(grasps)
     if as_json:
         click.echo(json.dumps(doc, indent=2, default=float))
     elif not quiet:
@@ -139,9 +192,13 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
         plane = " + support plane" if doc["support_plane"] is not None else ", no support plane"
         click.echo(f"{len(objs)} segments{plane} from {doc['points']} surface points "
                    f"in {result.timing['total']:.2f} s -> {outdir}/segments.json")
+        if grasps is not None:
+            ok = sum(g["converged"] for g in grasps["grasps"])
+            click.echo(f"grasps: {ok} of {len(grasps['grasps'])} objects -> {outdir}/grasps.json")
         for s in objs[:10]:
             sq = s["superquadric"]
             sq_txt = (f"sq size {[round(v, 3) for v in sq['size']]} e {[round(v, 2) for v in sq['exponents']]} "
-                      f"res {sq['residual'] * 1000:.1f} mm") if sq else "no sq"
+                      f"res {sq['residual'] * 1000:.1f} mm" + (f" {s['shape_class']}" if "shape_class" in s else "")
+                      ) if sq else "no sq"
             click.echo(f"  #{s['id']:<3} saliency {s['saliency']:.3f} (iso {s['isolation']:.2f} x round "
                        f"{s['roundness']:.2f}) {s['point_count']} pts  {sq_txt}")

@@ -6,7 +6,9 @@ Variables: the palm position p (3) and a rotation vector w (3) applied after a s
 to a radial distance; plain F - 1 explodes for box-like exponents). Inequalities (>= 0):
   support_plane   height of every L and V point above the plane (eq. 7.6 for all points, not only the lowest);
   cone:AXIS       hand axis . cone direction - cos(aperture) (eq. 7.10);
-  obstacle:K      sqrt(a1 a2 a3)_K sum_V (F_K(v)^e1 - 1): the palm and fingers on average outside part K (eq. 8.2);
+  obstacle:K      sqrt(a1 a2 a3)_K (F_K(v_i)^e1 - 1) for each of the V points v_i: every palm and finger point
+                  outside part K (eq. 8.2 sums over the V points, which lets one point sit inside the part
+                  while the others are far out; [ours] one constraint per point);
   facing          z_h . (target centre - p): the palm faces the target ([ours]: with L points on a half
                   ellipsoid the mirror pose, object behind the palm, is also a local minimum);
 and the workspace box as bounds on p (eq. 7.7). A few starts around the target are solved (the thesis'
@@ -48,7 +50,7 @@ class PartGrasp:
     overlap_rms: float  # RMS radial distance (m) of the L points to the target surface
     constraints: dict[str, float]  # name -> smallest value (>= 0 satisfied)
     active: list[str]  # constraints within CONSTRAINT_TOL of their bound
-    obstacle_distance: float  # eq. 8.11: sum over obstacles of their constraint values (0 without obstacles)
+    obstacle_distance: float  # eq. 8.11: sum over obstacles k and V points of sqrt(a1 a2 a3)_k (F_k^e1 - 1)
     hand: HandModel  # after the lifting rule
     message: str
     seconds: float
@@ -76,7 +78,8 @@ class _Problem:
         self.vol = float(np.sqrt(np.prod(target.size)))
         self.R0 = np.eye(3)
         self.names = (["support_plane"] * len(self.all_points) if cons.plane is not None else []) + \
-            [f"cone:{c.axis}" for c in cons.cones] + [f"obstacle:{k}" for k in range(len(obstacles))] + ["facing"]
+            [f"cone:{c.axis}" for c in cons.cones] + \
+            [f"obstacle:{k}" for k in range(len(obstacles)) for _ in range(len(self.V))] + ["facing"]
         self._key: bytes | None = None
         self._val: tuple | None = None
 
@@ -100,8 +103,7 @@ class _Problem:
         if self.obstacles:
             Vw = W[:, nL:]
             for ob in self.obstacles:
-                val = np.sqrt(np.prod(ob.size)) * _f_pow(Vw.reshape(-1, 3), ob).reshape(m, -1).sum(axis=1)
-                cols.append(val[:, None])
+                cols.append(np.sqrt(np.prod(ob.size)) * _f_pow(Vw.reshape(-1, 3), ob).reshape(m, -1))
         cols.append(np.einsum("mi,mi->m", R[:, :, 2], self.target.center - p)[:, None])
         return cost, np.concatenate(cols, axis=1)
 
@@ -245,7 +247,8 @@ def grasp_part(target: Superquadric, hand: HandModel, cons: GraspConstraints, ob
     active = sorted(k for k, v in values.items() if abs(v) <= CONSTRAINT_TOL * 10 and not k.startswith("facing"))
     Lw = p + prob.L @ R.T
     overlap = float(np.sqrt(np.mean(target.radial_distance(Lw) ** 2)))
-    obst = float(sum(values[f"obstacle:{k}"] for k in range(len(obstacles))))
+    Vw = p + prob.V @ R.T
+    obst = float(sum(np.sqrt(np.prod(ob.size)) * _f_pow(Vw, ob).sum() for ob in obstacles))
     return PartGrasp(R, p, ok, float(scaled * len(prob.L) * prob.vol ** 2), overlap, values, active, obst,
                      hand_used, str(message), time.perf_counter() - t0, iters, len(starts), viol,
                      {"cpu_seconds": time.process_time() - c0})

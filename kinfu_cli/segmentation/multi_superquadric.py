@@ -46,6 +46,7 @@ class SQNode:
     splitting: bool = False
     index: np.ndarray | None = None  # indices of `points` in the segment's cloud
     decided: bool = False  # set by a grandchild's uncle test (Alg. 5 lines 14-17): the own test is skipped
+    in_plane: np.ndarray | None = None  # (3, 2): the cut plane's in-plane axes (the other two principal axes)
 
     def nodes(self) -> list["SQNode"]:
         """This node and all below it, depth first."""
@@ -94,13 +95,47 @@ def contiguous_axis(a: SuperquadricFit, b: SuperquadricFit, perm: tuple[int, ...
     return i if abs(abs(along[i]) - reach) < max(mu, 0.25 * reach) else -1
 
 
-def different_dimensions(a: SuperquadricFit, b: SuperquadricFit, mu: float) -> bool:
+def plane_axis(a: SuperquadricFit, perm: tuple[int, ...], normal: np.ndarray) -> int:
+    """The pair index i whose axis of a lies within CONTIGUOUS_DEG of the cut plane's normal, or -1."""
+    cos = np.abs(a.superquadric.rotation.T @ (np.asarray(normal, dtype=np.float64) / np.linalg.norm(normal)))
+    i = int(np.argmax(cos))
+    return i if cos[i] >= np.cos(np.radians(CONTIGUOUS_DEG)) else -1
+
+
+def cut_extents(points: np.ndarray, in_plane: np.ndarray) -> np.ndarray:
+    """Full extents (2,) m of `points` along a cut plane's two in-plane axes (columns of `in_plane`, (3, 2)),
+    robust 1-99 % range."""
+    lo, hi = np.percentile(np.asarray(points, dtype=np.float64) @ in_plane, [1, 99], axis=0)
+    return hi - lo
+
+
+def different_dimensions(a: SuperquadricFit, b: SuperquadricFit, mu: float, normal: np.ndarray | None = None,
+                         extents: tuple[np.ndarray, np.ndarray] | None = None) -> bool:
     """Thesis differentDimensions: pair the parallel axes, skip the contiguous pair, and report whether any
-    other pair's dimensions (full lengths, m) differ by `mu` or more."""
+    other pair's dimensions (full lengths, m) differ by `mu` or more.
+
+    normal: the plane that cut a from b in the tree (siblings: their parent's plane; a nephew and its uncle:
+    the grandfather's). Pieces on both sides of a cut are contiguous across it by construction, so the pair
+    along the normal is the contiguous one ([ours]: the centre-distance test, used without a normal, fails
+    exactly when it matters, on the coarse, overlapping fit of a region that holds two parts).
+    extents: the two pieces' point extents along the cut plane (`cut_extents`); the superquadrics then
+    differ only when these differ by mu too ([ours]: the fit of an open shell, a piece of a cylinder wall,
+    can come out as a thin plate or a fat block while the points on both sides of the cut span the same)."""
     perm = paired_axes(a, b)
-    skip = contiguous_axis(a, b, perm, mu)
+    skip = contiguous_axis(a, b, perm, mu) if normal is None else plane_axis(a, perm, normal)
     da, db = 2 * a.superquadric.size, 2 * b.superquadric.size
-    return any(abs(da[i] - db[perm[i]]) >= mu for i in range(3) if i != skip)
+    fits_differ = any(abs(da[i] - db[perm[i]]) >= mu for i in range(3) if i != skip)
+    if extents is None or not fits_differ:
+        return fits_differ
+    return bool(np.any(np.abs(np.asarray(extents[0]) - np.asarray(extents[1])) >= mu))
+
+
+def _extents(a: "SQNode", b: "SQNode", cut: "SQNode") -> tuple[np.ndarray, np.ndarray] | None:
+    """Both pieces' extents along the plane of `cut` (their parent, or the nephew's grandfather); None for a
+    tree built by hand without points or in-plane axes."""
+    if cut.in_plane is None or not len(a.points) or not len(b.points):
+        return None
+    return cut_extents(a.points, cut.in_plane), cut_extents(b.points, cut.in_plane)
 
 
 # -------------------------------------------------------------------------------------------- Alg. 4
@@ -133,6 +168,7 @@ def _build(pts: np.ndarray, index: np.ndarray, depth: int, height: int, min_poin
     if side.sum() < min_points or (~side).sum() < min_points:
         return node
     node.plane = (bary, normal)
+    node.in_plane = v[:, :2]
     node.children = [_build(pts, index[~side], depth + 1, height, min_points, fit_kwargs),
                      _build(pts, index[side], depth + 1, height, min_points, fit_kwargs)]
     return node
@@ -180,7 +216,7 @@ def select_splitting_planes(root: SQNode, mu: float) -> None:
             if len(node.children) != 2 or any(c.fit is None for c in node.children):
                 continue
             left, right = node.children
-            if not different_dimensions(left.fit, right.fit, mu):
+            if not different_dimensions(left.fit, right.fit, mu, node.plane[1], _extents(left, right, node)):
                 continue
             if not node.decided:
                 node.splitting = True
@@ -190,7 +226,8 @@ def select_splitting_planes(root: SQNode, mu: float) -> None:
                 continue
             nephew = min((left, right), key=lambda c: np.linalg.norm(
                 c.fit.superquadric.center - uncle.fit.superquadric.center))
-            votes.setdefault(id(parent), []).append(different_dimensions(nephew.fit, uncle.fit, mu))
+            votes.setdefault(id(parent), []).append(different_dimensions(
+                nephew.fit, uncle.fit, mu, parent.plane[1], _extents(nephew, uncle, parent)))
 
 
 # -------------------------------------------------------------------------------------------- Alg. 6

@@ -20,6 +20,7 @@ from kinfu_cli.core.grid import TernaryGrid, check_up, read_ternary
 from kinfu_cli.fusion.volume import TernaryVolume, load_volume
 from kinfu_cli.segmentation.multi_superquadric import MultiSuperquadric, fit_multi_superquadric
 from kinfu_cli.segmentation.saliency import SegmentSaliency, oriented_box, segment_saliency
+from kinfu_cli.segmentation.shape_prior import classify_shape, exponent_bounds
 from kinfu_cli.segmentation.segments import PLANE_LABEL, Segmentation, SegmentationParams, segment_cloud
 from kinfu_cli.segmentation.superquadric import SegmentError, SuperquadricFit, fit_superquadric
 from kinfu_cli.segmentation.surface import SurfaceCloud, surface_from_volume
@@ -37,6 +38,7 @@ class SegmentOptions:
     sq_exponent_bounds: tuple[float, float] = (0.1, 1.9)
     sq_cost: str = "volume"
     sq_min_points: int = 30
+    shape_prior: bool = True  # thesis 7.3: classify each segment, fit inside its class's eq. 7.11 exponent bounds
     multi_sq: bool = False  # thesis ch. 8 split for segments whose single fit is poor
     msq_trigger: float = 0.005  # single-superquadric RMS residual (m) above which the split is tried
     msq_height: int = 3
@@ -79,6 +81,7 @@ class SegmentResult:
     multi: dict[int, MultiSuperquadric] = field(default_factory=dict)  # with options.multi_sq
     up_source: str = ""  # where the support plane's expected normal came from (see `resolve_up`)
     warnings: list[str] = field(default_factory=list)  # an empty result's structural reason, with counts
+    shape_classes: dict[int, ShapeClass] = field(default_factory=dict)  # with options.shape_prior
 
     def to_json(self) -> dict:
         segs = []
@@ -93,6 +96,7 @@ class SegmentResult:
                 "isolation": s.isolation, "roundness": s.roundness, "saliency": s.saliency,
                 "superquadric": sq.to_json() if isinstance(sq, SuperquadricFit) else None,
                 **({"superquadric_error": sq} if isinstance(sq, str) else {}),
+                **(self.shape_classes[s.id].to_json() if s.id in self.shape_classes else {}),
                 **({"multi_superquadric": self.multi[s.id].to_json()} if s.id in self.multi else {}),
             })
         if len(plane_pts):
@@ -109,20 +113,78 @@ class SegmentResult:
                 "stats": seg.stats, "timing_s": self.timing, "options": asdict(self.options)}
 
 
+PRIOR_RESIDUAL_SLACK = 0.25  # a class fit this much worse (RMS) than the free fit is contradicted by the points
+
+
+@dataclass
+class ShapeClass:
+    """The shape prior's verdict on one segment: its class, the class probabilities, the exponent bounds
+    the fit used (eq. 7.11, within the sq_exponent_bounds option) and whether the class fit was rejected
+    (its RMS residual more than PRIOR_RESIDUAL_SLACK above the free fit's: the free fit is kept)."""
+
+    name: str
+    probabilities: dict[str, float]
+    exponent_bounds: tuple[tuple[float, float], tuple[float, float]]
+    rejected: bool = False
+
+    def to_json(self) -> dict:
+        return {"shape_class": self.name, "shape_class_probabilities": self.probabilities,
+                "shape_prior_exponent_bounds": [list(b) for b in self.exponent_bounds],
+                "shape_prior_rejected": self.rejected}
+
+
+def prior_bounds(shape_class: str, option_bounds: tuple[float, float]
+                 ) -> tuple[tuple[float, float], tuple[float, float]]:
+    """Eq. 7.11's bounds of the class, narrowed to the user's (lo, hi); where they do not overlap the user's
+    bounds win (the option is the user's explicit choice)."""
+    lo, hi = option_bounds
+    out = []
+    for clo, chi in exponent_bounds(shape_class):
+        a, b = max(lo, clo), min(hi, chi)
+        out.append((a, b) if b - a > 1e-3 else (lo, hi))
+    return tuple(out)  # type: ignore[return-value]
+
+
+def _fit_one(points: np.ndarray, options: SegmentOptions) -> tuple[SuperquadricFit, ShapeClass | None]:
+    """The segment's superquadric: a free fit, then (shape prior on) the class from it and, for a class
+    other than generic whose bounds exclude the free exponents, a re-fit inside the class's bounds (kept
+    unless it fits clearly worse, see ShapeClass)."""
+    kw = {"max_points": options.sq_max_points, "cost": options.sq_cost}
+    free = fit_superquadric(points, exponent_bounds=options.sq_exponent_bounds, **kw)
+    if not options.shape_prior:
+        return free, None
+    name, proba = classify_shape(points, free)
+    bounds = prior_bounds(name, options.sq_exponent_bounds)
+    cls = ShapeClass(name, proba, bounds)
+    e = free.superquadric.exponents
+    if name == "generic" or all(lo <= v <= hi for v, (lo, hi) in zip(e, bounds)):
+        return free, cls  # the free optimum already lies inside the class's bounds
+    fit = fit_superquadric(points, exponent_bounds=bounds, **kw)
+    if fit.residual > (1 + PRIOR_RESIDUAL_SLACK) * free.residual:
+        cls.rejected = True
+        return free, cls
+    return fit, cls
+
+
 def _fit_superquadrics(seg: Segmentation, saliency: list[SegmentSaliency], options: SegmentOptions
-                       ) -> dict[int, SuperquadricFit | str]:
-    """A superquadric per segment, or why there is none (too few points, degenerate)."""
+                       ) -> tuple[dict[int, SuperquadricFit | str], dict[int, ShapeClass]]:
+    """A superquadric per segment, or why there is none (too few points, degenerate), and the shape
+    prior's class of each fitted segment."""
     fits: dict[int, SuperquadricFit | str] = {}
+    classes: dict[int, ShapeClass] = {}
     for s in saliency:
         if s.n_points < options.sq_min_points:
             fits[s.id] = f"{s.n_points} points (< sq_min_points {options.sq_min_points})"
             continue
         try:
-            fits[s.id] = fit_superquadric(seg.points[seg.labels == s.id], max_points=options.sq_max_points,
-                                          exponent_bounds=options.sq_exponent_bounds, cost=options.sq_cost)
+            fit, cls = _fit_one(seg.points[seg.labels == s.id], options)
         except SegmentError as exc:
             fits[s.id] = str(exc)
-    return fits
+            continue
+        fits[s.id] = fit
+        if cls is not None:
+            classes[s.id] = cls
+    return fits, classes
 
 
 def _fit_multi_superquadrics(seg: Segmentation, fits: dict[int, SuperquadricFit | str], options: SegmentOptions
@@ -202,7 +264,7 @@ def analyse_cloud(points: np.ndarray, normals: np.ndarray, options: SegmentOptio
     sal = segment_saliency(seg.points, seg.labels, b_th=options.isolation_threshold, exclude=(-1, PLANE_LABEL))
     timing["saliency"] = time.perf_counter() - t
     t = time.perf_counter()
-    fits = _fit_superquadrics(seg, sal, options) if options.superquadrics else {}
+    fits, classes = _fit_superquadrics(seg, sal, options) if options.superquadrics else ({}, {})
     timing["superquadrics"] = time.perf_counter() - t
     multi = {}
     if options.superquadrics and options.multi_sq:
@@ -210,7 +272,7 @@ def analyse_cloud(points: np.ndarray, normals: np.ndarray, options: SegmentOptio
         multi = _fit_multi_superquadrics(seg, fits, options)
         timing["multi_superquadrics"] = time.perf_counter() - t
     return SegmentResult(SurfaceCloud(seg.points, seg.normals, seg.colors), seg, sal, fits, timing, options, multi,
-                         up_source, support_plane_warnings(seg, up_source) + color_warnings(seg, options))
+                         up_source, support_plane_warnings(seg, up_source) + color_warnings(seg, options), classes)
 
 
 def analyse_volume(volume: TernaryVolume | TernaryGrid, options: SegmentOptions | None = None) -> SegmentResult:

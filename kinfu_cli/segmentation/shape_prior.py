@@ -123,7 +123,8 @@ def classify_shape(points: np.ndarray, fit: SuperquadricFit | None = None) -> tu
 
 def fit_with_prior(points: np.ndarray, **fit_kwargs) -> tuple[SuperquadricFit, str]:
     """Classify from a free fit, then re-fit inside the class's eq. 7.11 exponent bounds ("generic" keeps the
-    free fit). Returns the fit and the class."""
+    free fit). Returns the fit and the class. `kinfu segment` uses `segmentation.pipeline._fit_one`, which also
+    keeps the free fit when it already lies inside the bounds or fits clearly better."""
     free = fit_superquadric(points, **fit_kwargs)
     cls, _ = classify_shape(points, free)
     if cls == "generic":

@@ -85,13 +85,19 @@ def test_box_on_its_side_or_upright_changes_the_grasp():
     assert gl.best.position[2] < gu.best.position[2] - 0.02
 
 
-def test_multi_part_grasp_keeps_palm_and_fingers_outside_the_other_part():
-    for name, parts in composite_objects(np.random.default_rng(1)):
-        o, opts, ws = _grasp(parts)
-        chk = check_grasp(o, PLANE, opts, ws)
-        assert chk["satisfied"], name
-        assert chk["obstacle_constraint_min"] >= -CONSTRAINT_TOL
-        assert len(o.candidates) == 2  # one per target part
+@pytest.mark.parametrize("cone", [None, "top", "side"])
+def test_multi_part_grasp_keeps_palm_and_fingers_outside_the_other_part(cone):
+    """Eq. 8.2 per hand point: every one of the V palm and finger points is outside every other part, under
+    each cone preset (with the constraint on their sum, 2 of 15 points ended inside under the top preset)."""
+    cones = [] if cone is None else [preset_cone(cone, UP)]
+    for seed in (1, 2):
+        for name, parts in composite_objects(np.random.default_rng(seed)):
+            o, opts, ws = _grasp(parts, cones)
+            chk = check_grasp(o, PLANE, opts, ws)
+            assert chk["satisfied"], (name, cone)
+            assert chk["obstacle_constraint_min"] >= -CONSTRAINT_TOL
+            assert chk["hand_points_inside_obstacles"] == 0 and chk["obstacle_penetration_m"] == 0.0
+            assert len(o.candidates) == 2  # one per target part
 
 
 def test_infeasible_cones_and_workspace_are_refused():

@@ -63,3 +63,24 @@ def test_per_exponent_bounds_in_the_fit():
 def test_too_few_points_is_an_error_naming_the_points():
     with pytest.raises(SegmentError, match="points"):
         sp.classify_shape(np.random.default_rng(0).normal(size=(12, 3)))
+
+
+def test_segment_pipeline_uses_the_prior_and_reports_the_class():
+    """`kinfu segment`'s fit (`_fit_one`): the class is reported, the exponents stay in its eq. 7.11 bounds
+    narrowed to the option's, and the prior off gives the free fit and no class."""
+    from kinfu_cli.segmentation.pipeline import SegmentOptions, _fit_one, prior_bounds
+
+    assert prior_bounds("box", (0.1, 1.9)) == ((0.1, 0.5), (0.1, 0.5))
+    assert prior_bounds("sphere", (0.2, 0.8)) == ((0.6, 0.8), (0.6, 0.8))
+    assert prior_bounds("box", (1.0, 1.9)) == ((1.0, 1.9), (1.0, 1.9))  # no overlap: the option wins
+    rng = np.random.default_rng(11)
+    for kind in ("box", "cylinder", "sphere"):
+        pts = primitive_cloud(kind, rng, partial=True)
+        fit, cls = _fit_one(pts, SegmentOptions())
+        assert cls.name == kind and set(cls.to_json()) >= {"shape_class", "shape_class_probabilities"}
+        if not cls.rejected:
+            (lo1, hi1), (lo2, hi2) = cls.exponent_bounds
+            e1, e2 = fit.superquadric.exponents
+            assert lo1 - 1e-9 <= e1 <= hi1 + 1e-9 and lo2 - 1e-9 <= e2 <= hi2 + 1e-9
+        free, none = _fit_one(pts, SegmentOptions(shape_prior=False))
+        assert none is None and fit.residual <= 1.25 * free.residual + 1e-12
