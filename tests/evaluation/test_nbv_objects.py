@@ -35,8 +35,10 @@ def test_object_driven_views_cast_3_9x_fewer_candidates_for_the_same_reduction(e
         # no view is taken twice (the planner skips attempted viewpoints)
         p = np.array(r["poses"])
         assert all(not_attempted(p[i + 1:], p[i:i + 1]).all() for i in range(len(p) - 1))
-    # the object strategy does not stall: 3 views reveal most of what is unknown near the objects
-    assert obj["unknown_near"][-1] < 0.25 * obj["unknown_near"][0]
+    # the object strategy does not stall: 3 views reveal most of what is unknown near the objects (79.7k -> 20.4k
+    # since table-level fragments go to the support before small segments merge; 16.9k before, when a fragment
+    # of the table's edge could join the object beside it and move its contours)
+    assert obj["unknown_near"][-1] < 0.3 * obj["unknown_near"][0]
     assert obj["unknown_near"][-1] <= 1.1 * std["unknown_near"][-1]
     eq = doc["equal_reduction"]
     # with the thesis' W_th = 5 (unknown = seen fewer than 5 times, for planners and measure alike) the standard
