@@ -311,6 +311,7 @@ def _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, n
     lo = np.float32(0.0001)
     wlim = np.float32(width) - lo
     hlim = np.float32(height) - lo
+    w32 = np.int32(width)
     for k in range(B3):
         ix = k >> 6
         iy = (k >> 3) & 7
@@ -326,7 +327,7 @@ def _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, n
         vf = yc * fy * rz + cy + half
         ok = ((zc > zero) & (uf >= lo) & (uf < wlim) & (vf >= lo) & (vf < hlim)
               & (ix < nx) & (iy < ny) & (iz < nz))
-        p = np.int32(vf) * width + np.int32(uf)
+        p = np.int32(vf) * w32 + np.int32(uf)
         pix[k] = p if ok else np.int32(-1)
         zz[k] = zc
     for k in range(B3):
@@ -334,20 +335,23 @@ def _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, n
         sdf[k] = (depth_rl[p, 0] - zz[k]) * depth_rl[p, 1] if p >= 0 else -np.inf
     ntrunc = np.float32(-trunc)
     inv_trunc = np.float32(1.0 / trunc)
-    any_color = False
+    n_color = 0
     for k in range(B3):
         s = sdf[k]
         ok = s > ntrunc
         t = min(one, s * inv_trunc)
         sdf[k] = t
-        w0 = np.int32(pool_w[i, k])
-        v0 = np.float32(pool_v[i, k])
-        # v' = (v w + t) / (w + 1) in int16 units (v * V_SCALE); w' = min(w + 1, M_w)
-        vn = np.int16(np.floor((v0 * np.float32(w0) + t * scale) / np.float32(w0 + 1) + half))
-        pool_v[i, k] = vn if ok else pool_v[i, k]
-        pool_w[i, k] = np.uint8(min(w0 + 1, mw)) if ok else pool_w[i, k]
-        any_color = any_color | (ok & (abs(t) < color_band))
-    if not (has_color and any_color):
+        vold = pool_v[i, k]
+        wold = pool_w[i, k]
+        w0 = np.int32(wold)
+        # v' = (v w + t) / (w + 1) in int16 units (v * V_SCALE); w' = min(w + 1, M_w). Both computed for every
+        # voxel and selected, so that the loop has no branch and no conditional load (it vectorises)
+        vn = np.int16(np.floor((np.float32(vold) * np.float32(w0) + t * scale) / np.float32(w0 + 1) + half))
+        wn = np.uint8(min(w0 + 1, mw))
+        pool_v[i, k] = vn if ok else vold
+        pool_w[i, k] = wn if ok else wold
+        n_color += np.int32(ok & (abs(t) < color_band))
+    if not (has_color and n_color > 0):
         return
     if pool_hn is not None:  # None (the mean path): numba prunes this branch at compile time
         for k in range(B3):
