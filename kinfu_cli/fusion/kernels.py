@@ -312,10 +312,14 @@ def _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, n
     wlim = np.float32(width) - lo
     hlim = np.float32(height) - lo
     w32 = np.int32(width)
+    nx32 = np.int32(nx)
+    ny32 = np.int32(ny)
+    nz32 = np.int32(nz)
     for k in range(B3):
-        ix = k >> 6
-        iy = (k >> 3) & 7
-        iz = k & 7
+        k32 = np.int32(k)
+        ix = k32 >> np.int32(6)
+        iy = (k32 >> np.int32(3)) & np.int32(7)
+        iz = k32 & np.int32(7)
         lx = np.float32(ix)
         ly = np.float32(iy)
         lz = np.float32(iz)
@@ -326,7 +330,7 @@ def _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, n
         uf = xc * fx * rz + cx + half
         vf = yc * fy * rz + cy + half
         ok = ((zc > zero) & (uf >= lo) & (uf < wlim) & (vf >= lo) & (vf < hlim)
-              & (ix < nx) & (iy < ny) & (iz < nz))
+              & (ix < nx32) & (iy < ny32) & (iz < nz32))
         p = np.int32(vf) * w32 + np.int32(uf)
         pix[k] = p if ok else np.int32(-1)
         zz[k] = zc
