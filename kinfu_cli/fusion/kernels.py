@@ -177,6 +177,8 @@ def _classify_box(lo0, lo1, lo2, n, vs, T_cw, fx, fy, cx, cy, width, height, tru
 
 
 SUPER = 4  # classify_blocks looks at 4^3-block super-blocks first
+MID = 2  # then at the 2^3-block cubes of a super-block that is neither SKIP nor CARVE
+MID_PER_SUPER = (SUPER // MID) ** 3
 
 
 @njit(cache=True, error_model="numpy")
@@ -213,7 +215,8 @@ def classify_blocks(nb, origin, vs, T_cw, fx, fy, cx, cy, width, height,
 
     Only blocks in [b_lo, b_hi) (the viewing frustum's bounding box, in blocks) are looked at, a super-block of
     SUPER^3 blocks at a time: most super-blocks lie behind the surfaces or outside the image (SKIP) or wholly
-    in free space (CARVE) and settle all their blocks with one test.
+    in free space (CARVE) and settle all their blocks with one test; the others are looked at by MID^3-block
+    cubes before block by block (a cube near a surface is often wholly behind or in front of it).
     """
     nbx, nby, nbz = nb[0], nb[1], nb[2]
     cls = np.zeros(nbx * nby * nbz, dtype=np.uint8)
@@ -244,15 +247,26 @@ def classify_blocks(nb, origin, vs, T_cw, fx, fy, cx, cy, width, height,
                         inv_sat, planes, far)
         if sc == SKIP:
             continue
-        for bx in range(max(bx0, b_lo[0]), min(bx0 + SUPER, b_hi[0])):
-            for by in range(max(by0, b_lo[1]), min(by0 + SUPER, b_hi[1])):
-                for bz in range(max(bz0, b_lo[2]), min(bz0 + SUPER, b_hi[2])):
-                    if sc == CARVE:
-                        c = CARVE
-                    else:
-                        c = _box_class(bx, by, bz, 1, origin, vs, T_cw, fx, fy, cx, cy, width, height, trunc,
-                                       pm, inv_sat, planes, far)
-                    cls[(bx * nby + by) * nbz + bz] = VOXEL if c == CARVE_VALID else c
+        for m in range(MID_PER_SUPER):  # the super-block's 2^3-block cubes, then their blocks
+            mx0 = bx0 + MID * (m >> 2)
+            my0 = by0 + MID * ((m >> 1) & 1)
+            mz0 = bz0 + MID * (m & 1)
+            if sc == CARVE:
+                mc = CARVE
+            else:
+                mc = _box_class(mx0, my0, mz0, MID, origin, vs, T_cw, fx, fy, cx, cy, width, height, trunc, pm,
+                                inv_sat, planes, far)
+                if mc == SKIP:
+                    continue
+            for bx in range(max(mx0, b_lo[0]), min(mx0 + MID, b_hi[0])):
+                for by in range(max(my0, b_lo[1]), min(my0 + MID, b_hi[1])):
+                    for bz in range(max(mz0, b_lo[2]), min(mz0 + MID, b_hi[2])):
+                        if mc == CARVE:
+                            c = CARVE
+                        else:
+                            c = _box_class(bx, by, bz, 1, origin, vs, T_cw, fx, fy, cx, cy, width, height, trunc,
+                                           pm, inv_sat, planes, far)
+                        cls[(bx * nby + by) * nbz + bz] = VOXEL if c == CARVE_VALID else c
     return cls
 
 
