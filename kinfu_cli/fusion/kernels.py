@@ -353,7 +353,8 @@ def _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, n
         sdf[k] = (depth_rl[p, 0] - zz[k]) * depth_rl[p, 1] if p >= 0 else -np.inf
     ntrunc = np.float32(-trunc)
     inv_trunc = np.float32(1.0 / trunc)
-    n_color = 0
+    n_color = np.int32(0)
+    i1 = np.int32(1)
     for k in range(B3):
         s = sdf[k]
         ok = s > ntrunc
@@ -364,8 +365,8 @@ def _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, n
         w0 = np.int32(wold)
         # v' = (v w + t) / (w + 1) in int16 units (v * V_SCALE); w' = min(w + 1, M_w). Both computed for every
         # voxel and selected, so that the loop has no branch and no conditional load (it vectorises)
-        vn = np.int16(np.floor((np.float32(vold) * np.float32(w0) + t * scale) / np.float32(w0 + 1) + half))
-        wn = np.uint8(min(w0 + 1, mw))
+        vn = np.int16(np.floor((np.float32(vold) * np.float32(w0) + t * scale) / np.float32(w0 + i1) + half))
+        wn = np.uint8(min(w0 + i1, mw))
         pool_v[i, k] = vn if ok else vold
         pool_w[i, k] = wn if ok else wold
         n_color += np.int32(ok & (abs(t) < color_band))
