@@ -270,17 +270,25 @@ def classify_blocks(nb, origin, vs, T_cw, fx, fy, cx, cy, width, height,
     return cls
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def allocate_blocks(cls, block_idx_flat, block_w_flat, pool_v, pool_w, pool_c, n_used):
-    """Give per-voxel storage to VOXEL blocks that lack it (initialised from their uniform state)."""
+    """Give per-voxel storage to VOXEL blocks that lack it (initialised from their uniform state). Rows are
+    numbered serially in block order, then filled in parallel (the first frame fills tens of thousands)."""
     has_color = pool_c.shape[0] > 0
+    n_new = 0
     for b in range(cls.shape[0]):
-        if cls[b] != VOXEL or block_idx_flat[b] >= 0:
-            continue
-        i = n_used
-        n_used += 1
-        block_idx_flat[b] = i
-        bw = block_w_flat[b]
+        if cls[b] == VOXEL and block_idx_flat[b] < 0:
+            n_new += 1
+    new_b = np.empty(n_new, dtype=np.int64)
+    j = 0
+    for b in range(cls.shape[0]):
+        if cls[b] == VOXEL and block_idx_flat[b] < 0:
+            block_idx_flat[b] = n_used + j
+            new_b[j] = b
+            j += 1
+    for j in prange(n_new):
+        i = n_used + j
+        bw = block_w_flat[new_b[j]]
         fill = np.int16(V_SCALE) if bw > 0 else np.int16(0)
         for k in range(B3):
             pool_v[i, k] = fill
@@ -289,7 +297,7 @@ def allocate_blocks(cls, block_idx_flat, block_w_flat, pool_v, pool_w, pool_c, n
                 pool_c[i, k, 0] = 0
                 pool_c[i, k, 1] = 0
                 pool_c[i, k, 2] = 0
-    return n_used
+    return n_used + n_new
 
 
 @njit(cache=True, error_model="numpy")
