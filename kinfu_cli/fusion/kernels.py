@@ -177,6 +177,8 @@ def _classify_box(lo0, lo1, lo2, n, vs, T_cw, fx, fy, cx, cy, width, height, tru
 
 
 SUPER = 4  # classify_blocks looks at 4^3-block super-blocks first
+MID = 2  # then at the 2^3-block cubes of a super-block that is neither SKIP nor CARVE
+MID_PER_SUPER = (SUPER // MID) ** 3
 
 
 @njit(cache=True, error_model="numpy")
@@ -213,7 +215,8 @@ def classify_blocks(nb, origin, vs, T_cw, fx, fy, cx, cy, width, height,
 
     Only blocks in [b_lo, b_hi) (the viewing frustum's bounding box, in blocks) are looked at, a super-block of
     SUPER^3 blocks at a time: most super-blocks lie behind the surfaces or outside the image (SKIP) or wholly
-    in free space (CARVE) and settle all their blocks with one test.
+    in free space (CARVE) and settle all their blocks with one test; the others are looked at by MID^3-block
+    cubes before block by block (a cube near a surface is often wholly behind or in front of it).
     """
     nbx, nby, nbz = nb[0], nb[1], nb[2]
     cls = np.zeros(nbx * nby * nbz, dtype=np.uint8)
@@ -244,29 +247,48 @@ def classify_blocks(nb, origin, vs, T_cw, fx, fy, cx, cy, width, height,
                         inv_sat, planes, far)
         if sc == SKIP:
             continue
-        for bx in range(max(bx0, b_lo[0]), min(bx0 + SUPER, b_hi[0])):
-            for by in range(max(by0, b_lo[1]), min(by0 + SUPER, b_hi[1])):
-                for bz in range(max(bz0, b_lo[2]), min(bz0 + SUPER, b_hi[2])):
-                    if sc == CARVE:
-                        c = CARVE
-                    else:
-                        c = _box_class(bx, by, bz, 1, origin, vs, T_cw, fx, fy, cx, cy, width, height, trunc,
-                                       pm, inv_sat, planes, far)
-                    cls[(bx * nby + by) * nbz + bz] = VOXEL if c == CARVE_VALID else c
+        for m in range(MID_PER_SUPER):  # the super-block's 2^3-block cubes, then their blocks
+            mx0 = bx0 + MID * (m >> 2)
+            my0 = by0 + MID * ((m >> 1) & 1)
+            mz0 = bz0 + MID * (m & 1)
+            if sc == CARVE:
+                mc = CARVE
+            else:
+                mc = _box_class(mx0, my0, mz0, MID, origin, vs, T_cw, fx, fy, cx, cy, width, height, trunc, pm,
+                                inv_sat, planes, far)
+                if mc == SKIP:
+                    continue
+            for bx in range(max(mx0, b_lo[0]), min(mx0 + MID, b_hi[0])):
+                for by in range(max(my0, b_lo[1]), min(my0 + MID, b_hi[1])):
+                    for bz in range(max(mz0, b_lo[2]), min(mz0 + MID, b_hi[2])):
+                        if mc == CARVE:
+                            c = CARVE
+                        else:
+                            c = _box_class(bx, by, bz, 1, origin, vs, T_cw, fx, fy, cx, cy, width, height, trunc,
+                                           pm, inv_sat, planes, far)
+                        cls[(bx * nby + by) * nbz + bz] = VOXEL if c == CARVE_VALID else c
     return cls
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def allocate_blocks(cls, block_idx_flat, block_w_flat, pool_v, pool_w, pool_c, n_used):
-    """Give per-voxel storage to VOXEL blocks that lack it (initialised from their uniform state)."""
+    """Give per-voxel storage to VOXEL blocks that lack it (initialised from their uniform state). Rows are
+    numbered serially in block order, then filled in parallel (the first frame fills tens of thousands)."""
     has_color = pool_c.shape[0] > 0
+    n_new = 0
     for b in range(cls.shape[0]):
-        if cls[b] != VOXEL or block_idx_flat[b] >= 0:
-            continue
-        i = n_used
-        n_used += 1
-        block_idx_flat[b] = i
-        bw = block_w_flat[b]
+        if cls[b] == VOXEL and block_idx_flat[b] < 0:
+            n_new += 1
+    new_b = np.empty(n_new, dtype=np.int64)
+    j = 0
+    for b in range(cls.shape[0]):
+        if cls[b] == VOXEL and block_idx_flat[b] < 0:
+            block_idx_flat[b] = n_used + j
+            new_b[j] = b
+            j += 1
+    for j in prange(n_new):
+        i = n_used + j
+        bw = block_w_flat[new_b[j]]
         fill = np.int16(V_SCALE) if bw > 0 else np.int16(0)
         for k in range(B3):
             pool_v[i, k] = fill
@@ -275,7 +297,7 @@ def allocate_blocks(cls, block_idx_flat, block_w_flat, pool_v, pool_w, pool_c, n
                 pool_c[i, k, 0] = 0
                 pool_c[i, k, 1] = 0
                 pool_c[i, k, 2] = 0
-    return n_used
+    return n_used + n_new
 
 
 @njit(cache=True, error_model="numpy")
@@ -311,10 +333,15 @@ def _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, n
     lo = np.float32(0.0001)
     wlim = np.float32(width) - lo
     hlim = np.float32(height) - lo
+    w32 = np.int32(width)
+    nx32 = np.int32(nx)
+    ny32 = np.int32(ny)
+    nz32 = np.int32(nz)
     for k in range(B3):
-        ix = k >> 6
-        iy = (k >> 3) & 7
-        iz = k & 7
+        k32 = np.int32(k)
+        ix = k32 >> np.int32(6)
+        iy = (k32 >> np.int32(3)) & np.int32(7)
+        iz = k32 & np.int32(7)
         lx = np.float32(ix)
         ly = np.float32(iy)
         lz = np.float32(iz)
@@ -325,8 +352,8 @@ def _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, n
         uf = xc * fx * rz + cx + half
         vf = yc * fy * rz + cy + half
         ok = ((zc > zero) & (uf >= lo) & (uf < wlim) & (vf >= lo) & (vf < hlim)
-              & (ix < nx) & (iy < ny) & (iz < nz))
-        p = np.int32(vf) * width + np.int32(uf)
+              & (ix < nx32) & (iy < ny32) & (iz < nz32))
+        p = np.int32(vf) * w32 + np.int32(uf)
         pix[k] = p if ok else np.int32(-1)
         zz[k] = zc
     for k in range(B3):
@@ -334,20 +361,24 @@ def _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, n
         sdf[k] = (depth_rl[p, 0] - zz[k]) * depth_rl[p, 1] if p >= 0 else -np.inf
     ntrunc = np.float32(-trunc)
     inv_trunc = np.float32(1.0 / trunc)
-    any_color = False
+    n_color = np.int32(0)
+    i1 = np.int32(1)
     for k in range(B3):
         s = sdf[k]
         ok = s > ntrunc
         t = min(one, s * inv_trunc)
         sdf[k] = t
-        w0 = np.int32(pool_w[i, k])
-        v0 = np.float32(pool_v[i, k])
-        # v' = (v w + t) / (w + 1) in int16 units (v * V_SCALE); w' = min(w + 1, M_w)
-        vn = np.int16(np.floor((v0 * np.float32(w0) + t * scale) / np.float32(w0 + 1) + half))
-        pool_v[i, k] = vn if ok else pool_v[i, k]
-        pool_w[i, k] = np.uint8(min(w0 + 1, mw)) if ok else pool_w[i, k]
-        any_color = any_color | (ok & (abs(t) < color_band))
-    if not (has_color and any_color):
+        vold = pool_v[i, k]
+        wold = pool_w[i, k]
+        w0 = np.int32(wold)
+        # v' = (v w + t) / (w + 1) in int16 units (v * V_SCALE); w' = min(w + 1, M_w). Both computed for every
+        # voxel and selected, so that the loop has no branch and no conditional load (it vectorises)
+        vn = np.int16(np.floor((np.float32(vold) * np.float32(w0) + t * scale) / np.float32(w0 + i1) + half))
+        wn = np.uint8(min(w0 + i1, mw))
+        pool_v[i, k] = vn if ok else vold
+        pool_w[i, k] = wn if ok else wold
+        n_color += np.int32(ok & (abs(t) < color_band))
+    if not (has_color and n_color > 0):
         return
     if pool_hn is not None:  # None (the mean path): numba prunes this branch at compile time
         for k in range(B3):
