@@ -7,6 +7,7 @@ from pathlib import Path
 
 import click
 
+from kinfu_cli.commands._mupf_options import mupf_filter_options
 from kinfu_cli.commands._options import claim_outputs, force_option
 from kinfu_cli.commands._output import emit
 from kinfu_cli.core.errors import ConfigError
@@ -36,13 +37,7 @@ def _names(text: str, allowed, option: str) -> list[str]:
               help="Recognition trials per object (0: skip recognition).")
 @click.option("--recognition-points", type=int, default=170, show_default=True,
               help="Points per recognition trial (thesis: about 170).")
-@click.option("--beta", type=float, default=30.0, show_default=True, help="Unscented transform beta (Table 4.1).")
-@click.option("--rotation", type=click.Choice(["local", "euler"]), default="local", show_default=True,
-              help="Rotation perturbation of sigma points and samples: a rotation vector at each particle, or the "
-                   "thesis' Euler-angle state (see README).")
-@click.option("--paper-weights", is_flag=True,
-              help="Weights exactly as eqs. 4.18 / 4.24 (divided by the proposal density) and the MAP over the "
-                   "particles only (see README).")
+@mupf_filter_options
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write the results as JSON here.")

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import click
 
+from kinfu_cli.commands._mupf_options import mupf_filter_options
 from kinfu_cli.commands._options import claim_outputs, force_option
 from kinfu_cli.commands._output import emit
 from kinfu_cli.core.checks import check_number
@@ -61,13 +62,7 @@ def _lines(doc: dict) -> list[str]:
               help="I_L above which the run is reported as not converged (m; default sigma_p).")
 @click.option("--prior", default="centroid", show_default=True,
               help="Prior mean: 'centroid' (model centred on the points), 'zero' (thesis) or x,y,z,phi,theta,psi.")
-@click.option("--beta", type=float, default=30.0, show_default=True, help="Unscented transform beta (Table 4.1).")
-@click.option("--rotation", type=click.Choice(["local", "euler"]), default="local", show_default=True,
-              help="Rotation perturbation of sigma points and samples: a rotation vector at each particle, or the "
-                   "thesis' Euler-angle state (see README).")
-@click.option("--paper-weights", is_flag=True,
-              help="Weights exactly as eqs. 4.18 / 4.24 (divided by the proposal density) and the MAP over the "
-                   "particles only (see README).")
+@mupf_filter_options
 @click.option("--max-points", type=int, default=MAX_POINTS, show_default=True,
               help="Thin more points than this to this many, in their order (the thesis runs on 100 points of a "
                    "cloud; a fused segment has thousands); 0 = all.")

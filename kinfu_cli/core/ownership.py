@@ -48,15 +48,23 @@ def record_written(path: str | os.PathLike) -> None:
     path = Path(path)
     folder = path.parent if str(path.parent) else Path(".")
     files = _read_manifest(folder)
-    try:
+    with contextlib.suppress(OSError):
         files[path.name] = _stat_entry(path)
+        _write_manifest(folder, files)
+
+
+def _write_manifest(folder: Path, files: dict[str, dict]) -> None:
+    """Replace `folder`'s manifest atomically; best effort (an unwritable folder only loses the record)."""
+    tmp = None
+    try:
         fd, tmp = tempfile.mkstemp(prefix=f"{MANIFEST}.", suffix=".part", dir=folder)
         with os.fdopen(fd, "w") as fh:
             json.dump({"written_by": "kinfu", "files": files}, fh, indent=1, sort_keys=True)
         os.replace(tmp, folder / MANIFEST)
     except OSError:
-        with contextlib.suppress(Exception):
-            os.unlink(tmp)
+        if tmp is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
 
 
 def record_tree(folder: str | os.PathLike) -> None:
@@ -70,16 +78,10 @@ def record_tree(folder: str | os.PathLike) -> None:
         entries = [e for e in sub.iterdir() if e.name != MANIFEST and not e.name.startswith(f"{MANIFEST}.")]
         if all(e.name in files for e in entries):
             continue
-        for e in entries:
-            files.setdefault(e.name, _stat_entry(e))
-        try:
-            fd, tmp = tempfile.mkstemp(prefix=f"{MANIFEST}.", suffix=".part", dir=sub)
-            with os.fdopen(fd, "w") as fh:
-                json.dump({"written_by": "kinfu", "files": files}, fh, indent=1, sort_keys=True)
-            os.replace(tmp, sub / MANIFEST)
-        except OSError:
-            with contextlib.suppress(Exception):
-                os.unlink(tmp)
+        with contextlib.suppress(OSError):
+            for e in entries:
+                files.setdefault(e.name, _stat_entry(e))
+            _write_manifest(sub, files)
 
 
 def written_by_kinfu(path: str | os.PathLike) -> bool:

@@ -1,0 +1,17 @@
+"""The MUPF options `kinfu localize` and `kinfu eval localize` share (one definition, one help text)."""
+
+from __future__ import annotations
+
+import click
+
+
+def mupf_filter_options(fn):
+    """--beta, --rotation and --paper-weights (see README, section Localisation)."""
+    fn = click.option("--paper-weights", is_flag=True,
+                      help="Weights exactly as eqs. 4.18 / 4.24 (divided by the proposal density) and the MAP over "
+                           "the particles only (see README).")(fn)
+    fn = click.option("--rotation", type=click.Choice(["local", "euler"]), default="local", show_default=True,
+                      help="Rotation perturbation of sigma points and samples: a rotation vector at each particle, "
+                           "or the thesis' Euler-angle state (see README).")(fn)
+    return click.option("--beta", type=float, default=30.0, show_default=True,
+                        help="Unscented transform beta (Table 4.1).")(fn)
