@@ -4,7 +4,9 @@ File contract (`ternary.npz`, as ros_kinfu exports): array `ternary` int8, index
 1 = occupied, 0 = unknown, -1 = empty; `origin` (3,) world position of the grid's minimum
 corner, so voxel (i, j, k) has its centre at origin + (i + 0.5, j + 0.5, k + 0.5) * voxel_size;
 `voxel_size` (metres); optional `frame` (str): name of the world frame ("" or absent when not known);
-optional `up` (3,) float64: the unit direction against gravity in that frame (absent when not known).
+optional `up` (3,) float64: the unit direction against gravity in that frame (absent when not known);
+optional `intrinsics` (6,) float64: fx, fy, cx, cy, width, height of the depth camera fused (absent when not
+known), so `kinfu nbv` on a ternary.npz plans with the camera that made it.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ import numpy as np
 
 from kinfu_cli.core.atomic import write_npz
 from kinfu_cli.core.errors import ConfigError, VolumeError
-from kinfu_cli.core.volume_file import MAX_COORDINATE_M, READ_ERRORS
+from kinfu_cli.core.volume_file import INTRINSICS_KEYS, MAX_COORDINATE_M, READ_ERRORS, check_intrinsics
 
 OCCUPIED = np.int8(1)
 UNKNOWN = np.int8(0)
@@ -33,6 +35,7 @@ class TernaryGrid:
     voxel_size: float
     frame: str = ""  # world frame name, "" when not known
     up: np.ndarray | None = None  # unit "up" direction in the world frame (against gravity), None when not known
+    intrinsics: dict | None = None  # depth camera fused: fx, fy, cx, cy, width, height; None when not known
 
     def __post_init__(self) -> None:
         self.labels = np.asarray(self.labels, dtype=np.int8)
@@ -83,6 +86,8 @@ def save_ternary(path: str | os.PathLike, grid: TernaryGrid) -> None:
               "frame": np.array(grid.frame)}
     if grid.up is not None:
         arrays["up"] = grid.up
+    if grid.intrinsics is not None:
+        arrays["intrinsics"] = np.array([grid.intrinsics[k] for k in INTRINSICS_KEYS], dtype=np.float64)
     write_npz(path, arrays)
 
 
@@ -105,6 +110,7 @@ def read_ternary(path: str | os.PathLike) -> TernaryGrid | None:
             labels, origin, voxel_size = data["ternary"], data["origin"], data["voxel_size"]
             frame = data["frame"] if "frame" in keys else np.array("")
             up = data["up"] if "up" in keys else None
+            intrinsics = data["intrinsics"] if "intrinsics" in keys else None
     except VolumeError:
         raise
     except READ_ERRORS as exc:
@@ -122,8 +128,9 @@ def read_ternary(path: str | os.PathLike) -> TernaryGrid | None:
         raise VolumeError(f"{path}: 'voxel_size' is {voxel_size.tolist()!r}, expected a positive length in metres")
     if frame.shape != () or frame.dtype.kind != "U":
         raise VolumeError(f"{path}: 'frame' is not a frame name")
+    intrinsics = check_intrinsics(intrinsics, path)
     try:
-        return TernaryGrid(labels, origin, float(voxel_size), str(frame), up)
+        return TernaryGrid(labels, origin, float(voxel_size), str(frame), up, intrinsics)
     except ConfigError as exc:  # the up direction
         raise VolumeError(f"{path}: 'up' {exc.detail}") from None
 

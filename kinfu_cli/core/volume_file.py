@@ -27,6 +27,8 @@ import numpy as np
 from kinfu_cli.core.atomic import write_npz
 from kinfu_cli.core.errors import VolumeError
 
+INTRINSICS_KEYS = ("fx", "fy", "cx", "cy", "width", "height")
+
 FORMAT = "kinfu-volume"
 FORMAT_VERSION = 1
 ARRAYS = ("block_idx", "block_w", "pool_v", "pool_w", "pool_c")
@@ -169,3 +171,21 @@ def _check(path: Path, meta: object, arrays: dict[str, np.ndarray]) -> None:
     if idx.size and (int(idx.min()) < -1 or int(idx.max()) >= n):
         raise VolumeError(f"{path}: block table points at pool rows {int(idx.min())}..{int(idx.max())}, but the "
                           f"pools hold {n} rows")
+
+
+def check_intrinsics(value, path) -> dict | None:
+    """Recorded depth intrinsics (a mapping, or a sequence in INTRINSICS_KEYS order) checked: a dict of fx, fy,
+    cx, cy (float) and width, height (int); None when absent; VolumeError naming the file when malformed."""
+    if value is None:
+        return None
+    try:
+        if not isinstance(value, dict):
+            value = dict(zip(INTRINSICS_KEYS, np.asarray(value, dtype=np.float64).reshape(len(INTRINSICS_KEYS))))
+        out = {k: float(value[k]) for k in INTRINSICS_KEYS}
+    except (KeyError, TypeError, ValueError):
+        raise VolumeError(f"{path}: 'intrinsics' is not fx, fy, cx, cy, width, height: {value!r}") from None
+    if not (all(np.isfinite(v) for v in out.values()) and out["fx"] > 0 and out["fy"] > 0
+            and out["width"] >= 1 and out["height"] >= 1):
+        raise VolumeError(f"{path}: 'intrinsics' out of range: {value!r}")
+    out["width"], out["height"] = int(out["width"]), int(out["height"])
+    return out

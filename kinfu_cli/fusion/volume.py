@@ -22,7 +22,7 @@ from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError, VolumeError
 from kinfu_cli.core.grid import TernaryGrid, check_up, read_ternary
 from kinfu_cli.core.poses import check_rigid
-from kinfu_cli.core.volume_file import (FORMAT, FORMAT_VERSION, read_volume_file, read_volume_meta,
+from kinfu_cli.core.volume_file import (FORMAT, FORMAT_VERSION, check_intrinsics, read_volume_file, read_volume_meta,
                                         write_volume_file)
 from kinfu_cli.fusion import kernels as kn
 from kinfu_cli.fusion.color_mode import MAX_HYPOTHESES, MODE_THRESHOLD, check_color_mode, mode_winners
@@ -321,7 +321,7 @@ class TernaryVolume:
                                self.pool_v, self.pool_w)
 
     def ternary_grid(self) -> TernaryGrid:
-        return TernaryGrid(self.labels(), self.origin.copy(), self.voxel_size, self.frame, self.up)
+        return TernaryGrid(self.labels(), self.origin.copy(), self.voxel_size, self.frame, self.up, self.intrinsics)
 
     def _box(self, lo, hi) -> tuple[np.ndarray, np.ndarray]:
         lo = np.zeros(3, np.int64) if lo is None else np.asarray(lo, dtype=np.int64).reshape(3)
@@ -483,33 +483,17 @@ def load_volume(path: str | os.PathLike) -> TernaryVolume:
     except ConfigError:
         raise VolumeError(f"{path}: meta 'up' is not a finite direction: {meta.get('up')!r}") from None
     vol.up_source = str(meta.get("up_source", "") or "") if vol.up is not None else ""
-    vol.intrinsics = _intrinsics(meta.get("intrinsics"), path)
+    vol.intrinsics = check_intrinsics(meta.get("intrinsics"), path)
     return vol
 
 
-INTRINSICS_KEYS = ("fx", "fy", "cx", "cy", "width", "height")
-
-
-def _intrinsics(value, path) -> dict | None:
-    """The meta 'intrinsics' of a volume file checked (None when absent); VolumeError when malformed."""
-    if value is None:
-        return None
-    try:
-        out = {k: float(value[k]) for k in INTRINSICS_KEYS}
-    except (KeyError, TypeError, ValueError):
-        raise VolumeError(f"{path}: meta 'intrinsics' is not fx, fy, cx, cy, width, height: {value!r}") from None
-    if not (all(np.isfinite(v) for v in out.values()) and out["fx"] > 0 and out["fy"] > 0
-            and out["width"] >= 1 and out["height"] >= 1):
-        raise VolumeError(f"{path}: meta 'intrinsics' out of range: {value!r}")
-    out["width"], out["height"] = int(out["width"]), int(out["height"])
-    return out
-
-
 def volume_intrinsics(path: str | os.PathLike) -> dict | None:
-    """The depth intrinsics (fx, fy, cx, cy, width, height) a fusion volume.npz was fused with; None for a
-    ternary.npz or a volume written before they were recorded."""
+    """The depth intrinsics (fx, fy, cx, cy, width, height) a fusion volume.npz or ternary.npz was fused with;
+    None for files written before they were recorded."""
     meta = read_volume_meta(path)
-    return None if meta is None else _intrinsics(meta.get("intrinsics"), path)
+    if meta is None:
+        return read_ternary(path).intrinsics
+    return check_intrinsics(meta.get("intrinsics"), path)
 
 
 def load_grid(path: str | os.PathLike) -> TernaryGrid:
