@@ -31,6 +31,7 @@ from kinfu_cli.segmentation.superquadric import Superquadric, inside_outside_loc
 
 CONSTRAINT_TOL = 1e-4  # [code] constr_tol: a constraint value >= -CONSTRAINT_TOL is satisfied
 _FD_STEP = 1e-6
+REFINE_LEG = 20  # iterations per SLSQP leg of a refinement (`_refine`)
 
 
 def _f_pow(points: np.ndarray, sq: Superquadric) -> np.ndarray:
@@ -110,9 +111,10 @@ class _Problem:
     def _batch(self, x: np.ndarray) -> tuple:
         key = x.tobytes()
         if key != self._key:
-            X = np.vstack([x, x + _FD_STEP * np.eye(6)])
-            c, g = self.evaluate(X)
-            self._key, self._val = key, (c[0], (c[1:] - c[0]) / _FD_STEP, g[0], (g[1:] - g[0]).T / _FD_STEP)
+            E = _FD_STEP * np.eye(6)
+            c, g = self.evaluate(np.vstack([x, x + E, x - E]))
+            d = 2 * _FD_STEP
+            self._key, self._val = key, (c[0], (c[1:7] - c[7:]) / d, g[0], (g[1:7] - g[7:]).T / d)
         return self._val
 
     def fun(self, x):
@@ -202,6 +204,25 @@ def _run(prob: _Problem, R0: np.ndarray, x0: np.ndarray, bounds, max_iter: int) 
             int(res.nit))
 
 
+def _refine(prob: _Problem, R0: np.ndarray, x0: np.ndarray, bounds, max_iter: int) -> tuple:
+    """SLSQP to convergence in legs of at most REFINE_LEG iterations (max_iter in all), each leg warm-started
+    from the last one's pose with the rotation re-based (R0 <- R0 exp(w), w <- 0) and a fresh Hessian
+    estimate. [ours]: a single long run often reaches the optimum within ~15 iterations and then stalls,
+    on a flat direction (a round object's yaw under a top cone), until its iteration limit; a restart from
+    the same pose stops there in a few iterations."""
+    used, run = 0, None
+    while used < max_iter:
+        leg = min(REFINE_LEG, max_iter - used)
+        run = _run(prob, R0, x0, bounds, leg)
+        used += run[6]
+        if run[3] or run[6] < leg:  # converged, or SLSQP stopped for another reason than its limit
+            break
+        x = run[2]
+        R0 = R0 @ Rotation.from_rotvec(x[3:6]).as_matrix()
+        x0 = np.concatenate([x[:3], np.zeros(3)])
+    return run[:6] + (used,)
+
+
 def grasp_part(target: Superquadric, hand: HandModel, cons: GraspConstraints, obstacles: list[Superquadric] = (),
                *, lifting: bool = True, n_starts: int = 4, max_iter: int = 100, screen_iter: int = 6) -> PartGrasp:
     """The best feasible pose of `hand` on `target` over `n_starts` SLSQP runs; `converged` is False (and the
@@ -227,7 +248,7 @@ def grasp_part(target: Superquadric, hand: HandModel, cons: GraspConstraints, ob
     order = list(runs)
     if len(starts) > 1:  # refine the best screened run; when it fails, the next ones, until one converges
         for _, R0, x, _, _, _, _ in runs:
-            order.append(_run(prob, R0, x, bounds, max_iter))
+            order.append(_refine(prob, R0, x, bounds, max_iter))
             if order[-1][3]:
                 break
     for rank, R0, x, ok, g, message, nit in order:
