@@ -31,6 +31,11 @@ from kinfu_cli.segmentation.superquadric import Superquadric, inside_outside_loc
 
 CONSTRAINT_TOL = 1e-4  # [code] constr_tol: a constraint value >= -CONSTRAINT_TOL is satisfied
 _FD_STEP = 1e-6
+# SLSQP stops when the cost changes by less than its `ftol` AND the constraint violations sum to less than it:
+# 1e-6 is 1 um summed over the constraints; the cost is scaled so that 1e-6 is the cost tolerance that 1e-9
+# was unscaled (before, sums of 1e-7 m of violation over 53 near-active support points never stopped it)
+SLSQP_ACC = 1e-9
+COST_SCALE = 1.0
 REFINE_LEG = 20  # iterations per SLSQP leg of a refinement (`_refine`)
 
 
@@ -118,10 +123,10 @@ class _Problem:
         return self._val
 
     def fun(self, x):
-        return self._batch(x)[0]
+        return COST_SCALE * self._batch(x)[0]
 
     def jac(self, x):
-        return self._batch(x)[1]
+        return COST_SCALE * self._batch(x)[1]
 
     def con(self, x):
         return self._batch(x)[2]
@@ -193,7 +198,7 @@ def _run(prob: _Problem, R0: np.ndarray, x0: np.ndarray, bounds, max_iter: int) 
     prob.R0, prob._key = R0, None
     res = minimize(prob.fun, x0, jac=prob.jac, method="SLSQP", bounds=bounds,
                    constraints=[{"type": "ineq", "fun": prob.con, "jac": prob.con_jac}],
-                   options={"maxiter": max_iter, "ftol": 1e-9})
+                   options={"maxiter": max_iter, "ftol": SLSQP_ACC})
     x = res.x
     cost, g = prob.evaluate(x[None])
     viol = float(max(0.0, -g[0].min()))

@@ -36,6 +36,7 @@ CUTS = ("volume", "barycentre")
 # a node is cut at its best `volume_cut` instead of the barycentre when the two sides' boxes take less than
 # this share of the node's box (tuning seeds 100-104 of the composites and primitives; bench_multi_superquadric)
 VOLUME_CUT_RATIO = 0.85
+VOLUME_CUT_DEPTH = 6
 
 
 @dataclass
@@ -193,7 +194,7 @@ def _build(pts: np.ndarray, index: np.ndarray, depth: int, height: int, min_poin
     bary = points.mean(axis=0)
     _, v = np.linalg.eigh(np.cov((points - bary).T))
     k, origin = 2, bary  # the thesis' plane: through the barycentre, across the axis of largest spread
-    if cut == "volume":
+    if cut == "volume" and depth < VOLUME_CUT_DEPTH:
         axis, pos, ratio = volume_cut((points - bary) @ v, min_points)
         if axis >= 0 and ratio < VOLUME_CUT_RATIO:
             k, origin = axis, bary + pos * v[:, axis]
