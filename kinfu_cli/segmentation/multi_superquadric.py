@@ -3,7 +3,9 @@
 1. Superquadric tree (Alg. 4) of height H: every node holds a part of the cloud and its superquadric; it
    is cut by the plane through the part's barycentre perpendicular to its principal axis (the direction
    of largest spread, which is the thesis' "axis of maximum inertia" read as the axis the mass is spread
-   along, so an elongated part is cut across its length), and each half is fitted.
+   along, so an elongated part is cut across its length), and each half is fitted. [ours, cut="volume", the
+   default]: the root is instead cut where the cross-section changes, when its best `volume_cut` is clearly
+   one (a mug's handle meets its body where no barycentre plane runs: every one cuts through the handle).
 2. Splitting planes (Alg. 5), bottom-up from h = H-1: a node's plane is splitting when its children's
    superquadrics have `different_dimensions`; then the child closest to the node's brother (the children's
    uncle) is compared with that uncle, and the result decides the grandfather's plane (similar: not
