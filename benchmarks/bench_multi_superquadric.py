@@ -49,7 +49,7 @@ def main(n_seeds: int = 3, first_seed: int = 0, cut: str = "volume") -> None:
                 labels = np.zeros(len(pts), dtype=int)
             else:
                 pts, labels = composite_cloud(name, rng)
-            local = (pts - pts.mean(axis=0)) @ np.linalg.eigh(np.cov((pts - pts.mean(axis=0)).T))[1]
+            local = (pts - pts.mean(axis=0)) @ msq.box_frame(pts)
             ratios.append(msq.volume_cut(local, 30)[2])
             t = time.perf_counter()
             root = msq.build_superquadric_tree(pts, cut=cut, **FIT)

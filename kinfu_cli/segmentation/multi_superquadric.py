@@ -28,7 +28,7 @@ import itertools
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.spatial import cKDTree
+from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.segmentation.superquadric import SegmentError, SuperquadricFit, fit_superquadric
@@ -167,14 +167,35 @@ def _fit_or_none(points: np.ndarray, fit_kwargs: dict) -> SuperquadricFit | None
         return None
 
 
+def box_frame(points: np.ndarray) -> np.ndarray:
+    """Axes (3, 3, columns) of a tight box around `points`: the principal axis of least spread, then the
+    sides of the minimum-area rectangle around the points projected across it (one side lies along an edge
+    of their convex hull). [ours]: an L's principal axes run diagonally, a box along them is loose, and a
+    cut across them misses the junction."""
+    c = np.asarray(points, dtype=np.float64) - np.mean(points, axis=0)
+    _, v = np.linalg.eigh(np.cov(c.T))
+    uv = c @ v[:, 1:]
+    try:
+        h = uv[ConvexHull(uv).vertices]
+    except (QhullError, ValueError):
+        return v[:, ::-1].copy()
+    e = np.roll(h, -1, axis=0) - h
+    ang = np.arctan2(e[:, 1], e[:, 0])
+    cs, sn = np.cos(ang)[:, None], np.sin(ang)[:, None]
+    area = np.ptp(h[:, 0] * cs + h[:, 1] * sn, axis=1) * np.ptp(h[:, 1] * cs - h[:, 0] * sn, axis=1)
+    k = int(np.argmin(area))
+    d1 = cs[k, 0] * v[:, 1] + sn[k, 0] * v[:, 2]
+    return np.stack([v[:, 0], d1, np.cross(v[:, 0], d1)], axis=1)
+
+
 def volume_cut(local: np.ndarray, min_points: int) -> tuple[int, float, float]:
-    """The cut perpendicular to one of the node's principal axes that minimises the summed volume of the two
-    sides' bounding boxes (in the node's principal frame), each side at least min_points: (axis, position
+    """The cut perpendicular to one of the frame's axes that minimises the summed volume of the two sides'
+    bounding boxes (in that frame: `box_frame`), each side at least min_points: (axis, position
     along it, summed volume / the node's box volume). A part attached where the cross-section changes (a
     mug's handle, a bottle's neck) gives a ratio well below 1 at the junction; one convex primitive stays
     above about 0.92 (sphere 0.926, cylinder across its axis 0.95, box 1). (-1, 0, 1) when no cut fits.
 
-    local: (N, 3) points in the node's principal frame. Vectorised: per axis one sort and running min / max."""
+    local: (N, 3) points in the node's box frame. Vectorised: per axis one sort and running min / max."""
     n = len(local)
     whole = float(np.prod(np.ptp(local, axis=0)))
     if n < 2 * min_points or whole <= 0:
@@ -202,9 +223,10 @@ def _build(pts: np.ndarray, index: np.ndarray, depth: int, height: int, min_poin
     _, v = np.linalg.eigh(np.cov((points - bary).T))
     k, origin = 2, bary  # the thesis' plane: through the barycentre, across the axis of largest spread
     if cut == "volume" and depth < VOLUME_CUT_DEPTH:
-        axis, pos, ratio = volume_cut((points - bary) @ v, min_points)
+        frame = box_frame(points)
+        axis, pos, ratio = volume_cut((points - bary) @ frame, min_points)
         if axis >= 0 and ratio < VOLUME_CUT_RATIO:
-            k, origin = axis, bary + pos * v[:, axis]
+            k, origin, v = axis, bary + pos * frame[:, axis], frame
     normal = v[:, k]
     side = (points - origin) @ normal > 0
     if side.sum() < min_points or (~side).sum() < min_points:
