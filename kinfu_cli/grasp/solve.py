@@ -12,8 +12,10 @@ to a radial distance; plain F - 1 explodes for box-like exponents). Inequalities
   facing          z_h . (target centre - p): the palm faces the target ([ours]: with L points on a half
                   ellipsoid the mirror pose, object behind the palm, is also a local minimum);
 and the workspace box as bounds on p (eq. 7.7). A few starts around the target are solved (the thesis'
-Ipopt is a local method too) and the best feasible one is kept; gradients are forward differences computed
-for all six variables in one vectorised evaluation.
+Ipopt is a local method too): short screening runs, then the most promising refined in warm-restarted legs
+(`_refine`) until one converges. Gradients are central differences computed for all six variables in one
+vectorised evaluation: forward differences left active constraints violated by ~1e-6, above SLSQP's
+stopping tolerance, so runs at the optimum went on to their iteration limit (the 0.7 s worst cases).
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ from scipy.spatial.transform import Rotation
 
 from kinfu_cli.grasp.constraints import AXES, GraspConstraints
 from kinfu_cli.grasp.hand import HandModel
-from kinfu_cli.segmentation.superquadric import Superquadric, inside_outside_local
+from kinfu_cli.segmentation.superquadric import _TINY, Superquadric, inside_outside_local
 
 CONSTRAINT_TOL = 1e-4  # [code] constr_tol: a constraint value >= -CONSTRAINT_TOL is satisfied
 _FD_STEP = 1e-6
@@ -36,13 +38,59 @@ _FD_STEP = 1e-6
 # was unscaled (before, sums of 1e-7 m of violation over 53 near-active support points never stopped it)
 SLSQP_ACC = 1e-9
 COST_SCALE = 1.0
-REFINE_LEG = 20  # iterations per SLSQP leg of a refinement (`_refine`)
+REFINE_LEG = 20
+# gradients: central differences of twelve poses in one vectorised `evaluate` (default), or the analytic
+# `_Problem.value_and_grad` (equal to 1e-8; in numpy it is 1.7x slower in the same process, 0.020 vs 0.012 s
+# median per object: its ~40 small array operations cost more than one batch; a numba kernel of it is the
+# next lever)
+ANALYTIC = False  # iterations per SLSQP leg of a refinement (`_refine`)
 
 
 def _f_pow(points: np.ndarray, sq: Superquadric) -> np.ndarray:
     """F(points)^e1 - 1 (N,) for world points: < 0 inside, ~ relative radial distance outside."""
     F = inside_outside_local(sq.to_local(points), sq.size, sq.exponents)
     return np.power(np.maximum(F, 1e-300), sq.exponents[0]) - 1.0
+
+
+def _f_pow_grad(points: np.ndarray, sq: Superquadric) -> tuple[np.ndarray, np.ndarray]:
+    """F^e1 - 1 (N,) and its gradient (N, 3) w.r.t. the world points, analytic, in the log space of
+    `inside_outside_local`: with U = |x/a1|^(2/e2), V = |y/a2|^(2/e2), T1 = (U + V)^(e2/e1), T2 = |z/a3|^(2/e1),
+    F = T1 + T2 and d(F^e1)/dx = 2 F^e1 / F * T1 U / ((U + V) x), likewise y; d/dz = 2 F^e1 / F * T2 / z.
+    U / x and T2 / z go to 0 at 0 since 2 / e > 1 for the exponents a fit allows (< 2)."""
+    local = sq.to_local(points)
+    a = np.asarray(sq.size, dtype=np.float64)
+    e1, e2 = float(sq.exponents[0]), float(sq.exponents[1])
+    lx = np.log(np.maximum(np.abs(local) / a, _TINY))
+    lnU, lnV, lnT2 = 2.0 * lx[:, 0] / e2, 2.0 * lx[:, 1] / e2, 2.0 * lx[:, 2] / e1
+    S0 = np.exp(lnU) + np.exp(lnV)
+    S = np.maximum(S0, _TINY)
+    T1, T2 = np.exp((e2 / e1) * np.log(S)), np.exp(lnT2)
+    F = np.maximum(T1 + T2, _TINY)
+    G = np.exp(e1 * np.log(F))
+    ln_abs = lx + np.log(a)  # ln|x|, ln|y|, ln|z|
+    sign = np.sign(local)
+    k = 2.0 * G / F * (T1 + T2 > _TINY)  # where F or U + V is clamped, F is flat (as computed)
+    d = np.empty_like(local)
+    k1 = k * T1 / S * (S0 > _TINY)
+    d[:, 0] = k1 * sign[:, 0] * np.exp(lnU - ln_abs[:, 0])
+    d[:, 1] = k1 * sign[:, 1] * np.exp(lnV - ln_abs[:, 1])
+    d[:, 2] = k * sign[:, 2] * np.exp(lnT2 - ln_abs[:, 2])
+    return G - 1.0, d @ sq.rotation.T
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise a x b for (N, 3) arrays (np.cross costs ~0.1 ms of overhead per call here)."""
+    return np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+                     a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)
+
+
+def _right_jacobian(w: np.ndarray) -> np.ndarray:
+    """J_r of SO(3) at the rotation vector w: exp(w + d) = exp(w) exp(J_r(w) d) to first order."""
+    t = float(np.linalg.norm(w))
+    K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+    if t < 1e-6:
+        return np.eye(3) - 0.5 * K + K @ K / 6.0
+    return np.eye(3) - (1.0 - np.cos(t)) / t ** 2 * K + (t - np.sin(t)) / t ** 3 * (K @ K)
 
 
 @dataclass
@@ -113,13 +161,53 @@ class _Problem:
         cols.append(np.einsum("mi,mi->m", R[:, :, 2], self.target.center - p)[:, None])
         return cost, np.concatenate(cols, axis=1)
 
+    def value_and_grad(self, x: np.ndarray) -> tuple:
+        """Cost, its gradient (6,), constraint values (n,) and their Jacobian (n, 6) at one pose x, analytic.
+
+        A hand point a (hand frame) lands at W = p + R a with R = R0 exp(w); dW/dp = I and, with J_r the right
+        Jacobian of SO(3), dW/dw = -R [a]x J_r, so a world gradient g of a function of W pulls back to
+        J_r^T (a x R^T g) on w."""
+        p, w = x[:3], x[3:6]
+        R = self.R0 @ Rotation.from_rotvec(w).as_matrix()
+        J = _right_jacobian(w)
+        A, nL = self.all_points, len(self.L)
+        W = p + A @ R.T
+
+        def pull(a: np.ndarray, g: np.ndarray) -> np.ndarray:  # rows [dp | dw] for world gradients g at a
+            return np.hstack([g, _cross(a, g @ R) @ J])
+
+        r, dr = _f_pow_grad(W[:nL], self.target)
+        cost = float(np.mean(r ** 2))
+        grad = (2.0 / nL) * (r @ pull(self.L, dr))
+        vals, jacs = [], []
+        if self.cons.plane is not None:
+            n = self.cons.plane[:3]
+            vals.append(W @ n + self.cons.plane[3])
+            jacs.append(pull(A, np.broadcast_to(n, A.shape)))
+        for c in self.cons.cones:
+            e = np.eye(3)[AXES.index(c.axis)]
+            vals.append(np.array([R[:, AXES.index(c.axis)] @ c.unit() - np.cos(np.radians(c.aperture_deg))]))
+            jacs.append(np.hstack([np.zeros((1, 3)), _cross(e[None], (R.T @ c.unit())[None]) @ J]))
+        for ob in self.obstacles:
+            s = np.sqrt(np.prod(ob.size))
+            f, df = _f_pow_grad(W[nL:], ob)
+            vals.append(s * f)
+            jacs.append(s * pull(self.V, df))
+        d = self.target.center - p
+        vals.append(np.array([R[:, 2] @ d]))
+        jacs.append(np.hstack([-R[:, 2][None], _cross(np.array([[0.0, 0.0, 1.0]]), (R.T @ d)[None]) @ J]))
+        return cost, grad, np.concatenate(vals), np.vstack(jacs)
+
     def _batch(self, x: np.ndarray) -> tuple:
         key = x.tobytes()
         if key != self._key:
-            E = _FD_STEP * np.eye(6)
-            c, g = self.evaluate(np.vstack([x, x + E, x - E]))
-            d = 2 * _FD_STEP
-            self._key, self._val = key, (c[0], (c[1:7] - c[7:]) / d, g[0], (g[1:7] - g[7:]).T / d)
+            if ANALYTIC:
+                self._key, self._val = key, self.value_and_grad(x)
+            else:  # central differences of `evaluate`, all twelve poses in one batch
+                E = _FD_STEP * np.eye(6)
+                c, g = self.evaluate(np.vstack([x, x + E, x - E]))
+                h = 2 * _FD_STEP
+                self._key, self._val = key, (c[0], (c[1:7] - c[7:]) / h, g[0], (g[1:7] - g[7:]).T / h)
         return self._val
 
     def fun(self, x):

@@ -178,7 +178,7 @@ def test_volume_cut_finds_the_neck_and_leaves_single_primitives_alone():
     pts, labels = composite_cloud("L", np.random.default_rng(3))
     F = msq.box_frame(pts)
     ext = np.sort(np.ptp((pts - pts.mean(axis=0)) @ F, axis=0))
-    assert np.allclose(ext, [0.05, 0.17, 0.20], atol=0.006), ext  # the arms' box, not a diagonal one
+    assert np.allclose(ext, [0.05, 0.17, 0.20], atol=0.01), ext  # the arms' box (+ 1 mm noise), not a diagonal one
     assert msq.volume_cut((pts - pts.mean(axis=0)) @ F, 30)[2] < 0.55
 
 
