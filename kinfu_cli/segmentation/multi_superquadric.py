@@ -35,13 +35,14 @@ from kinfu_cli.segmentation.superquadric import SegmentError, SuperquadricFit, f
 
 CONTIGUOUS_DEG = 35.0  # the centre link within this angle of a paired axis: the axes lie on one line
 CUTS = ("volume", "barycentre")
-# [ours] Alg. 4 with cut="volume": the root (a whole object) is cut at its best `volume_cut` instead of the
-# barycentre when the two sides' boxes take less than VOLUME_CUT_RATIO of its box. Chosen on tuning seeds
-# 100-104 of bench_multi_superquadric (the reported seeds are 0-2): root ratios are T 0.40-0.44, mug
-# 0.72-0.77, bottle 0.76, L 0.81-0.82 (its principal axes run diagonally, so a box cut misses the junction:
-# at 0.85 the L is cut there, purity 0.52), box 0.89-0.96, cylinder 0.93-0.94. Only the root
-# (VOLUME_CUT_DEPTH = 1): deeper nodes are open-shell pieces whose boxes shrink at a cut without any change
-# of part; cutting them too (depth 6) left single boxes exact only for mu >= 0.03, cylinders for 0.06.
+# [ours] Alg. 4 with cut="volume": the root (a whole object) is cut at its best `volume_cut` (in its
+# `box_frame`) instead of the barycentre when the two sides' boxes take less than VOLUME_CUT_RATIO of its box.
+# Chosen on tuning seeds 100-104 of bench_multi_superquadric (the reported seeds are 0-2), root ratios: T
+# 0.40-0.41, L 0.49-0.50, mug 0.72-0.73, bottle 0.76; one primitive: ellipsoid 0.90-0.91, sphere 0.91, box
+# 0.91-0.97, capsule 0.91-0.93, cylinder 0.93-0.95, but a cone 0.61-0.73 (cut into a frustum and its tip).
+# Only the root (VOLUME_CUT_DEPTH = 1): deeper nodes are open-shell pieces whose boxes shrink at a cut
+# without any change of part; cutting them too (depth 6, principal frame) left single boxes exact only for
+# mu >= 0.03 and cylinders for 0.06.
 VOLUME_CUT_RATIO = 0.8
 VOLUME_CUT_DEPTH = 1
 
