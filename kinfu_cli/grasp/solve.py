@@ -33,17 +33,16 @@ from kinfu_cli.segmentation.superquadric import _TINY, Superquadric, inside_outs
 
 CONSTRAINT_TOL = 1e-4  # [code] constr_tol: a constraint value >= -CONSTRAINT_TOL is satisfied
 _FD_STEP = 1e-6
-# SLSQP stops when the cost changes by less than its `ftol` AND the constraint violations sum to less than it:
-# 1e-6 is 1 um summed over the constraints; the cost is scaled so that 1e-6 is the cost tolerance that 1e-9
-# was unscaled (before, sums of 1e-7 m of violation over 53 near-active support points never stopped it)
+# SLSQP stops when the cost changes by less than its `ftol` AND the constraint violations sum to less than it
 SLSQP_ACC = 1e-9
-COST_SCALE = 1.0
-REFINE_LEG = 20
-# gradients: central differences of twelve poses in one vectorised `evaluate` (default), or the analytic
-# `_Problem.value_and_grad` (equal to 1e-8; in numpy it is 1.7x slower in the same process, 0.020 vs 0.012 s
+REFINE_LEG = 20  # iterations per SLSQP leg of a refinement (`_refine`)
+# gradients of the refinement: "central" differences of twelve poses in one vectorised `evaluate` (default),
+# "forward" (six poses; they leave active constraints ~1e-6 violated, so SLSQP does not stop), or "analytic"
+# (`_Problem.value_and_grad`, equal to 1e-8; in numpy 1.7x slower in the same process, 0.020 vs 0.012 s
 # median per object: its ~40 small array operations cost more than one batch; a numba kernel of it is the
-# next lever)
-ANALYTIC = False  # iterations per SLSQP leg of a refinement (`_refine`)
+# next lever). The 6-iteration screening runs only rank the starts: forward differences are enough there.
+GRADIENT = "central"
+SCREEN_GRADIENT = "forward"
 
 
 def _f_pow(points: np.ndarray, sq: Superquadric) -> np.ndarray:
@@ -131,6 +130,7 @@ class _Problem:
         self.all_points = np.vstack([self.L, self.V])
         self.vol = float(np.sqrt(np.prod(target.size)))
         self.R0 = np.eye(3)
+        self.gradient = GRADIENT
         self.names = (["support_plane"] * len(self.all_points) if cons.plane is not None else []) + \
             [f"cone:{c.axis}" for c in cons.cones] + \
             [f"obstacle:{k}" for k in range(len(obstacles)) for _ in range(len(self.V))] + ["facing"]
@@ -201,9 +201,12 @@ class _Problem:
     def _batch(self, x: np.ndarray) -> tuple:
         key = x.tobytes()
         if key != self._key:
-            if ANALYTIC:
+            if self.gradient == "analytic":
                 self._key, self._val = key, self.value_and_grad(x)
-            else:  # central differences of `evaluate`, all twelve poses in one batch
+            elif self.gradient == "forward":  # seven poses in one batch
+                c, g = self.evaluate(np.vstack([x, x + _FD_STEP * np.eye(6)]))
+                self._key, self._val = key, (c[0], (c[1:] - c[0]) / _FD_STEP, g[0], (g[1:] - g[0]).T / _FD_STEP)
+            else:  # central differences, thirteen poses in one batch
                 E = _FD_STEP * np.eye(6)
                 c, g = self.evaluate(np.vstack([x, x + E, x - E]))
                 h = 2 * _FD_STEP
@@ -211,10 +214,10 @@ class _Problem:
         return self._val
 
     def fun(self, x):
-        return COST_SCALE * self._batch(x)[0]
+        return self._batch(x)[0]
 
     def jac(self, x):
-        return COST_SCALE * self._batch(x)[1]
+        return self._batch(x)[1]
 
     def con(self, x):
         return self._batch(x)[2]
@@ -280,10 +283,11 @@ def start_poses(target: Superquadric, cons: GraspConstraints, n_starts: int, tow
     return out
 
 
-def _run(prob: _Problem, R0: np.ndarray, x0: np.ndarray, bounds, max_iter: int) -> tuple:
+def _run(prob: _Problem, R0: np.ndarray, x0: np.ndarray, bounds, max_iter: int, gradient: str | None = None
+         ) -> tuple:
     """One SLSQP run from (R0, x0): (rank, R0, x, ok, constraint values, message, iterations); rank sorts
-    feasible converged runs first, then by violation, then by cost."""
-    prob.R0, prob._key = R0, None
+    feasible converged runs first, then by violation, then by cost. gradient: as GRADIENT (its default)."""
+    prob.R0, prob._key, prob.gradient = R0, None, gradient or GRADIENT
     res = minimize(prob.fun, x0, jac=prob.jac, method="SLSQP", bounds=bounds,
                    constraints=[{"type": "ineq", "fun": prob.con, "jac": prob.con_jac}],
                    options={"maxiter": max_iter, "ftol": SLSQP_ACC})
@@ -336,7 +340,8 @@ def grasp_part(target: Superquadric, hand: HandModel, cons: GraspConstraints, ob
         x0 = np.concatenate([p0, np.zeros(3)])
         if bounds is not None:
             x0[:3] = np.clip(x0[:3], [b[0] for b in bounds[:3]], [b[1] for b in bounds[:3]])
-        runs.append(_run(prob, R0, x0, bounds, screen_iter if len(starts) > 1 else max_iter))
+        runs.append(_run(prob, R0, x0, bounds, screen_iter, SCREEN_GRADIENT) if len(starts) > 1
+                    else _refine(prob, R0, x0, bounds, max_iter))
     runs.sort(key=lambda r: (r[0][1] > CONSTRAINT_TOL, r[0][2]))
     order = list(runs)
     if len(starts) > 1:  # refine the best screened run; when it fails, the next ones, until one converges
