@@ -4,6 +4,7 @@ per mu (m), against the true number of parts, over a few seeds; more parts than 
 per shape where every seed gives the true count.
 
     PYTHONPATH=$PWD python benchmarks/bench_multi_superquadric.py [n_seeds] [first_seed] [volume|barycentre]
+    PYTHONPATH=$PWD python benchmarks/bench_multi_superquadric.py mugs [n_scenes]   # the simulator's mugs
 
 The third argument picks Alg. 4's planes (`build_superquadric_tree(cut=...)`): "barycentre" is the thesis'.
 Seeds 0-2 are the reported ones; VOLUME_CUT_RATIO was chosen on seeds 100-104 ("root ratio" = the root's best
@@ -83,6 +84,31 @@ def main(n_seeds: int = 3, first_seed: int = 0, cut: str = "volume") -> None:
         print(f"  {name:9} {r}")
 
 
+def scene_mugs(n_scenes: int = 6) -> None:
+    """Parts per mu of the mug in `sim.scene.segmentation_scene` seeds 100.. (its own body and half-torus handle
+    sizes, the surface a sensor could see: no bottom, no handle half inside the body), both Alg. 4 rules."""
+    from kinfu_cli.sim.scene import scene_label_cloud, segmentation_scene
+
+    print("simulator mugs (segmentation_scene), parts per mu " + " ".join(f"{m:g}" for m in MUS))
+    for seed in range(100, 100 + n_scenes):
+        scene = segmentation_scene(seed=seed)
+        pts, lab = scene_label_cloud(scene, spacing=0.004, seed=seed)
+        for o in scene.present_objects:
+            if o.shape != "mug":
+                continue
+            seg = pts[lab == scene.label_of(o.id)]
+            for cut in msq.CUTS:
+                root = msq.build_superquadric_tree(seg, cut=cut, **FIT)
+                row = []
+                for mu in MUS:
+                    msq.select_splitting_planes(root, mu)
+                    row.append(len(msq.final_superquadrics(root, seg, mu, **FIT).parts))
+                print(f"  seed {seed} {len(seg):5d} points  {cut:10}  " + " ".join(str(v) for v in row))
+
+
 if __name__ == "__main__":
+    if len(sys.argv) > 1 and sys.argv[1] == "mugs":
+        scene_mugs(int(sys.argv[2]) if len(sys.argv) > 2 else 6)
+        sys.exit(0)
     main(int(sys.argv[1]) if len(sys.argv) > 1 else 3, int(sys.argv[2]) if len(sys.argv) > 2 else 0,
          sys.argv[3] if len(sys.argv) > 3 else "volume")
