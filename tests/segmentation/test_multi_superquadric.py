@@ -155,6 +155,9 @@ def test_bad_input_names_the_parameter():
     with pytest.raises(ConfigError) as e:
         msq.fit_multi_superquadric(pts, min_points=3)
     assert e.value.parameter == "min_points"
+    with pytest.raises(ConfigError) as e:
+        msq.fit_multi_superquadric(pts, min_points=10, cut="middle")
+    assert e.value.parameter == "cut"
 
 
 def test_volume_cut_finds_the_neck_and_leaves_single_primitives_alone():
