@@ -304,9 +304,8 @@ def _run(prob: _Problem, R0: np.ndarray, x0: np.ndarray, bounds, max_iter: int, 
 def _refine(prob: _Problem, R0: np.ndarray, x0: np.ndarray, bounds, max_iter: int) -> tuple:
     """SLSQP to convergence in legs of at most REFINE_LEG iterations (max_iter in all), each leg warm-started
     from the last one's pose with the rotation re-based (R0 <- R0 exp(w), w <- 0) and a fresh Hessian
-    estimate. [ours]: a single long run often reaches the optimum within ~15 iterations and then stalls,
-    on a flat direction (a round object's yaw under a top cone), until its iteration limit; a restart from
-    the same pose stops there in a few iterations."""
+    estimate. [ours]: a run that reached the optimum but does not meet SLSQP's stopping test (e.g. an active
+    constraint violated by more than its tolerance) restarts there instead of running to its limit."""
     used, run = 0, None
     while used < max_iter:
         leg = min(REFINE_LEG, max_iter - used)
