@@ -5,6 +5,7 @@ per shape where every seed gives the true count.
 
     PYTHONPATH=$PWD python benchmarks/bench_multi_superquadric.py [n_seeds] [first_seed] [volume|barycentre]
     PYTHONPATH=$PWD python benchmarks/bench_multi_superquadric.py mugs [n_scenes]   # the simulator's mugs
+    PYTHONPATH=$PWD python benchmarks/bench_multi_superquadric.py scenes [n_seeds]  # every scene object
 
 The third argument picks Alg. 4's planes (`build_superquadric_tree(cut=...)`): "barycentre" is the thesis'.
 Seeds 0-2 are the reported ones; VOLUME_CUT_RATIO was chosen on seeds 100-104 ("root ratio" = the root's best
@@ -106,7 +107,39 @@ def scene_mugs(n_scenes: int = 6) -> None:
                 print(f"  seed {seed} {len(seg):5d} points  {cut:10}  " + " ".join(str(v) for v in row))
 
 
+def scene_objects(n_seeds: int = 4) -> None:
+    """Parts of every object of the simulator's scenes (seeds 100..; tabletop, primitive and segmentation
+    scenes, ground-truth labelled visible surface) as `kinfu segment --multi-sq` splits them: its fit settings,
+    mu = 0.03, and only objects whose single superquadric's RMS residual exceeds msq_trigger = 5 mm."""
+    from collections import Counter, defaultdict
+
+    from kinfu_cli.segmentation.superquadric import fit_superquadric
+    from kinfu_cli.sim.scene import make_tabletop_scene, primitive_tabletop_scene, scene_label_cloud, \
+        segmentation_scene
+
+    fit = {"max_points": 200, "exponent_bounds": (0.1, 1.9), "cost": "volume"}
+    parts: dict = defaultdict(lambda: defaultdict(Counter))
+    for seed in range(100, 100 + n_seeds):
+        for build in (make_tabletop_scene, primitive_tabletop_scene, segmentation_scene):
+            scene = build(seed=seed)
+            pts, lab = scene_label_cloud(scene, spacing=0.004, seed=seed)
+            for o in scene.present_objects:
+                seg = pts[lab == scene.label_of(o.id)]
+                if len(seg) < 60:
+                    continue
+                split = fit_superquadric(seg, **fit).residual > 0.005
+                for cut in msq.CUTS:
+                    n = len(msq.fit_multi_superquadric(seg, mu=0.03, cut=cut, **fit).parts) if split else 1
+                    parts[o.shape][cut][n] += 1
+    print("scene objects: {parts: count} per Alg. 4 rule (mu = 0.03, kinfu segment --multi-sq settings)")
+    for shape, by_cut in parts.items():
+        print(f"  {shape:9} " + "   ".join(f"{c}: {dict(sorted(v.items()))}" for c, v in by_cut.items()))
+
+
 if __name__ == "__main__":
+    if len(sys.argv) > 1 and sys.argv[1] == "scenes":
+        scene_objects(int(sys.argv[2]) if len(sys.argv) > 2 else 4)
+        sys.exit(0)
     if len(sys.argv) > 1 and sys.argv[1] == "mugs":
         scene_mugs(int(sys.argv[2]) if len(sys.argv) > 2 else 6)
         sys.exit(0)
