@@ -6,6 +6,7 @@ per shape where every seed gives the true count.
     PYTHONPATH=$PWD python benchmarks/bench_multi_superquadric.py [n_seeds] [first_seed] [volume|barycentre]
     PYTHONPATH=$PWD python benchmarks/bench_multi_superquadric.py mugs [n_scenes]   # the simulator's mugs
     PYTHONPATH=$PWD python benchmarks/bench_multi_superquadric.py scenes [n_seeds]  # every scene object
+    PYTHONPATH=$PWD python benchmarks/bench_multi_superquadric.py fused [n_seeds]   # mugs in kinfu segment
 
 The third argument picks Alg. 4's planes (`build_superquadric_tree(cut=...)`): "barycentre" is the thesis'.
 Seeds 0-2 are the reported ones; VOLUME_CUT_RATIO was chosen on seeds 100-104 ("root ratio" = the root's best
@@ -136,7 +137,34 @@ def scene_objects(n_seeds: int = 4) -> None:
         print(f"  {shape:9} " + "   ".join(f"{c}: {dict(sorted(v.items()))}" for c, v in by_cut.items()))
 
 
+def fused_mugs(n_seeds: int = 3) -> None:
+    """The mug segment of `segmentation_scene` seeds 100.. segmented by `kinfu segment`'s pipeline
+    (`analyse_cloud`, --multi-sq, mu = 0.03) from the surface of the scene's exact TSDF (6 mm voxels): the
+    segment nearest the mug's centre, its parts' full extents, per Alg. 4 rule."""
+    from kinfu_cli.segmentation.pipeline import SegmentOptions, analyse_cloud
+    from kinfu_cli.segmentation.surface import surface_from_tsdf
+    from kinfu_cli.sim.scene import segmentation_scene
+    from kinfu_cli.sim.tsdf import scene_tsdf
+
+    vs, lo, hi = 0.006, np.array([-0.7, -0.5, 0.6]), np.array([0.7, 0.5, 1.1])
+    for seed in range(100, 100 + n_seeds):
+        scene = segmentation_scene(seed=seed)
+        tsdf, w = scene_tsdf(scene, lo, vs, tuple(np.ceil((hi - lo) / vs).astype(int)))
+        cloud = surface_from_tsdf(tsdf, w, lo, vs)
+        centre = np.asarray(next(o for o in scene.present_objects if o.shape == "mug").mesh.get_center())
+        for cut in msq.CUTS:
+            doc = analyse_cloud(cloud.points, cloud.normals, SegmentOptions(multi_sq=True, msq_cut=cut)).to_json()
+            seg = min((s for s in doc["segments"] if s.get("kind") == "object"),
+                      key=lambda s: np.linalg.norm(np.asarray(s["centroid"]) - centre))
+            parts = (seg.get("multi_superquadric") or {}).get("parts") or [seg["superquadric"]]
+            sizes = ", ".join("x".join(f"{100 * 2 * v:.0f}" for v in p["params"][:3]) for p in parts)
+            print(f"  seed {seed} {cut:10} mug segment {seg['id']}: {len(parts)} parts, extents cm {sizes}")
+
+
 if __name__ == "__main__":
+    if len(sys.argv) > 1 and sys.argv[1] == "fused":
+        fused_mugs(int(sys.argv[2]) if len(sys.argv) > 2 else 3)
+        sys.exit(0)
     if len(sys.argv) > 1 and sys.argv[1] == "scenes":
         scene_objects(int(sys.argv[2]) if len(sys.argv) > 2 else 4)
         sys.exit(0)
