@@ -38,9 +38,9 @@ SLSQP_ACC = 1e-9
 REFINE_LEG = 20  # iterations per SLSQP leg of a refinement (`_refine`)
 # gradients of the refinement: "central" differences of twelve poses in one vectorised `evaluate` (default),
 # "forward" (six poses; they leave active constraints ~1e-6 violated, so SLSQP does not stop), or "analytic"
-# (`_Problem.value_and_grad`, equal to 1e-8; in numpy 1.7x slower in the same process, 0.020 vs 0.012 s
-# median per object: its ~40 small array operations cost more than one batch; a numba kernel of it is the
-# next lever). The 6-iteration screening runs only rank the starts: forward differences are enough there.
+# (`_Problem.value_and_grad`, equal to 1e-8; in numpy 1.4x slower in the same process, benchmarks/bench_grasp.py:
+# its ~40 small array operations cost more than one batch; a numba kernel of it is the next lever).
+# The 6-iteration screening runs only rank the starts: forward differences are enough there.
 GRADIENT = "central"
 SCREEN_GRADIENT = "forward"
 
