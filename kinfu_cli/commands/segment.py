@@ -112,6 +112,8 @@ def _grasps(segments: dict, options: GraspOptions, cones: tuple[str, ...]) -> di
               help="Single-fit RMS residual (m) above which --multi-sq splits.")
 @click.option("--msq-height", type=int, default=3, show_default=True, help="Superquadric tree height H.")
 @click.option("--msq-mu", type=float, default=0.03, show_default=True, help="Dimension difference mu (m).")
+@click.option("--msq-cut", type=click.Choice(["volume", "barycentre"]), default="volume", show_default=True,
+              help="Tree root cut: where the two halves' boxes shrink most (ours), or the thesis' barycentre plane.")
 @click.option("--shape-prior/--no-shape-prior", default=True, show_default=True,
               help="Classify each segment (box / cylinder / sphere / generic) and fit its superquadric inside the "
                    "class's exponent bounds (thesis eq. 7.11).")
@@ -136,7 +138,7 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
             plane_distance, up, up_tolerance, isolation_threshold, no_superquadrics, sq_max_points,
             sq_exponent_bounds, sq_cost, multi_sq, msq_trigger, msq_height, msq_mu, seed, plot, as_json,
             quiet, force, viz=None, shape_prior=True, grasp=False, grasp_hand="both", grasp_cones=(),
-            grasp_starts=4) -> None:
+            grasp_starts=4, msq_cut="volume") -> None:
     """Segment the surface of VOLUME (a fusion volume.npz or a ternary.npz): support plane, supervoxels
     merged across convex boundaries (LCCP idea), saliency = isolation x roundness (thesis eq. 3.12) and a
     superquadric per segment (Vezzani ch. 7). Writes OUTDIR/segments.ply (coloured by segment),
@@ -163,7 +165,7 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
                           superquadrics=not no_superquadrics, sq_max_points=sq_max_points,
                           sq_exponent_bounds=_pair(sq_exponent_bounds, "--sq-exponent-bounds"), sq_cost=sq_cost,
                           multi_sq=multi_sq, msq_trigger=msq_trigger, msq_height=msq_height, msq_mu=msq_mu,
-                          color=not no_color, segmentation=params, shape_prior=shape_prior)
+                          msq_cut=msq_cut, color=not no_color, segmentation=params, shape_prior=shape_prior)
     result: SegmentResult | None = None
     grasps: dict | None = None
     steps = ["segment"] + (["grasp"] if grasp else []) + ["write"]

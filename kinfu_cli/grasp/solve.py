@@ -12,8 +12,10 @@ to a radial distance; plain F - 1 explodes for box-like exponents). Inequalities
   facing          z_h . (target centre - p): the palm faces the target ([ours]: with L points on a half
                   ellipsoid the mirror pose, object behind the palm, is also a local minimum);
 and the workspace box as bounds on p (eq. 7.7). A few starts around the target are solved (the thesis'
-Ipopt is a local method too) and the best feasible one is kept; gradients are forward differences computed
-for all six variables in one vectorised evaluation.
+Ipopt is a local method too): short screening runs, then the most promising refined in warm-restarted legs
+(`_refine`) until one converges. Gradients are central differences computed for all six variables in one
+vectorised evaluation: forward differences left active constraints violated by ~1e-6, above SLSQP's
+stopping tolerance, so runs at the optimum went on to their iteration limit (the 0.7 s worst cases).
 """
 
 from __future__ import annotations
@@ -27,16 +29,67 @@ from scipy.spatial.transform import Rotation
 
 from kinfu_cli.grasp.constraints import AXES, GraspConstraints
 from kinfu_cli.grasp.hand import HandModel
-from kinfu_cli.segmentation.superquadric import Superquadric, inside_outside_local
+from kinfu_cli.segmentation.superquadric import _TINY, Superquadric, inside_outside_local
 
 CONSTRAINT_TOL = 1e-4  # [code] constr_tol: a constraint value >= -CONSTRAINT_TOL is satisfied
 _FD_STEP = 1e-6
+# SLSQP stops when the cost changes by less than its `ftol` AND the constraint violations sum to less than it
+SLSQP_ACC = 1e-9
+REFINE_LEG = 20  # iterations per SLSQP leg of a refinement (`_refine`)
+# gradients of the refinement: "central" differences of twelve poses in one vectorised `evaluate` (default),
+# "forward" (six poses; they leave active constraints ~1e-6 violated, so SLSQP does not stop), or "analytic"
+# (`_Problem.value_and_grad`, equal to 1e-8; in numpy 1.4x slower in the same process, benchmarks/bench_grasp.py:
+# its ~40 small array operations cost more than one batch; a numba kernel of it is the next lever).
+# The 6-iteration screening runs only rank the starts: forward differences are enough there.
+GRADIENT = "central"
+SCREEN_GRADIENT = "forward"
 
 
 def _f_pow(points: np.ndarray, sq: Superquadric) -> np.ndarray:
     """F(points)^e1 - 1 (N,) for world points: < 0 inside, ~ relative radial distance outside."""
     F = inside_outside_local(sq.to_local(points), sq.size, sq.exponents)
     return np.power(np.maximum(F, 1e-300), sq.exponents[0]) - 1.0
+
+
+def _f_pow_grad(points: np.ndarray, sq: Superquadric) -> tuple[np.ndarray, np.ndarray]:
+    """F^e1 - 1 (N,) and its gradient (N, 3) w.r.t. the world points, analytic, in the log space of
+    `inside_outside_local`: with U = |x/a1|^(2/e2), V = |y/a2|^(2/e2), T1 = (U + V)^(e2/e1), T2 = |z/a3|^(2/e1),
+    F = T1 + T2 and d(F^e1)/dx = 2 F^e1 / F * T1 U / ((U + V) x), likewise y; d/dz = 2 F^e1 / F * T2 / z.
+    U / x and T2 / z go to 0 at 0 since 2 / e > 1 for the exponents a fit allows (< 2)."""
+    local = sq.to_local(points)
+    a = np.asarray(sq.size, dtype=np.float64)
+    e1, e2 = float(sq.exponents[0]), float(sq.exponents[1])
+    lx = np.log(np.maximum(np.abs(local) / a, _TINY))
+    lnU, lnV, lnT2 = 2.0 * lx[:, 0] / e2, 2.0 * lx[:, 1] / e2, 2.0 * lx[:, 2] / e1
+    S0 = np.exp(lnU) + np.exp(lnV)
+    S = np.maximum(S0, _TINY)
+    T1, T2 = np.exp((e2 / e1) * np.log(S)), np.exp(lnT2)
+    F = np.maximum(T1 + T2, _TINY)
+    G = np.exp(e1 * np.log(F))
+    ln_abs = lx + np.log(a)  # ln|x|, ln|y|, ln|z|
+    sign = np.sign(local)
+    k = 2.0 * G / F * (T1 + T2 > _TINY)  # where F or U + V is clamped, F is flat (as computed)
+    d = np.empty_like(local)
+    k1 = k * T1 / S * (S0 > _TINY)
+    d[:, 0] = k1 * sign[:, 0] * np.exp(lnU - ln_abs[:, 0])
+    d[:, 1] = k1 * sign[:, 1] * np.exp(lnV - ln_abs[:, 1])
+    d[:, 2] = k * sign[:, 2] * np.exp(lnT2 - ln_abs[:, 2])
+    return G - 1.0, d @ sq.rotation.T
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise a x b for (N, 3) arrays (np.cross costs ~0.1 ms of overhead per call here)."""
+    return np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+                     a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)
+
+
+def _right_jacobian(w: np.ndarray) -> np.ndarray:
+    """J_r of SO(3) at the rotation vector w: exp(w + d) = exp(w) exp(J_r(w) d) to first order."""
+    t = float(np.linalg.norm(w))
+    K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+    if t < 1e-6:
+        return np.eye(3) - 0.5 * K + K @ K / 6.0
+    return np.eye(3) - (1.0 - np.cos(t)) / t ** 2 * K + (t - np.sin(t)) / t ** 3 * (K @ K)
 
 
 @dataclass
@@ -77,6 +130,7 @@ class _Problem:
         self.all_points = np.vstack([self.L, self.V])
         self.vol = float(np.sqrt(np.prod(target.size)))
         self.R0 = np.eye(3)
+        self.gradient = GRADIENT
         self.names = (["support_plane"] * len(self.all_points) if cons.plane is not None else []) + \
             [f"cone:{c.axis}" for c in cons.cones] + \
             [f"obstacle:{k}" for k in range(len(obstacles)) for _ in range(len(self.V))] + ["facing"]
@@ -107,12 +161,56 @@ class _Problem:
         cols.append(np.einsum("mi,mi->m", R[:, :, 2], self.target.center - p)[:, None])
         return cost, np.concatenate(cols, axis=1)
 
+    def value_and_grad(self, x: np.ndarray) -> tuple:
+        """Cost, its gradient (6,), constraint values (n,) and their Jacobian (n, 6) at one pose x, analytic.
+
+        A hand point a (hand frame) lands at W = p + R a with R = R0 exp(w); dW/dp = I and, with J_r the right
+        Jacobian of SO(3), dW/dw = -R [a]x J_r, so a world gradient g of a function of W pulls back to
+        J_r^T (a x R^T g) on w."""
+        p, w = x[:3], x[3:6]
+        R = self.R0 @ Rotation.from_rotvec(w).as_matrix()
+        J = _right_jacobian(w)
+        A, nL = self.all_points, len(self.L)
+        W = p + A @ R.T
+
+        def pull(a: np.ndarray, g: np.ndarray) -> np.ndarray:  # rows [dp | dw] for world gradients g at a
+            return np.hstack([g, _cross(a, g @ R) @ J])
+
+        r, dr = _f_pow_grad(W[:nL], self.target)
+        cost = float(np.mean(r ** 2))
+        grad = (2.0 / nL) * (r @ pull(self.L, dr))
+        vals, jacs = [], []
+        if self.cons.plane is not None:
+            n = self.cons.plane[:3]
+            vals.append(W @ n + self.cons.plane[3])
+            jacs.append(pull(A, np.broadcast_to(n, A.shape)))
+        for c in self.cons.cones:
+            e = np.eye(3)[AXES.index(c.axis)]
+            vals.append(np.array([R[:, AXES.index(c.axis)] @ c.unit() - np.cos(np.radians(c.aperture_deg))]))
+            jacs.append(np.hstack([np.zeros((1, 3)), _cross(e[None], (R.T @ c.unit())[None]) @ J]))
+        for ob in self.obstacles:
+            s = np.sqrt(np.prod(ob.size))
+            f, df = _f_pow_grad(W[nL:], ob)
+            vals.append(s * f)
+            jacs.append(s * pull(self.V, df))
+        d = self.target.center - p
+        vals.append(np.array([R[:, 2] @ d]))
+        jacs.append(np.hstack([-R[:, 2][None], _cross(np.array([[0.0, 0.0, 1.0]]), (R.T @ d)[None]) @ J]))
+        return cost, grad, np.concatenate(vals), np.vstack(jacs)
+
     def _batch(self, x: np.ndarray) -> tuple:
         key = x.tobytes()
         if key != self._key:
-            X = np.vstack([x, x + _FD_STEP * np.eye(6)])
-            c, g = self.evaluate(X)
-            self._key, self._val = key, (c[0], (c[1:] - c[0]) / _FD_STEP, g[0], (g[1:] - g[0]).T / _FD_STEP)
+            if self.gradient == "analytic":
+                self._key, self._val = key, self.value_and_grad(x)
+            elif self.gradient == "forward":  # seven poses in one batch
+                c, g = self.evaluate(np.vstack([x, x + _FD_STEP * np.eye(6)]))
+                self._key, self._val = key, (c[0], (c[1:] - c[0]) / _FD_STEP, g[0], (g[1:] - g[0]).T / _FD_STEP)
+            else:  # central differences, thirteen poses in one batch
+                E = _FD_STEP * np.eye(6)
+                c, g = self.evaluate(np.vstack([x, x + E, x - E]))
+                h = 2 * _FD_STEP
+                self._key, self._val = key, (c[0], (c[1:7] - c[7:]) / h, g[0], (g[1:7] - g[7:]).T / h)
         return self._val
 
     def fun(self, x):
@@ -185,13 +283,14 @@ def start_poses(target: Superquadric, cons: GraspConstraints, n_starts: int, tow
     return out
 
 
-def _run(prob: _Problem, R0: np.ndarray, x0: np.ndarray, bounds, max_iter: int) -> tuple:
+def _run(prob: _Problem, R0: np.ndarray, x0: np.ndarray, bounds, max_iter: int, gradient: str | None = None
+         ) -> tuple:
     """One SLSQP run from (R0, x0): (rank, R0, x, ok, constraint values, message, iterations); rank sorts
-    feasible converged runs first, then by violation, then by cost."""
-    prob.R0, prob._key = R0, None
+    feasible converged runs first, then by violation, then by cost. gradient: as GRADIENT (its default)."""
+    prob.R0, prob._key, prob.gradient = R0, None, gradient or GRADIENT
     res = minimize(prob.fun, x0, jac=prob.jac, method="SLSQP", bounds=bounds,
                    constraints=[{"type": "ineq", "fun": prob.con, "jac": prob.con_jac}],
-                   options={"maxiter": max_iter, "ftol": 1e-9})
+                   options={"maxiter": max_iter, "ftol": SLSQP_ACC})
     x = res.x
     cost, g = prob.evaluate(x[None])
     viol = float(max(0.0, -g[0].min()))
@@ -200,6 +299,24 @@ def _run(prob: _Problem, R0: np.ndarray, x0: np.ndarray, bounds, max_iter: int) 
         ok = ok and all(b[0] - 1e-9 <= v <= b[1] + 1e-9 for b, v in zip(bounds[:3], x[:3]))
     return ((not ok, viol, float(cost[0])), R0, x.copy(), ok, g[0], str(res.message),
             int(res.nit))
+
+
+def _refine(prob: _Problem, R0: np.ndarray, x0: np.ndarray, bounds, max_iter: int) -> tuple:
+    """SLSQP to convergence in legs of at most REFINE_LEG iterations (max_iter in all), each leg warm-started
+    from the last one's pose with the rotation re-based (R0 <- R0 exp(w), w <- 0) and a fresh Hessian
+    estimate. [ours]: a run that reached the optimum but does not meet SLSQP's stopping test (e.g. an active
+    constraint violated by more than its tolerance) restarts there instead of running to its limit."""
+    used, run = 0, None
+    while used < max_iter:
+        leg = min(REFINE_LEG, max_iter - used)
+        run = _run(prob, R0, x0, bounds, leg)
+        used += run[6]
+        if run[3] or run[6] < leg:  # converged, or SLSQP stopped for another reason than its limit
+            break
+        x = run[2]
+        R0 = R0 @ Rotation.from_rotvec(x[3:6]).as_matrix()
+        x0 = np.concatenate([x[:3], np.zeros(3)])
+    return run[:6] + (used,)
 
 
 def grasp_part(target: Superquadric, hand: HandModel, cons: GraspConstraints, obstacles: list[Superquadric] = (),
@@ -222,12 +339,13 @@ def grasp_part(target: Superquadric, hand: HandModel, cons: GraspConstraints, ob
         x0 = np.concatenate([p0, np.zeros(3)])
         if bounds is not None:
             x0[:3] = np.clip(x0[:3], [b[0] for b in bounds[:3]], [b[1] for b in bounds[:3]])
-        runs.append(_run(prob, R0, x0, bounds, screen_iter if len(starts) > 1 else max_iter))
+        runs.append(_run(prob, R0, x0, bounds, screen_iter, SCREEN_GRADIENT) if len(starts) > 1
+                    else _refine(prob, R0, x0, bounds, max_iter))
     runs.sort(key=lambda r: (r[0][1] > CONSTRAINT_TOL, r[0][2]))
     order = list(runs)
     if len(starts) > 1:  # refine the best screened run; when it fails, the next ones, until one converges
         for _, R0, x, _, _, _, _ in runs:
-            order.append(_run(prob, R0, x, bounds, max_iter))
+            order.append(_refine(prob, R0, x, bounds, max_iter))
             if order[-1][3]:
                 break
     for rank, R0, x, ok, g, message, nit in order:

@@ -43,6 +43,7 @@ class SegmentOptions:
     msq_trigger: float = 0.005  # single-superquadric RMS residual (m) above which the split is tried
     msq_height: int = 3
     msq_mu: float = 0.03
+    msq_cut: str = "volume"  # Alg. 4's root cut: "volume" (ours) or the thesis' "barycentre"
     color: bool = True  # use the volume's per-voxel colour (when it was fused with colour) in segmentation
     segmentation: SegmentationParams = field(default_factory=SegmentationParams)
 
@@ -197,7 +198,7 @@ def _fit_multi_superquadrics(seg: Segmentation, fits: dict[int, SuperquadricFit 
                 multi[sid] = fit_multi_superquadric(
                     seg.points[seg.labels == sid], height=options.msq_height, mu=options.msq_mu,
                     min_points=options.sq_min_points, max_points=options.sq_max_points,
-                    exponent_bounds=options.sq_exponent_bounds, cost=options.sq_cost)
+                    exponent_bounds=options.sq_exponent_bounds, cost=options.sq_cost, cut=options.msq_cut)
             except SegmentError:
                 pass  # no split: the single superquadric stands
     return multi
