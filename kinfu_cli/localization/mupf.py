@@ -62,6 +62,10 @@ class MupfParameters:
     literal_estimate_weights: bool = False
     proposal: str = "sample"
     resample_ess: float = 1.0
+    temper_ess: float = 0.0
+    refine: int = 0
+    refine_iterations: int = 15
+    flips: int = 0
 
     def check(self) -> None:
         check_number(self.particles, "particles", 1, integer=True)
@@ -76,6 +80,10 @@ class MupfParameters:
         if self.proposal not in ("sample", "mean"):
             raise ConfigError(f"expected 'sample' or 'mean', got {self.proposal!r}", parameter="proposal")
         check_number(self.resample_ess, "resample_ess", 0, 1)
+        check_number(self.temper_ess, "temper_ess", 0, 1)
+        check_number(self.refine, "refine", 0, integer=True)
+        check_number(self.refine_iterations, "refine_iterations", 0, integer=True)
+        check_number(self.flips, "flips", 0, integer=True)
         check_number(self.sigma_p2, "sigma_p2", 0, low_open=True, unit="m^2")
         if self.max_index is not None:
             check_number(self.max_index, "max_index", 0, low_open=True, unit="m")
@@ -181,8 +189,9 @@ def localize_mupf(model: MeshModel, points: np.ndarray, params: MupfParameters =
         z = rng.standard_normal((n, N_X))
         ukf.mupf_step(mode, params.proposal == "sample", t, e, R, P, q_diag, ys[step - 1], window, expo, z, wm, wc, spread, sig2, f.lo, f.step,
                       f.sdf, f.normals, t_bar, e_bar, R_bar, t_hat, e_hat, R_hat, P_new, chol, log_q, log_l, log_l_est)
-        # eqs. 4.18-4.19: w_t = w_{t-1} l_window / q
-        log_w = _normalised(log_w_prev + log_l - (log_q if params.divide_by_proposal else 0.0))
+        # eqs. 4.18-4.19: w_t = w_{t-1} l_window / q (window likelihood tempered when temper_ess > 0)
+        lam = _temper(log_w_prev, log_l, params.temper_ess * n) if params.temper_ess > 0 else 1.0
+        log_w = _normalised(log_w_prev + lam * log_l - (log_q if params.divide_by_proposal else 0.0))
         if observer is not None:
             observer(step, t_hat, R_hat, log_w)
         if step == L or track_index:
@@ -197,6 +206,9 @@ def localize_mupf(model: MeshModel, points: np.ndarray, params: MupfParameters =
             ukf.map_scores(mode, tc, ec, Rc, t_hat, e_hat, R_hat, chol, log_w_bar, scores)
             j = int(np.argmax(scores))
             best = (tc[j].copy(), Rc[j].copy())
+            if step == L and params.refine:
+                best = _refine_candidates(model, ys, best, tc, Rc, np.concatenate([log_w_bar, log_w_bar])
+                                          if len(tc) > n else log_w_bar, params)
             if track_index:
                 history.append(model.performance_index(_pose_vector(*best), ys))
         ess = 1.0 / np.exp(2 * log_w).sum()
@@ -213,6 +225,76 @@ def localize_mupf(model: MeshModel, points: np.ndarray, params: MupfParameters =
     max_index = params.max_index if params.max_index is not None else math.sqrt(sig2)
     return MupfResult(pose=pose, index=index, converged=bool(index <= max_index),
                       max_index=max_index, seconds=seconds, window=m, index_history=history)
+
+
+def _temper(log_w_prev: np.ndarray, log_l: np.ndarray, target: float) -> float:
+    """The largest exponent lam in (0, 1] of the window likelihood that keeps the effective sample size of
+    w_prev l^lam at `target` particles or more (bisection): an adaptive annealing of the weights."""
+    def ess(lam):
+        w = _normalised(log_w_prev + lam * log_l)
+        return 1.0 / np.exp(2 * w).sum()
+
+    if ess(1.0) >= target:
+        return 1.0
+    lo, hi = 0.0, 1.0
+    for _ in range(30):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if ess(mid) >= target else (lo, mid)
+    return max(lo, 1e-6)
+
+
+def _distinct(tc: np.ndarray, Rc: np.ndarray, order: np.ndarray, k: int, min_m: float = 0.01,
+              min_rad: float = 0.17) -> list[int]:
+    """Up to k indices in `order` whose poses differ pairwise by > min_m or > min_rad (greedy)."""
+    keep: list[int] = []
+    for i in order:
+        if len(keep) >= k:
+            break
+        if keep:
+            dt = np.linalg.norm(tc[keep] - tc[i], axis=1)
+            cos = (np.einsum("kab,ab->k", Rc[keep], Rc[i]) - 1) / 2
+            if np.any((dt <= min_m) & (np.arccos(np.clip(cos, -1, 1)) <= min_rad)):
+                continue
+        keep.append(int(i))
+    return keep
+
+
+def _principal_flips(model: MeshModel) -> tuple[np.ndarray, np.ndarray]:
+    """Half turns about the model's three principal axes through its surface centroid c, as (F (3, 3, 3),
+    c - F c (3, 3)): the poses a nearly symmetric object is most often mistaken for."""
+    pts = model.sample_surface(2000, np.random.default_rng(0))
+    c = pts.mean(0)
+    _, axes = np.linalg.eigh(np.cov((pts - c).T))
+    F = np.stack([2 * np.outer(a, a) - np.eye(3) for a in axes.T])
+    return F, c - F @ c
+
+
+def _refine_candidates(model: MeshModel, ys, best, tc, Rc, log_w, params: MupfParameters):
+    """The MAP estimate and the best-weighted distinct candidates, each refined by Gauss-Newton on the points
+    (`refine`); the three best are also tried turned half about the model's principal axes (`flips`) and
+    refined; the lowest mean distance wins, then a few exact-mesh steps (README, "Localisation")."""
+    from kinfu_cli.localization.refine import refine_exact, refine_field
+
+    f = model.field
+
+    def polish(t, R):
+        t, R = np.ascontiguousarray(t), np.ascontiguousarray(R)
+        index = np.empty(len(t))
+        refine_field(t, R, ys, params.refine_iterations, f.lo, f.step, f.sdf, f.normals, index)
+        return t, R, index
+
+    idx = _distinct(tc, Rc, np.argsort(-log_w, kind="stable"), params.refine - 1)
+    t, R, index = polish(np.concatenate([best[0][None], tc[idx]]), np.concatenate([best[1][None], Rc[idx]]))
+    if params.flips:
+        top = _distinct(t, R, np.argsort(index, kind="stable"), params.flips)
+        F, shift = _principal_flips(model)
+        Rf = np.einsum("kab,fbc->kfac", R[top], F).reshape(-1, 3, 3)
+        tf = (t[top][:, None] + np.einsum("kab,fb->kfa", R[top], shift)).reshape(-1, 3)
+        t2, R2, index2 = polish(tf, Rf)
+        t, R, index = np.concatenate([t, t2]), np.concatenate([R, R2]), np.concatenate([index, index2])
+    j = int(np.argmin(index))
+    tj, Rj, _ = refine_exact(model, ys, t[j].copy(), R[j].copy())
+    return tj, Rj
 
 
 def _pose_vector(t: np.ndarray, R: np.ndarray) -> np.ndarray:
