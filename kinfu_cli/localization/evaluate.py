@@ -46,7 +46,8 @@ def _summary(rows: list[dict]) -> dict:
             "mean_seconds": float(sec.mean()), "max_seconds": float(sec.max()),
             "mean_cpu_seconds": float(np.mean([r["cpu_seconds"] for r in rows])),
             "max_cpu_seconds": float(np.max([r["cpu_seconds"] for r in rows])),
-            "converged": int(sum(r.get("converged", True) for r in rows))}
+            "converged": int(sum(r.get("converged", True) for r in rows)),
+            "converged_but_failed": int(sum(r.get("converged", False) and not r["success"] for r in rows))}
 
 
 def _row(model, samples, name, trial, pose, index, seconds, **extra) -> dict:
