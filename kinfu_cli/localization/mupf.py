@@ -7,7 +7,9 @@ h(x) the surface point closest to y with the object at x (eq. 4.17). After the U
 current point, every particle draws x_hat ~ N(x_bar, P) and is weighted by the likelihood of the last m
 points (the memory window, eqs. 4.18-4.20) over the proposal density; resampling starts after t0 steps.
 The estimate is the MAP particle of eqs. 4.28-4.29 under the estimation weights of eq. 4.24, and I_L
-(eq. 4.30) scores it without ground truth.
+(eq. 4.30) scores it without ground truth. By default (a departure, `refine`) the MAP particle and the best
+distinct candidates are then polished on the points and the lowest I_L kept; `converged` asks the points to fit
+at their noise level.
 """
 
 from __future__ import annotations
