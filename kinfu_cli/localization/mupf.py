@@ -25,6 +25,7 @@ from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.progress import progress
 from kinfu_cli.localization import ukf
 from kinfu_cli.localization.mesh_model import MeshModel, matrix_pose, pose_matrix, pose_rotations
+from kinfu_cli.localization.refine import pose_std
 
 N_X = 6
 MIN_POINTS = 3  # three points fix a rigid pose of a generic surface; fewer leave a continuum of poses
@@ -119,7 +120,7 @@ NO_REFINE = {"refine": 0, "flips": 0}
 @dataclass
 class MupfResult:
     """The MAP pose (vector and 4x4 model-to-world), its I_L (m), whether it passed `converged_rule`, the I_L of
-    the MAP estimate after each step (`index_history`), the run time (s) and the distances' 90th percentile."""
+    the MAP estimate after each step (`index_history`), the run time (s), the distances' 90th percentile and how well the points pin the pose (`pose_std`)."""
 
     pose: np.ndarray
     index: float
@@ -129,6 +130,7 @@ class MupfResult:
     window: int
     index_history: list[float] = field(default_factory=list)
     index_p90: float = float("nan")
+    pose_std: np.ndarray | None = None
 
     @property
     def matrix(self) -> np.ndarray:
@@ -232,16 +234,25 @@ def localize_mupf(model: MeshModel, points: np.ndarray, params: MupfParameters =
     seconds = time.perf_counter() - start
     pose = _pose_vector(*best)
     max_index = params.max_index if params.max_index is not None else 1.5 * params.noise
-    dist = model.exact_distances((ys - pose[:3]) @ pose_rotations(pose[None])[0])
+    Rp = pose_rotations(pose[None])[0]
+    dist = model.exact_distances((ys - pose[:3]) @ Rp)
     index, p90 = float(dist.mean()), float(np.percentile(dist, 90))
-    return MupfResult(pose=pose, index=index, converged=converged_rule(index, p90, max_index),
-                      max_index=max_index, seconds=seconds, window=m, index_history=history, index_p90=p90)
+    std = pose_std(model, ys, pose[:3], Rp, params.noise)
+    return MupfResult(pose=pose, index=index, converged=converged_rule(index, p90, max_index, std),
+                      max_index=max_index, seconds=seconds, window=m, index_history=history, index_p90=p90,
+                      pose_std=std)
 
 
-def converged_rule(index: float, p90: float, max_index: float) -> bool:
+MAX_POSE_STD = (0.01, math.radians(5.0))  # m, rad: a pose the points pin less than this is ambiguous
+
+
+def converged_rule(index: float, p90: float, max_index: float, std: np.ndarray | None = None) -> bool:
     """A pose fits at the noise level: mean distance <= max_index and 90 % of the points within 5/3 of it
-    (a wrong basin that fits most points closely still leaves a tail of far ones)."""
-    return bool(index <= max_index and p90 <= max_index * 5 / 3)
+    (a wrong basin that fits most points closely still leaves a tail of far ones); and, given the fit's
+    standard deviations `std` (refine.pose_std), the points pin it within MAX_POSE_STD (else another pose
+    fits them as well)."""
+    pinned = std is None or bool(np.all(std[:3] <= MAX_POSE_STD[0]) and np.all(std[3:] <= MAX_POSE_STD[1]))
+    return bool(index <= max_index and p90 <= max_index * 5 / 3 and pinned)
 
 
 def _distinct(tc: np.ndarray, Rc: np.ndarray, order: np.ndarray, k: int, min_m: float = 0.01,
@@ -274,7 +285,7 @@ def _refine_candidates(model: MeshModel, ys, best, tc, Rc, log_w, params: MupfPa
     """The MAP estimate and the best-weighted distinct candidates, each refined by Gauss-Newton on the points
     (`refine`); the three best are also tried turned half about the model's principal axes (`flips`) and
     refined; the lowest mean distance wins, then a few exact-mesh steps (README, "Localisation")."""
-    from kinfu_cli.localization.refine import refine_exact, refine_field
+    from kinfu_cli.localization.refine import refine_exact, refine_field  # noqa: PLC0415
 
     f = model.field
 

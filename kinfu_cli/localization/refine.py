@@ -109,3 +109,15 @@ def refine_exact(model, ys: np.ndarray, t: np.ndarray, R: np.ndarray, iterations
         if done:
             break
     return t, R, cur
+
+
+def pose_std(model, ys: np.ndarray, t: np.ndarray, R: np.ndarray, noise: float) -> np.ndarray:
+    """How well the points pin the pose: the standard deviations (m, m, m, rad, rad, rad; about the points'
+    centroid) of noise^2 (J^T J)^-1, J the point-to-plane Jacobian at (t, R). A direction no point constrains
+    (a box seen on faces parallel to one axis slides along it) gets a huge value, however low I_L is."""
+    H = model.exact_closest_points((ys - t) @ R) @ R.T + t
+    d = ys - H
+    n = d / np.maximum(np.linalg.norm(d, axis=1), 1e-12)[:, None]
+    J = np.hstack([n, np.cross(H - ys.mean(0), n)])
+    cov = noise ** 2 * np.linalg.pinv(J.T @ J, rcond=1e-12)
+    return np.sqrt(np.maximum(np.diag(cov), 0.0))

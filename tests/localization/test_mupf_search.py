@@ -87,3 +87,28 @@ def test_gauss_newton_refinement_converges_from_a_nearby_pose():
     E[:3, :3], E[:3, 3] = R, t
     rot, tra = pose_errors(E, T)
     assert rot < 0.2 and tra < 2e-4 and il < 1e-4
+
+
+def test_points_that_leave_a_direction_free_are_not_converged():
+    """A box touched only on the four faces parallel to its long axis y slides along y: the fit's standard
+    deviation along y is huge and the pose is not reported as converged although I_L is at the noise level;
+    with points on all six faces the same pose is pinned within 2 mm and 1 deg."""
+    from kinfu_cli.localization.refine import pose_std
+    from kinfu_cli.localization.shapes import box
+
+    b = box()
+    rng = np.random.default_rng(4)
+    pts = b.sample_surface(400, rng)
+    side = pts[np.abs(pts[:, 1]) < 0.12][:30]  # away from the end faces (noise would reach them)
+    ends = pts[np.abs(pts[:, 1]) > 0.15 - 1e-6][:6]
+    for sel, pinned in ((side, False), (np.concatenate([side, ends]), True)):
+        y = sel + rng.normal(0, NOISE, sel.shape)
+        std = pose_std(b, y, np.zeros(3), np.eye(3), NOISE)
+        il = float(b.exact_distances(y).mean())
+        p90 = float(np.percentile(b.exact_distances(y), 90))
+        assert il < 1.5 * NOISE
+        assert converged_rule(il, p90, 1.5 * NOISE, std) == pinned, std
+        if pinned:
+            assert std[:3].max() < 0.002 and np.rad2deg(std[3:]).max() < 1
+        else:
+            assert std[1] > 0.05
