@@ -47,7 +47,10 @@ def _summary(rows: list[dict]) -> dict:
             "mean_cpu_seconds": float(np.mean([r["cpu_seconds"] for r in rows])),
             "max_cpu_seconds": float(np.max([r["cpu_seconds"] for r in rows])),
             "converged": int(sum(r.get("converged", True) for r in rows)),
-            "converged_but_failed": int(sum(r.get("converged", False) and not r["success"] for r in rows))}
+            "converged_but_failed": int(sum(r.get("converged", False) and not r["success"] for r in rows)),
+            "ambiguous": int(sum(r.get("ambiguous", False) for r in rows)),
+            "unambiguous_converged_but_failed": int(sum(r.get("converged", False) and not r.get("ambiguous", True)
+                                                        and not r["success"] for r in rows))}
 
 
 def _row(model, samples, name, trial, pose, index, seconds, **extra) -> dict:
@@ -96,7 +99,8 @@ def evaluate_localization(names=tuple(shapes.SIMULATION_SHAPES), *, trials: int 
             c = time.process_time()
             r = localize_mupf(model, trial.points, replace(params, window=m), seed=s)
             per[name]["mupf"].append(_row(model, samples, name, trial, r.pose, r.index, r.seconds,
-                                          converged=r.converged, cpu_seconds=time.process_time() - c))
+                                          converged=r.converged, ambiguous=r.ambiguous,
+                                          cpu_seconds=time.process_time() - c))
         if "scaling_series" in methods:
             c = time.process_time()
             b = localize_scaling_series(model, trial.points, seed=s)

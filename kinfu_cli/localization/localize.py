@@ -26,7 +26,8 @@ def pose_json(result: MupfResult) -> dict | None:
 
 
 def _model_json(model: MeshModel, result: MupfResult) -> dict:
-    return {"model": model.name, "status": "converged" if result.converged else "not_converged",
+    status = "not_converged" if not result.converged else "ambiguous" if result.ambiguous else "converged"
+    return {"model": model.name, "status": status,
             "index_m": result.index, "index_p90_m": result.index_p90, "max_index_m": result.max_index,
             "pose_std": None if result.pose_std is None else [float(v) for v in result.pose_std],
             "seconds": result.seconds,
@@ -99,10 +100,13 @@ def localize_points(models: list[MeshModel], points: np.ndarray, params: MupfPar
     res = LocalizationResult(models, results, params, len(pts), priors[0])
     if not results[res.chosen].converged:
         r = results[res.chosen]
-        res.warnings.append(f"MUPF did not converge: the points do not fit at the noise level or do not pin the pose "
-                            f"(I_L {r.index:.4f} m, 90th percentile {r.index_p90:.4f} m, limits {r.max_index:.4f} / "
-                            f"{r.max_index * 5 / 3:.4f} m; pose std {np.round(r.pose_std, 4).tolist()} (m, rad), "
-                            f"limits 0.01 m / 5 deg; no pose reported)")
+        res.warnings.append(f"MUPF did not converge: the points do not fit at the noise level (I_L {r.index:.4f} m, "
+                            f"90th percentile {r.index_p90:.4f} m; limits {r.max_index:.4f} / "
+                            f"{r.max_index * 5 / 3:.4f} m; no pose reported)")
+    elif results[res.chosen].ambiguous:
+        res.warnings.append(f"the points do not pin the pose: standard deviations "
+                            f"{np.round(results[res.chosen].pose_std, 4).tolist()} (m, rad) exceed 0.01 m / 5 deg "
+                            f"somewhere; other poses fit as well (status ambiguous)")
     if thinned:
         res.warnings.append(f"used {len(pts)} of the {n_given} points, spread over them in their order "
                             f"(max_points; the thesis runs the filter on 100 points of a cloud)")

@@ -120,7 +120,8 @@ NO_REFINE = {"refine": 0, "flips": 0}
 @dataclass
 class MupfResult:
     """The MAP pose (vector and 4x4 model-to-world), its I_L (m), whether it passed `converged_rule`, the I_L of
-    the MAP estimate after each step (`index_history`), the run time (s), the distances' 90th percentile and how well the points pin the pose (`pose_std`)."""
+    the MAP estimate after each step (`index_history`), the run time (s), the distances' 90th percentile, how well the points pin the pose (`pose_std`) and whether
+    they leave it ambiguous (`pinned` fails)."""
 
     pose: np.ndarray
     index: float
@@ -131,6 +132,7 @@ class MupfResult:
     index_history: list[float] = field(default_factory=list)
     index_p90: float = float("nan")
     pose_std: np.ndarray | None = None
+    ambiguous: bool = False
 
     @property
     def matrix(self) -> np.ndarray:
@@ -238,21 +240,24 @@ def localize_mupf(model: MeshModel, points: np.ndarray, params: MupfParameters =
     dist = model.exact_distances((ys - pose[:3]) @ Rp)
     index, p90 = float(dist.mean()), float(np.percentile(dist, 90))
     std = pose_std(model, ys, pose[:3], Rp, params.noise)
-    return MupfResult(pose=pose, index=index, converged=converged_rule(index, p90, max_index, std),
+    return MupfResult(pose=pose, index=index, converged=converged_rule(index, p90, max_index),
                       max_index=max_index, seconds=seconds, window=m, index_history=history, index_p90=p90,
-                      pose_std=std)
+                      pose_std=std, ambiguous=not pinned(std))
 
 
 MAX_POSE_STD = (0.01, math.radians(5.0))  # m, rad: a pose the points pin less than this is ambiguous
 
 
-def converged_rule(index: float, p90: float, max_index: float, std: np.ndarray | None = None) -> bool:
+def converged_rule(index: float, p90: float, max_index: float) -> bool:
     """A pose fits at the noise level: mean distance <= max_index and 90 % of the points within 5/3 of it
-    (a wrong basin that fits most points closely still leaves a tail of far ones); and, given the fit's
-    standard deviations `std` (refine.pose_std), the points pin it within MAX_POSE_STD (else another pose
-    fits them as well)."""
-    pinned = std is None or bool(np.all(std[:3] <= MAX_POSE_STD[0]) and np.all(std[3:] <= MAX_POSE_STD[1]))
-    return bool(index <= max_index and p90 <= max_index * 5 / 3 and pinned)
+    (a wrong basin that fits most points closely still leaves a tail of far ones)."""
+    return bool(index <= max_index and p90 <= max_index * 5 / 3)
+
+
+def pinned(std: np.ndarray) -> bool:
+    """The points fix the pose within MAX_POSE_STD along every axis (refine.pose_std); else other poses fit
+    them as well (a box touched on four faces slides; a dome touched on its cap turns)."""
+    return bool(np.all(std[:3] <= MAX_POSE_STD[0]) and np.all(std[3:] <= MAX_POSE_STD[1]))
 
 
 def _distinct(tc: np.ndarray, Rc: np.ndarray, order: np.ndarray, k: int, min_m: float = 0.01,

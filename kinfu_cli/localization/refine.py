@@ -111,13 +111,39 @@ def refine_exact(model, ys: np.ndarray, t: np.ndarray, R: np.ndarray, iterations
     return t, R, cur
 
 
+def _jacobian(points: np.ndarray, normals: np.ndarray, centre: np.ndarray, radius: float) -> np.ndarray:
+    """Point-to-plane rows [n, ((p - centre) x n) / radius]: the rotation in arc length on the model's radius, so
+    translation and rotation directions compare in metres."""
+    return np.hstack([normals, np.cross(points - centre, normals) / radius])
+
+
+def _surface_normals(model, n: int = 2000) -> tuple[np.ndarray, np.ndarray]:
+    """n area-uniform surface samples of the model and their face normals (model frame; seeded)."""
+    rng = np.random.default_rng(0)
+    tri = rng.choice(len(model.triangles), size=n, p=model.areas / model.areas.sum())
+    a, b, c = (model.vertices[model.triangles[tri, k]] for k in range(3))
+    u, v = rng.random(n), rng.random(n)
+    flip = u + v > 1
+    u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
+    nrm = np.cross(b - a, c - a)
+    return a + u[:, None] * (b - a) + v[:, None] * (c - a), nrm / np.linalg.norm(nrm, axis=1, keepdims=True)
+
+
 def pose_std(model, ys: np.ndarray, t: np.ndarray, R: np.ndarray, noise: float) -> np.ndarray:
     """How well the points pin the pose: the standard deviations (m, m, m, rad, rad, rad; about the points'
     centroid) of noise^2 (J^T J)^-1, J the point-to-plane Jacobian at (t, R). A direction no point constrains
-    (a box seen on faces parallel to one axis slides along it) gets a huge value, however low I_L is."""
+    (a box seen on faces parallel to one axis slides along it) gets a huge value, however low I_L is.
+    Directions that move no part of the whole surface (a dome's turn about its axis: a continuous symmetry)
+    are left out: every pose along them is the same answer."""
     H = model.exact_closest_points((ys - t) @ R) @ R.T + t
     d = ys - H
     n = d / np.maximum(np.linalg.norm(d, axis=1), 1e-12)[:, None]
-    J = np.hstack([n, np.cross(H - ys.mean(0), n)])
-    cov = noise ** 2 * np.linalg.pinv(J.T @ J, rcond=1e-12)
-    return np.sqrt(np.maximum(np.diag(cov), 0.0))
+    centre, radius = ys.mean(0), model.diameter / 2
+    J = _jacobian(H, n, centre, radius)
+    sp, sn = _surface_normals(model)
+    Jm = _jacobian(sp @ R.T + t, sn @ R.T, centre, radius)
+    ev, V = np.linalg.eigh(Jm.T @ Jm / len(Jm))
+    Q = V[:, ev > 1e-4 * ev.max()]  # the directions the surface itself constrains
+    cov = Q @ (noise ** 2 * np.linalg.pinv(Q.T @ (J.T @ J) @ Q, rcond=1e-12)) @ Q.T
+    scale = np.r_[1.0, 1.0, 1.0, 1 / radius, 1 / radius, 1 / radius]
+    return np.sqrt(np.maximum(np.diag(cov), 0.0)) * scale
