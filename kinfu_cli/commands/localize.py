@@ -61,7 +61,7 @@ def _lines(doc: dict) -> list[str]:
 @click.option("--noise", type=float, default=0.002, show_default=True,
               help="Noise std of the points (m): the converged test expects I_L near 0.8 of it.")
 @click.option("--max-index", type=float, default=None,
-              help="Converged when I_L <= this and 90 %% of the points lie within 5/3 of it (m; default 1.5 x "
+              help="Converged when I_L <= this and 90 % of the points lie within 5/3 of it (m; default 1.5 x "
                    "--noise; the thesis' test was I_L <= sigma_p).")
 @click.option("--prior", default="centroid", show_default=True,
               help="Prior mean: 'centroid' (model centred on the points), 'zero' (thesis) or x,y,z,phi,theta,psi.")
