@@ -6,7 +6,10 @@ import click
 
 
 def mupf_filter_options(fn):
-    """--beta, --rotation and --paper-weights (see README, section Localisation)."""
+    """--beta, --rotation, --paper-weights and --no-refine (see README, section Localisation)."""
+    fn = click.option("--no-refine", is_flag=True,
+                      help="Report the MAP particle of eq. 4.28 as it is (the thesis), without polishing the best "
+                           "candidates and their half-turn flips by Gauss-Newton (see README).")(fn)
     fn = click.option("--paper-weights", is_flag=True,
                       help="Weights exactly as eqs. 4.18 / 4.24 (divided by the proposal density) and the MAP over "
                            "the particles only (see README).")(fn)

@@ -13,7 +13,7 @@ from kinfu_cli.commands._output import emit
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.localization.evaluate import METHODS, evaluate_localization, evaluate_recognition, \
     format_localization_table
-from kinfu_cli.localization.mupf import PAPER_WEIGHTS, MupfParameters
+from kinfu_cli.localization.mupf import NO_REFINE, PAPER_WEIGHTS, MupfParameters
 from kinfu_cli.localization.shapes import SIMULATION_SHAPES
 
 group = "eval"
@@ -45,7 +45,7 @@ def _names(text: str, allowed, option: str) -> list[str]:
 @click.option("--quiet", is_flag=True, help="No progress output.")
 @force_option
 def command(shapes: str, trials: int, methods: str, noise: float, particles: int, recognition_trials: int,
-            recognition_points: int, beta: float, rotation: str, paper_weights: bool, seed: int, output: Path | None, as_json: bool, quiet: bool,
+            recognition_points: int, beta: float, rotation: str, paper_weights: bool, no_refine: bool, seed: int, output: Path | None, as_json: bool, quiet: bool,
             force: bool) -> None:
     """Reproduce the thesis' simulation (Vezzani 2019 Table 4.2): on generated box, tetrahedron, cleaner,
     robot and helmet meshes, --trials true poses offset 0.05-0.1 m along one axis and 45-90 deg about one
@@ -63,7 +63,8 @@ def command(shapes: str, trials: int, methods: str, noise: float, particles: int
     meths = _names(methods, list(METHODS), "--methods")
     claim_outputs({"output": output}, [], force)
     params = MupfParameters(particles=particles, beta=beta, rotation=rotation,
-                            **(PAPER_WEIGHTS if paper_weights else {}))
+                            noise=noise if noise > 0 else MupfParameters.noise,
+                            **(PAPER_WEIGHTS if paper_weights else {}), **(NO_REFINE if no_refine else {}))
     params.check()
     doc = evaluate_localization(names, trials=trials, noise=noise, params=params, methods=meths, seed=seed,
                                 quiet=quiet)

@@ -34,6 +34,11 @@ class BaselineResult:
     capped: bool = False
 
 
+def _rigid(T: np.ndarray) -> bool:
+    return bool(np.all(np.isfinite(T)) and np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3), atol=1e-6)
+                and np.linalg.det(T[:3, :3]) > 0 and np.abs(T[:3, 3]).max() < 1e3)
+
+
 def _ball(rng: np.random.Generator, n: int, radius: float) -> np.ndarray:
     v = rng.standard_normal((n, 3))
     v /= np.linalg.norm(v, axis=1, keepdims=True)
@@ -106,6 +111,9 @@ def localize_ransac_icp(model: MeshModel, points: np.ndarray, *, voxel: float = 
                                    reg.TransformationEstimationPointToPlane())
     finally:
         o3d.utility.set_verbosity_level(level)
-    T_world_model = np.linalg.inv(icp.transformation)  # ICP maps measurements (world) into the model frame
+    # ICP maps measurements (world) into the model frame; with few points (the box: 15) it can return a
+    # degenerate matrix, then RANSAC's result, else the prior stands
+    T = next((np.asarray(c) for c in (icp.transformation, ransac.transformation) if _rigid(np.asarray(c))), np.eye(4))
+    T_world_model = np.linalg.inv(T)
     pose = matrix_pose(T_world_model)
     return BaselineResult(pose, model.performance_index(pose, points), time.perf_counter() - start)

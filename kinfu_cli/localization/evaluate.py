@@ -46,7 +46,11 @@ def _summary(rows: list[dict]) -> dict:
             "mean_seconds": float(sec.mean()), "max_seconds": float(sec.max()),
             "mean_cpu_seconds": float(np.mean([r["cpu_seconds"] for r in rows])),
             "max_cpu_seconds": float(np.max([r["cpu_seconds"] for r in rows])),
-            "converged": int(sum(r.get("converged", True) for r in rows))}
+            "converged": int(sum(r.get("converged", True) for r in rows)),
+            "converged_but_failed": int(sum(r.get("converged", False) and not r["success"] for r in rows)),
+            "ambiguous": int(sum(r.get("ambiguous", False) for r in rows)),
+            "unambiguous_converged_but_failed": int(sum(r.get("converged", False) and not r.get("ambiguous", True)
+                                                        and not r["success"] for r in rows))}
 
 
 def _row(model, samples, name, trial, pose, index, seconds, **extra) -> dict:
@@ -95,7 +99,8 @@ def evaluate_localization(names=tuple(shapes.SIMULATION_SHAPES), *, trials: int 
             c = time.process_time()
             r = localize_mupf(model, trial.points, replace(params, window=m), seed=s)
             per[name]["mupf"].append(_row(model, samples, name, trial, r.pose, r.index, r.seconds,
-                                          converged=r.converged, cpu_seconds=time.process_time() - c))
+                                          converged=r.converged, ambiguous=r.ambiguous,
+                                          cpu_seconds=time.process_time() - c))
         if "scaling_series" in methods:
             c = time.process_time()
             b = localize_scaling_series(model, trial.points, seed=s)
@@ -144,7 +149,7 @@ def evaluate_recognition(*, trials: int = 1, n_points: int = 170, noise: float =
 def format_localization_table(doc: dict) -> str:
     """The Table 4.2 / 4.4 layout: per shape and method, RMS error (deg, m), mean I_L, mean / max time and
     successes, with the thesis' row beside ours; then the recognition confusion (when run)."""
-    lines = [f"{'shape':<12}{'method':<15}{'err deg':>8}{'err m':>8}{'I_L mm':>8}{'time s':>13}{'cpu s':>7}{'succ.':>8}"
+    lines = [f"{'shape':<12}{'method':<15}{'err deg':>8}{'err m':>8}{'I_L mm':>8}{'time s':>13}{'cpu s mean/max':>15}{'succ.':>8}"
              f"   thesis (deg, m, I_L mm, s, succ./50)"]
     for name, per in doc.get("shapes", {}).items():
         for method, block in per.items():
@@ -154,9 +159,9 @@ def format_localization_table(doc: dict) -> str:
             if th is not None:
                 ref = "   " + ", ".join("-" if v is None else (f"{v * 1000:.1f}" if i == 2 else f"{v:g}")
                                         for i, v in enumerate(th))
-            lines.append(f"{name:<12}{method:<15}{s['rms_rotation_error_deg']:8.2f}{s['rms_translation_error_m']:8.4g}"
-                         f"{s['mean_index_m'] * 1000:8.4g}{s['mean_seconds']:6.2f} /{s['max_seconds']:5.1f}"
-                         f"{s['mean_cpu_seconds']:7.2f}"
+            lines.append(f"{name:<12}{method:<15}{s['rms_rotation_error_deg']:8.2f} {s['rms_translation_error_m']:7.4g}"
+                         f" {s['mean_index_m'] * 1000:7.4g}{s['mean_seconds']:6.2f} /{s['max_seconds']:5.1f}"
+                         f" {s['mean_cpu_seconds']:4.2f}/{s['max_cpu_seconds']:4.2f}"
                          f"{s['successes']:>4}/{s['trials']:<3}{ref}")
     rec = doc.get("recognition")
     if rec and rec["total"]:

@@ -16,7 +16,7 @@ from kinfu_cli.localization.mupf import MupfParameters, MupfResult, check_points
 
 def pose_json(result: MupfResult) -> dict | None:
     """The estimate as 4x4, position + quaternion (x, y, z, w) and the filter's Euler angles — only when it
-    converged (I_L within max_index): a non-converged run reports no pose."""
+    converged (`mupf.converged_rule`): a non-converged run reports no pose."""
     if not result.converged:
         return None
     T = result.matrix
@@ -26,8 +26,11 @@ def pose_json(result: MupfResult) -> dict | None:
 
 
 def _model_json(model: MeshModel, result: MupfResult) -> dict:
-    return {"model": model.name, "status": "converged" if result.converged else "not_converged",
-            "index_m": result.index, "max_index_m": result.max_index, "seconds": result.seconds,
+    status = "not_converged" if not result.converged else "ambiguous" if result.ambiguous else "converged"
+    return {"model": model.name, "status": status,
+            "index_m": result.index, "index_p90_m": result.index_p90, "max_index_m": result.max_index,
+            "pose_std": None if result.pose_std is None else [float(v) for v in result.pose_std],
+            "seconds": result.seconds,
             "window": result.window, "pose": pose_json(result)}
 
 
@@ -96,8 +99,14 @@ def localize_points(models: list[MeshModel], points: np.ndarray, params: MupfPar
         results.append(localize_mupf(model, pts, params, x0=x0, seed=seed, quiet=quiet))
     res = LocalizationResult(models, results, params, len(pts), priors[0])
     if not results[res.chosen].converged:
-        res.warnings.append(f"MUPF did not converge: I_L {results[res.chosen].index:.4f} m > max_index "
-                            f"{results[res.chosen].max_index:.4f} m (no pose reported)")
+        r = results[res.chosen]
+        res.warnings.append(f"MUPF did not converge: the points do not fit at the noise level (I_L {r.index:.4f} m, "
+                            f"90th percentile {r.index_p90:.4f} m; limits {r.max_index:.4f} / "
+                            f"{r.max_index * 5 / 3:.4f} m; no pose reported)")
+    elif results[res.chosen].ambiguous:
+        res.warnings.append(f"the points do not pin the pose: standard deviations "
+                            f"{np.round(results[res.chosen].pose_std, 4).tolist()} (m, rad) exceed 0.01 m / 5 deg "
+                            f"somewhere; other poses fit as well (status ambiguous)")
     if thinned:
         res.warnings.append(f"used {len(pts)} of the {n_given} points, spread over them in their order "
                             f"(max_points; the thesis runs the filter on 100 points of a cloud)")
