@@ -233,17 +233,34 @@ def _mean_rows(values: np.ndarray, lab: np.ndarray, k: int) -> np.ndarray:
     return np.stack([np.bincount(lab, values[:, a], minlength=k) for a in range(values.shape[1])], 1) / cnt[:, None]
 
 
+def _cell_ids(points: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
+    """(first point of each occupied `cell`-sized grid cell, cell id per point), cells in lexicographic order
+    (as np.unique(axis=0) gives them, through one int64 key: several times faster)."""
+    c = np.floor(points / cell).astype(np.int64)
+    c -= c.min(axis=0)
+    span = c.max(axis=0) + 1
+    key = (c[:, 0] * span[1] + c[:, 1]) * span[2] + c[:, 2]
+    _, first, inv = np.unique(key, return_index=True, return_inverse=True)
+    return first, inv.ravel()
+
+
+def _compact(labels: np.ndarray, k: int) -> tuple[np.ndarray, int]:
+    """Labels renumbered 0..K'-1 in increasing order of the used ids (np.unique's return_inverse, by bincount)."""
+    used = np.bincount(labels, minlength=k) > 0
+    remap = np.cumsum(used) - 1
+    return remap[labels], int(used.sum())
+
+
 def supervoxels(points: np.ndarray, normals: np.ndarray, params: SegmentationParams,
-                colors: np.ndarray | None = None) -> np.ndarray:
+                colors: np.ndarray | None = None, pairs: np.ndarray | None = None) -> np.ndarray:
     """VCCS-like supervoxel id per point (N,), spatially connected, ids 0..K-1. With colours (RGB in [0, 1])
-    the distance gains PCL's colour term color_importance * |c_p - c_s| (Euclidean in RGB)."""
+    the distance gains PCL's colour term color_importance * |c_p - c_s| (Euclidean in RGB). pairs: the point
+    pairs closer than adjacency_radius when the caller has them (found here otherwise)."""
     n = len(points)
     if n == 0:
         return np.zeros(0, dtype=np.int64)
     R = float(params.seed_resolution)
-    cells = np.floor(points / R).astype(np.int64)
-    _, first, inv = np.unique(cells, axis=0, return_index=True, return_inverse=True)
-    inv = inv.ravel()
+    first, inv = _cell_ids(points, R)
     # seeds: the centroid of each cell (position, normal, colour)
     k = len(first)
     seed_pos = _mean_rows(points, inv, k)
@@ -262,17 +279,15 @@ def supervoxels(points: np.ndarray, normals: np.ndarray, params: SegmentationPar
         dist = ws * np.einsum("ijk,ijk->ij", dx, dx) + wn * (1.0 - np.einsum("ik,ijk->ij", normals, seed_nrm[cand]))
         if seed_col is not None:
             dist += wc * np.linalg.norm(colors[:, None, :] - seed_col[cand], axis=2)
-        labels = cand[np.arange(n), np.argmin(dist, axis=1)]
-        used, labels = np.unique(labels, return_inverse=True)
-        labels = labels.ravel()
-        k = len(used)
+        labels, k = _compact(cand[np.arange(n), np.argmin(dist, axis=1)], k)
         seed_pos = _mean_rows(points, labels, k)
         seed_nrm = _mean_rows(normals, labels, k)
         seed_nrm /= np.maximum(np.linalg.norm(seed_nrm, axis=1, keepdims=True), 1e-12)
         if seed_col is not None:
             seed_col = _mean_rows(colors, labels, k)
     # split into spatially connected parts
-    pairs = cKDTree(points).query_pairs(r=params.adjacency_radius, output_type="ndarray")
+    if pairs is None:
+        pairs = cKDTree(points).query_pairs(r=params.adjacency_radius, output_type="ndarray")
     return _components(n, pairs[labels[pairs[:, 0]] == labels[pairs[:, 1]]])
 
 
@@ -296,12 +311,14 @@ def lccp_segments(points: np.ndarray, normals: np.ndarray, pairs: np.ndarray, pa
     (module docstring, step 4); with colours, an edge whose supervoxels' mean colours differ by more than
     t_lccp (RGB in [0, 1], Euclidean; thesis eq. 4.15) is cut whatever its shape. pairs: point pairs closer
     than adjacency_radius."""
-    sv = supervoxels(points, normals, params, colors)
+    sv = supervoxels(points, normals, params, colors, pairs)
     k = int(sv.max()) + 1
     _, cen, snrm = _segment_stats(points, normals, sv, k)
     a, b = sv[pairs[:, 0]], sv[pairs[:, 1]]
     diff = a != b
-    edges = np.unique(np.sort(np.stack([a[diff], b[diff]], 1), axis=1), axis=0).reshape(-1, 2)
+    lo, hi = np.minimum(a[diff], b[diff]), np.maximum(a[diff], b[diff])
+    key = np.unique(lo * np.int64(k) + hi)  # the sorted unique (lo, hi) rows, as np.unique(axis=0) orders them
+    edges = np.stack([key // k, key % k], 1).reshape(-1, 2)
     d = cen[edges[:, 0]] - cen[edges[:, 1]]
     d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
     n1, n2 = snrm[edges[:, 0]], snrm[edges[:, 1]]
@@ -349,34 +366,48 @@ def _concave_pairs(points: np.ndarray, normals: np.ndarray, pairs: np.ndarray, m
 
 
 def _best_face_cut(points: np.ndarray, normals: np.ndarray, idx: np.ndarray, seg_pairs: np.ndarray,
-                   concave: np.ndarray, params: SegmentationParams, rng: np.random.Generator
+                   concave: np.ndarray, params: SegmentationParams, rng: np.random.Generator, chunk: int = 64
                    ) -> tuple[float, np.ndarray | None]:
     """(concave share of the separated pairs, mask over the points of the + side) of the best face plane among
-    `cut_candidates` concave pairs of one segment (points idx, its pairs seg_pairs), or (0, None)."""
+    `cut_candidates` concave pairs of one segment (points idx, its pairs seg_pairs), or (0, None). The planes
+    are scored `chunk` at a time as (points x planes) side matrices; ties go to the first plane sampled."""
     cand = seg_pairs[concave]
-    best: tuple[float, np.ndarray | None] = (0.0, None)
     tol = params.plane_distance / 2  # the face's own points, within noise of its plane, stay on its side
+    planes = cand[rng.choice(len(cand), size=min(params.cut_candidates, len(cand)), replace=False)].ravel()
+    loc = np.full(len(points), -1, dtype=np.int64)
+    loc[idx] = np.arange(len(idx))
+    pa, pb = loc[seg_pairs[:, 0]], loc[seg_pairs[:, 1]]
+    x = points[idx]
     n_seg = len(idx)
+    best_share, best_side = 0.0, None
+    for c0 in range(0, len(planes), chunk):
+        p = planes[c0:c0 + chunk]
+        plus = np.einsum("ijk,jk->ij", x[:, None, :] - points[p][None], normals[p]) > tol
+        n_plus = plus.sum(axis=0)
+        small = np.minimum(n_plus, n_seg - n_plus)
+        large = np.maximum(n_plus, n_seg - n_plus)
+        ok = small >= np.maximum(params.min_segment_points, params.cut_min_ratio * large)
+        if not ok.any():
+            continue
+        plus = plus[:, ok]
+        cross = plus[pa] != plus[pb]
+        n_cross = cross.sum(axis=0)
+        share = np.where(n_cross > 0, (cross & concave[:, None]).sum(axis=0) / np.maximum(n_cross, 1), 0.0)
+        j = int(np.argmax(share))
+        if share[j] > best_share:
+            best_share, best_side = float(share[j]), plus[:, j]
+    if best_side is None:
+        return 0.0, None
     side = np.zeros(len(points), dtype=bool)
-    for i in rng.choice(len(cand), size=min(params.cut_candidates, len(cand)), replace=False):
-        for p in cand[i]:
-            plus = (points[idx] - points[p]) @ normals[p] > tol
-            n_plus = int(plus.sum())
-            small, large = sorted((n_plus, n_seg - n_plus))
-            if small < max(params.min_segment_points, params.cut_min_ratio * large):
-                continue
-            side[idx] = plus
-            cross = side[seg_pairs[:, 0]] != side[seg_pairs[:, 1]]
-            share = float(concave[cross].mean()) if cross.any() else 0.0
-            if share > best[0]:
-                best = (share, side.copy())
-    return best
+    side[idx] = best_side
+    return best_share, side
 
 
 def concave_plane_cuts(points: np.ndarray, normals: np.ndarray, seg: np.ndarray, pairs: np.ndarray,
                        params: SegmentationParams) -> tuple[np.ndarray, int]:
     """(segments after the concave plane cuts, number of cuts): module docstring, step 4b. seg: segment per
-    point (>= 0); pairs: point pairs closer than adjacency_radius. The pieces are re-split into connected parts."""
+    point (>= 0); pairs: point pairs closer than adjacency_radius. The pieces are re-split into connected parts.
+    Points and pairs are grouped by segment once per round (a cut only relabels its own segment's points)."""
     if not params.cut_concave_fraction or params.cut_rounds == 0 or len(pairs) == 0:  # None or 0: off
         return seg, 0
     rng = np.random.default_rng(params.seed)
@@ -387,15 +418,26 @@ def concave_plane_cuts(points: np.ndarray, normals: np.ndarray, seg: np.ndarray,
         a = seg[pairs[:, 0]]
         same = a == seg[pairs[:, 1]]
         hit = np.unique(a[same & concave])
+        if len(hit) == 0:
+            break
+        k = int(seg.max()) + 1
+        n_conc = np.bincount(a[same & concave], minlength=k)
+        ext = np.stack([np.full((k, 3), np.inf), np.full((k, 3), -np.inf)])
+        np.minimum.at(ext[0], seg, points)
+        np.maximum.at(ext[1], seg, points)
+        diag = np.linalg.norm(ext[1] - ext[0], axis=1)
+        p_order = np.argsort(seg, kind="stable")
+        p_start = np.searchsorted(seg[p_order], np.arange(k + 1))
+        in_pairs = np.flatnonzero(same)
+        e_order = in_pairs[np.argsort(a[in_pairs], kind="stable")]
+        e_start = np.searchsorted(a[e_order], np.arange(k + 1))
         before = cuts
         for s in hit:
-            inseg = same & (a == s)
-            if np.count_nonzero(concave & inseg) < 3:
+            if n_conc[s] < 3 or diag[s] > params.cut_max_size:
                 continue
-            idx = np.flatnonzero(seg == s)
-            if np.linalg.norm(np.ptp(points[idx], axis=0)) > params.cut_max_size:
-                continue
-            share, plus = _best_face_cut(points, normals, idx, pairs[inseg], concave[inseg], params, rng)
+            idx = p_order[p_start[s]:p_start[s + 1]]
+            e = e_order[e_start[s]:e_start[s + 1]]
+            share, plus = _best_face_cut(points, normals, idx, pairs[e], concave[e], params, rng)
             if plus is not None and share >= params.cut_concave_fraction:
                 seg[plus] = seg.max() + 1
                 cuts += 1
