@@ -69,7 +69,7 @@ class SegmentationParams:
     plane_color_margin: float = 0.01  # object points this close to the support plane join it when their
     # colour is nearer the plane's than their segment's (m; 0 = off; needs colours)
     # concave plane cuts (module docstring, step 4b; tuned on synth seeds 0, 1, 8-11; None or 0 = off)
-    cut_concave_fraction: float | None = 0.35
+    cut_concave_fraction: float | None = 0.4
     cut_min_angle_deg: float = 30.0
     cut_min_ratio: float = 0.4
     cut_candidates: int = 200
