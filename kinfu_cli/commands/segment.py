@@ -83,7 +83,7 @@ def _grasps(segments: dict, options: GraspOptions, cones: tuple[str, ...]) -> di
                    "distance, 0..1.73); default no cut.")
 @click.option("--t-ff", type=float, default=0.5, show_default=True,
               help="Flood Fill: neighbours join when colour-importance*|dc| + normal-importance*(1-n1.n2) is below this.")
-@click.option("--concave-cut", type=float, default=0.35, show_default=True,
+@click.option("--concave-cut", type=float, default=0.4, show_default=True,
               help="LCCP: cut a segment along the plane of a face at a concave crease when at least this share of "
                    "the point pairs the plane separates are concave (touching boxes); 0 = off (the thesis' LCCP).")
 @click.option("--plane-color-margin", type=float, default=0.01, show_default=True,
