@@ -28,6 +28,9 @@ numpy/scipy/open3d:
    fifth of the body, is a part, not an object); up to `cut_rounds` rounds, the best of `cut_candidates` sampled
    face planes per segment and round; only segments whose bounding-box diagonal is at most `cut_max_size`.
 5. Segments that stay within 2 x `plane_distance` of the support plane (its edges and sides) join it.
+5b. Fragments: a segment under `fragment_points` whose border points lie mostly (>= `fragment_share`) against one
+   larger object segment is a piece of it and joins it; a small object on the support borders mostly the plane
+   and stays (real fused scenes break box rims and card packs into such pieces).
 6. Segments smaller than `min_segment_points` join their most-connected neighbour (a large one first; fragments
    merge with each other); isolated specks join the support plane when at its level, a segment within
    `adjacency_radius`, or are dropped (label -1).
@@ -96,6 +99,10 @@ class SegmentationParams:
     # ones (a box on its side filling the view) still has its table
     min_up_facing_fraction: float = 0.3
     max_planes: int = 3  # RANSAC rounds; the highest qualifying horizontal plane is the support
+    # fragments (step 5b): a segment under fragment_points whose border runs mostly (>= fragment_share of its
+    # border points) along one larger object segment joins it; 0 = off
+    fragment_points: int = 100
+    fragment_share: float = 0.5
     seed: int = 0
 
     def validate(self) -> None:
@@ -120,6 +127,8 @@ class SegmentationParams:
         check_number(self.cut_max_size, "cut_max_size", 0, 100, unit="m")
         check_number(self.sanity_angle_deg, "sanity_angle_deg", 0, 180, unit="degrees")
         check_number(self.seed, "seed", 0, 2 ** 32 - 1, integer=True)
+        check_number(self.fragment_points, "fragment_points", 0, 10 ** 9, integer=True)
+        check_number(self.fragment_share, "fragment_share", 0, 1)
         if not 0 <= self.concavity_tolerance_deg < 90:
             raise ConfigError(f"expected 0..90 degrees, got {self.concavity_tolerance_deg}",
                               parameter="concavity_tolerance_deg")
@@ -481,6 +490,61 @@ def _absorb_small(seg: np.ndarray, pairs: np.ndarray, min_points: int) -> np.nda
     return np.where((seg >= 0) & (sizes[np.maximum(seg, 0)] >= min_points), seg, -1)
 
 
+def _near(points: np.ndarray, others: np.ndarray, radius: float) -> np.ndarray:
+    """Mask of `points` with a point of `others` within radius."""
+    if len(others) == 0 or len(points) == 0:
+        return np.zeros(len(points), dtype=bool)
+    d, _ = cKDTree(others).query(points, distance_upper_bound=radius)
+    return np.isfinite(d)
+
+
+def _merge_fragments(seg: np.ndarray, pairs: np.ndarray, near_plane: np.ndarray, max_points: int, share: float
+                     ) -> tuple[np.ndarray, int]:
+    """(segments, merges): a segment under max_points whose border lies mostly (>= share of its border points)
+    against one larger object segment is a piece of it and joins it; a small object standing on the support
+    borders mostly the support (near_plane: points with a support-plane point within adjacency_radius) and
+    stays. One pass, smallest fragments first (a fragment joins its neighbour's final segment)."""
+    n_seg = int(seg.max()) + 1 if (seg >= 0).any() else 0
+    if n_seg < 2:
+        return seg, 0
+    sizes = np.bincount(seg[seg >= 0], minlength=n_seg)
+    sa, sb = seg[pairs[:, 0]], seg[pairs[:, 1]]
+    m = (sa != sb) & (sa >= 0) & (sb >= 0)
+    # border points of each segment that touch segment t: unique (point, other segment) pairs
+    pt = np.r_[pairs[m, 0], pairs[m, 1]]
+    other = np.r_[sb[m], sa[m]]
+    key = np.unique(pt * np.int64(n_seg) + other)
+    pt, other = key // n_seg, key % n_seg
+    own = seg[pt]
+    border = np.zeros(len(seg), dtype=bool)
+    border[pt] = True
+    border |= near_plane & (seg >= 0)
+    n_border = np.bincount(seg[border & (seg >= 0)], minlength=n_seg)
+    touch = coo_matrix((np.ones(len(pt)), (own, other)), shape=(n_seg, n_seg)).tocsr()
+    target = np.arange(n_seg)
+    merges = 0
+    for s in np.argsort(sizes, kind="stable"):
+        if sizes[s] == 0 or sizes[s] >= max_points or n_border[s] == 0:
+            continue
+        row = touch.getrow(s)
+        if row.nnz == 0:
+            continue
+        cand = row.indices[sizes[row.indices] > sizes[s]]
+        if len(cand) == 0:
+            continue
+        w = np.asarray(row[:, cand].todense()).ravel()
+        t = cand[int(np.argmax(w))]
+        if w.max() >= share * n_border[s]:
+            target[s] = t
+            merges += 1
+    for _ in range(n_seg):  # follow chains (a fragment joined a fragment that joined a segment)
+        nxt = target[target]
+        if np.array_equal(nxt, target):
+            break
+        target = nxt
+    return np.where(seg >= 0, target[np.maximum(seg, 0)], -1), merges
+
+
 def _below_objects(seg: np.ndarray, h: np.ndarray, limit: float) -> np.ndarray:
     """Points of segments whose 95th-percentile height over the support plane is below `limit`."""
     out = np.zeros(len(seg), dtype=bool)
@@ -578,6 +642,10 @@ def segment_cloud(points: np.ndarray, normals: np.ndarray, params: SegmentationP
         labels[rest[support]] = PLANE_LABEL
         seg = np.where(support, -1, seg)
         keep_rest = ~support
+        if params.fragment_points > 0:
+            near_plane = _near(P, pts[labels == PLANE_LABEL], params.adjacency_radius)
+            seg, stats["fragments_merged"] = _merge_fragments(seg, pairs, near_plane, params.fragment_points,
+                                                              params.fragment_share)
     else:
         seg = _absorb_small(seg, pairs, params.min_segment_points)
         keep_rest = np.ones(len(seg), dtype=bool)
