@@ -91,7 +91,7 @@ def _grasps(segments: dict, options: GraspOptions, cones: tuple[str, ...]) -> di
                    "plane's; 0 = off.")
 @click.option("--adjacency-radius", type=float, default=0.018, show_default=True,
               help="Points closer than this connect supervoxels (m).")
-@click.option("--concavity-tolerance", type=float, default=20.0, show_default=True,
+@click.option("--concavity-tolerance", type=float, default=40.0, show_default=True,
               help="LCCP: concave edges flatter than this (deg) still merge.")
 @click.option("--sanity-angle", type=float, default=60.0, show_default=True, help="LCCP sanity criterion (deg).")
 @click.option("--min-segment-points", type=int, default=50, show_default=True,
