@@ -3,7 +3,7 @@
 1. Superquadric fit on synthetic partial views (2 mm noise): parameter errors and seconds per fit, and the
    speed-up over a reference fit in the same process (scipy finite-difference Jacobian, every candidate
    axis run to convergence).
-2. `kinfu segment` on a 512^3 / 3 m fusion volume of a synth scene (target <= 10 s), end to end via the CLI.
+2. `kinfu segment` on a 512^3 / 3 m fusion volume of a synth scene (issue 12 target <= 2 s), end to end via the CLI.
 3. Segmentation of fused synth scenes vs their object meshes: boundary precision/recall at 2 cm, object recall.
 3b. The same on scenes fused with colour (`--colour`): shape only, LCCP with colour, Flood Fill with colour,
    on the tuning seeds 0-3 and the held-out seeds 4-7 (defaults were chosen on 0-3 only), and the
