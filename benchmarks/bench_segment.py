@@ -3,13 +3,17 @@
 1. Superquadric fit on synthetic partial views (2 mm noise): parameter errors and seconds per fit, and the
    speed-up over a reference fit in the same process (scipy finite-difference Jacobian, every candidate
    axis run to convergence).
-2. `kinfu segment` on a 512^3 / 3 m fusion volume of a synth scene (target <= 10 s), end to end via the CLI.
+2. `kinfu segment` on a 512^3 / 3 m fusion volume of a synth scene (issue 12 target <= 2 s), end to end via the CLI.
 3. Segmentation of fused synth scenes vs their object meshes: boundary precision/recall at 2 cm, object recall.
 3b. The same on scenes fused with colour (`--colour`): shape only, LCCP with colour, Flood Fill with colour,
    on the tuning seeds 0-3 and the held-out seeds 4-7 (defaults were chosen on 0-3 only), and the
    segmentation time with colour over the time without it on the 512^3 volume fused with colour, same process.
 4. Object-driven planning (thesis Alg. 4) vs the standard strategy on a partially scanned scene: candidate
    views ray-cast, and the time of each.
+5. `--speed`: `segment_volume` on the issue's two volumes, both fused with colour: the synth 512^3 / 3 m volume of
+   (2.) and a real 6 mm room volume (7-Scenes redkitchen frames 0-59, 512^3 / 3 m = 5.86 mm, grid centred on the
+   scene as `kinfu fuse` places it); wall and CPU seconds (`time.process_time`, all threads) per phase, medians
+   of `repeats` runs after a warm-up. Cached in `--cache DIR` (fusing takes a minute).
 
 Run: .venv/bin/python benchmarks/bench_segment.py [--quick]
 """
@@ -217,6 +221,83 @@ def bench_object_planning(seed: int = 0) -> dict:
             "standard_score": std.score}
 
 
+def _speed_volumes(cache: Path) -> dict:
+    """The two volumes of (5.), fused once and kept in `cache`."""
+    from kinfu_cli.fusion.placement import default_origin
+    from kinfu_cli.fusion.volume import load_volume
+
+    cache.mkdir(parents=True, exist_ok=True)
+    synth, room = cache / "synth512_colour.npz", cache / "redkitchen_0_59_512.npz"
+    if not synth.exists():
+        sc = make_scenario(0)
+        after = sc.scene_after
+        c = np.array([after.table.center[0], after.table.center[1], after.table.top_z])
+        vol = TernaryVolume(size=3.0, resolution=512, origin=c - 1.5, color=True)
+        for k, f in enumerate(sc.frames):
+            depth, colour = sc.sensor.render(after, f.T_world_camera, frame_seed=k)
+            vol.integrate(depth, sc.K, f.T_world_camera, colour)
+        vol.save(synth)
+    if not room.exists():
+        from _seven_scenes import seven_scenes_frames
+
+        frames = seven_scenes_frames(60)
+        vol = TernaryVolume(size=3.0, resolution=512, origin=default_origin([f[:1] + f[2:] for f in frames[:5]], 3.0),
+                            color=True)
+        for d, c, K, T in frames:
+            vol.integrate(d, K, T, c)
+        vol.save(room)
+    return {"synth 512^3 / 3 m (scenario 0)": load_volume(synth), "7-Scenes redkitchen 0-59, 5.86 mm": load_volume(room)}
+
+
+def bench_speed(cache: Path, repeats: int = 3) -> dict:
+    """Per-phase wall / CPU seconds of `segment_volume` (5.): the library's steps are wrapped with timers."""
+    import os
+
+    from kinfu_cli.segmentation import pipeline as pl
+    from kinfu_cli.segmentation import segments as sg
+
+    acc: dict[str, list[float]] = {}
+
+    def timed(mod, name, label):
+        fn = getattr(mod, name)
+
+        def wrapper(*a, **k):
+            t, c = time.perf_counter(), time.process_time()
+            try:
+                return fn(*a, **k)
+            finally:
+                w = acc.setdefault(label, [0.0, 0.0])
+                w[0] += time.perf_counter() - t
+                w[1] += time.process_time() - c
+        setattr(mod, name, wrapper)
+        return mod, name, fn
+
+    wrapped = [timed(pl, "surface_from_volume", "surface"), timed(sg, "detect_support_plane", "support plane"),
+               timed(sg, "supervoxels", "supervoxels"), timed(sg, "concave_plane_cuts", "concave cuts"),
+               timed(sg, "_absorb_small", "small segments"), timed(pl, "segment_saliency", "saliency"),
+               timed(pl, "fit_superquadric", "superquadric fits"), timed(pl, "classify_shape", "shape classes"),
+               timed(pl, "segment_cloud", "segmentation (all)")]
+    out = {"load": os.getloadavg()[0]}
+    try:
+        for name, vol in _speed_volumes(cache).items():
+            pl.segment_volume(vol, SegmentOptions())  # warm-up
+            runs = []
+            for _ in range(repeats):
+                acc.clear()
+                t, c = time.perf_counter(), time.process_time()
+                res = pl.segment_volume(vol, SegmentOptions())
+                acc["total"] = [time.perf_counter() - t, time.process_time() - c]
+                runs.append({k: list(v) for k, v in acc.items()})
+            out[name] = {"points": int(len(res.segmentation.points)), "object_segments": len(res.saliency),
+                         **{k: {"wall": float(np.median([r[k][0] for r in runs])),
+                                "cpu": float(np.median([r[k][1] for r in runs]))} for k in runs[0]}}
+            print(name, json.dumps(out[name]), flush=True)
+    finally:
+        for mod, name, fn in wrapped:
+            setattr(mod, name, fn)
+    return out
+
+
 def bench_closed_loop(seed: int = 0, views: int = 5) -> dict:
     return compare_strategies(seed, views=views, log=lambda name, d: print(name, json.dumps(d), flush=True))
 
@@ -226,7 +307,13 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="fewer fits/scenes, no 512^3 run, no closed loop")
     ap.add_argument("--loop-only", action="store_true", help="only the closed-loop comparison")
     ap.add_argument("--colour", action="store_true", help="only the colour segmentation numbers (3b)")
+    ap.add_argument("--speed", action="store_true", help="only the per-phase segment time on the two volumes (5)")
+    ap.add_argument("--cache", default=str(Path(tempfile.gettempdir()) / "kinfu_bench_segment"),
+                    help="folder for the fused volumes of --speed")
     args = ap.parse_args()
+    if args.speed:
+        print(json.dumps(bench_speed(Path(args.cache)), indent=2))
+        return
     if args.colour:
         out = {"tuning seeds 0-3": bench_colour_scenes(range(4)), "held-out seeds 4-7": bench_colour_scenes(range(4, 8)),
                "speed": bench_colour_speed(0)}

@@ -83,7 +83,7 @@ def _grasps(segments: dict, options: GraspOptions, cones: tuple[str, ...]) -> di
                    "distance, 0..1.73); default no cut.")
 @click.option("--t-ff", type=float, default=0.5, show_default=True,
               help="Flood Fill: neighbours join when colour-importance*|dc| + normal-importance*(1-n1.n2) is below this.")
-@click.option("--concave-cut", type=float, default=0.35, show_default=True,
+@click.option("--concave-cut", type=float, default=0.4, show_default=True,
               help="LCCP: cut a segment along the plane of a face at a concave crease when at least this share of "
                    "the point pairs the plane separates are concave (touching boxes); 0 = off (the thesis' LCCP).")
 @click.option("--plane-color-margin", type=float, default=0.01, show_default=True,
@@ -91,11 +91,14 @@ def _grasps(segments: dict, options: GraspOptions, cones: tuple[str, ...]) -> di
                    "plane's; 0 = off.")
 @click.option("--adjacency-radius", type=float, default=0.018, show_default=True,
               help="Points closer than this connect supervoxels (m).")
-@click.option("--concavity-tolerance", type=float, default=20.0, show_default=True,
+@click.option("--concavity-tolerance", type=float, default=40.0, show_default=True,
               help="LCCP: concave edges flatter than this (deg) still merge.")
 @click.option("--sanity-angle", type=float, default=60.0, show_default=True, help="LCCP sanity criterion (deg).")
 @click.option("--min-segment-points", type=int, default=50, show_default=True,
               help="Smaller segments join a neighbour or are dropped.")
+@click.option("--fragment-points", type=int, default=100, show_default=True,
+              help="A segment under this many points whose border runs mostly along one larger object segment "
+                   "joins it (a piece of it, not an object); 0 = off.")
 @click.option("--plane-distance", type=float, default=0.01, show_default=True, help="Support plane RANSAC inlier distance (m).")
 @click.option("--up", default="auto", show_default=True,
               help="Expected support-plane normal: 'x,y,z', 'none' (any plane) or 'auto' (the volume's up, "
@@ -135,6 +138,7 @@ def _grasps(segments: dict, options: GraspOptions, cones: tuple[str, ...]) -> di
 @click.option("--quiet", is_flag=True, help="No progress output.")
 def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution, spatial_importance,
             normal_importance, method, color_importance, no_color, t_lccp, t_ff, concave_cut, plane_color_margin, adjacency_radius, concavity_tolerance, sanity_angle, min_segment_points,
+            fragment_points,
             plane_distance, up, up_tolerance, isolation_threshold, no_superquadrics, sq_max_points,
             sq_exponent_bounds, sq_cost, multi_sq, msq_trigger, msq_height, msq_mu, seed, plot, as_json,
             quiet, force, viz=None, shape_prior=True, grasp=False, grasp_hand="both", grasp_cones=(),
@@ -159,7 +163,8 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
                                 method=method, color_importance=color_importance, t_lccp=t_lccp, t_ff=t_ff,
                                 plane_color_margin=plane_color_margin, cut_concave_fraction=concave_cut or None,
                                 concavity_tolerance_deg=concavity_tolerance, sanity_angle_deg=sanity_angle,
-                                min_segment_points=min_segment_points, plane_distance=plane_distance,
+                                min_segment_points=min_segment_points, fragment_points=fragment_points,
+                                plane_distance=plane_distance,
                                 up=_up(up), up_tolerance_deg=up_tolerance, seed=seed)
     opts = SegmentOptions(resolution=resolution, min_weight=min_weight, isolation_threshold=isolation_threshold,
                           superquadrics=not no_superquadrics, sq_max_points=sq_max_points,

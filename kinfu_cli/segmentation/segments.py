@@ -28,6 +28,9 @@ numpy/scipy/open3d:
    fifth of the body, is a part, not an object); up to `cut_rounds` rounds, the best of `cut_candidates` sampled
    face planes per segment and round; only segments whose bounding-box diagonal is at most `cut_max_size`.
 5. Segments that stay within 2 x `plane_distance` of the support plane (its edges and sides) join it.
+5b. Fragments: a segment under `fragment_points` whose border points lie mostly (>= `fragment_share`) against one
+   larger object segment is a piece of it and joins it; a small object on the support borders mostly the plane
+   and stays (real fused scenes break box rims and card packs into such pieces).
 6. Segments smaller than `min_segment_points` join their most-connected neighbour (a large one first; fragments
    merge with each other); isolated specks join the support plane when at its level, a segment within
    `adjacency_radius`, or are dropped (label -1).
@@ -68,8 +71,10 @@ class SegmentationParams:
     t_ff: float = 0.5  # Flood Fill threshold T_ff (eq. 4.14; tuned on synth seeds 0-3)
     plane_color_margin: float = 0.01  # object points this close to the support plane join it when their
     # colour is nearer the plane's than their segment's (m; 0 = off; needs colours)
-    # concave plane cuts (module docstring, step 4b; tuned on synth seeds 0, 1, 8-11; None or 0 = off)
-    cut_concave_fraction: float | None = 0.35
+    # concave plane cuts (module docstring, step 4b; tuned on synth seeds 0, 1, 8-11; None or 0 = off). The share
+    # was 0.35 before never-coloured points were filled (surface.fill_uncoloured); re-chosen on the same seeds:
+    # 0.3 / 0.35 / 0.4 / 0.45 gave boundary F 0.835 / 0.854 / 0.858 / 0.848, object recall 0.90 / 0.93 / 0.96 / 0.92
+    cut_concave_fraction: float | None = 0.4
     cut_min_angle_deg: float = 30.0
     cut_min_ratio: float = 0.4
     cut_candidates: int = 200
@@ -79,7 +84,9 @@ class SegmentationParams:
     # rgbd-tabletop-box: its cuts were all in segments of 0.45-0.6 m; the synth merged twins and stacks are 0.3 m)
     kmeans_iterations: int = 3
     adjacency_radius: float = 0.018  # points closer than this connect their supervoxels (m)
-    concavity_tolerance_deg: float = 20.0  # LCCP beta_thresh (PCL default 10; fused TSDF normals are noisier)
+    concavity_tolerance_deg: float = 40.0  # LCCP beta_thresh (PCL default 10; fused TSDF normals are noisier;
+    # 20 until the colour fill and fragment merge; tuning seeds 0, 1, 8-11, mode and mean: 20 / 25 / 30 / 35 / 40 /
+    # 45 / 50 gave boundary F 0.864 / 0.874 / 0.883 / 0.887 / 0.892 / 0.892 / 0.892, object recall 0.958 at 20, 40, 45)
     sanity_angle_deg: float = 60.0  # LCCP sanity criterion threshold (PCL default)
     min_segment_points: int = 50  # smaller segments merge into a neighbour (50 cm2 at the 1 cm cloud;
     # chosen on synth seeds 0, 1, 8-11 (50 = 100 > 20) and rgbd-tabletop-box (object segments 17 -> 11 at 5 mm))
@@ -94,6 +101,10 @@ class SegmentationParams:
     # ones (a box on its side filling the view) still has its table
     min_up_facing_fraction: float = 0.3
     max_planes: int = 3  # RANSAC rounds; the highest qualifying horizontal plane is the support
+    # fragments (step 5b): a segment under fragment_points whose border runs mostly (>= fragment_share of its
+    # border points) along one larger object segment joins it; 0 = off
+    fragment_points: int = 100
+    fragment_share: float = 0.5
     seed: int = 0
 
     def validate(self) -> None:
@@ -118,6 +129,8 @@ class SegmentationParams:
         check_number(self.cut_max_size, "cut_max_size", 0, 100, unit="m")
         check_number(self.sanity_angle_deg, "sanity_angle_deg", 0, 180, unit="degrees")
         check_number(self.seed, "seed", 0, 2 ** 32 - 1, integer=True)
+        check_number(self.fragment_points, "fragment_points", 0, 10 ** 9, integer=True)
+        check_number(self.fragment_share, "fragment_share", 0, 1)
         if not 0 <= self.concavity_tolerance_deg < 90:
             raise ConfigError(f"expected 0..90 degrees, got {self.concavity_tolerance_deg}",
                               parameter="concavity_tolerance_deg")
@@ -233,17 +246,34 @@ def _mean_rows(values: np.ndarray, lab: np.ndarray, k: int) -> np.ndarray:
     return np.stack([np.bincount(lab, values[:, a], minlength=k) for a in range(values.shape[1])], 1) / cnt[:, None]
 
 
+def _cell_ids(points: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
+    """(first point of each occupied `cell`-sized grid cell, cell id per point), cells in lexicographic order
+    (as np.unique(axis=0) gives them, through one int64 key: several times faster)."""
+    c = np.floor(points / cell).astype(np.int64)
+    c -= c.min(axis=0)
+    span = c.max(axis=0) + 1
+    key = (c[:, 0] * span[1] + c[:, 1]) * span[2] + c[:, 2]
+    _, first, inv = np.unique(key, return_index=True, return_inverse=True)
+    return first, inv.ravel()
+
+
+def _compact(labels: np.ndarray, k: int) -> tuple[np.ndarray, int]:
+    """Labels renumbered 0..K'-1 in increasing order of the used ids (np.unique's return_inverse, by bincount)."""
+    used = np.bincount(labels, minlength=k) > 0
+    remap = np.cumsum(used) - 1
+    return remap[labels], int(used.sum())
+
+
 def supervoxels(points: np.ndarray, normals: np.ndarray, params: SegmentationParams,
-                colors: np.ndarray | None = None) -> np.ndarray:
+                colors: np.ndarray | None = None, pairs: np.ndarray | None = None) -> np.ndarray:
     """VCCS-like supervoxel id per point (N,), spatially connected, ids 0..K-1. With colours (RGB in [0, 1])
-    the distance gains PCL's colour term color_importance * |c_p - c_s| (Euclidean in RGB)."""
+    the distance gains PCL's colour term color_importance * |c_p - c_s| (Euclidean in RGB). pairs: the point
+    pairs closer than adjacency_radius when the caller has them (found here otherwise)."""
     n = len(points)
     if n == 0:
         return np.zeros(0, dtype=np.int64)
     R = float(params.seed_resolution)
-    cells = np.floor(points / R).astype(np.int64)
-    _, first, inv = np.unique(cells, axis=0, return_index=True, return_inverse=True)
-    inv = inv.ravel()
+    first, inv = _cell_ids(points, R)
     # seeds: the centroid of each cell (position, normal, colour)
     k = len(first)
     seed_pos = _mean_rows(points, inv, k)
@@ -262,17 +292,15 @@ def supervoxels(points: np.ndarray, normals: np.ndarray, params: SegmentationPar
         dist = ws * np.einsum("ijk,ijk->ij", dx, dx) + wn * (1.0 - np.einsum("ik,ijk->ij", normals, seed_nrm[cand]))
         if seed_col is not None:
             dist += wc * np.linalg.norm(colors[:, None, :] - seed_col[cand], axis=2)
-        labels = cand[np.arange(n), np.argmin(dist, axis=1)]
-        used, labels = np.unique(labels, return_inverse=True)
-        labels = labels.ravel()
-        k = len(used)
+        labels, k = _compact(cand[np.arange(n), np.argmin(dist, axis=1)], k)
         seed_pos = _mean_rows(points, labels, k)
         seed_nrm = _mean_rows(normals, labels, k)
         seed_nrm /= np.maximum(np.linalg.norm(seed_nrm, axis=1, keepdims=True), 1e-12)
         if seed_col is not None:
             seed_col = _mean_rows(colors, labels, k)
     # split into spatially connected parts
-    pairs = cKDTree(points).query_pairs(r=params.adjacency_radius, output_type="ndarray")
+    if pairs is None:
+        pairs = cKDTree(points).query_pairs(r=params.adjacency_radius, output_type="ndarray")
     return _components(n, pairs[labels[pairs[:, 0]] == labels[pairs[:, 1]]])
 
 
@@ -296,12 +324,14 @@ def lccp_segments(points: np.ndarray, normals: np.ndarray, pairs: np.ndarray, pa
     (module docstring, step 4); with colours, an edge whose supervoxels' mean colours differ by more than
     t_lccp (RGB in [0, 1], Euclidean; thesis eq. 4.15) is cut whatever its shape. pairs: point pairs closer
     than adjacency_radius."""
-    sv = supervoxels(points, normals, params, colors)
+    sv = supervoxels(points, normals, params, colors, pairs)
     k = int(sv.max()) + 1
     _, cen, snrm = _segment_stats(points, normals, sv, k)
     a, b = sv[pairs[:, 0]], sv[pairs[:, 1]]
     diff = a != b
-    edges = np.unique(np.sort(np.stack([a[diff], b[diff]], 1), axis=1), axis=0).reshape(-1, 2)
+    lo, hi = np.minimum(a[diff], b[diff]), np.maximum(a[diff], b[diff])
+    key = np.unique(lo * np.int64(k) + hi)  # the sorted unique (lo, hi) rows, as np.unique(axis=0) orders them
+    edges = np.stack([key // k, key % k], 1).reshape(-1, 2)
     d = cen[edges[:, 0]] - cen[edges[:, 1]]
     d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
     n1, n2 = snrm[edges[:, 0]], snrm[edges[:, 1]]
@@ -349,34 +379,48 @@ def _concave_pairs(points: np.ndarray, normals: np.ndarray, pairs: np.ndarray, m
 
 
 def _best_face_cut(points: np.ndarray, normals: np.ndarray, idx: np.ndarray, seg_pairs: np.ndarray,
-                   concave: np.ndarray, params: SegmentationParams, rng: np.random.Generator
+                   concave: np.ndarray, params: SegmentationParams, rng: np.random.Generator, chunk: int = 64
                    ) -> tuple[float, np.ndarray | None]:
     """(concave share of the separated pairs, mask over the points of the + side) of the best face plane among
-    `cut_candidates` concave pairs of one segment (points idx, its pairs seg_pairs), or (0, None)."""
+    `cut_candidates` concave pairs of one segment (points idx, its pairs seg_pairs), or (0, None). The planes
+    are scored `chunk` at a time as (points x planes) side matrices; ties go to the first plane sampled."""
     cand = seg_pairs[concave]
-    best: tuple[float, np.ndarray | None] = (0.0, None)
     tol = params.plane_distance / 2  # the face's own points, within noise of its plane, stay on its side
+    planes = cand[rng.choice(len(cand), size=min(params.cut_candidates, len(cand)), replace=False)].ravel()
+    loc = np.full(len(points), -1, dtype=np.int64)
+    loc[idx] = np.arange(len(idx))
+    pa, pb = loc[seg_pairs[:, 0]], loc[seg_pairs[:, 1]]
+    x = points[idx]
     n_seg = len(idx)
+    best_share, best_side = 0.0, None
+    for c0 in range(0, len(planes), chunk):
+        p = planes[c0:c0 + chunk]
+        plus = np.einsum("ijk,jk->ij", x[:, None, :] - points[p][None], normals[p]) > tol
+        n_plus = plus.sum(axis=0)
+        small = np.minimum(n_plus, n_seg - n_plus)
+        large = np.maximum(n_plus, n_seg - n_plus)
+        ok = small >= np.maximum(params.min_segment_points, params.cut_min_ratio * large)
+        if not ok.any():
+            continue
+        plus = plus[:, ok]
+        cross = plus[pa] != plus[pb]
+        n_cross = cross.sum(axis=0)
+        share = np.where(n_cross > 0, (cross & concave[:, None]).sum(axis=0) / np.maximum(n_cross, 1), 0.0)
+        j = int(np.argmax(share))
+        if share[j] > best_share:
+            best_share, best_side = float(share[j]), plus[:, j]
+    if best_side is None:
+        return 0.0, None
     side = np.zeros(len(points), dtype=bool)
-    for i in rng.choice(len(cand), size=min(params.cut_candidates, len(cand)), replace=False):
-        for p in cand[i]:
-            plus = (points[idx] - points[p]) @ normals[p] > tol
-            n_plus = int(plus.sum())
-            small, large = sorted((n_plus, n_seg - n_plus))
-            if small < max(params.min_segment_points, params.cut_min_ratio * large):
-                continue
-            side[idx] = plus
-            cross = side[seg_pairs[:, 0]] != side[seg_pairs[:, 1]]
-            share = float(concave[cross].mean()) if cross.any() else 0.0
-            if share > best[0]:
-                best = (share, side.copy())
-    return best
+    side[idx] = best_side
+    return best_share, side
 
 
 def concave_plane_cuts(points: np.ndarray, normals: np.ndarray, seg: np.ndarray, pairs: np.ndarray,
                        params: SegmentationParams) -> tuple[np.ndarray, int]:
     """(segments after the concave plane cuts, number of cuts): module docstring, step 4b. seg: segment per
-    point (>= 0); pairs: point pairs closer than adjacency_radius. The pieces are re-split into connected parts."""
+    point (>= 0); pairs: point pairs closer than adjacency_radius. The pieces are re-split into connected parts.
+    Points and pairs are grouped by segment once per round (a cut only relabels its own segment's points)."""
     if not params.cut_concave_fraction or params.cut_rounds == 0 or len(pairs) == 0:  # None or 0: off
         return seg, 0
     rng = np.random.default_rng(params.seed)
@@ -387,15 +431,26 @@ def concave_plane_cuts(points: np.ndarray, normals: np.ndarray, seg: np.ndarray,
         a = seg[pairs[:, 0]]
         same = a == seg[pairs[:, 1]]
         hit = np.unique(a[same & concave])
+        if len(hit) == 0:
+            break
+        k = int(seg.max()) + 1
+        n_conc = np.bincount(a[same & concave], minlength=k)
+        ext = np.stack([np.full((k, 3), np.inf), np.full((k, 3), -np.inf)])
+        np.minimum.at(ext[0], seg, points)
+        np.maximum.at(ext[1], seg, points)
+        diag = np.linalg.norm(ext[1] - ext[0], axis=1)
+        p_order = np.argsort(seg, kind="stable")
+        p_start = np.searchsorted(seg[p_order], np.arange(k + 1))
+        in_pairs = np.flatnonzero(same)
+        e_order = in_pairs[np.argsort(a[in_pairs], kind="stable")]
+        e_start = np.searchsorted(a[e_order], np.arange(k + 1))
         before = cuts
         for s in hit:
-            inseg = same & (a == s)
-            if np.count_nonzero(concave & inseg) < 3:
+            if n_conc[s] < 3 or diag[s] > params.cut_max_size:
                 continue
-            idx = np.flatnonzero(seg == s)
-            if np.linalg.norm(np.ptp(points[idx], axis=0)) > params.cut_max_size:
-                continue
-            share, plus = _best_face_cut(points, normals, idx, pairs[inseg], concave[inseg], params, rng)
+            idx = p_order[p_start[s]:p_start[s + 1]]
+            e = e_order[e_start[s]:e_start[s + 1]]
+            share, plus = _best_face_cut(points, normals, idx, pairs[e], concave[e], params, rng)
             if plus is not None and share >= params.cut_concave_fraction:
                 seg[plus] = seg.max() + 1
                 cuts += 1
@@ -435,6 +490,61 @@ def _absorb_small(seg: np.ndarray, pairs: np.ndarray, min_points: int) -> np.nda
     seg = np.where(seg >= 0, target[np.maximum(seg, 0)], -1)
     sizes = np.bincount(seg[seg >= 0], minlength=nseg)
     return np.where((seg >= 0) & (sizes[np.maximum(seg, 0)] >= min_points), seg, -1)
+
+
+def _near(points: np.ndarray, others: np.ndarray, radius: float) -> np.ndarray:
+    """Mask of `points` with a point of `others` within radius."""
+    if len(others) == 0 or len(points) == 0:
+        return np.zeros(len(points), dtype=bool)
+    d, _ = cKDTree(others).query(points, distance_upper_bound=radius)
+    return np.isfinite(d)
+
+
+def _merge_fragments(seg: np.ndarray, pairs: np.ndarray, near_plane: np.ndarray, max_points: int, share: float
+                     ) -> tuple[np.ndarray, int]:
+    """(segments, merges): a segment under max_points whose border lies mostly (>= share of its border points)
+    against one larger object segment is a piece of it and joins it; a small object standing on the support
+    borders mostly the support (near_plane: points with a support-plane point within adjacency_radius) and
+    stays. One pass, smallest fragments first (a fragment joins its neighbour's final segment)."""
+    n_seg = int(seg.max()) + 1 if (seg >= 0).any() else 0
+    if n_seg < 2:
+        return seg, 0
+    sizes = np.bincount(seg[seg >= 0], minlength=n_seg)
+    sa, sb = seg[pairs[:, 0]], seg[pairs[:, 1]]
+    m = (sa != sb) & (sa >= 0) & (sb >= 0)
+    # border points of each segment that touch segment t: unique (point, other segment) pairs
+    pt = np.r_[pairs[m, 0], pairs[m, 1]]
+    other = np.r_[sb[m], sa[m]]
+    key = np.unique(pt * np.int64(n_seg) + other)
+    pt, other = key // n_seg, key % n_seg
+    own = seg[pt]
+    border = np.zeros(len(seg), dtype=bool)
+    border[pt] = True
+    border |= near_plane & (seg >= 0)
+    n_border = np.bincount(seg[border & (seg >= 0)], minlength=n_seg)
+    touch = coo_matrix((np.ones(len(pt)), (own, other)), shape=(n_seg, n_seg)).tocsr()
+    target = np.arange(n_seg)
+    merges = 0
+    for s in np.argsort(sizes, kind="stable"):
+        if sizes[s] == 0 or sizes[s] >= max_points or n_border[s] == 0:
+            continue
+        row = touch.getrow(s)
+        if row.nnz == 0:
+            continue
+        cand = row.indices[sizes[row.indices] > sizes[s]]
+        if len(cand) == 0:
+            continue
+        w = np.asarray(row[:, cand].todense()).ravel()
+        t = cand[int(np.argmax(w))]
+        if w.max() >= share * n_border[s]:
+            target[s] = t
+            merges += 1
+    for _ in range(n_seg):  # follow chains (a fragment joined a fragment that joined a segment)
+        nxt = target[target]
+        if np.array_equal(nxt, target):
+            break
+        target = nxt
+    return np.where(seg >= 0, target[np.maximum(seg, 0)], -1), merges
 
 
 def _below_objects(seg: np.ndarray, h: np.ndarray, limit: float) -> np.ndarray:
@@ -534,6 +644,10 @@ def segment_cloud(points: np.ndarray, normals: np.ndarray, params: SegmentationP
         labels[rest[support]] = PLANE_LABEL
         seg = np.where(support, -1, seg)
         keep_rest = ~support
+        if params.fragment_points > 0:
+            near_plane = _near(P, pts[labels == PLANE_LABEL], params.adjacency_radius)
+            seg, stats["fragments_merged"] = _merge_fragments(seg, pairs, near_plane, params.fragment_points,
+                                                              params.fragment_share)
     else:
         seg = _absorb_small(seg, pairs, params.min_segment_points)
         keep_rest = np.ones(len(seg), dtype=bool)

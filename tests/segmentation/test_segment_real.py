@@ -102,8 +102,8 @@ def tabletop_box(tmp_path_factory):
 @pytest.mark.parametrize("method", ["lccp", "flood-fill"])
 def test_tabletop_box_plane_and_object_count(tabletop_box, method):
     """The desk is the support plane (within 5 deg of the fused volume's up, which is not z here) and the
-    count of object-sized segments is within 50 % of the objects seen by eye (measured with the concave cuts and
-    min_segment_points 50: LCCP 11 at 8 mm, 10 of >= 100 points; Flood Fill 6)."""
+    count of object-sized segments is within 50 % of the objects seen by eye (Flood Fill 5), and with LCCP the
+    count of all segments is within 30 % (9 at 8 mm, all of >= 100 points)."""
     doc, seg = _segment(tabletop_box / "f" / "volume.npz", method=method)
     report = json.loads((tabletop_box / "f" / "report.json").read_text())
     assert doc["support_plane"] is not None and doc["up_source"] == "volume" and doc["stats"]["colors"]
@@ -111,3 +111,6 @@ def test_tabletop_box_plane_and_object_count(tabletop_box, method):
     big = [s for s in doc["segments"] if s["kind"] == "object" and s["point_count"] >= 100]
     print(f"tabletop-box {method}: {len(big)} segments >= 100 points, {doc['stats']['segments']} in all")
     assert 0.5 * BOX_SCENE_OBJECTS <= len(big) <= 1.5 * BOX_SCENE_OBJECTS
+    if method == "lccp":  # issue 12: every segment counts, within 30 % (9 of 9 at 8 mm since the colour fill and
+        # the fragment merge; 14 before, of which 10 of >= 100 points)
+        assert 0.7 * BOX_SCENE_OBJECTS <= doc["stats"]["segments"] <= 1.3 * BOX_SCENE_OBJECTS
