@@ -235,7 +235,12 @@ def classify_blocks(nb, origin, vs, T_cw, fx, fy, cx, cy, width, height,
         planes[q, 1] = -sign * edges[q]
         planes[q, 2] = math.sqrt(1.0 + edges[q] * edges[q])
     far = dmax_all + trunc
-    for j in prange(rx * ry * rz):
+    nsup = rx * ry * rz
+    half = (nsup + 1) // 2
+    for jj in prange(nsup):
+        # even super-blocks first, then odd ones: numba gives each thread a contiguous half of the range, and
+        # neighbouring super-blocks cost alike, so both halves get similar work (x-major halves differed by 20 %)
+        j = 2 * jj if jj < half else 2 * (jj - half) + 1
         sx = j // (ry * rz)
         rem = j - sx * ry * rz
         sy = rem // rz
@@ -268,6 +273,44 @@ def classify_blocks(nb, origin, vs, T_cw, fx, fy, cx, cy, width, height,
                                            pm, inv_sat, planes, far)
                         cls[(bx * nby + by) * nbz + bz] = VOXEL if c == CARVE_VALID else c
     return cls
+
+
+@njit(cache=True)
+def work_list(cls, block_idx_flat):
+    """One pass over the classes: the blocks with work (CARVE or VOXEL, in block order), how many VOXEL blocks
+    lack storage, and the counts of CARVE and VOXEL blocks."""
+    n = 0
+    n_new = 0
+    n_carve = 0
+    for b in range(cls.shape[0]):
+        c = cls[b]
+        if c != SKIP:
+            n += 1
+            if c == CARVE:
+                n_carve += 1
+            elif block_idx_flat[b] < 0:
+                n_new += 1
+    work = np.empty(n, dtype=np.int64)
+    j = 0
+    for b in range(cls.shape[0]):
+        if cls[b] != SKIP:
+            work[j] = b
+            j += 1
+    return work, n_new, n_carve, n - n_carve
+
+
+@njit(cache=True, parallel=True)
+def clean_depth(depth, min_depth, max_depth):
+    """float32 copy of depth with readings outside [min_depth, max_depth] (and NaN, inf) set to 0, in one pass."""
+    h, w = depth.shape
+    out = np.empty((h, w), dtype=np.float32)
+    lo = np.float32(min_depth)  # compared in float32, as numpy compares a float32 image with a Python float
+    hi = np.float32(max_depth)
+    for v in prange(h):
+        for u in range(w):
+            d = np.float32(depth[v, u])
+            out[v, u] = d if (np.isfinite(d) and d >= lo and d <= hi) else np.float32(0.0)
+    return out
 
 
 @njit(cache=True, parallel=True)
