@@ -277,8 +277,8 @@ def classify_blocks(nb, origin, vs, T_cw, fx, fy, cx, cy, width, height,
 
 @njit(cache=True)
 def work_list(cls, block_idx_flat):
-    """One pass over the classes: the blocks with work (CARVE or VOXEL, in block order), how many VOXEL blocks
-    lack storage, and the counts of CARVE and VOXEL blocks."""
+    """One pass over the classes: the blocks with work (CARVE or VOXEL) and the VOXEL blocks that lack storage,
+    both in block order, and the counts of CARVE and VOXEL blocks."""
     n = 0
     n_new = 0
     n_carve = 0
@@ -291,12 +291,18 @@ def work_list(cls, block_idx_flat):
             elif block_idx_flat[b] < 0:
                 n_new += 1
     work = np.empty(n, dtype=np.int64)
+    new_b = np.empty(n_new, dtype=np.int64)
     j = 0
+    m = 0
     for b in range(cls.shape[0]):
-        if cls[b] != SKIP:
+        c = cls[b]
+        if c != SKIP:
             work[j] = b
             j += 1
-    return work, n_new, n_carve, n - n_carve
+            if c == VOXEL and block_idx_flat[b] < 0:
+                new_b[m] = b
+                m += 1
+    return work, new_b, n_carve, n - n_carve
 
 
 @njit(cache=True, parallel=True)
@@ -313,22 +319,20 @@ def clean_depth(depth, min_depth, max_depth):
     return out
 
 
-@njit(cache=True, parallel=True)
 def allocate_blocks(cls, block_idx_flat, block_w_flat, pool_v, pool_w, pool_c, n_used):
-    """Give per-voxel storage to VOXEL blocks that lack it (initialised from their uniform state). Rows are
-    numbered serially in block order, then filled in parallel (the first frame fills tens of thousands)."""
+    """Give per-voxel storage to VOXEL blocks that lack it (see allocate_new); returns the new row count."""
+    new_b = np.flatnonzero((cls == VOXEL) & (block_idx_flat < 0))
+    return allocate_new(new_b, block_idx_flat, block_w_flat, pool_v, pool_w, pool_c, n_used)
+
+
+@njit(cache=True, parallel=True)
+def allocate_new(new_b, block_idx_flat, block_w_flat, pool_v, pool_w, pool_c, n_used):
+    """Rows n_used, n_used + 1, ... for the blocks new_b (in that order), filled in parallel from their uniform
+    state (the first frame fills tens of thousands); returns the new row count."""
     has_color = pool_c.shape[0] > 0
-    n_new = 0
-    for b in range(cls.shape[0]):
-        if cls[b] == VOXEL and block_idx_flat[b] < 0:
-            n_new += 1
-    new_b = np.empty(n_new, dtype=np.int64)
-    j = 0
-    for b in range(cls.shape[0]):
-        if cls[b] == VOXEL and block_idx_flat[b] < 0:
-            block_idx_flat[b] = n_used + j
-            new_b[j] = b
-            j += 1
+    n_new = new_b.shape[0]
+    for j in range(n_new):
+        block_idx_flat[new_b[j]] = n_used + j
     for j in prange(n_new):
         i = n_used + j
         bw = block_w_flat[new_b[j]]

@@ -244,11 +244,11 @@ class TernaryVolume:
                                  self.truncation, pm, inv_sat, dmax_all, b_lo, b_hi)
         bidx = self.block_idx.reshape(-1)
         bw = self.block_w.reshape(-1)
-        work, need_new, n_carve, n_voxel = kn.work_list(cls, bidx)
+        work, new_b, n_carve, n_voxel = kn.work_list(cls, bidx)
         work = self._work_order(work)
-        if need_new:
-            self._ensure_capacity(self.n_used + need_new)
-            self.n_used = kn.allocate_blocks(cls, bidx, bw, self.pool_v, self.pool_w, self.pool_c, self.n_used)
+        if new_b.size:
+            self._ensure_capacity(self.n_used + new_b.size)
+            self.n_used = kn.allocate_new(new_b, bidx, bw, self.pool_v, self.pool_w, self.pool_c, self.n_used)
         kn.integrate_blocks(cls, self.nb, np.array(self.shape, dtype=np.int64), bidx, bw, self.pool_v,
                             self.pool_w, self.pool_c, *self._hypotheses(), self.origin, self.voxel_size,
                             T_cw, fx, fy, cx, cy, w, h, kn.depth_and_raylen(d, self._raylen(K, w, h)),

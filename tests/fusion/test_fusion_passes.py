@@ -52,7 +52,8 @@ def test_clean_depth_is_the_numpy_rule(lo, hi):
 
 
 def test_work_list_matches_the_classes(frames):
-    """work_list returns the blocks with work in block order, the VOXEL blocks without storage and the counts."""
+    """work_list returns the blocks with work and the VOXEL blocks without storage, in block order, and the
+    counts."""
     vol = TernaryVolume(size=(0.96, 0.96, 0.4), voxel_size=VS, origin=(-0.48, -0.48, -0.06), min_depth=0.1,
                         truncation=0.03, color=False)
     d, c, K, T = frames[0]
@@ -60,10 +61,10 @@ def test_work_list_matches_the_classes(frames):
     rng = np.random.default_rng(1)
     cls = rng.choice(np.array([kn.SKIP, kn.CARVE, kn.VOXEL], np.uint8), size=int(np.prod(vol.nb)), p=[0.5, 0.2, 0.3])
     bidx = vol.block_idx.reshape(-1)
-    work, n_new, n_carve, n_voxel = kn.work_list(cls, bidx)
+    work, new_b, n_carve, n_voxel = kn.work_list(cls, bidx)
     assert np.array_equal(work, np.flatnonzero(cls))
-    assert n_new == np.count_nonzero((cls == kn.VOXEL) & (bidx < 0)) > 0
-    assert n_new < n_voxel == np.count_nonzero(cls == kn.VOXEL)
+    assert np.array_equal(new_b, np.flatnonzero((cls == kn.VOXEL) & (bidx < 0))) and new_b.size > 0
+    assert new_b.size < n_voxel == np.count_nonzero(cls == kn.VOXEL)
     assert n_carve == np.count_nonzero(cls == kn.CARVE)
 
 
