@@ -361,7 +361,8 @@ def _carve_voxels(pool_v, pool_w, i, mw):
 
 @njit(cache=True, error_model="numpy")
 def _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, nx, ny, nz, fx, fy, cx, cy, width,
-                  height, depth_rl, color_f, has_color, trunc, mw, color_band, mode_thr2, pix, zz, sdf, cflag):
+                  height, depth_rl, color_f, has_color, trunc, mw, color_band, mode_thr2, pix, zz, sdf, cflag,
+                  cidx):
     """Projective update of every voxel of stored block i, as three flat loops over its 512 voxels.
 
     p0: camera-frame position of voxel (0, 0, 0); ex / ey / ez: camera-frame step per local x / y / z; nx, ny,
@@ -369,9 +370,10 @@ def _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, n
     there is no reading, so one comparison (sdf > -trunc) rejects invalid pixels too; voxels outside the image
     look at its extra last row (-inf), so the look-up needs no branch. The projection and the update loops have
     no branches and LLVM vectorises them; only the pixel look-up in between is scalar (gathers are slower than
-    scalar loads on current x86). The update loop also flags the voxels to colour (cflag), so that the colour
-    pass skips eight voxels at a time (about 1 % of a block's voxels get colour). error_model="numpy": 1 / z is not checked for
-    zero (a voxel at z = 0 fails the z > 0 test anyway), which is what lets the loops vectorise.
+    scalar loads on current x86). The update loop also flags the voxels to colour (cflag); a branch-free pass
+    lists them (cidx), so that the colour pass visits only those (a few % of a block's voxels).
+    error_model="numpy": 1 / z is not checked for zero (a voxel at z = 0 fails the z > 0 test anyway), which is
+    what lets the loops vectorise.
     With colour hypotheses (pool_hc / pool_hn not None: the mode filter, see color_mode.py) the colour goes to
     mode_update instead of the running mean.
     """
@@ -431,24 +433,23 @@ def _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, n
         n_color += np.int32(ok & (abs(t) < color_band))
     if not (has_color and n_color > 0):
         return
-    words = cflag.view(np.uint64)  # eight flags a word: most words of a block hold no voxel to colour
-    for q in range(B3 // 8):
-        if words[q] == 0:
+    nc = 0
+    for k in range(B3):  # branch-free compaction of the flagged voxels (their pattern defeats branch prediction)
+        cidx[nc] = k
+        nc += np.int32(cflag[k])
+    for j in range(nc):
+        k = cidx[j]
+        p = pix[k]
+        if pool_hn is not None:  # None (the mean path): numba prunes this branch at compile time
+            mode_update(pool_hc, pool_hn, i, k, color_f[p, 0], color_f[p, 1], color_f[p, 2], mode_thr2)
             continue
-        for k in range(q * 8, q * 8 + 8):
-            if cflag[k] == 0:
-                continue
-            p = pix[k]
-            if pool_hn is not None:  # None (the mean path): numba prunes this branch at compile time
-                mode_update(pool_hc, pool_hn, i, k, color_f[p, 0], color_f[p, 1], color_f[p, 2], mode_thr2)
-                continue
-            # black = never coloured: take the sample, else a running mean that forgets slowly
-            fresh = pool_c[i, k, 0] == 0 and pool_c[i, k, 1] == 0 and pool_c[i, k, 2] == 0
-            alpha = one if fresh else max(one / np.float32(pool_w[i, k]), np.float32(0.1))
-            for ch in range(3):
-                c0 = np.float32(pool_c[i, k, ch])
-                cn = np.float32(color_f[p, ch])
-                pool_c[i, k, ch] = np.uint8(min(np.float32(255.0), c0 + alpha * (cn - c0) + half))
+        # black = never coloured: take the sample, else a running mean that forgets slowly
+        fresh = pool_c[i, k, 0] == 0 and pool_c[i, k, 1] == 0 and pool_c[i, k, 2] == 0
+        alpha = one if fresh else max(one / np.float32(pool_w[i, k]), np.float32(0.1))
+        for ch in range(3):
+            c0 = np.float32(pool_c[i, k, ch])
+            cn = np.float32(color_f[p, ch])
+            pool_c[i, k, ch] = np.uint8(min(np.float32(255.0), c0 + alpha * (cn - c0) + half))
 
 
 @njit(cache=True, parallel=True)
@@ -496,6 +497,7 @@ def integrate_blocks(cls, nb, dims, block_idx_flat, block_w_flat, pool_v, pool_w
         zz = np.empty(B3, dtype=np.float32)
         sdf = np.empty(B3, dtype=np.float32)
         cflag = np.empty(B3, dtype=np.uint8)
+        cidx = np.empty(B3, dtype=np.int32)
         p0 = np.empty(3, dtype=np.float32)
         for j in range(r * n // nrun, (r + 1) * n // nrun):
             b = work[j]
@@ -520,7 +522,8 @@ def integrate_blocks(cls, nb, dims, block_idx_flat, block_w_flat, pool_v, pool_w
                 p0[q] = np.float32(T_cw[q, 0] * px + T_cw[q, 1] * py + T_cw[q, 2] * pz + T_cw[q, 3])
             _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, min(B, dims[0] - bx * B),
                           min(B, dims[1] - by * B), min(B, dims[2] - bz * B), fx32, fy32, cx32, cy32, width,
-                          height, depth_rl, color, has_color, trunc, mw, color_band, mode_thr2, pix, zz, sdf, cflag)
+                          height, depth_rl, color, has_color, trunc, mw, color_band, mode_thr2, pix, zz, sdf, cflag,
+                          cidx)
 
 
 @njit(cache=True, parallel=True)
