@@ -361,19 +361,15 @@ def _carve_voxels(pool_v, pool_w, i, mw):
 
 @njit(cache=True, error_model="numpy")
 def _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, nx, ny, nz, fx, fy, cx, cy, width,
-                  height, depth_rl, color_f, has_color, trunc, mw, color_band, mode_thr2, pix, zz, sdf, cflag,
-                  cidx):
+                  height, depth_rl, color_f, has_color, trunc, mw, color_band, mode_thr2, pix, zz, sdf):
     """Projective update of every voxel of stored block i, as three flat loops over its 512 voxels.
 
     p0: camera-frame position of voxel (0, 0, 0); ex / ey / ez: camera-frame step per local x / y / z; nx, ny,
     nz: voxels of the block inside the grid. depth_rl: per pixel (depth, ray length) with depth -inf where
-    there is no reading, so one comparison (sdf > -trunc) rejects invalid pixels too; voxels outside the image
-    look at its extra last row (-inf), so the look-up needs no branch. The projection and the update loops have
-    no branches and LLVM vectorises them; only the pixel look-up in between is scalar (gathers are slower than
-    scalar loads on current x86). The update loop also flags the voxels to colour (cflag); a branch-free pass
-    lists them (cidx), so that the colour pass visits only those (a few % of a block's voxels).
-    error_model="numpy": 1 / z is not checked for zero (a voxel at z = 0 fails the z > 0 test anyway), which is
-    what lets the loops vectorise.
+    there is no reading, so one comparison (sdf > -trunc) rejects invalid pixels too. The projection and the
+    update loops have no branches and LLVM vectorises them; only the pixel look-up in between is scalar
+    (gathers are slower than scalar loads on current x86). error_model="numpy": 1 / z is not checked for
+    zero (a voxel at z = 0 fails the z > 0 test anyway), which is what lets the loops vectorise.
     With colour hypotheses (pool_hc / pool_hn not None: the mode filter, see color_mode.py) the colour goes to
     mode_update instead of the running mean.
     """
@@ -385,7 +381,6 @@ def _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, n
     wlim = np.float32(width) - lo
     hlim = np.float32(height) - lo
     w32 = np.int32(width)
-    sentinel = np.int32(width * height)  # depth_rl's last row: depth -inf, so sdf = -inf (never updated)
     nx32 = np.int32(nx)
     ny32 = np.int32(ny)
     nz32 = np.int32(nz)
@@ -406,11 +401,11 @@ def _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, n
         ok = ((zc > zero) & (uf >= lo) & (uf < wlim) & (vf >= lo) & (vf < hlim)
               & (ix < nx32) & (iy < ny32) & (iz < nz32))
         p = np.int32(vf) * w32 + np.int32(uf)
-        pix[k] = p if ok else sentinel
+        pix[k] = p if ok else np.int32(-1)
         zz[k] = zc
     for k in range(B3):
         p = pix[k]
-        sdf[k] = (depth_rl[p, 0] - zz[k]) * depth_rl[p, 1]
+        sdf[k] = (depth_rl[p, 0] - zz[k]) * depth_rl[p, 1] if p >= 0 else -np.inf
     ntrunc = np.float32(-trunc)
     inv_trunc = np.float32(1.0 / trunc)
     n_color = np.int32(0)
@@ -429,19 +424,20 @@ def _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, n
         wn = np.uint8(min(w0 + i1, mw))
         pool_v[i, k] = vn if ok else vold
         pool_w[i, k] = wn if ok else wold
-        cflag[k] = np.uint8((t > -one) & (abs(t) < color_band))
         n_color += np.int32(ok & (abs(t) < color_band))
     if not (has_color and n_color > 0):
         return
-    nc = 0
-    for k in range(B3):  # branch-free compaction of the flagged voxels (their pattern defeats branch prediction)
-        cidx[nc] = k
-        nc += np.int32(cflag[k])
-    for j in range(nc):
-        k = cidx[j]
+    if pool_hn is not None:  # None (the mean path): numba prunes this branch at compile time
+        for k in range(B3):
+            p = pix[k]
+            t = sdf[k]
+            if p >= 0 and t > -one and abs(t) < color_band:
+                mode_update(pool_hc, pool_hn, i, k, color_f[p, 0], color_f[p, 1], color_f[p, 2], mode_thr2)
+        return
+    for k in range(B3):
         p = pix[k]
-        if pool_hn is not None:  # None (the mean path): numba prunes this branch at compile time
-            mode_update(pool_hc, pool_hn, i, k, color_f[p, 0], color_f[p, 1], color_f[p, 2], mode_thr2)
+        t = sdf[k]
+        if p < 0 or not (t > -one and abs(t) < color_band):
             continue
         # black = never coloured: take the sample, else a running mean that forgets slowly
         fresh = pool_c[i, k, 0] == 0 and pool_c[i, k, 1] == 0 and pool_c[i, k, 2] == 0
@@ -454,12 +450,9 @@ def _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, n
 
 @njit(cache=True, parallel=True)
 def depth_and_raylen(depth, raylen):
-    """(H * W + 1, 2) float32: depth (-inf where there is no reading) and ray length |K^-1 (u, v, 1)| per pixel;
-    the last row (-inf, 1) is where voxels outside the image look (branch-free look-up, sdf = -inf)."""
+    """(H * W, 2) float32: depth (-inf where there is no reading) and ray length |K^-1 (u, v, 1)| per pixel."""
     h, w = depth.shape
-    out = np.empty((h * w + 1, 2), dtype=np.float32)
-    out[h * w, 0] = -np.inf
-    out[h * w, 1] = 1.0
+    out = np.empty((h * w, 2), dtype=np.float32)
     for v in prange(h):
         for u in range(w):
             d = depth[v, u]
@@ -496,8 +489,6 @@ def integrate_blocks(cls, nb, dims, block_idx_flat, block_w_flat, pool_v, pool_w
         pix = np.empty(B3, dtype=np.int32)
         zz = np.empty(B3, dtype=np.float32)
         sdf = np.empty(B3, dtype=np.float32)
-        cflag = np.empty(B3, dtype=np.uint8)
-        cidx = np.empty(B3, dtype=np.int32)
         p0 = np.empty(3, dtype=np.float32)
         for j in range(r * n // nrun, (r + 1) * n // nrun):
             b = work[j]
@@ -522,8 +513,7 @@ def integrate_blocks(cls, nb, dims, block_idx_flat, block_w_flat, pool_v, pool_w
                 p0[q] = np.float32(T_cw[q, 0] * px + T_cw[q, 1] * py + T_cw[q, 2] * pz + T_cw[q, 3])
             _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, min(B, dims[0] - bx * B),
                           min(B, dims[1] - by * B), min(B, dims[2] - bz * B), fx32, fy32, cx32, cy32, width,
-                          height, depth_rl, color, has_color, trunc, mw, color_band, mode_thr2, pix, zz, sdf, cflag,
-                          cidx)
+                          height, depth_rl, color, has_color, trunc, mw, color_band, mode_thr2, pix, zz, sdf)
 
 
 @njit(cache=True, parallel=True)
