@@ -102,7 +102,7 @@ def _mean_colour_reference(shape, origin, vs, trunc, max_w, frames):
 
 
 def test_mean_colour_equals_dense_reference(frames):
-    """The colour pass (only flagged voxels, eight at a time) colours the same voxels as the plain rule, with
+    """The colour pass colours the same voxels as the plain rule (within about a voxel of the surface), with
     the same colour up to float32 rounding."""
     shape, origin, trunc, max_w = (120, 120, 50), np.array([-0.48, -0.48, -0.06]), 0.03, 64
     vol = TernaryVolume(size=np.array(shape) * VS, voxel_size=VS, origin=origin, truncation=trunc,
