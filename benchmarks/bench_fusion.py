@@ -10,7 +10,9 @@ first --octomap-frames frames (it needs tens of seconds per 640x480 frame, so it
 and the share of voxels with the same ternary label (over the whole grid and over the voxels either
 volume observed). Then, in fresh subprocesses, the peak RSS (VmHWM) of a 512^3 volume with colour fusing
 the 7-Scenes frames and reading them out (labels, mesh, save), as it comes and with every block stored.
-Not a test: the numbers go into the fusion report.
+Also printed: CPU ms per frame of each (process time, all threads: less sensitive to other processes than
+wall time on a shared machine) and the 1-minute load average at the end. Not a test: the numbers go into the
+fusion report.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from __future__ import annotations
 import argparse
 import gc
 import json
+import os
 import resource
 import subprocess
 import sys
@@ -110,7 +113,7 @@ def compare(name, frames, res, size, trunc, max_depth, placement="scene", with_m
     octo, octo_why = _octomap_tree(res, size) if octo_frames > 0 else (None, "not run")
     t_octo, t_ours_octo, n_octo, n_octo_points = 0.0, 0.0, 0, 0
     h, w = d.shape
-    t_ref = t_ours = 0.0
+    t_ref = t_ours = cpu_ref = cpu_ours = 0.0
     stats = None
     for d, c, K, T in frames:
         intr = o3d.camera.PinholeCameraIntrinsic(w, h, K[0, 0], K[1, 1], K[0, 2], K[1, 2])
@@ -118,13 +121,15 @@ def compare(name, frames, res, size, trunc, max_depth, placement="scene", with_m
             o3d.geometry.Image(np.ascontiguousarray(c)), o3d.geometry.Image(d), depth_scale=1.0,
             depth_trunc=max_depth, convert_rgb_to_intensity=False)
         extrinsic = np.linalg.inv(T)
-        t0 = time.perf_counter()
+        t0, p0 = time.perf_counter(), time.process_time()
         ref.integrate(rgbd, intr, extrinsic)
-        t1 = time.perf_counter()
+        t1, p1 = time.perf_counter(), time.process_time()
         stats = ours.integrate(d, K, T, c)
-        t2 = time.perf_counter()
+        t2, p2 = time.perf_counter(), time.process_time()
         t_ref += t1 - t0
         t_ours += t2 - t1
+        cpu_ref += p1 - p0
+        cpu_ours += p2 - p1
         if octo is not None and n_octo < octo_frames:
             # full rays from the camera to every valid depth point (free space cleared, endpoints occupied)
             pts = _world_points(d, K, T, max_depth)
@@ -149,6 +154,9 @@ def compare(name, frames, res, size, trunc, max_depth, placement="scene", with_m
         "data": name, "placement": placement, "frames": len(frames), "image": [w, h], "resolution": res,
         "size_m": size, "truncation_m": trunc,
         "open3d_fps": round(fps_o3d, 2), "kinfu_fps": round(fps_ours, 2), "speedup": round(fps_ours / fps_o3d, 2),
+        # CPU time of the process (all threads) per frame: less sensitive to other processes' load than wall time
+        "open3d_cpu_ms_per_frame": round(cpu_ref / len(frames) * 1e3, 1),
+        "kinfu_cpu_ms_per_frame": round(cpu_ours / len(frames) * 1e3, 1), "load_1min": round(os.getloadavg()[0], 1),
         "same_label_all": round(float(same.mean()) * 100, 3),
         "same_label_observed": round(float(same[observed].mean()) * 100, 3),
         "counts_kinfu": {k: int(np.count_nonzero(lab_ours == v)) for k, v in (("occupied", 1), ("empty", -1))},

@@ -235,7 +235,12 @@ def classify_blocks(nb, origin, vs, T_cw, fx, fy, cx, cy, width, height,
         planes[q, 1] = -sign * edges[q]
         planes[q, 2] = math.sqrt(1.0 + edges[q] * edges[q])
     far = dmax_all + trunc
-    for j in prange(rx * ry * rz):
+    nsup = rx * ry * rz
+    half = (nsup + 1) // 2
+    for jj in prange(nsup):
+        # even super-blocks first, then odd ones: numba gives each thread a contiguous half of the range, and
+        # neighbouring super-blocks cost alike, so both halves get similar work (x-major halves differed by 20 %)
+        j = 2 * jj if jj < half else 2 * (jj - half) + 1
         sx = j // (ry * rz)
         rem = j - sx * ry * rz
         sy = rem // rz
@@ -270,22 +275,64 @@ def classify_blocks(nb, origin, vs, T_cw, fx, fy, cx, cy, width, height,
     return cls
 
 
-@njit(cache=True, parallel=True)
-def allocate_blocks(cls, block_idx_flat, block_w_flat, pool_v, pool_w, pool_c, n_used):
-    """Give per-voxel storage to VOXEL blocks that lack it (initialised from their uniform state). Rows are
-    numbered serially in block order, then filled in parallel (the first frame fills tens of thousands)."""
-    has_color = pool_c.shape[0] > 0
+@njit(cache=True)
+def work_list(cls, block_idx_flat):
+    """One pass over the classes: the blocks with work (CARVE or VOXEL) and the VOXEL blocks that lack storage,
+    both in block order, and the counts of CARVE and VOXEL blocks."""
+    n = 0
     n_new = 0
+    n_carve = 0
     for b in range(cls.shape[0]):
-        if cls[b] == VOXEL and block_idx_flat[b] < 0:
-            n_new += 1
+        c = cls[b]
+        if c != SKIP:
+            n += 1
+            if c == CARVE:
+                n_carve += 1
+            elif block_idx_flat[b] < 0:
+                n_new += 1
+    work = np.empty(n, dtype=np.int64)
     new_b = np.empty(n_new, dtype=np.int64)
     j = 0
+    m = 0
     for b in range(cls.shape[0]):
-        if cls[b] == VOXEL and block_idx_flat[b] < 0:
-            block_idx_flat[b] = n_used + j
-            new_b[j] = b
+        c = cls[b]
+        if c != SKIP:
+            work[j] = b
             j += 1
+            if c == VOXEL and block_idx_flat[b] < 0:
+                new_b[m] = b
+                m += 1
+    return work, new_b, n_carve, n - n_carve
+
+
+@njit(cache=True, parallel=True)
+def clean_depth(depth, min_depth, max_depth):
+    """float32 copy of depth with readings outside [min_depth, max_depth] (and NaN, inf) set to 0, in one pass."""
+    h, w = depth.shape
+    out = np.empty((h, w), dtype=np.float32)
+    lo = np.float32(min_depth)  # compared in float32, as numpy compares a float32 image with a Python float
+    hi = np.float32(max_depth)
+    for v in prange(h):
+        for u in range(w):
+            d = np.float32(depth[v, u])
+            out[v, u] = d if (np.isfinite(d) and d >= lo and d <= hi) else np.float32(0.0)
+    return out
+
+
+def allocate_blocks(cls, block_idx_flat, block_w_flat, pool_v, pool_w, pool_c, n_used):
+    """Give per-voxel storage to VOXEL blocks that lack it (see allocate_new); returns the new row count."""
+    new_b = np.flatnonzero((cls == VOXEL) & (block_idx_flat < 0))
+    return allocate_new(new_b, block_idx_flat, block_w_flat, pool_v, pool_w, pool_c, n_used)
+
+
+@njit(cache=True, parallel=True)
+def allocate_new(new_b, block_idx_flat, block_w_flat, pool_v, pool_w, pool_c, n_used):
+    """Rows n_used, n_used + 1, ... for the blocks new_b (in that order), filled in parallel from their uniform
+    state (the first frame fills tens of thousands); returns the new row count."""
+    has_color = pool_c.shape[0] > 0
+    n_new = new_b.shape[0]
+    for j in range(n_new):
+        block_idx_flat[new_b[j]] = n_used + j
     for j in prange(n_new):
         i = n_used + j
         bw = block_w_flat[new_b[j]]

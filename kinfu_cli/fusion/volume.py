@@ -204,8 +204,7 @@ class TernaryVolume:
         d = np.asarray(depth, dtype=np.float32)
         if d.ndim != 2:
             raise VolumeError(f"depth: expected a 2-D image in metres, got shape {d.shape}")
-        ok = np.isfinite(d) & (d >= self.min_depth) & (d <= self.max_depth)
-        return np.where(ok, d, np.float32(0)).astype(np.float32)
+        return kn.clean_depth(d, self.min_depth, self.max_depth)
 
     def integrate(self, depth: np.ndarray, K: np.ndarray, T_world_camera: np.ndarray,
                   color: np.ndarray | None = None) -> dict:
@@ -219,11 +218,12 @@ class TernaryVolume:
             raise VolumeError(f"K: expected finite 3x3 intrinsics with fx, fy > 0, got {K.tolist()}")
         T = check_rigid(T_world_camera)
         d = self.prepare_depth(depth)
+        dmax_all = float(d.max()) if d.size else 0.0
         h, w = d.shape
         if not (0 <= K[0, 2] <= w and 0 <= K[1, 2] <= h):
             raise VolumeError(f"depth image {w}x{h} does not match the intrinsics (principal point "
                               f"{K[0, 2]:.1f}, {K[1, 2]:.1f} outside the image)")
-        if not np.any(d > 0):
+        if not dmax_all > 0:
             raise VolumeError(f"depth image has no valid pixels in [{self.min_depth}, {self.max_depth}] m")
         if color is not None and self.color:
             color = np.asarray(color)
@@ -239,25 +239,23 @@ class TernaryVolume:
         pm = self._pyramid_buffer(h, w)
         kn.depth_pyramid(d, pm)
         inv_sat = kn._invalid_integral(d)
-        dmax_all = float(d.max())
         b_lo, b_hi = self._frustum_blocks(T, K, w, h, dmax_all + self.truncation)
         cls = kn.classify_blocks(self.nb, self.origin, self.voxel_size, T_cw, fx, fy, cx, cy, w, h,
                                  self.truncation, pm, inv_sat, dmax_all, b_lo, b_hi)
         bidx = self.block_idx.reshape(-1)
         bw = self.block_w.reshape(-1)
-        need_new = int(np.count_nonzero((cls == kn.VOXEL) & (bidx < 0)))
-        work = self._work_order(np.flatnonzero(cls))
-        if need_new:
-            self._ensure_capacity(self.n_used + need_new)
-            self.n_used = kn.allocate_blocks(cls, bidx, bw, self.pool_v, self.pool_w, self.pool_c, self.n_used)
+        work, new_b, n_carve, n_voxel = kn.work_list(cls, bidx)
+        work = self._work_order(work)
+        if new_b.size:
+            self._ensure_capacity(self.n_used + new_b.size)
+            self.n_used = kn.allocate_new(new_b, bidx, bw, self.pool_v, self.pool_w, self.pool_c, self.n_used)
         kn.integrate_blocks(cls, self.nb, np.array(self.shape, dtype=np.int64), bidx, bw, self.pool_v,
                             self.pool_w, self.pool_c, *self._hypotheses(), self.origin, self.voxel_size,
                             T_cw, fx, fy, cx, cy, w, h, kn.depth_and_raylen(d, self._raylen(K, w, h)),
                             col.reshape(-1, 3), self.truncation, self.max_weight, work, float(self.mode_threshold))
         self._winners_stale = self._winners_stale or (self.color_mode == "mode" and col.shape[0] > 0)
         self.frames_integrated += 1
-        return {"blocks_carved": int(np.count_nonzero(cls == kn.CARVE)),
-                "blocks_voxelwise": int(np.count_nonzero(cls == kn.VOXEL)),
+        return {"blocks_carved": int(n_carve), "blocks_voxelwise": int(n_voxel),
                 "blocks_allocated": int(self.n_used)}
 
     def _hypotheses(self) -> tuple:
