@@ -320,7 +320,8 @@ class FrameToModelTracker:
         d = np.where((d >= volume.min_depth) & (d <= volume.max_depth), d, np.float32(0))
         Ks = np.asarray(K, dtype=np.float64).copy()
         Ks[:2] /= s  # pixel (u, v) of this ray-cast image is pixel (s u, s v) of the depth image
-        z, _, _, state = band_raycast(volume, Ks, T_world_camera, d, AGREEMENT_BAND * volume.truncation)
+        z, _, _, state = band_raycast(volume, Ks, T_world_camera, d, AGREEMENT_BAND * volume.truncation,
+                                     tsdf_normals=False)
         both = (state == BAND_HIT) | (state == BAND_OCCLUDED)
         n = int(np.count_nonzero(both))
         if n == 0:
