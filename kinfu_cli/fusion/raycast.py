@@ -40,20 +40,42 @@ def model_cloud(volume, K: np.ndarray, width: int, height: int, T_world_camera: 
 
 
 def band_raycast(volume, K: np.ndarray, T_world_camera: np.ndarray, hint: np.ndarray, margin: float,
-                 tsdf_normals: bool = True):
+                 tsdf_normals: bool = True, start: float | None = None):
     """Ray cast of the model from a pose, per pixel only within +-margin (m, along z) of hint's depth.
 
     hint: (H, W) depth (m, 0 = none) whose pixels are the rays (K is its intrinsics). Returns depth (H, W)
     float32 (0 = none), vertices and normals (H, W, 3) float32 world (NaN = none) and the state per pixel
     (BAND_NONE / BAND_HIT / BAND_OCCLUDED). tsdf_normals False: no normals (NaN), six trilinear TSDF samples
     per pixel saved (the tracker takes them from the vertex map).
+    start (m, < margin): the march starts `start` in front of the reading when the model is known free space
+    there, and steps back towards the band's near end until it is (when it never is: from the near end, as
+    without `start`). Most rays then walk a few voxels instead of the whole near half of the band; what it
+    can miss is a surface lying wholly (front, back and free space behind it) between the band's near end and
+    the start: a sheet thinner than the truncation distance seen from both sides.
     """
     K = np.asarray(K, dtype=np.float64)
     T = np.asarray(T_world_camera, dtype=np.float64)
     return _band_kernel(np.array(volume.shape, dtype=np.int64), volume.block_idx, volume.block_w, volume.pool_v,
                         volume.pool_w, np.asarray(volume.origin, dtype=np.float64), float(volume.voxel_size),
                         float(volume.truncation), T, np.linalg.inv(K), np.ascontiguousarray(hint, dtype=np.float32),
-                        float(margin), float(volume.min_depth), float(volume.max_depth), bool(tsdf_normals))
+                        float(margin), float(margin if start is None else min(start, margin)),
+                        float(volume.min_depth), float(volume.max_depth), bool(tsdf_normals))
+
+
+@njit(cache=True, inline="always")
+def _march_start(block_idx, block_w, pool_v, pool_w, dims, origin, inv_vs, o, d, t0, ts, back):
+    """The ray parameter to march from: ts, or the first point stepping back from it by `back` where the model is
+    known free space (v > 0), t0 when none is after t0 (band_raycast's `start`)."""
+    t = ts
+    while t > t0:
+        gx = int(math.floor((o[0] + d[0] * t - origin[0]) * inv_vs))
+        gy = int(math.floor((o[1] + d[1] * t - origin[1]) * inv_vs))
+        gz = int(math.floor((o[2] + d[2] * t - origin[2]) * inv_vs))
+        v, known = kn._corner(block_idx, block_w, pool_v, pool_w, dims, gx, gy, gz)
+        if known and v > 0.0:
+            return t
+        t -= back
+    return t0
 
 
 @njit(cache=True)
@@ -70,7 +92,7 @@ def _slab(o, d, lo, hi, t0, t1):
 
 @njit(cache=True, parallel=True, error_model="numpy")
 def _band_kernel(dims, block_idx, block_w, pool_v, pool_w, origin, vs, trunc, T_wc, Kinv, hint, margin,
-                 min_depth, max_depth, with_normals):
+                 start, min_depth, max_depth, with_normals):
     """Per pixel with a hint: the first + to - zero crossing within the band (kernels.raycast_kernel's march,
     restricted to the band; a band whose first known sample is inside a surface is BAND_OCCLUDED)."""
     height, width = hint.shape
@@ -96,7 +118,8 @@ def _band_kernel(dims, block_idx, block_w, pool_v, pool_w, origin, vs, trunc, T_
             t1 = min(max_depth, zh + margin) * nrm
             for a in range(3):  # clip to the grid box
                 t0, t1 = _slab(o[a], d[a], origin[a], origin[a] + dims[a] * vs, t0, t1)
-            t = t0
+            t = _march_start(block_idx, block_w, pool_v, pool_w, dims, origin, inv_vs, o, d, t0,
+                             min(t1, (zh - start) * nrm), 0.8 * trunc)
             prev_v = 0.0
             prev_t = t0
             prev_known = False
