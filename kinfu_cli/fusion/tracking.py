@@ -117,8 +117,8 @@ class FrameToModelTracker:
     depth first (KinFu); band: half-width (m) of the model ray cast around each reading; band_start: where in the
     band its march starts (BAND_START, truncation distances in front of the reading); max_condition (module
     docstring, check 3); icp_converged: a pyramid level stops iterating when a step moves the pose less than
-    this (rad and m). timing: seconds spent per phase (filter, pyramid, raycast, model normals, reduce WxH per
-    level, solve, agreement), summed over the frames tracked.
+    this (rad and m). timing: seconds spent per phase (filter, pyramid, raycast, model normals, icp WxH per
+    level: its iterations in one numba call, agreement), summed over the frames tracked.
     """
 
     def __init__(self, max_distances=(0.10, 0.05, 0.02), iterations=(10, 10, 8), stride: int = 2,
