@@ -10,9 +10,9 @@ integration of the frame ("track+fuse fps", what `kinfu fuse --pose icp` does pe
 recording). Prints per method: fps (mean over the runs, and the best of --repeat runs), CPU ms per frame
 (all threads; on a loaded machine the honest measure: a frame needing C ms of CPU runs at >= 1000 / C fps on an
 idle one even with no parallelism at all), ATE RMS / max (cm) against the recorded poses, frames lost, the speed
-ratio, and for the projective tracker the wall time per phase (FrameToModelTracker.timing). A method name may
-carry tracker options as `name:key=value+key=value` (e.g. `projective:map_scale=0.5+icp_converged=1e-6`, the
-session-4 settings) to compare settings in one process.
+ratio (wall, and CPU time: less sensitive to other processes' load), and for the projective tracker the wall
+time per phase (FrameToModelTracker.timing). A method name may carry tracker options as
+`name:key=value+key=value` (e.g. `projective:band_start=0`, the session-5 cast) to compare settings in one process.
 Not a test: the numbers go into the tracking report.
 """
 
@@ -157,6 +157,9 @@ def main() -> None:
         ratio = [a / b for a, b in zip(fps[m], fps[ref])]
         print(f"\nspeed ratio {m} / {ref}: {np.mean(ratio):.1f}x (per run: " + ", ".join(f"{x:.1f}" for x in ratio)
               + ")")
+        cratio = [b / a for a, b in zip(cpu[m], cpu[ref])]
+        print(f"CPU-time ratio {ref} / {m} (CPU ms per tracked frame, all threads): {np.mean(cratio):.1f}x (per run: "
+              + ", ".join(f"{x:.1f}" for x in cratio) + ")")
 
 
 if __name__ == "__main__":

@@ -212,75 +212,177 @@ def _project_vertex(vert, v, u, R, t, R_cw, t_cw, fx, fy, cx, cy, mw, mh):
     return True, px, py, pz, qz, mu, mv
 
 
+@njit(cache=True, inline="always")
+def _associate(vert, norm, v, u, R, t, model_v, model_n, R_cw, t_cw, fx, fy, cx, cy, mw, mh, max_dist2, min_cos):
+    """The projective correspondence of data pixel (v, u) at the pose (R, t): (ok, the moved vertex p, the model
+    normal n, the point-to-plane residual n . (p - q)); ok False without a model point with a normal, further
+    than max_dist2 (squared m), or with normals more than acos(min_cos) apart."""
+    ok, px, py, pz, qz, mu, mv = _project_vertex(vert, v, u, R, t, R_cw, t_cw, fx, fy, cx, cy, mw, mh)
+    if not ok:
+        return False, px, py, pz, 0.0, 0.0, 0.0, 0.0
+    nx = model_n[mv, mu, 0]
+    a0 = norm[v, u, 0]
+    if not (nx == nx and a0 == a0):
+        return False, px, py, pz, 0.0, 0.0, 0.0, 0.0
+    ny = model_n[mv, mu, 1]
+    nz = model_n[mv, mu, 2]
+    ex = px - model_v[mv, mu, 0]
+    ey = py - model_v[mv, mu, 1]
+    ez = pz - model_v[mv, mu, 2]
+    if ex * ex + ey * ey + ez * ez > max_dist2:
+        return False, px, py, pz, 0.0, 0.0, 0.0, 0.0
+    a1 = norm[v, u, 1]
+    a2 = norm[v, u, 2]
+    # data normal in the world . model normal
+    if ((R[0, 0] * a0 + R[0, 1] * a1 + R[0, 2] * a2) * nx + (R[1, 0] * a0 + R[1, 1] * a1 + R[1, 2] * a2) * ny
+            + (R[2, 0] * a0 + R[2, 1] * a1 + R[2, 2] * a2) * nz) < min_cos:
+        return False, px, py, pz, 0.0, 0.0, 0.0, 0.0
+    return True, px, py, pz, nx, ny, nz, nx * ex + ny * ey + nz * ez
+
+
+@njit(cache=True, inline="always")
+def _accumulate_rows(acc, vert, norm, v0, v1, R, t, model_v, model_n, R_cw, t_cw, fx, fy, cx, cy, max_dist2,
+                     min_cos):
+    """Adds the point-to-plane normal-equation sums of data rows v0..v1-1 to acc (N_SUMS: the upper triangle of
+    J^T J, J^T r, sum r^2, count; J = [p x n, n])."""
+    w = vert.shape[1]
+    mh, mw = model_v.shape[0], model_v.shape[1]
+    J = np.empty(6)
+    for v in range(v0, v1):
+        for u in range(w):
+            ok, px, py, pz, nx, ny, nz, r = _associate(vert, norm, v, u, R, t, model_v, model_n, R_cw, t_cw, fx, fy,
+                                                        cx, cy, mw, mh, max_dist2, min_cos)
+            if not ok:
+                continue
+            J[0] = py * nz - pz * ny
+            J[1] = pz * nx - px * nz
+            J[2] = px * ny - py * nx
+            J[3] = nx
+            J[4] = ny
+            J[5] = nz
+            k = 0
+            for i in range(6):
+                for j in range(i, 6):
+                    acc[k] += J[i] * J[j]
+                    k += 1
+            for i in range(6):
+                acc[21 + i] += J[i] * r
+            acc[27] += r * r
+            acc[28] += 1.0
+
+
 @njit(cache=True, parallel=True, fastmath=True)
 def _normal_equations(vert, norm, R, t, model_v, model_n, R_cw, t_cw, fx, fy, cx, cy, max_dist2, min_cos, nchunks):
     """Sums of the point-to-plane normal equations over the data vertices with a projective correspondence.
 
     vert, norm: data maps (camera frame); R, t: the pose estimate (world <- camera); model maps (world) ray cast
-    from the pose (R_cw, t_cw: model camera <- world) with intrinsics fx, fy, cx, cy. Per chunk of rows one row
-    of N_SUMS sums (J = [p x n, n], r = n . (p - q), p the moved data vertex, q, n the model's): rows summed by
-    the caller, so that threads never share an accumulator.
+    from the pose (R_cw, t_cw: model camera <- world) with intrinsics fx, fy, cx, cy. Per chunk of rows its own
+    N_SUMS partial sums (threads never share an accumulator), added up at the end.
     """
-    h, w = vert.shape[0], vert.shape[1]
-    mh, mw = model_v.shape[0], model_v.shape[1]
+    h = vert.shape[0]
     out = np.zeros((nchunks, N_SUMS))
     step = (h + nchunks - 1) // nchunks
     for c in prange(nchunks):
         acc = np.zeros(N_SUMS)
-        J = np.zeros(6)
-        for v in range(c * step, min(h, (c + 1) * step)):
-            for u in range(w):
-                ok, px, py, pz, qz, mu, mv = _project_vertex(vert, v, u, R, t, R_cw, t_cw, fx, fy, cx, cy, mw, mh)
-                if not ok:
-                    continue
-                nx = model_n[mv, mu, 0]
-                if not (nx == nx):
-                    continue
-                ny = model_n[mv, mu, 1]
-                nz = model_n[mv, mu, 2]
-                ex = px - model_v[mv, mu, 0]
-                ey = py - model_v[mv, mu, 1]
-                ez = pz - model_v[mv, mu, 2]
-                if ex * ex + ey * ey + ez * ez > max_dist2:
-                    continue
-                a0 = norm[v, u, 0]
-                if not (a0 == a0):
-                    continue
-                a1 = norm[v, u, 1]
-                a2 = norm[v, u, 2]
-                # data normal in the world . model normal
-                if ((R[0, 0] * a0 + R[0, 1] * a1 + R[0, 2] * a2) * nx + (R[1, 0] * a0 + R[1, 1] * a1 + R[1, 2] * a2) * ny
-                        + (R[2, 0] * a0 + R[2, 1] * a1 + R[2, 2] * a2) * nz) < min_cos:
-                    continue
-                r = nx * ex + ny * ey + nz * ez
-                J[0] = py * nz - pz * ny
-                J[1] = pz * nx - px * nz
-                J[2] = px * ny - py * nx
-                J[3] = nx
-                J[4] = ny
-                J[5] = nz
-                k = 0
-                for i in range(6):
-                    for j in range(i, 6):
-                        acc[k] += J[i] * J[j]
-                        k += 1
-                for i in range(6):
-                    acc[21 + i] += J[i] * r
-                acc[27] += r * r
-                acc[28] += 1.0
+        _accumulate_rows(acc, vert, norm, c * step, min(h, (c + 1) * step), R, t, model_v, model_n, R_cw, t_cw,
+                         fx, fy, cx, cy, max_dist2, min_cos)
         out[c] = acc
-    return out
+    return out.sum(axis=0)
 
 
-_UPPER = np.triu_indices(6)  # computed once: np.triu_indices costs more than the 6x6 solve
+@njit(cache=True)
+def _system(sums):
+    """(A, b) of the 6x6 normal equations from the N_SUMS row."""
+    A = np.empty((6, 6))
+    k = 0
+    for i in range(6):
+        for j in range(i, 6):
+            A[i, j] = sums[k]
+            A[j, i] = sums[k]
+            k += 1
+    return A, sums[21:27].copy()
 
 
-def _system(sums: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, int]:
-    """(A, b, sum r^2, count) from the summed N_SUMS row."""
-    A = np.zeros((6, 6))
-    A[_UPPER] = sums[:21]
-    A.T[_UPPER] = sums[:21]
-    return A, sums[21:27], float(sums[27]), int(sums[28])
+@njit(cache=True)
+def _rodrigues(wx, wy, wz):
+    """Rotation matrix of the rotation vector (wx, wy, wz) (angle = its norm)."""
+    th = math.sqrt(wx * wx + wy * wy + wz * wz)
+    R = np.eye(3)
+    if th < 1e-15:
+        return R
+    kx, ky, kz = wx / th, wy / th, wz / th
+    c, s = math.cos(th), math.sin(th)
+    C = 1.0 - c
+    R[0, 0] = c + kx * kx * C
+    R[0, 1] = kx * ky * C - kz * s
+    R[0, 2] = kx * kz * C + ky * s
+    R[1, 0] = ky * kx * C + kz * s
+    R[1, 1] = c + ky * ky * C
+    R[1, 2] = ky * kz * C - kx * s
+    R[2, 0] = kz * kx * C - ky * s
+    R[2, 1] = kz * ky * C + kx * s
+    R[2, 2] = c + kz * kz * C
+    return R
+
+
+@njit(cache=True)
+def _icp_level(vert, norm, T, model_v, model_n, R_cw, t_cw, fx, fy, cx, cy, max_dist2, min_cos, iterations,
+               converged, min_correspondences, nchunks):
+    """Up to `iterations` Gauss-Newton steps of one pyramid level from the pose T (world <- camera, updated in
+    place), in one call (no Python between the iterations). Returns (steps taken,
+    whether the last one moved the pose less than `converged`, the last sums: they stand for the sums at the
+    returned pose when it converged)."""
+    sums = np.zeros(N_SUMS)
+    for it in range(iterations):
+        R = np.ascontiguousarray(T[:3, :3])
+        t = np.ascontiguousarray(T[:3, 3])
+        sums = _normal_equations(vert, norm, R, t, model_v, model_n, R_cw, t_cw, fx, fy, cx, cy, max_dist2, min_cos,
+                                 nchunks)
+        if sums[28] < min_correspondences:
+            return it, False, sums
+        A, b = _system(sums)
+        xi = _solve6(A, -b)
+        if not np.all(np.isfinite(xi)):
+            return it, False, sums
+        step = np.eye(4)
+        step[:3, :3] = _rodrigues(xi[0], xi[1], xi[2])
+        step[0, 3], step[1, 3], step[2, 3] = xi[3], xi[4], xi[5]
+        T[:, :] = step @ T
+        if (math.sqrt(xi[0] ** 2 + xi[1] ** 2 + xi[2] ** 2) < converged
+                and math.sqrt(xi[3] ** 2 + xi[4] ** 2 + xi[5] ** 2) < converged):
+            return it + 1, True, sums
+    return iterations, False, sums
+
+
+@njit(cache=True)
+def _solve6(A, b):
+    """x with A x = b by Gaussian elimination with partial pivoting (NaN when A is singular)."""
+    M = A.copy()
+    x = b.copy()
+    n = 6
+    for c in range(n):
+        p = c
+        for r in range(c + 1, n):
+            if abs(M[r, c]) > abs(M[p, c]):
+                p = r
+        if M[p, c] == 0.0:
+            x[:] = np.nan
+            return x
+        if p != c:
+            for k in range(n):
+                M[c, k], M[p, k] = M[p, k], M[c, k]
+            x[c], x[p] = x[p], x[c]
+        for r in range(c + 1, n):
+            f = M[r, c] / M[c, c]
+            for k in range(c, n):
+                M[r, k] -= f * M[c, k]
+            x[r] -= f * x[c]
+    for c in range(n - 1, -1, -1):
+        acc = x[c]
+        for k in range(c + 1, n):
+            acc -= M[c, k] * x[k]
+        x[c] = acc / M[c, c]
+    return x
 
 
 def _condition(A: np.ndarray) -> float:
@@ -295,61 +397,45 @@ def projective_icp(levels: list[DataLevel], model_v: np.ndarray, model_n: np.nda
     """Pose (world <- camera) of the frame `levels` (finest first) against the model maps ray cast from T_model
     (world <- model camera) with K_model, from T_init. iterations and max_distance (m) per level, coarse to
     fine (the last entries are the finest level). A level stops early when an iteration moves the pose less than
-    `converged` (rad and m). timing: seconds added per phase ("reduce WxH" per level: association and normal
-    equations; "solve": the 6x6 solves and pose updates)."""
-    import cv2  # heavy: only when tracking
-
+    `converged` (rad and m). timing: seconds added per level ("icp WxH": its iterations, association, normal
+    equations, solves and pose updates, in one numba call)."""
     if len(iterations) != len(max_distance) or len(iterations) > len(levels):
         raise ValueError("projective_icp: one iterations and max_distance entry per pyramid level")
     Tm_inv = np.linalg.inv(np.asarray(T_model, dtype=np.float64))
     R_cw, t_cw = np.ascontiguousarray(Tm_inv[:3, :3]), np.ascontiguousarray(Tm_inv[:3, 3])
-    fx, fy, cx, cy = (float(K_model[0, 0]), float(K_model[1, 1]), float(K_model[0, 2]), float(K_model[1, 2]))
+    cam = (float(K_model[0, 0]), float(K_model[1, 1]), float(K_model[0, 2]), float(K_model[1, 2]))
     min_cos = math.cos(math.radians(max_angle_deg))
-    nchunks = 4 * numba.get_num_threads()
-    T = np.asarray(T_init, dtype=np.float64).copy()
+    T = np.array(T_init, dtype=np.float64)
     clock = {} if timing is None else timing
     used = 0
-
-    def sums(level: DataLevel, dist: float) -> np.ndarray:
-        t0 = time.perf_counter()
-        out = _normal_equations(level.vertices, level.normals, np.ascontiguousarray(T[:3, :3]),
-                                np.ascontiguousarray(T[:3, 3]), model_v, model_n, R_cw, t_cw, fx, fy, cx, cy,
-                                dist * dist, min_cos, nchunks).sum(axis=0)
-        key = f"reduce {level.depth.shape[1]}x{level.depth.shape[0]}"
-        clock[key] = clock.get(key, 0.0) + time.perf_counter() - t0
-        return out
-
     n = len(iterations)
-    last = None  # the finest level's sums when its last iteration moved the pose by less than `converged`
+    sums, done = None, False
     for i in range(n):  # coarse to fine
         level = levels[n - 1 - i]
-        for _ in range(iterations[i]):
-            s = sums(level, max_distance[i])
-            t0 = time.perf_counter()
-            A, b, _, count = _system(s)
-            if count < min_correspondences:
-                break
-            try:
-                xi = np.linalg.solve(A, -b)
-            except np.linalg.LinAlgError:
-                break
-            if not np.all(np.isfinite(xi)):
-                break
-            used += 1
-            step = np.eye(4)
-            step[:3, :3] = cv2.Rodrigues(xi[:3])[0]  # scipy's Rotation: 8x slower for one vector
-            step[:3, 3] = xi[3:]
-            T = step @ T
-            clock["solve"] = clock.get("solve", 0.0) + time.perf_counter() - t0
-            if np.linalg.norm(xi[:3]) < converged and np.linalg.norm(xi[3:]) < converged:
-                last = s if i == n - 1 else None
-                break
+        h, w = level.depth.shape
+        t0 = time.perf_counter()
+        steps, done, sums = _icp_level(level.vertices, level.normals, T, model_v, model_n, R_cw, t_cw, *cam,
+                                       max_distance[i] ** 2, min_cos, int(iterations[i]), float(converged),
+                                       float(min_correspondences), 4 * numba.get_num_threads())
+        used += steps
+        _add(clock, f"icp {w}x{h}", time.perf_counter() - t0)
     # the finest level at the returned pose: how many vertices found a correspondence, how well they fit (the
     # sums of its converged last iteration stand for them: the pose moved by less than `converged` since)
-    A, b, r2, count = _system(sums(levels[0], max_distance[-1]) if last is None else last)
-    rmse = math.sqrt(r2 / count) if count else float("nan")
+    if not done:
+        t0 = time.perf_counter()
+        sums = _normal_equations(levels[0].vertices, levels[0].normals, np.ascontiguousarray(T[:3, :3]),
+                                 np.ascontiguousarray(T[:3, 3]), model_v, model_n, R_cw, t_cw, *cam,
+                                 max_distance[-1] ** 2, min_cos, 4 * numba.get_num_threads())
+        _add(clock, f"icp {levels[0].depth.shape[1]}x{levels[0].depth.shape[0]}", time.perf_counter() - t0)
+    A, _ = _system(sums)
+    count = int(sums[28])
+    rmse = math.sqrt(sums[27] / count) if count else float("nan")
     cond = _condition(A) if count >= min_correspondences else float("inf")
     return IcpResult(T, count, levels[0].n_valid, rmse, cond, used)
+
+
+def _add(clock: dict, phase: str, seconds: float) -> None:
+    clock[phase] = clock.get(phase, 0.0) + seconds
 
 
 def model_agreement(level: DataLevel, T_world_camera: np.ndarray, model_depth: np.ndarray, model_state: np.ndarray,

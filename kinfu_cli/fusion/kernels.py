@@ -656,41 +656,96 @@ def clear_sphere_blocks(sph, nb, block_idx_flat, block_w_flat, pool_v, pool_w, o
                         pool_w[i, k] = 0
 
 
-@njit(cache=True)
-def _sample(block_idx, block_w, pool_v, pool_w, dims, gx, gy, gz):
-    """(v, w) of voxel (gx, gy, gz); w = -1 outside the grid."""
+@njit(cache=True, inline="always")
+def _corner(block_idx, block_w, pool_v, pool_w, dims, gx, gy, gz):
+    """Voxel (gx, gy, gz)'s v as stored (v * V_SCALE; a known-empty uniform block: V_SCALE) and whether it is
+    known (inside the grid, weight > 0)."""
     if gx < 0 or gy < 0 or gz < 0 or gx >= dims[0] or gy >= dims[1] or gz >= dims[2]:
-        return 0.0, -1
-    bx = gx >> 3
-    by = gy >> 3
-    bz = gz >> 3
-    i = block_idx[bx, by, bz]
+        return 0.0, False
+    i = block_idx[gx >> 3, gy >> 3, gz >> 3]
     if i < 0:
-        bw = block_w[bx, by, bz]
-        return (1.0 if bw > 0 else 0.0), np.int32(bw)
+        return V_SCALE, block_w[gx >> 3, gy >> 3, gz >> 3] != 0
     k = (gx & 7) * 64 + (gy & 7) * 8 + (gz & 7)
-    return pool_v[i, k] / V_SCALE, np.int32(pool_w[i, k])
+    return float(pool_v[i, k]), pool_w[i, k] != 0
 
 
 @njit(cache=True)
-def _trilinear(block_idx, block_w, pool_v, pool_w, dims, gxf, gyf, gzf):
-    """Trilinear v at continuous voxel coordinates (voxel centres at integers); ok False if a corner is unknown."""
+def _trilinear_any(block_idx, block_w, pool_v, pool_w, dims, gxf, gyf, gzf):
+    """_trilinear for any 8 corners (across blocks, uniform blocks, the grid's border): each corner looked up on
+    its own; the same interpolation order as _trilinear's fast path, so both give the same bits."""
     x0 = int(math.floor(gxf))
     y0 = int(math.floor(gyf))
     z0 = int(math.floor(gzf))
-    rx = gxf - x0
-    ry = gyf - y0
-    rz = gzf - z0
-    acc = 0.0
-    for c in range(8):
-        ox = c & 1
-        oy = (c >> 1) & 1
-        oz = (c >> 2) & 1
-        v, w = _sample(block_idx, block_w, pool_v, pool_w, dims, x0 + ox, y0 + oy, z0 + oz)
-        if w <= 0:
-            return 0.0, False
-        acc += v * (rx if ox else 1.0 - rx) * (ry if oy else 1.0 - ry) * (rz if oz else 1.0 - rz)
-    return acc, True
+    v000, k000 = _corner(block_idx, block_w, pool_v, pool_w, dims, x0, y0, z0)
+    v001, k001 = _corner(block_idx, block_w, pool_v, pool_w, dims, x0, y0, z0 + 1)
+    v010, k010 = _corner(block_idx, block_w, pool_v, pool_w, dims, x0, y0 + 1, z0)
+    v011, k011 = _corner(block_idx, block_w, pool_v, pool_w, dims, x0, y0 + 1, z0 + 1)
+    v100, k100 = _corner(block_idx, block_w, pool_v, pool_w, dims, x0 + 1, y0, z0)
+    v101, k101 = _corner(block_idx, block_w, pool_v, pool_w, dims, x0 + 1, y0, z0 + 1)
+    v110, k110 = _corner(block_idx, block_w, pool_v, pool_w, dims, x0 + 1, y0 + 1, z0)
+    v111, k111 = _corner(block_idx, block_w, pool_v, pool_w, dims, x0 + 1, y0 + 1, z0 + 1)
+    if not (k000 and k001 and k010 and k011 and k100 and k101 and k110 and k111):
+        return 0.0, False
+    return _lerp8(v000, v001, v010, v011, v100, v101, v110, v111, gxf - x0, gyf - y0, gzf - z0), True
+
+
+@njit(cache=True, inline="always")
+def _lerp8(v000, v001, v010, v011, v100, v101, v110, v111, rx, ry, rz):
+    """Trilinear interpolation of 8 corner values (scaled by V_SCALE; corner xyz offsets as the index bits)."""
+    c00 = v000 * (1.0 - rz) + v001 * rz
+    c01 = v010 * (1.0 - rz) + v011 * rz
+    c10 = v100 * (1.0 - rz) + v101 * rz
+    c11 = v110 * (1.0 - rz) + v111 * rz
+    c0 = c00 * (1.0 - ry) + c01 * ry
+    c1 = c10 * (1.0 - ry) + c11 * ry
+    return (c0 * (1.0 - rx) + c1 * rx) / V_SCALE
+
+
+@njit(cache=True, inline="always")
+def _trilinear(block_idx, block_w, pool_v, pool_w, dims, gxf, gyf, gzf):
+    """Trilinear v at continuous voxel coordinates (voxel centres at integers); ok False if a corner is unknown.
+    Fast path: when the 8 corners lie in one allocated block (2 points in 3 near a surface), read them from its
+    pool row directly instead of looking the block up 8 times (halves a ray cast's time)."""
+    x0 = int(math.floor(gxf))
+    y0 = int(math.floor(gyf))
+    z0 = int(math.floor(gzf))
+    if ((x0 & 7) != 7 and (y0 & 7) != 7 and (z0 & 7) != 7 and x0 >= 0 and y0 >= 0 and z0 >= 0
+            and x0 + 1 < dims[0] and y0 + 1 < dims[1] and z0 + 1 < dims[2]):
+        i = block_idx[x0 >> 3, y0 >> 3, z0 >> 3]
+        if i >= 0:
+            k = (x0 & 7) * 64 + (y0 & 7) * 8 + (z0 & 7)
+            if (pool_w[i, k] == 0 or pool_w[i, k + 1] == 0 or pool_w[i, k + 8] == 0 or pool_w[i, k + 9] == 0
+                    or pool_w[i, k + 64] == 0 or pool_w[i, k + 65] == 0 or pool_w[i, k + 72] == 0
+                    or pool_w[i, k + 73] == 0):
+                return 0.0, False
+            return _lerp8(float(pool_v[i, k]), float(pool_v[i, k + 1]), float(pool_v[i, k + 8]),
+                          float(pool_v[i, k + 9]), float(pool_v[i, k + 64]), float(pool_v[i, k + 65]),
+                          float(pool_v[i, k + 72]), float(pool_v[i, k + 73]), gxf - x0, gyf - y0, gzf - z0), True
+    return _trilinear_any(block_idx, block_w, pool_v, pool_w, dims, gxf, gyf, gzf)
+
+
+@njit(cache=True, error_model="numpy")
+def _normal(block_idx, block_w, pool_v, pool_w, dims, cxf, cyf, czf, dx, dy, dz):
+    """Unit TSDF gradient at continuous voxel coordinates, facing the ray (dx, dy, dz); ok False when unknown."""
+    gxp, o1 = _trilinear(block_idx, block_w, pool_v, pool_w, dims, cxf + 1.0, cyf, czf)
+    gxm, o2 = _trilinear(block_idx, block_w, pool_v, pool_w, dims, cxf - 1.0, cyf, czf)
+    gyp, o3 = _trilinear(block_idx, block_w, pool_v, pool_w, dims, cxf, cyf + 1.0, czf)
+    gym, o4 = _trilinear(block_idx, block_w, pool_v, pool_w, dims, cxf, cyf - 1.0, czf)
+    gzp, o5 = _trilinear(block_idx, block_w, pool_v, pool_w, dims, cxf, cyf, czf + 1.0)
+    gzm, o6 = _trilinear(block_idx, block_w, pool_v, pool_w, dims, cxf, cyf, czf - 1.0)
+    if not ((o1 or o2) and (o3 or o4) and (o5 or o6)):
+        return 0.0, 0.0, 0.0, False
+    # central differences; where one side is unknown (thin band, coarse voxels) a one-sided difference against
+    # the hit point (v = 0 there)
+    nx = ((gxp if o1 else 0.0) - (gxm if o2 else 0.0)) * (0.5 if (o1 and o2) else 1.0)
+    ny = ((gyp if o3 else 0.0) - (gym if o4 else 0.0)) * (0.5 if (o3 and o4) else 1.0)
+    nz = ((gzp if o5 else 0.0) - (gzm if o6 else 0.0)) * (0.5 if (o5 and o6) else 1.0)
+    nn = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if nn < 1e-9:
+        return 0.0, 0.0, 0.0, False
+    if nx * dx + ny * dy + nz * dz > 0.0:
+        nn = -nn
+    return nx / nn, ny / nn, nz / nn, True
 
 
 @njit(cache=True, parallel=True)
@@ -703,7 +758,7 @@ def raycast_kernel(dims, block_idx, block_w, pool_v, pool_w, origin, vs, trunc,
     With stop_unknown the ray also stops at the first unknown voxel (NBV: the first non-empty voxel), whose
     position is returned as the vertex (depth and normal stay 0 / NaN).
 
-    One function on purpose (hot path, ~175 lines): grid clipping, the march that jumps over uniform blocks,
+    One function on purpose (hot path, ~150 lines): grid clipping, the march that jumps over uniform blocks,
     the zero-crossing refinement and the normal all share a dozen per-ray variables inside one prange body;
     split into numba functions they would pass them all back and forth for every pixel.
     """
@@ -832,37 +887,12 @@ def raycast_kernel(dims, block_idx, block_w, pool_v, pool_w, origin, vs, trunc,
                     verts[pv, pu, 0] = hx
                     verts[pv, pu, 1] = hy
                     verts[pv, pu, 2] = hz
-                    # normal: central differences of trilinear v
-                    cxf = (hx - bmin0) * inv_vs - 0.5
-                    cyf = (hy - bmin1) * inv_vs - 0.5
-                    czf = (hz - bmin2) * inv_vs - 0.5
-                    gxp, o1 = _trilinear(block_idx, block_w, pool_v, pool_w, dims, cxf + 1.0, cyf, czf)
-                    gxm, o2 = _trilinear(block_idx, block_w, pool_v, pool_w, dims, cxf - 1.0, cyf, czf)
-                    gyp, o3 = _trilinear(block_idx, block_w, pool_v, pool_w, dims, cxf, cyf + 1.0, czf)
-                    gym, o4 = _trilinear(block_idx, block_w, pool_v, pool_w, dims, cxf, cyf - 1.0, czf)
-                    gzp, o5 = _trilinear(block_idx, block_w, pool_v, pool_w, dims, cxf, cyf, czf + 1.0)
-                    gzm, o6 = _trilinear(block_idx, block_w, pool_v, pool_w, dims, cxf, cyf, czf - 1.0)
-                    # central differences; where one side is unknown (thin band, coarse voxels) a one-sided
-                    # difference against the hit point (v = 0 there)
-                    ok_n = (o1 or o2) and (o3 or o4) and (o5 or o6)
+                    nx, ny, nz, ok_n = _normal(block_idx, block_w, pool_v, pool_w, dims, (hx - bmin0) * inv_vs - 0.5,
+                                               (hy - bmin1) * inv_vs - 0.5, (hz - bmin2) * inv_vs - 0.5, dx, dy, dz)
                     if ok_n:
-                        gxp = gxp if o1 else 0.0
-                        gxm = gxm if o2 else 0.0
-                        gyp = gyp if o3 else 0.0
-                        gym = gym if o4 else 0.0
-                        gzp = gzp if o5 else 0.0
-                        gzm = gzm if o6 else 0.0
-                    if ok_n:
-                        nx = (gxp - gxm) * (0.5 if (o1 and o2) else 1.0)
-                        ny = (gyp - gym) * (0.5 if (o3 and o4) else 1.0)
-                        nz = (gzp - gzm) * (0.5 if (o5 and o6) else 1.0)
-                        nn = math.sqrt(nx * nx + ny * ny + nz * nz)
-                        if nn > 1e-9:
-                            if nx * dx + ny * dy + nz * dz > 0.0:
-                                nn = -nn
-                            norms[pv, pu, 0] = nx / nn
-                            norms[pv, pu, 1] = ny / nn
-                            norms[pv, pu, 2] = nz / nn
+                        norms[pv, pu, 0] = nx
+                        norms[pv, pu, 1] = ny
+                        norms[pv, pu, 2] = nz
                     state[pv, pu] = 1
                     hit = True
                     break

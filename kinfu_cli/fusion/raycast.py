@@ -40,72 +40,42 @@ def model_cloud(volume, K: np.ndarray, width: int, height: int, T_world_camera: 
 
 
 def band_raycast(volume, K: np.ndarray, T_world_camera: np.ndarray, hint: np.ndarray, margin: float,
-                 tsdf_normals: bool = True):
+                 tsdf_normals: bool = True, start: float | None = None):
     """Ray cast of the model from a pose, per pixel only within +-margin (m, along z) of hint's depth.
 
     hint: (H, W) depth (m, 0 = none) whose pixels are the rays (K is its intrinsics). Returns depth (H, W)
     float32 (0 = none), vertices and normals (H, W, 3) float32 world (NaN = none) and the state per pixel
     (BAND_NONE / BAND_HIT / BAND_OCCLUDED). tsdf_normals False: no normals (NaN), six trilinear TSDF samples
     per pixel saved (the tracker takes them from the vertex map).
+    start (m, < margin): the march starts `start` in front of the reading when the model is known free space
+    there, and steps back towards the band's near end until it is (when it never is: from the near end, as
+    without `start`). Most rays then walk a few voxels instead of the whole near half of the band; what it
+    can miss is a surface lying wholly (front, back and free space behind it) between the band's near end and
+    the start: a sheet thinner than the truncation distance seen from both sides.
     """
     K = np.asarray(K, dtype=np.float64)
     T = np.asarray(T_world_camera, dtype=np.float64)
     return _band_kernel(np.array(volume.shape, dtype=np.int64), volume.block_idx, volume.block_w, volume.pool_v,
                         volume.pool_w, np.asarray(volume.origin, dtype=np.float64), float(volume.voxel_size),
                         float(volume.truncation), T, np.linalg.inv(K), np.ascontiguousarray(hint, dtype=np.float32),
-                        float(margin), float(volume.min_depth), float(volume.max_depth), bool(tsdf_normals))
-
-
-@njit(cache=True, error_model="numpy")
-def _normal(block_idx, block_w, pool_v, pool_w, dims, cxf, cyf, czf, dx, dy, dz):
-    """Unit TSDF gradient at continuous voxel coordinates, facing the ray (dx, dy, dz); ok False when unknown."""
-    gxp, o1 = _trilinear(block_idx, block_w, pool_v, pool_w, dims, cxf + 1.0, cyf, czf)
-    gxm, o2 = _trilinear(block_idx, block_w, pool_v, pool_w, dims, cxf - 1.0, cyf, czf)
-    gyp, o3 = _trilinear(block_idx, block_w, pool_v, pool_w, dims, cxf, cyf + 1.0, czf)
-    gym, o4 = _trilinear(block_idx, block_w, pool_v, pool_w, dims, cxf, cyf - 1.0, czf)
-    gzp, o5 = _trilinear(block_idx, block_w, pool_v, pool_w, dims, cxf, cyf, czf + 1.0)
-    gzm, o6 = _trilinear(block_idx, block_w, pool_v, pool_w, dims, cxf, cyf, czf - 1.0)
-    if not ((o1 or o2) and (o3 or o4) and (o5 or o6)):
-        return 0.0, 0.0, 0.0, False
-    # central differences; one-sided against the hit point (v = 0 there) where one side is unknown
-    nx = ((gxp if o1 else 0.0) - (gxm if o2 else 0.0)) * (0.5 if (o1 and o2) else 1.0)
-    ny = ((gyp if o3 else 0.0) - (gym if o4 else 0.0)) * (0.5 if (o3 and o4) else 1.0)
-    nz = ((gzp if o5 else 0.0) - (gzm if o6 else 0.0)) * (0.5 if (o5 and o6) else 1.0)
-    nn = math.sqrt(nx * nx + ny * ny + nz * nz)
-    if nn < 1e-9:
-        return 0.0, 0.0, 0.0, False
-    if nx * dx + ny * dy + nz * dz > 0.0:
-        nn = -nn
-    return nx / nn, ny / nn, nz / nn, True
+                        float(margin), float(margin if start is None else min(start, margin)),
+                        float(volume.min_depth), float(volume.max_depth), bool(tsdf_normals))
 
 
 @njit(cache=True, inline="always")
-def _trilinear(block_idx, block_w, pool_v, pool_w, dims, gxf, gyf, gzf):
-    """kernels._trilinear with a fast path: when the 8 corners lie in one allocated block (2 rays in 3), read
-    them from its pool row directly instead of looking the block up 8 times (halves the band cast's time)."""
-    x0 = int(math.floor(gxf))
-    y0 = int(math.floor(gyf))
-    z0 = int(math.floor(gzf))
-    if ((x0 & 7) != 7 and (y0 & 7) != 7 and (z0 & 7) != 7 and x0 >= 0 and y0 >= 0 and z0 >= 0
-            and x0 + 1 < dims[0] and y0 + 1 < dims[1] and z0 + 1 < dims[2]):
-        i = block_idx[x0 >> 3, y0 >> 3, z0 >> 3]
-        if i >= 0:
-            k = (x0 & 7) * 64 + (y0 & 7) * 8 + (z0 & 7)
-            if (pool_w[i, k] == 0 or pool_w[i, k + 1] == 0 or pool_w[i, k + 8] == 0 or pool_w[i, k + 9] == 0
-                    or pool_w[i, k + 64] == 0 or pool_w[i, k + 65] == 0 or pool_w[i, k + 72] == 0
-                    or pool_w[i, k + 73] == 0):
-                return 0.0, False
-            rx = gxf - x0
-            ry = gyf - y0
-            rz = gzf - z0
-            c00 = pool_v[i, k] * (1.0 - rz) + pool_v[i, k + 1] * rz
-            c01 = pool_v[i, k + 8] * (1.0 - rz) + pool_v[i, k + 9] * rz
-            c10 = pool_v[i, k + 64] * (1.0 - rz) + pool_v[i, k + 65] * rz
-            c11 = pool_v[i, k + 72] * (1.0 - rz) + pool_v[i, k + 73] * rz
-            c0 = c00 * (1.0 - ry) + c01 * ry
-            c1 = c10 * (1.0 - ry) + c11 * ry
-            return (c0 * (1.0 - rx) + c1 * rx) / kn.V_SCALE, True
-    return kn._trilinear(block_idx, block_w, pool_v, pool_w, dims, gxf, gyf, gzf)
+def _march_start(block_idx, block_w, pool_v, pool_w, dims, origin, inv_vs, o, d, t0, ts, back):
+    """The ray parameter to march from: ts, or the first point stepping back from it by `back` where the model is
+    known free space (v > 0), t0 when none is after t0 (band_raycast's `start`)."""
+    t = ts
+    while t > t0:
+        gx = int(math.floor((o[0] + d[0] * t - origin[0]) * inv_vs))
+        gy = int(math.floor((o[1] + d[1] * t - origin[1]) * inv_vs))
+        gz = int(math.floor((o[2] + d[2] * t - origin[2]) * inv_vs))
+        v, known = kn._corner(block_idx, block_w, pool_v, pool_w, dims, gx, gy, gz)
+        if known and v > 0.0:
+            return t
+        t -= back
+    return t0
 
 
 @njit(cache=True)
@@ -122,7 +92,7 @@ def _slab(o, d, lo, hi, t0, t1):
 
 @njit(cache=True, parallel=True, error_model="numpy")
 def _band_kernel(dims, block_idx, block_w, pool_v, pool_w, origin, vs, trunc, T_wc, Kinv, hint, margin,
-                 min_depth, max_depth, with_normals):
+                 start, min_depth, max_depth, with_normals):
     """Per pixel with a hint: the first + to - zero crossing within the band (kernels.raycast_kernel's march,
     restricted to the band; a band whose first known sample is inside a surface is BAND_OCCLUDED)."""
     height, width = hint.shape
@@ -148,7 +118,8 @@ def _band_kernel(dims, block_idx, block_w, pool_v, pool_w, origin, vs, trunc, T_
             t1 = min(max_depth, zh + margin) * nrm
             for a in range(3):  # clip to the grid box
                 t0, t1 = _slab(o[a], d[a], origin[a], origin[a] + dims[a] * vs, t0, t1)
-            t = t0
+            t = _march_start(block_idx, block_w, pool_v, pool_w, dims, origin, inv_vs, o, d, t0,
+                             min(t1, (zh - start) * nrm), 0.8 * trunc)
             prev_v = 0.0
             prev_t = t0
             prev_known = False
@@ -193,11 +164,11 @@ def _band_kernel(dims, block_idx, block_w, pool_v, pool_w, origin, vs, trunc, T_
                         break
                     th = t
                     if prev_known and prev_v > 0.0:
-                        a0, oka = _trilinear(block_idx, block_w, pool_v, pool_w, dims,
+                        a0, oka = kn._trilinear(block_idx, block_w, pool_v, pool_w, dims,
                                                 (o[0] + d[0] * prev_t - origin[0]) * inv_vs - 0.5,
                                                 (o[1] + d[1] * prev_t - origin[1]) * inv_vs - 0.5,
                                                 (o[2] + d[2] * prev_t - origin[2]) * inv_vs - 0.5)
-                        c0, okc = _trilinear(block_idx, block_w, pool_v, pool_w, dims,
+                        c0, okc = kn._trilinear(block_idx, block_w, pool_v, pool_w, dims,
                                                 (px - origin[0]) * inv_vs - 0.5, (py - origin[1]) * inv_vs - 0.5,
                                                 (pz - origin[2]) * inv_vs - 0.5)
                         if oka and okc and a0 > c0:
@@ -216,9 +187,9 @@ def _band_kernel(dims, block_idx, block_w, pool_v, pool_w, origin, vs, trunc, T_
                     state[pv, pu] = BAND_HIT
                     if not with_normals:
                         break
-                    nx, ny, nz, ok = _normal(block_idx, block_w, pool_v, pool_w, dims, (hx - origin[0]) * inv_vs - 0.5,
-                                             (hy - origin[1]) * inv_vs - 0.5, (hz - origin[2]) * inv_vs - 0.5,
-                                             d[0], d[1], d[2])
+                    nx, ny, nz, ok = kn._normal(block_idx, block_w, pool_v, pool_w, dims,
+                                                (hx - origin[0]) * inv_vs - 0.5, (hy - origin[1]) * inv_vs - 0.5,
+                                                (hz - origin[2]) * inv_vs - 0.5, d[0], d[1], d[2])
                     if ok:
                         norms[pv, pu, 0] = nx
                         norms[pv, pu, 1] = ny
