@@ -43,6 +43,7 @@ CLS_OCCUPIED = 1
 CLS_EMPTY_EXIT = 2
 N_TERMS = 4
 _CHUNK = 256  # rays per scheduling chunk of the caster (see _cast_lattice)
+_LANES = 32  # accumulation lanes of the caster (see _cast_lattice)
 FINE_CAP = 4  # cap of the voxel-level distances in mixed blocks (see _fill_bricks)
 
 
@@ -238,12 +239,13 @@ def _fill_bricks(labels, B, C, mixed, brick_of, bricks):
 
 
 @njit(cache=True, inline="always")
-def _next_boundary(lo, i, step, vs, p, inv):
-    """t at which the ray leaves voxel i along one axis (inf when it does not move along it)."""
+def _next_boundary(i, step, a, b):
+    """t at which the ray leaves voxel i along one axis (inf when it does not move along it); the ray
+    crosses the plane of voxel boundary f at t = f * a + b."""
     if step > 0:
-        return (lo + (i + 1) * vs - p) * inv
+        return (i + 1) * a + b
     if step < 0:
-        return (lo + i * vs - p) * inv
+        return i * a + b
     return np.inf
 
 
@@ -304,12 +306,20 @@ def _trace(bricks, brick_of, bdist, SH, n0, n1, n2, lx, ly, lz, vs, px, py, pz, 
     tdx = abs(vs * ivx) if sx != 0 else np.inf
     tdy = abs(vs * ivy) if sy != 0 else np.inf
     tdz = abs(vs * ivz) if sz != 0 else np.inf
-    ix = _clampi(int(math.floor((px + t0 * dx - lx) / vs)), 0, n0 - 1)
-    iy = _clampi(int(math.floor((py + t0 * dy - ly) / vs)), 0, n1 - 1)
-    iz = _clampi(int(math.floor((pz + t0 * dz - lz) / vs)), 0, n2 - 1)
-    tmx = _next_boundary(lx, ix, sx, vs, px, ivx)
-    tmy = _next_boundary(ly, iy, sy, vs, py, ivy)
-    tmz = _next_boundary(lz, iz, sz, vs, pz, ivz)
+    # per axis: boundary plane f is crossed at t = f * a + b; at t the ray is in voxel floor(t * g + h)
+    ivs = 1.0 / vs
+    ax, bx_ = vs * ivx, (lx - px) * ivx
+    ay, by_ = vs * ivy, (ly - py) * ivy
+    az, bz_ = vs * ivz, (lz - pz) * ivz
+    gx, hx = dx * ivs, (px - lx) * ivs
+    gy, hy = dy * ivs, (py - ly) * ivs
+    gz, hz = dz * ivs, (pz - lz) * ivs
+    ix = _clampi(int(math.floor(t0 * gx + hx)), 0, n0 - 1)
+    iy = _clampi(int(math.floor(t0 * gy + hy)), 0, n1 - 1)
+    iz = _clampi(int(math.floor(t0 * gz + hz)), 0, n2 - 1)
+    tmx = _next_boundary(ix, sx, ax, bx_)
+    tmy = _next_boundary(iy, sy, ay, by_)
+    tmz = _next_boundary(iz, sz, az, bz_)
     tcur = t0
     cls = CLS_EMPTY_EXIT
     thit = np.inf
@@ -326,13 +336,13 @@ def _trace(bricks, brick_of, bdist, SH, n0, n1, n2, lx, ly, lz, vs, px, py, pz, 
             D1 = D - 1
             te, ix, iy, iz = _leave_box(max((bx - D1) * B, 0), min((bx + D1 + 1) * B, n0), max((by - D1) * B, 0),
                                         min((by + D1 + 1) * B, n1), max((bz - D1) * B, 0),
-                                        min((bz + D1 + 1) * B, n2), sx, sy, sz, lx, ly, lz, vs, px, py, pz, dx, dy,
-                                        dz, ivx, ivy, ivz)
+                                        min((bz + D1 + 1) * B, n2), sx, sy, sz, ax, bx_, ay, by_, az, bz_,
+                                        gx, hx, gy, hy, gz, hz)
             if te >= t1 or ix < 0 or ix >= n0 or iy < 0 or iy >= n1 or iz < 0 or iz >= n2:
                 break
-            tmx = _next_boundary(lx, ix, sx, vs, px, ivx)
-            tmy = _next_boundary(ly, iy, sy, vs, py, ivy)
-            tmz = _next_boundary(lz, iz, sz, vs, pz, ivz)
+            tmx = _next_boundary(ix, sx, ax, bx_)
+            tmy = _next_boundary(iy, sy, ay, by_)
+            tmz = _next_boundary(iz, sz, az, bz_)
             tcur = te
             prev_unknown_in_s = False
             continue
@@ -347,12 +357,12 @@ def _trace(bricks, brick_of, bdist, SH, n0, n1, n2, lx, ly, lz, vs, px, py, pz, 
                 d1 = -lab - 1
                 te, ix, iy, iz = _leave_box(max(ix - d1, 0), min(ix + d1 + 1, n0), max(iy - d1, 0),
                                             min(iy + d1 + 1, n1), max(iz - d1, 0), min(iz + d1 + 1, n2), sx, sy, sz,
-                                            lx, ly, lz, vs, px, py, pz, dx, dy, dz, ivx, ivy, ivz)
+                                            ax, bx_, ay, by_, az, bz_, gx, hx, gy, hy, gz, hz)
                 if te >= t1 or ix < 0 or ix >= n0 or iy < 0 or iy >= n1 or iz < 0 or iz >= n2:
                     return cls, thit, v0, v1, v2, v3, nb, nf, nv
-                tmx = _next_boundary(lx, ix, sx, vs, px, ivx)
-                tmy = _next_boundary(ly, iy, sy, vs, py, ivy)
-                tmz = _next_boundary(lz, iz, sz, vs, pz, ivz)
+                tmx = _next_boundary(ix, sx, ax, bx_)
+                tmy = _next_boundary(iy, sy, ay, by_)
+                tmz = _next_boundary(iz, sz, az, bz_)
                 tcur = te
                 prev_unknown_in_s = False
                 if (ix >> SH) != bx or (iy >> SH) != by or (iz >> SH) != bz:
@@ -425,37 +435,38 @@ def _trace(bricks, brick_of, bdist, SH, n0, n1, n2, lx, ly, lz, vs, px, py, pz, 
 
 
 @njit(cache=True, inline="always")
-def _leave_box(x0, x1, y0, y1, z0, z1, sx, sy, sz, lx, ly, lz, vs, px, py, pz, dx, dy, dz, ivx, ivy, ivz):
+def _leave_box(x0, x1, y0, y1, z0, z1, sx, sy, sz, ax, bx, ay, by, az, bz, gx, hx, gy, hy, gz, hz):
     """The ray is inside the all-EMPTY box of voxels [x0, x1) x [y0, y1) x [z0, z1): the t where it leaves
-    the box and the voxel just past that face (the other two indices from the position, kept in the box)."""
+    the box and the voxel just past that face (the other two indices from the position, kept in the box).
+    It crosses boundary plane f of an axis at t = f * a + b and is in voxel floor(t * g + h) at t."""
     ex = np.inf
     if sx > 0:
-        ex = (lx + x1 * vs - px) * ivx
+        ex = x1 * ax + bx
     elif sx < 0:
-        ex = (lx + x0 * vs - px) * ivx
+        ex = x0 * ax + bx
     ey = np.inf
     if sy > 0:
-        ey = (ly + y1 * vs - py) * ivy
+        ey = y1 * ay + by
     elif sy < 0:
-        ey = (ly + y0 * vs - py) * ivy
+        ey = y0 * ay + by
     ez = np.inf
     if sz > 0:
-        ez = (lz + z1 * vs - pz) * ivz
+        ez = z1 * az + bz
     elif sz < 0:
-        ez = (lz + z0 * vs - pz) * ivz
+        ez = z0 * az + bz
     te = min(ex, min(ey, ez))
     if ex <= ey and ex <= ez:
         ix = x1 if sx > 0 else x0 - 1
-        iy = _clampi(int(math.floor((py + te * dy - ly) / vs)), y0, y1 - 1)
-        iz = _clampi(int(math.floor((pz + te * dz - lz) / vs)), z0, z1 - 1)
+        iy = _clampi(int(math.floor(te * gy + hy)), y0, y1 - 1)
+        iz = _clampi(int(math.floor(te * gz + hz)), z0, z1 - 1)
     elif ey <= ez:
         iy = y1 if sy > 0 else y0 - 1
-        ix = _clampi(int(math.floor((px + te * dx - lx) / vs)), x0, x1 - 1)
-        iz = _clampi(int(math.floor((pz + te * dz - lz) / vs)), z0, z1 - 1)
+        ix = _clampi(int(math.floor(te * gx + hx)), x0, x1 - 1)
+        iz = _clampi(int(math.floor(te * gz + hz)), z0, z1 - 1)
     else:
         iz = z1 if sz > 0 else z0 - 1
-        ix = _clampi(int(math.floor((px + te * dx - lx) / vs)), x0, x1 - 1)
-        iy = _clampi(int(math.floor((py + te * dy - ly) / vs)), y0, y1 - 1)
+        ix = _clampi(int(math.floor(te * gx + hx)), x0, x1 - 1)
+        iy = _clampi(int(math.floor(te * gy + hy)), y0, y1 - 1)
     return te, ix, iy, iz
 
 
@@ -605,20 +616,25 @@ def _fill_templates(tlat, loff, lut, tcount, toff, tview, vtmpl, woff, Ms, win, 
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def _cast_lattice(shape, bricks, brick_of, bdist, SH, lo, vs, ray_off, gtmpl, tlat, toff, tcell, R0s, t0s, fx, fy, cx, cy, min_range,
-                  max_range, cen, radius, through, optimistic, p_unknown, chunk, lanes, out_cls, out_vals, steps):
-    """Trace every ray of every group (built here from its template's lattice cell and the group's base
-    pose, so no per-ray origin/direction arrays). Ray costs differ by orders of magnitude (a free-space
-    skip vs a walk through clutter) and numba splits a prange into one contiguous slice per thread, so
-    the rays are cut into small chunks dealt round-robin to `lanes` workers: every worker gets a share
-    of every region."""
-    n = out_cls.shape[0]
+def _cast_lattice(shape, bricks, brick_of, bdist, SH, lo, vs, ray_off, gtmpl, toff, tdir, tview, woff, W, gview, R0s,
+                  t0s, min_range, max_range, cen, radius, through, optimistic, p_unknown, chunk, acc, steps):
+    """Trace every ray of every group (its direction is its template's ray turned by the group's base
+    pose, so no per-ray origin/direction arrays) and add its results, times its template's pixel weights,
+    to the sums of the group's views (columns gview[g] ... of acc, in the template's view order). Ray costs
+    differ by orders of magnitude (a free-space skip vs a walk through clutter) and numba splits a prange
+    into one contiguous slice per thread, so the rays are cut into small chunks dealt round-robin to the
+    lanes (acc's first axis, a fixed number so sums do not depend on the thread count): every thread gets
+    a share of every region, and each lane sums into its own rows (no ray arrays, no races).
+    acc rows: rays ending on 0 unknown (no gain) / 1 occupied / 2 empty exit / 3 unknown in S, then the
+    sums of gain terms 1-3 (term 0 is column 3)."""
+    lanes = acc.shape[0]
+    n = ray_off[-1]
     nchunk = (n + chunk - 1) // chunk
     r2 = radius * radius
     h = 0.0
     if 0.0 < p_unknown < 1.0:
         h = -(p_unknown * math.log2(p_unknown) + (1 - p_unknown) * math.log2(1 - p_unknown))
-    ng = ray_off.shape[0]
+    ng = ray_off.shape[0] - 1
     lx, ly, lz, ccx, ccy, ccz = lo[0], lo[1], lo[2], cen[0], cen[1], cen[2]
     n0, n1, n2 = shape
     for lane in prange(lanes):
@@ -628,61 +644,40 @@ def _cast_lattice(shape, bricks, brick_of, bdist, SH, lo, vs, ray_off, gtmpl, tl
             q1 = min(q0 + chunk, n)
             g = np.searchsorted(ray_off, q0, side="right") - 1
             for q in range(q0, q1):
-                while g + 1 < ng and q >= ray_off[g + 1]:
+                while q >= ray_off[g + 1]:
                     g += 1
                 t = gtmpl[g]
-                c = tcell[toff[t] + q - ray_off[g]]
-                LW = tlat[t, 2]
-                x = (c % LW + tlat[t, 0] - cx) / fx
-                y = (c // LW + tlat[t, 1] - cy) / fy
-                inrm = 1.0 / math.sqrt(x * x + y * y + 1.0)
-                dx = (R0s[g, 0, 0] * x + R0s[g, 0, 1] * y + R0s[g, 0, 2]) * inrm
-                dy = (R0s[g, 1, 0] * x + R0s[g, 1, 1] * y + R0s[g, 1, 2]) * inrm
-                dz = (R0s[g, 2, 0] * x + R0s[g, 2, 1] * y + R0s[g, 2, 2]) * inrm
+                r = q - ray_off[g]
+                e = toff[t] + r
+                x, y, z = tdir[e, 0], tdir[e, 1], tdir[e, 2]
+                dx = R0s[g, 0, 0] * x + R0s[g, 0, 1] * y + R0s[g, 0, 2] * z
+                dy = R0s[g, 1, 0] * x + R0s[g, 1, 1] * y + R0s[g, 1, 2] * z
+                dz = R0s[g, 2, 0] * x + R0s[g, 2, 1] * y + R0s[g, 2, 2] * z
                 c_, _t, v0, v1, v2, v3, nb, nf, nv = _trace(bricks, brick_of, bdist, SH, n0, n1, n2, lx, ly, lz, vs,
-                                                        t0s[g, 0], t0s[g, 1],
-                                                        t0s[g, 2], dx, dy, dz, min_range, max_range, ccx, ccy, ccz,
-                                                        r2, through, optimistic, p_unknown, h)
-                out_cls[q] = c_
-                out_vals[q, 0], out_vals[q, 1], out_vals[q, 2], out_vals[q, 3] = v0, v1, v2, v3
+                                                            t0s[g, 0], t0s[g, 1], t0s[g, 2], dx, dy, dz, min_range,
+                                                            max_range, ccx, ccy, ccz, r2, through, optimistic,
+                                                            p_unknown, h)
+                col = 3 if v0 != 0.0 else c_
+                K = tview[t + 1] - tview[t]
+                w0 = woff[t] + r * K
+                m0 = gview[g]
+                for kk in range(K):
+                    acc[lane, col, m0 + kk] += W[w0 + kk]
+                if v1 != 0.0:
+                    for kk in range(K):
+                        acc[lane, 4, m0 + kk] += W[w0 + kk] * v1
+                if v2 != 0.0:
+                    for kk in range(K):
+                        acc[lane, 5, m0 + kk] += W[w0 + kk] * v2
+                if v3 != 0.0:
+                    for kk in range(K):
+                        acc[lane, 6, m0 + kk] += W[w0 + kk] * v3
                 nbs += nb
                 nfs += nf
                 nvs += nv
         steps[lane, 0] = nbs
         steps[lane, 1] = nvs
         steps[lane, 2] = nfs
-
-
-@njit(cache=True, parallel=True)
-def _accumulate(ray_off, gtmpl, gview, tcount, tview, woff, W, cls, terms, out_counts, out_terms, npix):
-    """Per group: each view's sums are its template's pixel weights times the group's ray results (the
-    group's views are the output rows gview[g] ... in the template's view order)."""
-    for g in prange(ray_off.shape[0]):
-        t = gtmpl[g]
-        n = tcount[t]
-        K = tview[t + 1] - tview[t]
-        acc = np.zeros((K, 8))
-        q0 = ray_off[g]
-        w0 = woff[t]
-        for r in range(n):
-            q = q0 + r
-            c = cls[q]
-            a0, a1, a2, a3 = terms[q, 0], terms[q, 1], terms[q, 2], terms[q, 3]
-            for k in range(K):
-                w = W[w0 + r * K + k]
-                acc[k, c] += w
-                acc[k, 3] += w * a0
-                acc[k, 4] += w * a1
-                acc[k, 5] += w * a2
-                acc[k, 6] += w * a3
-                acc[k, 7] += w
-        for k in range(K):
-            m = gview[g] + k
-            for a in range(3):
-                out_counts[m, a] = int(acc[k, a])
-            for a in range(N_TERMS):
-                out_terms[m, a] = acc[k, 3 + a]
-            npix[m] = int(acc[k, 7])
 
 
 @dataclass
@@ -845,8 +840,18 @@ def _build_templates(cam, r_ext, groups: list[_Group]) -> list[dict]:
                     np.ascontiguousarray(np.concatenate([g.Ms for g in groups])),
                     np.ascontiguousarray(np.concatenate([g.win for g in groups])), cam.fx, cam.fy, cam.cx, cam.cy,
                     tcell, W)
-    return [{"lat": g.lat, "n": int(tcount[i]), "K": int(K[i]), "tcell": tcell[toff[i]:toff[i] + tcount[i]],
-             "W": W[woff[i]:woff[i] + wsize[i]]} for i, g in enumerate(groups)]
+    # each ray's unit direction in the base view
+    t_of = np.repeat(np.arange(len(groups)), tcount)
+    LW = tlat[t_of, 2]
+    d = np.stack([(tcell % LW + tlat[t_of, 0] - cam.cx) / cam.fx, (tcell // LW + tlat[t_of, 1] - cam.cy) / cam.fy,
+                  np.ones(len(tcell))], axis=1)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    out = []
+    for i, g in enumerate(groups):
+        Wi = W[woff[i]:woff[i] + wsize[i]]
+        out.append({"n": int(tcount[i]), "K": int(K[i]), "dir": d[toff[i]:toff[i] + tcount[i]], "W": Wi,
+                    "npix": Wi.reshape(-1, K[i]).sum(axis=0, dtype=np.float64).round().astype(np.int64)})
+    return out
 
 
 def _cast_batch(vol, cam, center, radius, r_ext, flags, p_unknown, batch: list[_Group], cache: dict, out: ViewRays,
@@ -866,41 +871,36 @@ def _cast_batch(vol, cam, center, radius, r_ext, flags, p_unknown, batch: list[_
         del cache[k]
     tid = {k: i for i, k in enumerate(keys)}
     tms = [cache[k] for k in keys]
-    tlat = np.array([t["lat"] for t in tms], dtype=np.int64).reshape(-1, 4)
     tcount = np.array([t["n"] for t in tms], dtype=np.int64)
     K = np.array([t["K"] for t in tms], dtype=np.int64)
     tview = np.concatenate([[0], np.cumsum(K)]).astype(np.int64)
     toff = np.concatenate([[0], np.cumsum(tcount)[:-1]]).astype(np.int64)
     woff = np.concatenate([[0], np.cumsum(tcount * K)[:-1]]).astype(np.int64)
-    tcell = np.concatenate([t["tcell"] for t in tms])
+    tdir = np.ascontiguousarray(np.concatenate([t["dir"] for t in tms]))
     W = np.concatenate([t["W"] for t in tms])
     gtmpl = np.array([tid[g.key] for g in batch], dtype=np.int64)
     gcount = tcount[gtmpl]
-    ray_off = np.concatenate([[0], np.cumsum(gcount)[:-1]]).astype(np.int64)
+    ray_off = np.concatenate([[0], np.cumsum(gcount)]).astype(np.int64)
     views = np.concatenate([g.views for g in batch])
     gview = np.concatenate([[0], np.cumsum([len(g.views) for g in batch])[:-1]]).astype(np.int64)
     R0s = np.ascontiguousarray(np.array([g.R0 for g in batch], dtype=np.float64))
     t0s = np.ascontiguousarray(np.array([g.t0 for g in batch], dtype=np.float64))
-    n = int(gcount.sum())
+    n = int(ray_off[-1])
     tick("mark")
-    cls = np.empty(n, np.int8)
-    tm = np.empty((n, N_TERMS), np.float64)
-    lanes = 8 * numba.get_num_threads()
-    steps = np.zeros((lanes, 3), np.int64)
-    _cast_lattice(vol.shape, vol.bricks, vol.brick_of, vol.block_dist, vol.shift, vol.origin, vol.voxel_size, ray_off, gtmpl, tlat, toff,
-                  tcell, R0s, t0s, cam.fx, cam.fy, cam.cx, cam.cy, cam.min_range, min(cam.max_range, 1e30), center,
-                  float(radius), bool(through), bool(optimistic), float(p_unknown), _CHUNK, lanes, cls, tm, steps)
+    acc = np.zeros((_LANES, 7, len(views)), np.float64)
+    steps = np.zeros((_LANES, 3), np.int64)
+    _cast_lattice(vol.shape, vol.bricks, vol.brick_of, vol.block_dist, vol.shift, vol.origin, vol.voxel_size,
+                  ray_off, gtmpl, toff, tdir, tview, woff, W, gview, R0s, t0s, cam.min_range,
+                  min(cam.max_range, 1e30), center, float(radius), bool(through), bool(optimistic), float(p_unknown),
+                  _CHUNK, acc, steps)
     out.block_steps += int(steps[:, 0].sum())
     out.voxel_steps += int(steps[:, 1].sum())
     out.fine_steps += int(steps[:, 2].sum())
     tick("cast")
-    counts = np.zeros((len(views), 3), np.int64)
-    terms = np.zeros((len(views), N_TERMS), np.float64)
-    npix = np.zeros(len(views), np.int64)
-    _accumulate(ray_off, gtmpl, gview, tcount, tview, woff, W, cls, tm, counts, terms, npix)
-    out.counts[views] = counts
-    out.terms[views] = terms
-    out.rays[views] = npix
+    tot = acc.sum(axis=0).T
+    out.counts[views] = np.stack([tot[:, 0] + tot[:, 3], tot[:, 1], tot[:, 2]], axis=1).round().astype(np.int64)
+    out.terms[views] = tot[:, 3:7]
+    out.rays[views] = np.concatenate([tms[tid[g.key]]["npix"] for g in batch])
     out.rays_cast += n
     tick("accumulate")
     if progress_cb:
