@@ -3,9 +3,11 @@
 A ray starts at the sensor, is clipped to the volume box and to `max_range`, and walks the voxels it
 crosses exactly (Amanatides & Woo 1987). It stops at the first voxel that is not EMPTY; the knowledge
 map records whether that voxel is UNKNOWN (class 0) or OCCUPIED (class 1); a ray that leaves the
-volume or reaches `max_range` through empty space only is EMPTY_EXIT (class 2). Blocks of
-`block` ^ 3 voxels that are all EMPTY are crossed in one step (a two-level occupancy pyramid), which
-makes free space nearly free.
+volume or reaches `max_range` through empty space only is EMPTY_EXIT (class 2). Empty space is crossed
+in cubes known to be all EMPTY: at the block level (`block`^3 voxels, a chessboard distance in blocks to
+the nearest block with a non-empty voxel) and, inside mixed blocks, at the voxel level (each EMPTY voxel
+stores its chessboard distance to the nearest non-empty voxel, capped at FINE_CAP). Labels are stored
+block by block (`RayVolume.bricks`) so a walk through a block touches a few cache lines.
 
 Per ray the kernel also returns the terms the gain functions sum (see `gains.py`), all restricted to
 voxels whose centre lies in the region S (centre, radius) and to hits at least `min_range` away:
@@ -684,8 +686,9 @@ def _cast_lattice(shape, bricks, brick_of, bdist, SH, lo, vs, ray_off, gtmpl, to
 class ViewRays:
     """Per-view sums over the pixels considered: counts (V, 3) of rays ending on unknown / occupied /
     empty-exit, terms (V, 4) summed gain terms, rays (V,) pixels considered, rays_cast rays traced;
-    block_steps / voxel_steps: empty-block skips and single-voxel steps the traced rays took in all;
-    templates: lattice templates built (groups with the same geometry about their sensor share one)."""
+    block_steps / fine_steps / voxel_steps: empty-block skips, voxel-level skips inside mixed blocks and
+    single-voxel steps the traced rays took in all; templates: lattice templates built (groups with the
+    same geometry about their sensor share one)."""
 
     counts: np.ndarray
     terms: np.ndarray
