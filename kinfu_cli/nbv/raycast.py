@@ -3,9 +3,11 @@
 A ray starts at the sensor, is clipped to the volume box and to `max_range`, and walks the voxels it
 crosses exactly (Amanatides & Woo 1987). It stops at the first voxel that is not EMPTY; the knowledge
 map records whether that voxel is UNKNOWN (class 0) or OCCUPIED (class 1); a ray that leaves the
-volume or reaches `max_range` through empty space only is EMPTY_EXIT (class 2). Blocks of
-`block` ^ 3 voxels that are all EMPTY are crossed in one step (a two-level occupancy pyramid), which
-makes free space nearly free.
+volume or reaches `max_range` through empty space only is EMPTY_EXIT (class 2). Empty space is crossed
+in cubes known to be all EMPTY: at the block level (`block`^3 voxels, a chessboard distance in blocks to
+the nearest block with a non-empty voxel) and, inside mixed blocks, at the voxel level (each EMPTY voxel
+stores its chessboard distance to the nearest non-empty voxel, capped at FINE_CAP). Labels are stored
+block by block (`RayVolume.bricks`) so a walk through a block touches a few cache lines.
 
 Per ray the kernel also returns the terms the gain functions sum (see `gains.py`), all restricted to
 voxels whose centre lies in the region S (centre, radius) and to hits at least `min_range` away:
@@ -35,6 +37,7 @@ import numba
 from numba import njit, prange
 from scipy.ndimage import distance_transform_cdt
 
+from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.grid import TernaryGrid
 
 CLS_UNKNOWN = 0
@@ -42,26 +45,46 @@ CLS_OCCUPIED = 1
 CLS_EMPTY_EXIT = 2
 N_TERMS = 4
 _CHUNK = 256  # rays per scheduling chunk of the caster (see _cast_lattice)
+_LANES = 32  # accumulation lanes of the caster (see _cast_lattice)
+FINE_CAP = 4  # cap of the voxel-level distances in mixed blocks (see _fill_bricks)
 
 
 @dataclass
 class RayVolume:
-    """A TernaryGrid prepared for ray casting: C-contiguous labels plus, per block of `block`^3 voxels,
-    `block_dist`: 0 if the block holds a non-empty voxel, else the chessboard distance (in blocks) to the
-    nearest such block, so the cube of (2 d - 1)^3 blocks around it is all EMPTY and a ray can cross it
-    in one step."""
+    """A TernaryGrid prepared for ray casting: C-contiguous labels plus, per block of `block`^3 voxels
+    (`block` a power of two), `block_dist`: 0 if the block holds a non-empty voxel, else the chessboard
+    distance (in blocks) to the nearest such block, so the cube of (2 d - 1)^3 blocks around it is all
+    EMPTY and a ray can cross it in one step. The caster reads labels block by block: `bricks` holds each
+    block's `block`^3 labels contiguously (x, y, z order inside), at brick `brick_of[block]`; blocks of a
+    single label share one brick (0 all EMPTY, 1 all UNKNOWN, 2 all OCCUPIED), so only mixed blocks cost
+    memory and a ray's walk through a block stays in one or a few cache lines."""
 
     labels: np.ndarray
     origin: np.ndarray
     voxel_size: float
     block: int
     block_dist: np.ndarray
+    bricks: np.ndarray
+    brick_of: np.ndarray
 
     @classmethod
-    def from_grid(cls, grid: TernaryGrid, block: int = 8) -> "RayVolume":
+    def from_grid(cls, grid: TernaryGrid, block: int = 8, fine_cap: int = FINE_CAP) -> "RayVolume":
+        block = int(block)
+        if block < 1 or block & (block - 1) or block > 16:
+            raise ConfigError(f"expected a power of two from 1 to 16, got {block}", parameter="block")
         labels = np.ascontiguousarray(grid.labels, dtype=np.int8)
-        return cls(labels, np.asarray(grid.origin, dtype=np.float64), float(grid.voxel_size), int(block),
-                   _chessboard(_block_empty(labels, int(block))))
+        kind = _block_kind(labels, block)
+        mixed = np.argwhere(kind == 3)
+        brick_of = np.where(kind == 3, 0, kind).astype(np.int32)
+        brick_of[tuple(mixed.T)] = 3 + np.arange(len(mixed), dtype=np.int32)
+        bricks = np.empty((3 + len(mixed)) * block ** 3, np.int8)
+        _fill_bricks(labels, block, min(int(fine_cap), 127), mixed, brick_of, bricks)
+        return cls(labels, np.asarray(grid.origin, dtype=np.float64), float(grid.voxel_size), block,
+                   _chessboard(kind == 0), bricks, brick_of)
+
+    @property
+    def shift(self) -> int:
+        return int(self.block).bit_length() - 1
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -72,7 +95,8 @@ class RayVolume:
         voxels far from the region (centre, radius) count as free: what optimistic rays may skip."""
         free = _block_free_outside(self.labels, self.block, self.origin, self.voxel_size,
                                    np.asarray(center, dtype=np.float64).reshape(3), float(radius))
-        return RayVolume(self.labels, self.origin, self.voxel_size, self.block, _chessboard(free))
+        return RayVolume(self.labels, self.origin, self.voxel_size, self.block, _chessboard(free), self.bricks,
+                         self.brick_of)
 
     def label_at(self, points: np.ndarray) -> np.ndarray:
         """Labels at world points (N, 3); points outside the volume read as EMPTY (-1), see `inside`."""
@@ -136,35 +160,94 @@ def _block_free_outside(labels, B, lo, vs, cen, radius):
 
 
 @njit(cache=True, parallel=True)
-def _block_empty(labels, B):
+def _block_kind(labels, B):
+    """Per block: 0 all EMPTY, 1 all UNKNOWN, 2 all OCCUPIED, 3 mixed."""
     nx, ny, nz = labels.shape
     bx, by, bz = (nx + B - 1) // B, (ny + B - 1) // B, (nz + B - 1) // B
     out = np.zeros((bx, by, bz), dtype=np.uint8)
     for a in prange(bx):
         for b in range(by):
             for c in range(bz):
-                ok = 1
+                first = labels[a * B, b * B, c * B]
+                same = True
                 for i in range(a * B, min(a * B + B, nx)):
                     for j in range(b * B, min(b * B + B, ny)):
                         for k in range(c * B, min(c * B + B, nz)):
-                            if labels[i, j, k] != -1:
-                                ok = 0
+                            if labels[i, j, k] != first:
+                                same = False
                                 break
-                        if ok == 0:
+                        if not same:
                             break
-                    if ok == 0:
+                    if not same:
                         break
-                out[a, b, c] = ok
+                out[a, b, c] = (first + 1) if same else 3
     return out
 
 
+@njit(cache=True, parallel=True)
+def _fill_bricks(labels, B, C, mixed, brick_of, bricks):
+    """The three shared single-label bricks, then each mixed block's brick: UNKNOWN 0 and OCCUPIED 1 as in
+    the grid, an EMPTY voxel as -d with d its chessboard distance (in voxels, capped at C) to the nearest
+    non-empty voxel, so the caster can leave the cube of (2 d - 1)^3 EMPTY voxels around it in one step.
+    Voxels past the volume count as EMPTY. The distance is separable (one axis after the other), computed
+    on the block grown by C - 1 voxels."""
+    nx, ny, nz = labels.shape
+    B3 = B * B * B
+    bricks[:B3] = -1
+    bricks[B3:2 * B3] = 0
+    bricks[2 * B3:3 * B3] = 1
+    R = C - 1
+    E = B + 2 * R
+    for m in prange(mixed.shape[0]):
+        a, b, c = mixed[m, 0], mixed[m, 1], mixed[m, 2]
+        base = brick_of[a, b, c] * B3
+        x0, y0, z0 = a * B - R, b * B - R, c * B - R
+        # distance along z to the nearest non-empty voxel within R (else C), on the grown block's x and y
+        dz = np.empty((E, E, B), np.int8)
+        for i in range(E):
+            x = x0 + i
+            for j in range(E):
+                y = y0 + j
+                inside_xy = 0 <= x < nx and 0 <= y < ny
+                for k in range(B):
+                    d = C
+                    if inside_xy:
+                        for e in range(-R, R + 1):
+                            z = z0 + R + k + e
+                            if 0 <= z < nz and labels[x, y, z] != -1 and abs(e) < d:
+                                d = abs(e)
+                    dz[i, j, k] = d
+        dyz = np.empty((E, B, B), np.int8)
+        for i in range(E):
+            for j in range(B):
+                for k in range(B):
+                    d = C
+                    for e in range(-R, R + 1):
+                        v = max(abs(e), dz[i, R + j + e, k])
+                        if v < d:
+                            d = v
+                    dyz[i, j, k] = d
+        for i in range(B):
+            for j in range(B):
+                for k in range(B):
+                    d = C
+                    for e in range(-R, R + 1):
+                        v = max(abs(e), dyz[R + i + e, j, k])
+                        if v < d:
+                            d = v
+                    x, y, z = a * B + i, b * B + j, c * B + k
+                    lab = labels[x, y, z] if x < nx and y < ny and z < nz else -1
+                    bricks[base + (i * B + j) * B + k] = lab if lab != -1 else -max(d, 1)
+
+
 @njit(cache=True, inline="always")
-def _next_boundary(lo, i, step, vs, p, inv):
-    """t at which the ray leaves voxel i along one axis (inf when it does not move along it)."""
+def _next_boundary(i, step, a, b):
+    """t at which the ray leaves voxel i along one axis (inf when it does not move along it); the ray
+    crosses the plane of voxel boundary f at t = f * a + b."""
     if step > 0:
-        return (lo + (i + 1) * vs - p) * inv
+        return (i + 1) * a + b
     if step < 0:
-        return (lo + i * vs - p) * inv
+        return i * a + b
     return np.inf
 
 
@@ -174,8 +257,8 @@ def _clampi(v, a, b):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _trace(labels, bdist, B, lx, ly, lz, vs, px, py, pz, dx, dy, dz, min_range, max_range, ccx, ccy, ccz, r2, through,
-           optimistic, p_unknown, h_unknown):
+def _trace(bricks, brick_of, bdist, SH, n0, n1, n2, lx, ly, lz, vs, px, py, pz, dx, dy, dz, min_range, max_range,
+           ccx, ccy, ccz, r2, through, optimistic, p_unknown, h_unknown):
     """Walk one ray (origin p, unit direction d, the volume's corner l, S's centre cc); returns (class, t of the
     first hit, the 4 gain terms, block skips, voxel steps). Scalars in and out, and inlined: an array view
     per ray costs atomic reference counts that the threads fight over.
@@ -184,14 +267,15 @@ def _trace(labels, bdist, B, lx, ly, lz, vs, px, py, pz, dx, dy, dz, min_range, 
     (voxel, next boundaries, visibility) crossing between the empty-block skip and the voxel walk stays
     in registers only while both live in one compiled loop.
     """
-    n0, n1, n2 = labels.shape
+    B = 1 << SH
+    M = B - 1
     # clip to the volume box and the range
     t0 = 0.0
     t1 = max_range
     eps = 1e-12
     if abs(dx) < eps:
         if px < lx or px > lx + n0 * vs:
-            return CLS_EMPTY_EXIT, np.inf, 0.0, 0.0, 0.0, 0.0, 0, 0
+            return CLS_EMPTY_EXIT, np.inf, 0.0, 0.0, 0.0, 0.0, 0, 0, 0
         ivx = np.inf
     else:
         ivx = 1.0 / dx
@@ -200,7 +284,7 @@ def _trace(labels, bdist, B, lx, ly, lz, vs, px, py, pz, dx, dy, dz, min_range, 
         t1 = min(t1, max(ta, tb))
     if abs(dy) < eps:
         if py < ly or py > ly + n1 * vs:
-            return CLS_EMPTY_EXIT, np.inf, 0.0, 0.0, 0.0, 0.0, 0, 0
+            return CLS_EMPTY_EXIT, np.inf, 0.0, 0.0, 0.0, 0.0, 0, 0, 0
         ivy = np.inf
     else:
         ivy = 1.0 / dy
@@ -209,7 +293,7 @@ def _trace(labels, bdist, B, lx, ly, lz, vs, px, py, pz, dx, dy, dz, min_range, 
         t1 = min(t1, max(ta, tb))
     if abs(dz) < eps:
         if pz < lz or pz > lz + n2 * vs:
-            return CLS_EMPTY_EXIT, np.inf, 0.0, 0.0, 0.0, 0.0, 0, 0
+            return CLS_EMPTY_EXIT, np.inf, 0.0, 0.0, 0.0, 0.0, 0, 0, 0
         ivz = np.inf
     else:
         ivz = 1.0 / dz
@@ -217,86 +301,79 @@ def _trace(labels, bdist, B, lx, ly, lz, vs, px, py, pz, dx, dy, dz, min_range, 
         t0 = max(t0, min(ta, tb))
         t1 = min(t1, max(ta, tb))
     if t0 >= t1:
-        return CLS_EMPTY_EXIT, np.inf, 0.0, 0.0, 0.0, 0.0, 0, 0
+        return CLS_EMPTY_EXIT, np.inf, 0.0, 0.0, 0.0, 0.0, 0, 0, 0
     sx = 1 if dx > eps else (-1 if dx < -eps else 0)
     sy = 1 if dy > eps else (-1 if dy < -eps else 0)
     sz = 1 if dz > eps else (-1 if dz < -eps else 0)
     tdx = abs(vs * ivx) if sx != 0 else np.inf
     tdy = abs(vs * ivy) if sy != 0 else np.inf
     tdz = abs(vs * ivz) if sz != 0 else np.inf
-    ix = _clampi(int(math.floor((px + t0 * dx - lx) / vs)), 0, n0 - 1)
-    iy = _clampi(int(math.floor((py + t0 * dy - ly) / vs)), 0, n1 - 1)
-    iz = _clampi(int(math.floor((pz + t0 * dz - lz) / vs)), 0, n2 - 1)
-    tmx = _next_boundary(lx, ix, sx, vs, px, ivx)
-    tmy = _next_boundary(ly, iy, sy, vs, py, ivy)
-    tmz = _next_boundary(lz, iz, sz, vs, pz, ivz)
+    # per axis: boundary plane f is crossed at t = f * a + b; at t the ray is in voxel floor(t * g + h)
+    ivs = 1.0 / vs
+    ax, bx_ = vs * ivx, (lx - px) * ivx
+    ay, by_ = vs * ivy, (ly - py) * ivy
+    az, bz_ = vs * ivz, (lz - pz) * ivz
+    gx, hx = dx * ivs, (px - lx) * ivs
+    gy, hy = dy * ivs, (py - ly) * ivs
+    gz, hz = dz * ivs, (pz - lz) * ivs
+    ix = _clampi(int(math.floor(t0 * gx + hx)), 0, n0 - 1)
+    iy = _clampi(int(math.floor(t0 * gy + hy)), 0, n1 - 1)
+    iz = _clampi(int(math.floor(t0 * gz + hz)), 0, n2 - 1)
+    tmx = _next_boundary(ix, sx, ax, bx_)
+    tmy = _next_boundary(iy, sy, ay, by_)
+    tmz = _next_boundary(iz, sz, az, bz_)
     tcur = t0
     cls = CLS_EMPTY_EXIT
     thit = np.inf
     vis = 1.0
     prev_unknown_in_s = False
     v0 = v1 = v2 = v3 = 0.0
-    nb = nv = 0  # block skips and voxel steps taken (for the benchmark's statistics)
+    nb = nf = nv = 0  # block skips, fine (voxel-level) skips and voxel steps taken (benchmark statistics)
     while True:
-        bx, by, bz = ix // B, iy // B, iz // B
+        bx, by, bz = ix >> SH, iy >> SH, iz >> SH
         D = bdist[bx, by, bz]
         if D > 0:
             nb += 1
             # the cube of blocks [b - D + 1, b + D - 1] is empty: leave it in one step
             D1 = D - 1
-            ex = np.inf
-            if sx > 0:
-                ex = (lx + min((bx + D1 + 1) * B, n0) * vs - px) * ivx
-            elif sx < 0:
-                ex = (lx + max((bx - D1) * B, 0) * vs - px) * ivx
-            ey = np.inf
-            if sy > 0:
-                ey = (ly + min((by + D1 + 1) * B, n1) * vs - py) * ivy
-            elif sy < 0:
-                ey = (ly + max((by - D1) * B, 0) * vs - py) * ivy
-            ez = np.inf
-            if sz > 0:
-                ez = (lz + min((bz + D1 + 1) * B, n2) * vs - pz) * ivz
-            elif sz < 0:
-                ez = (lz + max((bz - D1) * B, 0) * vs - pz) * ivz
-            te = min(ex, min(ey, ez))
-            if te >= t1:
+            te, ix, iy, iz = _leave_box(max((bx - D1) * B, 0), min((bx + D1 + 1) * B, n0), max((by - D1) * B, 0),
+                                        min((by + D1 + 1) * B, n1), max((bz - D1) * B, 0),
+                                        min((bz + D1 + 1) * B, n2), sx, sy, sz, ax, bx_, ay, by_, az, bz_,
+                                        gx, hx, gy, hy, gz, hz)
+            if te >= t1 or ix < 0 or ix >= n0 or iy < 0 or iy >= n1 or iz < 0 or iz >= n2:
                 break
-            # voxel just past the cube's face; the other coordinates from the position (kept in the cube)
-            if ex <= ey and ex <= ez:
-                ix = (bx + D1 + 1) * B if sx > 0 else (bx - D1) * B - 1
-                iy = _clampi(int(math.floor((py + te * dy - ly) / vs)), max((by - D1) * B, 0),
-                             min((by + D1 + 1) * B, n1) - 1)
-                iz = _clampi(int(math.floor((pz + te * dz - lz) / vs)), max((bz - D1) * B, 0),
-                             min((bz + D1 + 1) * B, n2) - 1)
-            elif ey <= ez:
-                iy = (by + D1 + 1) * B if sy > 0 else (by - D1) * B - 1
-                ix = _clampi(int(math.floor((px + te * dx - lx) / vs)), max((bx - D1) * B, 0),
-                             min((bx + D1 + 1) * B, n0) - 1)
-                iz = _clampi(int(math.floor((pz + te * dz - lz) / vs)), max((bz - D1) * B, 0),
-                             min((bz + D1 + 1) * B, n2) - 1)
-            else:
-                iz = (bz + D1 + 1) * B if sz > 0 else (bz - D1) * B - 1
-                ix = _clampi(int(math.floor((px + te * dx - lx) / vs)), max((bx - D1) * B, 0),
-                             min((bx + D1 + 1) * B, n0) - 1)
-                iy = _clampi(int(math.floor((py + te * dy - ly) / vs)), max((by - D1) * B, 0),
-                             min((by + D1 + 1) * B, n1) - 1)
-            if ix < 0 or ix >= n0 or iy < 0 or iy >= n1 or iz < 0 or iz >= n2:
-                break
-            tmx = _next_boundary(lx, ix, sx, vs, px, ivx)
-            tmy = _next_boundary(ly, iy, sy, vs, py, ivy)
-            tmz = _next_boundary(lz, iz, sz, vs, pz, ivz)
+            tmx = _next_boundary(ix, sx, ax, bx_)
+            tmy = _next_boundary(iy, sy, ay, by_)
+            tmz = _next_boundary(iz, sz, az, bz_)
             tcur = te
             prev_unknown_in_s = False
             continue
         # walk voxel by voxel through this non-empty block
         xb0, yb0, zb0 = bx * B, by * B, bz * B  # this block's voxel range [b0, b0 + B) per axis
+        base = brick_of[bx, by, bz] << (3 * SH)
         while True:
+            lab = bricks[base + ((((ix & M) << SH) | (iy & M)) << SH) + (iz & M)]
+            if lab < -1:
+                # an EMPTY voxel with no non-empty voxel closer than -lab (chessboard): leave that cube
+                nf += 1
+                d1 = -lab - 1
+                te, ix, iy, iz = _leave_box(max(ix - d1, 0), min(ix + d1 + 1, n0), max(iy - d1, 0),
+                                            min(iy + d1 + 1, n1), max(iz - d1, 0), min(iz + d1 + 1, n2), sx, sy, sz,
+                                            ax, bx_, ay, by_, az, bz_, gx, hx, gy, hy, gz, hz)
+                if te >= t1 or ix < 0 or ix >= n0 or iy < 0 or iy >= n1 or iz < 0 or iz >= n2:
+                    return cls, thit, v0, v1, v2, v3, nb, nf, nv
+                tmx = _next_boundary(ix, sx, ax, bx_)
+                tmy = _next_boundary(iy, sy, ay, by_)
+                tmz = _next_boundary(iz, sz, az, bz_)
+                tcur = te
+                prev_unknown_in_s = False
+                if (ix >> SH) != bx or (iy >> SH) != by or (iz >> SH) != bz:
+                    break
+                continue
             nv += 1
-            lab = labels[ix, iy, iz]
             in_s = False
             dist2 = 0.0
-            if lab != -1:
+            if lab >= 0:
                 if tcur >= min_range:
                     qx = lx + (ix + 0.5) * vs - ccx
                     qy = ly + (iy + 0.5) * vs - ccy
@@ -305,7 +382,7 @@ def _trace(labels, bdist, B, lx, ly, lz, vs, px, py, pz, dx, dy, dz, min_range, 
                     in_s = dist2 <= r2
                 if optimistic and lab == 0 and not in_s:
                     lab = -1  # unknown outside S: assumed free, the ray goes on
-            if lab != -1:
+            if lab >= 0:
                 if cls == CLS_EMPTY_EXIT:
                     thit = tcur
                     if lab == 0:
@@ -316,18 +393,18 @@ def _trace(labels, bdist, B, lx, ly, lz, vs, px, py, pz, dx, dy, dz, min_range, 
                     else:
                         cls = CLS_OCCUPIED
                     if not through:
-                        return cls, thit, v0, v1, v2, v3, nb, nv
+                        return cls, thit, v0, v1, v2, v3, nb, nf, nv
                 if lab == 0:
                     if in_s:
                         v3 += vis * h_unknown
                     vis *= 1.0 - p_unknown
                     prev_unknown_in_s = in_s
                     if vis < 1e-7:
-                        return cls, thit, v0, v1, v2, v3, nb, nv
+                        return cls, thit, v0, v1, v2, v3, nb, nf, nv
                 else:
                     if prev_unknown_in_s:
                         v2 = 1.0
-                    return cls, thit, v0, v1, v2, v3, nb, nv
+                    return cls, thit, v0, v1, v2, v3, nb, nf, nv
             else:
                 prev_unknown_in_s = False
             # one step; only the axis that moved can leave the volume or this block
@@ -336,31 +413,67 @@ def _trace(labels, bdist, B, lx, ly, lz, vs, px, py, pz, dx, dy, dz, min_range, 
                 ix += sx
                 tmx += tdx
                 if ix < 0 or ix >= n0:
-                    return cls, thit, v0, v1, v2, v3, nb, nv
+                    return cls, thit, v0, v1, v2, v3, nb, nf, nv
                 left = ix < xb0 or ix >= xb0 + B
             elif tmy <= tmz:
                 tcur = tmy
                 iy += sy
                 tmy += tdy
                 if iy < 0 or iy >= n1:
-                    return cls, thit, v0, v1, v2, v3, nb, nv
+                    return cls, thit, v0, v1, v2, v3, nb, nf, nv
                 left = iy < yb0 or iy >= yb0 + B
             else:
                 tcur = tmz
                 iz += sz
                 tmz += tdz
                 if iz < 0 or iz >= n2:
-                    return cls, thit, v0, v1, v2, v3, nb, nv
+                    return cls, thit, v0, v1, v2, v3, nb, nf, nv
                 left = iz < zb0 or iz >= zb0 + B
             if tcur >= t1:
-                return cls, thit, v0, v1, v2, v3, nb, nv
+                return cls, thit, v0, v1, v2, v3, nb, nf, nv
             if left:
                 break
-    return cls, thit, v0, v1, v2, v3, nb, nv
+    return cls, thit, v0, v1, v2, v3, nb, nf, nv
+
+
+@njit(cache=True, inline="always")
+def _leave_box(x0, x1, y0, y1, z0, z1, sx, sy, sz, ax, bx, ay, by, az, bz, gx, hx, gy, hy, gz, hz):
+    """The ray is inside the all-EMPTY box of voxels [x0, x1) x [y0, y1) x [z0, z1): the t where it leaves
+    the box and the voxel just past that face (the other two indices from the position, kept in the box).
+    It crosses boundary plane f of an axis at t = f * a + b and is in voxel floor(t * g + h) at t."""
+    ex = np.inf
+    if sx > 0:
+        ex = x1 * ax + bx
+    elif sx < 0:
+        ex = x0 * ax + bx
+    ey = np.inf
+    if sy > 0:
+        ey = y1 * ay + by
+    elif sy < 0:
+        ey = y0 * ay + by
+    ez = np.inf
+    if sz > 0:
+        ez = z1 * az + bz
+    elif sz < 0:
+        ez = z0 * az + bz
+    te = min(ex, min(ey, ez))
+    if ex <= ey and ex <= ez:
+        ix = x1 if sx > 0 else x0 - 1
+        iy = _clampi(int(math.floor(te * gy + hy)), y0, y1 - 1)
+        iz = _clampi(int(math.floor(te * gz + hz)), z0, z1 - 1)
+    elif ey <= ez:
+        iy = y1 if sy > 0 else y0 - 1
+        ix = _clampi(int(math.floor(te * gx + hx)), x0, x1 - 1)
+        iz = _clampi(int(math.floor(te * gz + hz)), z0, z1 - 1)
+    else:
+        iz = z1 if sz > 0 else z0 - 1
+        ix = _clampi(int(math.floor(te * gx + hx)), x0, x1 - 1)
+        iy = _clampi(int(math.floor(te * gy + hy)), y0, y1 - 1)
+    return te, ix, iy, iz
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def _cast_kernel(labels, bempty, B, lo, vs, origins, dirs, min_range, max_range, cen, radius, through,
+def _cast_kernel(shape, bricks, brick_of, bdist, SH, lo, vs, origins, dirs, min_range, max_range, cen, radius, through,
                  optimistic, p_unknown, out_cls, out_t, out_vals):
     n = dirs.shape[0]
     r2 = radius * radius
@@ -368,7 +481,8 @@ def _cast_kernel(labels, bempty, B, lo, vs, origins, dirs, min_range, max_range,
     if 0.0 < p_unknown < 1.0:
         h = -(p_unknown * math.log2(p_unknown) + (1 - p_unknown) * math.log2(1 - p_unknown))
     for r in prange(n):
-        c_, t_, v0, v1, v2, v3, _nb, _nv = _trace(labels, bempty, B, lo[0], lo[1], lo[2], vs, origins[r, 0],
+        c_, t_, v0, v1, v2, v3, _nb, _nf, _nv = _trace(bricks, brick_of, bdist, SH, shape[0], shape[1], shape[2],
+                                                  lo[0], lo[1], lo[2], vs, origins[r, 0],
                                                   origins[r, 1], origins[r, 2], dirs[r, 0], dirs[r, 1], dirs[r, 2],
                                                   min_range, max_range, cen[0], cen[1], cen[2], r2, through,
                                                   optimistic, p_unknown, h)
@@ -399,7 +513,7 @@ def cast_rays(vol: RayVolume, origins: np.ndarray, dirs: np.ndarray, *, min_rang
     cls = np.empty(n, np.int8)
     t = np.empty(n, np.float64)
     terms = np.empty((n, N_TERMS), np.float64)
-    _cast_kernel(vol.labels, vol.block_dist, vol.block, vol.origin, vol.voxel_size, origins, dirs,
+    _cast_kernel(vol.shape, vol.bricks, vol.brick_of, vol.block_dist, vol.shift, vol.origin, vol.voxel_size, origins, dirs,
                  float(min_range), float(min(max_range, 1e30)), np.asarray(center, dtype=np.float64).reshape(3),
                  float(radius), bool(through), bool(optimistic), float(p_unknown), cls, t, terms)
     return RayResults(cls, t, terms)
@@ -504,88 +618,77 @@ def _fill_templates(tlat, loff, lut, tcount, toff, tview, vtmpl, woff, Ms, win, 
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def _cast_lattice(labels, bdist, B, lo, vs, ray_off, gtmpl, tlat, toff, tcell, R0s, t0s, fx, fy, cx, cy, min_range,
-                  max_range, cen, radius, through, optimistic, p_unknown, chunk, lanes, out_cls, out_vals, steps):
-    """Trace every ray of every group (built here from its template's lattice cell and the group's base
-    pose, so no per-ray origin/direction arrays). Ray costs differ by orders of magnitude (a free-space
-    skip vs a walk through clutter) and numba splits a prange into one contiguous slice per thread, so
-    the rays are cut into small chunks dealt round-robin to `lanes` workers: every worker gets a share
-    of every region."""
-    n = out_cls.shape[0]
+def _cast_lattice(shape, bricks, brick_of, bdist, SH, lo, vs, ray_off, gtmpl, toff, tdir, tview, woff, W, gview, R0s,
+                  t0s, min_range, max_range, cen, radius, through, optimistic, p_unknown, chunk, acc, steps):
+    """Trace every ray of every group (its direction is its template's ray turned by the group's base
+    pose, so no per-ray origin/direction arrays) and add its results, times its template's pixel weights,
+    to the sums of the group's views (columns gview[g] ... of acc, in the template's view order). Ray costs
+    differ by orders of magnitude (a free-space skip vs a walk through clutter) and numba splits a prange
+    into one contiguous slice per thread, so the rays are cut into small chunks dealt round-robin to the
+    lanes (acc's first axis, a fixed number so sums do not depend on the thread count): every thread gets
+    a share of every region, and each lane sums into its own rows (no ray arrays, no races).
+    acc rows: rays ending on 0 unknown (no gain) / 1 occupied / 2 empty exit / 3 unknown in S, then the
+    sums of gain terms 1-3 (term 0 is column 3)."""
+    lanes = acc.shape[0]
+    n = ray_off[-1]
     nchunk = (n + chunk - 1) // chunk
     r2 = radius * radius
     h = 0.0
     if 0.0 < p_unknown < 1.0:
         h = -(p_unknown * math.log2(p_unknown) + (1 - p_unknown) * math.log2(1 - p_unknown))
-    ng = ray_off.shape[0]
+    ng = ray_off.shape[0] - 1
     lx, ly, lz, ccx, ccy, ccz = lo[0], lo[1], lo[2], cen[0], cen[1], cen[2]
+    n0, n1, n2 = shape
     for lane in prange(lanes):
-        nbs = nvs = 0
+        nbs = nfs = nvs = 0
         for k in range(lane, nchunk, lanes):
             q0 = k * chunk
             q1 = min(q0 + chunk, n)
             g = np.searchsorted(ray_off, q0, side="right") - 1
             for q in range(q0, q1):
-                while g + 1 < ng and q >= ray_off[g + 1]:
+                while q >= ray_off[g + 1]:
                     g += 1
                 t = gtmpl[g]
-                c = tcell[toff[t] + q - ray_off[g]]
-                LW = tlat[t, 2]
-                x = (c % LW + tlat[t, 0] - cx) / fx
-                y = (c // LW + tlat[t, 1] - cy) / fy
-                inrm = 1.0 / math.sqrt(x * x + y * y + 1.0)
-                dx = (R0s[g, 0, 0] * x + R0s[g, 0, 1] * y + R0s[g, 0, 2]) * inrm
-                dy = (R0s[g, 1, 0] * x + R0s[g, 1, 1] * y + R0s[g, 1, 2]) * inrm
-                dz = (R0s[g, 2, 0] * x + R0s[g, 2, 1] * y + R0s[g, 2, 2]) * inrm
-                c_, _t, v0, v1, v2, v3, nb, nv = _trace(labels, bdist, B, lx, ly, lz, vs, t0s[g, 0], t0s[g, 1],
-                                                        t0s[g, 2], dx, dy, dz, min_range, max_range, ccx, ccy, ccz,
-                                                        r2, through, optimistic, p_unknown, h)
-                out_cls[q] = c_
-                out_vals[q, 0], out_vals[q, 1], out_vals[q, 2], out_vals[q, 3] = v0, v1, v2, v3
+                r = q - ray_off[g]
+                e = toff[t] + r
+                x, y, z = tdir[e, 0], tdir[e, 1], tdir[e, 2]
+                dx = R0s[g, 0, 0] * x + R0s[g, 0, 1] * y + R0s[g, 0, 2] * z
+                dy = R0s[g, 1, 0] * x + R0s[g, 1, 1] * y + R0s[g, 1, 2] * z
+                dz = R0s[g, 2, 0] * x + R0s[g, 2, 1] * y + R0s[g, 2, 2] * z
+                c_, _t, v0, v1, v2, v3, nb, nf, nv = _trace(bricks, brick_of, bdist, SH, n0, n1, n2, lx, ly, lz, vs,
+                                                            t0s[g, 0], t0s[g, 1], t0s[g, 2], dx, dy, dz, min_range,
+                                                            max_range, ccx, ccy, ccz, r2, through, optimistic,
+                                                            p_unknown, h)
+                col = 3 if v0 != 0.0 else c_
+                K = tview[t + 1] - tview[t]
+                w0 = woff[t] + r * K
+                m0 = gview[g]
+                for kk in range(K):
+                    acc[lane, col, m0 + kk] += W[w0 + kk]
+                if v1 != 0.0:
+                    for kk in range(K):
+                        acc[lane, 4, m0 + kk] += W[w0 + kk] * v1
+                if v2 != 0.0:
+                    for kk in range(K):
+                        acc[lane, 5, m0 + kk] += W[w0 + kk] * v2
+                if v3 != 0.0:
+                    for kk in range(K):
+                        acc[lane, 6, m0 + kk] += W[w0 + kk] * v3
                 nbs += nb
+                nfs += nf
                 nvs += nv
         steps[lane, 0] = nbs
         steps[lane, 1] = nvs
-
-
-@njit(cache=True, parallel=True)
-def _accumulate(ray_off, gtmpl, gview, tcount, tview, woff, W, cls, terms, out_counts, out_terms, npix):
-    """Per group: each view's sums are its template's pixel weights times the group's ray results (the
-    group's views are the output rows gview[g] ... in the template's view order)."""
-    for g in prange(ray_off.shape[0]):
-        t = gtmpl[g]
-        n = tcount[t]
-        K = tview[t + 1] - tview[t]
-        acc = np.zeros((K, 8))
-        q0 = ray_off[g]
-        w0 = woff[t]
-        for r in range(n):
-            q = q0 + r
-            c = cls[q]
-            a0, a1, a2, a3 = terms[q, 0], terms[q, 1], terms[q, 2], terms[q, 3]
-            for k in range(K):
-                w = W[w0 + r * K + k]
-                acc[k, c] += w
-                acc[k, 3] += w * a0
-                acc[k, 4] += w * a1
-                acc[k, 5] += w * a2
-                acc[k, 6] += w * a3
-                acc[k, 7] += w
-        for k in range(K):
-            m = gview[g] + k
-            for a in range(3):
-                out_counts[m, a] = int(acc[k, a])
-            for a in range(N_TERMS):
-                out_terms[m, a] = acc[k, 3 + a]
-            npix[m] = int(acc[k, 7])
+        steps[lane, 2] = nfs
 
 
 @dataclass
 class ViewRays:
     """Per-view sums over the pixels considered: counts (V, 3) of rays ending on unknown / occupied /
     empty-exit, terms (V, 4) summed gain terms, rays (V,) pixels considered, rays_cast rays traced;
-    block_steps / voxel_steps: empty-block skips and single-voxel steps the traced rays took in all;
-    templates: lattice templates built (groups with the same geometry about their sensor share one)."""
+    block_steps / fine_steps / voxel_steps: empty-block skips, voxel-level skips inside mixed blocks and
+    single-voxel steps the traced rays took in all; templates: lattice templates built (groups with the
+    same geometry about their sensor share one)."""
 
     counts: np.ndarray
     terms: np.ndarray
@@ -594,6 +697,7 @@ class ViewRays:
     block_steps: int = 0
     voxel_steps: int = 0
     templates: int = 0
+    fine_steps: int = 0
 
 
 def group_views(poses: np.ndarray, tol: float = 1e-6) -> list[np.ndarray]:
@@ -739,8 +843,18 @@ def _build_templates(cam, r_ext, groups: list[_Group]) -> list[dict]:
                     np.ascontiguousarray(np.concatenate([g.Ms for g in groups])),
                     np.ascontiguousarray(np.concatenate([g.win for g in groups])), cam.fx, cam.fy, cam.cx, cam.cy,
                     tcell, W)
-    return [{"lat": g.lat, "n": int(tcount[i]), "K": int(K[i]), "tcell": tcell[toff[i]:toff[i] + tcount[i]],
-             "W": W[woff[i]:woff[i] + wsize[i]]} for i, g in enumerate(groups)]
+    # each ray's unit direction in the base view
+    t_of = np.repeat(np.arange(len(groups)), tcount)
+    LW = tlat[t_of, 2]
+    d = np.stack([(tcell % LW + tlat[t_of, 0] - cam.cx) / cam.fx, (tcell // LW + tlat[t_of, 1] - cam.cy) / cam.fy,
+                  np.ones(len(tcell))], axis=1)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    out = []
+    for i, g in enumerate(groups):
+        Wi = W[woff[i]:woff[i] + wsize[i]]
+        out.append({"n": int(tcount[i]), "K": int(K[i]), "dir": d[toff[i]:toff[i] + tcount[i]], "W": Wi,
+                    "npix": Wi.reshape(-1, K[i]).sum(axis=0, dtype=np.float64).round().astype(np.int64)})
+    return out
 
 
 def _cast_batch(vol, cam, center, radius, r_ext, flags, p_unknown, batch: list[_Group], cache: dict, out: ViewRays,
@@ -760,40 +874,36 @@ def _cast_batch(vol, cam, center, radius, r_ext, flags, p_unknown, batch: list[_
         del cache[k]
     tid = {k: i for i, k in enumerate(keys)}
     tms = [cache[k] for k in keys]
-    tlat = np.array([t["lat"] for t in tms], dtype=np.int64).reshape(-1, 4)
     tcount = np.array([t["n"] for t in tms], dtype=np.int64)
     K = np.array([t["K"] for t in tms], dtype=np.int64)
     tview = np.concatenate([[0], np.cumsum(K)]).astype(np.int64)
     toff = np.concatenate([[0], np.cumsum(tcount)[:-1]]).astype(np.int64)
     woff = np.concatenate([[0], np.cumsum(tcount * K)[:-1]]).astype(np.int64)
-    tcell = np.concatenate([t["tcell"] for t in tms])
+    tdir = np.ascontiguousarray(np.concatenate([t["dir"] for t in tms]))
     W = np.concatenate([t["W"] for t in tms])
     gtmpl = np.array([tid[g.key] for g in batch], dtype=np.int64)
     gcount = tcount[gtmpl]
-    ray_off = np.concatenate([[0], np.cumsum(gcount)[:-1]]).astype(np.int64)
+    ray_off = np.concatenate([[0], np.cumsum(gcount)]).astype(np.int64)
     views = np.concatenate([g.views for g in batch])
     gview = np.concatenate([[0], np.cumsum([len(g.views) for g in batch])[:-1]]).astype(np.int64)
     R0s = np.ascontiguousarray(np.array([g.R0 for g in batch], dtype=np.float64))
     t0s = np.ascontiguousarray(np.array([g.t0 for g in batch], dtype=np.float64))
-    n = int(gcount.sum())
+    n = int(ray_off[-1])
     tick("mark")
-    cls = np.empty(n, np.int8)
-    tm = np.empty((n, N_TERMS), np.float64)
-    lanes = 8 * numba.get_num_threads()
-    steps = np.zeros((lanes, 2), np.int64)
-    _cast_lattice(vol.labels, vol.block_dist, vol.block, vol.origin, vol.voxel_size, ray_off, gtmpl, tlat, toff,
-                  tcell, R0s, t0s, cam.fx, cam.fy, cam.cx, cam.cy, cam.min_range, min(cam.max_range, 1e30), center,
-                  float(radius), bool(through), bool(optimistic), float(p_unknown), _CHUNK, lanes, cls, tm, steps)
+    acc = np.zeros((_LANES, 7, len(views)), np.float64)
+    steps = np.zeros((_LANES, 3), np.int64)
+    _cast_lattice(vol.shape, vol.bricks, vol.brick_of, vol.block_dist, vol.shift, vol.origin, vol.voxel_size,
+                  ray_off, gtmpl, toff, tdir, tview, woff, W, gview, R0s, t0s, cam.min_range,
+                  min(cam.max_range, 1e30), center, float(radius), bool(through), bool(optimistic), float(p_unknown),
+                  _CHUNK, acc, steps)
     out.block_steps += int(steps[:, 0].sum())
     out.voxel_steps += int(steps[:, 1].sum())
+    out.fine_steps += int(steps[:, 2].sum())
     tick("cast")
-    counts = np.zeros((len(views), 3), np.int64)
-    terms = np.zeros((len(views), N_TERMS), np.float64)
-    npix = np.zeros(len(views), np.int64)
-    _accumulate(ray_off, gtmpl, gview, tcount, tview, woff, W, cls, tm, counts, terms, npix)
-    out.counts[views] = counts
-    out.terms[views] = terms
-    out.rays[views] = npix
+    tot = acc.sum(axis=0).T
+    out.counts[views] = np.stack([tot[:, 0] + tot[:, 3], tot[:, 1], tot[:, 2]], axis=1).round().astype(np.int64)
+    out.terms[views] = tot[:, 3:7]
+    out.rays[views] = np.concatenate([tms[tid[g.key]]["npix"] for g in batch])
     out.rays_cast += n
     tick("accumulate")
     if progress_cb:
