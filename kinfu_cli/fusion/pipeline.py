@@ -229,11 +229,9 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
         frames = iter_frames(rec, found, pose_source=plan.source, pose_topic=pose_topic, start_s=start_s,
                              end_s=end_s, every=every, stats=stats, tf=tf, tolerance_s=tolerance_s)
         integrator = _Integrator(vol, plan.mode, grid_spec, origin, names["origin"], str(rec.path), timing, icp)
-        # at most this many frames can be tracked (all selected ones, of the depth messages in the time window):
-        # past max_lost of it, fail at once. Counted only when tracking, before the frames are read.
-        bound = 0
-        if integrator.tracker is not None:
-            bound = -(-window_depth_count(rec, found.depth_topic, start_s, end_s, tolerance_s) // every)
+        # past max_lost of the most frames the time window can select (counted before reading, when tracking): stop
+        bound = (-(-window_depth_count(rec, found.depth_topic, start_s, end_s, tolerance_s) // every)
+                 if integrator.tracker is not None else 0)
         for frame in progress(_timed(frames, timing, "read"), desc="fusing", quiet=quiet, unit="frame"):
             t0 = time.perf_counter()
             d = depth_filter(frame)
