@@ -59,3 +59,25 @@ def one_line_error(res, *needles):
     for n in needles:
         assert n in lines[0], (n, lines[0])
     return lines[0]
+
+
+HAND_GROUPS = {"placements_removals": "placement", "pick_and_place": "pick-and-place"}
+
+
+def write_hand_dataset(root: Path, seeds=range(3), user: str = "user9", groups=tuple(HAND_GROUPS),
+                       **noise) -> Path:
+    """A hand data set in the layout `kinfu eval poi` reads: per group (placements_removals: placements,
+    pick_and_place) one synthetic task per seed, <user>_obj<seed>.traj with its labelled changes in
+    <user>_obj<seed>.traj.res. `noise`: synth_hand_trajectory's noise_std (else its default)."""
+    from kinfu_cli.io.polhemus import write_polhemus
+    from kinfu_cli.sim.hand import random_task, synth_hand_trajectory
+
+    for group in groups:
+        for seed in seeds:
+            traj, changes = synth_hand_trajectory(random_task(HAND_GROUPS[group], seed=seed), seed=seed, **noise)
+            p = root / group / f"{user}_obj{seed}.traj"
+            p.parent.mkdir(parents=True, exist_ok=True)
+            write_polhemus(p, traj)
+            (p.parent / (p.name + ".res")).write_text(
+                "".join(f"{c.position[0]} {c.position[1]} {c.position[2]}\n" for c in changes))
+    return root

@@ -73,12 +73,13 @@ def test_diff_eval_and_viewer_stages(sample_dir, scheduler, tmp_path):
     (tmp_path / "plan.toml").write_text(text)
     res = CliRunner().invoke(cli, ["batch", str(tmp_path / "plan.toml"), "--scheduler", scheduler, "--quiet"],
                              catch_exceptions=False)
-    assert res.exit_code == 0, res.output
     doc = json.loads((tmp_path / "out" / "manifest.json").read_text())
+    assert res.exit_code == 0, [(s, e["error"]) for r in doc["recordings"] for s, e in r["stages"].items()
+                                if e["status"] != "ok"]
     scan, after = doc["recordings"]
     assert list(scan["stages"]) == ["fuse", "viz"]
-    assert list(after["stages"]) == ["fuse", "poi", "segment", "diff", "eval-fusion", "eval-poi", "eval-nbv",
-                                     "eval-segment", "viz"]
+    assert list(after["stages"]) == ["fuse", "poi", "segment", "diff", "eval-fusion", "eval-nbv", "eval-segment",
+                                     "eval-poi", "viz"]
     assert all(e["status"] == "ok" for r in (scan, after) for e in r["stages"].values())
     st = after["stages"]
     # the moved object: one region removed where it was, one added where it went, both pointed at by the POIs
