@@ -29,6 +29,14 @@ def pytest_sessionstart(session):
     module.warm()
 
 
+def pytest_collection_modifyitems(session, config, items):
+    """Files holding `slow` tests first. With `--dist loadfile` (pyproject.toml) each file runs whole on one xdist
+    worker, so its module-scoped fixtures (a fused recording, a cluster run) are built once, not once per worker;
+    handing out the long files first keeps both workers busy to the end (no long file starts last)."""
+    slow = {item.path for item in items if item.get_closest_marker("slow")}
+    items.sort(key=lambda item: item.path not in slow)  # stable: the order within a file is kept
+
+
 def shared_path(*parts: str) -> Path:
     """Path under ../shared/data, or skip the test with the reason."""
     p = SHARED_DATA.joinpath(*parts)
@@ -81,3 +89,27 @@ def write_hand_dataset(root: Path, seeds=range(3), user: str = "user9", groups=t
             (p.parent / (p.name + ".res")).write_text(
                 "".join(f"{c.position[0]} {c.position[1]} {c.position[2]}\n" for c in changes))
     return root
+
+
+def pytest_runtest_protocol(item, nextitem):
+    """KINFU_TEST_CPU=FILE appends each test's CPU seconds (this process and its waited-for children) to FILE:
+    on a loaded machine wall times rank tests badly."""
+    path = os.environ.get("KINFU_TEST_CPU")
+    if not path:
+        return None
+    import resource
+    import time
+
+    def cpu():
+        return sum(resource.getrusage(who).ru_utime + resource.getrusage(who).ru_stime
+                   for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN))
+
+    c0, t0 = cpu(), time.perf_counter()
+    item.config.hook.pytest_runtest_logstart(nodeid=item.nodeid, location=item.location)
+    from _pytest.runner import runtestprotocol
+
+    runtestprotocol(item, nextitem=nextitem, log=True)
+    item.config.hook.pytest_runtest_logfinish(nodeid=item.nodeid, location=item.location)
+    with open(path, "a") as fh:
+        fh.write(f"{cpu() - c0:.2f} {time.perf_counter() - t0:.2f} {item.nodeid}\n")
+    return True
