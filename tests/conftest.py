@@ -29,21 +29,6 @@ def pytest_sessionstart(session):
     module.warm()
 
 
-@pytest.hookimpl(tryfirst=True)  # before xdist's own hook reads the groups
-def pytest_collection_modifyitems(session, config, items):
-    """xdist groups (`--dist loadgroup`, pyproject.toml): each file is one group, so its module-scoped fixtures (a
-    fused recording, a batch run) are built on one worker only, and the files using the Dask `scheduler` fixture
-    are one group together, so one cluster serves them (one per worker cost a second cluster's start and its
-    workers' imports). That group goes first, then files holding `slow` tests: the long work starts early and
-    both workers stay busy to the end."""
-    dask = {item.path for item in items if "scheduler" in getattr(item, "fixturenames", ())}
-    slow = {item.path for item in items if item.get_closest_marker("slow")}
-    for item in items:
-        group = "dask" if item.path in dask else item.path.relative_to(REPO).as_posix()
-        item.add_marker(pytest.mark.xdist_group(group))
-    items.sort(key=lambda item: (item.path not in dask, item.path not in slow))  # stable within a file
-
-
 def shared_path(*parts: str) -> Path:
     """Path under ../shared/data, or skip the test with the reason."""
     p = SHARED_DATA.joinpath(*parts)
