@@ -59,3 +59,49 @@ def one_line_error(res, *needles):
     for n in needles:
         assert n in lines[0], (n, lines[0])
     return lines[0]
+
+
+HAND_GROUPS = {"placements_removals": "placement", "pick_and_place": "pick-and-place"}
+
+
+def write_hand_dataset(root: Path, seeds=range(3), user: str = "user9", groups=tuple(HAND_GROUPS),
+                       **noise) -> Path:
+    """A hand data set in the layout `kinfu eval poi` reads: per group (placements_removals: placements,
+    pick_and_place) one synthetic task per seed, <user>_obj<seed>.traj with its labelled changes in
+    <user>_obj<seed>.traj.res. `noise`: synth_hand_trajectory's noise_std (else its default)."""
+    from kinfu_cli.io.polhemus import write_polhemus
+    from kinfu_cli.sim.hand import random_task, synth_hand_trajectory
+
+    for group in groups:
+        for seed in seeds:
+            traj, changes = synth_hand_trajectory(random_task(HAND_GROUPS[group], seed=seed), seed=seed, **noise)
+            p = root / group / f"{user}_obj{seed}.traj"
+            p.parent.mkdir(parents=True, exist_ok=True)
+            write_polhemus(p, traj)
+            (p.parent / (p.name + ".res")).write_text(
+                "".join(f"{c.position[0]} {c.position[1]} {c.position[2]}\n" for c in changes))
+    return root
+
+
+def pytest_runtest_protocol(item, nextitem):
+    """KINFU_TEST_CPU=FILE appends each test's CPU seconds (this process and its waited-for children) to FILE:
+    on a loaded machine wall times rank tests badly."""
+    path = os.environ.get("KINFU_TEST_CPU")
+    if not path:
+        return None
+    import resource
+    import time
+
+    def cpu():
+        return sum(resource.getrusage(who).ru_utime + resource.getrusage(who).ru_stime
+                   for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN))
+
+    c0, t0 = cpu(), time.perf_counter()
+    item.config.hook.pytest_runtest_logstart(nodeid=item.nodeid, location=item.location)
+    from _pytest.runner import runtestprotocol
+
+    runtestprotocol(item, nextitem=nextitem, log=True)
+    item.config.hook.pytest_runtest_logfinish(nodeid=item.nodeid, location=item.location)
+    with open(path, "a") as fh:
+        fh.write(f"{cpu() - c0:.2f} {time.perf_counter() - t0:.2f} {item.nodeid}\n")
+    return True

@@ -29,6 +29,13 @@ def _jobs(out: Path) -> dict[str, list[list[str]]]:
         "fusion": [
             fuse + ["-o", str(out / "icp"), "--pose", "icp", "--color", "mode", "--end", "3", "--max-lost", "1"],
             ["poi", str(REC), "-o", str(out / "zvc.json"), "--algorithm", "zvc", "--force"],
+            # kernels the two jobs above did not reach, compiled by several test files (each worker compiled them
+            # for itself): the shadow filter, the simulator's shading, MUPF's filter and distance field
+            fuse + ["-o", str(out / "shadow"), "--shadow-filter", "--end", "2"],
+            ["synth", "-o", str(out / "synth"), "--frames", "2", "--width", "32", "--height", "24", "--formats",
+             "mcap", "--quiet"],
+            ["eval", "localize", "--shapes", "tetrahedron", "--trials", "1", "--particles", "60",
+             "--recognition-trials", "0", "--quiet", "-o", str(out / "localize.json")],
         ],
         "planning": [
             fuse + ["-o", str(out / "scan")],

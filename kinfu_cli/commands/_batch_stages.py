@@ -22,6 +22,9 @@ from kinfu_cli.batch.stages import RECORDING, StageRun, StageSpec
 from kinfu_cli.commands._options import PARAMETER_FLAGS
 from kinfu_cli.core.errors import ConfigError, KinfuError
 
+# eval segment --sweep makes its own scenes: not a stage of a recording
+_SWEEP_OPTIONS = {"sweep", "sweep-parameter", "sweep-values", "method", "color", "photometric", "scene", "scenes",
+                  "resolution"}
 # stage -> (module of the command, options batch sets itself, options taking an output file whose `true` in the
 # plan means "this file in the recording's output folder"). A viewer output option (a file) goes in the last.
 _COMMANDS = {
@@ -32,6 +35,10 @@ _COMMANDS = {
     "diff": ("diff", {"output", "json", "quiet", "force", "pois"}, {}),
     "eval-fusion": ("eval_fusion", {"output", "json", "quiet", "force", "ground-truth"},
                     {"error-mesh": "eval_fusion_error.ply"}),
+    # the trials run inside the stage's task: batch's cluster is the engine, no nested one
+    "eval-nbv": ("eval_nbv", {"output", "json", "quiet", "force", "workers", "scheduler"}, {"plot": "eval_nbv.png"}),
+    "eval-segment": ("eval_segment", {"output", "json", "quiet", "force", "ground-truth", *_SWEEP_OPTIONS},
+                     {"plot": "eval_segment.png"}),
 }
 #: the viewer file each stage writes with `viz = true` (the combined viewer file is made from these)
 VIEWER_FILES = {stage: files["viz"] for stage, (_, _, files) in _COMMANDS.items() if "viz" in files}
@@ -61,6 +68,10 @@ def _base_args(stage: str, rec) -> list[str]:
     if stage == "eval-fusion":
         return [str(outdir / "fuse"), "--ground-truth", str(rec.links["ground_truth"]), "-o",
                 str(outdir / "eval_fusion.json")]
+    if stage == "eval-nbv":
+        return [str(rec.links["ground_truth"]), "-o", str(outdir / EVAL_NBV_FILE)]
+    if stage == "eval-segment":
+        return [str(outdir / "segment"), "--ground-truth", str(labels_file(rec)), "-o", str(outdir / EVAL_SEGMENT_FILE)]
     raise KeyError(stage)
 
 
@@ -71,6 +82,8 @@ def _option_args(stage: str, outdir: Path, options: dict) -> list[str]:
     by_flag = {o[2:]: p for p in cmd.params if isinstance(p, click.Option) for o in p.opts if o.startswith("--")}
     args: list[str] = []
     for key, value in options.items():
+        if key in _SWEEP_OPTIONS and stage == "eval-segment":
+            raise ConfigError(f"option {key!r} belongs to eval segment --sweep (generated scenes), not to a recording")
         if key in reserved or key == "help":
             raise ConfigError(f"option {key!r} is set by batch itself")
         param = by_flag.get(key)
@@ -194,6 +207,11 @@ def batch_stages() -> dict[str, StageSpec]:
                      links=("before",)),
         "eval-fusion": spec("eval-fusion", ("fuse",), (volume, "fuse/mesh.ply", "<ground_truth>"),
                             ("eval_fusion.json",), ("eval_fusion.json",), links=("ground_truth",)),
+        "eval-nbv": spec("eval-nbv", (), ("<ground_truth>",), (EVAL_NBV_FILE,), (EVAL_NBV_FILE,),
+                         links=("ground_truth",), check=check_eval_nbv),
+        "eval-segment": spec("eval-segment", ("segment",), ("segment/segments.json", "<ground_truth>"),
+                             (EVAL_SEGMENT_FILE,), (EVAL_SEGMENT_FILE,), links=("ground_truth",),
+                             check=check_eval_segment),
         "eval-poi": spec("eval-poi", ("poi",), ("pois.json", "<ground_truth>"), (EVAL_POI_FILE,), (EVAL_POI_FILE,),
                          links=("ground_truth",), check=check_eval_poi, run=run_eval_poi),
         "viz": spec("viz", (), _viz_parts, _viz_output, _viz_output, wants=tuple(VIEWER_FILES), links=("viz",),
@@ -224,6 +242,53 @@ def _eval_fusion_numbers(outdir: Path) -> dict:
 
 
 _NUMBERS.update({"diff": _diff_numbers, "eval-fusion": _eval_fusion_numbers})
+
+EVAL_NBV_FILE = "eval_nbv.json"
+EVAL_SEGMENT_FILE = "eval_segment.json"
+#: the labels eval-segment scores against, in the recording's ground truth (kinfu synth writes both; the room
+#: scene only labels.ply); the first found is used
+LABEL_FILES = ("labels.npz", "labels.ply")
+
+
+def labels_file(rec) -> Path:
+    gt = rec.links["ground_truth"]
+    return next((gt / n for n in LABEL_FILES if (gt / n).is_file()), gt / LABEL_FILES[0])
+
+
+def check_eval_segment(rec, options: dict) -> None:
+    """The labels must be there before any work (the plan only checked the ground-truth folder)."""
+    check_stage("eval-segment", rec, options)
+    path = labels_file(rec)
+    if not path.is_file():
+        raise ConfigError(f"no {path} (kinfu synth writes it for tabletop scenes): give the entry a 'ground-truth' "
+                          "folder holding labels.npz, or its own 'stages' without eval-segment")
+
+
+def check_eval_nbv(rec, options: dict) -> None:
+    """The simulated loop rebuilds the scene from the ground truth: its files must be there before any work."""
+    check_stage("eval-nbv", rec, options)
+    gt = rec.links["ground_truth"]
+    if missing := [n for n in ("changes.json", "camera_poses.txt") if not (gt / n).is_file()]:
+        raise ConfigError(f"no {gt / missing[0]} (eval-nbv simulates the scene of a kinfu synth ground_truth/ "
+                          "folder)")
+
+
+def _eval_nbv_numbers(outdir: Path) -> dict:
+    """Per strategy: unknown voxels left in the POI spheres (POI loop) or near the objects (exploration)."""
+    d = _read(outdir / EVAL_NBV_FILE)
+    out = {}
+    for name, r in d["strategies"].items():
+        out[f"{name}_unknown_left"] = r["final_unknown"] if "final_unknown" in r else r["unknown_near"][-1]
+    return out
+
+
+def _eval_segment_numbers(outdir: Path) -> dict:
+    d = _read(outdir / EVAL_SEGMENT_FILE)
+    return {k: d[k] for k in ("boundary_precision", "boundary_recall", "bce", "object_recall", "objects_found",
+                              "objects_total")}
+
+
+_NUMBERS.update({"eval-nbv": _eval_nbv_numbers, "eval-segment": _eval_segment_numbers})
 
 EVAL_POI_FILE = "eval_poi.json"
 

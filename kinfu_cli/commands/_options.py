@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterable
+from pathlib import Path
 
 import click
 
@@ -39,3 +40,24 @@ def claim_outputs(outputs: dict[str, str | os.PathLike | None], inputs: Iterable
     for name, path in outputs.items():
         if path is not None:
             claim_output(path, inputs, force=force, parameter=name)
+
+
+def result_options(*, output: str | None = "Write the results as JSON here.", plot: str | None = None,
+                   json: str = "Print the results JSON to stdout instead of the table.",
+                   quiet: str = "No progress output.", force: bool = True, dir_okay: bool = False):
+    """The option block the evaluation commands end with, shown in this order: --plot FILE, -o/--output FILE,
+    --json, --quiet, --force; each help text is the command's own (None leaves --plot / --output out, force=False
+    --force). The command receives plot, output, as_json, quiet and force. dir_okay: whether click lets a
+    folder through as --plot / --output (ownership is checked by claim_outputs either way)."""
+    def decorate(func):
+        if force:
+            func = force_option(func)
+        func = click.option("--quiet", is_flag=True, help=quiet)(func)
+        func = click.option("--json", "as_json", is_flag=True, help=json)(func)
+        for name, flags, text in (("output", ("-o", "--output"), output), ("plot", ("--plot",), plot)):
+            if text is not None:
+                func = click.option(*flags, name, type=click.Path(dir_okay=dir_okay, path_type=Path), default=None,
+                                    help=text)(func)
+        return func
+
+    return decorate

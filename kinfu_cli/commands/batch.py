@@ -8,6 +8,7 @@ from pathlib import Path
 import click
 
 from kinfu_cli.batch.engine import check_before_work, connect, run_plan
+from kinfu_cli.batch.lock import batch_lock
 from kinfu_cli.batch.manifest import MANIFEST_NAME
 from kinfu_cli.batch.plan import load_plan
 from kinfu_cli.commands._batch_stages import batch_stages
@@ -36,17 +37,21 @@ def command(plan: Path, output: Path | None, workers: int | None, scheduler: str
             force: bool, as_json: bool, quiet: bool) -> None:
     """Run the stages listed in PLAN (TOML or YAML) over every recording it names: one Dask task per
     (recording, stage), the stage dependencies as the graph (poi needs the recording, segment needs fuse,
-    nbv needs fuse and poi, diff needs fuse and its `before`, eval-fusion needs fuse, eval-poi needs poi).
+    nbv needs fuse and poi, diff needs fuse and its `before`, eval-fusion needs fuse, eval-poi needs poi,
+    eval-segment needs segment; eval-nbv needs only the ground truth).
     Each stage is the single command run in-process on a worker with the plan's options, writing what the
     command writes into OUTPUT/<recording>/: fuse/, pois.json, views.json, segment/, diff/ (`kinfu diff`
     against the recording's `before`: another recording of the plan or a volume.npz; with --pois when the
     recording has poi), eval_fusion.json (`kinfu eval fusion` against its ground truth) and eval_poi.json
-    (its POIs against the true changes, 0.20 m rule). Evaluations find the ground truth in the
-    ground_truth/ folder beside the recording (kinfu synth's layout) or the entry's `ground-truth`.
+    (its POIs against the true changes, 0.20 m rule), eval_nbv.json (`kinfu eval nbv`: the simulated NBV
+    loop on its ground-truth scene) and eval_segment.json (`kinfu eval segment` of segment/ against the
+    ground truth's labels.npz, else labels.ply). Evaluations find the ground truth in the ground_truth/
+    folder beside the recording (kinfu synth's layout) or the entry's `ground-truth`.
     --viz FILE.mcap writes OUTPUT/<recording>/FILE.mcap, one viewer file combining the viewer files its
     stages write (fuse.mcap, pois.mcap, views.mcap, segment.mcap). OUTPUT/manifest.json records per
     recording and stage the status (ok, skipped, failed, blocked), seconds, key numbers, warnings and the
-    error line, and is rewritten after every task.
+    error line, and is rewritten after every task. One run at a time per OUTPUT: a second `kinfu batch` on
+    the same folder stops at once with one line naming OUTPUT/.kinfu-batch.lock.
 
     Resumable: a stage whose outputs exist unchanged with the same input fingerprint (inputs' size and
     modification time, options, kinfu version) is skipped; --force redoes everything. A failing recording
@@ -73,12 +78,13 @@ def command(plan: Path, output: Path | None, workers: int | None, scheduler: str
         raise ConfigError("--workers: sizes the local cluster; with --scheduler the cluster has its own workers")
     table = batch_stages()
     loaded = load_plan(plan, table, output, viz)
-    check_before_work(loaded, table, force)
-    engine = connect(scheduler, workers)
-    try:
-        doc = run_plan(loaded, table, engine, force=force, quiet=quiet)
-    finally:
-        engine.close()
+    with batch_lock(loaded.output):  # a second run on this folder fails here, before any work
+        check_before_work(loaded, table, force)
+        engine = connect(scheduler, workers)
+        try:
+            doc = run_plan(loaded, table, engine, force=force, quiet=quiet)
+        finally:
+            engine.close()
     if as_json:
         click.echo(json.dumps(doc, indent=2))
     s = doc["summary"]

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from kinfu_cli.commands._options import claim_outputs, force_option
+from kinfu_cli.commands._options import claim_outputs, result_options
 from kinfu_cli.core.atomic import write_json
 from kinfu_cli.evaluation.reconstruction import DEFAULT_SPACING, DEFAULT_THRESHOLD, evaluate_fusion
 from kinfu_cli.evaluation.tables import format_fusion_tables
@@ -36,11 +36,7 @@ group = "eval"
 @click.option("--error-mesh", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Also write the reconstruction coloured by its error (blue 0 .. red 2 x threshold; grey: not "
                    "evaluated) as this .ply.")
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Write the results as JSON here.")
-@click.option("--json", "as_json", is_flag=True, help="Print the results JSON to stdout instead of tables.")
-@click.option("--quiet", is_flag=True, help="No progress output.")
-@force_option
+@result_options(json="Print the results JSON to stdout instead of tables.")
 def command(reconstruction: Path, ground_truth: Path, state: str, threshold: float, spacing: float, margin: float,
             min_height: float, footprint: str, no_volume: bool, error_mesh: Path | None, output: Path | None,
             as_json: bool, quiet: bool, force: bool) -> None:

@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from kinfu_cli.commands._engine import scheduler_option, trial_engine
-from kinfu_cli.commands._options import claim_outputs, force_option
+from kinfu_cli.commands._options import claim_outputs, result_options
 from kinfu_cli.commands._output import emit
 from kinfu_cli.core.pois import DEFAULT_RADIUS
 from kinfu_cli.evaluation.nbv_loop import LoopConfig, run_loop
@@ -58,15 +58,11 @@ group = "eval"
               help="Candidate views with the sensor in unknown space score 0 (the paper's robot); default: allowed.")
 @click.option("--no-noise", is_flag=True, help="Render exact depth (no Kinect noise model).")
 @click.option("--seed", default=0, show_default=True, type=int, help="Noise and random-strategy seed.")
-@click.option("-o", "--output", type=click.Path(path_type=Path), default=None, help="Write the result JSON here.")
-@click.option("--plot", type=click.Path(path_type=Path), default=None,
-              help="PNG: unknown voxels in each POI sphere vs views (the paper's Fig. 20).")
 @click.option("--workers", type=click.IntRange(min=1), default=None,
               help="Run the strategy trials on a local Dask cluster of this many processes [in this process].")
 @scheduler_option
-@click.option("--quiet", is_flag=True, help="No progress bar.")
-@click.option("--json", "as_json", is_flag=True, help="Print the result JSON on stdout.")
-@force_option
+@result_options(output="Write the result JSON here.", json="Print the result JSON on stdout.", quiet="No progress bar.",
+                plot="PNG: unknown voxels in each POI sphere vs views (the paper's Fig. 20).", dir_okay=True)
 def command(scene, strategies, views, mode, voxel_size, gain, inc_th, poi_radius, pois_from, poi, optimistic,
             oscillation, width, height, scan_every, lon_step, lat_step, roll_step, scan_frames, near_margin,
             score_width, reject_unknown, no_noise, seed, output, plot, workers, scheduler, quiet, as_json, force):

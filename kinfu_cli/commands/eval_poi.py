@@ -9,6 +9,7 @@ from pathlib import Path
 import click
 
 from kinfu_cli.commands._engine import scheduler_option, trial_engine
+from kinfu_cli.commands._options import result_options
 from kinfu_cli.commands._detector_options import detector_options, detector_params_from
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.evaluation.poi import evaluate_dataset, format_sample, format_tables, sample_statement
@@ -39,8 +40,7 @@ def _floats(option: str, value: str | None) -> list[float]:
 @click.option("--loo", is_flag=True,
               help="Leave-one-user-out instead: choose each default constant on one user, score it on another "
                    "(kinfu_cli/evaluation/poi_loo.py); detector options are ignored.")
-@click.option("--json", "as_json", is_flag=True, help="Print machine-readable results on stdout.")
-@click.option("--quiet", is_flag=True, help="No progress bar.")
+@result_options(output=None, json="Print machine-readable results on stdout.", quiet="No progress bar.", force=False)
 @detector_options
 def command(dataset_dir, algorithm, speed, noise, seed, workers, scheduler, loo, as_json, quiet, **kw):
     """Run GMM-AS and/or ZVC on every *.traj with a *.traj.res beside it and score them.

@@ -35,7 +35,7 @@ from kinfu_cli.fusion.placement import default_origin
 from kinfu_cli.fusion.tracking import POSE_MODES, FrameToModelTracker, TrackResult, predict_pose
 from kinfu_cli.fusion.up import choose_up
 from kinfu_cli.fusion.volume import TernaryVolume, load_volume
-from kinfu_cli.io.frames import FrameStats, RGBDFrame, iter_frames
+from kinfu_cli.io.frames import FrameStats, RGBDFrame, iter_frames, window_depth_count
 from kinfu_cli.io.messages import header_frame
 from kinfu_cli.io.recording import Recording, open_recording
 from kinfu_cli.io.roles import Roles, detect_roles
@@ -229,9 +229,9 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
         frames = iter_frames(rec, found, pose_source=plan.source, pose_topic=pose_topic, start_s=start_s,
                              end_s=end_s, every=every, stats=stats, tf=tf, tolerance_s=tolerance_s)
         integrator = _Integrator(vol, plan.mode, grid_spec, origin, names["origin"], str(rec.path), timing, icp)
-        # at most this many frames can be tracked (all selected ones): past max_lost of it, fail at once
-        count = rec.topics[found.depth_topic].count if found.depth_topic in rec.topics else 0
-        bound = -(-count // every)
+        # past max_lost of the most frames the time window can select (counted before reading, when tracking): stop
+        bound = (-(-window_depth_count(rec, found.depth_topic, start_s, end_s, tolerance_s) // every)
+                 if integrator.tracker is not None else 0)
         for frame in progress(_timed(frames, timing, "read"), desc="fusing", quiet=quiet, unit="frame"):
             t0 = time.perf_counter()
             d = depth_filter(frame)

@@ -230,6 +230,18 @@ def _topic_poses(rec, pose_topic: str | None, tol_ns: int, stats: FrameStats) ->
     return pose
 
 
+def window_depth_count(rec, depth_topic: str, start_s: float | None = None, end_s: float | None = None,
+                       tolerance_s: float = 0.05) -> int:
+    """The most depth messages iter_frames can select with this time window: those it reads (the window widened
+    by the tolerance), counted without decoding them."""
+    start_s = None if start_s is None else check_seconds(start_s, "start_s")
+    end_s = None if end_s is None else check_seconds(end_s, "end_s")
+    start_ns, end_ns = _time_window(rec, start_s, end_s)
+    tol_ns = int(round(check_seconds(tolerance_s, "tolerance_s", minimum=0.0) * 1e9))
+    return rec.count_messages(depth_topic, None if start_ns is None else max(0, start_ns - tol_ns),
+                              None if end_ns is None else end_ns + tol_ns)
+
+
 def _time_window(rec, start_s: float | None, end_s: float | None) -> tuple[int | None, int | None]:
     """[start, end] in log nanoseconds from seconds after the recording's first message (None: open)."""
     t0 = rec.start_ns or 0

@@ -197,6 +197,14 @@ class Recording:
         for topic, _, stamp, msg in self.typed_messages(topics, start_ns, end_ns):
             yield topic, stamp, msg
 
+    def count_messages(self, topic: str, start_ns: int | None = None, end_ns: int | None = None) -> int:
+        """Messages on `topic` with log stamps in [start_ns, end_ns] (None: open), read without decoding them."""
+        if topic not in self.topics:
+            return 0
+        if start_ns is None and end_ns is None:
+            return self.topics[topic].count
+        return self._backend.count(topic, start_ns, end_ns)
+
     def first_message(self, topic: str) -> object | None:
         for _, _, msg in self.messages([topic]):
             return msg
@@ -221,6 +229,8 @@ class _Backend(Protocol):
     def time_range(self) -> tuple[int | None, int | None]: ...
 
     def messages(self, topics, start_ns, end_ns) -> Iterator[tuple[str, str, int, object]]: ...
+
+    def count(self, topic: str, start_ns: int | None, end_ns: int | None) -> int: ...
 
 
 def _short_text(exc: BaseException) -> str:
@@ -295,6 +305,18 @@ class _RosbagsBackend(_Backend):
             return None, None
         try:
             return int(self.reader.start_time), int(self.reader.end_time) - 1  # rosbags' end is exclusive
+        except Exception as exc:
+            raise _read_error(self.path, exc, self.kind) from None
+
+    def count(self, topic: str, start_ns: int | None, end_ns: int | None) -> int:
+        conns = [c for c in self.reader.connections if c.topic == topic]
+        lo, hi = -1 if start_ns is None else start_ns, float("inf") if end_ns is None else end_ns
+        try:
+            if self.stamps_known:  # ROS 1: the index holds every stamp
+                indexes = self.reader.readers[0].indexes
+                return sum(lo <= i.time <= hi for c in conns for i in indexes.get(c.id) or [])
+            stop = None if end_ns is None else int(end_ns) + 1
+            return sum(1 for _ in self.reader.messages(connections=conns, start=start_ns, stop=stop)) if conns else 0
         except Exception as exc:
             raise _read_error(self.path, exc, self.kind) from None
 
@@ -388,6 +410,14 @@ class _McapBackend(_Backend):
         if st is None or st.message_count == 0:
             return None, None
         return int(st.message_start_time), int(st.message_end_time)
+
+    def count(self, topic: str, start_ns: int | None, end_ns: int | None) -> int:
+        stop = None if end_ns is None else int(end_ns) + 1
+        try:
+            return sum(1 for _ in self.reader.iter_messages(topics=[topic], start_time=start_ns, end_time=stop,
+                                                            log_time_order=False))
+        except Exception as exc:
+            raise _read_error(self.path, exc, "MCAP file") from None
 
     def messages(self, topics, start_ns, end_ns):
         stop = None if end_ns is None else int(end_ns) + 1

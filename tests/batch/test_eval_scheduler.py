@@ -8,14 +8,12 @@ import json
 
 import pytest
 from click.testing import CliRunner
-from conftest import one_line_error
+from conftest import one_line_error, write_hand_dataset
 
 from kinfu_cli.batch.engine import connect
 from kinfu_cli.cli import cli
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.evaluation.poi import _job_trial, find_tasks
-from kinfu_cli.io.polhemus import write_polhemus
-from kinfu_cli.sim.hand import random_task, synth_hand_trajectory
 
 # a tiny closed loop: 64x48 images, 3 cm voxels, a 4 x 3 x 2 viewing sphere
 NBV = ["--views", "1", "--width", "64", "--height", "48", "--voxel-size", "0.03", "--scan-every", "4",
@@ -25,16 +23,7 @@ NBV = ["--views", "1", "--width", "64", "--height", "48", "--voxel-size", "0.03"
 @pytest.fixture(scope="module")
 def hand_dataset(tmp_path_factory):
     """Four synthetic tasks (two per group) with their labelled changes."""
-    root = tmp_path_factory.mktemp("hand")
-    for group, kind in (("placements_removals", "placement"), ("pick_and_place", "pick-and-place")):
-        for seed in range(2):
-            traj, changes = synth_hand_trajectory(random_task(kind, seed=seed), seed=seed, noise_std=0.002)
-            p = root / group / f"user9_obj{seed}.traj"
-            p.parent.mkdir(parents=True, exist_ok=True)
-            write_polhemus(p, traj)
-            (p.parent / (p.name + ".res")).write_text(
-                "".join(f"{c.position[0]} {c.position[1]} {c.position[2]}\n" for c in changes))
-    return root
+    return write_hand_dataset(tmp_path_factory.mktemp("hand"), seeds=range(2), noise_std=0.002)
 
 
 def _run(*args) -> dict:

@@ -7,14 +7,13 @@ import json
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from conftest import write_hand_dataset
 
 from kinfu_cli.cli import cli
 from kinfu_cli.core.errors import ConfigError, TrajectoryError
 from kinfu_cli.evaluation.poi import (add_noise, evaluate_dataset, find_tasks, format_tables, resample_speed,
                                       score_pois, settings_for)
-from kinfu_cli.io.polhemus import write_polhemus
 from kinfu_cli.io.trajectory import Trajectory
-from kinfu_cli.sim.hand import random_task, synth_hand_trajectory
 
 
 def test_score_pois_counts_as_the_paper():
@@ -63,15 +62,7 @@ def test_settings_order():
 
 @pytest.fixture(scope="module")
 def synth_dataset(tmp_path_factory):
-    root = tmp_path_factory.mktemp("ds")
-    for group, kind in (("placements_removals", "placement"), ("pick_and_place", "pick-and-place")):
-        for seed in range(3):
-            traj, changes = synth_hand_trajectory(random_task(kind, seed=seed), seed=seed, noise_std=0.002)
-            p = root / group / f"user9_obj{seed}.traj"
-            p.parent.mkdir(parents=True, exist_ok=True)
-            write_polhemus(p, traj)
-            (p.parent / (p.name + ".res")).write_text(
-                "".join(f"{c.position[0]} {c.position[1]} {c.position[2]}\n" for c in changes))
+    root = write_hand_dataset(tmp_path_factory.mktemp("ds"), seeds=range(3), noise_std=0.002)
     (root / "pick_and_place" / "orphan.traj").write_text("")  # no .res beside it: ignored
     return root
 
@@ -188,13 +179,7 @@ def test_leave_one_user_out_chooses_on_one_user_and_scores_the_other(tmp_path):
     from kinfu_cli.evaluation import poi_loo
 
     for user, seeds in (("user7", (0, 1)), ("user8", (2, 3))):
-        for seed in seeds:
-            traj, changes = synth_hand_trajectory(random_task("pick-and-place", seed=seed), seed=seed)
-            p = tmp_path / "pick_and_place" / f"{user}_obj{seed}.traj"
-            p.parent.mkdir(parents=True, exist_ok=True)
-            write_polhemus(p, traj)
-            (p.parent / (p.name + ".res")).write_text(
-                "".join(f"{c.position[0]} {c.position[1]} {c.position[2]}\n" for c in changes))
+        write_hand_dataset(tmp_path, seeds, user=user, groups=("pick_and_place",))
     doc = poi_loo.leave_one_user_out(tmp_path, ["zvc"])
     assert doc["users"] == ["user7", "user8"] and doc["probes"] == ["none", "quick-grasp"]
     rel = next(s for s in doc["studies"] if s["constant"] == "relative")
