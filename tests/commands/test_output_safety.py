@@ -94,11 +94,12 @@ def test_a_killed_fuse_leaves_the_previous_result_whole(tmp_path, moment):
     assert run(*base, "--resolution", "64", "--end", "6.1", "--every", "6").exit_code == 0
     first = (out / "report.json").read_bytes()
     env = dict(os.environ, PYTHONPATH=str(REPO))
-    proc = subprocess.Popen([sys.executable, "-m", "kinfu_cli", *map(str, base), "--resolution", "320"], cwd=tmp_path,
+    # 512^3 over the whole sample: about 6 s on an idle 2-core machine, so a kill at 2 s lands mid-fusion
+    proc = subprocess.Popen([sys.executable, "-m", "kinfu_cli", *map(str, base), "--resolution", "512"], cwd=tmp_path,
                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 120
     if moment == "while fusing":
-        time.sleep(3.0)
+        time.sleep(2.0)
     else:  # as soon as the new folder is being written beside the old one
         while not list(tmp_path.glob(".fuse.*.part")) and proc.poll() is None and time.monotonic() < deadline:
             time.sleep(0.005)
