@@ -11,6 +11,7 @@ from kinfu_cli.fusion.volume import TernaryVolume
 from kinfu_cli.sim.paths import orbit_poses
 from kinfu_cli.sim.scene import box_scene
 from kinfu_cli.sim.sensor import DepthSensor
+from tests.fusion.test_volume import projective_samples
 
 W, H = 320, 240
 VS = 0.008
@@ -77,21 +78,7 @@ def _mean_colour_reference(shape, origin, vs, trunc, max_w, frames):
     col = np.zeros((len(pts), 3), dtype=np.float64)
     band = min(1.0, 1.2 * vs / trunc)
     for d, c, K, T in frames:
-        h, wd = d.shape
-        Tcw = np.linalg.inv(T)
-        pc = pts @ Tcw[:3, :3].T + Tcw[:3, 3]
-        z = pc[:, 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            uf = pc[:, 0] * K[0, 0] / z + K[0, 2] + 0.5
-            vf = pc[:, 1] * K[1, 1] / z + K[1, 2] + 0.5
-        ok = (z > 0) & (uf >= 1e-4) & (uf < wd - 1e-4) & (vf >= 1e-4) & (vf < h - 1e-4)
-        u = np.where(ok, uf, 0).astype(np.int64)
-        r = np.where(ok, vf, 0).astype(np.int64)
-        dd = d[r, u]
-        raylen = np.sqrt(1 + ((u - K[0, 2]) / K[0, 0]) ** 2 + ((r - K[1, 2]) / K[1, 1]) ** 2)
-        sdf = (dd - z) * raylen
-        ok &= (dd > 0) & (sdf > -trunc)
-        t = np.minimum(1.0, sdf / trunc)
+        ok, u, r, t = projective_samples(pts, d, K, T, trunc)
         w[ok] = np.minimum(w[ok] + 1, max_w)
         paint = ok & (np.abs(t) < band)
         fresh = ~col[paint].any(axis=1)

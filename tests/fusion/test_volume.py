@@ -261,6 +261,26 @@ def test_raycast_stop_at_unknown_reports_first_non_empty_voxel(fused, frames):
     assert np.allclose(depth[both], depth2[both])
 
 
+def projective_samples(pts, d, K, T, trunc):
+    """Per world point, the projective TSDF sample of one depth frame (digest sec. 1.2), plain numpy float64:
+    (ok: the point updates, u, r: its pixel, t: its truncated distance in [-1, 1])."""
+    h, wd = d.shape
+    Tcw = np.linalg.inv(T)
+    pc = pts @ Tcw[:3, :3].T + Tcw[:3, 3]
+    z = pc[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        uf = pc[:, 0] * K[0, 0] / z + K[0, 2] + 0.5
+        vf = pc[:, 1] * K[1, 1] / z + K[1, 2] + 0.5
+    ok = (z > 0) & (uf >= 1e-4) & (uf < wd - 1e-4) & (vf >= 1e-4) & (vf < h - 1e-4)
+    u = np.where(ok, uf, 0).astype(np.int64)
+    r = np.where(ok, vf, 0).astype(np.int64)
+    dd = d[r, u]
+    raylen = np.sqrt(1 + ((u - K[0, 2]) / K[0, 0]) ** 2 + ((r - K[1, 2]) / K[1, 1]) ** 2)
+    sdf = (dd - z) * raylen
+    ok &= (dd > 0) & (sdf > -trunc)
+    return ok, u, r, np.minimum(1.0, sdf / trunc)
+
+
 def _dense_reference(shape, origin, vs, trunc, max_w, frames):
     """The projective update rule (digest §1.2 eqs. 2.1-2.3) on a dense grid in plain numpy, float64."""
     idx = np.indices(shape).reshape(3, -1).T
@@ -268,21 +288,7 @@ def _dense_reference(shape, origin, vs, trunc, max_w, frames):
     v = np.zeros(len(pts))
     w = np.zeros(len(pts), dtype=np.int64)
     for d, K, T in frames:
-        h, wd = d.shape
-        Tcw = np.linalg.inv(T)
-        pc = pts @ Tcw[:3, :3].T + Tcw[:3, 3]
-        z = pc[:, 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            uf = pc[:, 0] * K[0, 0] / z + K[0, 2] + 0.5
-            vf = pc[:, 1] * K[1, 1] / z + K[1, 2] + 0.5
-        ok = (z > 0) & (uf >= 1e-4) & (uf < wd - 1e-4) & (vf >= 1e-4) & (vf < h - 1e-4)
-        u = np.where(ok, uf, 0).astype(np.int64)
-        r = np.where(ok, vf, 0).astype(np.int64)
-        dd = d[r, u]
-        raylen = np.sqrt(1 + ((u - K[0, 2]) / K[0, 0]) ** 2 + ((r - K[1, 2]) / K[1, 1]) ** 2)
-        sdf = (dd - z) * raylen
-        ok &= (dd > 0) & (sdf > -trunc)
-        t = np.minimum(1.0, sdf / trunc)
+        ok, _, _, t = projective_samples(pts, d, K, T, trunc)
         v[ok] = (v[ok] * w[ok] + t[ok]) / (w[ok] + 1)
         w[ok] = np.minimum(w[ok] + 1, max_w)
     return v.reshape(shape), w.reshape(shape)
