@@ -5,6 +5,7 @@ on partial views of known primitives.
 
     PYTHONPATH=$PWD python benchmarks/bench_shape_prior.py [n_per_kind] [n_scenes] [n_size]
     PYTHONPATH=$PWD python benchmarks/bench_shape_prior.py pipeline [n_scenes]   # inside kinfu segment
+    PYTHONPATH=$PWD python benchmarks/bench_shape_prior.py forest    # numpy Forest vs scikit-learn, one process
 """
 
 import sys
@@ -147,7 +148,32 @@ def pipeline_prior(n_scenes: int) -> None:
               f"                  {np.median(b):8.3f} / {np.percentile(b, 90):.3f}")
 
 
+def forest_speed(n_segments: int = 20) -> None:
+    """What a `kinfu segment` run pays for the classifier: scikit-learn (import, train with the fixed seed,
+    one predict_proba per segment) against the packaged numpy Forest (load, same predictions), one process."""
+    import time
+
+    with np.load(sp.FEATURES_FILE) as data:
+        X = data["X"][:n_segments]
+    t0 = time.perf_counter()
+    import sklearn.ensemble  # noqa: F401  (the import alone is most of it)
+
+    t1 = time.perf_counter()
+    model = sp.train_classifier()
+    ref = np.array([model.predict_proba(x[None])[0] for x in X])
+    t2 = time.perf_counter()
+    forest = sp.load_classifier.__wrapped__()
+    ours = np.array([forest.predict_proba(x[None])[0] for x in X])
+    t3 = time.perf_counter()
+    assert np.array_equal(ours, ref)
+    print(f"{n_segments} segments: scikit-learn import {t1 - t0:.3f} s + train and predict {t2 - t1:.3f} s; "
+          f"numpy Forest load and predict {t3 - t2:.3f} s; ratio {(t2 - t0) / (t3 - t2):.0f}x, same class shares")
+
+
 if __name__ == "__main__":
+    if len(sys.argv) > 1 and sys.argv[1] == "forest":
+        forest_speed()
+        sys.exit()
     if len(sys.argv) > 1 and sys.argv[1] == "pipeline":
         pipeline_prior(int(sys.argv[2]) if len(sys.argv) > 2 else 3)
         sys.exit()

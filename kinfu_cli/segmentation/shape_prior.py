@@ -7,13 +7,16 @@ and statistics of local curvature (surface variation) and of how the normals lin
 (a box's normals cluster on three axes, a cylinder's on one, a sphere's on none).
 
 The package ships the training set's features (`shape_prior_features.npz`, generated primitives with a
-fixed seed by `training_set`; rebuild it with `python -m kinfu_cli.segmentation.shape_prior`), and the
-forest is trained from them on first use (about 0.2 s, fixed seed): a features file does not depend on the
-scikit-learn version the way a pickled model does, and loading it runs no pickled code.
+fixed seed by `training_set`) and the forest scikit-learn trains on them with a fixed seed, exported as plain
+node arrays (`shape_prior_forest.npz`; rebuild both with `python -m kinfu_cli.segmentation.shape_prior`).
+`Forest.predict_proba` walks those arrays in numpy: a `kinfu segment` run then neither imports scikit-learn
+(0.8 s) nor trains (0.2-0.3 s), the file does not depend on the scikit-learn version the way a pickled
+model does, and loading it runs no pickled code. Tests hold it equal to scikit-learn's own predict_proba.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 
@@ -34,6 +37,8 @@ PRIOR_EXPONENTS = {"box": (0.1, 0.1), "cylinder": (0.1, 1.0), "sphere": (1.0, 1.
 DELTA_LOWER = 0.4
 DELTA_UPPER = 0.4
 FEATURES_FILE = Path(__file__).with_name("shape_prior_features.npz")
+FOREST_FILE = Path(__file__).with_name("shape_prior_forest.npz")
+FOREST_PARAMS = {"n_estimators": 150, "min_samples_leaf": 2, "random_state": 0}
 MIN_POINTS = 30
 FEATURE_NAMES = ("extent_mid_ratio", "extent_min_ratio", "e1", "e2", "residual_ratio", "variation_mean",
                  "variation_std", "variation_p90", "edge_share", "normal_axis_mean", "normal_axis_p10",
@@ -102,9 +107,9 @@ def save_training_set(path: Path = FEATURES_FILE, n_per_kind: int = 60, seed: in
     return path
 
 
-@lru_cache(maxsize=2)
-def load_classifier(path: str = str(FEATURES_FILE)):
-    """The random forest trained on the packaged features (fixed seed: the same model every time)."""
+def train_classifier(path: str | Path = FEATURES_FILE):
+    """The scikit-learn random forest trained on the packaged features (fixed seed: the same model every
+    time); what `FOREST_FILE` exports."""
     from sklearn.ensemble import RandomForestClassifier
 
     with np.load(path) as data:
@@ -112,7 +117,71 @@ def load_classifier(path: str = str(FEATURES_FILE)):
             raise ConfigError(f"{path}: features {data['feature_names'].tolist()} do not match this version; "
                               f"rebuild it with save_training_set", parameter="path")
         X, y = data["X"], data["y"]
-    return RandomForestClassifier(n_estimators=150, min_samples_leaf=2, random_state=0, n_jobs=1).fit(X, y)
+    return RandomForestClassifier(**FOREST_PARAMS, n_jobs=1).fit(X, y)
+
+
+@dataclass(frozen=True)
+class Forest:
+    """A trained tree ensemble as node arrays (all trees concatenated; leaves have left == -1): enough to
+    predict as scikit-learn does, without scikit-learn."""
+
+    feature: np.ndarray  # (nodes,) int: the feature a split tests
+    threshold: np.ndarray  # (nodes,) float64: go left when x[feature] <= threshold (x as float32, as sklearn)
+    left: np.ndarray  # (nodes,) int: global index of the left child, -1 at leaves
+    right: np.ndarray  # (nodes,) int
+    proba: np.ndarray  # (nodes, classes): class shares of the training samples at the node
+    roots: np.ndarray  # (trees,) int
+
+    def predict_proba(self, X: np.ndarray) -> np.ndarray:
+        """Mean over the trees of the leaf's class shares, (n, classes)."""
+        X = np.asarray(X, dtype=np.float32).astype(np.float64)  # sklearn's trees compare float32 features
+        rows = np.arange(len(X))[:, None]
+        node = np.broadcast_to(self.roots, (len(X), len(self.roots))).copy()
+        while True:  # one step down every tree per pass: as many passes as the deepest tree
+            inner = self.left[node] >= 0
+            if not inner.any():
+                break
+            go_left = X[rows, self.feature[node]] <= self.threshold[node]
+            node = np.where(inner, np.where(go_left, self.left[node], self.right[node]), node)
+        return self.proba[node].mean(axis=1)
+
+    def predict(self, X: np.ndarray) -> np.ndarray:
+        """Class indices (into CLASSES) of the highest mean share."""
+        return np.argmax(self.predict_proba(X), axis=1)
+
+
+def export_forest(model, path: Path = FOREST_FILE) -> Path:
+    """Write a fitted scikit-learn forest's trees as `Forest` node arrays."""
+    feats, thrs, lefts, rights, probas, roots = [], [], [], [], [], []
+    offset = 0
+    for est in model.estimators_:
+        t = est.tree_
+        inner = t.children_left >= 0
+        roots.append(offset)
+        feats.append(np.where(inner, t.feature, 0))
+        thrs.append(t.threshold)
+        lefts.append(np.where(inner, t.children_left + offset, -1))
+        rights.append(np.where(inner, t.children_right + offset, -1))
+        v = t.value[:, 0, :]
+        probas.append(v / v.sum(axis=1, keepdims=True))
+        offset += t.node_count
+    np.savez_compressed(path, feature=np.concatenate(feats).astype(np.int32), threshold=np.concatenate(thrs),
+                        left=np.concatenate(lefts).astype(np.int32), right=np.concatenate(rights).astype(np.int32),
+                        proba=np.concatenate(probas), roots=np.array(roots, dtype=np.int32),
+                        classes=np.array([CLASSES[int(c)] for c in model.classes_]),
+                        feature_names=np.array(FEATURE_NAMES))
+    return path
+
+
+@lru_cache(maxsize=2)
+def load_classifier(path: str = str(FOREST_FILE)) -> Forest:
+    """The packaged forest (`export_forest` of `train_classifier`)."""
+    with np.load(path) as data:
+        if tuple(data["feature_names"].tolist()) != FEATURE_NAMES or tuple(data["classes"].tolist()) != CLASSES:
+            raise ConfigError(f"{path}: forest features / classes do not match this version; rebuild it with "
+                              f"export_forest(train_classifier())", parameter="path")
+        return Forest(data["feature"], data["threshold"], data["left"], data["right"], data["proba"],
+                      data["roots"])
 
 
 def classify_shape(points: np.ndarray, fit: SuperquadricFit | None = None) -> tuple[str, dict[str, float]]:
@@ -132,5 +201,6 @@ def fit_with_prior(points: np.ndarray, **fit_kwargs) -> tuple[SuperquadricFit, s
     return fit_superquadric(points, **{**fit_kwargs, "exponent_bounds": exponent_bounds(cls)}), cls
 
 
-if __name__ == "__main__":  # rebuild the packaged training features
+if __name__ == "__main__":  # rebuild the packaged training features and the forest trained on them
     print(save_training_set())
+    print(export_forest(train_classifier()))

@@ -84,3 +84,18 @@ def test_segment_pipeline_uses_the_prior_and_reports_the_class():
             assert lo1 - 1e-9 <= e1 <= hi1 + 1e-9 and lo2 - 1e-9 <= e2 <= hi2 + 1e-9
         free, none = _fit_one(pts, SegmentOptions(shape_prior=False))
         assert none is None and fit.residual <= 1.25 * free.residual + 1e-12
+
+
+def test_the_packaged_forest_predicts_as_scikit_learn_trained_on_the_packaged_features():
+    """`shape_prior_forest.npz` is the export of `train_classifier()`: same class shares to the last bit, on the
+    training features and on perturbed ones (so every branch direction is exercised), so `kinfu segment` can
+    classify without importing scikit-learn."""
+    model = sp.train_classifier()
+    with np.load(sp.FEATURES_FILE) as data:
+        X = data["X"]
+    rng = np.random.default_rng(3)
+    perturbed = X[rng.integers(0, len(X), 300)] * rng.normal(1.0, 0.2, (300, X.shape[1]))
+    forest = sp.load_classifier()
+    for A in (X, perturbed):
+        assert np.array_equal(forest.predict_proba(A), model.predict_proba(A))
+        assert np.array_equal(forest.predict(A), model.predict(A))
