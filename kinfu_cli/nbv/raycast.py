@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 import numba
 from numba import njit, prange
-from scipy.ndimage import distance_transform_cdt
+from scipy.ndimage import binary_dilation, distance_transform_cdt
 
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.grid import TernaryGrid
@@ -258,10 +258,11 @@ def _clampi(v, a, b):
 
 @njit(cache=True, error_model="numpy", inline="always")
 def _trace(bricks, brick_of, bdist, SH, n0, n1, n2, lx, ly, lz, vs, px, py, pz, dx, dy, dz, min_range, max_range,
-           ccx, ccy, ccz, r2, through, optimistic, p_unknown, h_unknown):
+           ccx, ccy, ccz, r2, through, optimistic, p_unknown, h_unknown, tstart=0.0):
     """Walk one ray (origin p, unit direction d, the volume's corner l, S's centre cc); returns (class, t of the
     first hit, the 4 gain terms, block skips, voxel steps). Scalars in and out, and inlined: an array view
-    per ray costs atomic reference counts that the threads fight over.
+    per ray costs atomic reference counts that the threads fight over. `tstart`: the walk begins there (the
+    caller knows every voxel the ray crosses before it is EMPTY, see `_free_start`).
 
     One long function on purpose: it is the innermost loop of every NBV command, and the walk state
     (voxel, next boundaries, visibility) crossing between the empty-block skip and the voxel walk stays
@@ -270,7 +271,7 @@ def _trace(bricks, brick_of, bdist, SH, n0, n1, n2, lx, ly, lz, vs, px, py, pz, 
     B = 1 << SH
     M = B - 1
     # clip to the volume box and the range
-    t0 = 0.0
+    t0 = tstart
     t1 = max_range
     eps = 1e-12
     if abs(dx) < eps:
@@ -619,10 +620,11 @@ def _fill_templates(tlat, loff, lut, tcount, toff, tview, vtmpl, woff, Ms, win, 
 
 @njit(cache=True, parallel=True, error_model="numpy")
 def _cast_lattice(shape, bricks, brick_of, bdist, SH, lo, vs, ray_off, gtmpl, toff, tdir, tview, woff, W, gview, R0s,
-                  t0s, min_range, max_range, cen, radius, through, optimistic, p_unknown, chunk, acc, steps):
+                  t0s, tfree, min_range, max_range, cen, radius, through, optimistic, p_unknown, chunk, acc, steps):
     """Trace every ray of every group (its direction is its template's ray turned by the group's base
     pose, so no per-ray origin/direction arrays) and add its results, times its template's pixel weights,
-    to the sums of the group's views (columns gview[g] ... of acc, in the template's view order). Ray costs
+    to the sums of the group's views (columns gview[g] ... of acc, in the template's view order); a ray of
+    group g starts at tfree[g] (the space before it is EMPTY, see `_free_start`). Ray costs
     differ by orders of magnitude (a free-space skip vs a walk through clutter) and numba splits a prange
     into one contiguous slice per thread, so the rays are cut into small chunks dealt round-robin to the
     lanes (acc's first axis, a fixed number so sums do not depend on the thread count): every thread gets
@@ -658,7 +660,7 @@ def _cast_lattice(shape, bricks, brick_of, bdist, SH, lo, vs, ray_off, gtmpl, to
                 c_, _t, v0, v1, v2, v3, nb, nf, nv = _trace(bricks, brick_of, bdist, SH, n0, n1, n2, lx, ly, lz, vs,
                                                             t0s[g, 0], t0s[g, 1], t0s[g, 2], dx, dy, dz, min_range,
                                                             max_range, ccx, ccy, ccz, r2, through, optimistic,
-                                                            p_unknown, h)
+                                                            p_unknown, h, tfree[g])
                 col = 3 if v0 != 0.0 else c_
                 K = tview[t + 1] - tview[t]
                 w0 = woff[t] + r * K
@@ -680,6 +682,65 @@ def _cast_lattice(shape, bricks, brick_of, bdist, SH, lo, vs, ray_off, gtmpl, to
         steps[lane, 0] = nbs
         steps[lane, 1] = nvs
         steps[lane, 2] = nfs
+
+
+def _free_start(vol: RayVolume, sensors: np.ndarray, center, r_ext: float, check: np.ndarray) -> np.ndarray:
+    """Per group: a distance along its rays before which every voxel they cross is EMPTY, so the walk can
+    start there instead of crossing the free space around the sensor in block skips. The group's cast rays
+    lie in the cone from its sensor towards S (half-angle asin(r_ext / distance); any direction when
+    `check` is false); the first non-empty voxel a ray meets lies in a block that is not free and touches
+    a free block (or the volume's faces), so the nearest box of such a block whose bounding sphere meets
+    the cone bounds it from below (minus a thousandth of a voxel for rounding)."""
+    free = vol.block_dist > 0
+    edge = ~free & binary_dilation(free, np.ones((3, 3, 3), bool), border_value=1)
+    blocks = np.argwhere(edge).astype(np.int64)
+    out = np.zeros(len(sensors))
+    if len(blocks):
+        _free_start_kernel(blocks, vol.block * vol.voxel_size, vol.origin, np.asarray(sensors, np.float64),
+                           np.asarray(center, np.float64).reshape(3), float(r_ext), check, out)
+    # a sensor inside a block that is not free starts at 0 (its own block need not touch a free one)
+    bi = np.floor((np.asarray(sensors, np.float64).reshape(-1, 3) - vol.origin) / (vol.block * vol.voxel_size))
+    bi = bi.astype(np.int64)
+    inside = np.all((bi >= 0) & (bi < np.array(free.shape)), axis=1)
+    at = np.zeros(len(out), bool)
+    at[inside] = ~free[bi[inside, 0], bi[inside, 1], bi[inside, 2]]
+    out[at] = 0.0
+    return np.maximum(out - 1e-3 * vol.voxel_size, 0.0)
+
+
+@njit(cache=True, parallel=True)
+def _free_start_kernel(blocks, bs, lo, P, cen, r_ext, check, out):
+    """out[g]: the smallest distance from sensor P[g] to the box of a block (blocks (N, 3), side bs) whose
+    bounding sphere meets the group's cone (apex P[g], axis to cen, sin of half-angle r_ext / distance)."""
+    rb = bs * 0.8660254037844387 * (1.0 + 1e-9)
+    for g in prange(P.shape[0]):
+        ax, ay, az = cen[0] - P[g, 0], cen[1] - P[g, 1], cen[2] - P[g, 2]
+        L = math.sqrt(ax * ax + ay * ay + az * az)
+        cone = check[g] and L > r_ext
+        sa = ca = 0.0
+        if cone:
+            ax, ay, az = ax / L, ay / L, az / L
+            sa = min(r_ext / L * (1.0 + 1e-9), 1.0)
+            ca = math.sqrt(1.0 - sa * sa)
+        best = np.inf
+        for m in range(blocks.shape[0]):
+            x0, y0, z0 = lo[0] + blocks[m, 0] * bs, lo[1] + blocks[m, 1] * bs, lo[2] + blocks[m, 2] * bs
+            d2 = (_gap(P[g, 0], x0, x0 + bs) + _gap(P[g, 1], y0, y0 + bs) + _gap(P[g, 2], z0, z0 + bs))
+            if d2 >= best * best:
+                continue
+            if cone:
+                # distance from the block's centre to the (one-sided) cone, against its bounding radius
+                vx, vy, vz = x0 + 0.5 * bs - P[g, 0], y0 + 0.5 * bs - P[g, 1], z0 + 0.5 * bs - P[g, 2]
+                along = vx * ax + vy * ay + vz * az
+                perp = math.sqrt(max(vx * vx + vy * vy + vz * vz - along * along, 0.0))
+                if perp * sa + along * ca < 0.0:
+                    dc = math.sqrt(vx * vx + vy * vy + vz * vz)
+                else:
+                    dc = perp * ca - along * sa
+                if dc > rb:
+                    continue
+            best = math.sqrt(d2)
+        out[g] = best
 
 
 @dataclass
@@ -893,7 +954,9 @@ def _cast_batch(vol, cam, center, radius, r_ext, flags, p_unknown, batch: list[_
     acc = np.zeros((_LANES, 7, len(views)), np.float64)
     steps = np.zeros((_LANES, 3), np.int64)
     _cast_lattice(vol.shape, vol.bricks, vol.brick_of, vol.block_dist, vol.shift, vol.origin, vol.voxel_size,
-                  ray_off, gtmpl, toff, tdir, tview, woff, W, gview, R0s, t0s, cam.min_range,
+                  ray_off, gtmpl, toff, tdir, tview, woff, W, gview, R0s, t0s,
+                  _free_start(vol, t0s, center, r_ext, np.array([g.check for g in batch], dtype=np.bool_)),
+                  cam.min_range,
                   min(cam.max_range, 1e30), center, float(radius), bool(through), bool(optimistic), float(p_unknown),
                   _CHUNK, acc, steps)
     out.block_steps += int(steps[:, 0].sum())
