@@ -45,6 +45,7 @@ CLS_OCCUPIED = 1
 CLS_EMPTY_EXIT = 2
 N_TERMS = 4
 _CHUNK = 256  # rays per scheduling chunk of the caster (see _cast_lattice)
+_TILE = 16  # lattice tile side: rays are numbered tile by tile (see _mark_templates)
 _LANES = 32  # accumulation lanes of the caster (see _cast_lattice)
 FINE_CAP = 4  # cap of the voxel-level distances in mixed blocks (see _fill_bricks)
 
@@ -562,19 +563,21 @@ def _mark_templates(tlat, loff, tcb, tcheck, fx, fy, cx, cy, r2, lut, tcount):
         cb = tcb[t]
         cbn2 = cb[0] * cb[0] + cb[1] * cb[1] + cb[2] * cb[2]
         n = 0
-        for c in range(LW * LH):
-            ok = True
-            if tcheck[t]:
-                x = (c % LW + lu0 - cx) / fx
-                y = (c // LW + lv0 - cy) / fy
-                proj = cb[0] * x + cb[1] * y + cb[2]
-                if proj <= 0 or cbn2 - proj * proj / (x * x + y * y + 1.0) > r2:
-                    ok = False
-            if ok:
-                lut[loff[t] + c] = n
-                n += 1
-            else:
-                lut[loff[t] + c] = -1
+        # ray numbers go tile by tile (_TILE^2 cells, row-major inside): a scheduling chunk of the caster is
+        # then a compact bundle of rays that read the same bricks, not one long row of the lattice
+        for tile in range(((LH + _TILE - 1) // _TILE) * ((LW + _TILE - 1) // _TILE)):
+            tv = tile // ((LW + _TILE - 1) // _TILE) * _TILE
+            tu = tile % ((LW + _TILE - 1) // _TILE) * _TILE
+            for cv in range(tv, min(tv + _TILE, LH)):
+                for cu in range(tu, min(tu + _TILE, LW)):
+                    ok = True
+                    if tcheck[t]:
+                        x = (cu + lu0 - cx) / fx
+                        y = (cv + lv0 - cy) / fy
+                        proj = cb[0] * x + cb[1] * y + cb[2]
+                        ok = proj > 0 and cbn2 - proj * proj / (x * x + y * y + 1.0) <= r2
+                    lut[loff[t] + cv * LW + cu] = n if ok else -1
+                    n += 1 if ok else 0
         tcount[t] = n
 
 
