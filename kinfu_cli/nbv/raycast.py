@@ -632,8 +632,9 @@ def _cast_lattice(shape, bricks, brick_of, bdist, SH, lo, vs, ray_off, gtmpl, to
     into one contiguous slice per thread, so the rays are cut into small chunks dealt round-robin to the
     lanes (acc's first axis, a fixed number so sums do not depend on the thread count): every thread gets
     a share of every region, and each lane sums into its own rows (no ray arrays, no races).
-    acc rows: rays ending on 0 unknown (no gain) / 1 occupied / 2 empty exit / 3 unknown in S, then the
-    sums of gain terms 1-3 (term 0 is column 3)."""
+    acc rows: rays ending on 0 unknown (no gain) / 1 occupied / 2 empty exit / 3 unknown in S (left at 0:
+    the caller takes it as the views' pixels minus rows 0-2), then the sums of gain terms 1-3 (term 0 is
+    row 3)."""
     lanes = acc.shape[0]
     n = ray_off[-1]
     nchunk = (n + chunk - 1) // chunk
@@ -668,8 +669,9 @@ def _cast_lattice(shape, bricks, brick_of, bdist, SH, lo, vs, ray_off, gtmpl, to
                 K = tview[t + 1] - tview[t]
                 w0 = woff[t] + r * K
                 m0 = gview[g]
-                for kk in range(K):
-                    acc[lane, col, m0 + kk] += W[w0 + kk]
+                if col != 3:  # rays ending on unknown in S are the rest, counted after the cast
+                    for kk in range(K):
+                        acc[lane, col, m0 + kk] += W[w0 + kk]
                 if v1 != 0.0:
                     for kk in range(K):
                         acc[lane, 4, m0 + kk] += W[w0 + kk] * v1
@@ -967,9 +969,13 @@ def _cast_batch(vol, cam, center, radius, r_ext, flags, p_unknown, batch: list[_
     out.fine_steps += int(steps[:, 2].sum())
     tick("cast")
     tot = acc.sum(axis=0).T
+    npix = np.concatenate([tms[tid[g.key]]["npix"] for g in batch])
+    # every cast ray adds its pixel weights to exactly one of columns 0-3 and the weights are whole numbers
+    # (exact in float64), so column 3 (unknown in S, not written by the caster) is what the others leave
+    tot[:, 3] = npix - tot[:, :3].sum(axis=1)
     out.counts[views] = np.stack([tot[:, 0] + tot[:, 3], tot[:, 1], tot[:, 2]], axis=1).round().astype(np.int64)
     out.terms[views] = tot[:, 3:7]
-    out.rays[views] = np.concatenate([tms[tid[g.key]]["npix"] for g in batch])
+    out.rays[views] = npix
     out.rays_cast += n
     tick("accumulate")
     if progress_cb:
