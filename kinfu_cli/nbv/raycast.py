@@ -86,7 +86,8 @@ class RayVolume:
 
     def block_code(self) -> np.ndarray:
         """What the caster reads per block, one array so one memory access: -block_dist for free blocks,
-        else the brick number (int16 when the bricks allow: half the cache footprint). Built once."""
+        else the brick number (int16 when the bricks allow: half the cache footprint). Built at the first
+        cast: change block_dist or brick_of only before it."""
         if self._code is None:
             dt = np.int16 if len(self.bricks) // self.block ** 3 < 32768 else np.int32
             self._code = np.ascontiguousarray(np.where(self.block_dist > 0, -self.block_dist.astype(np.int32),
