@@ -30,12 +30,12 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import numba
 from numba import njit, prange
-from scipy.ndimage import distance_transform_cdt
+from scipy.ndimage import binary_dilation, distance_transform_cdt
 
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.grid import TernaryGrid
@@ -45,6 +45,7 @@ CLS_OCCUPIED = 1
 CLS_EMPTY_EXIT = 2
 N_TERMS = 4
 _CHUNK = 256  # rays per scheduling chunk of the caster (see _cast_lattice)
+_TILE = 16  # lattice tile side: rays are numbered tile by tile (see _mark_templates)
 _LANES = 32  # accumulation lanes of the caster (see _cast_lattice)
 FINE_CAP = 4  # cap of the voxel-level distances in mixed blocks (see _fill_bricks)
 
@@ -66,6 +67,7 @@ class RayVolume:
     block_dist: np.ndarray
     bricks: np.ndarray
     brick_of: np.ndarray
+    _code: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @classmethod
     def from_grid(cls, grid: TernaryGrid, block: int = 8, fine_cap: int = FINE_CAP) -> "RayVolume":
@@ -81,6 +83,16 @@ class RayVolume:
         _fill_bricks(labels, block, min(int(fine_cap), 127), mixed, brick_of, bricks)
         return cls(labels, np.asarray(grid.origin, dtype=np.float64), float(grid.voxel_size), block,
                    _chessboard(kind == 0), bricks, brick_of)
+
+    def block_code(self) -> np.ndarray:
+        """What the caster reads per block, one array so one memory access: -block_dist for free blocks,
+        else the brick number (int16 when the bricks allow: half the cache footprint). Built at the first
+        cast: change block_dist or brick_of only before it."""
+        if self._code is None:
+            dt = np.int16 if len(self.bricks) // self.block ** 3 < 32768 else np.int32
+            self._code = np.ascontiguousarray(np.where(self.block_dist > 0, -self.block_dist.astype(np.int32),
+                                                       self.brick_of).astype(dt))
+        return self._code
 
     @property
     def shift(self) -> int:
@@ -257,11 +269,12 @@ def _clampi(v, a, b):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _trace(bricks, brick_of, bdist, SH, n0, n1, n2, lx, ly, lz, vs, px, py, pz, dx, dy, dz, min_range, max_range,
-           ccx, ccy, ccz, r2, through, optimistic, p_unknown, h_unknown):
+def _trace(bricks, code, SH, n0, n1, n2, lx, ly, lz, vs, px, py, pz, dx, dy, dz, min_range, max_range,
+           ccx, ccy, ccz, r2, through, optimistic, p_unknown, h_unknown, tstart=0.0):
     """Walk one ray (origin p, unit direction d, the volume's corner l, S's centre cc); returns (class, t of the
     first hit, the 4 gain terms, block skips, voxel steps). Scalars in and out, and inlined: an array view
-    per ray costs atomic reference counts that the threads fight over.
+    per ray costs atomic reference counts that the threads fight over. `tstart`: the walk begins there (the
+    caller knows every voxel the ray crosses before it is EMPTY, see `_free_start`).
 
     One long function on purpose: it is the innermost loop of every NBV command, and the walk state
     (voxel, next boundaries, visibility) crossing between the empty-block skip and the voxel walk stays
@@ -270,7 +283,7 @@ def _trace(bricks, brick_of, bdist, SH, n0, n1, n2, lx, ly, lz, vs, px, py, pz, 
     B = 1 << SH
     M = B - 1
     # clip to the volume box and the range
-    t0 = 0.0
+    t0 = tstart
     t1 = max_range
     eps = 1e-12
     if abs(dx) < eps:
@@ -331,8 +344,9 @@ def _trace(bricks, brick_of, bdist, SH, n0, n1, n2, lx, ly, lz, vs, px, py, pz, 
     nb = nf = nv = 0  # block skips, fine (voxel-level) skips and voxel steps taken (benchmark statistics)
     while True:
         bx, by, bz = ix >> SH, iy >> SH, iz >> SH
-        D = bdist[bx, by, bz]
-        if D > 0:
+        cd = code[bx, by, bz]
+        if cd < 0:
+            D = -np.int64(cd)
             nb += 1
             # the cube of blocks [b - D + 1, b + D - 1] is empty: leave it in one step
             D1 = D - 1
@@ -350,7 +364,7 @@ def _trace(bricks, brick_of, bdist, SH, n0, n1, n2, lx, ly, lz, vs, px, py, pz, 
             continue
         # walk voxel by voxel through this non-empty block
         xb0, yb0, zb0 = bx * B, by * B, bz * B  # this block's voxel range [b0, b0 + B) per axis
-        base = brick_of[bx, by, bz] << (3 * SH)
+        base = np.int64(cd) << (3 * SH)
         while True:
             lab = bricks[base + ((((ix & M) << SH) | (iy & M)) << SH) + (iz & M)]
             if lab < -1:
@@ -473,7 +487,7 @@ def _leave_box(x0, x1, y0, y1, z0, z1, sx, sy, sz, ax, bx, ay, by, az, bz, gx, h
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def _cast_kernel(shape, bricks, brick_of, bdist, SH, lo, vs, origins, dirs, min_range, max_range, cen, radius, through,
+def _cast_kernel(shape, bricks, code, SH, lo, vs, origins, dirs, min_range, max_range, cen, radius, through,
                  optimistic, p_unknown, out_cls, out_t, out_vals):
     n = dirs.shape[0]
     r2 = radius * radius
@@ -481,7 +495,7 @@ def _cast_kernel(shape, bricks, brick_of, bdist, SH, lo, vs, origins, dirs, min_
     if 0.0 < p_unknown < 1.0:
         h = -(p_unknown * math.log2(p_unknown) + (1 - p_unknown) * math.log2(1 - p_unknown))
     for r in prange(n):
-        c_, t_, v0, v1, v2, v3, _nb, _nf, _nv = _trace(bricks, brick_of, bdist, SH, shape[0], shape[1], shape[2],
+        c_, t_, v0, v1, v2, v3, _nb, _nf, _nv = _trace(bricks, code, SH, shape[0], shape[1], shape[2],
                                                   lo[0], lo[1], lo[2], vs, origins[r, 0],
                                                   origins[r, 1], origins[r, 2], dirs[r, 0], dirs[r, 1], dirs[r, 2],
                                                   min_range, max_range, cen[0], cen[1], cen[2], r2, through,
@@ -513,7 +527,7 @@ def cast_rays(vol: RayVolume, origins: np.ndarray, dirs: np.ndarray, *, min_rang
     cls = np.empty(n, np.int8)
     t = np.empty(n, np.float64)
     terms = np.empty((n, N_TERMS), np.float64)
-    _cast_kernel(vol.shape, vol.bricks, vol.brick_of, vol.block_dist, vol.shift, vol.origin, vol.voxel_size, origins, dirs,
+    _cast_kernel(vol.shape, vol.bricks, vol.block_code(), vol.shift, vol.origin, vol.voxel_size, origins, dirs,
                  float(min_range), float(min(max_range, 1e30)), np.asarray(center, dtype=np.float64).reshape(3),
                  float(radius), bool(through), bool(optimistic), float(p_unknown), cls, t, terms)
     return RayResults(cls, t, terms)
@@ -561,19 +575,21 @@ def _mark_templates(tlat, loff, tcb, tcheck, fx, fy, cx, cy, r2, lut, tcount):
         cb = tcb[t]
         cbn2 = cb[0] * cb[0] + cb[1] * cb[1] + cb[2] * cb[2]
         n = 0
-        for c in range(LW * LH):
-            ok = True
-            if tcheck[t]:
-                x = (c % LW + lu0 - cx) / fx
-                y = (c // LW + lv0 - cy) / fy
-                proj = cb[0] * x + cb[1] * y + cb[2]
-                if proj <= 0 or cbn2 - proj * proj / (x * x + y * y + 1.0) > r2:
-                    ok = False
-            if ok:
-                lut[loff[t] + c] = n
-                n += 1
-            else:
-                lut[loff[t] + c] = -1
+        # ray numbers go tile by tile (_TILE^2 cells, row-major inside): a scheduling chunk of the caster is
+        # then a compact bundle of rays that read the same bricks, not one long row of the lattice
+        for tile in range(((LH + _TILE - 1) // _TILE) * ((LW + _TILE - 1) // _TILE)):
+            tv = tile // ((LW + _TILE - 1) // _TILE) * _TILE
+            tu = tile % ((LW + _TILE - 1) // _TILE) * _TILE
+            for cv in range(tv, min(tv + _TILE, LH)):
+                for cu in range(tu, min(tu + _TILE, LW)):
+                    ok = True
+                    if tcheck[t]:
+                        x = (cu + lu0 - cx) / fx
+                        y = (cv + lv0 - cy) / fy
+                        proj = cb[0] * x + cb[1] * y + cb[2]
+                        ok = proj > 0 and cbn2 - proj * proj / (x * x + y * y + 1.0) <= r2
+                    lut[loff[t] + cv * LW + cu] = n if ok else -1
+                    n += 1 if ok else 0
         tcount[t] = n
 
 
@@ -618,17 +634,19 @@ def _fill_templates(tlat, loff, lut, tcount, toff, tview, vtmpl, woff, Ms, win, 
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def _cast_lattice(shape, bricks, brick_of, bdist, SH, lo, vs, ray_off, gtmpl, toff, tdir, tview, woff, W, gview, R0s,
-                  t0s, min_range, max_range, cen, radius, through, optimistic, p_unknown, chunk, acc, steps):
+def _cast_lattice(shape, bricks, code, SH, lo, vs, ray_off, gtmpl, toff, tdir, tview, woff, W, gview, R0s,
+                  t0s, tfree, min_range, max_range, cen, radius, through, optimistic, p_unknown, chunk, acc, steps):
     """Trace every ray of every group (its direction is its template's ray turned by the group's base
     pose, so no per-ray origin/direction arrays) and add its results, times its template's pixel weights,
-    to the sums of the group's views (columns gview[g] ... of acc, in the template's view order). Ray costs
+    to the sums of the group's views (columns gview[g] ... of acc, in the template's view order); a ray of
+    group g starts at tfree[g] (the space before it is EMPTY, see `_free_start`). Ray costs
     differ by orders of magnitude (a free-space skip vs a walk through clutter) and numba splits a prange
     into one contiguous slice per thread, so the rays are cut into small chunks dealt round-robin to the
     lanes (acc's first axis, a fixed number so sums do not depend on the thread count): every thread gets
     a share of every region, and each lane sums into its own rows (no ray arrays, no races).
-    acc rows: rays ending on 0 unknown (no gain) / 1 occupied / 2 empty exit / 3 unknown in S, then the
-    sums of gain terms 1-3 (term 0 is column 3)."""
+    acc rows: rays ending on 0 unknown (no gain) / 1 occupied / 2 empty exit / 3 unknown in S (left at 0:
+    the caller takes it as the views' pixels minus rows 0-2), then the sums of gain terms 1-3 (term 0 is
+    row 3)."""
     lanes = acc.shape[0]
     n = ray_off[-1]
     nchunk = (n + chunk - 1) // chunk
@@ -655,16 +673,17 @@ def _cast_lattice(shape, bricks, brick_of, bdist, SH, lo, vs, ray_off, gtmpl, to
                 dx = R0s[g, 0, 0] * x + R0s[g, 0, 1] * y + R0s[g, 0, 2] * z
                 dy = R0s[g, 1, 0] * x + R0s[g, 1, 1] * y + R0s[g, 1, 2] * z
                 dz = R0s[g, 2, 0] * x + R0s[g, 2, 1] * y + R0s[g, 2, 2] * z
-                c_, _t, v0, v1, v2, v3, nb, nf, nv = _trace(bricks, brick_of, bdist, SH, n0, n1, n2, lx, ly, lz, vs,
+                c_, _t, v0, v1, v2, v3, nb, nf, nv = _trace(bricks, code, SH, n0, n1, n2, lx, ly, lz, vs,
                                                             t0s[g, 0], t0s[g, 1], t0s[g, 2], dx, dy, dz, min_range,
                                                             max_range, ccx, ccy, ccz, r2, through, optimistic,
-                                                            p_unknown, h)
+                                                            p_unknown, h, tfree[g])
                 col = 3 if v0 != 0.0 else c_
                 K = tview[t + 1] - tview[t]
                 w0 = woff[t] + r * K
                 m0 = gview[g]
-                for kk in range(K):
-                    acc[lane, col, m0 + kk] += W[w0 + kk]
+                if col != 3:  # rays ending on unknown in S are the rest, counted after the cast
+                    for kk in range(K):
+                        acc[lane, col, m0 + kk] += W[w0 + kk]
                 if v1 != 0.0:
                     for kk in range(K):
                         acc[lane, 4, m0 + kk] += W[w0 + kk] * v1
@@ -680,6 +699,65 @@ def _cast_lattice(shape, bricks, brick_of, bdist, SH, lo, vs, ray_off, gtmpl, to
         steps[lane, 0] = nbs
         steps[lane, 1] = nvs
         steps[lane, 2] = nfs
+
+
+def _free_start(vol: RayVolume, sensors: np.ndarray, center, r_ext: float, check: np.ndarray) -> np.ndarray:
+    """Per group: a distance along its rays before which every voxel they cross is EMPTY, so the walk can
+    start there instead of crossing the free space around the sensor in block skips. The group's cast rays
+    lie in the cone from its sensor towards S (half-angle asin(r_ext / distance); any direction when
+    `check` is false); the first non-empty voxel a ray meets lies in a block that is not free and touches
+    a free block (or the volume's faces), so the nearest box of such a block whose bounding sphere meets
+    the cone bounds it from below (minus a thousandth of a voxel for rounding)."""
+    free = vol.block_dist > 0
+    edge = ~free & binary_dilation(free, np.ones((3, 3, 3), bool), border_value=1)
+    blocks = np.argwhere(edge).astype(np.int64)
+    out = np.zeros(len(sensors))
+    if len(blocks):
+        _free_start_kernel(blocks, vol.block * vol.voxel_size, vol.origin, np.asarray(sensors, np.float64),
+                           np.asarray(center, np.float64).reshape(3), float(r_ext), check, out)
+    # a sensor inside a block that is not free starts at 0 (its own block need not touch a free one)
+    bi = np.floor((np.asarray(sensors, np.float64).reshape(-1, 3) - vol.origin) / (vol.block * vol.voxel_size))
+    bi = bi.astype(np.int64)
+    inside = np.all((bi >= 0) & (bi < np.array(free.shape)), axis=1)
+    at = np.zeros(len(out), bool)
+    at[inside] = ~free[bi[inside, 0], bi[inside, 1], bi[inside, 2]]
+    out[at] = 0.0
+    return np.maximum(out - 1e-3 * vol.voxel_size, 0.0)
+
+
+@njit(cache=True, parallel=True)
+def _free_start_kernel(blocks, bs, lo, P, cen, r_ext, check, out):
+    """out[g]: the smallest distance from sensor P[g] to the box of a block (blocks (N, 3), side bs) whose
+    bounding sphere meets the group's cone (apex P[g], axis to cen, sin of half-angle r_ext / distance)."""
+    rb = bs * 0.8660254037844387 * (1.0 + 1e-9)
+    for g in prange(P.shape[0]):
+        ax, ay, az = cen[0] - P[g, 0], cen[1] - P[g, 1], cen[2] - P[g, 2]
+        L = math.sqrt(ax * ax + ay * ay + az * az)
+        cone = check[g] and L > r_ext
+        sa = ca = 0.0
+        if cone:
+            ax, ay, az = ax / L, ay / L, az / L
+            sa = min(r_ext / L * (1.0 + 1e-9), 1.0)
+            ca = math.sqrt(1.0 - sa * sa)
+        best = np.inf
+        for m in range(blocks.shape[0]):
+            x0, y0, z0 = lo[0] + blocks[m, 0] * bs, lo[1] + blocks[m, 1] * bs, lo[2] + blocks[m, 2] * bs
+            d2 = (_gap(P[g, 0], x0, x0 + bs) + _gap(P[g, 1], y0, y0 + bs) + _gap(P[g, 2], z0, z0 + bs))
+            if d2 >= best * best:
+                continue
+            if cone:
+                # distance from the block's centre to the (one-sided) cone, against its bounding radius
+                vx, vy, vz = x0 + 0.5 * bs - P[g, 0], y0 + 0.5 * bs - P[g, 1], z0 + 0.5 * bs - P[g, 2]
+                along = vx * ax + vy * ay + vz * az
+                perp = math.sqrt(max(vx * vx + vy * vy + vz * vz - along * along, 0.0))
+                if perp * sa + along * ca < 0.0:
+                    dc = math.sqrt(vx * vx + vy * vy + vz * vz)
+                else:
+                    dc = perp * ca - along * sa
+                if dc > rb:
+                    continue
+            best = math.sqrt(d2)
+        out[g] = best
 
 
 @dataclass
@@ -892,8 +970,10 @@ def _cast_batch(vol, cam, center, radius, r_ext, flags, p_unknown, batch: list[_
     tick("mark")
     acc = np.zeros((_LANES, 7, len(views)), np.float64)
     steps = np.zeros((_LANES, 3), np.int64)
-    _cast_lattice(vol.shape, vol.bricks, vol.brick_of, vol.block_dist, vol.shift, vol.origin, vol.voxel_size,
-                  ray_off, gtmpl, toff, tdir, tview, woff, W, gview, R0s, t0s, cam.min_range,
+    _cast_lattice(vol.shape, vol.bricks, vol.block_code(), vol.shift, vol.origin, vol.voxel_size,
+                  ray_off, gtmpl, toff, tdir, tview, woff, W, gview, R0s, t0s,
+                  _free_start(vol, t0s, center, r_ext, np.array([g.check for g in batch], dtype=np.bool_)),
+                  cam.min_range,
                   min(cam.max_range, 1e30), center, float(radius), bool(through), bool(optimistic), float(p_unknown),
                   _CHUNK, acc, steps)
     out.block_steps += int(steps[:, 0].sum())
@@ -901,9 +981,13 @@ def _cast_batch(vol, cam, center, radius, r_ext, flags, p_unknown, batch: list[_
     out.fine_steps += int(steps[:, 2].sum())
     tick("cast")
     tot = acc.sum(axis=0).T
+    npix = np.concatenate([tms[tid[g.key]]["npix"] for g in batch])
+    # every cast ray adds its pixel weights to exactly one of columns 0-3 and the weights are whole numbers
+    # (exact in float64), so column 3 (unknown in S, not written by the caster) is what the others leave
+    tot[:, 3] = npix - tot[:, :3].sum(axis=1)
     out.counts[views] = np.stack([tot[:, 0] + tot[:, 3], tot[:, 1], tot[:, 2]], axis=1).round().astype(np.int64)
     out.terms[views] = tot[:, 3:7]
-    out.rays[views] = np.concatenate([tms[tid[g.key]]["npix"] for g in batch])
+    out.rays[views] = npix
     out.rays_cast += n
     tick("accumulate")
     if progress_cb:

@@ -97,3 +97,33 @@ def test_block_must_be_a_power_of_two():
     with pytest.raises(ConfigError, match="power of two") as e:
         RayVolume.from_grid(random_grid(), block=6)
     assert e.value.parameter == "block"
+
+
+def test_free_start_lies_before_the_first_hit_of_every_ray_in_the_cone():
+    """The caster starts a group's rays at `_free_start`: every ray towards S must meet nothing before it."""
+    from kinfu_cli.nbv.raycast import _free_start
+
+    g, poi = cluttered_scene(seed=3)
+    vol = RayVolume.from_grid(g)
+    poses = sphere_viewpoints(poi, 0.8, lon_step=45, lat_step=30, roll_step=90)
+    sensors = np.unique(poses[:, :3, 3].round(9), axis=0)
+    r_ext = 0.2 + vol.voxel_size * np.sqrt(3) / 2
+    tf = _free_start(vol, sensors, poi, r_ext, np.ones(len(sensors), bool))
+    assert (tf > 0.1).mean() > 0.5 and tf.max() > 0.3  # not trivial: most rays skip part of their way
+    rng = np.random.default_rng(0)
+    for p, t in zip(sensors, tf):
+        a = (poi - p) / np.linalg.norm(poi - p)
+        # directions filling the cone towards S (half-angle asin(r_ext / distance)), its rim included
+        u = np.cross(a, [0.3, 0.5, 0.8])
+        u /= np.linalg.norm(u)
+        w = np.cross(a, u)
+        ang = np.arcsin(r_ext / np.linalg.norm(poi - p)) * np.sqrt(rng.uniform(0, 1, 2000))
+        ang[:200] = np.arcsin(r_ext / np.linalg.norm(poi - p))
+        phi = rng.uniform(0, 2 * np.pi, 2000)
+        d = (np.cos(ang)[:, None] * a + np.sin(ang)[:, None] * (np.cos(phi)[:, None] * u + np.sin(phi)[:, None] * w))
+        hit = cast_rays(vol, p, d, center=poi, radius=0.2).t
+        assert hit.min() >= t
+    # a sensor inside a block that is not free starts at once
+    b = np.argwhere(vol.block_dist == 0)[0]
+    inside = vol.origin + (b + 0.5) * vol.block * vol.voxel_size
+    assert _free_start(vol, inside[None], poi, r_ext, np.ones(1, bool))[0] == 0.0
