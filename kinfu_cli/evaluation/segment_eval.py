@@ -67,8 +67,11 @@ def _labels_from_colours(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def load_predicted_segments(path: str | os.PathLike) -> PredictedSegments:
-    """A `kinfu segment` folder, its segments.ply, or a labels file (.ply with `label`, .npz)."""
+    """A `kinfu segment` folder, its segments.ply (or segments.json, which names the same result), or a labels
+    file (.ply with `label`, .npz)."""
     path = Path(path)
+    if path.name == "segments.json" and (path.parent / "segments.ply").is_file():
+        path = path.parent / "segments.ply"  # the JSON holds no points: score the cloud written beside it
     if path.is_dir():
         ply = path / "segments.ply"
         if not ply.is_file():

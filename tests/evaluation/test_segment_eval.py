@@ -163,6 +163,9 @@ def test_eval_segment_end_to_end(small_scene, tmp_path):
     assert doc["boundary_precision"] > 0.5 and doc["boundary_recall"] > 0.4 and doc["bce"] < 0.2
     assert doc["points"]["unmatched_share"] < 0.05
     assert (tmp_path / "top.png").stat().st_size > 10_000
+    # segments.json names the same result: the cloud beside it is scored, with the same numbers
+    via_json = load_predicted_segments(root / "seg" / "segments.json")
+    assert via_json.labels.tolist() == load_predicted_segments(root / "seg").labels.tolist()
     # the ground truth scored against itself (the labels moved onto the segmented points) is perfect
     labels = read_labelled_cloud(root / "labels.ply")
     moved, _ = transfer_labels(labels.points, labels.labels, res.segmentation.points, 0.015)
