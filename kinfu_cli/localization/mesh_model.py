@@ -141,14 +141,19 @@ class MeshModel:
         R = pose_rotations(np.asarray(pose)[None])[0]
         return float(self.exact_distances((np.asarray(points) - np.asarray(pose)[:3]) @ R).mean())
 
-    def sample_surface(self, n: int, rng: np.random.Generator) -> np.ndarray:
-        """n points uniform by area on the surface (model frame)."""
+    def sample_surface(self, n: int, rng: np.random.Generator, with_normals: bool = False):
+        """n points uniform by area on the surface (model frame); with_normals: also their unit face normals,
+        as (points, normals)."""
         tri = rng.choice(len(self.triangles), size=n, p=self.areas / self.areas.sum())
         u, v = rng.random(n), rng.random(n)
         flip = u + v > 1
         u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
         a, b, c = (self.vertices[self.triangles[tri, k]] for k in range(3))
-        return a + u[:, None] * (b - a) + v[:, None] * (c - a)
+        points = a + u[:, None] * (b - a) + v[:, None] * (c - a)
+        if not with_normals:
+            return points
+        nrm = np.cross(b - a, c - a)
+        return points, nrm / np.linalg.norm(nrm, axis=1, keepdims=True)
 
 
 def check_mesh(vertices: np.ndarray, triangles: np.ndarray, source: str) -> None:

@@ -117,18 +117,6 @@ def _jacobian(points: np.ndarray, normals: np.ndarray, centre: np.ndarray, radiu
     return np.hstack([normals, np.cross(points - centre, normals) / radius])
 
 
-def _surface_normals(model, n: int = 2000) -> tuple[np.ndarray, np.ndarray]:
-    """n area-uniform surface samples of the model and their face normals (model frame; seeded)."""
-    rng = np.random.default_rng(0)
-    tri = rng.choice(len(model.triangles), size=n, p=model.areas / model.areas.sum())
-    a, b, c = (model.vertices[model.triangles[tri, k]] for k in range(3))
-    u, v = rng.random(n), rng.random(n)
-    flip = u + v > 1
-    u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
-    nrm = np.cross(b - a, c - a)
-    return a + u[:, None] * (b - a) + v[:, None] * (c - a), nrm / np.linalg.norm(nrm, axis=1, keepdims=True)
-
-
 def pose_std(model, ys: np.ndarray, t: np.ndarray, R: np.ndarray, noise: float) -> np.ndarray:
     """How well the points pin the pose: the standard deviations (m, m, m, rad, rad, rad; about the points'
     centroid) of noise^2 (J^T J)^-1, J the point-to-plane Jacobian at (t, R). A direction no point constrains
@@ -140,7 +128,7 @@ def pose_std(model, ys: np.ndarray, t: np.ndarray, R: np.ndarray, noise: float) 
     n = d / np.maximum(np.linalg.norm(d, axis=1), 1e-12)[:, None]
     centre, radius = ys.mean(0), model.diameter / 2
     J = _jacobian(H, n, centre, radius)
-    sp, sn = _surface_normals(model)
+    sp, sn = model.sample_surface(2000, np.random.default_rng(0), with_normals=True)
     Jm = _jacobian(sp @ R.T + t, sn @ R.T, centre, radius)
     ev, V = np.linalg.eigh(Jm.T @ Jm / len(Jm))
     Q = V[:, ev > 1e-4 * ev.max()]  # the directions the surface itself constrains
