@@ -3,7 +3,9 @@
 Two runs on one folder would interleave their stages' writes and each rewrite manifest.json from its own view.
 The lock is an advisory `flock` on OUTPUT/.kinfu-batch.lock, taken before any work and held until the run ends;
 the kernel drops it when the process dies, so a killed run leaves no stale lock (the file stays, holding the
-last holder's pid for the message). A folder the run created is removed again when nothing was written into it. Batch runs on other machines sharing the folder over NFS are not covered: flock is local there.
+last holder's pid for the message). A folder the run created is removed again when nothing was written into it,
+and a lock file the run created is removed again when the run fails (e.g. refused before any work), so a refused
+run leaves nothing in a user's folder. Batch runs on other machines sharing the folder over NFS are not covered: flock is local there.
 """
 
 from __future__ import annotations
@@ -35,9 +37,11 @@ def batch_lock(output: str | os.PathLike) -> Iterator[Path]:
     try:
         folder.mkdir(parents=True, exist_ok=True)
         path = folder / LOCK_NAME
+        lock_existed = path.exists()
         fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
     except OSError as exc:
         raise ConfigError(f"{folder}: cannot create the batch lock ({exc.strerror})", parameter="output") from None
+    failed, locked = True, False
     try:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -50,10 +54,15 @@ def batch_lock(output: str | os.PathLike) -> Iterator[Path]:
             raise ConfigError(f"{path}: exists and was not written by kinfu; move it away")
         os.ftruncate(fd, 0)
         os.pwrite(fd, f"{_MARK} pid {os.getpid()}\n".encode(), 0)
+        locked = True
         yield path
+        failed = False
     finally:
         if created and [p.name for p in folder.iterdir()] == [LOCK_NAME]:  # nothing ran: leave no trace
             with contextlib.suppress(OSError):
                 path.unlink()
                 folder.rmdir()
+        elif failed and locked and not lock_existed:  # ours, from a run that failed: not left behind
+            with contextlib.suppress(OSError):
+                path.unlink()
         os.close(fd)  # releases the lock

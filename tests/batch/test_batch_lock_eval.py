@@ -76,3 +76,12 @@ def test_missing_eval_inputs_and_bad_options_are_one_line_before_any_work(lab, s
 def test_eval_stages_are_listed_with_their_needs(lab):
     plan = _plan(lab, '"fuse", "eval-segment"')
     one_line_error(_batch(plan), "eval-segment needs segment")
+
+
+def test_a_run_refused_in_a_users_folder_leaves_nothing_there(lab):
+    out = lab / "out"
+    out.mkdir()
+    (out / "manifest.json").write_text("{}")  # the user's, not kinfu's
+    one_line_error(_batch(_plan(lab, '"poi"')), "manifest.json", "kinfu did not write")
+    assert sorted(p.name for p in out.iterdir()) == ["manifest.json"]  # no lock file left behind
+    assert (out / "manifest.json").read_text() == "{}"
