@@ -122,7 +122,7 @@ def main(argv: list[str] | None = None) -> int:
     exact, t_exact = timed(share_rolls=False) if a.exact else (fast, None)
     full, t_full = timed(share_rolls=False, restrict=False) if a.full else (None, None)
     print("  phase        wall s   CPU s   (best shared-rolls run)")
-    for ph in ("setup", "mark", "cast", "accumulate"):
+    for ph in ("setup", "mark", "march", "cast", "accumulate"):
         print(f"  {ph:11s} {phases['{}'].get(ph, 0.0):7.3f} {phases['{}'].get(ph + '_cpu', 0.0):7.3f}")
     sub = np.linspace(0, len(poses) - 1, a.ref_views).round().astype(int)
     reference_views(vol, poses[:1], CameraModel(50, 50, 15.5, 11.5, 32, 24), poi, 0.2)  # compile

@@ -20,6 +20,9 @@ voxels whose centre lies in the region S (centre, radius) and to hits at least `
               (occlusion-aware entropy, Isler et al. ICRA 2016; known voxels carry no entropy)
 Terms 2 and 3 need the ray to continue through unknown space (`through=True`).
 
+Rays do not walk the empty space before the scene alone: each 8 x 8 bundle of lattice rays marches its
+cone once (`_cone_starts`) until the cone comes near a non-empty voxel, and its rays start there.
+
 Camera rays of views that differ only by a roll about the optical axis (the paper's 8 rolls at each
 sphere position) are cast once per position on the first view's pixel lattice; every view then looks
 up its pixels' nearest lattice ray (`share_rolls`, exact for a single view or a roll that maps the
@@ -48,6 +51,7 @@ _CHUNK = 256  # rays per scheduling chunk of the caster (see _cast_lattice)
 _TILE = 16  # lattice tile side: rays are numbered tile by tile (see _mark_templates)
 _LANES = 32  # accumulation lanes of the caster (see _cast_lattice)
 FINE_CAP = 4  # cap of the voxel-level distances in mixed blocks (see _fill_bricks)
+_CONE = 8  # side (lattice cells) of the ray bundles that march their free start together (see _cone_starts)
 
 
 @dataclass
@@ -635,11 +639,12 @@ def _fill_templates(tlat, loff, lut, tcount, toff, tview, vtmpl, woff, Ms, win, 
 
 @njit(cache=True, parallel=True, error_model="numpy")
 def _cast_lattice(shape, bricks, code, SH, lo, vs, ray_off, gtmpl, toff, tdir, tview, woff, W, gview, R0s,
-                  t0s, tfree, min_range, max_range, cen, radius, through, optimistic, p_unknown, chunk, acc, steps):
+                  t0s, tcone, coff, cstart, min_range, max_range, cen, radius, through, optimistic, p_unknown, chunk,
+                  acc, steps):
     """Trace every ray of every group (its direction is its template's ray turned by the group's base
     pose, so no per-ray origin/direction arrays) and add its results, times its template's pixel weights,
-    to the sums of the group's views (columns gview[g] ... of acc, in the template's view order); a ray of
-    group g starts at tfree[g] (the space before it is EMPTY, see `_free_start`). Ray costs
+    to the sums of the group's views (columns gview[g] ... of acc, in the template's view order); a ray
+    starts where its bundle's cone leaves free space: cstart[coff[g] + tcone[e]] (`_cone_starts`). Ray costs
     differ by orders of magnitude (a free-space skip vs a walk through clutter) and numba splits a prange
     into one contiguous slice per thread, so the rays are cut into small chunks dealt round-robin to the
     lanes (acc's first axis, a fixed number so sums do not depend on the thread count): every thread gets
@@ -676,7 +681,7 @@ def _cast_lattice(shape, bricks, code, SH, lo, vs, ray_off, gtmpl, toff, tdir, t
                 c_, _t, v0, v1, v2, v3, nb, nf, nv = _trace(bricks, code, SH, n0, n1, n2, lx, ly, lz, vs,
                                                             t0s[g, 0], t0s[g, 1], t0s[g, 2], dx, dy, dz, min_range,
                                                             max_range, ccx, ccy, ccz, r2, through, optimistic,
-                                                            p_unknown, h, tfree[g])
+                                                            p_unknown, h, cstart[coff[g] + tcone[e]])
                 col = 3 if v0 != 0.0 else c_
                 K = tview[t + 1] - tview[t]
                 w0 = woff[t] + r * K
@@ -760,6 +765,157 @@ def _free_start_kernel(blocks, bs, lo, P, cen, r_ext, check, out):
         out[g] = best
 
 
+@njit(cache=True)
+def _bundle_cones(tdir, tcell, LW, side, ncu, cone, axis, chord):
+    """One template's ray bundles: each ray's bundle (`cone`, a square of side x side lattice cells), the
+    bundle's axis (unit mean direction) and its largest chord |u - axis| over its unit directions u, so a
+    ray point at distance s from the sensor lies within s * chord of the axis point at s. Empty bundles
+    keep a zero axis."""
+    axis[:] = 0.0
+    chord[:] = 0.0
+    for e in range(tdir.shape[0]):
+        k = (tcell[e] // LW) // side * ncu + (tcell[e] % LW) // side
+        cone[e] = k
+        axis[k, 0] += tdir[e, 0]
+        axis[k, 1] += tdir[e, 1]
+        axis[k, 2] += tdir[e, 2]
+    for k in range(axis.shape[0]):
+        n = math.sqrt(axis[k, 0] ** 2 + axis[k, 1] ** 2 + axis[k, 2] ** 2)
+        if n > 0.0:
+            axis[k, 0] /= n
+            axis[k, 1] /= n
+            axis[k, 2] /= n
+    for e in range(tdir.shape[0]):
+        k = cone[e]
+        c = math.sqrt((tdir[e, 0] - axis[k, 0]) ** 2 + (tdir[e, 1] - axis[k, 1]) ** 2 + (tdir[e, 2] - axis[k, 2]) ** 2)
+        chord[k] = max(chord[k], c)
+
+
+@njit(cache=True, parallel=True)
+def _cone_starts(bricks, code, SH, shape, lo, vs, gtmpl, R0s, t0s, tfree, tmax, ctoff, caxis, cchord, coff, out):
+    """Per group and ray bundle: a distance before which every voxel any of the bundle's rays crosses is
+    EMPTY, so each ray's walk starts there. From the group's free start (which must hold for the widest
+    cone towards S) the bundle's axis point p(s) marches on: the rays' points at distances in
+    [s, s + step] lie within (s + step) * chord + step of p(s), so the march may take a step whose ball
+    around p is free (`_free_radius`), less a thousandth of a voxel; where that is under half a voxel, a
+    half-voxel step whose box of voxels is all EMPTY (`_box_empty`). It stops at the first box that is
+    not: the cone then touches a non-empty voxel, and each ray walks the rest alone. No ray goes past
+    tmax (the range, or the farthest corner of the volume)."""
+    bs = vs * (1 << SH)
+    n = coff[-1]
+    for lane in prange(_LANES):  # bundles dealt round-robin: neighbours cost alike, groups do not
+        for q in range(lane, n, _LANES):
+            g = np.searchsorted(coff, q, side="right") - 1
+            c = ctoff[gtmpl[g]] + q - coff[g]
+            x, y, z = caxis[c, 0], caxis[c, 1], caxis[c, 2]
+            s = tfree[g]
+            if x != 0.0 or y != 0.0 or z != 0.0:
+                R = R0s[g]
+                ax = R[0, 0] * x + R[0, 1] * y + R[0, 2] * z
+                ay = R[1, 0] * x + R[1, 1] * y + R[1, 2] * z
+                az = R[2, 0] * x + R[2, 1] * y + R[2, 2] * z
+                ch = cchord[c] * (1.0 + 1e-9) + 1e-12
+                for _ in range(1024):
+                    if s >= tmax[g]:
+                        s = tmax[g]
+                        break
+                    px, py, pz = t0s[g, 0] + s * ax, t0s[g, 1] + s * ay, t0s[g, 2] + s * az
+                    step = (_free_radius(bricks, code, SH, shape, lo, vs, px, py, pz) - s * ch) / (1.0 + ch)
+                    step -= 1e-3 * vs
+                    if step < 0.5 * vs:
+                        # half a block if every block its box meets is free, else half a voxel if every
+                        # voxel its box meets is EMPTY
+                        step = 0.5 * bs
+                        if not _box_free(code, SH, lo, vs, px, py, pz, (s + step) * ch + step + 1e-3 * vs):
+                            step = 0.5 * vs
+                            if not _box_empty(bricks, code, SH, shape, lo, vs, px, py, pz,
+                                              (s + step) * ch + step + 1e-3 * vs):
+                                break
+                    s += step
+            out[q] = s
+
+
+@njit(cache=True, inline="always")
+def _free_radius(bricks, code, SH, shape, lo, vs, px, py, pz):
+    """A radius around p in which every voxel is EMPTY: outside the volume the distance to its box; in a
+    free block the distance to the faces of its all-EMPTY cube of blocks; on an EMPTY voxel of a mixed
+    block the distance to the faces of its cube of voxels (the brick's capped chessboard distance); 0
+    elsewhere."""
+    B = 1 << SH
+    fx, fy, fz = (px - lo[0]) / vs, (py - lo[1]) / vs, (pz - lo[2]) / vs
+    n0, n1, n2 = shape[0], shape[1], shape[2]
+    if fx < 0 or fy < 0 or fz < 0 or fx >= n0 or fy >= n1 or fz >= n2:
+        return math.sqrt(_gap(fx, 0.0, n0) + _gap(fy, 0.0, n1) + _gap(fz, 0.0, n2)) * vs
+    ix, iy, iz = min(int(fx), n0 - 1), min(int(fy), n1 - 1), min(int(fz), n2 - 1)
+    cd = code[ix >> SH, iy >> SH, iz >> SH]
+    if cd < 0:
+        # cube of blocks [b - D + 1, b + D - 1], in voxels
+        D = -np.int64(cd)
+        x0, y0, z0 = ((ix >> SH) - D + 1) * B, ((iy >> SH) - D + 1) * B, ((iz >> SH) - D + 1) * B
+        w = (2 * D - 1) * B
+    else:
+        M = B - 1
+        lab = bricks[(np.int64(cd) << (3 * SH)) + ((((ix & M) << SH) | (iy & M)) << SH) + (iz & M)]
+        if lab >= 0:
+            return 0.0
+        d = -np.int64(lab)
+        x0, y0, z0 = ix - d + 1, iy - d + 1, iz - d + 1
+        w = 2 * d - 1
+    r = min(min(fx - x0, x0 + w - fx), min(fy - y0, y0 + w - fy))
+    return min(r, min(fz - z0, z0 + w - fz)) * vs
+
+
+@njit(cache=True, inline="always")
+def _box_free(code, SH, lo, vs, px, py, pz, r):
+    """Whether every block meeting the cube of half-side r around p is free (outside the volume: free)."""
+    bs = vs * (1 << SH)
+    nbx, nby, nbz = code.shape
+    x0 = max(int(math.floor((px - r - lo[0]) / bs)), 0)
+    x1 = min(int(math.floor((px + r - lo[0]) / bs)), nbx - 1)
+    y0 = max(int(math.floor((py - r - lo[1]) / bs)), 0)
+    y1 = min(int(math.floor((py + r - lo[1]) / bs)), nby - 1)
+    z0 = max(int(math.floor((pz - r - lo[2]) / bs)), 0)
+    z1 = min(int(math.floor((pz + r - lo[2]) / bs)), nbz - 1)
+    for i in range(x0, x1 + 1):
+        for j in range(y0, y1 + 1):
+            for k in range(z0, z1 + 1):
+                if code[i, j, k] >= 0:
+                    return False
+    return True
+
+
+@njit(cache=True, inline="always")
+def _box_empty(bricks, code, SH, shape, lo, vs, px, py, pz, r):
+    """Whether every voxel meeting the cube of half-side r around p is EMPTY, block by block: free blocks
+    at once, single-label ones at once, mixed ones voxel by voxel from their bricks."""
+    B = 1 << SH
+    M = B - 1
+    i0 = max(int(math.floor((px - r - lo[0]) / vs)), 0)
+    i1 = min(int(math.floor((px + r - lo[0]) / vs)), shape[0] - 1)
+    j0 = max(int(math.floor((py - r - lo[1]) / vs)), 0)
+    j1 = min(int(math.floor((py + r - lo[1]) / vs)), shape[1] - 1)
+    k0 = max(int(math.floor((pz - r - lo[2]) / vs)), 0)
+    k1 = min(int(math.floor((pz + r - lo[2]) / vs)), shape[2] - 1)
+    if i0 > i1 or j0 > j1 or k0 > k1:
+        return True
+    for a in range(i0 >> SH, (i1 >> SH) + 1):
+        for b in range(j0 >> SH, (j1 >> SH) + 1):
+            for c in range(k0 >> SH, (k1 >> SH) + 1):
+                cd = code[a, b, c]
+                if cd < 0:
+                    continue
+                if cd == 1 or cd == 2:
+                    return False
+                base = np.int64(cd) << (3 * SH)
+                for i in range(max(i0, a << SH), min(i1, (a << SH) + M) + 1):
+                    for j in range(max(j0, b << SH), min(j1, (b << SH) + M) + 1):
+                        row = base + ((((i & M) << SH) | (j & M)) << SH)
+                        for k in range(max(k0, c << SH), min(k1, (c << SH) + M) + 1):
+                            if bricks[row + (k & M)] >= 0:
+                                return False
+    return True
+
+
 @dataclass
 class ViewRays:
     """Per-view sums over the pixels considered: counts (V, 3) of rays ending on unknown / occupied /
@@ -827,13 +983,16 @@ def _template_key(lat, cb, check, Ms, win) -> tuple:
 
 def cast_views(vol: RayVolume, poses: np.ndarray, camera, center, radius: float, *, through: bool = False,
                optimistic: bool = False, restrict: bool = True, share_rolls: bool = True, p_unknown: float = 0.5,
-               batch_cells: int = 12_000_000, progress_cb=None, timings: dict | None = None) -> ViewRays:
+               march: bool = True, batch_cells: int = 12_000_000, progress_cb=None,
+               timings: dict | None = None) -> ViewRays:
     """Cast the rays of every view (camera-to-world `poses` (V, 4, 4)) and sum them per view.
 
     `restrict`: only pixels whose ray passes within radius + half a voxel diagonal of `center` (the
     only ones that can add gain); the counts then cover those pixels. `share_rolls`: views that differ
     only by roll reuse the first view's rays (nearest lattice ray). `optimistic`: unknown voxels
-    outside S do not stop rays (see `cast_rays`). `progress_cb(n)` after each batch. `timings`: when a
+    outside S do not stop rays (see `cast_rays`). `march`: rays start where their bundle of 8 x 8
+    lattice rays first comes near a non-empty voxel (`_cone_starts`; the same sums, fewer steps) instead
+    of at their group's free start. `progress_cb(n)` after each batch. `timings`: when a
     dict, seconds per phase (setup, mark, cast, accumulate) are added to it (for the benchmark).
     """
     tick = _Ticker(timings)
@@ -873,12 +1032,12 @@ def cast_views(vol: RayVolume, poses: np.ndarray, camera, center, radius: float,
         used += lat[2] * lat[3]
         if used >= batch_cells:
             tick("setup")
-            _cast_batch(vol, cam, center, radius, r_ext, (through, optimistic), p_unknown, batch, cache, out,
+            _cast_batch(vol, cam, center, radius, r_ext, (through, optimistic, march), p_unknown, batch, cache, out,
                         progress_cb, tick)
             batch, used = [], 0
     tick("setup")
     if batch:
-        _cast_batch(vol, cam, center, radius, r_ext, (through, optimistic), p_unknown, batch, cache, out,
+        _cast_batch(vol, cam, center, radius, r_ext, (through, optimistic, march), p_unknown, batch, cache, out,
                     progress_cb, tick)
     return out
 
@@ -930,16 +1089,40 @@ def _build_templates(cam, r_ext, groups: list[_Group]) -> list[dict]:
     out = []
     for i, g in enumerate(groups):
         Wi = W[woff[i]:woff[i] + wsize[i]]
-        out.append({"n": int(tcount[i]), "K": int(K[i]), "dir": d[toff[i]:toff[i] + tcount[i]], "W": Wi,
-                    "npix": Wi.reshape(-1, K[i]).sum(axis=0, dtype=np.float64).round().astype(np.int64)})
+        di = d[toff[i]:toff[i] + tcount[i]]
+        ncu = -(-int(tlat[i, 2]) // _CONE)
+        nc = ncu * -(-int(tlat[i, 3]) // _CONE)
+        cone, axis, chord = np.empty(len(di), np.int32), np.empty((nc, 3)), np.empty(nc)
+        _bundle_cones(di, tcell[toff[i]:toff[i] + tcount[i]], int(tlat[i, 2]), _CONE, ncu, cone, axis, chord)
+        out.append({"n": int(tcount[i]), "K": int(K[i]), "dir": di, "W": Wi, "cone": cone, "axis": axis,
+                    "chord": chord, "npix": Wi.reshape(-1, K[i]).sum(axis=0, dtype=np.float64).round().astype(np.int64)})
     return out
+
+
+def _bundle_starts(vol, cam, center, r_ext, batch: list[_Group], tms: list[dict], gtmpl, march: bool):
+    """Where each group's ray bundles start (see `_cone_starts`): offsets of the groups' bundles and the
+    starts; without `march`, every bundle starts at its group's free start."""
+    R0s = np.array([g.R0 for g in batch], dtype=np.float64).reshape(-1, 3, 3)
+    t0s = np.array([g.t0 for g in batch], dtype=np.float64).reshape(-1, 3)
+    ncone = np.array([len(t["chord"]) for t in tms], dtype=np.int64)
+    ctoff = np.concatenate([[0], np.cumsum(ncone)]).astype(np.int64)
+    coff = np.concatenate([[0], np.cumsum(ncone[gtmpl])]).astype(np.int64)
+    tfree = _free_start(vol, t0s, center, r_ext, np.array([g.check for g in batch], dtype=np.bool_))
+    # no ray goes past the range or the volume's farthest corner
+    corners = vol.origin + np.stack(np.meshgrid([0, 1], [0, 1], [0, 1]), -1).reshape(-1, 3) * vol.shape * vol.voxel_size
+    tmax = np.minimum(np.linalg.norm(t0s[:, None] - corners[None], axis=2).max(axis=1), min(cam.max_range, 1e30))
+    cstart = np.empty(int(coff[-1]))
+    _cone_starts(vol.bricks, vol.block_code(), vol.shift, np.array(vol.shape, np.int64), vol.origin, vol.voxel_size,
+                 gtmpl, R0s, t0s, tfree, np.maximum(tmax, tfree) if march else tfree, ctoff,
+                 np.concatenate([t["axis"] for t in tms]), np.concatenate([t["chord"] for t in tms]), coff, cstart)
+    return coff, cstart
 
 
 def _cast_batch(vol, cam, center, radius, r_ext, flags, p_unknown, batch: list[_Group], cache: dict, out: ViewRays,
                 progress_cb, tick) -> None:
     """Cast one batch of groups: build the templates not cached yet, trace every group's rays, sum per
     view. The cache keeps only this batch's templates afterwards (a sphere's one template lives on)."""
-    through, optimistic = flags
+    through, optimistic, march = flags
     new: dict = {}
     for g in batch:
         if g.key not in cache and g.key not in new:
@@ -970,9 +1153,11 @@ def _cast_batch(vol, cam, center, radius, r_ext, flags, p_unknown, batch: list[_
     tick("mark")
     acc = np.zeros((_LANES, 7, len(views)), np.float64)
     steps = np.zeros((_LANES, 3), np.int64)
+    coff, cstart = _bundle_starts(vol, cam, center, r_ext, batch, tms, gtmpl, march)
+    tick("march")
     _cast_lattice(vol.shape, vol.bricks, vol.block_code(), vol.shift, vol.origin, vol.voxel_size,
                   ray_off, gtmpl, toff, tdir, tview, woff, W, gview, R0s, t0s,
-                  _free_start(vol, t0s, center, r_ext, np.array([g.check for g in batch], dtype=np.bool_)),
+                  np.concatenate([t["cone"] for t in tms]), coff, cstart,
                   cam.min_range,
                   min(cam.max_range, 1e30), center, float(radius), bool(through), bool(optimistic), float(p_unknown),
                   _CHUNK, acc, steps)

@@ -86,11 +86,52 @@ def test_view_sums_do_not_depend_on_block_size_and_skips_are_used():
     for r in runs[1:]:
         assert np.array_equal(runs[0].counts, r.counts) and np.array_equal(runs[0].rays, r.rays)
         assert np.allclose(runs[0].terms, r.terms, rtol=1e-12, atol=0)
-    r, plain = runs[1], runs[3]
+    r = runs[1]
     assert r.counts.sum() == r.rays.sum() and r.terms[:, 0].min() > 100
-    # the voxel-level skips replace most single-voxel steps near surfaces
-    assert r.fine_steps > 0 and plain.fine_steps == 0
-    assert r.voxel_steps + r.fine_steps < 0.8 * plain.voxel_steps
+    # each ray from its group's free start: the voxel-level skips replace most single-voxel steps near surfaces
+    walk, plain = (cast_views(RayVolume.from_grid(g, block=8, fine_cap=c), poses, cam, poi, 0.2, through=True,
+                              march=False) for c in (4, 1))
+    assert np.array_equal(walk.counts, r.counts) and np.allclose(walk.terms, r.terms, rtol=1e-12, atol=0)
+    assert walk.fine_steps > 0 and plain.fine_steps == 0
+    assert walk.voxel_steps + walk.fine_steps < 0.8 * plain.voxel_steps
+    # up to the first hit, the bundles' march takes more than half of the rays' empty-space skips
+    vol = RayVolume.from_grid(g)
+    a, b = (cast_views(vol, poses, cam, poi, 0.2, march=m) for m in (True, False))
+    assert np.array_equal(a.counts, b.counts) and np.allclose(a.terms, b.terms, rtol=1e-12, atol=0)
+    assert a.block_steps + a.fine_steps < 0.5 * (b.block_steps + b.fine_steps)
+
+
+def test_bundle_starts_lie_before_the_first_hit_of_each_of_their_rays():
+    """Every ray of a bundle starts at the bundle's march result: nothing non-empty may lie before it."""
+    from kinfu_cli.nbv import raycast
+
+    g, poi = cluttered_scene(seed=3)
+    vol = RayVolume.from_grid(g)
+    cam = CameraModel(220.0, 220.0, 127.5, 95.5, 256, 192, min_range=0.3, max_range=3.0)
+    poses = sphere_viewpoints(poi, 0.8, lon_step=90, lat_step=45, roll_step=180)
+    seen = {}
+
+    def spy(*args):
+        seen["args"] = args
+        return cast_lattice(*args)
+
+    cast_lattice = raycast._cast_lattice
+    raycast._cast_lattice = spy
+    try:
+        for group in raycast.group_views(poses):
+            for march in (True, False):
+                raycast.cast_views(vol, poses[group], cam, poi, 0.2, march=march)
+                a = seen["args"]
+                tdir, R0, t0, tcone, coff, cstart = a[9], a[14][0], a[15][0], a[16], a[17], a[18]
+                start = cstart[coff[0] + tcone]
+                hit = cast_rays(vol, t0, tdir @ R0.T, center=poi, radius=0.2).t
+                assert np.all(hit >= start)
+                f = np.isfinite(hit)
+                seen.setdefault(march, []).append(np.median(hit[f] - start[f]) / vol.voxel_size)
+    finally:
+        raycast._cast_lattice = cast_lattice
+    # not trivial: a typical ray starts a few voxels from its hit, much nearer than its group's free start
+    assert np.median(seen[True]) < 4 and np.median(seen[True]) < 0.5 * np.median(seen[False])
 
 
 def test_block_must_be_a_power_of_two():
