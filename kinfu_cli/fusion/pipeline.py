@@ -52,6 +52,11 @@ DROP_LOST = "tracking lost (not fused)"
 # size 'auto' without camera poses (icp from the first frame): the first frame's box, grown by this share of its
 # extent on each side, for what the camera turns to later (the face-contact warning says when it was not enough)
 ICP_GROW = 0.5
+# tracked poses farther than this (RMS over the frames) from the recording's own camera poses are reported: KinFu's
+# tracking is good to about 1 cm (7-Scenes frames 0-59: 0.67 cm), and 2 cm already blurs a 6 mm grid by 3 voxels
+DRIFT_WARN_M = 0.02
+# more than this share of tracked frames found only by the wider re-localisation search is reported (7-Scenes: 0)
+RELOCALISED_WARN = 0.2
 
 
 @dataclass
@@ -246,6 +251,7 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
             why = "; ".join(f"{k}: {v}" for k, v in dropped.items()) or "no depth frames in the selection"
             raise RecordingError(f"{rec.path}: no usable depth frames ({why})")
         warnings += _tracking_verdict(integrator, max_lost, str(rec.path))
+        warnings += _tracking_doubts(integrator.track_log)
         vol = integrator.volume
         vol.frame = vol.frame or plan.world
 
@@ -378,6 +384,37 @@ def _tracking_verdict(integrator: _Integrator, max_lost: float, recording: str,
         raise RecordingError(f"{recording}: {what}; more than the {100 * max_lost:.0f} % allowed (sub-sample "
                              f"less, or give camera poses)", parameter="max_lost")
     return [f"{what}; they were not fused"]
+
+
+def _tracking_doubts(track_log: list[dict]) -> list[str]:
+    """Warnings when tracked poses look wrong although no frame was lost: far from the recording's own camera
+    poses, or found mostly by the re-localisation search (the first ICP attempt failed). Both come with the
+    tracked camera's median motion per frame, since frame-to-model ICP assumes small steps."""
+    kept = [t for t in track_log if not t["lost"]]
+    if not kept:
+        return []
+    T = np.array([t["T_world_camera"] for t in kept], dtype=np.float64)
+    step = ""
+    if len(T) > 1:
+        move = np.linalg.norm(np.diff(T[:, :3, 3], axis=0), axis=1)
+        cos = (np.einsum("nij,nij->n", T[1:, :3, :3], T[:-1, :3, :3]) - 1.0) / 2.0
+        turn = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+        step = f"; the tracked camera moves a median {100 * np.median(move):.1f} cm / {np.median(turn):.1f} deg per frame"
+    out = []
+    dev = np.array([t["given_minus_tracked_m"] for t in kept if t.get("given_minus_tracked_m") is not None])
+    if len(dev) and np.sqrt(np.mean(dev ** 2)) > DRIFT_WARN_M:
+        worst = max((t for t in kept if t.get("given_minus_tracked_m") is not None),
+                    key=lambda t: t["given_minus_tracked_m"])
+        out.append(f"tracked camera poses lie {100 * np.sqrt(np.mean(dev ** 2)):.1f} cm RMS from the recording's own "
+                   f"poses (max {100 * worst['given_minus_tracked_m']:.1f} cm at frame {worst['index']}): tracking "
+                   f"drifted or the camera moves too fast for frame-to-model ICP{step}; the recorded poses "
+                   f"(pose 'forced') may serve better")
+        step = ""
+    reloc = sum(bool(t.get("relocalised")) for t in kept)
+    if reloc > RELOCALISED_WARN * len(kept):
+        out.append(f"{reloc} of {len(kept)} tracked frames were found only by the wider re-localisation search (the "
+                   f"first ICP attempt failed): their poses are uncertain{step}")
+    return out
 
 
 def _face_warnings(faces: dict[str, int]) -> list[str]:
