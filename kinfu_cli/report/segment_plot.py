@@ -97,6 +97,11 @@ def plot_segments(result: SegmentResult, outdir: str | os.PathLike) -> dict[str,
                     if isinstance(fit, SuperquadricFit):
                         sp = fit.superquadric.sample_surface(400, 0)[0] @ basis.T
                         ax.scatter(sp[:, i], sp[:, j], s=0.3, c="k", alpha=0.3, linewidths=0)
+            # the scene's extent: a superquadric fitted to a wall may reach metres past it
+            for lim, k in ((ax.set_xlim, i), (ax.set_ylim, j)):
+                lo, hi = float(pts[:, k].min()), float(pts[:, k].max())
+                pad = max(0.05 * (hi - lo), 0.02)
+                lim(lo - pad, hi + pad)
             ax.set_aspect("equal")
             ax.set_title(title)
             ax.set_xlabel(axes.names[i] + " (m)")

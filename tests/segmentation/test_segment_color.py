@@ -106,3 +106,35 @@ def test_plots_view_along_the_volume_up_with_colour_bars_and_labels_apart(tmp_pa
     boxes = place_labels(ax, [(0.5, 0.5 + 0.002 * i, f"{i}: 0.{i}") for i in range(12)])  # 12 labels, one spot
     assert not any(boxes[i].overlaps(boxes[j]) for i in range(12) for j in range(i))
     plt.close(fig)
+
+
+def test_plot_axes_follow_the_scene_not_an_oversized_superquadric(tmp_path, monkeypatch):
+    """A superquadric fitted to a wall may reach metres past the scene; the panels keep the scene's extent."""
+    import dataclasses
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from kinfu_cli.report.segment_plot import plot_segments
+    from kinfu_cli.segmentation.superquadric import Superquadric, SuperquadricFit
+
+    pts, nrm, col, _ = block_scene()
+    res = analyse_cloud(pts, nrm, SegmentOptions(superquadrics=False), colors=col)
+    sid = res.saliency[0].id
+    huge = Superquadric(np.array([4.0, 4.0, 4.0]), np.array([0.5, 0.5]), pts.mean(axis=0), np.eye(3))
+    res = dataclasses.replace(res, superquadrics={sid: SuperquadricFit(huge, 0.0, 0.0, 10, 10, 0, 0.0, True)})
+    made = []
+    subplots = plt.subplots
+
+    def spy(*a, **k):
+        fig, axes = subplots(*a, **k)
+        made.append(axes)
+        return fig, axes
+
+    monkeypatch.setattr(plt, "subplots", spy)
+    plot_segments(res, tmp_path)
+    span = np.ptp(pts, axis=0).max()
+    for ax in made[0]:
+        assert np.ptp(ax.get_xlim()) < 1.5 * span + 0.05 and np.ptp(ax.get_ylim()) < 1.5 * span + 0.05
