@@ -79,6 +79,7 @@ class SegmentationParams:
     cut_min_ratio: float = 0.4
     cut_candidates: int = 200
     cut_rounds: int = 3
+    step_min_height: float = 0.01  # step cuts (step 4c): two tops this far apart (m); 0 = off
     cut_max_size: float = 0.4  # only segments whose box diagonal is at most this are cut (m): two graspable
     # objects side by side; a large concave thing (a box on its side, a shelf) keeps its inner corners (chosen on
     # rgbd-tabletop-box: its cuts were all in segments of 0.45-0.6 m; the synth merged twins and stacks are 0.3 m)
@@ -460,6 +461,81 @@ def concave_plane_cuts(points: np.ndarray, normals: np.ndarray, seg: np.ndarray,
     return _components(len(points), pairs[keep]), cuts
 
 
+def _step_plane(x: np.ndarray, nx: np.ndarray, h: np.ndarray, up: np.ndarray, params: SegmentationParams
+                ) -> tuple[np.ndarray, np.ndarray] | None:
+    """(origin, normal) of the step face between two tops of one segment (points x, normals nx, heights over the
+    support h), or None: the segment's up-facing points, off the support, fall into two levels at least
+    `step_min_height` apart (largest gap in their heights), and a vertical face rising from the lower level has
+    the whole lower top in front of it and the whole upper top behind it (two boxes of different heights side by
+    side; a box on another has its base's top around it, so no face plane parts the two tops)."""
+    cos = np.cos(np.radians(20.0))
+    tol = params.plane_distance / 2
+    top = np.flatnonzero((nx @ up >= cos) & (h > 2 * params.plane_distance))
+    need = max(5, params.min_segment_points // 5)
+    if len(top) < 2 * need:
+        return None
+    order = top[np.argsort(h[top], kind="stable")]
+    gaps = np.diff(h[order])
+    gaps[:need - 1] = 0
+    gaps[len(gaps) - need + 1:] = 0
+    g = int(np.argmax(gaps))
+    if gaps[g] < params.step_min_height:
+        return None
+    low, high = order[:g + 1], order[g + 1:]
+    h_low, h_high = float(np.median(h[low])), float(np.median(h[high]))
+    # candidate step directions: the horizontal part of the normals between the two levels (the step face, bent by
+    # the TSDF at its crease and edge); the one parting the two tops with the widest margin wins
+    side = np.flatnonzero((nx @ up < cos) & (h > h_low + tol) & (h < h_high - tol))
+    n = nx[side] - np.outer(nx[side] @ up, up)
+    norm = np.linalg.norm(n, axis=1)
+    n = n[norm >= 0.3] / norm[norm >= 0.3, None]
+    if len(n) < need:
+        return None
+    lo = np.percentile(x[low] @ n.T, 5, axis=0)  # the lower top lies in front of the step face
+    hi = np.percentile(x[high] @ n.T, 95, axis=0)  # the upper top behind it
+    j = int(np.argmax(lo - hi))
+    if lo[j] - hi[j] < -tol:
+        return None
+    return n[j] * (lo[j] + hi[j]) / 2, n[j]
+
+
+def step_cuts(points: np.ndarray, normals: np.ndarray, seg: np.ndarray, pairs: np.ndarray, plane: np.ndarray,
+              params: SegmentationParams) -> tuple[np.ndarray, int]:
+    """(segments, cuts): a segment of at most `cut_max_size` whose top has two levels parted by a vertical step
+    face (`_step_plane`) is cut along that face's plane when both pieces stand on the support and the smaller
+    holds >= `cut_min_ratio` of the larger. For touching boxes whose front and back faces are one plane: the
+    concave crease at the step is too short a share of the seam for the face-plane cut."""
+    if not params.step_min_height or not (seg >= 0).any():
+        return seg, 0
+    up = plane[:3]
+    h = points @ up + plane[3]
+    seg = seg.copy()
+    cuts = 0
+    grounded = h < 2 * params.plane_distance
+    for s in np.unique(seg[seg >= 0]):
+        idx = np.flatnonzero(seg == s)
+        x = points[idx]
+        if len(idx) < 2 * params.min_segment_points or np.linalg.norm(np.ptp(x, axis=0)) > params.cut_max_size:
+            continue
+        found = _step_plane(x, normals[idx], h[idx], up, params)
+        if found is None:
+            continue
+        plus = (x - found[0]) @ found[1] > params.plane_distance / 2
+        n_plus = int(plus.sum())
+        small, large = min(n_plus, len(idx) - n_plus), max(n_plus, len(idx) - n_plus)
+        if small < max(params.min_segment_points, params.cut_min_ratio * large):
+            continue
+        if not (grounded[idx][plus].any() and grounded[idx][~plus].any()):
+            continue
+        seg[idx[plus]] = seg.max() + 1
+        cuts += 1
+    if cuts:
+        keep = seg[pairs[:, 0]] == seg[pairs[:, 1]]
+        comp = _components(len(points), pairs[keep])
+        seg = np.where(seg >= 0, comp, -1)
+    return seg, cuts
+
+
 def _absorb_small(seg: np.ndarray, pairs: np.ndarray, min_points: int) -> np.ndarray:
     """Segments smaller than min_points join the large segment they share most point pairs with. Fragments that
     touch no large segment merge with the fragments they touch, and the merged piece is kept when it reaches
@@ -631,6 +707,8 @@ def segment_cloud(points: np.ndarray, normals: np.ndarray, params: SegmentationP
     else:
         seg, sv, grow = lccp_segments(P, N, pairs, params, C)
         seg, grow["plane_cuts"] = concave_plane_cuts(P, N, seg, pairs, params)
+        if plane is not None:
+            seg, grow["step_cuts"] = step_cuts(P, N, seg, pairs, plane, params)
         k = int(sv.max()) + 1
         sv_all[rest] = sv
     stats.update(grow)
