@@ -84,9 +84,8 @@ class SegmentationParams:
     # 0.3 / 0.35 / 0.4 / 0.45 gave boundary F 0.835 / 0.854 / 0.858 / 0.848, object recall 0.90 / 0.93 / 0.96 / 0.92
     cut_concave_fraction: float | None = 0.4
     cut_min_angle_deg: float = 30.0
-    cut_min_ratio: float = 0.45  # 0.4 until the step cuts; tuning seeds 0, 1, 8-19 (mode, mean object recall):
-    # 0.4 0.982 / 0.973, 0.45 0.982 / 0.982, 0.5 0.973 / 0.973, 0.55 0.964 / 0.964 (a mug cut into body + handle with
-    # a slice of the body at 0.40; touching boxes are 0.5-0.9)
+    cut_min_ratio: float = 0.4  # tuning seeds 0, 1, 8-19 (object recall mode / mean): 0.4 0.982 / 0.973, 0.45 0.982 /
+    # 0.982 (a mug cut with a slice of its body at 0.40), but a box on a box in test_segment's primitive scene is 0.449
     cut_candidates: int = 200
     cut_rounds: int = 3
     # step cuts (step 4a): two tops at least this far apart (largest gap of the up-facing heights, m); 0 = off

@@ -77,8 +77,7 @@ def _box_labels(seg, box):
     """Object labels of the points strictly inside one box's faces (1 cm in from its edges)."""
     lo, hi = np.asarray(box[0]), np.asarray(box[1])
     own = np.all((seg.points >= lo) & (seg.points <= hi), axis=1) & (seg.labels > 0)
-    own &= np.all((seg.points[:, :2] > lo[:2] + 0.01) & (seg.points[:, :2] < hi[:2] - 0.01), axis=1) | \
-        (seg.points[:, 2] > hi[2] - 1e-9)
+    own &= np.all((seg.points[:, :2] > lo[:2] + 0.01) & (seg.points[:, :2] < hi[:2] - 0.01), axis=1)
     return seg.labels[own]
 
 
