@@ -375,14 +375,15 @@ def bench_objects(tuning=OBJECTS_TUNING, held_out=OBJECTS_HELD_OUT, colours=("mo
             p, rc = (float(np.mean([r[k] for r in rows])) for k in ("boundary_precision", "boundary_recall"))
             summary = {"seeds": list(seeds), "boundary_precision": p, "boundary_recall": rc,
                        "boundary_f": 2 * p * rc / max(p + rc, 1e-12), "bce": float(np.mean([r["bce"] for r in rows])),
-                       "object_recall": sum(r["objects_found"] for r in rows) / max(sum(r["objects_total"] for r in rows), 1),
+                       "object_recall": (sum(r["objects_found"] for r in rows)
+                                         / max(sum(r["objects_total"] for r in rows), 1)),
                        "scenes": rows}
             out["groups"][f"{group} {colour}"] = summary
     log("| seeds, colour | P / R at 2 cm | F | BCE | object recall |")
     log("|---|---|---|---|---|")
     for name, g in out["groups"].items():
-        log(f"| {name} ({','.join(map(str, g['seeds']))}) | {g['boundary_precision']:.3f} / {g['boundary_recall']:.3f} "
-            f"| {g['boundary_f']:.3f} | {g['bce']:.3f} | {g['object_recall']:.3f} |")
+        log(f"| {name} ({','.join(map(str, g['seeds']))}) | {g['boundary_precision']:.3f} / "
+            f"{g['boundary_recall']:.3f} | {g['boundary_f']:.3f} | {g['bce']:.3f} | {g['object_recall']:.3f} |")
     return out
 
 
