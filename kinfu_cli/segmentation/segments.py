@@ -417,14 +417,15 @@ def _best_face_cut(points: np.ndarray, normals: np.ndarray, idx: np.ndarray, seg
     best_share, best_side = 0.0, None
     for c0 in range(0, len(planes), chunk):
         p = planes[c0:c0 + chunk]
-        plus = np.einsum("ijk,jk->ij", x[:, None, :] - points[p][None], normals[p]) > tol
+        dist = x @ normals[p].T - np.einsum("ij,ij->i", points[p], normals[p])  # (points, planes) signed
+        plus = dist > tol
         n_plus = plus.sum(axis=0)
         small = np.minimum(n_plus, n_seg - n_plus)
         large = np.maximum(n_plus, n_seg - n_plus)
         ok = small >= np.maximum(params.min_segment_points, params.cut_min_ratio * large)
-        if params.cut_face_points > 0:  # the plane must be a face's: enough points on it near the candidate
-            near = np.linalg.norm(x[:, None, :] - points[p][None], axis=2) <= CUT_FACE_RADIUS
-            on = near & ~plus & (np.einsum("ijk,jk->ij", x[:, None, :] - points[p][None], normals[p]) >= -tol)
+        if params.cut_face_points > 0 and ok.any():  # the plane must be a face's: points on it near the candidate
+            sq = (x * x).sum(axis=1)[:, None] - 2 * x @ points[p].T + (points[p] * points[p]).sum(axis=1)
+            on = (sq <= CUT_FACE_RADIUS ** 2) & (np.abs(dist) <= tol)
             on &= normals[idx] @ normals[p].T >= np.cos(np.radians(20.0))
             ok &= on.sum(axis=0) >= params.cut_face_points
         if not ok.any():
@@ -540,11 +541,17 @@ def step_cuts(points: np.ndarray, normals: np.ndarray, seg: np.ndarray, pairs: n
     seg = seg.copy()
     cuts = 0
     grounded = h < 2 * params.plane_distance
-    for s in np.unique(seg[seg >= 0]):
-        idx = np.flatnonzero(seg == s)
+    k = int(seg.max()) + 1
+    valid = np.flatnonzero(seg >= 0)
+    order = valid[np.argsort(seg[valid], kind="stable")]  # points grouped by segment, once
+    start = np.searchsorted(seg[order], np.arange(k + 1))
+    ext = np.stack([np.full((k, 3), np.inf), np.full((k, 3), -np.inf)])
+    np.minimum.at(ext[0], seg[valid], points[valid])
+    np.maximum.at(ext[1], seg[valid], points[valid])
+    small_enough = np.linalg.norm(ext[1] - ext[0], axis=1) <= params.cut_max_size
+    for s in np.flatnonzero(small_enough & (np.diff(start) >= 2 * params.min_segment_points)):
+        idx = order[start[s]:start[s + 1]]
         x = points[idx]
-        if len(idx) < 2 * params.min_segment_points or np.linalg.norm(np.ptp(x, axis=0)) > params.cut_max_size:
-            continue
         found = _step_plane(x, normals[idx], h[idx], up, params)
         if found is None:
             continue

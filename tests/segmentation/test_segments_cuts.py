@@ -1,5 +1,6 @@
 """Concave plane cuts (segments.concave_plane_cuts): two touching same-colour boxes whose front faces are one
-plane are one LCCP segment; the cut along the taller box's face separates them."""
+plane are one LCCP segment; the cut along the taller box's face separates them. Step cuts (segments.step_cuts):
+the step between their tops separates them too; a box on a box and two boxes of one height are not step-cut."""
 
 from __future__ import annotations
 
