@@ -445,9 +445,9 @@ def _best_face_cut(points: np.ndarray, normals: np.ndarray, idx: np.ndarray, seg
 
 
 def concave_plane_cuts(points: np.ndarray, normals: np.ndarray, seg: np.ndarray, pairs: np.ndarray,
-                       params: SegmentationParams, keep: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+                       params: SegmentationParams, skip: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """(segments after the concave plane cuts, number of cuts): module docstring, step 4b. seg: segment per
-    point (>= 0); pairs: point pairs closer than adjacency_radius; keep: points whose segments are not cut (the
+    point (>= 0); pairs: point pairs closer than adjacency_radius; skip: points whose segments are not cut (the
     step cuts' pieces). The pieces are re-split into connected parts.
     Points and pairs are grouped by segment once per round (a cut only relabels its own segment's points)."""
     if not params.cut_concave_fraction or params.cut_rounds == 0 or len(pairs) == 0:  # None or 0: off
@@ -475,7 +475,7 @@ def concave_plane_cuts(points: np.ndarray, normals: np.ndarray, seg: np.ndarray,
         e_start = np.searchsorted(a[e_order], np.arange(k + 1))
         before = cuts
         for s in hit:
-            if n_conc[s] < 3 or diag[s] > params.cut_max_size or (keep is not None and keep[p_order[p_start[s]]]):
+            if n_conc[s] < 3 or diag[s] > params.cut_max_size or (skip is not None and skip[p_order[p_start[s]]]):
                 continue
             idx = p_order[p_start[s]:p_start[s + 1]]
             e = e_order[e_start[s]:e_start[s + 1]]
