@@ -27,6 +27,14 @@ numpy/scipy/open3d:
    `cut_min_angle_deg`), and the smaller piece holds at least `cut_min_ratio` of the larger (a mug's handle, one
    fifth of the body, is a part, not an object); up to `cut_rounds` rounds, the best of `cut_candidates` sampled
    face planes per segment and round; only segments whose bounding-box diagonal is at most `cut_max_size`.
+4a. Step cuts (before 4b; not in the thesis): two touching boxes of different heights whose front and back faces are one
+   plane show the concave crease only along the step, too short a share of the seam for 4b. A segment (at most
+   `cut_max_size`) whose up-facing points form two levels at least `step_min_height` apart, with a vertical plane
+   (from the normals between the levels) that has the whole lower top in front and the whole upper top behind,
+   is cut along that plane when both pieces stand on the support and the smaller holds >= `cut_min_ratio` of
+   the larger (a box on a larger box has the base's top all round it, so no such plane exists). The pieces are
+   not cut again in 4b: its best face plane for such a pair can be the lower box's top, which also leaves two
+   convex boxes, one of them floating.
 5. Segments that stay within 2 x `plane_distance` of the support plane (its edges and sides) join it.
 5b. Fragments: a segment under `fragment_points` whose border points lie mostly (>= `fragment_share`) against one
    larger object segment is a piece of it and joins it; a small object on the support borders mostly the plane
@@ -55,6 +63,7 @@ METHODS = ("lccp", "flood-fill")
 # an object point near the support plane joins it when its colour is this much nearer the plane's mean colour
 # than its segment's (tuned on synth seeds 0-3: 1.0 / 0.5 / 0.3 gave boundary P 0.931 / 0.954 / 0.929)
 PLANE_COLOR_RATIO = 0.5
+CUT_FACE_RADIUS = 0.03  # face-plane cuts: the face's points are counted within this of the candidate point (m)
 
 
 @dataclass
@@ -76,9 +85,19 @@ class SegmentationParams:
     # 0.3 / 0.35 / 0.4 / 0.45 gave boundary F 0.835 / 0.854 / 0.858 / 0.848, object recall 0.90 / 0.93 / 0.96 / 0.92
     cut_concave_fraction: float | None = 0.4
     cut_min_angle_deg: float = 30.0
-    cut_min_ratio: float = 0.4
+    cut_min_ratio: float = 0.4  # tuning seeds 0, 1, 8-19 (object recall mode / mean): 0.4 0.982 / 0.973, 0.45 0.982 /
+    # 0.982 (a mug cut with a slice of its body at 0.40), but a box on a box in test_segment's primitive scene is 0.449
     cut_candidates: int = 200
     cut_rounds: int = 3
+    # step cuts (step 4a): two tops at least this far apart (largest gap of the up-facing heights, m); 0 = off.
+    # Tuning seeds 0, 1, 8-19, object recall mode / mean: off 0.946 / 0.946, 0.005 and 0.01 0.982 / 0.982, 0.015
+    # 0.973 / 0.973, 0.02 0.955 / 0.955 (the TSDF rounds a step, so the gap is less than the step)
+    step_min_height: float = 0.01
+    # the cut plane must be a face's: >= this many points of the segment on it (within plane_distance / 2, normals
+    # within 20 deg) within CUT_FACE_RADIUS of the candidate point (0 = off). The cuts made on tuning seeds 0, 1,
+    # 8-19 had 6-17 such points, a mug cut through its body at a handle point 2; 3 / 4 / 5 / 6 / 8 gave object
+    # recall (mode, mean) 0.982 / 0.982, 0.973 / 0.973, 0.982 / 0.982, 0.982 / 0.982, 0.982 / 0.982
+    cut_face_points: int = 5
     cut_max_size: float = 0.4  # only segments whose box diagonal is at most this are cut (m): two graspable
     # objects side by side; a large concave thing (a box on its side, a shelf) keeps its inner corners (chosen on
     # rgbd-tabletop-box: its cuts were all in segments of 0.45-0.6 m; the synth merged twins and stacks are 0.3 m)
@@ -127,6 +146,8 @@ class SegmentationParams:
         check_number(self.cut_candidates, "cut_candidates", 1, 10_000, integer=True)
         check_number(self.cut_rounds, "cut_rounds", 0, 100, integer=True)
         check_number(self.cut_max_size, "cut_max_size", 0, 100, unit="m")
+        check_number(self.cut_face_points, "cut_face_points", 0, 10 ** 6, integer=True)
+        check_number(self.step_min_height, "step_min_height", 0, 10, unit="m")
         check_number(self.sanity_angle_deg, "sanity_angle_deg", 0, 180, unit="degrees")
         check_number(self.seed, "seed", 0, 2 ** 32 - 1, integer=True)
         check_number(self.fragment_points, "fragment_points", 0, 10 ** 9, integer=True)
@@ -379,14 +400,15 @@ def _concave_pairs(points: np.ndarray, normals: np.ndarray, pairs: np.ndarray, m
 
 
 def _best_face_cut(points: np.ndarray, normals: np.ndarray, idx: np.ndarray, seg_pairs: np.ndarray,
-                   concave: np.ndarray, params: SegmentationParams, rng: np.random.Generator, chunk: int = 64
-                   ) -> tuple[float, np.ndarray | None]:
+                   concave: np.ndarray, params: SegmentationParams, rng: np.random.Generator, chunk: int = 64,
+                   planes: np.ndarray | None = None) -> tuple[float, np.ndarray | None]:
     """(concave share of the separated pairs, mask over the points of the + side) of the best face plane among
     `cut_candidates` concave pairs of one segment (points idx, its pairs seg_pairs), or (0, None). The planes
     are scored `chunk` at a time as (points x planes) side matrices; ties go to the first plane sampled."""
     cand = seg_pairs[concave]
     tol = params.plane_distance / 2  # the face's own points, within noise of its plane, stay on its side
-    planes = cand[rng.choice(len(cand), size=min(params.cut_candidates, len(cand)), replace=False)].ravel()
+    if planes is None:  # else: the given points' planes
+        planes = cand[rng.choice(len(cand), size=min(params.cut_candidates, len(cand)), replace=False)].ravel()
     loc = np.full(len(points), -1, dtype=np.int64)
     loc[idx] = np.arange(len(idx))
     pa, pb = loc[seg_pairs[:, 0]], loc[seg_pairs[:, 1]]
@@ -395,11 +417,17 @@ def _best_face_cut(points: np.ndarray, normals: np.ndarray, idx: np.ndarray, seg
     best_share, best_side = 0.0, None
     for c0 in range(0, len(planes), chunk):
         p = planes[c0:c0 + chunk]
-        plus = np.einsum("ijk,jk->ij", x[:, None, :] - points[p][None], normals[p]) > tol
+        dist = x @ normals[p].T - np.einsum("ij,ij->i", points[p], normals[p])  # (points, planes) signed
+        plus = dist > tol
         n_plus = plus.sum(axis=0)
         small = np.minimum(n_plus, n_seg - n_plus)
         large = np.maximum(n_plus, n_seg - n_plus)
         ok = small >= np.maximum(params.min_segment_points, params.cut_min_ratio * large)
+        if params.cut_face_points > 0 and ok.any():  # the plane must be a face's: points on it near the candidate
+            sq = (x * x).sum(axis=1)[:, None] - 2 * x @ points[p].T + (points[p] * points[p]).sum(axis=1)
+            on = (sq <= CUT_FACE_RADIUS ** 2) & (np.abs(dist) <= tol)
+            on &= normals[idx] @ normals[p].T >= np.cos(np.radians(20.0))
+            ok &= on.sum(axis=0) >= params.cut_face_points
         if not ok.any():
             continue
         plus = plus[:, ok]
@@ -417,9 +445,10 @@ def _best_face_cut(points: np.ndarray, normals: np.ndarray, idx: np.ndarray, seg
 
 
 def concave_plane_cuts(points: np.ndarray, normals: np.ndarray, seg: np.ndarray, pairs: np.ndarray,
-                       params: SegmentationParams) -> tuple[np.ndarray, int]:
+                       params: SegmentationParams, skip: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """(segments after the concave plane cuts, number of cuts): module docstring, step 4b. seg: segment per
-    point (>= 0); pairs: point pairs closer than adjacency_radius. The pieces are re-split into connected parts.
+    point (>= 0); pairs: point pairs closer than adjacency_radius; skip: points whose segments are not cut (the
+    step cuts' pieces). The pieces are re-split into connected parts.
     Points and pairs are grouped by segment once per round (a cut only relabels its own segment's points)."""
     if not params.cut_concave_fraction or params.cut_rounds == 0 or len(pairs) == 0:  # None or 0: off
         return seg, 0
@@ -446,7 +475,7 @@ def concave_plane_cuts(points: np.ndarray, normals: np.ndarray, seg: np.ndarray,
         e_start = np.searchsorted(a[e_order], np.arange(k + 1))
         before = cuts
         for s in hit:
-            if n_conc[s] < 3 or diag[s] > params.cut_max_size:
+            if n_conc[s] < 3 or diag[s] > params.cut_max_size or (skip is not None and skip[p_order[p_start[s]]]):
                 continue
             idx = p_order[p_start[s]:p_start[s + 1]]
             e = e_order[e_start[s]:e_start[s + 1]]
@@ -458,6 +487,102 @@ def concave_plane_cuts(points: np.ndarray, normals: np.ndarray, seg: np.ndarray,
             break
     keep = seg[pairs[:, 0]] == seg[pairs[:, 1]]
     return _components(len(points), pairs[keep]), cuts
+
+
+def _step_plane(x: np.ndarray, nx: np.ndarray, h: np.ndarray, up: np.ndarray, params: SegmentationParams
+                ) -> tuple[np.ndarray, np.ndarray] | None:
+    """(origin, normal) of the step face between two tops of one segment (points x, normals nx, heights over the
+    support h), or None: the segment's up-facing points, off the support, fall into two levels at least
+    `step_min_height` apart (largest gap in their heights), and a vertical face rising from the lower level has
+    the whole lower top in front of it and the whole upper top behind it (two boxes of different heights side by
+    side; a box on another has its base's top around it, so no face plane parts the two tops)."""
+    cos = np.cos(np.radians(20.0))
+    tol = params.plane_distance / 2
+    top = np.flatnonzero((nx @ up >= cos) & (h > 2 * params.plane_distance))
+    need = max(5, params.min_segment_points // 5)
+    if len(top) < 2 * need:
+        return None
+    order = top[np.argsort(h[top], kind="stable")]
+    gaps = np.diff(h[order])
+    gaps[:need - 1] = 0
+    gaps[len(gaps) - need + 1:] = 0
+    g = int(np.argmax(gaps))
+    if gaps[g] < params.step_min_height:
+        return None
+    low, high = order[:g + 1], order[g + 1:]
+    h_low, h_high = float(np.median(h[low])), float(np.median(h[high]))
+    # candidate step directions: the horizontal part of the normals between the two levels (the step face, bent by
+    # the TSDF at its crease and edge); the one parting the two tops with the widest margin wins
+    side = np.flatnonzero((nx @ up < cos) & (h > h_low + tol) & (h < h_high - tol))
+    n = nx[side] - np.outer(nx[side] @ up, up)
+    norm = np.linalg.norm(n, axis=1)
+    n = n[norm >= 0.3] / norm[norm >= 0.3, None]
+    if len(n) < need:
+        return None
+    lo = np.percentile(x[low] @ n.T, 5, axis=0)  # the lower top lies in front of the step face
+    hi = np.percentile(x[high] @ n.T, 95, axis=0)  # the upper top behind it
+    j = int(np.argmax(lo - hi))
+    if lo[j] - hi[j] < -tol:
+        return None
+    return n[j] * (lo[j] + hi[j]) / 2, n[j]
+
+
+def step_cuts(points: np.ndarray, normals: np.ndarray, seg: np.ndarray, pairs: np.ndarray, plane: np.ndarray,
+              params: SegmentationParams) -> tuple[np.ndarray, int, np.ndarray]:
+    """(segments, cuts, mask of the points of the segments cut): module docstring, step 4a. A segment of at most
+    `cut_max_size` whose top has two levels parted by a vertical step (`_step_plane`) is cut along the step face's
+    plane (the best face-plane cut among its concave points facing along the step, else the plane midway between
+    the tops) when both pieces stand on the support and the smaller holds >= `cut_min_ratio` of the larger."""
+    stepped = np.zeros(len(seg), dtype=bool)
+    if not params.step_min_height or not (seg >= 0).any():
+        return seg, 0, stepped
+    up = plane[:3]
+    h = points @ up + plane[3]
+    seg = seg.copy()
+    cuts = 0
+    grounded = h < 2 * params.plane_distance
+    k = int(seg.max()) + 1
+    valid = np.flatnonzero(seg >= 0)
+    order = valid[np.argsort(seg[valid], kind="stable")]  # points grouped by segment, once
+    start = np.searchsorted(seg[order], np.arange(k + 1))
+    ext = np.stack([np.full((k, 3), np.inf), np.full((k, 3), -np.inf)])
+    np.minimum.at(ext[0], seg[valid], points[valid])
+    np.maximum.at(ext[1], seg[valid], points[valid])
+    small_enough = np.linalg.norm(ext[1] - ext[0], axis=1) <= params.cut_max_size
+    for s in np.flatnonzero(small_enough & (np.diff(start) >= 2 * params.min_segment_points)):
+        idx = order[start[s]:start[s + 1]]
+        x = points[idx]
+        found = _step_plane(x, normals[idx], h[idx], up, params)
+        if found is None:
+            continue
+        plus = (x - found[0]) @ found[1] > params.plane_distance / 2
+        # the step face's own plane where its crease shows it: the face-plane cut (4b) over the concave points
+        # facing along the step within 1.5 plane_distance of the plane between the tops (the TSDF rounds the step)
+        inside = seg == s
+        e = np.flatnonzero(inside[pairs[:, 0]] & inside[pairs[:, 1]])
+        conc = _concave_pairs(points, normals, pairs[e], params.cut_min_angle_deg)
+        ends = np.unique(pairs[e][conc].ravel())
+        near = ends[(np.abs(normals[ends] @ found[1]) >= np.cos(np.radians(25.0)))
+                    & (np.abs((points[ends] - found[0]) @ found[1]) <= 1.5 * params.plane_distance)]
+        if len(near):
+            _, side = _best_face_cut(points, normals, idx, pairs[e], conc, params, np.random.default_rng(params.seed),
+                                     planes=near)
+            if side is not None:
+                plus = side[idx]
+        n_plus = int(plus.sum())
+        small, large = min(n_plus, len(idx) - n_plus), max(n_plus, len(idx) - n_plus)
+        if small < max(params.min_segment_points, params.cut_min_ratio * large):
+            continue
+        if not (grounded[idx][plus].any() and grounded[idx][~plus].any()):
+            continue
+        seg[idx[plus]] = seg.max() + 1
+        stepped[idx] = True
+        cuts += 1
+    if cuts:
+        keep = seg[pairs[:, 0]] == seg[pairs[:, 1]]
+        comp = _components(len(points), pairs[keep])
+        seg = np.where(seg >= 0, comp, -1)
+    return seg, cuts, stepped
 
 
 def _absorb_small(seg: np.ndarray, pairs: np.ndarray, min_points: int) -> np.ndarray:
@@ -630,7 +755,10 @@ def segment_cloud(points: np.ndarray, normals: np.ndarray, params: SegmentationP
         k = 0
     else:
         seg, sv, grow = lccp_segments(P, N, pairs, params, C)
-        seg, grow["plane_cuts"] = concave_plane_cuts(P, N, seg, pairs, params)
+        stepped = None
+        if plane is not None:  # step cuts first: their pieces are two boxes side by side, not cut again
+            seg, grow["step_cuts"], stepped = step_cuts(P, N, seg, pairs, plane, params)
+        seg, grow["plane_cuts"] = concave_plane_cuts(P, N, seg, pairs, params, stepped)
         k = int(sv.max()) + 1
         sv_all[rest] = sv
     stats.update(grow)
