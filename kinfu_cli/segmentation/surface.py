@@ -192,22 +192,32 @@ def _surface_from_blocks(volume, min_weight: float, resolution: float | None, ch
 
 
 def downsample(cloud: SurfaceCloud, resolution: float) -> SurfaceCloud:
-    """Average points and normals per `resolution`-sized voxel (open3d voxel_down_sample); colours are averaged
-    over the coloured points only (black = never coloured), and a point left with none takes the colour of the
-    nearest coloured point within FILL_DISTANCE (`fill_uncoloured`)."""
+    """Average points and normals per `resolution`-sized voxel; colours are averaged over the coloured points only
+    (black = never coloured), and a point left with none takes the colour of the nearest coloured point within
+    FILL_DISTANCE (`fill_uncoloured`). The voxels are open3d's voxel_down_sample's (the grid starts half a voxel
+    below the cloud's minimum; the same points, bit for bit), in the order of their grid index rather than of
+    open3d's hash map, and without importing open3d (0.4 s of a 2 s `kinfu segment`)."""
     if resolution is None or resolution <= 0 or len(cloud) == 0:
         return cloud
-    pc = cloud.to_open3d(cloud.colors).voxel_down_sample(float(resolution))
-    nrm = np.asarray(pc.normals)
+    pts = np.asarray(cloud.points, dtype=np.float64)
+    key = np.floor((pts - (pts.min(axis=0) - 0.5 * resolution)) / resolution).astype(np.int64)
+    dims = key.max(axis=0) + 1
+    if int(dims[0]) * int(dims[1]) * int(dims[2]) < 2**62:  # one int64 per voxel: a 1-D sort
+        key = (key[:, 0] * dims[1] + key[:, 1]) * dims[2] + key[:, 2]
+    voxel, inv, count = np.unique(key, axis=0 if key.ndim == 2 else None, return_inverse=True, return_counts=True)
+    inv = inv.reshape(-1)
+
+    def sums(values: np.ndarray) -> np.ndarray:  # per voxel, added in point order (as open3d does)
+        return np.stack([np.bincount(inv, weights=values[:, j], minlength=len(voxel)) for j in range(3)], axis=1)
+
+    pts = sums(pts) / count[:, None]
+    nrm = sums(np.asarray(cloud.normals, dtype=np.float64))
     nrm = nrm / np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-12)
-    pts = np.asarray(pc.points).copy()
     cols = None
     if cloud.colors is not None:
-        # the same down-sampling of a 0/1 "coloured" flag gives each voxel's coloured share: black adds 0 to the
-        # mean, so mean / share is the mean over the coloured points
-        flag = np.repeat(np.any(cloud.colors > 0, axis=1, keepdims=True).astype(np.float64), 3, axis=1)
-        share = np.asarray(cloud.to_open3d(flag).voxel_down_sample(float(resolution)).colors)[:, :1]
-        cols = np.where(share > 1e-9, np.asarray(pc.colors) / np.maximum(share, 1e-9), 0.0).clip(0, 1)
+        colors = np.asarray(cloud.colors, dtype=np.float64)
+        coloured = np.bincount(inv, weights=np.any(colors > 0, axis=1).astype(np.float64), minlength=len(voxel))
+        cols = np.where(coloured[:, None] > 0, sums(colors) / np.maximum(coloured, 1.0)[:, None], 0.0).clip(0, 1)
         cols = fill_uncoloured(pts, cols)
     return SurfaceCloud(pts, nrm, cols)
 
