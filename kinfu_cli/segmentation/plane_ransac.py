@@ -1,0 +1,81 @@
+"""RANSAC plane of a point cloud, as open3d's `PointCloud.segment_plane` (ransac_n = 3) does it, in numpy.
+
+Same rules as open3d 0.18-0.20: a hypothesis is the plane through 3 sampled points (degenerate triples
+skipped); inliers are the points closer than `distance`; the best hypothesis has the highest inlier share,
+then the lowest inlier RMS distance; after each improvement the search stops once more iterations were run than
+log(1 - p) / log(1 - share^3) (p = 0.99999999), and the returned plane is the least-squares fit (open3d's
+determinant formula) to the best hypothesis' inliers, which are returned with it. The samples come from a
+numpy Generator, so a seed gives one answer on any number of threads, and `kinfu segment` need not import
+open3d (0.4 s of its 2 s budget) for this one call.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+PROBABILITY = 0.99999999  # open3d's default: the chance that one of the iterations run saw only inliers
+BATCH = 64  # hypotheses scored at once: (points x BATCH) distance arrays
+
+
+def plane_from_points(points: np.ndarray) -> np.ndarray:
+    """(a, b, c, d), unit (a, b, c), of the least-squares plane through `points`: open3d's GetPlaneFromPoints
+    (the plane regressed along the axis where the points spread least); zeros when it is undefined."""
+    if len(points) == 0:
+        return np.zeros(4)
+    c = points.mean(axis=0)
+    r = points - c
+    xx, xy, xz = r[:, 0] @ r[:, 0], r[:, 0] @ r[:, 1], r[:, 0] @ r[:, 2]
+    yy, yz, zz = r[:, 1] @ r[:, 1], r[:, 1] @ r[:, 2], r[:, 2] @ r[:, 2]
+    det_x, det_y, det_z = yy * zz - yz * yz, xx * zz - xz * xz, xx * yy - xy * xy
+    if det_x > det_y and det_x > det_z:
+        abc = np.array([det_x, xz * yz - xy * zz, xy * yz - xz * yy])
+    elif det_y > det_z:
+        abc = np.array([xz * yz - xy * zz, det_y, xy * xz - yz * xx])
+    else:
+        abc = np.array([xy * yz - xz * yy, xy * xz - yz * xx, det_z])
+    norm = float(np.linalg.norm(abc))
+    if norm == 0.0:
+        return np.zeros(4)
+    abc = abc / norm
+    return np.append(abc, -abc @ c)
+
+
+def ransac_plane(points: np.ndarray, distance: float, iterations: int, rng: np.random.Generator
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """(plane (a, b, c, d) with a unit normal, inlier indices) of `points` (N, 3): see the module docstring.
+    A cloud without a non-degenerate triple gives zeros and no inliers."""
+    pts = np.asarray(points, dtype=np.float64)
+    n = len(pts)
+    if n < 3:
+        return np.zeros(4), np.zeros(0, dtype=np.int64)
+    samples = rng.integers(0, n, size=(int(iterations), 3))
+    best_share, best_rmse, best = 0.0, np.inf, None
+    stop = np.inf  # open3d's break_iteration
+    done = 0
+    for start in range(0, len(samples), BATCH):
+        if done > stop:
+            break
+        tri = pts[samples[start:start + BATCH]]
+        normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        length = np.linalg.norm(normal, axis=1)
+        ok = length > 0
+        normal = normal / np.where(ok, length, 1.0)[:, None]
+        offset = -np.einsum("ij,ij->i", normal, tri[:, 0])
+        dist = np.abs(pts @ normal.T + offset)
+        inl = dist < distance
+        count = inl.sum(axis=0)
+        rmse = np.sqrt(np.where(inl, dist * dist, 0.0).sum(axis=0) / np.maximum(count, 1))
+        for j in range(len(tri)):  # in sample order, as open3d on one thread
+            if done > stop:
+                break
+            if not ok[j]:
+                continue  # collinear: no plane, and not counted (as open3d)
+            share = count[j] / n
+            if share > best_share or (share == best_share and count[j] > 0 and rmse[j] < best_rmse):
+                best_share, best_rmse, best = share, rmse[j], np.append(normal[j], offset[j])
+                stop = min(np.log(1 - PROBABILITY) / np.log(1 - share ** 3), iterations) if share < 1.0 else 0
+            done += 1
+    if best is None:
+        return np.zeros(4), np.zeros(0, dtype=np.int64)
+    inliers = np.flatnonzero(np.abs(pts @ best[:3] + best[3]) < distance)
+    return plane_from_points(pts[inliers]), inliers
