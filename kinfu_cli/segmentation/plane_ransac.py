@@ -29,8 +29,7 @@ def plane_from_points(points: np.ndarray) -> np.ndarray:
         return np.zeros(4)
     c = points.mean(axis=0)
     r = points - c
-    xx, xy, xz = r[:, 0] @ r[:, 0], r[:, 0] @ r[:, 1], r[:, 0] @ r[:, 2]
-    yy, yz, zz = r[:, 1] @ r[:, 1], r[:, 1] @ r[:, 2], r[:, 2] @ r[:, 2]
+    (xx, xy, xz), (_, yy, yz), (_, _, zz) = r.T @ r  # one product: six strided dot products cost 10x more
     det_x, det_y, det_z = yy * zz - yz * yz, xx * zz - xz * xz, xx * yy - xy * xy
     if det_x > det_y and det_x > det_z:
         abc = np.array([det_x, xz * yz - xy * zz, xy * yz - xz * yy])
@@ -56,11 +55,10 @@ def ransac_plane(points: np.ndarray, distance: float, iterations: int, rng: np.r
     samples = rng.integers(0, n, size=(int(iterations), 3))
     best_share, best_rmse, best = 0.0, np.inf, None
     stop = np.inf  # open3d's break_iteration
-    done = 0
-    for start in range(0, len(samples), BATCH):
-        if done > stop:
-            break
-        tri = pts[samples[start:start + BATCH]]
+    done = start = 0
+    while start < len(samples) and done <= stop:
+        tri = pts[samples[start:start + min(BATCH, 16 << (start // 16).bit_length())]]  # 16, 32, 64, 64, ...
+        start += len(tri)
         normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
         length = np.linalg.norm(normal, axis=1)
         ok = length > 0
@@ -69,17 +67,17 @@ def ransac_plane(points: np.ndarray, distance: float, iterations: int, rng: np.r
         dist = np.abs(pts @ normal.T + offset)
         inl = dist < distance
         count = inl.sum(axis=0)
-        rmse = np.sqrt(np.where(inl, dist * dist, 0.0).sum(axis=0) / np.maximum(count, 1))
-        for j in range(len(tri)):  # in sample order, as open3d on one thread
+        for j in np.flatnonzero(ok):  # in sample order, as open3d on one thread; collinear triples do not count
             if done > stop:
                 break
-            if not ok[j]:
-                continue  # collinear: no plane, and not counted (as open3d)
-            share = count[j] / n
-            if share > best_share or (share == best_share and count[j] > 0 and rmse[j] < best_rmse):
-                best_share, best_rmse, best = share, rmse[j], np.append(normal[j], offset[j])
-                stop = min(np.log(1 - PROBABILITY) / np.log(1 - share ** 3), iterations) if share < 1.0 else 0
             done += 1
+            share = count[j] / n
+            if share < best_share or count[j] == 0:
+                continue
+            rmse = float(np.sqrt(np.mean(dist[inl[:, j], j] ** 2)))
+            if share > best_share or rmse < best_rmse:
+                best_share, best_rmse, best = share, rmse, np.append(normal[j], offset[j])
+                stop = min(np.log(1 - PROBABILITY) / np.log(1 - share ** 3), iterations) if share < 1.0 else 0
     if best is None:
         return np.zeros(4), np.zeros(0, dtype=np.int64)
     inliers = np.flatnonzero(np.abs(pts @ best[:3] + best[3]) < distance)
