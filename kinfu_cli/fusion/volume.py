@@ -14,7 +14,6 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-import cv2
 import numpy as np
 from scipy.ndimage import binary_dilation
 
@@ -232,6 +231,8 @@ class TernaryVolume:
             if color.ndim != 3 or color.shape[2] < 3:
                 raise VolumeError(f"color: expected an RGB image (H, W, 3), got shape {color.shape}")
             if color.shape[:2] != (h, w):
+                import cv2  # only here: readers of volumes (segment, nbv) need not load OpenCV
+
                 color = cv2.resize(np.ascontiguousarray(color[:, :, :3]), (w, h), interpolation=cv2.INTER_NEAREST)
             col = np.ascontiguousarray(color[:, :, :3], dtype=np.uint8)
         else:
