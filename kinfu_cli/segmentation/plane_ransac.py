@@ -64,7 +64,9 @@ def ransac_plane(points: np.ndarray, distance: float, iterations: int, rng: np.r
         ok = length > 0
         normal = normal / np.where(ok, length, 1.0)[:, None]
         offset = -np.einsum("ij,ij->i", normal, tri[:, 0])
-        dist = np.abs(pts @ normal.T + offset)
+        dist = pts @ normal.T  # (points x hypotheses), then in place: one array of that size
+        dist += offset
+        np.abs(dist, out=dist)
         inl = dist < distance
         count = inl.sum(axis=0)
         for j in np.flatnonzero(ok):  # in sample order, as open3d on one thread; collinear triples do not count
