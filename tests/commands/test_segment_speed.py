@@ -41,3 +41,38 @@ def test_default_segment_run_imports_no_heavy_library(tmp_path):
     doc = json.loads((out / "segments.json").read_text())
     assert doc["support_plane"] is not None and sum(s["kind"] == "object" for s in doc["segments"]) >= 3
     assert (out / "segments.ply").stat().st_size > 0 and (out / "saliency.ply").stat().st_size > 0
+
+
+def test_mode_volume_read_without_hypotheses_segments_alike_and_refuses_fusion(tmp_path):
+    """`kinfu segment` leaves a colour-mode volume's hypotheses (5x the rest of the file) unread: the colours it
+    segments are the same winners, and such a volume cannot be fused into or saved (its hypotheses are missing)."""
+    import pytest
+
+    from kinfu_cli.core.errors import VolumeError
+    from kinfu_cli.fusion.volume import TernaryVolume, load_volume
+    from kinfu_cli.segmentation.pipeline import SegmentOptions, segment_volume
+    from kinfu_cli.sim.paths import orbit_poses
+    from kinfu_cli.sim.sensor import DepthSensor, kinect_v1_intrinsics
+
+    scene = primitive_tabletop_scene(3)
+    K = kinect_v1_intrinsics(160, 120)
+    sensor = DepthSensor(K, 160, 120, noise=False, seed=3)
+    vol = TernaryVolume(size=(1.28, 0.8, 0.4), voxel_size=0.01, origin=(-0.64, -0.4, 0.6), truncation=0.04,
+                        min_depth=0.2, max_depth=2.0, color_mode="mode")
+    frames = [(*sensor.render(scene, T), T) for T in orbit_poses(4, radius=0.85, height=1.3, target=(0, 0, 0.75))]
+    for depth, colour, T in frames[:3]:
+        vol.integrate(depth, K, T, colour)
+    vol.save(tmp_path / "volume.npz")
+    full, light = load_volume(tmp_path / "volume.npz"), load_volume(tmp_path / "volume.npz", hypotheses=False)
+    assert light.color_mode == "mode" and light.pool_hc.size == 0 and full.pool_hc.shape[0] == full.n_used > 0
+    for a, b in zip(full.tsdf_weights(color=True), light.tsdf_weights(color=True)):
+        assert np.array_equal(a, b)
+    opts = SegmentOptions(superquadrics=False)
+    segments = segment_volume(full, opts).to_json()["segments"]
+    assert len(segments) >= 3 and segments == segment_volume(light, opts).to_json()["segments"]
+    with pytest.raises(VolumeError, match="hypotheses"):
+        light.integrate(frames[3][0], K, frames[3][2], frames[3][1])
+    with pytest.raises(VolumeError, match="hypotheses"):
+        light.save(tmp_path / "again.npz")
+    full.integrate(frames[3][0], K, frames[3][2], frames[3][1])  # with them, fusion goes on (pools grow)
+    assert full.n_used >= light.n_used
