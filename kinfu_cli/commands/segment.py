@@ -179,16 +179,18 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
                           multi_sq=multi_sq, msq_trigger=msq_trigger, msq_height=msq_height, msq_mu=msq_mu,
                           msq_cut=msq_cut, color=not no_color, segmentation=params, shape_prior=shape_prior)
     result: SegmentResult | None = None
+    doc: dict = {}
     grasps: dict | None = None
     steps = ["segment"] + (["grasp"] if grasp else []) + ["write"]
     for step in progress(steps, total=len(steps), desc="segment", quiet=quiet):
         if step == "segment":
             result = segment_volume(volume, opts)
+            doc = result.to_json()
         elif step == "grasp":
-            grasps = _grasps(result.to_json(), grasp_options, grasp_cones)
+            grasps = _grasps(doc, grasp_options, grasp_cones)
         else:
             with atomic_dir(outdir) as tmp:  # the folder appears whole or not at all
-                write_segment_outputs(result, tmp)
+                write_segment_outputs(result, tmp, doc)
                 if grasps is not None:
                     write_json(tmp / "grasps.json", grasps)
                 if plot:
@@ -199,7 +201,6 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
         from kinfu_cli.report.viewer import write_viewer
 
         write_viewer(viz, segments=result)
-    doc = result.to_json()
     print_warnings(doc)
     if grasps is not None:
         print_warnings(grasps)

@@ -57,14 +57,15 @@ def _write_cloud(path: Path, seg, colors: np.ndarray, labels: np.ndarray | None)
                 comments=["Created by kinfu segment"]).write(fh)
 
 
-def write_segment_outputs(result: SegmentResult, outdir: str | os.PathLike) -> dict[str, Path]:
+def write_segment_outputs(result: SegmentResult, outdir: str | os.PathLike, doc: dict | None = None
+                          ) -> dict[str, Path]:
     """segments.ply, saliency.ply and segments.json in `outdir`; returns name -> path. segments.ply also carries
     the segment as an integer `label` (0 support plane, 1.. segments, -1 dropped), so readers need not decode
-    colours."""
+    colours. doc: `result.to_json()` when the caller has made it already."""
     out = Path(outdir)
     seg = result.segmentation
     _write_cloud(out / "segments.ply", seg, segment_colors(seg.labels), np.asarray(seg.labels, dtype=np.int32))
     _write_cloud(out / "saliency.ply", seg, saliency_colors(seg.labels, result.saliency), None)
     files = {"segments.ply": out / "segments.ply", "saliency.ply": out / "saliency.ply"}
-    files["segments.json"] = write_json(out / "segments.json", result.to_json())
+    files["segments.json"] = write_json(out / "segments.json", result.to_json() if doc is None else doc)
     return files
