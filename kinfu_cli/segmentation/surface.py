@@ -60,10 +60,12 @@ def _active_box(mask: np.ndarray, pad: int) -> tuple[slice, slice, slice] | None
 
 def surface_from_tsdf(tsdf: np.ndarray, weight: np.ndarray, origin, voxel_size: float, *,
                       min_weight: float = 1.0, resolution: float | None = 0.01,
-                      color: np.ndarray | None = None) -> SurfaceCloud:
+                      color: np.ndarray | None = None, index_offset=(0, 0, 0)) -> SurfaceCloud:
     """Zero crossing of the TSDF among known voxels (w >= min_weight), world coordinates.
 
-    tsdf, weight: (X, Y, Z) arrays indexed [x, y, z], voxel centre at origin + (i + 0.5) * voxel_size.
+    tsdf, weight: (X, Y, Z) arrays indexed [x, y, z], voxel centre at origin + (i + index_offset + 0.5) *
+    voxel_size (index_offset: where the arrays start in the grid `origin` belongs to, so that a sub-box gives
+    the same coordinates to the last bit).
     color: (X, Y, Z, 3) uint8 RGB of the same voxels, or None (the cloud then has no colours).
     resolution: thin the cloud on this voxel size (m); None keeps every marching-cubes vertex.
     Raises VolumeError when the volume has no observed surface.
@@ -95,7 +97,7 @@ def surface_from_tsdf(tsdf: np.ndarray, weight: np.ndarray, origin, voxel_size: 
     verts, normals = verts[ok], -normals[ok]  # skimage normals point down the gradient: flip to outward
     if len(verts) == 0:
         raise VolumeError("volume has no surface (no zero crossing between occupied and empty voxels)")
-    offset = np.array([s.start for s in box], dtype=np.float64)
+    offset = np.array([s.start for s in box], dtype=np.float64) + np.asarray(index_offset, dtype=np.float64)
     pts = np.asarray(origin, dtype=np.float64) + (verts + offset + 0.5) * float(voxel_size)
     nrm = normals.astype(np.float64)
     cols = None
@@ -153,11 +155,11 @@ def surface_from_volume(volume, *, min_weight: float = 1.0, resolution: float | 
 
 
 def _surface_from_blocks(volume, min_weight: float, resolution: float | None, chunk: int = 64) -> SurfaceCloud:
-    """Marching cubes chunk by chunk over the box around the volume's surface blocks. A chunk is read only around
-    its surface blocks (`surface_blocks`: blocks with an occupied voxel, grown by a block, so both voxels of every
-    crossing are inside) and skipped without one: free space, carved per block or voxel by voxel, costs nothing
-    here (on the synth 512^3 volume 6 M voxels are read instead of 33 M, the same vertices). With min_weight 0
-    unknown voxels count as surface: every chunk with an allocated block is read whole."""
+    """Marching cubes chunk by chunk over the box around the volume's surface blocks. A chunk is read only within
+    a block of its surface blocks (`surface_blocks`: blocks with an occupied voxel and their allocated
+    neighbours), which holds the box marching cubes runs on (`_active_box`), so the vertices are the same to the
+    last bit, and skipped without one: free space, carved per block or voxel by voxel, costs nothing here. With
+    min_weight 0 unknown voxels count as surface: every chunk with an allocated block is read whole."""
     box = volume.surface_block_box()
     if box is None:
         raise VolumeError("volume has no observed surface (no allocated blocks): nothing to segment")
@@ -174,23 +176,23 @@ def _surface_from_blocks(volume, min_weight: float, resolution: float | None, ch
     for x0 in range(int(lo[0]), int(hi[0]), chunk):
         for y0 in range(int(lo[1]), int(hi[1]), chunk):
             for z0 in range(int(lo[2]), int(hi[2]), chunk):
-                c0 = np.array([x0, y0, z0])
+                c0 = start = np.array([x0, y0, z0])
                 c1 = np.minimum(c0 + chunk + 1, hi)  # one voxel of overlap: no crossing is lost
                 if block_idx is not None:
                     b0, b1 = c0 // bsize, -(-c1 // bsize)
                     sub = block_idx[b0[0]:b1[0], b0[1]:b1[1], b0[2]:b1[2]]
                     if not sub.any():
                         continue
-                    if trim:
+                    if trim:  # grown by a block: surface_blocks leaves out unallocated neighbours
                         ib = np.argwhere(sub)
-                        c0 = np.maximum((ib.min(axis=0) + b0) * bsize, c0)
-                        c1 = np.minimum((ib.max(axis=0) + b0 + 1) * bsize, c1)
+                        c0 = np.maximum((ib.min(axis=0) + b0 - 1) * bsize, c0)
+                        c1 = np.minimum((ib.max(axis=0) + b0 + 2) * bsize, c1)
                 v, w, *c = volume.tsdf_weights(c0, c1, color=with_color)
                 if min(v.shape) < 2:
                     continue
                 try:
-                    part = surface_from_tsdf(v, w, origin + c0 * vs, vs, min_weight=min_weight, resolution=None,
-                                             color=c[0] if c else None)
+                    part = surface_from_tsdf(v, w, origin + start * vs, vs, min_weight=min_weight, resolution=None,
+                                             color=c[0] if c else None, index_offset=c0 - start)
                 except VolumeError:
                     continue
                 pts.append(part.points)
