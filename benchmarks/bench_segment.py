@@ -13,7 +13,9 @@
 5. `--speed`: `segment_volume` on the issue's two volumes, both fused with colour: the synth 512^3 / 3 m volume of
    (2.) and a real 6 mm room volume (7-Scenes redkitchen frames 0-59, 512^3 / 3 m = 5.86 mm, grid centred on the
    scene as `kinfu fuse` places it); wall and CPU seconds (`time.process_time`, all threads) per phase, medians
-   of `repeats` runs after a warm-up. Cached in `--cache DIR` (fusing takes a minute).
+   of `repeats` runs after a warm-up. Cached in `--cache DIR` (fusing takes a minute). Then `kinfu segment` on
+   both through the CLI in a fresh interpreter (the issue's end-to-end number): median of 3 wall / CPU seconds and
+   the split into start-up, imports, load, algorithm, writing (`bench_cli_speed`).
 6. `--objects`: issue 12's quality table on the `objects` scenes (stacked boxes, touching twins, mug, striped
    objects, ball), fused as `kinfu eval segment --sweep` does and cached in /tmp: boundary P / R at 2 cm, BCE,
    object recall of the default LCCP with colour, mode filter and mean colour, on the tuning seeds 0, 1, 8-19
@@ -387,6 +389,97 @@ def bench_objects(tuning=OBJECTS_TUNING, held_out=OBJECTS_HELD_OUT, colours=("mo
     return out
 
 
+# Run in a subprocess by bench_cli_speed: `kinfu segment ARGS` through the `kinfu` entry point, the library's phases
+# wrapped by timers (wall by time.time, comparable with the parent's clock; CPU by time.process_time).
+_CLI_DRIVER = r"""
+import json, sys, time
+stamps = {"start": (time.time(), time.process_time())}
+import kinfu_cli.cli
+import kinfu_cli.commands.segment as seg_cmd
+from kinfu_cli.segmentation import pipeline as pl
+stamps["imports"] = (time.time(), time.process_time())
+
+def timed(mod, name, label):
+    fn = getattr(mod, name)
+    def wrapper(*a, **k):
+        stamps[label + " start"] = (time.time(), time.process_time())
+        try:
+            return fn(*a, **k)
+        finally:
+            stamps[label] = (time.time(), time.process_time())
+    setattr(mod, name, wrapper)
+
+timed(pl, "load_segment_input", "load")
+timed(pl, "analyse_volume", "analyse")
+timed(seg_cmd, "write_segment_outputs", "write")
+sys.argv = ["kinfu", "segment"] + sys.argv[1:]
+try:
+    from kinfu_cli.__main__ import main
+    main()  # the `kinfu` entry point, which ends in sys.exit
+finally:
+    stamps["done"] = (time.time(), time.process_time())
+    print("STAMPS" + json.dumps(stamps), flush=True)
+"""
+
+
+_CLI_PHASES = {"imports": ("start", "imports"), "volume load": ("load start", "load"),
+               "surface + segments + superquadrics": ("analyse start", "analyse"),
+               "write outputs": ("write start", "write")}
+
+
+def bench_cli_speed(cache: Path, repeats: int = 3) -> dict:
+    """`kinfu segment VOLUME -o OUT --force --quiet` in a fresh interpreter (issue 12: <= 2 s on the synth 512^3
+    volume, <= 8 s on the room), median of `repeats` after a warm-up run (numba cache, page cache): wall and CPU
+    (the child's user + sys) of the whole run, and the split into Python start-up, imports, volume load,
+    surface + segmentation + saliency + superquadrics (with segments.json's timing_s inside it), output writing
+    and exit. `segment_volume` in this process on the same file gives the algorithm-only reference."""
+    import os
+    import resource
+    import subprocess
+
+    from kinfu_cli.segmentation.pipeline import segment_volume
+
+    _speed_volumes(cache)
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+    out: dict = {"load": os.getloadavg()[0]}
+    for name, path in (("synth 512^3 / 3 m (scenario 0)", cache / "synth512_colour.npz"),
+                       ("7-Scenes redkitchen 0-59, 5.86 mm", cache / "redkitchen_0_59_512.npz")):
+        runs = []
+        with tempfile.TemporaryDirectory() as tmp:
+            for run in range(repeats + 1):
+                before = resource.getrusage(resource.RUSAGE_CHILDREN)
+                t0 = time.time()
+                res = subprocess.run([sys.executable, "-c", _CLI_DRIVER, str(path), "-o", str(Path(tmp) / "seg"),
+                                      "--force", "--quiet"], capture_output=True, text=True, env=env)
+                t1 = time.time()
+                after = resource.getrusage(resource.RUSAGE_CHILDREN)
+                if res.returncode != 0 or "STAMPS" not in res.stdout:
+                    raise RuntimeError(res.stderr)
+                st = json.loads(res.stdout.split("STAMPS", 1)[1])
+                timing = json.loads((Path(tmp) / "seg" / "segments.json").read_text())["timing_s"]
+                if run == 0:
+                    continue  # warm-up
+                cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+                wall = {"python start-up": st["start"][0] - t0,
+                        **{k: st[b][0] - st[a][0] for k, (a, b) in _CLI_PHASES.items()}, "exit": t1 - st["done"][0]}
+                wall["other (options, progress, JSON print)"] = (t1 - t0) - sum(wall.values())
+                runs.append({"wall": t1 - t0, "cpu": cpu, "split": wall,
+                             "split_cpu": {k: st[b][1] - st[a][1] for k, (a, b) in _CLI_PHASES.items()},
+                             "timing_s": timing})
+        segment_volume(path)  # warm-up
+        t = time.perf_counter()
+        segment_volume(path)
+        in_process = time.perf_counter() - t
+        med = int(np.argsort([r["wall"] for r in runs])[len(runs) // 2])  # the median run, with its split
+        out[name] = {"cli_wall_median": float(np.median([r["wall"] for r in runs])),
+                     "cli_cpu_median": float(np.median([r["cpu"] for r in runs])),
+                     "cli_walls": [round(r["wall"], 3) for r in runs], "median_run": runs[med],
+                     "segment_volume_in_process_wall": in_process,
+                     "cli_over_in_process": float(np.median([r["wall"] for r in runs])) / in_process}
+        print(name, json.dumps(out[name]), flush=True)
+    return out
+
+
 def bench_closed_loop(seed: int = 0, views: int = 5) -> dict:
     return compare_strategies(seed, views=views, log=lambda name, d: print(name, json.dumps(d), flush=True))
 
@@ -411,7 +504,8 @@ def main() -> None:
         bench_objects(*seeds, overrides=over)
         return
     if args.speed:
-        print(json.dumps(bench_speed(Path(args.cache)), indent=2))
+        print(json.dumps({"segment_volume": bench_speed(Path(args.cache)),
+                          "kinfu segment (CLI, subprocess)": bench_cli_speed(Path(args.cache))}, indent=2))
         return
     if args.colour:
         out = {"tuning seeds 0-3": bench_colour_scenes(range(4)), "held-out seeds 4-7": bench_colour_scenes(range(4, 8)),

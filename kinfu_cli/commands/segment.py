@@ -1,4 +1,8 @@
-"""`kinfu segment`: segments of the fused surface, their saliency (thesis eq. 3.12) and superquadrics."""
+"""`kinfu segment`: segments of the fused surface, their saliency (thesis eq. 3.12) and superquadrics.
+
+Grasp planning, plots and the viewer are imported inside the functions that use them: the default run
+(issue 12: <= 2 s end to end) does not pay for scipy's rotations, matplotlib or protobuf.
+"""
 
 from __future__ import annotations
 
@@ -12,12 +16,8 @@ from kinfu_cli.commands._options import claim_outputs, force_option
 from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.commands._up import parse_up
 from kinfu_cli.core.atomic import atomic_dir, write_json
-from kinfu_cli.grasp.constraints import parse_cone
-from kinfu_cli.grasp.plan import GraspError, GraspOptions, plan_grasps
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.progress import progress
-from kinfu_cli.report.segment_plot import plot_segments
-from kinfu_cli.report.viewer import write_viewer
 from kinfu_cli.segmentation.outputs import write_segment_outputs
 from kinfu_cli.segmentation.pipeline import SegmentOptions, SegmentResult, segment_volume
 from kinfu_cli.segmentation.segments import SegmentationParams
@@ -38,8 +38,12 @@ def _up(value: str) -> tuple[float, float, float] | str | None:
     return tuple(float(x) for x in v)  # type: ignore[return-value]
 
 
-def _grasp_options(hand: str, cones: tuple[str, ...], starts: int, no_superquadrics: bool) -> GraspOptions:
-    """--grasp's options, checked before any work (cone presets are re-made on the support plane found)."""
+def _grasp_options(hand: str, cones: tuple[str, ...], starts: int, no_superquadrics: bool):
+    """--grasp's options (a GraspOptions), checked before any work (cone presets are re-made on the support
+    plane found)."""
+    from kinfu_cli.grasp.constraints import parse_cone
+    from kinfu_cli.grasp.plan import GraspOptions
+
     if no_superquadrics:
         raise ConfigError("--grasp needs the superquadrics: drop --no-superquadrics")
     try:
@@ -51,8 +55,11 @@ def _grasp_options(hand: str, cones: tuple[str, ...], starts: int, no_superquadr
     return opts
 
 
-def _grasps(segments: dict, options: GraspOptions, cones: tuple[str, ...]) -> dict:
+def _grasps(segments: dict, options, cones: tuple[str, ...]) -> dict:
     """grasps.json for the segments just found; no object to grasp gives an empty list and a warning."""
+    from kinfu_cli.grasp.constraints import parse_cone
+    from kinfu_cli.grasp.plan import GraspError, plan_grasps
+
     plane = segments.get("support_plane")
     up = plane[:3] if plane is not None else (0.0, 0.0, 1.0)
     options = replace(options, cones=[parse_cone(c, up) for c in cones])
@@ -172,23 +179,28 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
                           multi_sq=multi_sq, msq_trigger=msq_trigger, msq_height=msq_height, msq_mu=msq_mu,
                           msq_cut=msq_cut, color=not no_color, segmentation=params, shape_prior=shape_prior)
     result: SegmentResult | None = None
+    doc: dict = {}
     grasps: dict | None = None
     steps = ["segment"] + (["grasp"] if grasp else []) + ["write"]
     for step in progress(steps, total=len(steps), desc="segment", quiet=quiet):
         if step == "segment":
             result = segment_volume(volume, opts)
+            doc = result.to_json()
         elif step == "grasp":
-            grasps = _grasps(result.to_json(), grasp_options, grasp_cones)
+            grasps = _grasps(doc, grasp_options, grasp_cones)
         else:
             with atomic_dir(outdir) as tmp:  # the folder appears whole or not at all
-                write_segment_outputs(result, tmp)
+                write_segment_outputs(result, tmp, doc)
                 if grasps is not None:
                     write_json(tmp / "grasps.json", grasps)
                 if plot:
+                    from kinfu_cli.report.segment_plot import plot_segments
+
                     plot_segments(result, tmp)
     if viz is not None:
+        from kinfu_cli.report.viewer import write_viewer
+
         write_viewer(viz, segments=result)
-    doc = result.to_json()
     print_warnings(doc)
     if grasps is not None:
         print_warnings(grasps)

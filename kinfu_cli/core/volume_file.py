@@ -49,8 +49,9 @@ def write_volume_file(path: str | os.PathLike, meta: dict, arrays: dict[str, np.
     return write_npz(path, {"meta": np.array(json.dumps(meta)), **{k: arrays[k] for k in ARRAYS}, **extra})
 
 
-def read_volume_file(path: str | os.PathLike) -> tuple[dict, dict[str, np.ndarray]]:
-    """(meta, arrays) of a volume.npz; VolumeError for a missing, unreadable, foreign or other-version file."""
+def read_volume_file(path: str | os.PathLike, optional: bool = True) -> tuple[dict, dict[str, np.ndarray]]:
+    """(meta, arrays) of a volume.npz; VolumeError for a missing, unreadable, foreign or other-version file.
+    optional=False leaves OPTIONAL_ARRAYS (the mode filter's hypotheses, 5x the rest) compressed on disk."""
     path = Path(path)
     if not path.exists():
         raise VolumeError(f"{path}: no such volume file")
@@ -69,7 +70,7 @@ def read_volume_file(path: str | os.PathLike) -> tuple[dict, dict[str, np.ndarra
             missing = [k for k in ARRAYS if k not in data.files]
             if missing:
                 raise VolumeError(f"{path}: volume file lacks the arrays {', '.join(missing)}")
-            arrays = {k: data[k] for k in ARRAYS + OPTIONAL_ARRAYS if k in data.files}
+            arrays = {k: data[k] for k in ARRAYS + (OPTIONAL_ARRAYS if optional else ()) if k in data.files}
     except VolumeError:
         raise
     except READ_ERRORS as exc:

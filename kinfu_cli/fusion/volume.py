@@ -14,7 +14,6 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-import cv2
 import numpy as np
 from scipy.ndimage import binary_dilation
 
@@ -127,6 +126,7 @@ class TernaryVolume:
         self.up: np.ndarray | None = None  # unit direction against gravity in that frame (None = not known)
         self.up_source = ""  # how up was decided (fusion.up.choose_up), "" when not known
         self.intrinsics: dict | None = None  # the depth camera fused: fx, fy, cx, cy, width, height
+        self.hypotheses_loaded = True  # False: read by load_volume(hypotheses=False), not to be fused into or saved
         if _allocate:
             self.block_idx = np.full(tuple(self.nb), -1, dtype=np.int32)
             self.block_w = np.zeros(tuple(self.nb), dtype=np.uint8)
@@ -157,6 +157,7 @@ class TernaryVolume:
         self.pool_hn = np.zeros((nh, kn.B3, self.mode_hypotheses), dtype=np.uint8)
 
     def _ensure_capacity(self, need: int) -> None:
+        self._check_hypotheses()
         cap = self.pool_v.shape[0]
         if need <= cap:
             return
@@ -230,6 +231,8 @@ class TernaryVolume:
             if color.ndim != 3 or color.shape[2] < 3:
                 raise VolumeError(f"color: expected an RGB image (H, W, 3), got shape {color.shape}")
             if color.shape[:2] != (h, w):
+                import cv2  # only here: readers of volumes (segment, nbv) need not load OpenCV
+
                 color = cv2.resize(np.ascontiguousarray(color[:, :, :3]), (w, h), interpolation=cv2.INTER_NEAREST)
             col = np.ascontiguousarray(color[:, :, :3], dtype=np.uint8)
         else:
@@ -261,6 +264,7 @@ class TernaryVolume:
     def _hypotheses(self) -> tuple:
         """The mode filter's pools for the kernels; (None, None) for the mean, whose kernel then lacks the mode
         code altogether."""
+        self._check_hypotheses()
         return (self.pool_hc, self.pool_hn) if self.color_mode == "mode" else (None, None)
 
     def _frustum_blocks(self, T: np.ndarray, K: np.ndarray, w: int, h: int, far: float):
@@ -421,6 +425,7 @@ class TernaryVolume:
 
     def save(self, path: str | os.PathLike) -> Path:
         """Write one .npz (metadata, block tables, used pool rows) atomically; `load_volume` reads it back."""
+        self._check_hypotheses()
         n = self.n_used
         self.sync_colors()
         arrays = {"block_idx": self.block_idx, "block_w": self.block_w, "pool_v": self.pool_v[:n],
@@ -428,6 +433,11 @@ class TernaryVolume:
         if self.color_mode == "mode":  # the hypotheses too, so that fusion can go on (init)
             arrays.update(pool_hc=self.pool_hc[:n], pool_hn=self.pool_hn[:n])
         return write_volume_file(path, self.meta(), arrays)
+
+    def _check_hypotheses(self) -> None:
+        if not self.hypotheses_loaded:
+            raise VolumeError("this colour-mode volume was read without its colour hypotheses "
+                              "(load_volume(hypotheses=False)): it cannot be fused into or saved")
 
     def copy(self) -> "TernaryVolume":
         other = TernaryVolume.__new__(TernaryVolume)
@@ -441,10 +451,14 @@ class TernaryVolume:
                 f"{np.round(self.origin, 3).tolist()}, {self.n_used} blocks stored)")
 
 
-def load_volume(path: str | os.PathLike) -> TernaryVolume:
-    """Read a volume written by TernaryVolume.save; VolumeError for missing, foreign or other-version files."""
+def load_volume(path: str | os.PathLike, hypotheses: bool = True) -> TernaryVolume:
+    """Read a volume written by TernaryVolume.save; VolumeError for missing, foreign or other-version files.
+
+    The pools are the arrays np.load returns (no copy: `_ensure_capacity` grows them when fusion goes on).
+    hypotheses=False leaves a colour-mode volume's hypotheses unread (pool_c holds their winners, written by
+    save): for readers of the colours only, such as segmentation; such a volume refuses integrate and save."""
     path = Path(path)
-    meta, arrays = read_volume_file(path)
+    meta, arrays = read_volume_file(path, optional=hypotheses)
     vol = TernaryVolume(size=[s * meta["voxel_size"] for s in meta["shape"]], voxel_size=meta["voxel_size"],
                         origin=meta["origin"], truncation=meta["truncation"], max_weight=meta["max_weight"],
                         min_depth=meta["min_depth"], max_depth=meta["max_depth"], color=meta["color"],
@@ -459,21 +473,22 @@ def load_volume(path: str | os.PathLike) -> TernaryVolume:
     vol.block_w = np.ascontiguousarray(arrays["block_w"], dtype=np.uint8)
     n = int(arrays["pool_v"].shape[0])
     vol.n_used = n
-    vol._alloc_pools(max(n, 1024))
-    vol.pool_v[:n] = arrays["pool_v"]
-    vol.pool_w[:n] = arrays["pool_w"]
+    vol._alloc_pools(0)
+    vol.pool_v = np.ascontiguousarray(arrays["pool_v"], dtype=np.int16)
+    vol.pool_w = np.ascontiguousarray(arrays["pool_w"], dtype=np.uint8)
     if vol.color:
         if arrays["pool_c"].shape[0] != n:
             raise VolumeError(f"{path}: inconsistent colour pool ({arrays['pool_c'].shape[0]} rows, expected {n})")
-        vol.pool_c[:n] = arrays["pool_c"]
-    if vol.color_mode == "mode":
+        vol.pool_c = np.ascontiguousarray(arrays["pool_c"], dtype=np.uint8)
+    if vol.color_mode == "mode" and hypotheses:
         hc, hn = arrays.get("pool_hc"), arrays.get("pool_hn")
         if (hc is None or hn is None or hc.shape != (n,) + vol.pool_hc.shape[1:]
                 or hn.shape != (n,) + vol.pool_hn.shape[1:]):
             raise VolumeError(f"{path}: colour mode volume without matching hypothesis pools (pool_hc, pool_hn "
                               f"of {n} rows, {vol.mode_hypotheses} hypotheses per voxel)")
-        vol.pool_hc[:n] = hc
-        vol.pool_hn[:n] = hn
+        vol.pool_hc = np.ascontiguousarray(hc, dtype=np.uint8)
+        vol.pool_hn = np.ascontiguousarray(hn, dtype=np.uint8)
+    vol.hypotheses_loaded = hypotheses or vol.color_mode != "mode"
     vol.frames_integrated = int(meta.get("frames_integrated", 0))
     vol.frame = str(meta.get("frame", "") or "")
     try:  # volumes written before the up direction and the intrinsics were recorded have neither

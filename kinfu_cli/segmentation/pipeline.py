@@ -294,7 +294,7 @@ def load_segment_input(path: str | os.PathLike) -> TernaryVolume | TernaryGrid:
     if not path.exists():
         raise VolumeError(f"{path}: no such volume file")
     grid = read_ternary(path)
-    return grid if grid is not None else load_volume(path)
+    return grid if grid is not None else load_volume(path, hypotheses=False)  # the winning colours suffice
 
 
 def segment_volume(volume: str | os.PathLike | TernaryVolume | TernaryGrid,

@@ -1,11 +1,11 @@
 """Segmentation of the surface cloud: support plane, supervoxels, merging across convex boundaries.
 
 Thesis Alg. 4 line 4 uses PCL's VCCS supervoxels + LCCP (Stein et al. 2014). This is the same idea in
-numpy/scipy/open3d:
+numpy/scipy:
 
-1. Support plane: open3d RANSAC (`segment_plane`, up to `max_planes` rounds) on points whose normal is
-   within `up_tolerance_deg` of `up`; the highest plane holding >= `min_plane_fraction` of the points, or
-   >= `min_up_facing_fraction` of those up-facing points (and at least `min_segment_points`), is the
+1. Support plane: RANSAC (open3d's `segment_plane` redone in numpy: plane_ransac.py; up to `max_planes` rounds)
+   on points whose normal is within `up_tolerance_deg` of `up`; the highest plane holding >= `min_plane_fraction`
+   of the points, or >= `min_up_facing_fraction` of those up-facing points (and at least `min_segment_points`), is the
    support (the table, not the floor); its inliers with a matching normal become segment 0.
 2. Supervoxels (VCCS-like): seeds on a `seed_resolution` grid, then a few k-means rounds where each point
    joins the closest of its 8 spatially nearest seeds under the VCCS distance
@@ -60,6 +60,7 @@ from scipy.spatial import cKDTree
 from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError, VolumeError
 from kinfu_cli.core.grid import check_up
+from kinfu_cli.segmentation.plane_ransac import ransac_plane
 
 PLANE_LABEL = 0
 NOISE_LABEL = -1
@@ -203,33 +204,12 @@ class Segmentation:
     colors: np.ndarray | None = None  # (N, 3) RGB in [0, 1] the segmentation used, None without colour
 
 
-def _ransac_plane(points: np.ndarray, distance: float, iterations: int) -> tuple[np.ndarray, list[int]]:
-    """open3d's RANSAC plane (model, inlier indices), run on one thread so that a seed gives one answer.
-
-    open3d runs the RANSAC iterations in parallel and stops them all once the best plane so far is good
-    enough; which sampled triples were tried before the stop then depends on thread timing, so with
-    several threads the seeded RANSAC returns a slightly different plane from run to run. On one thread
-    the iterations run in sample order (and, stopping early, no slower on a table-top cloud).
-    """
-    import open3d as o3d  # heavy; only needed here
-
-    pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
-    threads = o3d.utility.get_max_threads()
-    o3d.utility.set_max_threads(1)
-    try:
-        return pc.segment_plane(distance_threshold=distance, ransac_n=3, num_iterations=iterations)
-    finally:
-        o3d.utility.set_max_threads(threads)
-
-
 def detect_support_plane(points: np.ndarray, normals: np.ndarray, params: SegmentationParams,
                          info: dict | None = None) -> tuple[np.ndarray | None, np.ndarray]:
-    """(plane (4,) or None, inlier mask (N,)) by open3d RANSAC on up-facing points. `info`, when given,
-    receives what the search saw: points, up (the unit direction used, None for any), candidate_points
+    """(plane (4,) or None, inlier mask (N,)) by RANSAC (`ransac_plane`) on up-facing points. `info`, when
+    given, receives what the search saw: points, up (the unit direction used, None for any), candidate_points
     (normal within up_tolerance_deg of up), planes_tried, largest_plane_points (of the planes with an
     up-facing normal) and needed_points."""
-    import open3d as o3d  # heavy; only needed here
-
     n = len(points)
     up = params.up_vector()
     info = {} if info is None else info
@@ -248,13 +228,14 @@ def detect_support_plane(points: np.ndarray, normals: np.ndarray, params: Segmen
     if cand.sum() < need:
         return none
     idx = np.flatnonzero(cand)
-    o3d.utility.random.seed(int(params.seed))
+    rng = np.random.default_rng(int(params.seed))
     best = None
     remaining = idx
     for _ in range(max(1, int(params.max_planes))):  # several horizontal planes (floor, table): take the highest
         if len(remaining) < need:
             break
-        model, inl_idx = _ransac_plane(points[remaining], float(params.plane_distance), int(params.plane_iterations))
+        model, inl_idx = ransac_plane(points[remaining], float(params.plane_distance), int(params.plane_iterations),
+                                      rng)
         plane = np.asarray(model, dtype=np.float64)
         plane /= np.linalg.norm(plane[:3])
         if up is not None:
