@@ -17,7 +17,7 @@ import numpy as np
 from kinfu_cli.core.atomic import atomic_path
 from kinfu_cli.core.errors import VolumeError
 from kinfu_cli.core.grid import save_ternary
-from kinfu_cli.fusion.pipeline import FusionResult
+from kinfu_cli.fusion.pipeline import FusionResult, ate_vs_given
 from kinfu_cli.io.tum import write_tum
 
 OUTPUTS = ("mesh.ply", "cloud.ply", "volume.npz", "ternary.npz", "trajectory.tum", "report.json")
@@ -116,12 +116,9 @@ def _tracking_summary(track_log: list[dict]) -> dict:
     """The report's tracking section: every tracked frame, the lost ones, and the error against the given poses
     (when the recording has them: a tracked pose's camera position minus the given one, RMSE and max)."""
     kept = [t for t in track_log if not t["lost"]]
-    dev = np.array([t["given_minus_tracked_m"] for t in kept if t.get("given_minus_tracked_m") is not None])
     return {
         "frames": track_log, "tracked": len(track_log), "lost_frames": [t["index"] for t in track_log if t["lost"]],
         "lost": len(track_log) - len(kept),
         "relocalised": int(sum(bool(t.get("relocalised")) for t in kept)),
         "mean_fitness": float(np.mean([t["fitness"] for t in track_log])) if track_log else None,
-        "ate_vs_given_m": None if not len(dev) else {
-            "rmse": round(float(np.sqrt(np.mean(dev ** 2))), 5), "max": round(float(dev.max()), 5),
-            "frames": len(dev)}}
+        "ate_vs_given_m": ate_vs_given(track_log)}

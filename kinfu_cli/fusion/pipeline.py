@@ -386,6 +386,18 @@ def _tracking_verdict(integrator: _Integrator, max_lost: float, recording: str,
     return [f"{what}; they were not fused"]
 
 
+def ate_vs_given(track_log: list[dict]) -> dict | None:
+    """The tracked frames' camera positions against the recording's own poses (`given_minus_tracked_m` of the
+    frames not lost): RMSE, max (m), frames and the frame of the max; None without given poses."""
+    dev = [(t["given_minus_tracked_m"], t["index"]) for t in track_log
+           if not t["lost"] and t.get("given_minus_tracked_m") is not None]
+    if not dev:
+        return None
+    d = np.array([v for v, _ in dev])
+    return {"rmse": round(float(np.sqrt(np.mean(d ** 2))), 5), "max": round(float(d.max()), 5), "frames": len(d),
+            "max_frame": dev[int(np.argmax(d))][1]}
+
+
 def _tracking_doubts(track_log: list[dict]) -> list[str]:
     """Warnings when tracked poses look wrong although no frame was lost: far from the recording's own camera
     poses, or found mostly by the re-localisation search (the first ICP attempt failed). Both come with the
@@ -401,14 +413,11 @@ def _tracking_doubts(track_log: list[dict]) -> list[str]:
         turn = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
         step = f"; the tracked camera moves a median {100 * np.median(move):.1f} cm / {np.median(turn):.1f} deg per frame"
     out = []
-    dev = np.array([t["given_minus_tracked_m"] for t in kept if t.get("given_minus_tracked_m") is not None])
-    if len(dev) and np.sqrt(np.mean(dev ** 2)) > DRIFT_WARN_M:
-        worst = max((t for t in kept if t.get("given_minus_tracked_m") is not None),
-                    key=lambda t: t["given_minus_tracked_m"])
-        out.append(f"tracked camera poses lie {100 * np.sqrt(np.mean(dev ** 2)):.1f} cm RMS from the recording's own "
-                   f"poses (max {100 * worst['given_minus_tracked_m']:.1f} cm at frame {worst['index']}): tracking "
-                   f"drifted or the camera moves too fast for frame-to-model ICP{step}; the recorded poses "
-                   f"(pose 'forced') may serve better")
+    ate = ate_vs_given(track_log)
+    if ate is not None and ate["rmse"] > DRIFT_WARN_M:
+        out.append(f"tracked camera poses lie {100 * ate['rmse']:.1f} cm RMS from the recording's own poses (max "
+                   f"{100 * ate['max']:.1f} cm at frame {ate['max_frame']}): tracking drifted or the camera moves "
+                   f"too fast for frame-to-model ICP{step}; the recorded poses (pose 'forced') may serve better")
         step = ""
     reloc = sum(bool(t.get("relocalised")) for t in kept)
     if reloc > RELOCALISED_WARN * len(kept):
