@@ -12,6 +12,7 @@ from kinfu_cli.commands._output import emit
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.evaluation.segment_eval import (SWEEP_DEFAULT, default_sweep_values, evaluate_segments, label_names,
                                                sweep_segmentation)
+from kinfu_cli.evaluation.segments import MATCHINGS
 from kinfu_cli.evaluation.segment_tables import format_segment_table, format_sweep_table
 
 group = "eval"
@@ -35,6 +36,9 @@ def _numbers(text: str, option: str, kind=float) -> list:
                    "labels.npz.")
 @click.option("--t-eval", type=float, default=0.02, show_default=True,
               help="T_eval (m): neighbourhood radius and boundary matching distance.")
+@click.option("--matching", type=click.Choice(MATCHINGS), default="assignment", show_default=True,
+              help="Boundary matching: the maximum one-to-one matching within T_eval (what Martin et al.'s minimum "
+                   "distance assignment gives), or greedy closest pairs first (the scorer before 2026-11-26).")
 @click.option("--max-distance", type=float, default=0.015, show_default=True,
               help="A segmented point takes the label of the nearest ground-truth point within this (m); farther "
                    "points are not scored (and counted).")
@@ -70,13 +74,13 @@ def _numbers(text: str, option: str, kind=float) -> list:
 @click.option("--json", "as_json", is_flag=True, help="Print the results JSON to stdout instead of the table.")
 @click.option("--quiet", is_flag=True, help="No progress output.")
 @force_option
-def command(segments: Path | None, ground_truth: Path | None, t_eval: float, max_distance: float, cover: float,
-            share: float, sweep: bool, sweep_parameter: str, sweep_values: str | None, method: str | None, color: str,
-            photometric: bool, layouts: str, scenes: str, resolution: int,
+def command(segments: Path | None, ground_truth: Path | None, t_eval: float, matching: str, max_distance: float,
+            cover: float, share: float, sweep: bool, sweep_parameter: str, sweep_values: str | None, method: str | None,
+            color: str, photometric: bool, layouts: str, scenes: str, resolution: int,
             plot: Path | None, output: Path | None, as_json: bool, quiet: bool, force: bool) -> None:
     """Score SEGMENTS (a kinfu segment output folder, its segments.ply, or a labels file) against
     --ground-truth labels: boundary precision / recall at T_eval on the T_eval neighbourhood graph (thesis
-    eq. 4.16, one-to-one matching within T_eval), Bidirectional Consistency Error, object recall (one segment
+    eq. 4.16, a maximum one-to-one matching within T_eval; --matching greedy: closest pairs first), Bidirectional Consistency Error, object recall (one segment
     holds >= --cover of a true object), over-segmented objects and under-segmenting segments. Ground-truth
     labels reach the segmented points by nearest neighbour within --max-distance; unmatched points are
     counted, not scored.
@@ -107,8 +111,9 @@ def command(segments: Path | None, ground_truth: Path | None, t_eval: float, max
             raise ConfigError(f"--resolution: expected 32..512 voxels, got {resolution}")
         claim_outputs({"output": output, "plot": plot}, [], force)
         doc = sweep_segmentation(seeds, sweep_parameter, values, method=method, colors=colors, layouts=scene_layouts,
-                                 photometric=photometric, t_eval=t_eval, max_distance=max_distance, cover=cover,
-                                 share=share, resolution=resolution, quiet=quiet)
+                                 photometric=photometric, t_eval=t_eval, matching=matching,
+                                 max_distance=max_distance, cover=cover, share=share, resolution=resolution,
+                                 quiet=quiet)
         doc["warnings"] = []
         if plot is not None:
             from kinfu_cli.report.segment_eval_plot import plot_sweep_pr
@@ -121,8 +126,8 @@ def command(segments: Path | None, ground_truth: Path | None, t_eval: float, max
     if ground_truth is None:
         raise ConfigError("--ground-truth: a labels file is needed to score SEGMENTS")
     claim_outputs({"output": output, "plot": plot}, [segments, ground_truth], force)
-    result = evaluate_segments(segments, ground_truth, t_eval=t_eval, max_distance=max_distance, cover=cover,
-                               share=share)
+    result = evaluate_segments(segments, ground_truth, t_eval=t_eval, matching=matching, max_distance=max_distance,
+                               cover=cover, share=share)
     doc = result.document
     if plot is not None:
         from kinfu_cli.report.segment_eval_plot import plot_segment_errors

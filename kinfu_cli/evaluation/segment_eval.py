@@ -28,7 +28,7 @@ from kinfu_cli.core.errors import ConfigError, KinfuError
 from kinfu_cli.core.progress import progress
 from kinfu_cli.io.labelled_cloud import (LabelledCloud, LabelsFileError, ply_points, read_labelled_cloud,
                                          read_ply_vertices)
-from kinfu_cli.evaluation.segments import consistency_errors, score_segmentation
+from kinfu_cli.evaluation.segments import MATCHINGS, consistency_errors, score_segmentation
 
 PLANE_GREY = 153  # segments.ply: the support plane's colour (0.6 as uint8); dropped points are black
 SWEEP_DEFAULT = ("concavity_tolerance_deg", (0.0, 5.0, 10.0, 15.0, 20.0, 30.0, 45.0, 60.0))
@@ -158,7 +158,10 @@ class SegmentEvalResult:
     up: np.ndarray | None
 
 
-def _check_eval_numbers(t_eval: float, max_distance: float, cover: float, share: float) -> None:
+def _check_eval_numbers(t_eval: float, max_distance: float, cover: float, share: float,
+                        matching: str = "assignment") -> None:
+    if matching not in MATCHINGS:
+        raise ConfigError(f"expected one of {', '.join(MATCHINGS)}, got {matching!r}", parameter="matching")
     for name, v, lo, hi in (("t_eval", t_eval, 0, 1), ("max_distance", max_distance, 0, 1), ("cover", cover, 0, 1),
                             ("share", share, 0, 0.5)):
         if not (lo < v <= hi):
@@ -167,7 +170,8 @@ def _check_eval_numbers(t_eval: float, max_distance: float, cover: float, share:
 
 def score_labelled_points(points: np.ndarray, labels: np.ndarray, gt: LabelledCloud, *, t_eval: float = 0.02,
                           max_distance: float = 0.015, cover: float = 0.8, share: float = 0.2,
-                          min_object_points: int = 20) -> tuple[dict, np.ndarray, np.ndarray, np.ndarray]:
+                          min_object_points: int = 20, matching: str = "assignment"
+                          ) -> tuple[dict, np.ndarray, np.ndarray, np.ndarray]:
     """Scores of one labelling of `points` against the ground-truth cloud: (document, kept mask,
     transferred ground-truth labels of the kept points, per-point consistency error)."""
     gt_lab, _ = transfer_labels(gt.points, gt.labels, points, max_distance)
@@ -178,7 +182,7 @@ def score_labelled_points(points: np.ndarray, labels: np.ndarray, gt: LabelledCl
                          f"in the same world frame?", parameter="max_distance")
     pts, lab, g = points[keep], labels[keep], gt_lab[keep]
     sc = score_segmentation(pts, lab, g, t_eval=t_eval, cover=cover, min_object_points=min_object_points,
-                            share=share)
+                            share=share, matching=matching)
     # ground truth no segmented point came near: never seen, so not held against the segmentation
     near, _ = transfer_labels(points, np.zeros(len(points), dtype=np.int64), gt.points, max_distance)
     unseen = near < 0
@@ -200,13 +204,14 @@ def score_labelled_points(points: np.ndarray, labels: np.ndarray, gt: LabelledCl
 
 def evaluate_segments(segments: str | os.PathLike | PredictedSegments, ground_truth: str | os.PathLike | LabelledCloud,
                       *, t_eval: float = 0.02, max_distance: float = 0.015, cover: float = 0.8, share: float = 0.2,
-                      min_object_points: int = 20) -> SegmentEvalResult:
+                      min_object_points: int = 20, matching: str = "assignment") -> SegmentEvalResult:
     """Score a segmentation (files or loaded) against ground-truth labels; see the module docstring."""
-    _check_eval_numbers(t_eval, max_distance, cover, share)
+    _check_eval_numbers(t_eval, max_distance, cover, share, matching)
     pred = segments if isinstance(segments, PredictedSegments) else load_predicted_segments(segments)
     gt = ground_truth if isinstance(ground_truth, LabelledCloud) else load_ground_truth_labels(ground_truth)
     doc, keep, g, err = score_labelled_points(pred.points, pred.labels, gt, t_eval=t_eval, max_distance=max_distance,
-                                              cover=cover, share=share, min_object_points=min_object_points)
+                                              cover=cover, share=share, min_object_points=min_object_points,
+                                              matching=matching)
     warnings = list(pred.warnings)
     p = doc["points"]
     if p["unmatched_share"] > 0.1:
@@ -214,7 +219,7 @@ def evaluate_segments(segments: str | os.PathLike | PredictedSegments, ground_tr
                         f"ground-truth point within {max_distance} m and are not scored")
     document = {"input": {"segments": str(segments) if not isinstance(segments, PredictedSegments) else None,
                           "ground_truth": str(gt.path) if gt.path else None, "labels_from": pred.source},
-                "t_eval": t_eval, "max_distance": max_distance, "cover": cover, "share": share,
+                "t_eval": t_eval, "matching": matching, "max_distance": max_distance, "cover": cover, "share": share,
                 "min_object_points": min_object_points, **doc, "warnings": warnings}
     names = label_names(gt.path)
     for o in document["per_object"]:
@@ -302,7 +307,7 @@ def sweep_segmentation(seeds=(0, 1, 2), parameter: str = SWEEP_DEFAULT[0], value
                        method: str | None = None, colors=("mean", "mode"), layouts=("objects",), photometric: bool = True,
                        t_eval: float = 0.02, max_distance: float = 0.015, cover: float = 0.8, share: float = 0.2,
                        resolution: int = 160, size: float | None = None, frames: int = 24,
-                       quiet: bool = True) -> dict:
+                       quiet: bool = True, matching: str = "assignment") -> dict:
     """Boundary P/R, BCE, object recall of the segmentation of generated scenes over `values` of one
     segmentation parameter (a numeric field of SegmentationParams; t_lccp and t_ff as in thesis Figs.
     4.10-4.11), for every scene layout x seed x colour mode ("none", "mean", "mode": the volume fused without
@@ -315,7 +320,7 @@ def sweep_segmentation(seeds=(0, 1, 2), parameter: str = SWEEP_DEFAULT[0], value
 
     values = default_sweep_values(parameter) if values is None else values
     values, seeds, layouts, colors = _check_sweep_inputs(parameter, values, seeds, layouts, colors)
-    _check_eval_numbers(t_eval, max_distance, cover, share)
+    _check_eval_numbers(t_eval, max_distance, cover, share, matching)
     method = sweep_method(parameter, method)
     as_int = _sweep_fields()[parameter] in (int, "int")
     opts = {c: _sweep_options(parameter, values, method, c != "none", as_int) for c in colors}
@@ -342,7 +347,7 @@ def sweep_segmentation(seeds=(0, 1, 2), parameter: str = SWEEP_DEFAULT[0], value
         cloud = clouds[c]
         res = analyse_cloud(cloud.points, cloud.normals, opts[c][k], up_source="option", colors=cloud.colors)
         doc, *_ = score_labelled_points(res.segmentation.points, res.segmentation.labels, gt, t_eval=t_eval,
-                                        max_distance=max_distance, cover=cover, share=share)
+                                        max_distance=max_distance, cover=cover, share=share, matching=matching)
         scenes[-1]["rows"].append({"value": values[k], **{key: doc[key] for key in ROW_KEYS},
                                    "unmatched_share": doc["points"]["unmatched_share"],
                                    "missed": [objects.get(str(o["object"]), o["object"]) for o in doc["per_object"]
@@ -357,7 +362,8 @@ def sweep_segmentation(seeds=(0, 1, 2), parameter: str = SWEEP_DEFAULT[0], value
         means[c] = {key: [float(np.mean([s["rows"][i][key] for s in group])) for i in range(len(values))]
                     for key in ("boundary_precision", "boundary_recall", "boundary_f", "bce", "object_recall")}
     return {"parameter": parameter, "method": method, "values": values, "seeds": seeds, "layouts": layouts,
-            "colors": colors, "photometric": photometric, "t_eval": t_eval, "max_distance": max_distance,
+            "colors": colors, "photometric": photometric, "t_eval": t_eval, "matching": matching,
+            "max_distance": max_distance,
             "cover": cover, "share": share,
             "fusion": {"resolution": resolution, "voxel_m": (size or 1.1) / resolution, "frames": frames,
                        "sizes": {lay: size or SCENE_SIZES[lay] for lay in layouts}},

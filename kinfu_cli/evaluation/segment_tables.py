@@ -11,7 +11,8 @@ def format_segment_table(doc: dict) -> str:
              f"(labels from {doc['input']['labels_from']})", "",
              f"points: {p['evaluated']} of {p['segmented']} segmented points scored ({p['unmatched']} with no "
              f"ground truth within {doc['max_distance'] * 100:.1f} cm); {p['ground_truth_unseen']} of "
-             f"{p['ground_truth']} ground-truth points unseen ({p['ground_truth_unseen_share']:.0%})", "",
+             f"{p['ground_truth']} ground-truth points unseen ({p['ground_truth_unseen_share']:.0%}); boundary "
+             f"matching: {_matching(doc)}", "",
              f"  {'T_eval':>7} {'bnd P':>6} {'bnd R':>6} {'bnd F':>6} {'BCE':>6} {'obj R':>6} {'found':>6} "
              f"{'segs':>5} {'over':>5} {'under':>5}",
              f"  {doc['t_eval'] * 100:5.1f}cm {doc['boundary_precision']:6.3f} {doc['boundary_recall']:6.3f} "
@@ -32,6 +33,11 @@ def format_segment_table(doc: dict) -> str:
     return "\n".join(lines)
 
 
+def _matching(doc: dict) -> str:
+    """The boundary matching of a results document; files written before it was recorded used the greedy one."""
+    return doc.get("matching", "greedy")
+
+
 def _scene_name(s: dict) -> str:
     return f"{s.get('layout', 'objects')} {s['seed']} {s.get('color', '')}".strip()
 
@@ -46,7 +52,8 @@ def format_sweep_table(doc: dict) -> str:
              f"seeds {', '.join(map(str, doc['seeds']))}; colour {', '.join(doc.get('colors', ['none']))}"
              f"{', photometric effects' if doc.get('photometric') else ''}; voxel "
              f"{doc['fusion'].get('voxel_m', 0) * 1000:.1f} mm, cubes "
-             f"{', '.join(f'{k} {v} m' for k, v in sizes.items())}), T_eval {doc['t_eval'] * 100:.1f} cm", "",
+             f"{', '.join(f'{k} {v} m' for k, v in sizes.items())}), T_eval {doc['t_eval'] * 100:.1f} cm, "
+             f"boundary matching: {_matching(doc)}", "",
              f"  {'scene':>16} {name[:12]:>12} {'bnd P':>6} {'bnd R':>6} {'bnd F':>6} {'BCE':>6} {'obj R':>6} "
              f"{'segs':>5} {'over':>5} {'under':>5}  missed"]
     for s in doc["scenes"]:
