@@ -69,6 +69,9 @@ METHODS = ("lccp", "flood-fill")
 # than its segment's (tuned on synth seeds 0-3: 1.0 / 0.5 / 0.3 gave boundary P 0.931 / 0.954 / 0.929)
 PLANE_COLOR_RATIO = 0.5
 CUT_FACE_RADIUS = 0.03  # face-plane cuts: the face's points are counted within this of the candidate point (m)
+# step cuts (4a): a top level is a height shared by at least `need` up-facing points within this (m); the TSDF
+# rounds a step's edge and leaves a few up-facing points between the two tops, which otherwise fill the gap
+STEP_LEVEL_BAND = 0.0
 FOOT_BAND = 0.015  # feet (step 7): object points higher than this over the support are the object's side, never a foot (m)
 
 
@@ -400,10 +403,13 @@ def _concave_pairs(points: np.ndarray, normals: np.ndarray, pairs: np.ndarray, m
 
 def _best_face_cut(points: np.ndarray, normals: np.ndarray, idx: np.ndarray, seg_pairs: np.ndarray,
                    concave: np.ndarray, params: SegmentationParams, rng: np.random.Generator, chunk: int = 64,
-                   planes: np.ndarray | None = None) -> tuple[float, np.ndarray | None]:
+                   planes: np.ndarray | None = None, grounded: np.ndarray | None = None
+                   ) -> tuple[float, np.ndarray | None]:
     """(concave share of the separated pairs, mask over the points of the + side) of the best face plane among
     `cut_candidates` concave pairs of one segment (points idx, its pairs seg_pairs), or (0, None). The planes
-    are scored `chunk` at a time as (points x planes) side matrices; ties go to the first plane sampled."""
+    are scored `chunk` at a time as (points x planes) side matrices; ties go to the first plane sampled.
+    grounded (mask over all points, or None): only planes that leave one side with no grounded point count
+    (the piece cut off rests on the other, it does not stand beside it)."""
     cand = seg_pairs[concave]
     tol = params.plane_distance / 2  # the face's own points, within noise of its plane, stay on its side
     if planes is None:  # else: the given points' planes
@@ -413,6 +419,7 @@ def _best_face_cut(points: np.ndarray, normals: np.ndarray, idx: np.ndarray, seg
     pa, pb = loc[seg_pairs[:, 0]], loc[seg_pairs[:, 1]]
     x = points[idx]
     n_seg = len(idx)
+    g = None if grounded is None else grounded[idx]
     best_share, best_side = 0.0, None
     for c0 in range(0, len(planes), chunk):
         p = planes[c0:c0 + chunk]
@@ -422,6 +429,9 @@ def _best_face_cut(points: np.ndarray, normals: np.ndarray, idx: np.ndarray, seg
         small = np.minimum(n_plus, n_seg - n_plus)
         large = np.maximum(n_plus, n_seg - n_plus)
         ok = small >= np.maximum(params.min_segment_points, params.cut_min_ratio * large)
+        if g is not None and g.any():
+            n_g = (plus & g[:, None]).sum(axis=0)
+            ok &= (n_g == 0) | (n_g == g.sum())
         if params.cut_face_points > 0 and ok.any():  # the plane must be a face's: points on it near the candidate
             sq = (x * x).sum(axis=1)[:, None] - 2 * x @ points[p].T + (points[p] * points[p]).sum(axis=1)
             on = (sq <= CUT_FACE_RADIUS ** 2) & (np.abs(dist) <= tol)
@@ -444,10 +454,12 @@ def _best_face_cut(points: np.ndarray, normals: np.ndarray, idx: np.ndarray, seg
 
 
 def concave_plane_cuts(points: np.ndarray, normals: np.ndarray, seg: np.ndarray, pairs: np.ndarray,
-                       params: SegmentationParams, skip: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+                       params: SegmentationParams, skip: np.ndarray | None = None,
+                       grounded: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """(segments after the concave plane cuts, number of cuts): module docstring, step 4b. seg: segment per
     point (>= 0); pairs: point pairs closer than adjacency_radius; skip: points whose segments are not cut (the
-    step cuts' pieces). The pieces are re-split into connected parts.
+    step cuts' pieces); grounded: points at the support (within 2 plane_distance of it), or None: with it, a cut
+    must leave one piece off the support (`_best_face_cut`). The pieces are re-split into connected parts.
     Points and pairs are grouped by segment once per round (a cut only relabels its own segment's points)."""
     if not params.cut_concave_fraction or params.cut_rounds == 0 or len(pairs) == 0:  # None or 0: off
         return seg, 0
@@ -478,7 +490,7 @@ def concave_plane_cuts(points: np.ndarray, normals: np.ndarray, seg: np.ndarray,
                 continue
             idx = p_order[p_start[s]:p_start[s + 1]]
             e = e_order[e_start[s]:e_start[s + 1]]
-            share, plus = _best_face_cut(points, normals, idx, pairs[e], concave[e], params, rng)
+            share, plus = _best_face_cut(points, normals, idx, pairs[e], concave[e], params, rng, grounded=grounded)
             if plus is not None and share >= params.cut_concave_fraction:
                 seg[plus] = seg.max() + 1
                 cuts += 1
@@ -502,6 +514,12 @@ def _step_plane(x: np.ndarray, nx: np.ndarray, h: np.ndarray, up: np.ndarray, pa
     if len(top) < 2 * need:
         return None
     order = top[np.argsort(h[top], kind="stable")]
+    if STEP_LEVEL_BAND > 0:  # levels only: the rounded edge's few up-facing points between the tops are left out
+        hs = h[order]
+        count = np.searchsorted(hs, hs + STEP_LEVEL_BAND, "right") - np.searchsorted(hs, hs - STEP_LEVEL_BAND, "left")
+        order = order[count >= need]
+        if len(order) < 2 * need:
+            return None
     gaps = np.diff(h[order])
     gaps[:need - 1] = 0
     gaps[len(gaps) - need + 1:] = 0
@@ -777,10 +795,12 @@ def segment_cloud(points: np.ndarray, normals: np.ndarray, params: SegmentationP
         k = 0
     else:
         seg, sv, grow = lccp_segments(P, N, pairs, params, C)
-        stepped = None
+        stepped = grounded = None
         if plane is not None:  # step cuts first: their pieces are two boxes side by side, not cut again
             seg, grow["step_cuts"], stepped = step_cuts(P, N, seg, pairs, plane, params)
-        seg, grow["plane_cuts"] = concave_plane_cuts(P, N, seg, pairs, params, stepped)
+            if params.step_min_height:  # objects side by side are the step cuts'; face-plane cuts lift one off
+                grounded = P @ plane[:3] + plane[3] < 2 * params.plane_distance
+        seg, grow["plane_cuts"] = concave_plane_cuts(P, N, seg, pairs, params, stepped, grounded)
         k = int(sv.max()) + 1
         sv_all[rest] = sv
     stats.update(grow)
