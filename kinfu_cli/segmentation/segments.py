@@ -71,7 +71,8 @@ PLANE_COLOR_RATIO = 0.5
 CUT_FACE_RADIUS = 0.03  # face-plane cuts: the face's points are counted within this of the candidate point (m)
 # step cuts (4a): a top level is a height shared by at least `need` up-facing points within this (m); the TSDF
 # rounds a step's edge and leaves a few up-facing points between the two tops, which otherwise fill the gap
-STEP_LEVEL_BAND = 0.0
+# (tuning seeds 0, 1, 8-139, objects scenes, mode: 0 / 0.0025 / 0.005 gave object recall 0.979 / 0.984 / 0.983)
+STEP_LEVEL_BAND = 0.0025
 FOOT_BAND = 0.015  # feet (step 7): object points higher than this over the support are the object's side, never a foot (m)
 
 
@@ -403,13 +404,14 @@ def _concave_pairs(points: np.ndarray, normals: np.ndarray, pairs: np.ndarray, m
 
 def _best_face_cut(points: np.ndarray, normals: np.ndarray, idx: np.ndarray, seg_pairs: np.ndarray,
                    concave: np.ndarray, params: SegmentationParams, rng: np.random.Generator, chunk: int = 64,
-                   planes: np.ndarray | None = None, grounded: np.ndarray | None = None
-                   ) -> tuple[float, np.ndarray | None]:
+                   planes: np.ndarray | None = None, grounded: np.ndarray | None = None,
+                   plane_normals: np.ndarray | None = None) -> tuple[float, np.ndarray | None]:
     """(concave share of the separated pairs, mask over the points of the + side) of the best face plane among
     `cut_candidates` concave pairs of one segment (points idx, its pairs seg_pairs), or (0, None). The planes
     are scored `chunk` at a time as (points x planes) side matrices; ties go to the first plane sampled.
     grounded (mask over all points, or None): only planes that leave one side with no grounded point count
-    (the piece cut off rests on the other, it does not stand beside it)."""
+    (the piece cut off rests on the other, it does not stand beside it). plane_normals (len(planes), 3): the
+    given planes' normals instead of their points' normals."""
     cand = seg_pairs[concave]
     tol = params.plane_distance / 2  # the face's own points, within noise of its plane, stay on its side
     if planes is None:  # else: the given points' planes
@@ -423,7 +425,8 @@ def _best_face_cut(points: np.ndarray, normals: np.ndarray, idx: np.ndarray, seg
     best_share, best_side = 0.0, None
     for c0 in range(0, len(planes), chunk):
         p = planes[c0:c0 + chunk]
-        dist = x @ normals[p].T - np.einsum("ij,ij->i", points[p], normals[p])  # (points, planes) signed
+        pn = normals[p] if plane_normals is None else plane_normals[c0:c0 + chunk]
+        dist = x @ pn.T - np.einsum("ij,ij->i", points[p], pn)  # (points, planes) signed
         plus = dist > tol
         n_plus = plus.sum(axis=0)
         small = np.minimum(n_plus, n_seg - n_plus)
@@ -435,7 +438,7 @@ def _best_face_cut(points: np.ndarray, normals: np.ndarray, idx: np.ndarray, seg
         if params.cut_face_points > 0 and ok.any():  # the plane must be a face's: points on it near the candidate
             sq = (x * x).sum(axis=1)[:, None] - 2 * x @ points[p].T + (points[p] * points[p]).sum(axis=1)
             on = (sq <= CUT_FACE_RADIUS ** 2) & (np.abs(dist) <= tol)
-            on &= normals[idx] @ normals[p].T >= np.cos(np.radians(20.0))
+            on &= normals[idx] @ pn.T >= np.cos(np.radians(20.0))
             ok &= on.sum(axis=0) >= params.cut_face_points
         if not ok.any():
             continue
@@ -524,17 +527,25 @@ def _step_plane(x: np.ndarray, nx: np.ndarray, h: np.ndarray, up: np.ndarray, pa
     gaps[:need - 1] = 0
     gaps[len(gaps) - need + 1:] = 0
     g = int(np.argmax(gaps))
-    if gaps[g] < params.step_min_height:
-        return None
     low, high = order[:g + 1], order[g + 1:]
     h_low, h_high = float(np.median(h[low])), float(np.median(h[high]))
+    # the step is the levels' distance: the TSDF rounds the edge, which narrows the gap between them, not that
+    if gaps[g] <= STEP_LEVEL_BAND or h_high - h_low < params.step_min_height:
+        return None
     # candidate step directions: the horizontal part of the normals between the two levels (the step face, bent by
-    # the TSDF at its crease and edge); the one parting the two tops with the widest margin wins
+    # the TSDF at its crease and edge; a step of one or two voxels shows few), and the horizontal direction from the
+    # upper top's centre to the lower's; the one parting the two tops with the widest margin wins
     side = np.flatnonzero((nx @ up < cos) & (h > h_low + tol) & (h < h_high - tol))
     n = nx[side] - np.outer(nx[side] @ up, up)
     norm = np.linalg.norm(n, axis=1)
     n = n[norm >= 0.3] / norm[norm >= 0.3, None]
     if len(n) < need:
+        n = n[:0]
+    c = x[low].mean(axis=0) - x[high].mean(axis=0)
+    c -= (c @ up) * up
+    if np.linalg.norm(c) > 1e-9:
+        n = np.vstack([n, c / np.linalg.norm(c)])
+    if len(n) == 0:
         return None
     lo = np.percentile(x[low] @ n.T, 5, axis=0)  # the lower top lies in front of the step face
     hi = np.percentile(x[high] @ n.T, 95, axis=0)  # the upper top behind it
@@ -582,8 +593,12 @@ def step_cuts(points: np.ndarray, normals: np.ndarray, seg: np.ndarray, pairs: n
         near = ends[(np.abs(normals[ends] @ found[1]) >= np.cos(np.radians(25.0)))
                     & (np.abs((points[ends] - found[0]) @ found[1]) <= 1.5 * params.plane_distance)]
         if len(near):
+            # the face stands on the support, so its plane is vertical: the crease's normals, bent up by the TSDF,
+            # lose their vertical part (else the plane tilts through the lower box, a 20 deg tilt 3 cm at its foot)
+            hz = normals[near] - np.outer(normals[near] @ up, up)
+            hz /= np.maximum(np.linalg.norm(hz, axis=1, keepdims=True), 1e-12)
             _, side = _best_face_cut(points, normals, idx, pairs[e], conc, params, np.random.default_rng(params.seed),
-                                     planes=near)
+                                     planes=near, plane_normals=hz)
             if side is not None:
                 plus = side[idx]
         n_plus = int(plus.sum())
