@@ -80,9 +80,10 @@ def test_mug_is_not_face_cut_beside_its_handle_but_a_box_on_a_box_is():
     seg, objs = _objects(pts, nrm, cut_concave_fraction=0.1)
     assert len(objs) == 1 and seg.stats["plane_cuts"] == 0
     assert np.sum(seg.labels == objs[0]) >= 0.95 * np.sum(pts[:, 2] > 0.005)
-    base, top = ((-0.08, -0.06, 0.0), (0.08, 0.06, 0.08)), ((-0.05, -0.04, 0.08), (0.05, 0.04, 0.15))
+    # a box on a box, flush with its +x face (one plane: LCCP alone joins them); the cut lifts the top box off
+    base, top = ((-0.08, -0.06, 0.0), (0.08, 0.06, 0.08)), ((-0.02, -0.04, 0.08), (0.08, 0.04, 0.15))
     bp, bn = _box_faces(*base)
-    keep = ~np.all(np.abs(bp[:, :2]) <= (0.05, 0.04), axis=1) | (bp[:, 2] < 0.08 - 1e-9)  # the top box hides this
+    keep = ~np.all((bp[:, :2] >= (-0.02, -0.04)) & (bp[:, :2] <= (0.08, 0.04)), axis=1) | (bp[:, 2] < 0.08 - 1e-9)
     tp, tn = _box_faces(*top)
     table = _table(hole=lambda x, y: (np.abs(x) <= 0.08) & (np.abs(y) <= 0.06))
     seg, objs = _objects(np.concatenate([bp[keep], tp, table[0]]), np.concatenate([bn[keep], tn, table[1]]),
