@@ -20,7 +20,8 @@
    objects, ball), fused as `kinfu eval segment --sweep` does and cached in /tmp: boundary P / R at 2 cm, BCE,
    object recall of the default LCCP with colour, mode filter and mean colour, on the tuning seeds 0, 1, 8-19
    (`--tune-seeds`; constants are chosen there) and the held-out seeds 2-7 (`--held-seeds`; reported only);
-   `--set NAME=VALUE` overrides a SegmentationParams field (a tuning run takes ~10 s once the clouds are cached).
+   `--set NAME=VALUE` overrides a SegmentationParams field (a tuning run takes ~10 s once the clouds are cached);
+   `--missed` also counts the missed objects by object and cause (merged with a neighbour, into the table, split...).
 
 Run: .venv/bin/python benchmarks/bench_segment.py [--quick]
 """
@@ -351,18 +352,48 @@ def score_objects_scene(data: dict, colour: str, overrides: dict | None = None) 
     opts.validate()
     res = analyse_cloud(data[f"{colour}_points"], data[f"{colour}_normals"], opts, up_source="option",
                         colors=data[f"{colour}_colors"])
-    doc, *_ = score_labelled_points(res.segmentation.points, res.segmentation.labels,
-                                    LabelledCloud(data["gt_points"], data["gt_labels"]))
+    doc, keep, gt, _ = score_labelled_points(res.segmentation.points, res.segmentation.labels,
+                                             LabelledCloud(data["gt_points"], data["gt_labels"]))
     names = dict(n.split(":", 1) for n in data["names"])
+    lab = res.segmentation.labels[keep]
+    missed = [o for o in doc["per_object"] if not o["found"]]
     return {k: doc[k] for k in ("boundary_precision", "boundary_recall", "boundary_f", "bce", "objects_found",
                                 "objects_total", "segments")} | {
-        "missed": [names.get(str(o["object"]), o["object"]) for o in doc["per_object"] if not o["found"]]}
+        "missed": [names.get(str(o["object"]), o["object"]) for o in missed],
+        "missed_causes": [(names.get(str(o["object"]), str(o["object"])), miss_cause(lab, gt, o["object"]))
+                          for o in missed]}
+
+
+def miss_cause(lab: np.ndarray, gt: np.ndarray, oid: int) -> str:
+    """Why a true object was missed (labels lab and ground truth gt of the scored points): "into table" (its
+    largest part is the support's), "merged with neighbour" (one segment holds >= 80 % of it but mostly another
+    object), "part into table" / "part into neighbour" (its second part is the support's / another object's
+    segment), "split" (into segments of its own), "dropped"."""
+    segs, cnt = np.unique(lab[gt == oid], return_counts=True)
+    order = np.argsort(-cnt)
+    segs, share = segs[order], cnt[order] / cnt.sum()
+
+    def majority(s):
+        g, c = np.unique(gt[lab == s], return_counts=True)
+        return int(g[np.argmax(c)])
+    if segs[0] == -1:
+        return "dropped"
+    if segs[0] == 0:
+        return "into table"
+    if share[0] >= 0.8:
+        return "merged with neighbour"
+    if len(segs) < 2 or segs[1] == -1:
+        return "split"
+    if segs[1] == 0:
+        return "part into table"
+    return "split" if majority(segs[1]) == oid else "part into neighbour"
 
 
 def bench_objects(tuning=OBJECTS_TUNING, held_out=OBJECTS_HELD_OUT, colours=("mode", "mean"),
-                  cache: Path | None = None, overrides: dict | None = None, log=print) -> dict:
+                  cache: Path | None = None, overrides: dict | None = None, log=print, missed: bool = False) -> dict:
     """Issue 12's quality table: boundary P / R at 2 cm, BCE and object recall (pooled over scenes) of the
-    default segmentation on the `objects` scenes, tuning and held-out seeds, per colour mode."""
+    default segmentation on the `objects` scenes, tuning and held-out seeds, per colour mode; missed: also the
+    missed objects counted by object and cause (`miss_cause`)."""
     cache = cache or Path(tempfile.gettempdir()) / "kinfu_bench_segment_objects"
     out = {"overrides": overrides or {}, "groups": {}}
     for group, seeds in (("tuning", tuning), ("held-out", held_out)):
@@ -381,11 +412,23 @@ def bench_objects(tuning=OBJECTS_TUNING, held_out=OBJECTS_HELD_OUT, colours=("mo
                                          / max(sum(r["objects_total"] for r in rows), 1)),
                        "scenes": rows}
             out["groups"][f"{group} {colour}"] = summary
+            if missed:
+                causes: dict = {}
+                for r in rows:
+                    for name, cause in r["missed_causes"]:
+                        causes.setdefault((name, cause), []).append(r["seed"])
+                summary["missed_by_cause"] = {f"{n}: {c}": v for (n, c), v in sorted(causes.items())}
     log("| seeds, colour | P / R at 2 cm | F | BCE | object recall |")
     log("|---|---|---|---|---|")
     for name, g in out["groups"].items():
         log(f"| {name} ({','.join(map(str, g['seeds']))}) | {g['boundary_precision']:.3f} / "
             f"{g['boundary_recall']:.3f} | {g['boundary_f']:.3f} | {g['bce']:.3f} | {g['object_recall']:.3f} |")
+    if missed:
+        log("| seeds, colour | object: cause | count | seeds |")
+        log("|---|---|---|---|")
+        for name, g in out["groups"].items():
+            for key, seeds in g["missed_by_cause"].items():
+                log(f"| {name} | {key} | {len(seeds)} | {','.join(map(str, seeds))} |")
     return out
 
 
@@ -493,6 +536,7 @@ def main() -> None:
     ap.add_argument("--objects", action="store_true", help="only the issue-12 quality table on the objects scenes")
     ap.add_argument("--tune-seeds", default=",".join(map(str, OBJECTS_TUNING)), help="--objects tuning seeds")
     ap.add_argument("--held-seeds", default=",".join(map(str, OBJECTS_HELD_OUT)), help="--objects held-out seeds")
+    ap.add_argument("--missed", action="store_true", help="--objects: also count the missed objects by cause")
     ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                     help="--objects: a SegmentationParams field to override (repeatable)")
     ap.add_argument("--cache", default=str(Path(tempfile.gettempdir()) / "kinfu_bench_segment"),
@@ -501,7 +545,7 @@ def main() -> None:
     if args.objects:
         seeds = [tuple(int(v) for v in a.split(",") if v) for a in (args.tune_seeds, args.held_seeds)]
         over = {k: json.loads(v) for k, v in (a.split("=", 1) for a in args.set)}
-        bench_objects(*seeds, overrides=over)
+        bench_objects(*seeds, overrides=over, missed=args.missed)
         return
     if args.speed:
         print(json.dumps({"segment_volume": bench_speed(Path(args.cache)),
