@@ -26,12 +26,18 @@ numpy/scipy:
    the plane separates, at least `cut_concave_fraction` are concave (normals bent by more than
    `cut_min_angle_deg`), and the smaller piece holds at least `cut_min_ratio` of the larger (a mug's handle, one
    fifth of the body, is a part, not an object); up to `cut_rounds` rounds, the best of `cut_candidates` sampled
-   face planes per segment and round; only segments whose bounding-box diagonal is at most `cut_max_size`.
+   face planes per segment and round; only segments whose bounding-box diagonal is at most `cut_max_size`. With a
+   support plane and step cuts on, a cut must leave one piece off the support (no point within 2 x
+   `plane_distance` of it): objects side by side both stand on it and are 4a's; a cut between two standing pieces
+   takes a part off an object (a mug's handle with a slice of its body, a box's side). Without 4a, 4b does both.
 4a. Step cuts (before 4b; not in the thesis): two touching boxes of different heights whose front and back faces are one
    plane show the concave crease only along the step, too short a share of the seam for 4b. A segment (at most
-   `cut_max_size`) whose up-facing points form two levels at least `step_min_height` apart, with a vertical plane
-   (from the normals between the levels) that has the whole lower top in front and the whole upper top behind,
-   is cut along that plane when both pieces stand on the support and the smaller holds >= `cut_min_ratio` of
+   `cut_max_size`) whose up-facing points form two levels (heights that many of them share: the TSDF's rounded
+   edge leaves a few between the tops) whose medians are at least `step_min_height` apart, with a vertical plane
+   (from the normals between the levels, or from the upper top's centre towards the lower's) that has the whole
+   lower top in front and the whole upper top behind,
+   is cut along that plane (or the step face's own vertical plane at its crease) when both pieces stand on the
+   support and the smaller holds >= `cut_min_ratio` of
    the larger (a box on a larger box has the base's top all round it, so no such plane exists). The pieces are
    not cut again in 4b: its best face plane for such a pair can be the lower box's top, which also leaves two
    convex boxes, one of them floating.
@@ -71,7 +77,8 @@ PLANE_COLOR_RATIO = 0.5
 CUT_FACE_RADIUS = 0.03  # face-plane cuts: the face's points are counted within this of the candidate point (m)
 # step cuts (4a): a top level is a height shared by at least `need` up-facing points within this (m); the TSDF
 # rounds a step's edge and leaves a few up-facing points between the two tops, which otherwise fill the gap
-# (tuning seeds 0, 1, 8-139, objects scenes, mode: 0 / 0.0025 / 0.005 gave object recall 0.979 / 0.984 / 0.983)
+# (tuning seeds 0, 1, 8-139, objects scenes, mode, with the gap as the step: 0 / 0.0025 / 0.005 gave object recall
+# 0.979 / 0.984 / 0.983)
 STEP_LEVEL_BAND = 0.0025
 FOOT_BAND = 0.015  # feet (step 7): object points higher than this over the support are the object's side, never a foot (m)
 
@@ -99,10 +106,13 @@ class SegmentationParams:
     # 0.982 (a mug cut with a slice of its body at 0.40), but a box on a box in test_segment's primitive scene is 0.449
     cut_candidates: int = 200
     cut_rounds: int = 3
-    # step cuts (step 4a): two tops at least this far apart (largest gap of the up-facing heights, m); 0 = off.
+    # step cuts (step 4a): two tops at least this far apart (m; the largest gap of the up-facing heights until the
+    # levels' median heights replaced it, module docstring); 0 = off.
     # Tuning seeds 0, 1, 8-19, object recall mode / mean: off 0.946 / 0.946, 0.005 and 0.01 0.982 / 0.982, 0.015
-    # 0.973 / 0.973, 0.02 0.955 / 0.955 (the TSDF rounds a step, so the gap is less than the step)
-    step_min_height: float = 0.01
+    # 0.973 / 0.973, 0.02 0.955 / 0.955 (the TSDF rounds a step, so the gap is less than the step). With the levels'
+    # medians, tuning seeds 0, 1, 8-139 (mode, mean alike): 0.005 / 0.007 / 0.01 / 0.015 gave 0.996 / 0.996 / 0.994 /
+    # 0.981 and the same boundary P (0.950); 0.007 is one voxel of those scenes (6.9 mm): a smaller step is noise
+    step_min_height: float = 0.007
     # the cut plane must be a face's: >= this many points of the segment on it (within plane_distance / 2, normals
     # within 20 deg) within CUT_FACE_RADIUS of the candidate point (0 = off). The cuts made on tuning seeds 0, 1,
     # 8-19 had 6-17 such points, a mug cut through its body at a handle point 2; 3 / 4 / 5 / 6 / 8 gave object
@@ -506,8 +516,9 @@ def concave_plane_cuts(points: np.ndarray, normals: np.ndarray, seg: np.ndarray,
 def _step_plane(x: np.ndarray, nx: np.ndarray, h: np.ndarray, up: np.ndarray, params: SegmentationParams
                 ) -> tuple[np.ndarray, np.ndarray] | None:
     """(origin, normal) of the step face between two tops of one segment (points x, normals nx, heights over the
-    support h), or None: the segment's up-facing points, off the support, fall into two levels at least
-    `step_min_height` apart (largest gap in their heights), and a vertical face rising from the lower level has
+    support h), or None: the segment's up-facing points, off the support, fall into two levels (split at the largest
+    gap between heights that at least `need` of them share within STEP_LEVEL_BAND) whose medians are at least
+    `step_min_height` apart, and a vertical face rising from the lower level has
     the whole lower top in front of it and the whole upper top behind it (two boxes of different heights side by
     side; a box on another has its base's top around it, so no face plane parts the two tops)."""
     cos = np.cos(np.radians(20.0))
@@ -530,6 +541,7 @@ def _step_plane(x: np.ndarray, nx: np.ndarray, h: np.ndarray, up: np.ndarray, pa
     low, high = order[:g + 1], order[g + 1:]
     h_low, h_high = float(np.median(h[low])), float(np.median(h[high]))
     # the step is the levels' distance: the TSDF rounds the edge, which narrows the gap between them, not that
+    # (tuning seeds 0, 1, 8-139, mode: the gap >= step_min_height instead gave object recall 0.989, this 0.994)
     if gaps[g] <= STEP_LEVEL_BAND or h_high - h_low < params.step_min_height:
         return None
     # candidate step directions: the horizontal part of the normals between the two levels (the step face, bent by
