@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from kinfu_cli.segmentation.segments import SegmentationParams, segment_cloud
+from tests.segmentation.box_clouds import face_points, object_segments as _objects
 
 STEP = 0.007  # about the fused clouds' spacing
 
@@ -48,29 +48,15 @@ def _mug(r=0.036, height=0.107, hr=0.03, tube=0.011):
 
 def _box_faces(lo, hi, skip=()):
     """Grid points and outward normals on the faces of the box lo..hi, bottom and faces in skip left out."""
-    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
     pts, nrm = [], []
     for axis in range(3):
         for side in (-1, 1):
             if (axis == 2 and side < 0) or (axis, side) in skip:
                 continue
-            u_ax, v_ax = [a for a in range(3) if a != axis]
-            u = np.arange(lo[u_ax] + STEP / 2, hi[u_ax], STEP)
-            v = np.arange(lo[v_ax] + STEP / 2, hi[v_ax], STEP)
-            uu, vv = (w.ravel() for w in np.meshgrid(u, v))
-            p = np.zeros((len(uu), 3))
-            p[:, u_ax], p[:, v_ax] = uu, vv
-            p[:, axis] = hi[axis] if side > 0 else lo[axis]
-            n = np.zeros_like(p)
-            n[:, axis] = side
+            p, n = face_points(lo, hi, axis, side, STEP)
             pts.append(p)
             nrm.append(n)
     return np.concatenate(pts), np.concatenate(nrm)
-
-
-def _objects(points, normals, **params):
-    seg = segment_cloud(points, normals, SegmentationParams(up=(0.0, 0.0, 1.0), **params))
-    return seg, [int(s) for s in np.unique(seg.labels) if s > 0]
 
 
 def test_mug_is_not_face_cut_beside_its_handle_but_a_box_on_a_box_is():

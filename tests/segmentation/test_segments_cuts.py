@@ -6,24 +6,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from kinfu_cli.segmentation.segments import SegmentationParams, segment_cloud
+from tests.segmentation.box_clouds import face_points, object_segments as _objects
 
 STEP = 0.01
-
-
-def _face_points(lo, hi, axis, side):
-    """Grid points on one face of the box lo..hi with the outward normal along +-axis."""
-    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
-    ax = [a for a in range(3) if a != axis]
-    u = np.arange(lo[ax[0]] + STEP / 2, hi[ax[0]], STEP)
-    v = np.arange(lo[ax[1]] + STEP / 2, hi[ax[1]], STEP)
-    g = np.stack(np.meshgrid(u, v, indexing="ij"), -1).reshape(-1, 2)
-    p = np.zeros((len(g), 3))
-    p[:, ax[0]], p[:, ax[1]] = g[:, 0], g[:, 1]
-    p[:, axis] = hi[axis] if side > 0 else lo[axis]
-    n = np.zeros_like(p)
-    n[:, axis] = side
-    return p, n
 
 
 def _boxes_on_table(boxes, hidden):
@@ -41,15 +26,10 @@ def _boxes_on_table(boxes, hidden):
             for side in (-1, 1):
                 if (axis == 2 and side < 0) or (k, axis, side) in hidden:
                     continue
-                p, n = _face_points(lo, hi, axis, side)
+                p, n = face_points(lo, hi, axis, side, STEP)
                 pts.append(p)
                 nrm.append(n)
     return np.concatenate(pts), np.concatenate(nrm)
-
-
-def _objects(points, normals, **params):
-    seg = segment_cloud(points, normals, SegmentationParams(up=(0.0, 0.0, 1.0), **params))
-    return seg, [int(s) for s in np.unique(seg.labels) if s > 0]
 
 
 def test_touching_twins_are_cut_along_the_taller_face():
