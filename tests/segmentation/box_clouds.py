@@ -23,6 +23,14 @@ def face_points(lo, hi, axis: int, side: int, step: float) -> tuple[np.ndarray, 
     return p, n
 
 
+def box_faces(lo, hi, step: float, skip=()) -> tuple[np.ndarray, np.ndarray]:
+    """Grid points and outward normals on the faces of the box lo..hi; the bottom and the (axis, side) faces in
+    skip are left out (hidden by the table or a touching box)."""
+    faces = [face_points(lo, hi, axis, side, step) for axis in range(3) for side in (-1, 1)
+             if not (axis == 2 and side < 0) and (axis, side) not in skip]
+    return np.concatenate([f[0] for f in faces]), np.concatenate([f[1] for f in faces])
+
+
 def object_segments(points: np.ndarray, normals: np.ndarray, **params):
     """(segmentation with z up, the object segment ids)."""
     seg = segment_cloud(points, normals, SegmentationParams(up=(0.0, 0.0, 1.0), **params))

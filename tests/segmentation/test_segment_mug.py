@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tests.segmentation.box_clouds import face_points, object_segments as _objects
+from tests.segmentation.box_clouds import box_faces, object_segments as _objects
 
 STEP = 0.007  # about the fused clouds' spacing
 
@@ -47,16 +47,7 @@ def _mug(r=0.036, height=0.107, hr=0.03, tube=0.011):
 
 
 def _box_faces(lo, hi, skip=()):
-    """Grid points and outward normals on the faces of the box lo..hi, bottom and faces in skip left out."""
-    pts, nrm = [], []
-    for axis in range(3):
-        for side in (-1, 1):
-            if (axis == 2 and side < 0) or (axis, side) in skip:
-                continue
-            p, n = face_points(lo, hi, axis, side, STEP)
-            pts.append(p)
-            nrm.append(n)
-    return np.concatenate(pts), np.concatenate(nrm)
+    return box_faces(lo, hi, STEP, skip)
 
 
 def test_mug_is_not_face_cut_beside_its_handle_but_a_box_on_a_box_is():

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tests.segmentation.box_clouds import face_points, object_segments as _objects
+from tests.segmentation.box_clouds import box_faces, object_segments as _objects
 
 STEP = 0.01
 
@@ -22,13 +22,9 @@ def _boxes_on_table(boxes, hidden):
     pts.append(np.c_[t[~inside], np.zeros((~inside).sum())])
     nrm.append(np.tile([0.0, 0.0, 1.0], ((~inside).sum(), 1)))
     for k, (lo, hi) in enumerate(boxes):
-        for axis in range(3):
-            for side in (-1, 1):
-                if (axis == 2 and side < 0) or (k, axis, side) in hidden:
-                    continue
-                p, n = face_points(lo, hi, axis, side, STEP)
-                pts.append(p)
-                nrm.append(n)
+        p, n = box_faces(lo, hi, STEP, skip={(axis, side) for j, axis, side in hidden if j == k})
+        pts.append(p)
+        nrm.append(n)
     return np.concatenate(pts), np.concatenate(nrm)
 
 
