@@ -845,7 +845,8 @@ def segment_cloud(points: np.ndarray, normals: np.ndarray, params: SegmentationP
     labels[on_plane] = PLANE_LABEL
     sv_all = np.full(n, -1, dtype=np.int64)
     stats = {"points": int(n), "plane_points": int(on_plane.sum()), "support_plane_search": search,
-             "method": params.method, "colors": col is not None}
+             "method": params.method, "colors": col is not None,
+             "color_distance": params.color_distance}
     if len(rest) == 0:
         return Segmentation(pts, nrm, labels, plane, sv_all, 0, stats, col)
     P, N = pts[rest], nrm[rest]
