@@ -17,9 +17,10 @@ numpy/scipy:
    convex when (n1 - n2) . d >= 0 and d is not within `sanity_angle_deg` of n1 x n2 (LCCP's sanity
    criterion against singular configurations), or when the normals differ by less than `concavity_tolerance_deg`
    (smooth surfaces); with colours, an edge whose supervoxels' mean colours differ by more than `t_lccp`
-   is cut (thesis eq. 4.15: LCCP alone ignores colour); segments are the connected components.
+   (in `color_distance`, chromaticity by default) is cut (thesis eq. 4.15: LCCP alone ignores colour); segments
+   are the connected components.
    method "flood-fill" replaces steps 2-4 by the thesis's baseline (eqs. 4.13-4.14): neighbouring points
-   stay joined when w_c |c1 - c2| + w_n (1 - n1 . n2) < `t_ff`.
+   stay joined when w_c d(c1, c2) + w_n (1 - n1 . n2) < `t_ff` (d: `color_distance`).
 4b. Concave plane cuts (after CPC, Schoeler et al. 2015; not in the thesis): an LCCP segment still joined across a
    concave crease through some flat or convex path (two touching boxes whose front faces are one plane; a box whose
    top overhangs its base) is cut by the plane of a face at one of its concave point pairs when, of the point pairs
@@ -177,7 +178,7 @@ class SegmentationParams:
             raise ConfigError(f"expected one of {', '.join(COLOR_DISTANCES)}, got {self.color_distance!r}",
                               parameter="color_distance")
         if self.t_lccp is not None:
-            check_number(self.t_lccp, "t_lccp", 0, 2)  # the RGB cube's diagonal is sqrt(3)
+            check_number(self.t_lccp, "t_lccp", 0, 2)  # every distance is below 2 (rgb sqrt(3), chroma sqrt(2))
         check_number(self.t_ff, "t_ff", 0, 1e6, low_open=True)
         if self.cut_concave_fraction is not None:
             check_number(self.cut_concave_fraction, "cut_concave_fraction", 0, 1)
@@ -389,7 +390,7 @@ def lccp_segments(points: np.ndarray, normals: np.ndarray, pairs: np.ndarray, pa
                   colors: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
     """(segment per point, supervoxel per point, stats): supervoxels joined over convex or smooth edges
     (module docstring, step 4); with colours, an edge whose supervoxels' mean colours differ by more than
-    t_lccp (RGB in [0, 1], Euclidean; thesis eq. 4.15) is cut whatever its shape. pairs: point pairs closer
+    t_lccp (in params.color_distance; thesis eq. 4.15: RGB) is cut whatever its shape. pairs: point pairs closer
     than adjacency_radius."""
     sv = supervoxels(points, normals, params, colors, pairs)
     k = int(sv.max()) + 1
@@ -426,8 +427,8 @@ def lccp_segments(points: np.ndarray, normals: np.ndarray, pairs: np.ndarray, pa
 def flood_fill_segments(normals: np.ndarray, pairs: np.ndarray, params: SegmentationParams,
                         colors: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
     """(segment per point, stats): the thesis's Flood Fill baseline (eqs. 4.13-4.14): neighbouring points
-    (closer than adjacency_radius) stay joined when color_importance |c1 - c2| + normal_importance
-    (1 - n1 . n2) < t_ff (RGB in [0, 1]); segments are the connected components. Without colours the
+    (closer than adjacency_radius) stay joined when color_importance d(c1, c2) + normal_importance
+    (1 - n1 . n2) < t_ff (d: params.color_distance); segments are the connected components. Without colours the
     colour term is 0."""
     cost = params.normal_importance * (1.0 - np.einsum("ij,ij->i", normals[pairs[:, 0]], normals[pairs[:, 1]]))
     if colors is not None:
