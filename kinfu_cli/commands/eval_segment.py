@@ -52,7 +52,7 @@ def _numbers(text: str, option: str, kind=float) -> list:
 @click.option("--sweep-parameter", default=SWEEP_DEFAULT[0], show_default=True,
               help="The segmentation threshold to sweep (a numeric kinfu segment parameter).")
 @click.option("--sweep-values", default=None,
-              help="Its values, comma-separated [default: t_lccp 0.1,0.15,0.2,0.3,0.4,0.6,2 (2 prunes nothing); "
+              help="Its values, comma-separated [default: t_lccp 0.02,0.04,0.08,0.12,0.16,0.25,2 (chromaticity distance; 2 prunes nothing); "
                    "t_ff 0.1,0.2,0.3,0.5,0.7,1; others " + ",".join(f"{v:g}" for v in SWEEP_DEFAULT[1]) + "].")
 @click.option("--method", type=click.Choice(["lccp", "flood-fill"]), default=None,
               help="Segmentation method of the sweep [default: flood-fill for t_ff, else lccp].")

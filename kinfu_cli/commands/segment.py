@@ -20,7 +20,7 @@ from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.progress import progress
 from kinfu_cli.segmentation.outputs import write_segment_outputs
 from kinfu_cli.segmentation.pipeline import SegmentOptions, SegmentResult, segment_volume
-from kinfu_cli.segmentation.segments import SegmentationParams
+from kinfu_cli.segmentation.segments import COLOR_DISTANCES, SegmentationParams
 
 
 def _pair(value: str, name: str) -> tuple[float, float]:
@@ -86,8 +86,11 @@ def _grasps(segments: dict, options, cones: tuple[str, ...]) -> dict:
               help="Colour weight (RGB in [0, 1]) in the supervoxels and in the Flood Fill cost.")
 @click.option("--no-color", is_flag=True, help="Ignore the volume's colour (segment by shape alone).")
 @click.option("--t-lccp", type=float, default=None,
-              help="LCCP: cut edges between supervoxels whose mean colours differ more than this (RGB "
-                   "distance, 0..1.73); default no cut.")
+              help="LCCP: cut edges between supervoxels whose mean colours differ more than this (in "
+                   "--color-distance: chroma 0..1.41, rgb 0..1.73, angle 0..1.57 rad); default no cut.")
+@click.option("--color-distance", type=click.Choice(COLOR_DISTANCES), default="chroma", show_default=True,
+              help="Colour distance of --t-lccp and --t-ff: chroma (chromaticity rgb/(r+g+b), blind to shading and "
+                   "gain), rgb (the thesis' Euclidean RGB) or angle (between the colour vectors).")
 @click.option("--t-ff", type=float, default=0.5, show_default=True,
               help="Flood Fill: neighbours join when colour-importance*|dc| + normal-importance*(1-n1.n2) is below this.")
 @click.option("--concave-cut", type=float, default=0.4, show_default=True,
@@ -149,7 +152,7 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
             plane_distance, up, up_tolerance, isolation_threshold, no_superquadrics, sq_max_points,
             sq_exponent_bounds, sq_cost, multi_sq, msq_trigger, msq_height, msq_mu, seed, plot, as_json,
             quiet, force, viz=None, shape_prior=True, grasp=False, grasp_hand="both", grasp_cones=(),
-            grasp_starts=4, msq_cut="volume") -> None:
+            grasp_starts=4, msq_cut="volume", color_distance="chroma") -> None:
     """Segment the surface of VOLUME (a fusion volume.npz or a ternary.npz): support plane, supervoxels
     merged across convex boundaries (LCCP idea), saliency = isolation x roundness (thesis eq. 3.12) and a
     superquadric per segment (Vezzani ch. 7). Writes OUTDIR/segments.ply (coloured by segment),
@@ -168,6 +171,7 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
     params = SegmentationParams(seed_resolution=seed_resolution, spatial_importance=spatial_importance,
                                 normal_importance=normal_importance, adjacency_radius=adjacency_radius,
                                 method=method, color_importance=color_importance, t_lccp=t_lccp, t_ff=t_ff,
+                                color_distance=color_distance,
                                 plane_color_margin=plane_color_margin, cut_concave_fraction=concave_cut or None,
                                 concavity_tolerance_deg=concavity_tolerance, sanity_angle_deg=sanity_angle,
                                 min_segment_points=min_segment_points, fragment_points=fragment_points,

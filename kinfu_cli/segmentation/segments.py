@@ -17,9 +17,10 @@ numpy/scipy:
    convex when (n1 - n2) . d >= 0 and d is not within `sanity_angle_deg` of n1 x n2 (LCCP's sanity
    criterion against singular configurations), or when the normals differ by less than `concavity_tolerance_deg`
    (smooth surfaces); with colours, an edge whose supervoxels' mean colours differ by more than `t_lccp`
-   is cut (thesis eq. 4.15: LCCP alone ignores colour); segments are the connected components.
+   (in `color_distance`, chromaticity by default) is cut (thesis eq. 4.15: LCCP alone ignores colour); segments
+   are the connected components.
    method "flood-fill" replaces steps 2-4 by the thesis's baseline (eqs. 4.13-4.14): neighbouring points
-   stay joined when w_c |c1 - c2| + w_n (1 - n1 . n2) < `t_ff`.
+   stay joined when w_c d(c1, c2) + w_n (1 - n1 . n2) < `t_ff` (d: `color_distance`).
 4b. Concave plane cuts (after CPC, Schoeler et al. 2015; not in the thesis): an LCCP segment still joined across a
    concave crease through some flat or convex path (two touching boxes whose front faces are one plane; a box whose
    top overhangs its base) is cut by the plane of a face at one of its concave point pairs when, of the point pairs
@@ -71,6 +72,8 @@ from kinfu_cli.segmentation.plane_ransac import ransac_plane
 PLANE_LABEL = 0
 NOISE_LABEL = -1
 METHODS = ("lccp", "flood-fill")
+# the colour distances of T_lccp (eq. 4.15) and T_ff (eq. 4.14), see color_distance
+COLOR_DISTANCES = ("rgb", "chroma", "angle")
 # an object point near the support plane joins it when its colour is this much nearer the plane's mean colour
 # than its segment's (tuned on synth seeds 0-3: 1.0 / 0.5 / 0.3 gave boundary P 0.931 / 0.954 / 0.929)
 PLANE_COLOR_RATIO = 0.5
@@ -92,9 +95,14 @@ class SegmentationParams:
     normal_importance: float = 1.0  # alpha_n (thesis ch. 4: 0.5), also in the Flood Fill cost (eq. 4.14)
     color_importance: float = 1.0  # alpha_c (thesis ch. 4: 1.0), RGB in [0, 1]; also in eq. 4.14
     method: str = "lccp"  # "lccp" (supervoxels + LCCP) or "flood-fill" (the thesis's baseline)
-    t_lccp: float | None = None  # LCCP colour pruning T_lccp (eq. 4.15, RGB distance); None = no pruning
-    # (tuned on synth seeds 0-3: pruning at 0.3-0.6 only split objects along shading; >= 0.8 prunes nothing)
-    t_ff: float = 0.5  # Flood Fill threshold T_ff (eq. 4.14; tuned on synth seeds 0-3)
+    t_lccp: float | None = None  # LCCP colour pruning T_lccp (eq. 4.15, in color_distance); None = no pruning
+    # (with RGB, tuned on synth seeds 0-3: pruning at 0.3-0.6 only split objects along shading; >= 0.8 prunes nothing)
+    t_ff: float = 0.5  # Flood Fill threshold T_ff (eq. 4.14; tuned on synth seeds 0-3 with RGB)
+    # the colour distance of t_lccp and t_ff (COLOR_DISTANCES, see color_distance). "rgb" is the thesis'; "chroma"
+    # ignores shading and gain. Objects scenes, tuning seeds 0, 1, 8-19, LCCP, mode filter P / R / object recall:
+    # rgb T_lccp 0.2 0.782 / 0.897 / 0.732, chroma T_lccp 0.04 0.886 / 0.956 / 0.929 (README, colour in segmentation);
+    # Flood Fill at T_ff 0.5 alike (0.962 / 0.749 both), at 0.2 rgb 0.609 / 0.863, chroma 0.916 / 0.779
+    color_distance: str = "chroma"
     plane_color_margin: float = 0.01  # object points this close to the support plane join it when their
     # colour is nearer the plane's than their segment's (m; 0 = off; needs colours)
     # concave plane cuts (module docstring, step 4b; tuned on synth seeds 0, 1, 8-11; None or 0 = off). The share
@@ -166,8 +174,11 @@ class SegmentationParams:
             check_number(getattr(self, name), name, 0, 1e6)
         if self.method not in METHODS:
             raise ConfigError(f"expected one of {', '.join(METHODS)}, got {self.method!r}", parameter="method")
+        if self.color_distance not in COLOR_DISTANCES:
+            raise ConfigError(f"expected one of {', '.join(COLOR_DISTANCES)}, got {self.color_distance!r}",
+                              parameter="color_distance")
         if self.t_lccp is not None:
-            check_number(self.t_lccp, "t_lccp", 0, 2)  # the RGB cube's diagonal is sqrt(3)
+            check_number(self.t_lccp, "t_lccp", 0, 2)  # every distance is below 2 (rgb sqrt(3), chroma sqrt(2))
         check_number(self.t_ff, "t_ff", 0, 1e6, low_open=True)
         if self.cut_concave_fraction is not None:
             check_number(self.cut_concave_fraction, "cut_concave_fraction", 0, 1)
@@ -352,11 +363,34 @@ def _segment_stats(points: np.ndarray, normals: np.ndarray, lab: np.ndarray, k: 
     return cnt, cen, nrm
 
 
+def color_distance(c1: np.ndarray, c2: np.ndarray, kind: str = "rgb") -> np.ndarray:
+    """Row-wise distance (N,) of colours (N, 3) RGB in [0, 1]. "rgb": Euclidean (the thesis's eqs. 4.14-4.15).
+    Lighting scales a face's colour (Lambert shading, a camera's gain), which moves it far in RGB; the other two
+    ignore such a scale: "chroma", the Euclidean distance of the chromaticities rgb / (r + g + b) (0 to sqrt(2));
+    "angle", the angle between the colour vectors (radians, 0 to pi / 2). Black has no hue: it is grey to both."""
+    if kind == "rgb":
+        return np.linalg.norm(c1 - c2, axis=1)
+    if kind == "chroma":
+        return np.linalg.norm(_chromaticity(c1) - _chromaticity(c2), axis=1)
+    if kind == "angle":
+        u, v = _chromaticity(c1), _chromaticity(c2)  # same direction as the colour, grey for black
+        cos = np.einsum("ij,ij->i", u, v) / np.maximum(np.linalg.norm(u, axis=1) * np.linalg.norm(v, axis=1), 1e-12)
+        return np.arccos(np.clip(cos, -1.0, 1.0))
+    raise ConfigError(f"expected one of {', '.join(COLOR_DISTANCES)}, got {kind!r}", parameter="color_distance")
+
+
+def _chromaticity(c: np.ndarray) -> np.ndarray:
+    """rgb / (r + g + b) per row; black (sum ~ 0) is grey (1/3, 1/3, 1/3)."""
+    c = np.maximum(np.asarray(c, dtype=np.float64), 0.0)
+    s = c.sum(axis=1, keepdims=True)
+    return np.where(s > 1e-6, c / np.maximum(s, 1e-6), 1.0 / 3.0)
+
+
 def lccp_segments(points: np.ndarray, normals: np.ndarray, pairs: np.ndarray, params: SegmentationParams,
                   colors: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
     """(segment per point, supervoxel per point, stats): supervoxels joined over convex or smooth edges
     (module docstring, step 4); with colours, an edge whose supervoxels' mean colours differ by more than
-    t_lccp (RGB in [0, 1], Euclidean; thesis eq. 4.15) is cut whatever its shape. pairs: point pairs closer
+    t_lccp (in params.color_distance; thesis eq. 4.15: RGB) is cut whatever its shape. pairs: point pairs closer
     than adjacency_radius."""
     sv = supervoxels(points, normals, params, colors, pairs)
     k = int(sv.max()) + 1
@@ -381,7 +415,7 @@ def lccp_segments(points: np.ndarray, normals: np.ndarray, pairs: np.ndarray, pa
     pruned = 0
     if colors is not None and params.t_lccp is not None:
         scol = _mean_rows(colors, sv, k)
-        far = np.linalg.norm(scol[edges[:, 0]] - scol[edges[:, 1]], axis=1) > params.t_lccp
+        far = color_distance(scol[edges[:, 0]], scol[edges[:, 1]], params.color_distance) > params.t_lccp
         pruned = int(np.sum(join & far))
         join &= ~far
     keep = edges[join]
@@ -393,12 +427,13 @@ def lccp_segments(points: np.ndarray, normals: np.ndarray, pairs: np.ndarray, pa
 def flood_fill_segments(normals: np.ndarray, pairs: np.ndarray, params: SegmentationParams,
                         colors: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
     """(segment per point, stats): the thesis's Flood Fill baseline (eqs. 4.13-4.14): neighbouring points
-    (closer than adjacency_radius) stay joined when color_importance |c1 - c2| + normal_importance
-    (1 - n1 . n2) < t_ff (RGB in [0, 1]); segments are the connected components. Without colours the
+    (closer than adjacency_radius) stay joined when color_importance d(c1, c2) + normal_importance
+    (1 - n1 . n2) < t_ff (d: params.color_distance); segments are the connected components. Without colours the
     colour term is 0."""
     cost = params.normal_importance * (1.0 - np.einsum("ij,ij->i", normals[pairs[:, 0]], normals[pairs[:, 1]]))
     if colors is not None:
-        cost += params.color_importance * np.linalg.norm(colors[pairs[:, 0]] - colors[pairs[:, 1]], axis=1)
+        cost += params.color_importance * color_distance(colors[pairs[:, 0]], colors[pairs[:, 1]],
+                                                         params.color_distance)
     keep = pairs[cost < params.t_ff]
     return _components(len(normals), keep), {"adjacent_pairs": int(len(pairs)), "joined_pairs": int(len(keep))}
 
@@ -811,7 +846,8 @@ def segment_cloud(points: np.ndarray, normals: np.ndarray, params: SegmentationP
     labels[on_plane] = PLANE_LABEL
     sv_all = np.full(n, -1, dtype=np.int64)
     stats = {"points": int(n), "plane_points": int(on_plane.sum()), "support_plane_search": search,
-             "method": params.method, "colors": col is not None}
+             "method": params.method, "colors": col is not None,
+             "color_distance": params.color_distance}
     if len(rest) == 0:
         return Segmentation(pts, nrm, labels, plane, sv_all, 0, stats, col)
     P, N = pts[rest], nrm[rest]
