@@ -10,10 +10,11 @@ import click
 from kinfu_cli.commands._options import claim_outputs, force_option
 from kinfu_cli.commands._output import emit
 from kinfu_cli.core.errors import ConfigError
-from kinfu_cli.evaluation.segment_eval import (SWEEP_DEFAULT, default_sweep_values, evaluate_segments, label_names,
-                                               sweep_segmentation)
+from kinfu_cli.evaluation.segment_eval import (RGB_T_LCCP_VALUES, SWEEP_DEFAULT, default_sweep_values,
+                                               evaluate_segments, label_names, sweep_segmentation)
 from kinfu_cli.evaluation.segments import MATCHINGS
 from kinfu_cli.evaluation.segment_tables import format_segment_table, format_sweep_table
+from kinfu_cli.segmentation.segments import COLOR_DISTANCES
 
 group = "eval"
 
@@ -52,8 +53,12 @@ def _numbers(text: str, option: str, kind=float) -> list:
 @click.option("--sweep-parameter", default=SWEEP_DEFAULT[0], show_default=True,
               help="The segmentation threshold to sweep (a numeric kinfu segment parameter).")
 @click.option("--sweep-values", default=None,
-              help="Its values, comma-separated [default: t_lccp 0.02,0.04,0.08,0.12,0.16,0.25,2 (chromaticity distance; 2 prunes nothing); "
+              help="Its values, comma-separated [default: t_lccp 0.02,0.04,0.08,0.12,0.16,0.25,2 in chroma, "
+                   + ",".join(f"{v:g}" for v in RGB_T_LCCP_VALUES) + " in rgb (2 prunes nothing); "
                    "t_ff 0.1,0.2,0.3,0.5,0.7,1; others " + ",".join(f"{v:g}" for v in SWEEP_DEFAULT[1]) + "].")
+@click.option("--color-distance", type=click.Choice(COLOR_DISTANCES), default="chroma", show_default=True,
+              help="Sweep: the colour distance of t_lccp / t_ff (as kinfu segment --color-distance; rgb is the "
+                   "thesis').")
 @click.option("--method", type=click.Choice(["lccp", "flood-fill"]), default=None,
               help="Segmentation method of the sweep [default: flood-fill for t_ff, else lccp].")
 @click.option("--color", "color", default="mean,mode", show_default=True,
@@ -75,8 +80,8 @@ def _numbers(text: str, option: str, kind=float) -> list:
 @click.option("--quiet", is_flag=True, help="No progress output.")
 @force_option
 def command(segments: Path | None, ground_truth: Path | None, t_eval: float, matching: str, max_distance: float,
-            cover: float, share: float, sweep: bool, sweep_parameter: str, sweep_values: str | None, method: str | None,
-            color: str, photometric: bool, layouts: str, scenes: str, resolution: int,
+            cover: float, share: float, sweep: bool, sweep_parameter: str, sweep_values: str | None,
+            color_distance: str, method: str | None, color: str, photometric: bool, layouts: str, scenes: str, resolution: int,
             plot: Path | None, output: Path | None, as_json: bool, quiet: bool, force: bool) -> None:
     """Score SEGMENTS (a kinfu segment output folder, its segments.ply, or a labels file) against
     --ground-truth labels: boundary precision / recall at T_eval on the T_eval neighbourhood graph (thesis
@@ -103,7 +108,7 @@ def command(segments: Path | None, ground_truth: Path | None, t_eval: float, mat
         if segments is not None or ground_truth is not None:
             raise ConfigError("--sweep makes its own scenes: give no SEGMENTS nor --ground-truth")
         values = (_numbers(sweep_values, "--sweep-values") if sweep_values is not None
-                  else default_sweep_values(sweep_parameter))
+                  else default_sweep_values(sweep_parameter, color_distance))
         seeds = _numbers(scenes, "--scenes", int)
         colors = [c.strip() for c in color.split(",") if c.strip()]
         scene_layouts = [c.strip() for c in layouts.split(",") if c.strip()]
@@ -113,7 +118,7 @@ def command(segments: Path | None, ground_truth: Path | None, t_eval: float, mat
         doc = sweep_segmentation(seeds, sweep_parameter, values, method=method, colors=colors, layouts=scene_layouts,
                                  photometric=photometric, t_eval=t_eval, matching=matching,
                                  max_distance=max_distance, cover=cover, share=share, resolution=resolution,
-                                 quiet=quiet)
+                                 quiet=quiet, color_distance=color_distance)
         doc["warnings"] = []
         if plot is not None:
             from kinfu_cli.report.segment_eval_plot import plot_sweep_pr

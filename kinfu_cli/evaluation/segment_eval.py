@@ -36,6 +36,8 @@ SWEEP_DEFAULT = ("concavity_tolerance_deg", (0.0, 5.0, 10.0, 15.0, 20.0, 30.0, 4
 # sqrt(2); the thesis' RGB at most sqrt(3)): a T_lccp of 2 prunes nothing, the unpruned LCCP. The t_lccp values span
 # the chroma curve on tuning seeds 0, 1, 8-139 (0.02: object recall ~0.88, 0.25: as unpruned)
 SWEEP_VALUES = {"t_lccp": (0.02, 0.04, 0.08, 0.12, 0.16, 0.25, 2.0), "t_ff": (0.1, 0.2, 0.3, 0.5, 0.7, 1.0)}
+# t_lccp in the thesis' RGB distance (the chroma values would all cut objects into faces there)
+RGB_T_LCCP_VALUES = (0.1, 0.15, 0.2, 0.3, 0.4, 0.6, 2.0)
 
 
 @dataclass
@@ -244,8 +246,10 @@ def sweep_method(parameter: str, method: str | None = None) -> str:
     return method or ("flood-fill" if parameter == "t_ff" else "lccp")
 
 
-def default_sweep_values(parameter: str) -> tuple[float, ...]:
-    """The values swept when none are given."""
+def default_sweep_values(parameter: str, color_distance: str = "chroma") -> tuple[float, ...]:
+    """The values swept when none are given (t_lccp's depend on the colour distance)."""
+    if parameter == "t_lccp" and color_distance == "rgb":
+        return RGB_T_LCCP_VALUES
     return SWEEP_VALUES.get(parameter, SWEEP_DEFAULT[1])
 
 
@@ -264,14 +268,15 @@ def fuse_segmentation_scene(seed: int, *, resolution: int = 160, size: float = 1
                                   frames=frames, layout=layout, photometric=photometric)
 
 
-def _sweep_options(parameter: str, values: list[float], method: str, color: bool, as_int: bool) -> list:
+def _sweep_options(parameter: str, values: list[float], method: str, color: bool, as_int: bool,
+                   color_distance: str) -> list:
     from kinfu_cli.segmentation.pipeline import SegmentOptions
 
     base = SegmentOptions(superquadrics=False, color=color)
     out = []
     for v in values:
         seg = replace(base.segmentation, **{parameter: int(round(v)) if as_int else v}, method=method,
-                      up=(0.0, 0.0, 1.0))
+                      up=(0.0, 0.0, 1.0), color_distance=color_distance)
         opts = replace(base, segmentation=seg)
         opts.validate()
         out.append(opts)
@@ -308,23 +313,23 @@ def sweep_segmentation(seeds=(0, 1, 2), parameter: str = SWEEP_DEFAULT[0], value
                        method: str | None = None, colors=("mean", "mode"), layouts=("objects",), photometric: bool = True,
                        t_eval: float = 0.02, max_distance: float = 0.015, cover: float = 0.8, share: float = 0.2,
                        resolution: int = 160, size: float | None = None, frames: int = 24,
-                       quiet: bool = True, matching: str = "assignment") -> dict:
+                       quiet: bool = True, matching: str = "assignment", color_distance: str = "chroma") -> dict:
     """Boundary P/R, BCE, object recall of the segmentation of generated scenes over `values` of one
     segmentation parameter (a numeric field of SegmentationParams; t_lccp and t_ff as in thesis Figs.
     4.10-4.11), for every scene layout x seed x colour mode ("none", "mean", "mode": the volume fused without
     colour, with the running mean, with the mode filter; photometric: the simulator's colour effects on).
     size: the fusion cube (default SCENE_SIZES per layout; the voxel stays 1.1 m / resolution).
-    Returns the JSON-ready document."""
+    color_distance: of t_lccp / t_ff (SegmentationParams.color_distance). Returns the JSON-ready document."""
     from kinfu_cli.segmentation.pipeline import analyse_cloud
     from kinfu_cli.segmentation.surface import surface_from_volume
     from kinfu_cli.sim.scene import scene_label_cloud
 
-    values = default_sweep_values(parameter) if values is None else values
+    values = default_sweep_values(parameter, color_distance) if values is None else values
     values, seeds, layouts, colors = _check_sweep_inputs(parameter, values, seeds, layouts, colors)
     _check_eval_numbers(t_eval, max_distance, cover, share, matching)
     method = sweep_method(parameter, method)
     as_int = _sweep_fields()[parameter] in (int, "int")
-    opts = {c: _sweep_options(parameter, values, method, c != "none", as_int) for c in colors}
+    opts = {c: _sweep_options(parameter, values, method, c != "none", as_int, color_distance) for c in colors}
     scenes = []
     steps = [(lay, s, c, k) for lay in layouts for s in seeds for c in [None, *colors]
              for k in ([0] if c is None else range(len(values)))]
@@ -364,6 +369,7 @@ def sweep_segmentation(seeds=(0, 1, 2), parameter: str = SWEEP_DEFAULT[0], value
                     for key in ("boundary_precision", "boundary_recall", "boundary_f", "bce", "object_recall")}
     return {"parameter": parameter, "method": method, "values": values, "seeds": seeds, "layouts": layouts,
             "colors": colors, "photometric": photometric, "t_eval": t_eval, "matching": matching,
+            "color_distance": color_distance,
             "max_distance": max_distance,
             "cover": cover, "share": share,
             "fusion": {"resolution": resolution, "voxel_m": (size or 1.1) / resolution, "frames": frames,

@@ -53,7 +53,8 @@ def format_sweep_table(doc: dict) -> str:
              f"{', photometric effects' if doc.get('photometric') else ''}; voxel "
              f"{doc['fusion'].get('voxel_m', 0) * 1000:.1f} mm, cubes "
              f"{', '.join(f'{k} {v} m' for k, v in sizes.items())}), T_eval {doc['t_eval'] * 100:.1f} cm, "
-             f"boundary matching: {_matching(doc)}", "",
+             f"boundary matching: {_matching(doc)}"
+             f"{'; colour distance: ' + doc.get('color_distance', 'rgb') if name in ('t_lccp', 't_ff') else ''}", "",
              f"  {'scene':>16} {name[:12]:>12} {'bnd P':>6} {'bnd R':>6} {'bnd F':>6} {'BCE':>6} {'obj R':>6} "
              f"{'segs':>5} {'over':>5} {'under':>5}  missed"]
     for s in doc["scenes"]:

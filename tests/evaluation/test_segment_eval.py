@@ -257,3 +257,20 @@ def test_sweep_gives_pr_points_per_value(tmp_path):
     from kinfu_cli.report.segment_eval_plot import plot_sweep_pr
 
     assert plot_sweep_pr(doc, tmp_path / "pr.png").stat().st_size > 10_000
+
+
+def test_cli_t_lccp_sweep_in_the_thesis_rgb_distance(tmp_path):
+    """--color-distance rgb sweeps T_lccp over the RGB values by default (the chroma ones would cut every box into
+    faces there) and records the distance; a stricter T_lccp never gives fewer segments."""
+    from kinfu_cli.evaluation.segment_eval import RGB_T_LCCP_VALUES
+
+    out = tmp_path / "sweep.json"
+    r = CliRunner().invoke(cli, ["eval", "segment", "--sweep", "--sweep-parameter", "t_lccp", "--color-distance",
+                                 "rgb", "--color", "mode", "--scenes", "1", "--resolution", "64", "-o", str(out),
+                                 "--quiet"])
+    assert r.exit_code == 0, r.output
+    doc = json.loads(out.read_text())
+    assert doc["color_distance"] == "rgb" and doc["values"] == list(RGB_T_LCCP_VALUES)
+    segs = [row["segments"] for row in doc["scenes"][0]["rows"]]
+    assert segs[0] >= segs[-1] and segs[0] > 1
+    assert "colour distance: rgb" in r.output
