@@ -1,12 +1,11 @@
-"""tqdm progress bars on stderr, off when asked (`quiet`) or when stderr is not a terminal."""
+"""tqdm progress bars on stderr, off when asked (`quiet`) or when stderr is not a terminal (tqdm is then not
+even imported: 30 ms of a short run)."""
 
 from __future__ import annotations
 
 import sys
 from collections.abc import Iterable
-from typing import TypeVar
-
-from tqdm import tqdm
+from typing import Any, TypeVar
 
 T = TypeVar("T")
 
@@ -21,5 +20,16 @@ def progress(iterable: Iterable[T], *, total: int | None = None, desc: str = "",
     """Wrap an iterable in a tqdm bar on stderr (or return it unchanged when disabled)."""
     if not progress_enabled(quiet):
         return iterable
+    from tqdm import tqdm
+
     return tqdm(iterable, total=total, desc=desc, unit=unit, file=sys.stderr, leave=False,
                 dynamic_ncols=True)
+
+
+def progress_bar(total: int, *, desc: str = "", quiet: bool = False, unit: str = "it") -> Any | None:
+    """A tqdm bar to update by hand (work that is not one loop), or None when progress is off."""
+    if not progress_enabled(quiet):
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, unit=unit, file=sys.stderr, leave=False, dynamic_ncols=True)

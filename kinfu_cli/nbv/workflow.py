@@ -13,18 +13,16 @@ candidate rejected, no candidate at all) says so in its `warnings`, with the cou
 from __future__ import annotations
 
 import os
-import sys
 from dataclasses import dataclass, field
 
 import numpy as np
-from tqdm import tqdm
 
 from kinfu_cli.core.camera import CameraModel
 from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.grid import TernaryGrid, check_up
 from kinfu_cli.core.poses import matrix_to_quaternion
-from kinfu_cli.core.progress import progress_enabled
+from kinfu_cli.core.progress import progress_bar
 from kinfu_cli.fusion.volume import load_grid
 from kinfu_cli.nbv.gains import get_gain
 from kinfu_cli.nbv.objects import W_TH, ObjectPlan, known_grid, nbv_scorer, plan_object_views_for_volume
@@ -142,11 +140,9 @@ class PoiViews:
         }
 
 
-def _view_bar(total: int, quiet: bool) -> tqdm | None:
+def _view_bar(total: int, quiet: bool):
     """A progress bar over the candidate views on stderr, or None when progress is off."""
-    if not progress_enabled(quiet):
-        return None
-    return tqdm(total=total, desc="nbv candidates", unit="view", file=sys.stderr, leave=False, dynamic_ncols=True)
+    return progress_bar(total, desc="nbv candidates", unit="view", quiet=quiet)
 
 
 def rank_poi_views(volume_path: str | os.PathLike, pois_path: str | os.PathLike, camera: CameraModel,

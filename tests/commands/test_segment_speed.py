@@ -13,9 +13,10 @@ from kinfu_cli.core.grid import TernaryGrid, save_ternary
 from kinfu_cli.sim.scene import primitive_tabletop_scene
 from kinfu_cli.sim.tsdf import scene_tsdf
 
-# not needed by a default `kinfu segment`: 3D library, learners, batch, recordings, grasping, plots, viewer
+# not needed by a default `kinfu segment` (--quiet): 3D library, learners, batch, recordings, grasping, plots,
+# viewer, progress bars
 HEAVY = ("open3d", "sklearn", "dask", "distributed", "mcap", "rosbags", "kinfu_cli.grasp",
-         "kinfu_cli.report", "kinfu_cli.io.recording", "foxglove_schemas_protobuf")
+         "kinfu_cli.report", "kinfu_cli.io.recording", "foxglove_schemas_protobuf", "tqdm")
 
 
 def _loaded(code: str) -> list[str]:
