@@ -16,8 +16,8 @@ LIGHT = np.array([0.3, -0.4, 1.0]) / np.linalg.norm([0.3, -0.4, 1.0])  # as the 
 
 def shaded_block_scene():
     """test_segment_color's flush red | blue block (and the table) shaded by ambient + Lambert from LIGHT: the top
-    at 0.93 of its albedo, the sides from 0.35 to 0.57 (a face's colour differs from the top by up to 0.45 in RGB,
-    more than red from blue in chromaticity is small)."""
+    at 0.93 of its albedo, the sides from 0.35 to 0.57: a side differs from its top by up to 0.45 in RGB and not at
+    all in chromaticity."""
     pts, nrm, col, truth = block_scene()
     shade = 0.35 + 0.65 * np.clip(nrm @ LIGHT, 0.0, 1.0)
     return pts, nrm, np.clip(col * shade[:, None], 0, 1), truth
