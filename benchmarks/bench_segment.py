@@ -537,6 +537,9 @@ def main() -> None:
     ap.add_argument("--tune-seeds", default=",".join(map(str, OBJECTS_TUNING)), help="--objects tuning seeds")
     ap.add_argument("--held-seeds", default=",".join(map(str, OBJECTS_HELD_OUT)), help="--objects held-out seeds")
     ap.add_argument("--missed", action="store_true", help="--objects: also count the missed objects by cause")
+    ap.add_argument("--no-misregistration", action="store_true",
+                    help="--objects: fuse the scenes with the colour-depth misregistration off (gain and white "
+                         "balance jitter kept; own cache): is a mode-vs-mean gap the misregistration's?")
     ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                     help="--objects: a SegmentationParams field to override (repeatable)")
     ap.add_argument("--cache", default=str(Path(tempfile.gettempdir()) / "kinfu_bench_segment"),
@@ -545,7 +548,13 @@ def main() -> None:
     if args.objects:
         seeds = [tuple(int(v) for v in a.split(",") if v) for a in (args.tune_seeds, args.held_seeds)]
         over = {k: json.loads(v) for k, v in (a.split("=", 1) for a in args.set)}
-        bench_objects(*seeds, overrides=over, missed=args.missed)
+        cache = None
+        if args.no_misregistration:
+            import kinfu_cli.evaluation.segments as scenes
+
+            scenes.PHOTOMETRIC = dict(scenes.PHOTOMETRIC, misregistration=(0.0, 0.0, 0.0))
+            cache = Path(tempfile.gettempdir()) / "kinfu_bench_segment_objects_no_misregistration"
+        bench_objects(*seeds, overrides=over, missed=args.missed, cache=cache)
         return
     if args.speed:
         print(json.dumps({"segment_volume": bench_speed(Path(args.cache)),
