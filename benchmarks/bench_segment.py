@@ -19,7 +19,8 @@
 6. `--objects`: issue 12's quality table on the `objects` scenes (stacked boxes, touching twins, mug, striped
    objects, ball), fused as `kinfu eval segment --sweep` does and cached in /tmp: boundary P / R at 2 cm, BCE,
    object recall of the default LCCP with colour, mode filter and mean colour, on the tuning seeds 0, 1, 8-19
-   (`--tune-seeds`; constants are chosen there) and the held-out seeds 2-7 (`--held-seeds`; reported only);
+   (`--tune-seeds`; constants are chosen there) and, only when asked (`--held-out`, or `--held-seeds`), the
+   held-out seeds 2-7, reported once at the end of a change and never looked at while tuning;
    `--set NAME=VALUE` overrides a SegmentationParams field (a tuning run takes ~10 s once the clouds are cached);
    `--missed` also counts the missed objects by object and cause (merged with a neighbour, into the table, split...).
 
@@ -535,7 +536,10 @@ def main() -> None:
     ap.add_argument("--speed", action="store_true", help="only the per-phase segment time on the two volumes (5)")
     ap.add_argument("--objects", action="store_true", help="only the issue-12 quality table on the objects scenes")
     ap.add_argument("--tune-seeds", default=",".join(map(str, OBJECTS_TUNING)), help="--objects tuning seeds")
-    ap.add_argument("--held-seeds", default=",".join(map(str, OBJECTS_HELD_OUT)), help="--objects held-out seeds")
+    ap.add_argument("--held-out", action="store_true",
+                    help="--objects: also the held-out seeds " + ",".join(map(str, OBJECTS_HELD_OUT))
+                         + " (run them once, at the end of a change)")
+    ap.add_argument("--held-seeds", default="", help="--objects held-out seeds (default: none, or those of --held-out)")
     ap.add_argument("--missed", action="store_true", help="--objects: also count the missed objects by cause")
     ap.add_argument("--no-misregistration", action="store_true",
                     help="--objects: fuse the scenes with the colour-depth misregistration off (gain and white "
@@ -546,7 +550,8 @@ def main() -> None:
                     help="folder for the fused volumes of --speed")
     args = ap.parse_args()
     if args.objects:
-        seeds = [tuple(int(v) for v in a.split(",") if v) for a in (args.tune_seeds, args.held_seeds)]
+        held = args.held_seeds or (",".join(map(str, OBJECTS_HELD_OUT)) if args.held_out else "")
+        seeds = [tuple(int(v) for v in a.split(",") if v) for a in (args.tune_seeds, held)]
         over = {k: json.loads(v) for k, v in (a.split("=", 1) for a in args.set)}
         cache = None
         if args.no_misregistration:
