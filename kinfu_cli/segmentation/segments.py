@@ -368,22 +368,28 @@ def color_distance(c1: np.ndarray, c2: np.ndarray, kind: str = "rgb") -> np.ndar
     Lighting scales a face's colour (Lambert shading, a camera's gain), which moves it far in RGB; the other two
     ignore such a scale: "chroma", the Euclidean distance of the chromaticities rgb / (r + g + b) (0 to sqrt(2));
     "angle", the angle between the colour vectors (radians, 0 to pi / 2). Black has no hue: it is grey to both."""
+    return _feature_distance(_color_features(c1, kind), _color_features(c2, kind), kind)
+
+
+def _color_features(c: np.ndarray, kind: str) -> np.ndarray:
+    """The colours in the space color_distance measures `kind` in: RGB itself, else the chromaticities
+    rgb / (r + g + b) (the colour's direction; black, sum ~ 0, is grey). Computed once per point or supervoxel,
+    then indexed by the pairs."""
     if kind == "rgb":
-        return np.linalg.norm(c1 - c2, axis=1)
-    if kind == "chroma":
-        return np.linalg.norm(_chromaticity(c1) - _chromaticity(c2), axis=1)
-    if kind == "angle":
-        u, v = _chromaticity(c1), _chromaticity(c2)  # same direction as the colour, grey for black
-        cos = np.einsum("ij,ij->i", u, v) / np.maximum(np.linalg.norm(u, axis=1) * np.linalg.norm(v, axis=1), 1e-12)
-        return np.arccos(np.clip(cos, -1.0, 1.0))
-    raise ConfigError(f"expected one of {', '.join(COLOR_DISTANCES)}, got {kind!r}", parameter="color_distance")
-
-
-def _chromaticity(c: np.ndarray) -> np.ndarray:
-    """rgb / (r + g + b) per row; black (sum ~ 0) is grey (1/3, 1/3, 1/3)."""
+        return c
+    if kind not in COLOR_DISTANCES:
+        raise ConfigError(f"expected one of {', '.join(COLOR_DISTANCES)}, got {kind!r}", parameter="color_distance")
     c = np.maximum(np.asarray(c, dtype=np.float64), 0.0)
     s = c.sum(axis=1, keepdims=True)
     return np.where(s > 1e-6, c / np.maximum(s, 1e-6), 1.0 / 3.0)
+
+
+def _feature_distance(u: np.ndarray, v: np.ndarray, kind: str) -> np.ndarray:
+    """Row-wise distance of _color_features rows: the angle between them for "angle", else Euclidean."""
+    if kind != "angle":
+        return np.linalg.norm(u - v, axis=1)
+    cos = np.einsum("ij,ij->i", u, v) / np.maximum(np.linalg.norm(u, axis=1) * np.linalg.norm(v, axis=1), 1e-12)
+    return np.arccos(np.clip(cos, -1.0, 1.0))
 
 
 def lccp_segments(points: np.ndarray, normals: np.ndarray, pairs: np.ndarray, params: SegmentationParams,
@@ -414,8 +420,8 @@ def lccp_segments(points: np.ndarray, normals: np.ndarray, pairs: np.ndarray, pa
     join = convex | smooth
     pruned = 0
     if colors is not None and params.t_lccp is not None:
-        scol = _mean_rows(colors, sv, k)
-        far = color_distance(scol[edges[:, 0]], scol[edges[:, 1]], params.color_distance) > params.t_lccp
+        f = _color_features(_mean_rows(colors, sv, k), params.color_distance)
+        far = _feature_distance(f[edges[:, 0]], f[edges[:, 1]], params.color_distance) > params.t_lccp
         pruned = int(np.sum(join & far))
         join &= ~far
     keep = edges[join]
@@ -432,8 +438,8 @@ def flood_fill_segments(normals: np.ndarray, pairs: np.ndarray, params: Segmenta
     colour term is 0."""
     cost = params.normal_importance * (1.0 - np.einsum("ij,ij->i", normals[pairs[:, 0]], normals[pairs[:, 1]]))
     if colors is not None:
-        cost += params.color_importance * color_distance(colors[pairs[:, 0]], colors[pairs[:, 1]],
-                                                         params.color_distance)
+        f = _color_features(colors, params.color_distance)  # once per point, not per pair end
+        cost += params.color_importance * _feature_distance(f[pairs[:, 0]], f[pairs[:, 1]], params.color_distance)
     keep = pairs[cost < params.t_ff]
     return _components(len(normals), keep), {"adjacent_pairs": int(len(pairs)), "joined_pairs": int(len(keep))}
 
