@@ -311,7 +311,7 @@ OBJECTS_TUNING = (0, 1, *range(8, 20))  # seeds constants may be chosen on (so f
 OBJECTS_HELD_OUT = (2, 3, 4, 5, 6, 7)  # reported only, never used to choose a constant
 
 
-def _objects_clouds(seed: int, cache: Path) -> dict:
+def _objects_clouds(seed: int, cache: Path, photometric: bool | dict = True) -> dict:
     """Surface clouds (mean colour, mode filter) and the labelled ground truth of the generated `objects` scene
     `seed`, fused as `kinfu eval segment --sweep` does (160 voxels per 1.1 m, 24 frames 240x180, photometric
     effects), kept in `cache` (fusing both volumes takes ~20 s)."""
@@ -324,7 +324,7 @@ def _objects_clouds(seed: int, cache: Path) -> dict:
     if not path.exists():
         cache.mkdir(parents=True, exist_ok=True)
         vols, scene = fuse_segmentation_scene(seed, resolution=160, size=1.1, frames=24, layout="objects",
-                                              colors=("mean", "mode"), photometric=True)
+                                              colors=("mean", "mode"), photometric=photometric)
         o = Opts()
         arrays = {}
         for m, v in vols.items():
@@ -391,17 +391,19 @@ def miss_cause(lab: np.ndarray, gt: np.ndarray, oid: int) -> str:
 
 
 def bench_objects(tuning=OBJECTS_TUNING, held_out=OBJECTS_HELD_OUT, colours=("mode", "mean"),
-                  cache: Path | None = None, overrides: dict | None = None, log=print, missed: bool = False) -> dict:
+                  cache: Path | None = None, overrides: dict | None = None, log=print, missed: bool = False,
+                  photometric: bool | dict = True) -> dict:
     """Issue 12's quality table: boundary P / R at 2 cm, BCE and object recall (pooled over scenes) of the
     default segmentation on the `objects` scenes, tuning and held-out seeds, per colour mode; missed: also the
-    missed objects counted by object and cause (`miss_cause`)."""
+    missed objects counted by object and cause (`miss_cause`); photometric: as fuse_synthetic_volumes' (a
+    changed one needs its own cache)."""
     cache = cache or Path(tempfile.gettempdir()) / "kinfu_bench_segment_objects"
     out = {"overrides": overrides or {}, "groups": {}}
     for group, seeds in (("tuning", tuning), ("held-out", held_out)):
         for colour in colours if seeds else ():
             rows = []
             for s in seeds:
-                r = score_objects_scene(_objects_clouds(s, cache), colour, overrides) | {"seed": s}
+                r = score_objects_scene(_objects_clouds(s, cache, photometric), colour, overrides) | {"seed": s}
                 rows.append(r)
                 log(f"  {group:8s} {colour:4s} seed {s:2d}: P {r['boundary_precision']:.3f} R "
                     f"{r['boundary_recall']:.3f} BCE {r['bce']:.3f} objects {r['objects_found']}/{r['objects_total']}"
@@ -553,13 +555,11 @@ def main() -> None:
         held = args.held_seeds or (",".join(map(str, OBJECTS_HELD_OUT)) if args.held_out else "")
         seeds = [tuple(int(v) for v in a.split(",") if v) for a in (args.tune_seeds, held)]
         over = {k: json.loads(v) for k, v in (a.split("=", 1) for a in args.set)}
-        cache = None
+        photometric, cache = True, None
         if args.no_misregistration:
-            import kinfu_cli.evaluation.segments as scenes
-
-            scenes.PHOTOMETRIC = dict(scenes.PHOTOMETRIC, misregistration=(0.0, 0.0, 0.0))
+            photometric = {"misregistration": (0.0, 0.0, 0.0)}
             cache = Path(tempfile.gettempdir()) / "kinfu_bench_segment_objects_no_misregistration"
-        bench_objects(*seeds, overrides=over, missed=args.missed, cache=cache)
+        bench_objects(*seeds, overrides=over, missed=args.missed, cache=cache, photometric=photometric)
         return
     if args.speed:
         print(json.dumps({"segment_volume": bench_speed(Path(args.cache)),

@@ -259,7 +259,7 @@ SCENE_SIZES = {"objects": 1.1, "tabletop": 1.6}
 
 def fuse_segmentation_scene(seed: int, *, resolution: int = 160, size: float = 1.1, width: int = 240,
                             height: int = 180, frames: int = 24, layout: str = "objects", colors=("none",),
-                            photometric: bool = False):
+                            photometric: bool | dict = False):
     """The volumes of the generated scene `seed` (the after state of kinfu synth's `layout` scene, fused from every
     camera pose with the sensor noise), one per colour mode in `colors`, and that scene."""
     from kinfu_cli.evaluation.segments import fuse_synthetic_volumes

@@ -235,11 +235,12 @@ COLOR_CHOICES = ("none", "mean", "mode")  # "none": fused without colour (segmen
 
 def fuse_synthetic_volumes(seed: int = 0, *, colors=("none",), resolution: int = 256, size: float = 1.6,
                            width: int = 320, height: int = 240, frames: int = 36, noise: bool = True,
-                           layout: str = "tabletop", photometric: bool = False
+                           layout: str = "tabletop", photometric: bool | dict = False
                            ) -> tuple[dict[str, TernaryVolume], Scene]:
     """Fuse the after-change state of the synth scenario `seed` (layout: `make_scenario`'s) from all its
     camera poses, once per colour mode in `colors` (COLOR_CHOICES) from the same rendered images.
-    photometric: render with PHOTOMETRIC (else the sensor's clean colours).
+    photometric: render with PHOTOMETRIC (else the sensor's clean colours); a dict replaces some of its entries
+    (e.g. {"misregistration": (0, 0, 0)}: is an effect due to the misregistration?).
 
     Returns ({colour mode: volume}, scene after the change).
     """
@@ -251,7 +252,8 @@ def fuse_synthetic_volumes(seed: int = 0, *, colors=("none",), resolution: int =
                           parameter="colors")
     sc = make_scenario(seed, width=width, height=height, frames=frames, noise=noise, layout=layout)
     after = sc.scene_after
-    sensor = DepthSensor(sc.K, width, height, noise=noise, seed=seed, **PHOTOMETRIC) if photometric else sc.sensor
+    effects = PHOTOMETRIC | (photometric if isinstance(photometric, dict) else {})
+    sensor = DepthSensor(sc.K, width, height, noise=noise, seed=seed, **effects) if photometric else sc.sensor
     c = np.array([after.table.center[0], after.table.center[1], after.table.top_z])
     vols = {m: TernaryVolume(size=size, resolution=resolution, origin=c - np.array([size / 2, size / 2, 0.25]),
                              color=m != "none", color_mode="mean" if m == "none" else m) for m in dict.fromkeys(colors)}
