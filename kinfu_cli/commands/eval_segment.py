@@ -10,13 +10,17 @@ import click
 from kinfu_cli.commands._options import claim_outputs, force_option
 from kinfu_cli.commands._output import emit
 from kinfu_cli.core.errors import ConfigError
-from kinfu_cli.evaluation.segment_eval import (RGB_T_LCCP_VALUES, SWEEP_DEFAULT, default_sweep_values,
+from kinfu_cli.evaluation.segment_eval import (RGB_T_LCCP_VALUES, SWEEP_DEFAULT, SWEEP_VALUES, default_sweep_values,
                                                evaluate_segments, label_names, sweep_segmentation)
 from kinfu_cli.evaluation.segments import MATCHINGS
 from kinfu_cli.evaluation.segment_tables import format_segment_table, format_sweep_table
 from kinfu_cli.segmentation.segments import COLOR_DISTANCES
 
 group = "eval"
+
+
+def _listed(values) -> str:
+    return ",".join(f"{v:g}" for v in values)
 
 
 def _numbers(text: str, option: str, kind=float) -> list:
@@ -53,9 +57,9 @@ def _numbers(text: str, option: str, kind=float) -> list:
 @click.option("--sweep-parameter", default=SWEEP_DEFAULT[0], show_default=True,
               help="The segmentation threshold to sweep (a numeric kinfu segment parameter).")
 @click.option("--sweep-values", default=None,
-              help="Its values, comma-separated [default: t_lccp 0.02,0.04,0.08,0.12,0.16,0.25,2 in chroma, "
-                   + ",".join(f"{v:g}" for v in RGB_T_LCCP_VALUES) + " in rgb (2 prunes nothing); "
-                   "t_ff 0.1,0.2,0.3,0.5,0.7,1; others " + ",".join(f"{v:g}" for v in SWEEP_DEFAULT[1]) + "].")
+              help=f"Its values, comma-separated [default: t_lccp {_listed(SWEEP_VALUES['t_lccp'])} in chroma, "
+                   f"{_listed(RGB_T_LCCP_VALUES)} in rgb (2 prunes nothing); t_ff {_listed(SWEEP_VALUES['t_ff'])}; "
+                   f"others {_listed(SWEEP_DEFAULT[1])}].")
 @click.option("--color-distance", type=click.Choice(COLOR_DISTANCES), default="chroma", show_default=True,
               help="Sweep: the colour distance of t_lccp / t_ff (as kinfu segment --color-distance; rgb is the "
                    "thesis').")
@@ -81,8 +85,8 @@ def _numbers(text: str, option: str, kind=float) -> list:
 @force_option
 def command(segments: Path | None, ground_truth: Path | None, t_eval: float, matching: str, max_distance: float,
             cover: float, share: float, sweep: bool, sweep_parameter: str, sweep_values: str | None,
-            color_distance: str, method: str | None, color: str, photometric: bool, layouts: str, scenes: str, resolution: int,
-            plot: Path | None, output: Path | None, as_json: bool, quiet: bool, force: bool) -> None:
+            color_distance: str, method: str | None, color: str, photometric: bool, layouts: str, scenes: str,
+            resolution: int, plot: Path | None, output: Path | None, as_json: bool, quiet: bool, force: bool) -> None:
     """Score SEGMENTS (a kinfu segment output folder, its segments.ply, or a labels file) against
     --ground-truth labels: boundary precision / recall at T_eval on the T_eval neighbourhood graph (thesis
     eq. 4.16, a maximum one-to-one matching within T_eval; --matching greedy: closest pairs first), Bidirectional Consistency Error, object recall (one segment

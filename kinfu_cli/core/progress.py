@@ -18,18 +18,18 @@ def progress_enabled(quiet: bool = False) -> bool:
 def progress(iterable: Iterable[T], *, total: int | None = None, desc: str = "",
              quiet: bool = False, unit: str = "it") -> Iterable[T]:
     """Wrap an iterable in a tqdm bar on stderr (or return it unchanged when disabled)."""
-    if not progress_enabled(quiet):
-        return iterable
-    from tqdm import tqdm
-
-    return tqdm(iterable, total=total, desc=desc, unit=unit, file=sys.stderr, leave=False,
-                dynamic_ncols=True)
+    bar = _bar(quiet, iterable=iterable, total=total, desc=desc, unit=unit)
+    return iterable if bar is None else bar
 
 
 def progress_bar(total: int, *, desc: str = "", quiet: bool = False, unit: str = "it") -> Any | None:
     """A tqdm bar to update by hand (work that is not one loop), or None when progress is off."""
+    return _bar(quiet, total=total, desc=desc, unit=unit)
+
+
+def _bar(quiet: bool, **kwargs) -> Any | None:
     if not progress_enabled(quiet):
         return None
     from tqdm import tqdm
 
-    return tqdm(total=total, desc=desc, unit=unit, file=sys.stderr, leave=False, dynamic_ncols=True)
+    return tqdm(file=sys.stderr, leave=False, dynamic_ncols=True, **kwargs)
