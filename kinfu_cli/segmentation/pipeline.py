@@ -242,10 +242,16 @@ def support_plane_warnings(seg: Segmentation, up_source: str) -> list[str]:
 
 
 def color_warnings(seg: Segmentation, options: SegmentOptions) -> list[str]:
-    """Flood Fill asked for on a cloud without colours: it then groups by normals alone."""
-    if options.segmentation.method == "flood-fill" and seg.colors is None:
-        why = "colour is off" if not options.color else "the volume has no colour (fused without it)"
+    """A colour test asked for on a cloud without colours: Flood Fill then groups by normals alone, and LCCP's
+    T_lccp cuts nothing."""
+    if seg.colors is not None:
+        return []
+    why = "colour is off" if not options.color else "the volume has no colour (fused without it)"
+    params = options.segmentation
+    if params.method == "flood-fill":
         return [f"flood fill without colour: {why}, so points are grouped by their normals alone"]
+    if params.t_lccp is not None:
+        return [f"t_lccp {params.t_lccp:g} without colour: {why}, so no edge is cut by colour"]
     return []
 
 

@@ -62,7 +62,7 @@ def test_colour_splits_the_flush_block(params):
         assert with_colour.stats["color_pruned_pairs"] > 0
 
 
-def test_colour_term_off_without_colours_and_flood_fill_warns():
+def test_colour_term_off_without_colours_and_flood_fill_or_t_lccp_warns():
     pts, nrm, col, _ = block_scene()
     opts = SegmentOptions(superquadrics=False, segmentation=SegmentationParams(up=(0.0, 0.0, 1.0), method="flood-fill"))
     res = analyse_cloud(pts, nrm, opts)
@@ -70,6 +70,11 @@ def test_colour_term_off_without_colours_and_flood_fill_warns():
     assert len(res.warnings) == 1 and "flood fill without colour" in res.warnings[0]
     res = analyse_cloud(pts, nrm, opts, colors=col)
     assert res.warnings == [] and res.to_json()["stats"]["method"] == "flood-fill"
+    lccp = SegmentOptions(superquadrics=False, segmentation=SegmentationParams(up=(0.0, 0.0, 1.0), t_lccp=0.1))
+    res = analyse_cloud(pts, nrm, lccp)
+    assert len(res.warnings) == 1 and "t_lccp 0.1 without colour" in res.warnings[0]
+    assert res.segmentation.stats["color_pruned_pairs"] == 0
+    assert analyse_cloud(pts, nrm, lccp, colors=col).warnings == []
 
 
 @pytest.mark.parametrize("name,value", [("method", "watershed"), ("t_lccp", -0.1), ("t_ff", 0.0),
