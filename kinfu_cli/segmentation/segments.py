@@ -83,6 +83,8 @@ CUT_FACE_RADIUS = 0.03  # face-plane cuts: the face's points are counted within 
 # (tuning seeds 0, 1, 8-139, objects scenes, mode, with the gap as the step: 0 / 0.0025 / 0.005 gave object recall
 # 0.979 / 0.984 / 0.983)
 STEP_LEVEL_BAND = 0.0025
+SUPPORT_PARALLEL_DEG = 5.0  # support candidates: planes within this of the largest plane's normal (a table and
+# the floor are parallel within a degree or two; RANSAC's fit tilts a 1 m table by well under one)
 FOOT_BAND = 0.015  # feet (step 7): object points higher than this over the support are the object's side, never a foot (m)
 
 
@@ -254,7 +256,7 @@ def detect_support_plane(points: np.ndarray, normals: np.ndarray, params: Segmen
         return none
     idx = np.flatnonzero(cand)
     rng = np.random.default_rng(int(params.seed))
-    best = None
+    found = []  # (plane, inliers) of the planes that qualify
     remaining = idx
     for _ in range(max(1, int(params.max_planes))):  # several horizontal planes (floor, table): take the highest
         if len(remaining) < need:
@@ -266,23 +268,37 @@ def detect_support_plane(points: np.ndarray, normals: np.ndarray, params: Segmen
         if up is not None:
             if plane[:3] @ up < 0:
                 plane = -plane
-        elif np.sum(points @ plane[:3] + plane[3] > params.plane_distance) < n / 2:
-            plane = -plane  # no up given: orient towards the side with more points
         dist = points @ plane[:3] + plane[3]
         inl = (np.abs(dist) <= params.plane_distance) & (np.abs(normals @ plane[:3]) >= cos_tol)
+        if up is None and _faces_down(plane, dist, normals, inl, params.plane_distance):
+            plane, dist = -plane, -dist
         facing = up is None or abs(plane[:3] @ up) >= cos_tol
         ok = inl.sum() >= need and facing
         info["planes_tried"] += 1
         if facing:
             info["largest_plane_points"] = max(info["largest_plane_points"], int(inl.sum()))
         if ok:
-            height = -plane[3] if up is None else float(np.mean(points[inl] @ up))
-            if best is None or height > best[0]:
-                best = (height, plane, inl)
+            found.append((plane, inl))
         remaining = np.setdiff1d(remaining, remaining[np.asarray(inl_idx, dtype=np.int64)], assume_unique=True)
-    if best is None:
+    if not found:
         return none
-    return best[1], best[2]
+    # the highest of the planes parallel to the largest (a table above the floor). A plane at an angle to it is
+    # no support: a wall, or RANSAC's leftovers of the table with the objects' tops (tilted 10-15 deg in
+    # generated single views), which would be "higher"
+    ref = max(found, key=lambda f: int(f[1].sum()))[0][:3]
+    found = [f for f in found if abs(f[0][:3] @ ref) >= np.cos(np.radians(SUPPORT_PARALLEL_DEG))]
+    return max(found, key=lambda f: float(np.mean(points[f[1]] @ ref)))
+
+
+def _faces_down(plane: np.ndarray, dist: np.ndarray, normals: np.ndarray, inl: np.ndarray, margin: float) -> bool:
+    """No up given: whether `plane`'s normal points away from the free side, where the objects stand. Surface
+    normals point into free space (SurfaceCloud), so the plane's own points say which way it faces; with
+    normals that do not agree (a cloud whose normals were not oriented), the side with more points off the
+    plane (a table top holds most of a single view's points, so a share of all the points would not do)."""
+    side = float(np.mean(normals[inl] @ plane[:3])) if inl.any() else 0.0
+    if abs(side) >= 0.5:
+        return side < 0
+    return int(np.sum(dist < -margin)) > int(np.sum(dist > margin))
 
 
 def _mean_rows(values: np.ndarray, lab: np.ndarray, k: int) -> np.ndarray:
