@@ -351,8 +351,14 @@ def _auto_grid(rec: Recording, roles: Roles, plan: _PosePlan, grid_spec: _GridSp
     without poses (icp with no TF) the first frame at the identity, its box grown by ICP_GROW."""
     count = rec.topics[roles.depth_topic].count if roles.depth_topic in rec.topics else 0
     step = max(1, -(-count // (selection["every"] * SURVEY_FRAMES)))
-    frames = iter_frames(rec, replace(roles, color_topic=None), pose_source=plan.source,
-                         **{**selection, "every": selection["every"] * step})
+    read = []  # frames iter_frames gave, with a pose or not
+
+    def frames_read():
+        for f in iter_frames(rec, replace(roles, color_topic=None), pose_source=plan.source,
+                             **{**selection, "every": selection["every"] * step}):
+            read.append(f.T_world_camera is not None)
+            yield f
+    frames = frames_read()
     lo, hi = grid_spec.min_depth, grid_spec.max_depth
     if plan.source == "none":
         first = next(iter(frames), None)
@@ -362,7 +368,13 @@ def _auto_grid(rec: Recording, roles: Roles, plan: _PosePlan, grid_spec: _GridSp
         views = ((filters.range_filter(f.depth, lo, hi), f.K, f.T_world_camera) for f in frames
                  if f.T_world_camera is not None and np.all(np.isfinite(f.T_world_camera)))
         grow = 0.0
-    return auto_grid(survey(views, lo, hi), voxel_size=voxel_size, resolution=resolution,
+    seen = survey(views, lo, hi)
+    if seen.frames == 0:  # not "no valid depth": there was no frame to look at, or none had a pose
+        if not read:
+            raise RecordingError(f"{rec.path}: no usable depth frames (no depth frames in the selection)")
+        raise RecordingError(f"{rec.path}: no selected depth frame has a camera pose in {plan.world or 'the world'}"
+                             f" frame, so the grid cannot be sized around them")
+    return auto_grid(seen, voxel_size=voxel_size, resolution=resolution,
                      truncation=grid_spec.truncation, budget=budget, origin=origin, grow=grow,
                      color="mode" if grid_spec.color and grid_spec.color_mode == "mode" else grid_spec.color)
 

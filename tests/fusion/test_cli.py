@@ -115,6 +115,15 @@ def test_depth_range_excluding_everything_is_an_error(sample_dir, tmp_path):
     assert not out.exists() or not any(out.iterdir())
 
 
+def test_a_time_window_without_frames_says_so_when_sizing_the_grid(sample_dir, tmp_path):
+    """The grid sizing pass (--size auto, the default) used to blame --size and the depth range."""
+    out = tmp_path / "out"
+    res = run([str(sample_dir / "recording.mcap"), "-o", str(out), "--quiet", "--start", "0.001", "--end", "0.002"])
+    assert res.exit_code == 2, res.output
+    assert "no depth frames in the selection" in res.output and "--size" not in res.output
+    assert not out.exists() or not any(out.iterdir())
+
+
 def test_imported_7scenes_fuses_forced_and_icp(shared_data, tmp_path):
     """`kinfu import` of the real 7-Scenes frames, then `kinfu fuse` with TF poses and with ICP tracking."""
     root = shared_data("rgbd-7scenes-redkitchen")
