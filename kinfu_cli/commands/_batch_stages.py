@@ -19,12 +19,11 @@ from pathlib import Path
 import click
 
 from kinfu_cli.batch.stages import RECORDING, StageRun, StageSpec
-from kinfu_cli.commands._options import PARAMETER_FLAGS
+from kinfu_cli.commands._options import PARAMETER_FLAGS, SWEEP_ONLY_OPTIONS
 from kinfu_cli.core.errors import ConfigError, KinfuError
 
 # eval segment --sweep makes its own scenes: not a stage of a recording
-_SWEEP_OPTIONS = {"sweep", "sweep-parameter", "sweep-values", "method", "color", "photometric", "scene", "scenes",
-                  "resolution"}
+_SWEEP_OPTIONS = {"sweep", *SWEEP_ONLY_OPTIONS}
 # stage -> (module of the command, options batch sets itself, options taking an output file whose `true` in the
 # plan means "this file in the recording's output folder"). A viewer output option (a file) goes in the last.
 _COMMANDS = {

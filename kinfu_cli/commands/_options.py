@@ -12,6 +12,7 @@ from collections.abc import Iterable
 from pathlib import Path
 
 import click
+from click.core import ParameterSource
 
 from kinfu_cli.core.ownership import claim_output
 
@@ -24,6 +25,24 @@ PARAMETER_FLAGS: dict[str, str] = {
     "modes": "--mode",
     "up_tolerance_deg": "--up-tolerance",
 }
+
+#: `kinfu eval segment` options that mean something only with --sweep (long flags without the dashes): the
+#: command refuses them without --sweep, batch's eval-segment stage (one recording, never a sweep) refuses them
+SWEEP_ONLY_OPTIONS = frozenset({"sweep-parameter", "sweep-values", "color-distance", "method", "color", "photometric",
+                                "scene", "scenes", "resolution"})
+
+
+def given_options(ctx: click.Context, flags: Iterable[str]) -> list[str]:
+    """The options among `flags` (long flags without the dashes) that the user set, by click's parameter source
+    (an option given at its default value counts, one left out does not), shown as their flags."""
+    wanted = set(flags)
+    given = []
+    for p in ctx.command.params:
+        long = [o for o in p.opts if o.startswith("--")]
+        if (isinstance(p, click.Option) and wanted.intersection(o[2:] for o in long)
+                and ctx.get_parameter_source(p.name) not in (None, ParameterSource.DEFAULT)):
+            given.append("/".join(long + list(p.secondary_opts)))
+    return given
 
 
 def force_option(func):

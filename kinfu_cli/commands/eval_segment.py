@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from kinfu_cli.commands._options import claim_outputs, force_option
+from kinfu_cli.commands._options import SWEEP_ONLY_OPTIONS, claim_outputs, force_option, given_options
 from kinfu_cli.commands._output import emit
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.evaluation.segment_eval import (RGB_T_LCCP_VALUES, SWEEP_DEFAULT, SWEEP_VALUES, default_sweep_values,
@@ -130,6 +130,9 @@ def command(segments: Path | None, ground_truth: Path | None, t_eval: float, mat
             doc["plot"] = str(plot_sweep_pr(doc, plot))
         emit(doc, output, as_json, lambda d: format_sweep_table(d).splitlines())
         return
+    sweep_only = given_options(click.get_current_context(), SWEEP_ONLY_OPTIONS)
+    if sweep_only:
+        raise ConfigError(f"{', '.join(sweep_only)}: needs --sweep (scoring SEGMENTS does not use it)")
     if segments is None:
         raise ConfigError("expected SEGMENTS (a kinfu segment output folder or labelled cloud), or --sweep")
     if ground_truth is None:

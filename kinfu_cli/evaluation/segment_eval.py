@@ -22,9 +22,9 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from kinfu_cli.core.errors import ConfigError, KinfuError
+from kinfu_cli.core.neighbours import transfer_nearest
 from kinfu_cli.core.progress import progress
 from kinfu_cli.io.labelled_cloud import (LabelledCloud, LabelsFileError, ply_points, read_labelled_cloud,
                                          read_ply_vertices)
@@ -141,12 +141,8 @@ def transfer_labels(src_points: np.ndarray, src_labels: np.ndarray, dst_points: 
                     max_distance: float) -> tuple[np.ndarray, np.ndarray]:
     """Label of the nearest source point for each destination point (-1 when none within max_distance),
     and that distance (inf when none)."""
-    tree = cKDTree(np.asarray(src_points, dtype=np.float64))
-    dist, idx = tree.query(np.asarray(dst_points, dtype=np.float64), distance_upper_bound=max_distance)
-    ok = np.isfinite(dist)
     out = np.full(len(dst_points), -1, dtype=np.int64)
-    out[ok] = np.asarray(src_labels)[idx[ok]]
-    return out, dist
+    return out, transfer_nearest(src_points, src_labels, dst_points, max_distance, out)
 
 
 @dataclass

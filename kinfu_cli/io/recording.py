@@ -13,12 +13,14 @@ from __future__ import annotations
 import contextlib
 import os
 import shutil
+import struct
 import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Protocol
 
+import numpy as np
 from mcap.exceptions import DecoderNotFoundError
 from mcap.reader import make_reader
 
@@ -203,6 +205,8 @@ class Recording:
             return 0
         if start_ns is None and end_ns is None:
             return self.topics[topic].count
+        if start_ns is not None and end_ns is not None and start_ns > end_ns:
+            return 0
         return self._backend.count(topic, start_ns, end_ns)
 
     def first_message(self, topic: str) -> object | None:
@@ -315,6 +319,11 @@ class _RosbagsBackend(_Backend):
             if self.stamps_known:  # ROS 1: the index holds every stamp
                 indexes = self.reader.readers[0].indexes
                 return sum(lo <= i.time <= hi for c in conns for i in indexes.get(c.id) or [])
+            if self.fmt == "mcap" and conns:  # the MCAP indexes hold every stamp too
+                with self.path.open("rb") as f:
+                    indexed = _mcap_indexed_count(f, make_reader(f).get_summary(), topic, start_ns, end_ns)
+                if indexed is not None:
+                    return indexed
             stop = None if end_ns is None else int(end_ns) + 1
             return sum(1 for _ in self.reader.messages(connections=conns, start=start_ns, stop=stop)) if conns else 0
         except Exception as exc:
@@ -360,6 +369,37 @@ def _topic_infos(connections: Iterable[tuple[str, str, int]]) -> dict[str, Topic
 def _extend(info: TopicInfo, first: int, last: int) -> None:
     info._first = first if info._first is None else min(info._first, first)
     info._last = last if info._last is None else max(info._last, last)
+
+
+def _mcap_indexed_count(stream, summary, topic: str, start_ns: int | None, end_ns: int | None) -> int | None:
+    """Messages on `topic` with log times in [start_ns, end_ns] from an MCAP file's summary (chunk indexes) and
+    message indexes (each chunk's log times, stored uncompressed after it), so no chunk is read or decompressed
+    (counting by reading cost a second pass over every chunk the frames were then read from): a chunk inside
+    the window counts its index entries, one across its edge the entries in the window. None when the file has
+    no chunk index or a chunk the window touches has no message index: the caller reads the messages."""
+    if summary is None or not summary.chunk_indexes:
+        return None
+    lo = -1 if start_ns is None else int(start_ns)
+    hi = 2**63 - 1 if end_ns is None else int(end_ns)  # log times as int64 (a float would round them)
+    channels = {cid for cid, ch in summary.channels.items() if ch.topic == topic}
+    total = 0
+    for chunk in summary.chunk_indexes:
+        if chunk.message_end_time < lo or chunk.message_start_time > hi:
+            continue
+        if not chunk.message_index_offsets:
+            return None
+        inside = lo <= chunk.message_start_time and chunk.message_end_time <= hi
+        for cid in channels.intersection(chunk.message_index_offsets):
+            # a Message Index record: opcode u8, record length u64, channel id u16, then the entries' byte
+            # length u32 and the entries, (log time u64, offset u64) each
+            stream.seek(chunk.message_index_offsets[cid] + 1 + 8 + 2)
+            size = struct.unpack("<I", stream.read(4))[0]
+            if inside:
+                total += size // 16
+            else:
+                times = np.frombuffer(stream.read(size), dtype="<i8")[::2]
+                total += int(np.count_nonzero((times >= lo) & (times <= hi)))
+    return total
 
 
 def _mcap_needs_mcap_lib(path: Path) -> bool:
@@ -412,9 +452,13 @@ class _McapBackend(_Backend):
         return int(st.message_start_time), int(st.message_end_time)
 
     def count(self, topic: str, start_ns: int | None, end_ns: int | None) -> int:
-        stop = None if end_ns is None else int(end_ns) + 1
+        """From the MCAP indexes (no chunk decompressed); a file without them is read message by message."""
         try:
-            return sum(1 for _ in self.reader.iter_messages(topics=[topic], start_time=start_ns, end_time=stop,
+            indexed = _mcap_indexed_count(self.file, self.summary, topic, start_ns, end_ns)
+            if indexed is not None:
+                return indexed
+            stop = None if end_ns is None else int(end_ns) + 1
+            return sum(1 for _ in self.reader.iter_messages(topics=[topic], starting_at=start_ns, ending_before=stop,
                                                             log_time_order=False))
         except Exception as exc:
             raise _read_error(self.path, exc, "MCAP file") from None

@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 from numba import njit, prange
+from numba.extending import register_jitable
 
 from kinfu_cli.localization.ukf import expmap, point_distance
 
@@ -54,6 +55,20 @@ def _gn_step(t, R, ys, H, damping, t_out, R_out):
         t_out[a] = s + c[a] + x[a]
 
 
+#: the damping both refinements start from (Levenberg-Marquardt on the diagonal of J^T J)
+_DAMPING = 1e-3
+
+
+@register_jitable  # compiled into refine_field, plain Python in refine_exact
+def _judge(cur, new, damping):
+    """The damped loop's rule, one for the field and the exact mesh: a step that raises the mean distance is
+    undone and the damping raised x10; one that does not is kept and the damping lowered x0.3 (to 1e-6 at
+    least); the loop ends when a kept step gains less than 1e-7 m. Returns (keep, done, damping)."""
+    if new > cur:
+        return False, False, damping * 10.0
+    return True, cur - new < 1e-7, max(damping * 0.3, 1e-6)
+
+
 @njit(cache=True, parallel=True)
 def refine_field(t, R, ys, iterations, lo, step, sdf, normals, index):
     """Gauss-Newton from every candidate (t (K, 3), R (K, 3, 3), updated in place) on the field; index[k] is the
@@ -66,24 +81,21 @@ def refine_field(t, R, ys, iterations, lo, step, sdf, normals, index):
         cur = 0.0
         for k in range(L):
             cur += point_distance(t[i], R[i], ys[k], lo, step, sdf, normals, H[k], c) / L
-        damping = 1e-3
+        damping = _DAMPING
         for _ in range(iterations):
             _gn_step(t[i], R[i], ys, H, damping, tn, Rn)
             Hn = np.empty((L, 3))
             new = 0.0
             for k in range(L):
                 new += point_distance(tn, Rn, ys[k], lo, step, sdf, normals, Hn[k], c) / L
-            if new <= cur:
+            keep, done, damping = _judge(cur, new, damping)
+            if keep:
                 t[i, :] = tn
                 R[i, :, :] = Rn
                 H[:, :] = Hn
-                damping = max(damping * 0.3, 1e-6)
-                if cur - new < 1e-7:
-                    cur = new
-                    break
                 cur = new
-            else:
-                damping *= 10.0
+                if done:
+                    break
         index[i] = cur
 
 
@@ -95,19 +107,16 @@ def refine_exact(model, ys: np.ndarray, t: np.ndarray, R: np.ndarray, iterations
     H = closest(t, R)
     cur = float(np.linalg.norm(ys - H, axis=1).mean())
     tn, Rn = np.empty(3), np.empty((3, 3))
-    damping = 1e-3
+    damping = _DAMPING
     for _ in range(iterations):
         _gn_step(t, R, ys, H, damping, tn, Rn)
         Hn = closest(tn, Rn)
         new = float(np.linalg.norm(ys - Hn, axis=1).mean())
-        if new > cur:
-            damping *= 10.0
-            continue
-        done = cur - new < 1e-7
-        t, R, H, cur = tn.copy(), Rn.copy(), Hn, new
-        damping = max(damping * 0.3, 1e-6)
-        if done:
-            break
+        keep, done, damping = _judge(cur, new, damping)
+        if keep:
+            t, R, H, cur = tn.copy(), Rn.copy(), Hn, new
+            if done:
+                break
     return t, R, cur
 
 

@@ -19,6 +19,7 @@ from scipy.ndimage import gaussian_filter
 from skimage.measure import marching_cubes
 
 from kinfu_cli.core.errors import VolumeError
+from kinfu_cli.core.neighbours import transfer_nearest
 
 __all__ = ["SurfaceCloud", "surface_from_tsdf", "surface_from_labels", "surface_from_volume", "downsample"]
 
@@ -242,14 +243,11 @@ def fill_uncoloured(points: np.ndarray, colors: np.ndarray, max_distance: float 
     """Colours with each black (never coloured) point given its nearest coloured point's colour within
     max_distance. About 7-20 % of a fused surface is never coloured (seen only at grazing angles, or its voxels
     fused before the colour was): as black it would read as a dark object to every colour term."""
-    from scipy.spatial import cKDTree
-
     black = ~np.any(colors > 0, axis=1)
     if not black.any() or black.all():
         return colors
-    src = np.flatnonzero(~black)
-    d, j = cKDTree(points[src]).query(points[black], distance_upper_bound=max_distance)
-    hit = np.isfinite(d)
+    filled = colors[black]
+    transfer_nearest(points[~black], colors[~black], points[black], max_distance, filled)
     out = colors.copy()
-    out[np.flatnonzero(black)[hit]] = colors[src[j[hit]]]
+    out[black] = filled
     return out

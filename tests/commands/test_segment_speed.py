@@ -14,9 +14,9 @@ from kinfu_cli.sim.scene import primitive_tabletop_scene
 from kinfu_cli.sim.tsdf import scene_tsdf
 
 # not needed by a default `kinfu segment` (--quiet): 3D library, learners, batch, recordings, grasping, plots,
-# viewer, progress bars
+# viewer, progress bars, matplotlib (saliency.ply's viridis is a table)
 HEAVY = ("open3d", "sklearn", "dask", "distributed", "mcap", "rosbags", "kinfu_cli.grasp",
-         "kinfu_cli.report", "kinfu_cli.io.recording", "foxglove_schemas_protobuf", "tqdm")
+         "kinfu_cli.report", "kinfu_cli.io.recording", "foxglove_schemas_protobuf", "tqdm", "matplotlib")
 
 
 def _loaded(code: str) -> list[str]:
