@@ -467,7 +467,7 @@ class _McapBackend(_Backend):
         stop = None if end_ns is None else int(end_ns) + 1
         try:
             for schema, ch, msg, decoded in self.reader.iter_decoded_messages(
-                    topics=topics, start_time=start_ns, end_time=stop, log_time_order=True):
+                    topics=topics, starting_at=start_ns, ending_before=stop, log_time_order=True):
                 yield ch.topic, normalize_msgtype(schema.name if schema else ""), msg.log_time, decoded
         except RecordingError:
             raise
