@@ -211,7 +211,7 @@ def decode_depth(msg: object, topic: str = "depth") -> np.ndarray:
         depth[~np.isfinite(depth) | (depth < 0)] = 0.0
         return depth
     raise RecordingError(f"{topic}: depth encoding {enc!r} is not supported (expected 16UC1 in mm, 32FC1 in m "
-                         f"or a compressedDepth PNG)")
+                         f"or a compressedDepth PNG / RVL)")
 
 
 def _decode_compressed_depth(msg: object, topic: str) -> np.ndarray:
@@ -219,9 +219,37 @@ def _decode_compressed_depth(msg: object, topic: str) -> np.ndarray:
     if "compresseddepth" not in fmt.lower():
         raise RecordingError(f"{topic}: compressed image format {fmt!r} is not depth (expected "
                              f"'16UC1; compressedDepth png' or '32FC1; compressedDepth')")
-    if "rvl" in fmt.lower():
-        raise RecordingError(f"{topic}: compressedDepth format {fmt!r} (RVL) is not supported, expected png")
     raw = _bytes(msg.data).tobytes()
+    if "rvl" in fmt.lower():
+        from kinfu_cli.io.rvl import decode_rvl  # numba: only for the recordings that need it
+
+        try:
+            img, header = decode_rvl(raw)
+        except ValueError as exc:
+            raise RecordingError(f"{topic}: compressedDepth RVL data: {exc}") from None
+    else:
+        img, header = _compressed_depth_png(raw, topic)
+    enc = fmt.split(";")[0].strip()
+    if enc in ("16UC1", "mono16"):
+        depth = img.astype(np.float32) * np.float32(0.001)
+        depth[img == 65535] = 0.0
+        return depth
+    if enc == "32FC1":
+        if header is None:
+            raise RecordingError(f"{topic}: 32FC1 compressedDepth lacks its 12-byte quantisation header")
+        _, a, b = struct.unpack("<iff", header)
+        inv = img.astype(np.float32)
+        depth = np.zeros(img.shape, np.float32)
+        ok = img != 0
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            depth[ok] = a / (inv[ok] - b)
+        depth[~np.isfinite(depth) | (depth < 0)] = 0.0
+        return depth
+    raise RecordingError(f"{topic}: compressedDepth encoding {enc!r} is not supported (expected 16UC1 or 32FC1)")
+
+
+def _compressed_depth_png(raw: bytes, topic: str) -> tuple[np.ndarray, bytes | None]:
+    """(uint16 image, the 12-byte quantisation header before the PNG or None) of compressedDepth png data."""
     start = raw.find(_PNG_MAGIC)
     if start < 0:
         raise RecordingError(f"{topic}: compressedDepth message holds no PNG data")
@@ -230,22 +258,7 @@ def _decode_compressed_depth(msg: object, topic: str) -> np.ndarray:
         raise RecordingError(f"{topic}: compressedDepth PNG could not be decoded (truncated or corrupt image data)")
     if img.ndim != 2 or img.dtype != np.uint16:
         raise RecordingError(f"{topic}: compressedDepth PNG is not a 16-bit single-channel image")
-    enc = fmt.split(";")[0].strip()
-    if enc in ("16UC1", "mono16"):
-        depth = img.astype(np.float32) * np.float32(0.001)
-        depth[img == 65535] = 0.0
-        return depth
-    if enc == "32FC1":
-        if start < 12:
-            raise RecordingError(f"{topic}: 32FC1 compressedDepth lacks its 12-byte quantisation header")
-        _, a, b = struct.unpack("<iff", raw[start - 12:start])
-        inv = img.astype(np.float32)
-        depth = np.zeros(img.shape, np.float32)
-        ok = img != 0
-        depth[ok] = a / (inv[ok] - b)
-        depth[~np.isfinite(depth) | (depth < 0)] = 0.0
-        return depth
-    raise RecordingError(f"{topic}: compressedDepth encoding {enc!r} is not supported (expected 16UC1 or 32FC1)")
+    return img, (raw[start - 12:start] if start >= 12 else None)
 
 
 def decode_color(msg: object, topic: str = "color") -> np.ndarray:
