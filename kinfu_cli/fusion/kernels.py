@@ -431,13 +431,13 @@ def _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, n
         for k in range(B3):
             p = pix[k]
             t = sdf[k]
-            if p >= 0 and t > -one and abs(t) < color_band:
+            if p >= 0 and t > -one and abs(t) < color_band and not _black(color_f, p):
                 mode_update(pool_hc, pool_hn, i, k, color_f[p, 0], color_f[p, 1], color_f[p, 2], mode_thr2)
         return
     for k in range(B3):
         p = pix[k]
         t = sdf[k]
-        if p < 0 or not (t > -one and abs(t) < color_band):
+        if p < 0 or not (t > -one and abs(t) < color_band) or _black(color_f, p):
             continue
         # black = never coloured: take the sample, else a running mean that forgets slowly
         fresh = pool_c[i, k, 0] == 0 and pool_c[i, k, 1] == 0 and pool_c[i, k, 2] == 0
@@ -446,6 +446,13 @@ def _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, n
             c0 = np.float32(pool_c[i, k, ch])
             cn = np.float32(color_f[p, ch])
             pool_c[i, k, ch] = np.uint8(min(np.float32(255.0), c0 + alpha * (cn - c0) + half))
+
+
+@njit(cache=True, inline="always")
+def _black(color_f, p):
+    """Pixel p has no colour sample: black (io.color_registration leaves pixels the colour camera does not see
+    black; a camera's own black is 0-3 noise, rarely all three zero)."""
+    return color_f[p, 0] == 0 and color_f[p, 1] == 0 and color_f[p, 2] == 0
 
 
 @njit(cache=True, parallel=True)

@@ -250,8 +250,8 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
             dropped = {**stats.dropped, **depth_filter.drops}
             why = "; ".join(f"{k}: {v}" for k, v in dropped.items()) or "no depth frames in the selection"
             raise RecordingError(f"{rec.path}: no usable depth frames ({why})")
-        warnings += _tracking_verdict(integrator, max_lost, str(rec.path))
-        warnings += _tracking_doubts(integrator.track_log)
+        warnings += (_color_warnings(stats, str(rec.path)) + _tracking_verdict(integrator, max_lost, str(rec.path))
+                     + _tracking_doubts(integrator.track_log))
         vol = integrator.volume
         vol.frame = vol.frame or plan.world
 
@@ -307,6 +307,15 @@ def _check_arguments(pose: str | None, pose_topic: str | None, every: int, max_l
         raise ConfigError(f"expected a share of the tracked frames in [0, 1], got {max_lost}", parameter="max_lost")
     if isinstance(size, str) and size != "auto":
         raise ConfigError(f"expected metres or 'auto', got {size!r}", parameter="size")
+
+
+def _color_warnings(stats: FrameStats, recording: str) -> list[str]:
+    """Why a run with a colour topic fused no colour (io.color_registration could not place it), or []."""
+    reg = stats.color_registration
+    if not reg or reg["mode"] != "none":
+        return []
+    return [f"{recording}: fused without colour: {reg['reason']}, so the colour images cannot be placed on the "
+            f"depth (resizing them would paint each surface with its neighbour's)"]
 
 
 def _dropped(stats: FrameStats, depth_filter: DepthFilter, integrator: "_Integrator") -> dict[str, int]:

@@ -10,11 +10,12 @@ from __future__ import annotations
 
 from collections import deque
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from kinfu_cli.core.errors import ConfigError, RecordingError, TransformError
+from kinfu_cli.io.color_registration import ColorRegistration, color_registration, register_color
 from kinfu_cli.io.messages import (POSE_TYPES, camera_info_K, decode_color, decode_depth, header_frame,
                                    header_stamp_ns, normalize_msgtype, pose_message_to_tq)
 from kinfu_cli.io.roles import Roles, detect_roles, require_role_topic
@@ -51,6 +52,7 @@ class FrameStats:
     skipped: int = 0
     without_color: int = 0
     dropped: dict[str, int] = field(default_factory=dict)
+    color_registration: dict | None = None  # ColorRegistration.as_dict() when there is a colour topic
 
     def drop(self, reason: str) -> None:
         self.dropped[reason] = self.dropped.get(reason, 0) + 1
@@ -62,7 +64,8 @@ class FrameStats:
     def as_dict(self) -> dict:
         return {"depth_messages": self.depth_messages, "used": self.used, "skipped": self.skipped,
                 "without_color": self.without_color, "dropped": dict(self.dropped),
-                "dropped_total": self.dropped_total}
+                "dropped_total": self.dropped_total,
+                **({"color_registration": self.color_registration} if self.color_registration else {})}
 
 
 def _stamp(msg: object, log_ns: int) -> int:
@@ -145,7 +148,13 @@ def iter_frames(rec, roles: Roles | None = None, pose_source: str = "tf", pose_t
     else:
         pose_fn = None
     start_ns, end_ns = _time_window(rec, start_s, end_s)
-    pairer = _FramePairer(rec, roles, depth_topic, K, width, height, pose_fn, tol_ns, stats, require_color)
+    reg = None
+    if roles.color_topic is not None:
+        reg = color_registration(rec, depth_topic, roles.color_topic, roles.info_topic, tf)
+        stats.color_registration = reg.as_dict()
+        if reg.mode == "none":  # colour that cannot be placed is left out, not painted beside its surface
+            roles = replace(roles, color_topic=None)
+    pairer = _FramePairer(rec, roles, depth_topic, K, width, height, pose_fn, tol_ns, stats, require_color, reg)
     yield from pairer.stream(start_ns, end_ns, every)
 
 
@@ -259,8 +268,10 @@ class _FramePairer:
     no depth frame can use them."""
 
     def __init__(self, rec, roles: Roles, depth_topic: str, K: np.ndarray, width: int, height: int,
-                 pose_fn: PoseLookup | None, tol_ns: int, stats: FrameStats, require_color: bool) -> None:
+                 pose_fn: PoseLookup | None, tol_ns: int, stats: FrameStats, require_color: bool,
+                 registration: ColorRegistration | None = None) -> None:
         self.rec = rec
+        self.registration = registration
         self.depth_topic = depth_topic
         self.info_topic = roles.info_topic
         self.color_topic = roles.color_topic
@@ -330,7 +341,10 @@ class _FramePairer:
         if self.color_topic is not None and self.colors:
             best_stamp, best = min(self.colors, key=lambda c: abs(c[0] - stamp))
             if abs(best_stamp - stamp) <= self.tol_ns:
-                color = decode_color(best, f"{self.rec.path}: {self.color_topic}")
+                where = f"{self.rec.path}: {self.color_topic}"
+                color = decode_color(best, where)
+                if self.registration is not None:
+                    color = register_color(self.registration, depth, self.K, color, where)
         if color is None:
             if self.require_color:
                 self.stats.drop(DROP_NO_COLOR)

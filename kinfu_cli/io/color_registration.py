@@ -1,0 +1,100 @@
+"""Colour registered to depth: each depth pixel's colour, whether or not the colour camera is the depth camera.
+
+A colour image is registered to the depth image when both are in the same optical frame (a Kinect's registered
+mode, RealSense's aligned_depth_to_color topics): pixel (u, v) of one is pixel (u, v) of the other, and a
+different size is a resize. A RealSense or Azure Kinect recording without alignment has its colour camera a few
+centimetres away, with its own intrinsics and size: resizing would paint every surface with what lies beside it.
+Then each depth pixel's 3-D point is projected into the colour camera (its camera info, and the TF from the depth
+to the colour optical frame) and takes the colour there, unless the colour camera sees a nearer surface at that
+pixel (a z-buffer of the projected depth: the colour camera's own occlusions). Pixels without colour are black,
+which fusion reads as "no colour sample". When the colour camera's info or TF is missing, there is no colour.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from kinfu_cli.core.errors import RecordingError, TransformError
+from kinfu_cli.io.messages import camera_info_K, header_frame
+from kinfu_cli.io.roles import CAMERA_INFO
+from kinfu_cli.io.tf_buffer import TfBuffer
+
+OCCLUSION_MARGIN = 0.02  # m: a point farther than the colour camera's nearest surface at its pixel by this is hidden
+
+
+@dataclass
+class ColorRegistration:
+    """How colour images map onto the depth image: `mode` "same-frame" (pixel to pixel, resized), "project"
+    (through K_color and T_color_depth) or "none" (no colour: `reason` says why)."""
+
+    mode: str
+    depth_frame: str = ""
+    color_frame: str = ""
+    info_topic: str | None = None
+    K_color: np.ndarray | None = None
+    color_size: tuple[int, int] | None = None  # (width, height) of the colour camera info
+    T_color_depth: np.ndarray | None = None
+    reason: str = ""
+
+    def as_dict(self) -> dict:
+        return {"mode": self.mode, "depth_frame": self.depth_frame, "color_frame": self.color_frame,
+                "color_info_topic": self.info_topic, "reason": self.reason,
+                **({"T_color_depth": np.round(self.T_color_depth, 6).tolist()} if self.T_color_depth is not None
+                   else {})}
+
+
+def color_registration(rec, depth_topic: str, color_topic: str, depth_info_topic: str,
+                       tf: TfBuffer | None = None) -> ColorRegistration:
+    """How the colour topic's images map onto the depth topic's (the first message of each names its frame);
+    tf: the recording's TF (read from it when None and needed)."""
+    first_depth, first_color = rec.first_message(depth_topic), rec.first_message(color_topic)
+    d_frame = header_frame(first_depth).lstrip("/") if first_depth is not None else ""
+    c_frame = header_frame(first_color).lstrip("/") if first_color is not None else ""
+    if not d_frame or not c_frame or d_frame == c_frame:
+        return ColorRegistration("same-frame", d_frame, c_frame)
+    infos = [n for n, i in rec.topics.items() if CAMERA_INFO in i.msgtypes and i.count > 0 and n != depth_info_topic]
+    info_topic = next((n for n in infos if header_frame(rec.first_message(n)).lstrip("/") == c_frame), None)
+    if info_topic is None:
+        return ColorRegistration("none", d_frame, c_frame, reason=f"the colour images are in frame {c_frame!r}, "
+                                 f"the depth images in {d_frame!r}, and no camera info topic is in {c_frame!r}")
+    K, w, h = camera_info_K(rec.first_message(info_topic), f"{rec.path}: {info_topic}")
+    tf = tf if tf is not None else TfBuffer.from_recording(rec)
+    if not tf.connected(c_frame, d_frame):
+        return ColorRegistration("none", d_frame, c_frame, info_topic, reason=f"no TF links the colour frame "
+                                 f"{c_frame!r} to the depth frame {d_frame!r}")
+    try:
+        T = tf.lookup(c_frame, d_frame)
+    except TransformError as exc:
+        return ColorRegistration("none", d_frame, c_frame, info_topic, reason=str(exc))
+    return ColorRegistration("project", d_frame, c_frame, info_topic, K, (w, h), T)
+
+
+def register_color(reg: ColorRegistration, depth: np.ndarray, K_depth: np.ndarray, color: np.ndarray,
+                   where: str) -> np.ndarray:
+    """uint8 (H, W, 3) colour of each depth pixel of `depth` (metres, 0 = none); black where there is none."""
+    h, w = depth.shape
+    ch, cw = color.shape[:2]
+    if reg.mode != "project":
+        return color
+    if (cw, ch) != reg.color_size:
+        raise RecordingError(f"{where}: colour image is {cw}x{ch} but camera info {reg.info_topic} says "
+                             f"{reg.color_size[0]}x{reg.color_size[1]}")
+    v, u = np.nonzero(depth > 0)
+    z = depth[v, u].astype(np.float64)
+    pts = np.stack([(u - K_depth[0, 2]) / K_depth[0, 0] * z, (v - K_depth[1, 2]) / K_depth[1, 1] * z, z], axis=1)
+    pc = pts @ reg.T_color_depth[:3, :3].T + reg.T_color_depth[:3, 3]
+    K = reg.K_color
+    with np.errstate(divide="ignore", invalid="ignore"):
+        uc = np.floor(pc[:, 0] / pc[:, 2] * K[0, 0] + K[0, 2] + 0.5)
+        vc = np.floor(pc[:, 1] / pc[:, 2] * K[1, 1] + K[1, 2] + 0.5)
+    ok = (pc[:, 2] > 0) & (uc >= 0) & (uc < cw) & (vc >= 0) & (vc < ch)
+    flat = (vc[ok] * cw + uc[ok]).astype(np.int64)
+    nearest = np.full(cw * ch, np.inf)
+    np.minimum.at(nearest, flat, pc[ok, 2])
+    seen = pc[ok, 2] <= nearest[flat] + OCCLUSION_MARGIN
+    out = np.zeros((h, w, 3), dtype=np.uint8)
+    idx = np.flatnonzero(ok)[seen]
+    out[v[idx], u[idx]] = color.reshape(-1, 3)[flat[seen]]
+    return out
