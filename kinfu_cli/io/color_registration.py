@@ -59,7 +59,10 @@ def color_registration(rec, depth_topic: str, color_topic: str, depth_info_topic
     if info_topic is None:
         return ColorRegistration("none", d_frame, c_frame, reason=f"the colour images are in frame {c_frame!r}, "
                                  f"the depth images in {d_frame!r}, and no camera info topic is in {c_frame!r}")
-    K, w, h = camera_info_K(rec.first_message(info_topic), f"{rec.path}: {info_topic}")
+    try:
+        K, w, h = camera_info_K(rec.first_message(info_topic), f"{rec.path}: {info_topic}")
+    except RecordingError as exc:  # a broken colour calibration costs the colour, not the run
+        return ColorRegistration("none", d_frame, c_frame, info_topic, reason=str(exc))
     tf = tf if tf is not None else TfBuffer.from_recording(rec)
     if not tf.connected(c_frame, d_frame):
         return ColorRegistration("none", d_frame, c_frame, info_topic, reason=f"no TF links the colour frame "

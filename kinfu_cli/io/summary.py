@@ -198,4 +198,10 @@ def _frames_lines(fr: dict) -> list[str]:
              f"(skipped {fr['skipped']}, without colour {fr['without_color']})"]
     for reason, n in fr["dropped"].items():
         lines.append(f"  dropped {n}: {reason}")
+    reg = fr.get("color_registration")
+    if reg and reg["mode"] == "project":
+        lines.append(f"  colour: projected from the colour camera ({reg['color_frame']}, {reg['color_info_topic']}) "
+                     f"onto the depth camera ({reg['depth_frame']})")
+    elif reg and reg["mode"] == "none":
+        lines.append(f"  colour: left out: {reg['reason']}")
     return lines
