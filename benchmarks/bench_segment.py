@@ -530,6 +530,45 @@ def bench_closed_loop(seed: int = 0, views: int = 5) -> dict:
     return compare_strategies(seed, views=views, log=lambda name, d: print(name, json.dumps(d), flush=True))
 
 
+def bench_seed_assignment(n: int = 1_260_000, seeds: int = 40_000, repeats: int = 3) -> dict:
+    """`--seed-assignment`: the supervoxels' k-means step (segmentation.seed_assignment, numba) against the numpy
+    form it replaced, in this process, on a room-sized random cloud (the synthetic room's 1.26 M points): CPU
+    seconds of each (medians of `repeats`) and whether they chose the same seeds."""
+    from scipy.spatial import cKDTree
+
+    from kinfu_cli.segmentation.seed_assignment import assign_to_seeds
+
+    rng = np.random.default_rng(0)
+    pts, col = rng.random((n, 3)) * [5.0, 4.0, 2.5], rng.random((n, 3))
+    nrm = rng.normal(size=(n, 3))
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    sp, sc, sn = pts[:seeds], col[:seeds], nrm[:seeds]
+    _, cand = cKDTree(sp).query(pts, k=8)
+    ws, wn, wc = 0.1 / 0.04 ** 2, 1.0, 1.0
+
+    def reference():
+        dx = pts[:, None, :] - sp[cand]
+        dist = ws * np.einsum("ijk,ijk->ij", dx, dx) + wn * (1.0 - np.einsum("ik,ijk->ij", nrm, sn[cand]))
+        dist += wc * np.linalg.norm(col[:, None, :] - sc[cand], axis=2)
+        return cand[np.arange(n), np.argmin(dist, axis=1)]
+
+    def ours():
+        return assign_to_seeds(pts, nrm, cand, sp, sn, ws, wn, col, sc, wc)
+
+    ours()  # compile / load the cache
+    out = {}
+    for name, f in (("numpy (reference)", reference), ("numba", ours)):
+        cpu = []
+        for _ in range(repeats):
+            t = time.process_time()
+            labels = f()
+            cpu.append(time.process_time() - t)
+        out[name] = {"cpu_s": float(np.median(cpu)), "labels": labels}
+    same = bool(np.array_equal(out["numpy (reference)"].pop("labels"), out["numba"].pop("labels")))
+    return out | {"same_seeds": same, "cpu_ratio_numba_over_numpy": out["numba"]["cpu_s"]
+                  / out["numpy (reference)"]["cpu_s"]}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="fewer fits/scenes, no 512^3 run, no closed loop")
@@ -550,7 +589,12 @@ def main() -> None:
                     help="--objects: a SegmentationParams field to override (repeatable)")
     ap.add_argument("--cache", default=str(Path(tempfile.gettempdir()) / "kinfu_bench_segment"),
                     help="folder for the fused volumes of --speed")
+    ap.add_argument("--seed-assignment", action="store_true",
+                    help="only the supervoxel k-means step against its numpy reference (same process)")
     args = ap.parse_args()
+    if args.seed_assignment:
+        print(json.dumps(bench_seed_assignment(), indent=2))
+        return
     if args.objects:
         held = args.held_seeds or (",".join(map(str, OBJECTS_HELD_OUT)) if args.held_out else "")
         seeds = [tuple(int(v) for v in a.split(",") if v) for a in (args.tune_seeds, held)]

@@ -68,6 +68,7 @@ from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError, VolumeError
 from kinfu_cli.core.grid import check_up
 from kinfu_cli.segmentation.plane_ransac import ransac_plane
+from kinfu_cli.segmentation.seed_assignment import assign_to_seeds
 
 PLANE_LABEL = 0
 NOISE_LABEL = -1
@@ -347,13 +348,9 @@ def supervoxels(points: np.ndarray, normals: np.ndarray, params: SegmentationPar
     wn = params.normal_importance
     for _ in range(max(0, int(params.kmeans_iterations))):
         kk = min(8, len(seed_pos))
-        _, cand = cKDTree(seed_pos).query(points, k=kk)
-        cand = cand.reshape(n, kk)
-        dx = points[:, None, :] - seed_pos[cand]
-        dist = ws * np.einsum("ijk,ijk->ij", dx, dx) + wn * (1.0 - np.einsum("ik,ijk->ij", normals, seed_nrm[cand]))
-        if seed_col is not None:
-            dist += wc * np.linalg.norm(colors[:, None, :] - seed_col[cand], axis=2)
-        labels, k = _compact(cand[np.arange(n), np.argmin(dist, axis=1)], k)
+        _, cand = cKDTree(seed_pos).query(points, k=kk, workers=-1)
+        near = assign_to_seeds(points, normals, cand.reshape(n, kk), seed_pos, seed_nrm, ws, wn, colors, seed_col, wc)
+        labels, k = _compact(near, k)
         seed_pos = _mean_rows(points, labels, k)
         seed_nrm = _mean_rows(normals, labels, k)
         seed_nrm /= np.maximum(np.linalg.norm(seed_nrm, axis=1, keepdims=True), 1e-12)
@@ -473,7 +470,7 @@ def _best_face_cut(points: np.ndarray, normals: np.ndarray, idx: np.ndarray, seg
                    concave: np.ndarray, params: SegmentationParams, rng: np.random.Generator, chunk: int = 64,
                    planes: np.ndarray | None = None, grounded: np.ndarray | None = None,
                    plane_normals: np.ndarray | None = None) -> tuple[float, np.ndarray | None]:
-    """(concave share of the separated pairs, mask over the points of the + side) of the best face plane among
+    """(concave share of the separated pairs, mask over idx of the + side) of the best face plane among
     `cut_candidates` concave pairs of one segment (points idx, its pairs seg_pairs), or (0, None). The planes
     are scored `chunk` at a time as (points x planes) side matrices; ties go to the first plane sampled.
     grounded (mask over all points, or None): only planes that leave one side with no grounded point count
@@ -483,9 +480,11 @@ def _best_face_cut(points: np.ndarray, normals: np.ndarray, idx: np.ndarray, seg
     tol = params.plane_distance / 2  # the face's own points, within noise of its plane, stay on its side
     if planes is None:  # else: the given points' planes
         planes = cand[rng.choice(len(cand), size=min(params.cut_candidates, len(cand)), replace=False)].ravel()
-    loc = np.full(len(points), -1, dtype=np.int64)
-    loc[idx] = np.arange(len(idx))
-    pa, pb = loc[seg_pairs[:, 0]], loc[seg_pairs[:, 1]]
+    # the pairs' ends as positions in idx (both ends are in the segment), without an array over the whole cloud
+    srt = None if np.all(idx[1:] > idx[:-1]) else np.argsort(idx)
+    pa, pb = (np.searchsorted(idx, seg_pairs[:, c], sorter=srt) for c in (0, 1))
+    if srt is not None:
+        pa, pb = srt[pa], srt[pb]
     x = points[idx]
     n_seg = len(idx)
     g = None if grounded is None else grounded[idx]
@@ -518,9 +517,7 @@ def _best_face_cut(points: np.ndarray, normals: np.ndarray, idx: np.ndarray, seg
             best_share, best_side = float(share[j]), plus[:, j]
     if best_side is None:
         return 0.0, None
-    side = np.zeros(len(points), dtype=bool)
-    side[idx] = best_side
-    return best_share, side
+    return best_share, best_side
 
 
 def concave_plane_cuts(points: np.ndarray, normals: np.ndarray, seg: np.ndarray, pairs: np.ndarray,
@@ -562,7 +559,7 @@ def concave_plane_cuts(points: np.ndarray, normals: np.ndarray, seg: np.ndarray,
             e = e_order[e_start[s]:e_start[s + 1]]
             share, plus = _best_face_cut(points, normals, idx, pairs[e], concave[e], params, rng, grounded=grounded)
             if plus is not None and share >= params.cut_concave_fraction:
-                seg[plus] = seg.max() + 1
+                seg[idx[plus]] = seg.max() + 1
                 cuts += 1
         if cuts == before:
             break
@@ -669,7 +666,7 @@ def step_cuts(points: np.ndarray, normals: np.ndarray, seg: np.ndarray, pairs: n
             _, side = _best_face_cut(points, normals, idx, pairs[e], conc, params, np.random.default_rng(params.seed),
                                      planes=near, plane_normals=hz)
             if side is not None:
-                plus = side[idx]
+                plus = side
         n_plus = int(plus.sum())
         small, large = min(n_plus, len(idx) - n_plus), max(n_plus, len(idx) - n_plus)
         if small < max(params.min_segment_points, params.cut_min_ratio * large):
