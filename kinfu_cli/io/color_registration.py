@@ -17,9 +17,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from kinfu_cli.core.errors import RecordingError, TransformError
-from kinfu_cli.io.messages import camera_info_K, header_frame
+from kinfu_cli.io.messages import camera_info_distortion, camera_info_K, header_frame
 from kinfu_cli.io.roles import CAMERA_INFO
 from kinfu_cli.io.tf_buffer import TfBuffer
+from kinfu_cli.io.undistort import Undistorter
 
 OCCLUSION_MARGIN = 0.02  # m: a point farther than the colour camera's nearest surface at its pixel by this is hidden
 
@@ -37,6 +38,7 @@ class ColorRegistration:
     color_size: tuple[int, int] | None = None  # (width, height) of the colour camera info
     T_color_depth: np.ndarray | None = None
     reason: str = ""
+    lens: Undistorter | None = None  # the colour camera's distortion
 
     def as_dict(self) -> dict:
         return {"mode": self.mode, "depth_frame": self.depth_frame, "color_frame": self.color_frame,
@@ -60,7 +62,9 @@ def color_registration(rec, depth_topic: str, color_topic: str, depth_info_topic
         return ColorRegistration("none", d_frame, c_frame, reason=f"the colour images are in frame {c_frame!r}, "
                                  f"the depth images in {d_frame!r}, and no camera info topic is in {c_frame!r}")
     try:
-        K, w, h = camera_info_K(rec.first_message(info_topic), f"{rec.path}: {info_topic}")
+        info = rec.first_message(info_topic)
+        K, w, h = camera_info_K(info, f"{rec.path}: {info_topic}")
+        lens = Undistorter(K, *camera_info_distortion(info, f"{rec.path}: {info_topic}"))
     except RecordingError as exc:  # a broken colour calibration costs the colour, not the run
         return ColorRegistration("none", d_frame, c_frame, info_topic, reason=str(exc))
     tf = tf if tf is not None else TfBuffer.from_recording(rec)
@@ -71,7 +75,7 @@ def color_registration(rec, depth_topic: str, color_topic: str, depth_info_topic
         T = tf.lookup(c_frame, d_frame)
     except TransformError as exc:
         return ColorRegistration("none", d_frame, c_frame, info_topic, reason=str(exc))
-    return ColorRegistration("project", d_frame, c_frame, info_topic, K, (w, h), T)
+    return ColorRegistration("project", d_frame, c_frame, info_topic, K, (w, h), T, lens=lens)
 
 
 def register_color(reg: ColorRegistration, depth: np.ndarray, K_depth: np.ndarray, color: np.ndarray,
@@ -89,10 +93,15 @@ def register_color(reg: ColorRegistration, depth: np.ndarray, K_depth: np.ndarra
     pts = np.stack([(u - K_depth[0, 2]) / K_depth[0, 0] * z, (v - K_depth[1, 2]) / K_depth[1, 1] * z, z], axis=1)
     pc = pts @ reg.T_color_depth[:3, :3].T + reg.T_color_depth[:3, 3]
     K = reg.K_color
-    with np.errstate(divide="ignore", invalid="ignore"):
-        uc = np.floor(pc[:, 0] / pc[:, 2] * K[0, 0] + K[0, 2] + 0.5)
-        vc = np.floor(pc[:, 1] / pc[:, 2] * K[1, 1] + K[1, 2] + 0.5)
-    ok = (pc[:, 2] > 0) & (uc >= 0) & (uc < cw) & (vc >= 0) & (vc < ch)
+    front = pc[:, 2] > 1e-6
+    uc, vc = np.full(len(pc), -1.0), np.full(len(pc), -1.0)
+    if reg.lens:  # through the colour camera's lens
+        uv = reg.lens.project(pc[front])
+        uc[front], vc[front] = np.floor(uv[:, 0] + 0.5), np.floor(uv[:, 1] + 0.5)
+    else:
+        uc[front] = np.floor(pc[front, 0] / pc[front, 2] * K[0, 0] + K[0, 2] + 0.5)
+        vc[front] = np.floor(pc[front, 1] / pc[front, 2] * K[1, 1] + K[1, 2] + 0.5)
+    ok = front & (uc >= 0) & (uc < cw) & (vc >= 0) & (vc < ch)
     flat = (vc[ok] * cw + uc[ok]).astype(np.int64)
     nearest = np.full(cw * ch, np.inf)
     np.minimum.at(nearest, flat, pc[ok, 2])

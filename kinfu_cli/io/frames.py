@@ -16,10 +16,11 @@ import numpy as np
 
 from kinfu_cli.core.errors import ConfigError, RecordingError, TransformError
 from kinfu_cli.io.color_registration import ColorRegistration, color_registration, register_color
-from kinfu_cli.io.messages import (POSE_TYPES, camera_info_K, decode_color, decode_depth, header_frame,
+from kinfu_cli.io.messages import (POSE_TYPES, camera_info_distortion, camera_info_K, decode_color, decode_depth, header_frame,
                                    header_stamp_ns, normalize_msgtype, pose_message_to_tq)
 from kinfu_cli.io.roles import Roles, detect_roles, require_role_topic
 from kinfu_cli.io.tf_buffer import TfBuffer
+from kinfu_cli.io.undistort import Undistorter
 
 POSE_SOURCES = ("tf", "topic", "none")
 MAX_SECONDS = 1e7  # bound of times and tolerances (116 days): stamps in ns stay far inside int64
@@ -141,6 +142,7 @@ def iter_frames(rec, roles: Roles | None = None, pose_source: str = "tf", pose_t
                              f"{rec.path}: camera info topic {roles.info_topic} lists {count} messages but none "
                              f"could be read")
     K, width, height = camera_info_K(first_info, f"{rec.path}: {roles.info_topic}")
+    lens = Undistorter(K, *camera_info_distortion(first_info, f"{rec.path}: {roles.info_topic}"))
     if pose_source == "tf":
         pose_fn = _tf_poses(rec, roles, depth_topic, tf, tol_ns, stats)
     elif pose_source == "topic":
@@ -154,7 +156,8 @@ def iter_frames(rec, roles: Roles | None = None, pose_source: str = "tf", pose_t
         stats.color_registration = reg.as_dict()
         if reg.mode == "none":  # colour that cannot be placed is left out, not painted beside its surface
             roles = replace(roles, color_topic=None)
-    pairer = _FramePairer(rec, roles, depth_topic, K, width, height, pose_fn, tol_ns, stats, require_color, reg)
+    pairer = _FramePairer(rec, roles, depth_topic, K, width, height, pose_fn, tol_ns, stats, require_color, reg,
+                          lens)
     yield from pairer.stream(start_ns, end_ns, every)
 
 
@@ -269,9 +272,11 @@ class _FramePairer:
 
     def __init__(self, rec, roles: Roles, depth_topic: str, K: np.ndarray, width: int, height: int,
                  pose_fn: PoseLookup | None, tol_ns: int, stats: FrameStats, require_color: bool,
-                 registration: ColorRegistration | None = None) -> None:
+                 registration: ColorRegistration | None = None, lens: Undistorter | None = None) -> None:
         self.rec = rec
         self.registration = registration
+        # the depth camera's distortion: the first camera info's, then each one's
+        self.lens = lens if lens is not None else Undistorter(K, "", np.zeros(0))
         self.depth_topic = depth_topic
         self.info_topic = roles.info_topic
         self.color_topic = roles.color_topic
@@ -294,7 +299,12 @@ class _FramePairer:
         kept = 0  # depth messages inside the window so far
         for topic, log_ns, msg in self.rec.messages(topics, start_ns=read_start, end_ns=read_end):
             if topic == self.info_topic:
-                self.K, self.width, self.height = camera_info_K(msg, f"{self.rec.path}: {self.info_topic}")
+                where = f"{self.rec.path}: {self.info_topic}"
+                self.K, self.width, self.height = camera_info_K(msg, where)
+                model, D = camera_info_distortion(msg, where)
+                if not (self.lens.model == model and np.array_equal(self.lens.D, D)
+                        and np.array_equal(self.lens.K, self.K)):
+                    self.lens = Undistorter(self.K, model, D)
                 continue
             stamp = _stamp(msg, log_ns)
             if topic == self.color_topic:
@@ -329,6 +339,7 @@ class _FramePairer:
         if self.width and self.height and (w, h) != (self.width, self.height):
             raise RecordingError(f"{self.rec.path}: depth image on {self.depth_topic} is {w}x{h} but camera info "
                                  f"{self.info_topic} says {self.width}x{self.height}")
+        depth = self.lens.image(depth)
         T = None
         if self.pose_fn is not None:
             T = self.pose_fn(stamp)
@@ -343,8 +354,10 @@ class _FramePairer:
             if abs(best_stamp - stamp) <= self.tol_ns:
                 where = f"{self.rec.path}: {self.color_topic}"
                 color = decode_color(best, where)
-                if self.registration is not None:
+                if self.registration is not None and self.registration.mode == "project":
                     color = register_color(self.registration, depth, self.K, color, where)
+                else:  # the depth camera's own pixels: its lens too
+                    color = self.lens.image(color, size_of_K=(w, h))
         if color is None:
             if self.require_color:
                 self.stats.drop(DROP_NO_COLOR)

@@ -286,6 +286,16 @@ def decode_color(msg: object, topic: str = "color") -> np.ndarray:
                          f"{', '.join(COLOR_ENCODINGS[:5])}, or jpeg/png CompressedImage)")
 
 
+def camera_info_distortion(msg: object, topic: str = "camera_info") -> tuple[str, np.ndarray]:
+    """sensor_msgs/CameraInfo -> (distortion model, D): D empty when all zero (io.undistort.check_distortion)."""
+    from kinfu_cli.io.undistort import check_distortion
+
+    d = getattr(msg, "d", None)
+    if d is None:
+        d = getattr(msg, "D", None)
+    return check_distortion(str(getattr(msg, "distortion_model", "") or ""), d, topic)
+
+
 def camera_info_K(msg: object, topic: str = "camera_info") -> tuple[np.ndarray, int, int]:
     """sensor_msgs/CameraInfo -> (K 3x3 float64, width, height)."""
     k = getattr(msg, "k", None)
