@@ -22,8 +22,11 @@ ROLE_HELP = {
 
 def role_options(func: Callable) -> Callable:
     """click decorator adding --depth-topic, --color-topic, --info-topic, --camera-frame, --world-frame,
-    --hand-topic, --hand-frame (each default None = auto-detect). Pass the values to `detect_roles(rec, **kw)`
+    --hand-topic, --hand-frame (each default None = auto-detect) and --intrinsics. Pass the values to `detect_roles(rec, **kw)`
     with `role_kwargs(kwargs)`."""
+    func = click.option("--intrinsics", "intrinsics", default=None, metavar="FX,FY,CX,CY",
+                        help="Depth camera intrinsics in pixels, for a recording without its CameraInfo (or to "
+                             "override it; not with --info-topic).")(func)
     for name in reversed(ROLE_HELP):
         func = click.option(f"--{name.replace('_', '-')}", name, default=None, metavar="NAME",
                             help=ROLE_HELP[name])(func)
@@ -32,4 +35,4 @@ def role_options(func: Callable) -> Callable:
 
 def role_kwargs(kwargs: dict) -> dict:
     """Pop the role options out of a command's kwargs (for detect_roles)."""
-    return {name: kwargs.pop(name, None) for name in ROLE_HELP}
+    return {name: kwargs.pop(name, None) for name in (*ROLE_HELP, "intrinsics")}

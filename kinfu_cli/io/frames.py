@@ -135,14 +135,7 @@ def iter_frames(rec, roles: Roles | None = None, pose_source: str = "tf", pose_t
         roles = detect_roles(rec, tf=tf)
     depth_topic = _require_topics(rec, roles)
     tol_ns = int(round(tolerance_s * 1e9))
-    first_info = rec.first_message(roles.info_topic)
-    if first_info is None:
-        count = rec.topics[roles.info_topic].count
-        raise RecordingError(f"{rec.path}: camera info topic {roles.info_topic} has no messages" if not count else
-                             f"{rec.path}: camera info topic {roles.info_topic} lists {count} messages but none "
-                             f"could be read")
-    K, width, height = camera_info_K(first_info, f"{rec.path}: {roles.info_topic}")
-    lens = Undistorter(K, *camera_info_distortion(first_info, f"{rec.path}: {roles.info_topic}"))
+    K, width, height, lens = _depth_camera(rec, roles, depth_topic)
     if pose_source == "tf":
         pose_fn = _tf_poses(rec, roles, depth_topic, tf, tol_ns, stats)
     elif pose_source == "topic":
@@ -174,6 +167,25 @@ def check_seconds(value: float, parameter: str, minimum: float = -MAX_SECONDS) -
     return v
 
 
+def _depth_camera(rec, roles: Roles, depth_topic: str) -> tuple[np.ndarray, int, int, Undistorter]:
+    """(K, width, height, lens) of the depth camera: its first camera info, or the given intrinsics (the size of
+    the first depth image; no distortion)."""
+    if roles.intrinsics is not None:
+        fx, fy, cx, cy = roles.intrinsics
+        K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+        first = rec.first_message(depth_topic)
+        h, w = decode_depth(first, f"{rec.path}: {depth_topic}").shape if first is not None else (0, 0)
+        return K, w, h, Undistorter(K, "", np.zeros(0))
+    first_info = rec.first_message(roles.info_topic)
+    if first_info is None:
+        count = rec.topics[roles.info_topic].count
+        raise RecordingError(f"{rec.path}: camera info topic {roles.info_topic} has no messages" if not count else
+                             f"{rec.path}: camera info topic {roles.info_topic} lists {count} messages but none "
+                             f"could be read")
+    K, width, height = camera_info_K(first_info, f"{rec.path}: {roles.info_topic}")
+    return K, width, height, Undistorter(K, *camera_info_distortion(first_info, f"{rec.path}: {roles.info_topic}"))
+
+
 def _require_topics(rec, roles: Roles) -> str:
     """The depth topic; RecordingError unless the depth, camera info and (when set) colour topics are there."""
     depth_topic = roles.depth_topic
@@ -181,10 +193,11 @@ def _require_topics(rec, roles: Roles) -> str:
         avail = ", ".join(f"{n} ({i.msgtype})" for n, i in rec.topics.items()) or "none"
         raise RecordingError(f"{rec.path}: no depth image topic found; topics: {avail}", parameter="depth_topic")
     require_role_topic(rec, depth_topic, "depth topic")
-    if roles.info_topic is None:
+    if roles.info_topic is None and roles.intrinsics is None:
         raise RecordingError(f"{rec.path}: no sensor_msgs/CameraInfo topic for depth topic {depth_topic} "
-                             f"(intrinsics are needed)", parameter="info_topic")
-    require_role_topic(rec, roles.info_topic, "camera info topic")
+                             f"(give the intrinsics fx,fy,cx,cy)", parameter="intrinsics")
+    if roles.info_topic is not None:
+        require_role_topic(rec, roles.info_topic, "camera info topic")
     if roles.color_topic is not None:
         require_role_topic(rec, roles.color_topic, "colour topic")
     return depth_topic
@@ -294,7 +307,7 @@ class _FramePairer:
         tol_ns, stats, pending = self.tol_ns, self.stats, self.pending
         read_start = None if start_ns is None else max(0, start_ns - tol_ns)
         read_end = None if end_ns is None else end_ns + tol_ns
-        topics = [self.depth_topic, self.info_topic] + ([self.color_topic] if self.color_topic else [])
+        topics = [self.depth_topic] + [t for t in (self.info_topic, self.color_topic) if t]
         index = 0  # position of the depth message on its topic among those read
         kept = 0  # depth messages inside the window so far
         for topic, log_ns, msg in self.rec.messages(topics, start_ns=read_start, end_ns=read_end):
@@ -337,8 +350,9 @@ class _FramePairer:
         depth = decode_depth(msg, f"{self.rec.path}: {self.depth_topic}")
         h, w = depth.shape
         if self.width and self.height and (w, h) != (self.width, self.height):
-            raise RecordingError(f"{self.rec.path}: depth image on {self.depth_topic} is {w}x{h} but camera info "
-                                 f"{self.info_topic} says {self.width}x{self.height}")
+            said = f"camera info {self.info_topic}" if self.info_topic else "the first depth image"
+            raise RecordingError(f"{self.rec.path}: depth image on {self.depth_topic} is {w}x{h} but {said} "
+                                 f"says {self.width}x{self.height}")
         depth = self.lens.image(depth)
         T = None
         if self.pose_fn is not None:

@@ -10,7 +10,9 @@ from __future__ import annotations
 import re
 from dataclasses import asdict, dataclass
 
-from kinfu_cli.core.errors import RecordingError, TransformError
+import numpy as np
+
+from kinfu_cli.core.errors import ConfigError, RecordingError, TransformError
 from kinfu_cli.io.messages import DEPTH_ENCODINGS, POSE_TYPES, header_frame
 from kinfu_cli.io.tf_buffer import TfBuffer
 
@@ -37,9 +39,12 @@ class Roles:
     world_frame: str | None = None
     hand_topic: str | None = None
     hand_frame: str | None = None
+    intrinsics: tuple[float, float, float, float] | None = None  # fx, fy, cx, cy given instead of a camera info
 
     def as_dict(self) -> dict:
-        return asdict(self)
+        d = asdict(self)
+        d["intrinsics"] = None if self.intrinsics is None else list(self.intrinsics)
+        return d
 
 
 def require_role_topic(rec, topic: str, what: str):
@@ -163,11 +168,18 @@ def _require_frame(rec, tf: TfBuffer | None, frame: str, what: str, parameter: s
 def detect_roles(rec, depth_topic: str | None = None, color_topic: str | None = None,
                  info_topic: str | None = None, camera_frame: str | None = None,
                  world_frame: str | None = None, hand_topic: str | None = None,
-                 hand_frame: str | None = None, tf: TfBuffer | None = None) -> Roles:
+                 hand_frame: str | None = None, tf: TfBuffer | None = None,
+                 intrinsics=None) -> Roles:
     """Roles of a Recording; arguments that are not None win over detection.
 
     `tf` may be passed to reuse an already-read TfBuffer (else the TF topics are read here when needed).
+    intrinsics: the depth camera's fx, fy, cx, cy (pixels) for a recording without its camera info (or to
+    override it); then no camera info topic is used.
     """
+    if intrinsics is not None:
+        intrinsics = check_intrinsics(intrinsics)
+        if info_topic is not None:
+            raise ConfigError("give either a camera info topic or intrinsics, not both", parameter="intrinsics")
     for topic, what in ((depth_topic, "depth topic"), (color_topic, "colour topic"),
                         (info_topic, "camera info topic"), (hand_topic, "hand topic")):
         if topic is not None:
@@ -179,7 +191,7 @@ def detect_roles(rec, depth_topic: str | None = None, color_topic: str | None = 
     if color_topic is None:
         cands = _color_candidates(rec, depth_topic)
         color_topic = cands[0] if cands else None
-    if info_topic is None:
+    if info_topic is None and intrinsics is None:
         info_topic = _pick_info(rec, depth_topic)
 
     given_camera = camera_frame
@@ -215,5 +227,18 @@ def detect_roles(rec, depth_topic: str | None = None, color_topic: str | None = 
 
     return Roles(depth_topic=depth_topic, color_topic=color_topic, info_topic=info_topic,
                  camera_frame=camera_frame, world_frame=world_frame, hand_topic=hand_topic,
-                 hand_frame=hand_frame)
+                 hand_frame=hand_frame, intrinsics=intrinsics)
+
+
+def check_intrinsics(value) -> tuple[float, float, float, float]:
+    """(fx, fy, cx, cy) from 4 numbers or "fx,fy,cx,cy": finite, focal lengths > 0, principal point >= 0;
+    ConfigError naming parameter 'intrinsics' otherwise."""
+    try:
+        parts = [float(v) for v in (value.split(",") if isinstance(value, str) else value)]
+    except (TypeError, ValueError):
+        parts = []
+    if len(parts) != 4 or not all(np.isfinite(parts)) or parts[0] <= 0 or parts[1] <= 0 or min(parts[2:]) < 0:
+        raise ConfigError(f"expected fx,fy,cx,cy in pixels (focal lengths > 0), got {value!r}",
+                          parameter="intrinsics")
+    return tuple(parts)  # type: ignore[return-value]
 
