@@ -220,8 +220,8 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
         if vol is not None and vol.frame and plan.world and vol.frame != plan.world:
             raise RecordingError(f"{init}: the volume was fused in frame {vol.frame!r}, but {rec.path} gives "
                                  f"camera poses in {plan.world!r}", parameter="init")
-        warnings = poi_frame_warnings(clear_pois, plan.world or (vol.frame if vol is not None else ""),
-                                      names["clear_pois"])
+        warnings = rec.problems + poi_frame_warnings(clear_pois, plan.world or (vol.frame if vol is not None
+                                                                               else ""), names["clear_pois"])
         sizing, notes = {"mode": "init" if init else "given"}, []
         if auto and vol is None:
             t0 = time.perf_counter()

@@ -25,6 +25,7 @@ from mcap.exceptions import DecoderNotFoundError
 from mcap.reader import make_reader
 
 from kinfu_cli.core.errors import RecordingError
+from kinfu_cli.io.mcap_truncated import TruncatedMcap, is_truncated_mcap
 from kinfu_cli.io.messages import normalize_msgtype
 
 _ROS1_MAGIC = b"#ROSBAG V2.0"
@@ -111,8 +112,12 @@ class Recording:
         self._stack = contextlib.ExitStack()
         self._topics: dict[str, TopicInfo] | None = None
         self._backend: _Backend
+        self.problems: list[str] = []  # what could not be read (a cut-short file), for the run's warnings
         try:
-            if self.format == "mcap" and _mcap_needs_mcap_lib(self.path):
+            if self.format == "mcap" and is_truncated_mcap(self.path):
+                self._backend = TruncatedMcap(self.path)
+                self.problems.append(self._backend.problem)
+            elif self.format == "mcap" and _mcap_needs_mcap_lib(self.path):
                 self._backend = _McapBackend(self.path, self._stack)
             else:
                 self._backend = _RosbagsBackend(self.path, self.format, self._stack)

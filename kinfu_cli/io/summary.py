@@ -63,6 +63,7 @@ def summarize(rec: Recording, check_frames: dict | None = None, quiet: bool = Tr
                                   for (p, c), r in tf.rejected_links.items()],
                "parent_changes": [list(c) for c in tf.parent_changes], "loops": tf.loops(), "problem": problem},
         "frames": frames,
+        "problems": list(rec.problems),
     }
 
 
@@ -120,6 +121,7 @@ def format_summary(s: dict, roles_heading: str = "roles (detected):") -> str:
     lines = [f"recording: {s['path']}",
              f"format:    {fmt}, {s['size_bytes'] / 1e6:.2f} MB, {s['message_count']} messages",
              f"time span: {_when(s['start_ns'])} .. {_when(s['end_ns'])} ({s['duration_s']:.3f} s)",
+             *(f"problem:   {p}" for p in s.get("problems", [])),
              ""]
     lines += _topic_lines(s["topics"])
     lines.append("")
