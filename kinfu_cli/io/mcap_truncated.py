@@ -56,10 +56,10 @@ class TruncatedMcap:
         self.stamps = {cid: np.sort(np.asarray(s, dtype=np.int64)) for cid, s in stamps.items()}
         size = path.stat().st_size
         n = sum(len(s) for s in self.stamps.values())
-        self.problem = (f"{path}: MCAP file cut short (no footer): read {n} messages from the first "
-                        f"{self.read_bytes} of {size} bytes; the rest is lost")
+        self.problem = (f"{path}: MCAP file truncated (no footer: the recording was cut short): read {n} messages "
+                        f"from the first {self.read_bytes} of {size} bytes; the rest is lost")
         if not self.channels:
-            raise RecordingError(f"{path}: MCAP file cut short (no footer) within its first records or chunk: "
+            raise RecordingError(f"{path}: MCAP file truncated (no footer) within its first records or chunk: "
                                  f"nothing whole to read")
 
     def _records(self) -> Iterator[object]:

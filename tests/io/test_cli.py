@@ -80,7 +80,7 @@ def test_info_bad_input(tmp_path, shared_data):
     cut = tmp_path / "cut.mcap"
     cut.write_bytes(mcap.read_bytes()[: mcap.stat().st_size // 2])
     # one zstd chunk holds everything: cut in half, nothing whole is left (io/mcap_truncated.py reads what is)
-    one_line_error(run("info", cut), "cut.mcap", "cut short", "nothing whole to read")
+    one_line_error(run("info", cut), "cut.mcap", "truncated", "nothing whole to read")
     folder = tmp_path / "folder"
     folder.mkdir()
     one_line_error(run("info", folder), "folder", "metadata.yaml")

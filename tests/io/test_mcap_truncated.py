@@ -22,7 +22,7 @@ def test_cut_short_recording_gives_the_frames_before_the_cut(sample_dir, tmp_pat
     with open_recording(whole) as rec:
         full = list(iter_frames(rec))
     with open_recording(cut) as rec:
-        assert rec.problems and "cut short" in rec.problems[0] and "cut.mcap" in rec.problems[0]
+        assert rec.problems and "truncated" in rec.problems[0] and "cut.mcap" in rec.problems[0]
         depth_topic = "/camera/depth/image_raw/compressedDepth"
         n = rec.topics[depth_topic].count
         stamps = [t for _, t, _ in rec.messages([depth_topic])]
