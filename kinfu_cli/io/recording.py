@@ -250,7 +250,8 @@ def _short_text(exc: BaseException) -> str:
 
 def _read_error(path: Path, exc: BaseException, kind: str) -> RecordingError:
     text = _short_text(exc)
-    return RecordingError(f"{path}: cannot read {kind} ({text}); the file may be truncated or corrupt")
+    hint = "; `rosbag reindex` repairs a bag whose recording was cut short" if kind == "ROS 1 bag" else ""
+    return RecordingError(f"{path}: cannot read {kind} ({text}); the file may be truncated or corrupt{hint}")
 
 
 _KIND_NAMES = {"bag": "ROS 1 bag", "ros2": "ROS 2 bag", "mcap": "MCAP file"}
