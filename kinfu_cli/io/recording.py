@@ -76,6 +76,15 @@ class TopicInfo:
                 "first_ns": self.first_ns, "last_ns": self.last_ns, "rate_hz": self.rate_hz}
 
 
+def _lone_mcap(path: Path) -> Path | None:
+    """The one .mcap file of a folder without metadata.yaml: `ros2 bag record` writes the metadata when it stops,
+    so a recording that was killed leaves just its storage file."""
+    if not path.is_dir() or (path / "metadata.yaml").is_file():
+        return None
+    files = list(path.glob("*.mcap"))
+    return files[0] if len(files) == 1 else None
+
+
 def detect_format(path: str | os.PathLike) -> str:
     """'bag', 'mcap' or 'ros2' (a bag folder) from the file's first bytes; RecordingError otherwise."""
     path = Path(path)
@@ -83,6 +92,9 @@ def detect_format(path: str | os.PathLike) -> str:
         raise RecordingError(f"{path}: no such file or folder, expected {_KINDS}")
     if path.is_dir():
         if not (path / "metadata.yaml").is_file():
+            if len(list(path.glob("*.db3"))) == 1:
+                raise RecordingError(f"{path}: folder has no metadata.yaml (a ROS 2 recording that was cut short?); "
+                                     f"`ros2 bag reindex` writes it")
             raise RecordingError(f"{path}: folder has no metadata.yaml, expected a ROS 2 bag folder")
         return "ros2"
     try:
@@ -106,13 +118,18 @@ class Recording:
 
     def __init__(self, path: str | os.PathLike):
         self.path = Path(path)
+        self.problems: list[str] = []  # what could not be read (a cut-short file), for the run's warnings
+        lone = _lone_mcap(self.path)
+        if lone is not None:
+            self.problems.append(f"{self.path}: ROS 2 bag folder without metadata.yaml (its recording was cut "
+                                 f"short?): read its one MCAP file {lone.name}")
+            self.path = lone
         self.format = detect_format(self.path)
         if self.format == "ros2" and self.path.is_file():
             self.path = self.path.parent
         self._stack = contextlib.ExitStack()
         self._topics: dict[str, TopicInfo] | None = None
         self._backend: _Backend
-        self.problems: list[str] = []  # what could not be read (a cut-short file), for the run's warnings
         try:
             if self.format == "mcap" and is_truncated_mcap(self.path):
                 self._backend = TruncatedMcap(self.path)

@@ -45,3 +45,18 @@ def test_cut_before_any_channel_is_an_error(sample_dir, tmp_path):
     with pytest.raises(RecordingError, match="stub.mcap"):
         with open_recording(cut) as rec:
             list(iter_frames(rec))
+
+
+def test_ros2_folder_of_a_killed_recording(sample_dir, tmp_path):
+    """`ros2 bag record` writes metadata.yaml when it stops: a killed one leaves only its storage file."""
+    folder = tmp_path / "killed"
+    folder.mkdir()
+    _cut(sample_dir / "recording.mcap", folder / "killed_0.mcap", 0.7)
+    with open_recording(folder) as rec:
+        assert len(rec.problems) == 2 and "without metadata.yaml" in rec.problems[0]
+        assert len(list(iter_frames(rec))) > 0
+    sqlite = tmp_path / "sqlite"
+    sqlite.mkdir()
+    (sqlite / "killed_0.db3").write_bytes(b"SQLite format 3\x00" + bytes(100))
+    with pytest.raises(RecordingError, match="ros2 bag reindex"):
+        open_recording(sqlite)
