@@ -88,25 +88,15 @@ def register_color(reg: ColorRegistration, depth: np.ndarray, K_depth: np.ndarra
     if (cw, ch) != reg.color_size:
         raise RecordingError(f"{where}: colour image is {cw}x{ch} but camera info {reg.info_topic} says "
                              f"{reg.color_size[0]}x{reg.color_size[1]}")
-    v, u = np.nonzero(depth > 0)
-    z = depth[v, u].astype(np.float64)
-    pts = np.stack([(u - K_depth[0, 2]) / K_depth[0, 0] * z, (v - K_depth[1, 2]) / K_depth[1, 1] * z, z], axis=1)
-    pc = pts @ reg.T_color_depth[:3, :3].T + reg.T_color_depth[:3, 3]
-    K = reg.K_color
-    front = pc[:, 2] > 1e-6
-    uc, vc = np.full(len(pc), -1.0), np.full(len(pc), -1.0)
-    if reg.lens:  # through the colour camera's lens
-        uv = reg.lens.project(pc[front])
-        uc[front], vc[front] = np.floor(uv[:, 0] + 0.5), np.floor(uv[:, 1] + 0.5)
+    from kinfu_cli.io.color_kernels import colour_camera_points, pinhole_pixels, zbuffer_gather
+
+    T = np.asarray(reg.T_color_depth, dtype=np.float64)
+    pc = colour_camera_points(np.ascontiguousarray(depth, dtype=np.float32), np.asarray(K_depth, np.float64),
+                              np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]))
+    if reg.lens:  # through the colour camera's lens (OpenCV's projection, C++)
+        uv = np.full((len(pc), 2), -1.0)
+        front = pc[:, 2] > 1e-6
+        uv[front] = reg.lens.project(pc[front])
     else:
-        uc[front] = np.floor(pc[front, 0] / pc[front, 2] * K[0, 0] + K[0, 2] + 0.5)
-        vc[front] = np.floor(pc[front, 1] / pc[front, 2] * K[1, 1] + K[1, 2] + 0.5)
-    ok = front & (uc >= 0) & (uc < cw) & (vc >= 0) & (vc < ch)
-    flat = (vc[ok] * cw + uc[ok]).astype(np.int64)
-    nearest = np.full(cw * ch, np.inf)
-    np.minimum.at(nearest, flat, pc[ok, 2])
-    seen = pc[ok, 2] <= nearest[flat] + OCCLUSION_MARGIN
-    out = np.zeros((h, w, 3), dtype=np.uint8)
-    idx = np.flatnonzero(ok)[seen]
-    out[v[idx], u[idx]] = color.reshape(-1, 3)[flat[seen]]
-    return out
+        uv = pinhole_pixels(pc, np.asarray(reg.K_color, np.float64))
+    return zbuffer_gather(pc, uv, np.ascontiguousarray(color[:, :, :3]), OCCLUSION_MARGIN, h, w)
