@@ -84,8 +84,8 @@ CUT_FACE_RADIUS = 0.03  # face-plane cuts: the face's points are counted within 
 # (tuning seeds 0, 1, 8-139, objects scenes, mode, with the gap as the step: 0 / 0.0025 / 0.005 gave object recall
 # 0.979 / 0.984 / 0.983)
 STEP_LEVEL_BAND = 0.0025
-SUPPORT_PARALLEL_DEG = 5.0  # support candidates: planes within this of the largest plane's normal (a table and
-# the floor are parallel within a degree or two; RANSAC's fit tilts a 1 m table by well under one)
+SUPPORT_PARALLEL_DEG = 5.0  # without an up, support candidates are the planes within this of the largest plane's
+# normal (a table and the floor are parallel within a degree or two; RANSAC's fit tilts a 1 m table by well under one)
 FOOT_BAND = 0.015  # feet (step 7): object points higher than this over the support are the object's side, never a foot (m)
 
 
@@ -283,11 +283,14 @@ def detect_support_plane(points: np.ndarray, normals: np.ndarray, params: Segmen
         remaining = np.setdiff1d(remaining, remaining[np.asarray(inl_idx, dtype=np.int64)], assume_unique=True)
     if not found:
         return none
-    # the highest of the planes parallel to the largest (a table above the floor). A plane at an angle to it is
-    # no support: a wall, or RANSAC's leftovers of the table with the objects' tops (tilted 10-15 deg in
-    # generated single views), which would be "higher"
-    ref = max(found, key=lambda f: int(f[1].sum()))[0][:3]
-    found = [f for f in found if abs(f[0][:3] @ ref) >= np.cos(np.radians(SUPPORT_PARALLEL_DEG))]
+    # the highest plane along up (a table above the floor). Without an up, the largest plane gives it, and only
+    # planes parallel to that one compete: a plane at an angle to it is no support (a wall, or RANSAC's leftovers
+    # of the table with the objects' tops, tilted 10-15 deg in generated single views, which would be "higher");
+    # with an up, every plane facing it within up_tolerance_deg competes, as before
+    ref = up
+    if up is None:
+        ref = max(found, key=lambda f: int(f[1].sum()))[0][:3]
+        found = [f for f in found if abs(f[0][:3] @ ref) >= np.cos(np.radians(SUPPORT_PARALLEL_DEG))]
     return max(found, key=lambda f: float(np.mean(points[f[1]] @ ref)))
 
 
