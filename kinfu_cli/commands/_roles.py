@@ -22,8 +22,8 @@ ROLE_HELP = {
 
 def role_options(func: Callable) -> Callable:
     """click decorator adding --depth-topic, --color-topic, --info-topic, --camera-frame, --world-frame,
-    --hand-topic, --hand-frame (each default None = auto-detect) and --intrinsics. Pass the values to `detect_roles(rec, **kw)`
-    with `role_kwargs(kwargs)`."""
+    --hand-topic, --hand-frame (each default None = auto-detect) and --intrinsics. Pass the values to
+    `detect_roles(rec, **kw)` with `role_kwargs(kwargs)`."""
     func = click.option("--intrinsics", "intrinsics", default=None, metavar="FX,FY,CX,CY",
                         help="Depth camera intrinsics in pixels, for a recording without its CameraInfo (or to "
                              "override it; not with --info-topic).")(func)

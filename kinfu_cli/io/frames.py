@@ -16,8 +16,8 @@ import numpy as np
 
 from kinfu_cli.core.errors import ConfigError, RecordingError, TransformError
 from kinfu_cli.io.color_registration import ColorRegistration, color_registration, register_color
-from kinfu_cli.io.messages import (POSE_TYPES, camera_info_distortion, camera_info_K, decode_color, decode_depth, header_frame,
-                                   header_stamp_ns, normalize_msgtype, pose_message_to_tq)
+from kinfu_cli.io.messages import (POSE_TYPES, camera_info_distortion, camera_info_K, decode_color, decode_depth,
+                                   header_frame, header_stamp_ns, normalize_msgtype, pose_message_to_tq)
 from kinfu_cli.io.roles import Roles, detect_roles, require_role_topic
 from kinfu_cli.io.tf_buffer import TfBuffer
 from kinfu_cli.io.undistort import Undistorter
