@@ -52,7 +52,7 @@ def main() -> None:
     depth, _ = DepthSensor(K, 640, 480, noise=True, seed=2).render(scene, pose)
     _, color = DepthSensor(K, 640, 480, noise=False).render(scene, pose @ T_dc)
     reg = ColorRegistration("project", "depth", "colour", "/info", K, (640, 480), np.linalg.inv(T_dc))
-    ours = register_color(reg, depth, K, color, "bench")  # compile / load the cache
+    ours = register_color(reg, depth, K, color, "bench")[0]  # compile / load the cache
     ref = reference(reg, depth, K, color)
     times = {}
     for name, f in (("numpy (reference)", reference), ("numba", lambda *a: register_color(*a, "bench"))):

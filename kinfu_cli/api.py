@@ -5,7 +5,7 @@
     with kf.open_recording("sample_data/tabletop/recording.mcap") as rec:
         vol = kf.TernaryVolume(size=1.2, voxel_size=0.01, origin=(-0.6, -0.6, 0.4))
         for frame in kf.iter_frames(rec, end_s=6.1):
-            vol.integrate(frame.depth, frame.K, frame.T_world_camera, frame.color)
+            vol.integrate(frame.depth, frame.K, frame.T_world_camera, frame.color, frame.color_mask)
     pois = kf.detect_pois("sample_data/tabletop/recording.mcap").pois
     camera = kf.CameraModel(**kf.SENSOR_PRESETS["kinect_v1"])
     views = kf.rank_poi(vol.ternary_grid(), pois[0].position, camera, radius=pois[0].radius)

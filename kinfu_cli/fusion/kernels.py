@@ -361,7 +361,7 @@ def _carve_voxels(pool_v, pool_w, i, mw):
 
 @njit(cache=True, error_model="numpy")
 def _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, nx, ny, nz, fx, fy, cx, cy, width,
-                  height, depth_rl, color_f, has_color, trunc, mw, color_band, mode_thr2, pix, zz, sdf):
+                  height, depth_rl, color_f, color_ok, has_color, trunc, mw, color_band, mode_thr2, pix, zz, sdf):
     """Projective update of every voxel of stored block i, as three flat loops over its 512 voxels.
 
     p0: camera-frame position of voxel (0, 0, 0); ex / ey / ez: camera-frame step per local x / y / z; nx, ny,
@@ -371,7 +371,8 @@ def _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, n
     (gathers are slower than scalar loads on current x86). error_model="numpy": 1 / z is not checked for
     zero (a voxel at z = 0 fails the z > 0 test anyway), which is what lets the loops vectorise.
     With colour hypotheses (pool_hc / pool_hn not None: the mode filter, see color_mode.py) the colour goes to
-    mode_update instead of the running mean.
+    mode_update instead of the running mean. color_ok: per pixel 1 where the colour image has a sample (empty:
+    everywhere), e.g. not where a colour camera beside the depth camera does not see the point.
     """
     one = np.float32(1.0)
     half = np.float32(0.5)
@@ -431,13 +432,13 @@ def _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, n
         for k in range(B3):
             p = pix[k]
             t = sdf[k]
-            if p >= 0 and t > -one and abs(t) < color_band and not _black(color_f, p):
+            if p >= 0 and t > -one and abs(t) < color_band and (color_ok.shape[0] == 0 or color_ok[p]):
                 mode_update(pool_hc, pool_hn, i, k, color_f[p, 0], color_f[p, 1], color_f[p, 2], mode_thr2)
         return
     for k in range(B3):
         p = pix[k]
         t = sdf[k]
-        if p < 0 or not (t > -one and abs(t) < color_band) or _black(color_f, p):
+        if p < 0 or not (t > -one and abs(t) < color_band) or (color_ok.shape[0] > 0 and not color_ok[p]):
             continue
         # black = never coloured: take the sample, else a running mean that forgets slowly
         fresh = pool_c[i, k, 0] == 0 and pool_c[i, k, 1] == 0 and pool_c[i, k, 2] == 0
@@ -446,13 +447,6 @@ def _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, n
             c0 = np.float32(pool_c[i, k, ch])
             cn = np.float32(color_f[p, ch])
             pool_c[i, k, ch] = np.uint8(min(np.float32(255.0), c0 + alpha * (cn - c0) + half))
-
-
-@njit(cache=True, inline="always")
-def _black(color_f, p):
-    """Pixel p has no colour sample: black (io.color_registration leaves pixels the colour camera does not see
-    black; a camera's own black is 0-3 noise, rarely all three zero)."""
-    return color_f[p, 0] == 0 and color_f[p, 1] == 0 and color_f[p, 2] == 0
 
 
 @njit(cache=True, parallel=True)
@@ -470,8 +464,8 @@ def depth_and_raylen(depth, raylen):
 
 @njit(cache=True, parallel=True)
 def integrate_blocks(cls, nb, dims, block_idx_flat, block_w_flat, pool_v, pool_w, pool_c, pool_hc, pool_hn,
-                     origin, vs, T_cw, fx, fy, cx, cy, width, height, depth_rl, color, trunc, max_w, work,
-                     mode_thr):
+                     origin, vs, T_cw, fx, fy, cx, cy, width, height, depth_rl, color, color_ok, trunc, max_w,
+                     work, mode_thr):
     """Apply one frame: CARVE blocks in bulk (a weight step for uniform blocks, tsdf = 1 for stored ones);
     VOXEL blocks voxel by voxel (_update_block). `work` lists the blocks to visit; it is cut into one run per
     worker task, each with its own scratch rows. pool_hc / pool_hn: colour hypotheses of the mode filter (None:
@@ -520,7 +514,8 @@ def integrate_blocks(cls, nb, dims, block_idx_flat, block_w_flat, pool_v, pool_w
                 p0[q] = np.float32(T_cw[q, 0] * px + T_cw[q, 1] * py + T_cw[q, 2] * pz + T_cw[q, 3])
             _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, min(B, dims[0] - bx * B),
                           min(B, dims[1] - by * B), min(B, dims[2] - bz * B), fx32, fy32, cx32, cy32, width,
-                          height, depth_rl, color, has_color, trunc, mw, color_band, mode_thr2, pix, zz, sdf)
+                          height, depth_rl, color, color_ok, has_color, trunc, mw, color_band, mode_thr2, pix, zz,
+                          sdf)
 
 
 @njit(cache=True, parallel=True)

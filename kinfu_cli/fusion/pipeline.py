@@ -593,7 +593,7 @@ class _Integrator:
             T = res.T_world_camera
         t0 = time.perf_counter()
         try:
-            vol.integrate(depth, frame.K, T, frame.color)
+            vol.integrate(depth, frame.K, T, frame.color, frame.color_mask)
         except VolumeError as exc:
             raise VolumeError(f"{where}: {exc}") from None
         _add(self.timing, "integrate", time.perf_counter() - t0)

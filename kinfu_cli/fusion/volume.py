@@ -208,11 +208,12 @@ class TernaryVolume:
         return kn.clean_depth(d, self.min_depth, self.max_depth)
 
     def integrate(self, depth: np.ndarray, K: np.ndarray, T_world_camera: np.ndarray,
-                  color: np.ndarray | None = None) -> dict:
+                  color: np.ndarray | None = None, color_mask: np.ndarray | None = None) -> dict:
         """Fuse one depth image (metres, float32 (H, W); 0/NaN = no reading) taken from T_world_camera.
 
-        color: uint8 RGB (H, W, 3) registered to the depth image, or None. Returns counts of blocks
-        carved in bulk and updated voxel by voxel.
+        color: uint8 RGB (H, W, 3) registered to the depth image, or None; color_mask: bool (H, W), False where
+        `color` has no sample (None: it has one everywhere). Returns counts of blocks carved in bulk and updated
+        voxel by voxel.
         """
         K = np.asarray(K, dtype=np.float64)
         if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
@@ -237,6 +238,12 @@ class TernaryVolume:
             col = np.ascontiguousarray(color[:, :, :3], dtype=np.uint8)
         else:
             col = np.zeros((0, 0, 3), dtype=np.uint8)
+        ok = np.zeros(0, dtype=np.uint8)
+        if color_mask is not None and col.size:
+            m = np.asarray(color_mask, dtype=bool)
+            if m.shape != col.shape[:2]:
+                raise VolumeError(f"color_mask: expected shape {col.shape[:2]}, got {m.shape}")
+            ok = np.ascontiguousarray(m.reshape(-1), dtype=np.uint8)
         T_cw = np.linalg.inv(T)
         fx, fy, cx, cy = float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])
         pm = self._pyramid_buffer(h, w)
@@ -255,7 +262,7 @@ class TernaryVolume:
         kn.integrate_blocks(cls, self.nb, np.array(self.shape, dtype=np.int64), bidx, bw, self.pool_v,
                             self.pool_w, self.pool_c, *self._hypotheses(), self.origin, self.voxel_size,
                             T_cw, fx, fy, cx, cy, w, h, kn.depth_and_raylen(d, self._raylen(K, w, h)),
-                            col.reshape(-1, 3), self.truncation, self.max_weight, work, float(self.mode_threshold))
+                            col.reshape(-1, 3), ok, self.truncation, self.max_weight, work, float(self.mode_threshold))
         self._winners_stale = self._winners_stale or (self.color_mode == "mode" and col.shape[0] > 0)
         self.frames_integrated += 1
         return {"blocks_carved": int(n_carve), "blocks_voxelwise": int(n_voxel),

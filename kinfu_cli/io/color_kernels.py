@@ -41,8 +41,9 @@ def pinhole_pixels(pc, Kc):
 
 @njit(cache=True)
 def zbuffer_gather(pc, uv, color, margin, h, w):
-    """uint8 (h, w, 3): each depth pixel's colour at its nearest colour pixel uv, where the colour camera's nearest
-    surface there (over all the depth pixels) is within `margin` of the point; black elsewhere."""
+    """(uint8 (h, w, 3), bool (h, w)): each depth pixel's colour at its nearest colour pixel uv, where the colour
+    camera's nearest surface there (over all the depth pixels) is within `margin` of the point, and where it has
+    one; black and False elsewhere."""
     ch, cw = color.shape[0], color.shape[1]
     n = pc.shape[0]
     near = np.full(ch * cw, np.inf)
@@ -59,10 +60,12 @@ def zbuffer_gather(pc, uv, color, margin, h, w):
         if pc[i, 2] < near[k]:
             near[k] = pc[i, 2]
     out = np.zeros((h, w, 3), dtype=np.uint8)
+    has = np.zeros((h, w), dtype=np.bool_)
     for i in range(n):
         k = idx[i]
         if k >= 0 and pc[i, 2] <= near[k] + margin:
             v, u = i // w, i % w
+            has[v, u] = True
             for c in range(3):
                 out[v, u, c] = color[k // cw, k % cw, c]
-    return out
+    return out, has

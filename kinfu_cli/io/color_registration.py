@@ -6,8 +6,9 @@ different size is a resize. A RealSense or Azure Kinect recording without alignm
 centimetres away, with its own intrinsics and size: resizing would paint every surface with what lies beside it.
 Then each depth pixel's 3-D point is projected into the colour camera (its camera info, and the TF from the depth
 to the colour optical frame) and takes the colour there, unless the colour camera sees a nearer surface at that
-pixel (a z-buffer of the projected depth: the colour camera's own occlusions). Pixels without colour are black,
-which fusion reads as "no colour sample". When the colour camera's info or TF is missing, there is no colour.
+pixel (a z-buffer of the projected depth: the colour camera's own occlusions). Pixels without colour are black
+and False in the frame's colour mask, which fusion skips. When the colour camera's info or TF is missing, there is
+no colour.
 """
 
 from __future__ import annotations
@@ -79,12 +80,13 @@ def color_registration(rec, depth_topic: str, color_topic: str, depth_info_topic
 
 
 def register_color(reg: ColorRegistration, depth: np.ndarray, K_depth: np.ndarray, color: np.ndarray,
-                   where: str) -> np.ndarray:
-    """uint8 (H, W, 3) colour of each depth pixel of `depth` (metres, 0 = none); black where there is none."""
+                   where: str) -> tuple[np.ndarray, np.ndarray | None]:
+    """(uint8 (H, W, 3) colour of each depth pixel of `depth` (metres, 0 = none), bool (H, W) mask of the pixels
+    that have one (None: all)); black where there is none."""
     h, w = depth.shape
     ch, cw = color.shape[:2]
     if reg.mode != "project":
-        return color
+        return color, None
     if (cw, ch) != reg.color_size:
         raise RecordingError(f"{where}: colour image is {cw}x{ch} but camera info {reg.info_topic} says "
                              f"{reg.color_size[0]}x{reg.color_size[1]}")

@@ -42,6 +42,7 @@ class RGBDFrame:
     color: np.ndarray | None  # uint8 (H, W, 3) RGB, or None
     K: np.ndarray  # (3, 3) of the depth camera
     T_world_camera: np.ndarray | None  # (4, 4) camera-to-world, or None with pose_source="none"
+    color_mask: np.ndarray | None = None  # bool (H, W): False where colour has no sample (projected colour)
 
 
 @dataclass
@@ -362,14 +363,14 @@ class _FramePairer:
         if not np.any(depth > 0):
             self.stats.drop(DROP_EMPTY)
             return None
-        color = None
+        color = color_mask = None
         if self.color_topic is not None and self.colors:
             best_stamp, best = min(self.colors, key=lambda c: abs(c[0] - stamp))
             if abs(best_stamp - stamp) <= self.tol_ns:
                 where = f"{self.rec.path}: {self.color_topic}"
                 color = decode_color(best, where)
                 if self.registration is not None and self.registration.mode == "project":
-                    color = register_color(self.registration, depth, self.K, color, where)
+                    color, color_mask = register_color(self.registration, depth, self.K, color, where)
                 else:  # the depth camera's own pixels: its lens too
                     color = self.lens.image(color, size_of_K=(w, h))
         if color is None:
@@ -378,7 +379,8 @@ class _FramePairer:
                 return None
             self.stats.without_color += 1
         self.stats.used += 1
-        return RGBDFrame(index=index, stamp_ns=stamp, depth=depth, color=color, K=self.K.copy(), T_world_camera=T)
+        return RGBDFrame(index=index, stamp_ns=stamp, depth=depth, color=color, K=self.K.copy(), T_world_camera=T,
+                         color_mask=color_mask)
 
     def _prune(self, before: int) -> None:
         """Forget colour images too old for any depth frame from `before` on."""
