@@ -19,7 +19,13 @@ from kinfu_cli.core.errors import RecordingError
 from kinfu_cli.core.poses import quaternion_to_matrix
 
 DEPTH_ENCODINGS = ("16UC1", "mono16", "32FC1")
-COLOR_ENCODINGS = ("rgb8", "bgr8", "rgba8", "bgra8", "mono8", "8UC3", "8UC1")
+COLOR_ENCODINGS = ("rgb8", "bgr8", "rgba8", "bgra8", "mono8", "8UC3", "8UC1", "yuv422", "uyvy", "yuv422_yuy2",
+                   "yuyv", "bayer_rggb8", "bayer_bggr8", "bayer_gbrg8", "bayer_grbg8", "rgb16", "bgr16", "mono16")
+# OpenCV's Bayer codes name the pattern from the second row and column: ROS's bayer_rggb8 is OpenCV's BayerBG
+_BAYER = {"bayer_rggb8": cv2.COLOR_BayerBG2RGB, "bayer_bggr8": cv2.COLOR_BayerRG2RGB,
+          "bayer_gbrg8": cv2.COLOR_BayerGR2RGB, "bayer_grbg8": cv2.COLOR_BayerGB2RGB}
+_YUV = {"yuv422": cv2.COLOR_YUV2RGB_UYVY, "uyvy": cv2.COLOR_YUV2RGB_UYVY, "yuv422_yuy2": cv2.COLOR_YUV2RGB_YUY2,
+        "yuyv": cv2.COLOR_YUV2RGB_YUY2}
 _PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
 
@@ -262,7 +268,8 @@ def _compressed_depth_png(raw: bytes, topic: str) -> tuple[np.ndarray, bytes | N
 
 
 def decode_color(msg: object, topic: str = "color") -> np.ndarray:
-    """sensor_msgs/Image (rgb8, bgr8, rgba8, bgra8, mono8) or jpeg/png CompressedImage -> uint8 (H,W,3) RGB."""
+    """sensor_msgs/Image (COLOR_ENCODINGS: rgb/bgr/rgba/bgra/mono 8-bit, 16-bit rgb/bgr/mono, packed YUV 4:2:2,
+    Bayer mosaics) or jpeg/png CompressedImage -> uint8 (H,W,3) RGB."""
     if is_compressed(msg):
         fmt = str(msg.format)
         if "compresseddepth" in fmt.lower():
@@ -282,8 +289,16 @@ def decode_color(msg: object, topic: str = "color") -> np.ndarray:
         return _raw_image(msg, np.uint8, 4, topic)[:, :, 2::-1].copy()
     if enc in ("mono8", "8UC1"):
         return np.repeat(_raw_image(msg, np.uint8, 1, topic)[:, :, None], 3, axis=2)
+    if enc.lower() in _YUV:  # a webcam's (usb_cam, v4l2) packed 4:2:2
+        return cv2.cvtColor(_raw_image(msg, np.uint8, 2, topic), _YUV[enc.lower()])
+    if enc in _BAYER:  # a machine-vision camera's raw mosaic
+        return cv2.cvtColor(np.ascontiguousarray(_raw_image(msg, np.uint8, 1, topic)), _BAYER[enc])
+    if enc in ("rgb16", "bgr16", "mono16"):
+        img = (_raw_image(msg, np.uint16, 1 if enc == "mono16" else 3, topic) >> 8).astype(np.uint8)
+        return np.repeat(img[:, :, None], 3, axis=2) if enc == "mono16" else np.ascontiguousarray(
+            img if enc == "rgb16" else img[:, :, ::-1])
     raise RecordingError(f"{topic}: colour encoding {enc!r} is not supported (expected one of "
-                         f"{', '.join(COLOR_ENCODINGS[:5])}, or jpeg/png CompressedImage)")
+                         f"{', '.join(COLOR_ENCODINGS)}, or jpeg/png CompressedImage)")
 
 
 def camera_info_distortion(msg: object, topic: str = "camera_info") -> tuple[str, np.ndarray]:
