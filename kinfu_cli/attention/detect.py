@@ -113,6 +113,7 @@ def detect_pois(source: str | os.PathLike | Trajectory, algorithm: str = "gmm-as
         recorded["n_components"] = int(sum(d.n_components_ for d in detectors))  # per task in "tasks"
     document = pois_document(pois, algorithm, recorded, frame=traj.frame, source=source_name)
     document["tasks"] = task_entries(tasks, detectors)
+    document["warnings"] = list(traj.meta.get("recording_problems", []))
     document["tasks_dropped"] = tasks.dropped
     document["task_split"] = {"workspace": list(box) if box else None,
                               "split_gap": None if split_gap is None else float(split_gap),

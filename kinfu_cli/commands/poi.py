@@ -7,10 +7,11 @@ from pathlib import Path
 
 import click
 
-from kinfu_cli.commands._options import claim_outputs, force_option
 from kinfu_cli.attention.detect import PoiDetection, detect_pois
 from kinfu_cli.attention.tasks import MIN_TASK_S, SPLIT_GAP_S
 from kinfu_cli.commands._detector_options import detector_options, detector_params_from
+from kinfu_cli.commands._options import claim_outputs, force_option
+from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.core.atomic import write_json
 from kinfu_cli.report.poi_plot import plot_pois, plot_task_pois
 from kinfu_cli.report.viewer import write_viewer
@@ -70,6 +71,7 @@ def command(source, algorithm, hand_topic, hand_frame, world_frame, workspace, s
     found = detect_pois(source, algorithm, params, workspace=workspace, split_gap=split_gap, min_task=min_task,
                         hand_topic=hand_topic, hand_frame=hand_frame, world_frame=world_frame, quiet=quiet)
     write_json(output, found.document)
+    print_warnings(found.document)
     if plot is not None:
         title = f"{Path(str(source)).name} ({algorithm})"
         if found.whole_trajectory:

@@ -37,7 +37,10 @@ def load_hand_trajectory(path: str | os.PathLike, hand_topic: str | None = None,
     if path.suffix.lower() in TEXT_SUFFIXES:
         return read_polhemus(path)
     with open_recording(path) as rec:
-        return hand_trajectory_from_recording(rec, hand_topic, hand_frame, world_frame)
+        traj = hand_trajectory_from_recording(rec, hand_topic, hand_frame, world_frame)
+        if rec.problems:  # a recording cut short: what was lost goes with the trajectory
+            traj.meta["recording_problems"] = list(rec.problems)
+        return traj
 
 
 def hand_trajectory_from_recording(rec: Recording, hand_topic: str | None = None, hand_frame: str | None = None,

@@ -60,3 +60,14 @@ def test_ros2_folder_of_a_killed_recording(sample_dir, tmp_path):
     (sqlite / "killed_0.db3").write_bytes(b"SQLite format 3\x00" + bytes(100))
     with pytest.raises(RecordingError, match="ros2 bag reindex"):
         open_recording(sqlite)
+
+
+def test_poi_from_a_cut_short_recording_says_so(sample_dir, tmp_path):
+    from click.testing import CliRunner
+
+    from kinfu_cli.cli import cli
+
+    cut = _cut(sample_dir / "recording.mcap", tmp_path / "cut.mcap", 0.97)
+    res = CliRunner().invoke(cli, ["poi", str(cut), "-o", str(tmp_path / "pois.json"), "--json"])
+    assert res.exit_code == 0, res.output
+    assert "kinfu: warning: " in res.output and "truncated" in res.output
