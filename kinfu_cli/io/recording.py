@@ -426,7 +426,8 @@ def _mcap_indexed_count(stream, summary, topic: str, start_ns: int | None, end_n
 
 
 def _mcap_needs_mcap_lib(path: Path) -> bool:
-    """True when an MCAP file holds messages rosbags cannot decode (ROS 1 encoding)."""
+    """True when an MCAP file holds messages rosbags cannot decode (ROS 1 encoding), or chunk indexes without
+    message indexes (rosbags then finds no message at all; the mcap library reads the chunks)."""
     try:
         with path.open("rb") as f:
             summary = make_reader(f).get_summary()
@@ -434,11 +435,14 @@ def _mcap_needs_mcap_lib(path: Path) -> bool:
         return False  # no summary: let rosbags report (or cope)
     if summary is None:
         return False
+    if any(not ci.message_index_offsets for ci in summary.chunk_indexes):
+        return True
     return any(ch.message_encoding not in ("cdr", "") for ch in summary.channels.values())
 
 
 class _McapBackend(_Backend):
-    """MCAP via the mcap library with ROS 1 and ROS 2 decoders (for ROS 1 encoded MCAP files)."""
+    """MCAP via the mcap library with ROS 1 and ROS 2 decoders (for ROS 1 encoded MCAP files, and files whose
+    chunks have no message indexes)."""
 
     def __init__(self, path: Path, stack: contextlib.ExitStack):
         # the ROS message decoders take a fifth of a second to import: only for ROS 1 encoded MCAP files
