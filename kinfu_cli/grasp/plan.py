@@ -176,7 +176,7 @@ def read_segments(path: str | os.PathLike) -> dict:
         doc = json.loads(path.read_text())
     except FileNotFoundError:
         raise GraspError(f"{path}: no such file (expected a kinfu segment segments.json)") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+    except (OSError, ValueError, RecursionError) as exc:  # JSONDecodeError, UnicodeDecodeError, an integer of > 4300 digits
         raise GraspError(f"{path}: not a JSON file ({type(exc).__name__})") from None
     if not isinstance(doc, dict) or not isinstance(doc.get("segments"), list):
         raise GraspError(f"{path}: expected a kinfu segment segments.json with a 'segments' list")
