@@ -12,6 +12,7 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
+from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.sim.room import WORLDS, RoomScenario, make_room, write_room_ground_truth, write_room_recordings
 from kinfu_cli.sim.scenario import (Scenario, check_camera_pose_topic, make_scenario, recording_topics,
@@ -65,6 +66,7 @@ def synthesize(out: str | os.PathLike, seed: int = 0, width: int = 320, height: 
     for name, rate in (("hand_rate", hand_rate), ("frame_rate", frame_rate)):
         if not rate > 0:
             raise ConfigError(f"expected a positive rate in Hz, got {rate}", parameter=name)
+    check_number(seed, "seed", 0, 2 ** 63 - 1, integer=True)  # numpy refuses negative seeds with a bare ValueError
     if not 1 <= jpeg_quality <= 100:
         raise ConfigError(f"expected 1..100, got {jpeg_quality}", parameter="jpeg_quality")
     check_camera_pose_topic(camera_pose_topic, depth_format, color_format)
