@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 from pathlib import Path
 
@@ -26,9 +27,12 @@ def _table_z_option(value: str):
     if v in ("auto", "none"):
         return v
     try:
-        return float(v)
+        z = float(v)
     except ValueError:
-        raise ConfigError(f"--table-z: expected auto, none or a height in metres, got {value!r}") from None
+        z = math.nan
+    if not math.isfinite(z) or abs(z) > 1e4:  # nan / inf would reject every view, or none, silently
+        raise ConfigError(f"--table-z: expected auto, none or a height in metres, got {value!r}")
+    return z
 
 
 def summary_lines(doc: dict) -> list[str]:
