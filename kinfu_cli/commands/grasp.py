@@ -89,7 +89,7 @@ def command(segments: Path, output: Path, hand, segment_ids, cones, cone_apertur
       kinfu grasp out/segments/segments.json -o out/grasps.json --plot out/grasps.png
       kinfu grasp out/segments --hand right --cone top --json --quiet
     """
-    claim_outputs({"output": output, "plot": plot}, [segments], force)
+    claim_outputs({"output": output, "plot": plot}, [segments / "segments.json" if segments.is_dir() else segments], force)
     doc = read_segments(segments)
     plane = support_plane(doc, str(segments))
     up = plane[:3] if plane is not None else np.array([0.0, 0.0, 1.0])

@@ -34,3 +34,27 @@ def test_nbv_refuses_a_table_height_that_is_not_finite(tiny, tmp_path, value):
               "--table-z", value, "--quiet")
     one_line_error(res, "--table-z", "expected")
     assert not (tmp_path / "v.json").exists()
+
+
+def test_one_path_for_two_outputs_is_refused_before_any_work(tiny, tmp_path):
+    same = tmp_path / "same.json"
+    res = run("nbv", tiny / "fuse" / "volume.npz", "--pois", tiny / "pois.json", "-o", same, "--plot", same, "--quiet")
+    one_line_error(res, "--output/--plot", "given for both")
+    assert not same.exists()
+
+
+def test_a_file_of_an_input_folder_is_never_an_output(tmp_path):
+    """eval fusion read out/fuse/mesh.ply and then wrote its JSON over it; import wrote the recording into the
+    frame folder it read (where the next import of that folder finds it)."""
+    fused = tmp_path / "fuse"
+    fused.mkdir()
+    (fused / "mesh.ply").write_text("ply\n")
+    res = run("eval", "fusion", fused, "--ground-truth", tmp_path / "gt", "-o", fused / "mesh.ply", "--quiet",
+              "--force")
+    one_line_error(res, "--output", "input folder")
+    assert (fused / "mesh.ply").read_text() == "ply\n"
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    res = run("import", frames, "-o", frames / "rec.mcap", "-q")
+    one_line_error(res, "--out", "inside the input folder")
+    assert not (frames / "rec.mcap").exists()
