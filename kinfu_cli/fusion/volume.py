@@ -505,7 +505,11 @@ def volume_intrinsics(path: str | os.PathLike) -> dict | None:
     None for files written before they were recorded."""
     meta = read_volume_meta(path)
     if meta is None:
-        return read_ternary(path).intrinsics
+        grid = read_ternary(path)
+        if grid is None:  # a readable .npz of something else (nbv read it as a ternary: AttributeError)
+            raise VolumeError(f"{path}: not a kinfu volume.npz or ternary.npz (neither a 'meta' nor a 'ternary' "
+                              f"array)")
+        return grid.intrinsics
     return check_intrinsics(meta.get("intrinsics"), path)
 
 
