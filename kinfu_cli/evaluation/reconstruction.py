@@ -43,6 +43,7 @@ from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError, RecordingError, VolumeError
 from kinfu_cli.core.grid import UNKNOWN
 from kinfu_cli.core.progress import progress
+from kinfu_cli.io.messages import c_stderr_silenced
 from kinfu_cli.evaluation.object_measures import PAPER_TABLE_1, ObjectMeasuresResult, object_measures
 from kinfu_cli.fusion.volume import TernaryVolume, load_volume
 from kinfu_cli.sim.sampling import sample_surface
@@ -105,7 +106,8 @@ def read_mesh_arrays(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
         raise VolumeError(f"{path}: no such mesh file")
     if path.suffix.lower() not in MESH_SUFFIXES:
         raise VolumeError(f"{path}: expected a mesh file ({', '.join(MESH_SUFFIXES)}) or a `kinfu fuse` output folder")
-    with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):  # we report problems ourselves
+    # we report problems ourselves (RPly writes its own lines on a damaged PLY, whatever the verbosity)
+    with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error), c_stderr_silenced():
         mesh = o3d.io.read_triangle_mesh(str(path))
         v = np.asarray(mesh.vertices, dtype=np.float64)
         f = np.asarray(mesh.triangles, dtype=np.int64).reshape(-1, 3)

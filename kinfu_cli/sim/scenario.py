@@ -36,6 +36,7 @@ from kinfu_cli.core.progress import progress
 from kinfu_cli.io.polhemus import read_polhemus
 from kinfu_cli.io.trajectory import Trajectory
 from kinfu_cli.io.writers import RecordingWriter
+from kinfu_cli.io.messages import c_stderr_silenced
 from kinfu_cli.sim.hand import Action, HandChange, synth_hand_trajectory, write_polhemus
 from kinfu_cli.sim.robot import CAMERA_FRAME, LINKS, WORLD_FRAME, RobotArm
 from kinfu_cli.io.labelled_cloud import write_labelled_cloud
@@ -560,7 +561,9 @@ def _check_info(info: object) -> tuple[np.ndarray, int, int]:
 def _read_mesh(path: Path) -> o3d.geometry.TriangleMesh:
     if not path.exists():
         raise RecordingError(f"{path}: missing ground-truth mesh")
-    mesh = o3d.io.read_triangle_mesh(str(path))
+    # no reader chatter (open3d warnings, RPly's own lines on a damaged PLY): we report problems
+    with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error), c_stderr_silenced():
+        mesh = o3d.io.read_triangle_mesh(str(path))
     if len(mesh.triangles) == 0:
         raise RecordingError(f"{path}: not a triangle mesh (no triangles)")
     return mesh
