@@ -20,6 +20,7 @@ is what to compare on a shared machine.
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import statistics
@@ -138,7 +139,7 @@ def resample_speed(traj: Trajectory, speed: float) -> Trajectory:
 
 def add_noise(traj: Trajectory, noise: float, seed: int = 0) -> Trajectory:
     """White Gaussian noise of std `noise` metres on every coordinate; the seed mixes in the file name."""
-    if noise < 0:
+    if not noise >= 0 or not math.isfinite(noise):  # nan passed `noise < 0`
         raise ConfigError(f"expected standard deviations >= 0 metres, got {noise}", parameter="noise")
     if noise == 0:
         return traj

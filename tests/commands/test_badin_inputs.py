@@ -58,3 +58,11 @@ def test_a_file_of_an_input_folder_is_never_an_output(tmp_path):
     res = run("import", frames, "-o", frames / "rec.mcap", "-q")
     one_line_error(res, "--out", "inside the input folder")
     assert not (frames / "rec.mcap").exists()
+
+
+@pytest.mark.parametrize("option, value", [("--noise", "nan"), ("--noise", "0.01,inf"), ("--speed", "inf"),
+                                           ("--speed", "nan")])
+def test_eval_poi_refuses_settings_that_are_not_finite(tmp_path, option, value):
+    """--noise nan was scored as a setting (exit 0, NaN trajectories)."""
+    res = run("eval", "poi", tmp_path, option, value, "--quiet")
+    one_line_error(res, option, "finite")
