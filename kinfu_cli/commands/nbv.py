@@ -164,6 +164,8 @@ def command(volume, pois_path, mode, clear, gain, top, output, plot, candidates,
     up_dir = parse_up(up, ("auto",))
     up_dir = None if isinstance(up_dir, str) else tuple(float(v) for v in up_dir)
     if mode == "objects":
+        if candidates is not None:  # it was read by nobody: a damaged or wrong file passed silently
+            raise ConfigError("--candidates: applies to --mode poi (--mode objects places its own views)")
         planned = rank_object_views(volume, cam, gain=gain, table_z=_table_z_option(table_z),
                                     score_threshold=0.0 if inc_th is None else inc_th, top=top, up=up_dir)
         doc = planned.to_json()

@@ -19,12 +19,12 @@ def run(*args):
 
 @pytest.fixture(scope="module")
 def tiny(tmp_path_factory):
-    """A fused volume of the tiny test recording and one POI in front of it."""
+    """A fused volume of the tiny test recording and one POI inside it."""
     root = tmp_path_factory.mktemp("tiny")
     rec = make_recording(root / "rec.mcap")
     res = run("fuse", rec, "-o", root / "fuse", "--resolution", "32", "--quiet")
     assert res.exit_code == 0, res.output
-    (root / "pois.json").write_text(json.dumps({"pois": [{"position": [0.5, 0.0, 0.5]}]}))
+    (root / "pois.json").write_text(json.dumps({"pois": [{"position": [0.6, -0.1, 1.8]}]}))
     return root
 
 
@@ -66,3 +66,16 @@ def test_eval_poi_refuses_settings_that_are_not_finite(tmp_path, option, value):
     """--noise nan was scored as a setting (exit 0, NaN trajectories)."""
     res = run("eval", "poi", tmp_path, option, value, "--quiet")
     one_line_error(res, option, "finite")
+
+
+def test_nbv_candidates_far_away_or_in_objects_mode_are_refused(tiny, tmp_path):
+    """A candidate 1e300 m away overflowed the ray casts (numpy warnings, exit 0); --mode objects read no
+    --candidates file at all, so a damaged one passed silently."""
+    far = tmp_path / "far.json"
+    far.write_text(json.dumps([[[1, 0, 0, 1e300], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]]))
+    vol = tiny / "fuse" / "volume.npz"
+    res = run("nbv", vol, "--pois", tiny / "pois.json", "--candidates", far, "-o", tmp_path / "v.json", "--quiet")
+    one_line_error(res, str(far), "from the origin")
+    res = run("nbv", vol, "--mode", "objects", "--candidates", far, "-o", tmp_path / "v.json", "--quiet")
+    one_line_error(res, "--candidates", "--mode poi")
+    assert not (tmp_path / "v.json").exists()
