@@ -169,7 +169,9 @@ def state_frames(gt: GroundTruth, state: str, window: tuple | None = None) -> np
 def fused_window(report: dict | None) -> tuple | None:
     """(start_s, end_s) of the frames a `kinfu fuse` run used (its report.json "frames"), or None."""
     fr = (report or {}).get("frames") or {}
-    lo, hi = fr.get("start_s"), fr.get("end_s")
+    fr = fr if isinstance(fr, dict) else {}  # a hand-edited report: ignore what is not a kinfu fuse report's
+    lo, hi = (v if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) else None
+              for v in (fr.get("start_s"), fr.get("end_s")))
     if lo is None and hi is None:
         return None
     return lo, hi
@@ -445,9 +447,10 @@ def report_json_of(path: str | os.PathLike) -> dict | None:
     if not p.exists():
         return None
     try:
-        return json.loads(p.read_text())
+        doc = json.loads(p.read_text())
     except (OSError, ValueError, RecursionError):
         return None
+    return doc if isinstance(doc, dict) else None
 
 
 # ---------------------------------------------------------------------------------------------- the whole evaluation
@@ -505,6 +508,7 @@ def _document(rec: Reconstruction, gt: GroundTruth, state: str, window: tuple | 
               score: ReconstructionScore, measures: ObjectMeasuresResult, seconds: float) -> dict:
     """The results document, strict JSON (NaN / inf as null)."""
     mode = (report or {}).get("pose_mode")
+    mode = mode if isinstance(mode, str) else None
     tracking = POSE_MODE_LABELS.get(mode, mode or "as fused")
     objs = measures.to_json()
     doc = {
