@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError, KinfuError
 from kinfu_cli.core.grid import check_up
 from kinfu_cli.core.neighbours import transfer_nearest
@@ -302,6 +303,8 @@ def _check_sweep_inputs(parameter: str, values, seeds, layouts, colors) -> tuple
     seeds = [int(s) for s in seeds]
     if not seeds:
         raise ConfigError("expected at least one scene seed", parameter="scenes")
+    for s in seeds:  # numpy refuses negative seeds with a bare ValueError
+        check_number(s, "scenes", 0, 2 ** 63 - 1, integer=True)
     layouts = list(dict.fromkeys(layouts))
     if not layouts or any(lay not in SCENE_SIZES for lay in layouts):
         raise ConfigError(f"expected scene layouts among {', '.join(SCENE_SIZES)}, got {layouts}", parameter="layouts")

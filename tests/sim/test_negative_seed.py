@@ -1,5 +1,5 @@
 """A negative seed is a ConfigError naming `seed` (numpy's default_rng refuses it with a bare ValueError, which
-reached the user as a traceback from `kinfu synth / eval grasp / eval localize --seed -1`)."""
+reached the user as a traceback from `kinfu synth / eval grasp / eval localize --seed -1`, `eval segment --sweep --scenes=-1`)."""
 
 from __future__ import annotations
 
@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.evaluation.segment_eval import sweep_segmentation
 from kinfu_cli.grasp.evaluate import evaluate_grasping
 from kinfu_cli.localization import shapes
 from kinfu_cli.localization.evaluate import evaluate_localization, evaluate_recognition
@@ -18,6 +19,7 @@ from kinfu_cli.sim.synth import synthesize
     (lambda tmp: synthesize(tmp / "out", seed=-1, frames=3, quiet=True), "seed"),
     (lambda tmp: evaluate_grasping(seed=-1), "seed"),
     (lambda tmp: evaluate_grasping(scenes=(0, -2)), "scenes"),
+    (lambda tmp: sweep_segmentation(seeds=(-1,)), "scenes"),
     (lambda tmp: evaluate_localization(trials=1, seed=-1), "seed"),
     (lambda tmp: evaluate_recognition(seed=-1), "seed"),
     (lambda tmp: localize_points([shapes.box()], np.random.default_rng(0).normal(size=(50, 3)) * 0.02, seed=-3),
