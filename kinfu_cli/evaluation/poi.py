@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from kinfu_cli.attention.detect import make_detector
+from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError, TrajectoryError
 from kinfu_cli.core.pois import DEFAULT_RADIUS
 from kinfu_cli.core.progress import progress
@@ -220,6 +221,7 @@ def evaluate_dataset(dataset_dir: str | os.PathLike, algorithms: list[str], spee
     map_trials: run the (task, setting) trials through this map (a Dask cluster) instead of `workers`
     local processes; the rows are the same, in the same order.
     """
+    check_number(seed, "seed", 0, 2 ** 63 - 1, integer=True)  # numpy refuses negative seeds with a bare ValueError
     tasks = find_tasks(dataset_dir)
     settings = settings_for(speeds or [1.0], noises or [])
     for alg in algorithms:

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.evaluation.poi import evaluate_dataset
 from kinfu_cli.evaluation.segment_eval import sweep_segmentation
 from kinfu_cli.grasp.evaluate import evaluate_grasping
 from kinfu_cli.localization import shapes
@@ -20,6 +21,7 @@ from kinfu_cli.sim.synth import synthesize
     (lambda tmp: evaluate_grasping(seed=-1), "seed"),
     (lambda tmp: evaluate_grasping(scenes=(0, -2)), "scenes"),
     (lambda tmp: sweep_segmentation(seeds=(-1,)), "scenes"),
+    (lambda tmp: evaluate_dataset(tmp, ["zvc"], noises=[0.01], seed=-5), "seed"),
     (lambda tmp: evaluate_localization(trials=1, seed=-1), "seed"),
     (lambda tmp: evaluate_recognition(seed=-1), "seed"),
     (lambda tmp: localize_points([shapes.box()], np.random.default_rng(0).normal(size=(50, 3)) * 0.02, seed=-3),
