@@ -14,6 +14,7 @@ from pathlib import Path
 import click
 from click.core import ParameterSource
 
+from kinfu_cli.core.errors import KinfuError
 from kinfu_cli.core.ownership import claim_output
 
 PARAMETER_FLAGS: dict[str, str] = {
@@ -56,9 +57,16 @@ def claim_outputs(outputs: dict[str, str | os.PathLike | None], inputs: Iterable
                   force: bool) -> None:
     """Refuse, before any work, outputs that are inputs, hold an input, are empty, or exist without being
     kinfu's (unless force); keys are the commands' option names, so the error shows the flag."""
+    inputs = list(inputs)
+    seen: dict[str, str] = {}
     for name, path in outputs.items():
         if path is not None:
             claim_output(path, inputs, force=force, parameter=name)
+            real = os.path.realpath(path)
+            if real in seen:  # the second write would replace the first (poi -o p.json --plot p.json)
+                raise KinfuError(f"{path} is given for both; name two different paths",
+                                 parameter=f"{seen[real]}/{name}")
+            seen[real] = name
 
 
 def result_options(*, output: str | None = "Write the results as JSON here.", plot: str | None = None,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 from pathlib import Path
 
@@ -21,9 +22,12 @@ def _floats(option: str, value: str | None) -> list[float]:
     if value is None or not value.strip():
         return []
     try:
-        return [float(v) for v in value.split(",") if v.strip()]
+        values = [float(v) for v in value.split(",") if v.strip()]
     except ValueError:
-        raise ConfigError(f"{option}: expected comma-separated numbers, got {value!r}") from None
+        values = [math.nan]
+    if not all(math.isfinite(v) for v in values):  # nan / inf were taken as a setting and scored
+        raise ConfigError(f"{option}: expected comma-separated finite numbers, got {value!r}")
+    return values
 
 
 @click.command("poi", short_help="Score GMM-AS / ZVC POIs on a hand data set (paper Tables 2-4).")

@@ -15,7 +15,7 @@ from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.progress import progress
 from kinfu_cli.grasp.constraints import PRESET_APERTURE_DEG, Workspace, parse_cone
 from kinfu_cli.grasp.hand import ICUB_HAND_SIZE, HandModel
-from kinfu_cli.grasp.plan import GraspOptions, GraspResult, plan_grasps, read_segments
+from kinfu_cli.grasp.plan import GraspOptions, GraspResult, plan_grasps, read_segments, support_plane
 
 
 def _numbers(text: str, n: int, parameter: str) -> tuple[float, ...]:
@@ -89,10 +89,10 @@ def command(segments: Path, output: Path, hand, segment_ids, cones, cone_apertur
       kinfu grasp out/segments/segments.json -o out/grasps.json --plot out/grasps.png
       kinfu grasp out/segments --hand right --cone top --json --quiet
     """
-    claim_outputs({"output": output, "plot": plot}, [segments], force)
+    claim_outputs({"output": output, "plot": plot}, [segments / "segments.json" if segments.is_dir() else segments], force)
     doc = read_segments(segments)
-    plane = doc.get("support_plane")
-    up = np.asarray(plane[:3], dtype=float) if plane is not None else np.array([0.0, 0.0, 1.0])
+    plane = support_plane(doc, str(segments))
+    up = plane[:3] if plane is not None else np.array([0.0, 0.0, 1.0])
     hand_model = HandModel(_numbers(hand_size, 3, "hand_size"), n_points, palm_width, thumb_length, finger_length)
     workspaces = {h: w for h, w in (("right", _workspace(workspace_right, "workspace_right")),
                                     ("left", _workspace(workspace_left, "workspace_left"))) if w is not None}
@@ -101,7 +101,8 @@ def command(segments: Path, output: Path, hand, segment_ids, cones, cone_apertur
                         reach_weight=reach_weight, obstacle_weight=obstacle_weight, n_starts=n_starts,
                         segment_ids=list(segment_ids) or None)
     result: GraspResult = plan_grasps(doc, opts, progress=lambda ids: progress(ids, total=len(ids), desc="grasp",
-                                                                               quiet=quiet))
+                                                                               quiet=quiet),
+                                      source=str(segments))
     result.source = str(segments)
     out = result.to_json()
     if plot is not None:

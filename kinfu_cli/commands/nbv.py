@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 from pathlib import Path
 
@@ -26,9 +27,12 @@ def _table_z_option(value: str):
     if v in ("auto", "none"):
         return v
     try:
-        return float(v)
+        z = float(v)
     except ValueError:
-        raise ConfigError(f"--table-z: expected auto, none or a height in metres, got {value!r}") from None
+        z = math.nan
+    if not math.isfinite(z) or abs(z) > 1e4:  # nan / inf would reject every view, or none, silently
+        raise ConfigError(f"--table-z: expected auto, none or a height in metres, got {value!r}")
+    return z
 
 
 def summary_lines(doc: dict) -> list[str]:
@@ -160,6 +164,8 @@ def command(volume, pois_path, mode, clear, gain, top, output, plot, candidates,
     up_dir = parse_up(up, ("auto",))
     up_dir = None if isinstance(up_dir, str) else tuple(float(v) for v in up_dir)
     if mode == "objects":
+        if candidates is not None:  # it was read by nobody: a damaged or wrong file passed silently
+            raise ConfigError("--candidates: applies to --mode poi (--mode objects places its own views)")
         planned = rank_object_views(volume, cam, gain=gain, table_z=_table_z_option(table_z),
                                     score_threshold=0.0 if inc_th is None else inc_th, top=top, up=up_dir)
         doc = planned.to_json()

@@ -112,7 +112,8 @@ def claim_output(output: str | os.PathLike | None, inputs: Iterable[str | os.Pat
     """Check that kinfu may write `output`, before any work is done; returns it as a Path.
 
     Refused always: an empty path, the current folder or one above it, an output that is one of `inputs`,
-    or a folder that holds one of them (replacing it would destroy the input). Refused unless `force`: an existing path kinfu did not write.
+    a folder that holds one of them (replacing it would destroy the input), or an existing file inside an input
+    folder (a fuse folder, a ROS 2 bag, a ground-truth folder: the command may read it). Refused unless `force`: an existing path kinfu did not write.
     """
     if output is None or str(output).strip() == "":
         raise KinfuError("expected a path, got an empty one", parameter=parameter)
@@ -130,6 +131,9 @@ def claim_output(output: str | os.PathLike | None, inputs: Iterable[str | os.Pat
         if _inside(src, real):
             raise KinfuError(f"{out} contains the input {inp}; writing it would replace the input",
                              parameter=parameter)
+        if src.is_dir() and _inside(real, src) and real.is_file():  # e.g. eval fusion out/fuse -o out/fuse/mesh.ply
+            raise KinfuError(f"{out} is a file of the input folder {inp}; writing it would replace the input; "
+                             f"choose another output path", parameter=parameter)
     if out.exists() and not force and not written_by_kinfu(out):
         what = "folder" if out.is_dir() else "file"
         raise ForeignOutputError(f"{out}: an existing {what} that kinfu did not write; choose another path",

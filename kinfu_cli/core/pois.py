@@ -95,7 +95,7 @@ def read_pois_document(path: str | os.PathLike) -> dict:
         raise PoiFileError(f"{path}: no such POI file (expected pois.json from `kinfu poi`)") from None
     except IsADirectoryError:
         raise PoiFileError(f"{path}: is a folder, expected a pois.json file") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+    except ValueError as exc:  # JSONDecodeError, UnicodeDecodeError, an integer of > 4300 digits
         raise PoiFileError(f"{path}: not valid JSON ({exc}), expected a pois.json file from `kinfu poi`") from None
     except RecursionError:
         raise PoiFileError(f"{path}: JSON nested too deeply to read, expected a pois.json file from "

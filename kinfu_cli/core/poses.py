@@ -10,6 +10,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from kinfu_cli.core.errors import ConfigError, TransformError, VolumeError
+from kinfu_cli.core.volume_file import MAX_COORDINATE_M
 
 
 def look_at(position, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
@@ -79,6 +80,9 @@ def check_poses(poses, source: str = "poses") -> np.ndarray:
     if not np.all(np.isfinite(arr)):
         bad = int(np.flatnonzero(~np.isfinite(arr).all(axis=(1, 2)))[0])
         raise ConfigError(f"{source}: pose {bad} is not finite")
+    far = np.flatnonzero(np.abs(arr[:, :3, 3]).max(axis=1) > MAX_COORDINATE_M)
+    if far.size:  # 1e300 overflowed the ray casts' voxel indices (numpy warnings)
+        raise ConfigError(f"{source}: pose {int(far[0])} is more than {MAX_COORDINATE_M:g} m from the origin")
     R = arr[:, :3, :3]
     err = np.abs(np.einsum("nji,njk->nik", R, R) - np.eye(3)).max(axis=(1, 2))
     det = np.linalg.det(R)

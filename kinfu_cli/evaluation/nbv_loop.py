@@ -66,6 +66,7 @@ from kinfu_cli.core.grid import TernaryGrid
 from kinfu_cli.core.pois import DEFAULT_RADIUS
 from kinfu_cli.core.progress import progress
 from kinfu_cli.core.trials import TrialMap, serial_trials
+from kinfu_cli.io.messages import c_stderr_silenced
 from kinfu_cli.evaluation.reconstruction import point_to_mesh_distance
 from kinfu_cli.fusion.volume import TernaryVolume
 from kinfu_cli.nbv.gains import get_gain
@@ -197,7 +198,9 @@ def load_scene(path: str | os.PathLike, cfg: LoopConfig) -> SimScene:
         return SimScene(gt.folder.name, gt.mesh("before"), gt.mesh("after"), gt.K, gt.width, gt.height,
                         gt.poses[:n_scan:cfg.scan_every], gt.hand(), gt.change_positions, tz, lo, hi,
                         object_spheres=spheres)
-    mesh = o3d.io.read_triangle_mesh(str(path))
+    # no reader chatter (open3d warnings, RPly's own lines on a damaged PLY): we report problems
+    with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error), c_stderr_silenced():
+        mesh = o3d.io.read_triangle_mesh(str(path))
     if len(mesh.triangles) == 0:
         raise RecordingError(f"{path}: not a triangle mesh (no triangles)")
     if cfg.poi is None:

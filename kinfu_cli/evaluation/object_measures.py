@@ -27,6 +27,7 @@ import numpy as np
 import open3d as o3d
 
 from kinfu_cli.core.errors import ConfigError, RecordingError
+from kinfu_cli.io.messages import c_stderr_silenced
 
 # Monica et al. RAS 2016 Table 1 (thesis Table 2.1): mean abs. / st. dev. (m) of the object measure errors
 PAPER_TABLE_1 = [
@@ -86,7 +87,9 @@ def ground_truth_objects(gt, state: str = "after") -> list[GroundTruthObject]:
         path = gt.folder / "objects" / f"{oid}.ply"
         obj = GroundTruthObject(oid, str(o.get("shape", "")), center, size, yaw, np.zeros((0, 3)))
         if path.exists() and bool(o.get("present_after", True)):
-            v = np.asarray(o3d.io.read_triangle_mesh(str(path)).vertices, dtype=np.float64)
+            # no reader chatter (open3d warnings, RPly's own lines on a damaged PLY): we report problems
+            with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error), c_stderr_silenced():
+                v = np.asarray(o3d.io.read_triangle_mesh(str(path)).vertices, dtype=np.float64)
             obj.vertices = v + (center - np.asarray(o["center"], dtype=float))
         else:
             if meshes is None:

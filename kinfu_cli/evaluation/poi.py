@@ -20,6 +20,7 @@ is what to compare on a shared machine.
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import statistics
@@ -32,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from kinfu_cli.attention.detect import make_detector
+from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError, TrajectoryError
 from kinfu_cli.core.pois import DEFAULT_RADIUS
 from kinfu_cli.core.progress import progress
@@ -138,7 +140,7 @@ def resample_speed(traj: Trajectory, speed: float) -> Trajectory:
 
 def add_noise(traj: Trajectory, noise: float, seed: int = 0) -> Trajectory:
     """White Gaussian noise of std `noise` metres on every coordinate; the seed mixes in the file name."""
-    if noise < 0:
+    if not noise >= 0 or not math.isfinite(noise):  # nan passed `noise < 0`
         raise ConfigError(f"expected standard deviations >= 0 metres, got {noise}", parameter="noise")
     if noise == 0:
         return traj
@@ -219,6 +221,7 @@ def evaluate_dataset(dataset_dir: str | os.PathLike, algorithms: list[str], spee
     map_trials: run the (task, setting) trials through this map (a Dask cluster) instead of `workers`
     local processes; the rows are the same, in the same order.
     """
+    check_number(seed, "seed", 0, 2 ** 63 - 1, integer=True)  # numpy refuses negative seeds with a bare ValueError
     tasks = find_tasks(dataset_dir)
     settings = settings_for(speeds or [1.0], noises or [])
     for alg in algorithms:

@@ -43,6 +43,7 @@ from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError, RecordingError, VolumeError
 from kinfu_cli.core.grid import UNKNOWN
 from kinfu_cli.core.progress import progress
+from kinfu_cli.io.messages import c_stderr_silenced
 from kinfu_cli.evaluation.object_measures import PAPER_TABLE_1, ObjectMeasuresResult, object_measures
 from kinfu_cli.fusion.volume import TernaryVolume, load_volume
 from kinfu_cli.sim.sampling import sample_surface
@@ -105,7 +106,8 @@ def read_mesh_arrays(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
         raise VolumeError(f"{path}: no such mesh file")
     if path.suffix.lower() not in MESH_SUFFIXES:
         raise VolumeError(f"{path}: expected a mesh file ({', '.join(MESH_SUFFIXES)}) or a `kinfu fuse` output folder")
-    with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):  # we report problems ourselves
+    # we report problems ourselves (RPly writes its own lines on a damaged PLY, whatever the verbosity)
+    with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error), c_stderr_silenced():
         mesh = o3d.io.read_triangle_mesh(str(path))
         v = np.asarray(mesh.vertices, dtype=np.float64)
         f = np.asarray(mesh.triangles, dtype=np.int64).reshape(-1, 3)
@@ -167,7 +169,9 @@ def state_frames(gt: GroundTruth, state: str, window: tuple | None = None) -> np
 def fused_window(report: dict | None) -> tuple | None:
     """(start_s, end_s) of the frames a `kinfu fuse` run used (its report.json "frames"), or None."""
     fr = (report or {}).get("frames") or {}
-    lo, hi = fr.get("start_s"), fr.get("end_s")
+    fr = fr if isinstance(fr, dict) else {}  # a hand-edited report: ignore what is not a kinfu fuse report's
+    lo, hi = (v if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) else None
+              for v in (fr.get("start_s"), fr.get("end_s")))
     if lo is None and hi is None:
         return None
     return lo, hi
@@ -443,9 +447,10 @@ def report_json_of(path: str | os.PathLike) -> dict | None:
     if not p.exists():
         return None
     try:
-        return json.loads(p.read_text())
+        doc = json.loads(p.read_text())
     except (OSError, ValueError, RecursionError):
         return None
+    return doc if isinstance(doc, dict) else None
 
 
 # ---------------------------------------------------------------------------------------------- the whole evaluation
@@ -503,6 +508,7 @@ def _document(rec: Reconstruction, gt: GroundTruth, state: str, window: tuple | 
               score: ReconstructionScore, measures: ObjectMeasuresResult, seconds: float) -> dict:
     """The results document, strict JSON (NaN / inf as null)."""
     mode = (report or {}).get("pose_mode")
+    mode = mode if isinstance(mode, str) else None
     tracking = POSE_MODE_LABELS.get(mode, mode or "as fused")
     objs = measures.to_json()
     doc = {

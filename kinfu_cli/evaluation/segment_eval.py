@@ -23,7 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
+from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError, KinfuError
+from kinfu_cli.core.grid import check_up
 from kinfu_cli.core.neighbours import transfer_nearest
 from kinfu_cli.core.progress import progress
 from kinfu_cli.io.labelled_cloud import (LabelledCloud, LabelsFileError, ply_points, read_labelled_cloud,
@@ -96,12 +98,21 @@ def load_predicted_segments(path: str | os.PathLike) -> PredictedSegments:
     if path.name == "segments.ply" and meta.is_file():
         try:
             doc = json.loads(meta.read_text())
-        except (OSError, ValueError) as e:
-            raise LabelsFileError(f"{meta}: not readable JSON ({e})") from None
+        except (OSError, ValueError, RecursionError) as e:
+            raise LabelsFileError(f"{meta}: not readable JSON ({type(e).__name__}: {e})") from None
+        if not isinstance(doc, dict):
+            raise LabelsFileError(f"{meta}: expected the JSON object `kinfu segment` writes")
         if doc.get("up") is not None:
-            up = np.asarray(doc["up"], dtype=float)
+            try:
+                up = check_up(doc["up"])
+            except ConfigError:
+                raise LabelsFileError(f"{meta}: 'up' is {doc['up']!r}, expected a finite non-zero direction") from None
         if source == "segment colours":
-            want = sorted(int(s["point_count"]) for s in doc.get("segments", []) if s.get("kind") == "object")
+            try:
+                want = sorted(int(s["point_count"]) for s in doc.get("segments", []) if s.get("kind") == "object")
+            except (KeyError, TypeError, ValueError, AttributeError):
+                raise LabelsFileError(f"{meta}: 'segments' is not a list of segments with integer point counts") \
+                    from None
             have = sorted(int(n) for n in np.bincount(labels[labels > 0])[1:] if n > 0)
             if want != have:
                 warnings.append(f"{path}: its {len(have)} segment colours do not match the {len(want)} segments "
@@ -133,7 +144,7 @@ def label_names(labels_path: str | os.PathLike | None) -> dict[int, str]:
         names = {int(k): str(v) for k, v in doc.get("labels", {}).items()}  # the room scene names its labels
         return ({0: "table"} | names | {int(o["label"]): str(o["id"]) for o in doc.get("objects", [])
                                          if o.get("present_after")})
-    except (OSError, ValueError, KeyError, TypeError):
+    except (OSError, ValueError, KeyError, TypeError, AttributeError, RecursionError):  # names are optional
         return {}
 
 
@@ -292,6 +303,8 @@ def _check_sweep_inputs(parameter: str, values, seeds, layouts, colors) -> tuple
     seeds = [int(s) for s in seeds]
     if not seeds:
         raise ConfigError("expected at least one scene seed", parameter="scenes")
+    for s in seeds:  # numpy refuses negative seeds with a bare ValueError
+        check_number(s, "scenes", 0, 2 ** 63 - 1, integer=True)
     layouts = list(dict.fromkeys(layouts))
     if not layouts or any(lay not in SCENE_SIZES for lay in layouts):
         raise ConfigError(f"expected scene layouts among {', '.join(SCENE_SIZES)}, got {layouts}", parameter="layouts")

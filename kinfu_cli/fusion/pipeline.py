@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError, RecordingError, VolumeError
 from kinfu_cli.core.grid import TernaryGrid, check_up
 from kinfu_cli.core.pois import poi_frame_warnings, read_pois
@@ -130,6 +131,9 @@ class DepthFilter:
     shadow_baseline: float
     gap_pixels: int = 0
     drops: dict[str, int] = field(default_factory=dict)  # reason -> frames left without valid depth
+
+    def __post_init__(self) -> None:
+        check_number(self.fill_gaps, "fill_gaps", 0, 4096, integer=True)  # longer than any row: numba overflowed
 
     def __call__(self, frame: RGBDFrame) -> np.ndarray | None:
         """The filtered depth image, or None (counted) when no valid reading is left."""

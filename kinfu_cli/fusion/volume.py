@@ -21,8 +21,8 @@ from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError, VolumeError
 from kinfu_cli.core.grid import TernaryGrid, check_up, read_ternary
 from kinfu_cli.core.poses import check_rigid
-from kinfu_cli.core.volume_file import (FORMAT, FORMAT_VERSION, check_intrinsics, read_volume_file, read_volume_meta,
-                                        write_volume_file)
+from kinfu_cli.core.volume_file import (FORMAT, FORMAT_VERSION, MAX_COORDINATE_M, check_intrinsics, read_volume_file,
+                                        read_volume_meta, write_volume_file)
 from kinfu_cli.fusion import kernels as kn
 from kinfu_cli.fusion.color_mode import MAX_HYPOTHESES, MODE_THRESHOLD, check_color_mode, mode_winners
 from kinfu_cli.fusion.mesh import extract_mesh
@@ -30,6 +30,7 @@ from kinfu_cli.fusion.mesh import extract_mesh
 BYTES_PER_VOXEL = 3  # v int16 + w uint8
 BYTES_PER_VOXEL_COLOR = 3
 BYTES_PER_HYPOTHESIS = 4  # colour mode filter: uint8 RGB + uint8 count
+MIN_VOXEL_M = 1e-4  # a tenth of a millimetre: finer is no depth sensor's scale
 MAX_RANGE_M = 100.0  # bound of depths and truncation: farther is no depth sensor (and overflows float32 casts)
 
 
@@ -80,12 +81,13 @@ class TernaryVolume:
                  min_depth: float = 0.3, max_depth: float = 4.0, color: bool = True, color_mode: str = "mean",
                  _allocate: bool = True) -> None:
         size = _triple(size, "size")
+        voxel_size_given = voxel_size is not None
         if not all(np.isfinite(s) and s > 0 for s in size):
-            raise ConfigError(f"size: expected positive lengths in metres, got {size}")
+            raise ConfigError(f"expected positive lengths in metres, got {size}", parameter="size")
         if voxel_size is not None:
             voxel_size = float(voxel_size)
             if not (np.isfinite(voxel_size) and voxel_size > 0):
-                raise ConfigError(f"voxel_size: expected a positive length in metres, got {voxel_size}")
+                raise ConfigError(f"expected a positive length in metres, got {voxel_size}", parameter="voxel_size")
             dims = tuple(max(1, int(np.ceil(s / voxel_size - 1e-9))) for s in size)
         else:
             dims = _triple(resolution, "resolution", int)
@@ -95,6 +97,10 @@ class TernaryVolume:
                 raise ConfigError(f"size {size} and resolution {dims} give non-cubic voxels; give a voxel size "
                                   f"instead", parameter="voxel_size")
             voxel_size = size[0] / dims[0]
+        if not MIN_VOXEL_M <= voxel_size <= MAX_RANGE_M:  # 1e-300 overflowed the voxel counts and index casts
+            raise ConfigError(f"expected a voxel edge of {MIN_VOXEL_M * 1000:g} mm to {MAX_RANGE_M:g} m, got "
+                              f"{voxel_size:g} m",
+                              parameter="voxel_size" if voxel_size_given else "size/resolution")
         # finite and of a sensor's size: a 1e300 truncation or depth range overflows the kernels' casts
         check_number(truncation, "truncation", 0, MAX_RANGE_M, low_open=True, unit="m")
         check_number(max_weight, "max_weight", 1, 255, integer=True)
@@ -107,8 +113,9 @@ class TernaryVolume:
         if origin is None:
             origin = -0.5 * np.array(self.shape) * self.voxel_size
         self.origin = np.asarray(_triple(origin, "origin"), dtype=np.float64)
-        if not np.all(np.isfinite(self.origin)):
-            raise ConfigError(f"origin: expected finite x,y,z, got {tuple(self.origin)}")
+        if not np.all(np.isfinite(self.origin)) or np.any(np.abs(self.origin) > MAX_COORDINATE_M):
+            raise ConfigError(f"expected finite x,y,z within {MAX_COORDINATE_M:g} m, got "
+                              f"{tuple(float(v) for v in self.origin)}", parameter="origin")
         self.truncation = float(truncation)
         self.max_weight = int(max_weight)
         self.min_depth = float(min_depth)
@@ -512,7 +519,11 @@ def volume_intrinsics(path: str | os.PathLike) -> dict | None:
     None for files written before they were recorded."""
     meta = read_volume_meta(path)
     if meta is None:
-        return read_ternary(path).intrinsics
+        grid = read_ternary(path)
+        if grid is None:  # a readable .npz of something else (nbv read it as a ternary: AttributeError)
+            raise VolumeError(f"{path}: not a kinfu volume.npz or ternary.npz (neither a 'meta' nor a 'ternary' "
+                              f"array)")
+        return grid.intrinsics
     return check_intrinsics(meta.get("intrinsics"), path)
 
 

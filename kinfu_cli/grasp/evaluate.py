@@ -15,6 +15,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from kinfu_cli.core.checks import check_number
 from kinfu_cli.grasp.constraints import AXES, preset_cone
 from kinfu_cli.grasp.plan import GraspOptions, ObjectGrasp, grasp_object, plan_grasps
 from kinfu_cli.grasp.constraints import default_workspaces
@@ -171,6 +172,9 @@ def evaluate_grasping(options: GraspOptions | None = None, *, conditions=("none"
     """The whole `kinfu eval grasp` document."""
     options = options or GraspOptions()
     options.validate()
+    check_number(seed, "seed", 0, 2 ** 63 - 1, integer=True)  # numpy refuses negative seeds with a bare ValueError
+    for s in scenes or ():
+        check_number(s, "scenes", 0, 2 ** 63 - 1, integer=True)
     doc = {"generated": evaluate_generated(options, conditions, yaws, seed, progress),
            "scenes": evaluate_scenes(options, scenes, progress) if scenes else {"rows": [], "summary": {}},
            "hand": options.hand, "thesis": {"grasp_s_per_object": list(THESIS_GRASP_S), "target_s": 0.05,

@@ -33,6 +33,10 @@ from kinfu_cli.grasp.solve import PartGrasp, grasp_part
 from kinfu_cli.segmentation.superquadric import Superquadric
 
 
+# what a segments.json superquadric may hold (sizes and centre in m)
+MAX_SQ_SIZE, MAX_SQ_CENTER, MIN_SQ_EXPONENT, MAX_SQ_EXPONENT = 100.0, 1.0e4, 0.01, 4.0
+
+
 class GraspError(KinfuError):
     """segments.json cannot be read, or holds nothing to grasp."""
 
@@ -154,6 +158,12 @@ def superquadric_from_json(d: dict, where: str) -> Superquadric:
     sq = Superquadric.from_params(params)
     if np.any(sq.size <= 0) or np.any(sq.exponents <= 0):
         raise GraspError(f"{where}: superquadric sizes and exponents must be > 0")
+    # beyond these the solver's powers overflow (warnings, NaN poses): no segment of a scene is that large
+    if np.any(sq.size > MAX_SQ_SIZE) or np.any(np.abs(sq.center) > MAX_SQ_CENTER) or np.any(sq.exponents < MIN_SQ_EXPONENT) \
+            or np.any(sq.exponents > MAX_SQ_EXPONENT):
+        raise GraspError(f"{where}: superquadric sizes {sq.size.tolist()} m, exponents {sq.exponents.tolist()}, centre "
+                         f"{sq.center.tolist()} m out of range (expected sizes <= {MAX_SQ_SIZE:g} m, exponents "
+                         f"{MIN_SQ_EXPONENT:g}..{MAX_SQ_EXPONENT:g}, centre within {MAX_SQ_CENTER:g} m)")
     return sq
 
 
@@ -166,21 +176,33 @@ def read_segments(path: str | os.PathLike) -> dict:
         doc = json.loads(path.read_text())
     except FileNotFoundError:
         raise GraspError(f"{path}: no such file (expected a kinfu segment segments.json)") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+    except (OSError, ValueError, RecursionError) as exc:  # JSONDecodeError, UnicodeDecodeError, an integer of > 4300 digits
         raise GraspError(f"{path}: not a JSON file ({type(exc).__name__})") from None
     if not isinstance(doc, dict) or not isinstance(doc.get("segments"), list):
         raise GraspError(f"{path}: expected a kinfu segment segments.json with a 'segments' list")
     return doc
 
 
+def _segment_id(s: dict, i: int, source: str) -> int:
+    sid = s.get("id")
+    if isinstance(sid, bool) or not isinstance(sid, (int, float)) or sid != sid or int(sid) != sid:
+        raise GraspError(f"{source}: segments[{i}].id is {sid!r}, expected an integer")
+    return int(sid)
+
+
 def segment_parts(doc: dict, source: str) -> dict[int, list[Superquadric]]:
     """Object segment id -> its superquadric parts (the multi-superquadric parts when present)."""
     out = {}
-    for s in doc["segments"]:
+    for i, s in enumerate(doc["segments"]):
+        if not isinstance(s, dict):
+            raise GraspError(f"{source}: segments[{i}] is {type(s).__name__}, expected an object")
         if s.get("kind") != "object":
             continue
-        sid = int(s["id"])
-        multi = (s.get("multi_superquadric") or {}).get("parts") or []
+        sid = _segment_id(s, i, source)
+        multi = s.get("multi_superquadric") or {}
+        if not isinstance(multi, dict) or not isinstance(multi.get("parts") or [], list):
+            raise GraspError(f"{source}: segment {sid}: multi_superquadric is not an object with a 'parts' list")
+        multi = multi.get("parts") or []
         if multi:
             out[sid] = [superquadric_from_json(p, f"{source}: segment {sid} part {i}") for i, p in enumerate(multi)]
         elif s.get("superquadric"):
@@ -188,11 +210,16 @@ def segment_parts(doc: dict, source: str) -> dict[int, list[Superquadric]]:
     return out
 
 
-def _plane(doc: dict, source: str) -> np.ndarray | None:
+def support_plane(doc: dict, source: str) -> np.ndarray | None:
+    """segments.json's support plane (a, b, c, d) with a unit normal, None when absent; GraspError naming
+    `source` when it is not four finite numbers."""
     p = doc.get("support_plane")
     if p is None:
         return None
-    p = np.asarray(p, dtype=np.float64)
+    try:
+        p = np.asarray(p, dtype=np.float64)
+    except (TypeError, ValueError):
+        p = np.zeros(0)
     if p.shape != (4,) or not np.all(np.isfinite(p)) or np.linalg.norm(p[:3]) < 1e-9:
         raise GraspError(f"{source}: support_plane must be four finite numbers a, b, c, d")
     return p / np.linalg.norm(p[:3])
@@ -222,17 +249,17 @@ def grasp_object(sid: int, parts: list[Superquadric], plane: np.ndarray | None, 
                        cands, options.pregrasp_distance, options.poor_overlap, time.perf_counter() - t0, time.process_time() - c0)
 
 
-def plan_grasps(segments: str | os.PathLike | dict, options: GraspOptions | None = None, progress=None
-                ) -> GraspResult:
+def plan_grasps(segments: str | os.PathLike | dict, options: GraspOptions | None = None, progress=None,
+                source: str | None = None) -> GraspResult:
     """The `kinfu grasp` driver: read segments.json (a path or its parsed dict), check the options and the
     workspaces against the support plane, then grasp every object segment. `progress` wraps the segment
     list (a tqdm-like callable) when given."""
     t0 = time.perf_counter()
     options = options or GraspOptions()
     options.validate()
-    source = str(segments) if not isinstance(segments, dict) else "segments"
+    source = source or (str(segments) if not isinstance(segments, dict) else "segments")
     doc = read_segments(segments) if not isinstance(segments, dict) else segments
-    plane = _plane(doc, source)
+    plane = support_plane(doc, source)
     parts = segment_parts(doc, source)
     warnings = []
     if options.segment_ids is not None:
@@ -254,8 +281,11 @@ def plan_grasps(segments: str | os.PathLike | dict, options: GraspOptions | None
         workspaces.setdefault(h, auto[h])
         check_workspace(workspaces[h], plane, f"workspace_{h}")
     ids = list(parts)
-    objs = [grasp_object(sid, parts[sid], plane, workspaces, options)
-            for sid in (progress(ids) if progress is not None else ids)]
+    # extreme (valid) superquadrics overflow the inside-outside powers to inf: that candidate then fails its
+    # constraints and the object is reported without a grasp, so numpy's overflow warnings are only noise
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        objs = [grasp_object(sid, parts[sid], plane, workspaces, options)
+                for sid in (progress(ids) if progress is not None else ids)]
     for o in objs:
         if plane is not None and any(q.center @ plane[:3] + plane[3] < 0 for q in o.parts):
             warnings.append(f"segment {o.segment}: its superquadric's centre is below the support plane (a poor "

@@ -57,6 +57,9 @@ def _c_stderr_silenced() -> Iterator[None]:
         os.close(saved)
 
 
+c_stderr_silenced = _c_stderr_silenced  # for other C readers (open3d's RPly prints "RPly: ..." lines itself)
+
+
 def imdecode_quiet(data: np.ndarray | bytes, flags: int) -> np.ndarray | None:
     """cv2.imdecode of encoded image bytes (None when they do not decode), without the codec libraries'
     messages on stderr."""

@@ -69,6 +69,7 @@ def evaluate_localization(names=tuple(shapes.SIMULATION_SHAPES), *, trials: int 
     localised by every method in `methods`; per-trial rows, per-shape summaries and the thesis' numbers."""
     check_number(trials, "trials", 1, integer=True)
     check_number(noise, "noise", 0, unit="m")
+    check_number(seed, "seed", 0, 2 ** 63 - 1, integer=True)  # numpy refuses negative seeds with a bare ValueError
     unknown = [n for n in names if n not in shapes.SIMULATION_SHAPES]
     if unknown:
         raise ConfigError(f"unknown shape(s) {', '.join(unknown)} (expected {', '.join(shapes.SIMULATION_SHAPES)})",
@@ -123,6 +124,7 @@ def evaluate_recognition(*, trials: int = 1, n_points: int = 170, noise: float =
     points at a Table 4.2-style pose; MUPF on every model (m = L/2), the lowest I_L names the object."""
     check_number(trials, "recognition_trials", 0, integer=True)
     check_number(n_points, "recognition_points", 3, integer=True)
+    check_number(seed, "seed", 0, 2 ** 63 - 1, integer=True)
     models = list(shapes.recognition_shapes())
     for m in models:
         m.build_field()

@@ -74,6 +74,8 @@ def localize_points(models: list[MeshModel], points: np.ndarray, params: MupfPar
         raise ConfigError("expected at least one model", parameter="models")
     pts = check_points(points)
     check_number(max_points, "max_points", 0, integer=True)
+    if seed is not None:
+        check_number(seed, "seed", 0, 2 ** 63 - 1, integer=True)  # numpy refuses negative seeds with a bare ValueError
     thinned = 0 < max_points < len(pts)
     n_given = len(pts)
     if thinned:

@@ -16,6 +16,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from kinfu_cli.core.errors import KinfuError
+from kinfu_cli.io.messages import c_stderr_silenced
 from kinfu_cli.localization.distance_field import sample_field
 
 EULER = "ZYX"
@@ -185,7 +186,8 @@ def read_mesh(path: str | os.PathLike) -> MeshModel:
     level = o3d.utility.get_verbosity_level()
     o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)  # no reader chatter on stderr
     try:
-        mesh = o3d.io.read_triangle_mesh(str(path), print_progress=False)
+        with c_stderr_silenced():  # RPly writes its own lines on a damaged PLY
+            mesh = o3d.io.read_triangle_mesh(str(path), print_progress=False)
     finally:
         o3d.utility.set_verbosity_level(level)
     mesh.remove_duplicated_vertices()

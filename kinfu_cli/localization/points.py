@@ -46,8 +46,8 @@ def read_segment_points(segments_json: str | os.PathLike, segment: int) -> np.nd
         segs = {int(s["id"]): s for s in doc["segments"] if s.get("kind") == "object"}
     except FileNotFoundError:
         raise LocalizationError(f"{meta}: no such segments file") from None
-    except (OSError, ValueError, KeyError, TypeError):
-        raise LocalizationError(f"{meta}: not a kinfu segment segments.json") from None
+    except (OSError, ValueError, KeyError, TypeError, AttributeError, RecursionError):  # a segment not an object,
+        raise LocalizationError(f"{meta}: not a kinfu segment segments.json") from None  # JSON nested too deep
     if segment not in segs:
         raise LocalizationError(f"{meta}: no object segment with id {segment} (ids: "
                                 f"{', '.join(map(str, sorted(segs))) or 'none'})", parameter="segment")

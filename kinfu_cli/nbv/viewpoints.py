@@ -112,7 +112,7 @@ def read_candidates(path: str | os.PathLike) -> np.ndarray:
         doc = json.loads(path.read_text())
     except FileNotFoundError:
         raise ConfigError(f"{path}: no such candidate file") from None
-    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
+    except (OSError, ValueError) as exc:  # JSONDecodeError, UnicodeDecodeError, an integer of > 4300 digits
         raise ConfigError(f"{path}: not a JSON candidate file ({exc}); expected a list of 4x4 poses") from None
     except RecursionError:
         raise ConfigError(f"{path}: JSON nested too deeply to read; expected a list of 4x4 poses") from None

@@ -36,6 +36,7 @@ from kinfu_cli.core.progress import progress
 from kinfu_cli.io.polhemus import read_polhemus
 from kinfu_cli.io.trajectory import Trajectory
 from kinfu_cli.io.writers import RecordingWriter
+from kinfu_cli.io.messages import c_stderr_silenced
 from kinfu_cli.sim.hand import Action, HandChange, synth_hand_trajectory, write_polhemus
 from kinfu_cli.sim.robot import CAMERA_FRAME, LINKS, WORLD_FRAME, RobotArm
 from kinfu_cli.io.labelled_cloud import write_labelled_cloud
@@ -464,7 +465,7 @@ class GroundTruth:
 
     @property
     def objects(self) -> list[dict]:
-        return self.info["objects"]
+        return self.info.get("objects", [])
 
     @property
     def change_positions(self) -> np.ndarray:
@@ -499,13 +500,8 @@ def load_ground_truth(folder: str | os.PathLike) -> GroundTruth:
         raise RecordingError(f"{folder}: no changes.json (expected a `kinfu synth` ground_truth folder)")
     try:
         info = json.loads(path.read_text())
-        cam = info["camera"]
-        K = np.asarray(cam["K"], dtype=float).reshape(3, 3)
-        width, height = int(cam["width"]), int(cam["height"])
-        for c in info["changes"]:
-            if np.asarray(c["position"], dtype=float).shape != (3,):
-                raise ValueError("a change position is not [x, y, z]")
-    except (ValueError, KeyError, TypeError, RecursionError) as exc:
+        K, width, height = _check_info(info)
+    except (ValueError, KeyError, TypeError, AttributeError, RecursionError) as exc:
         raise RecordingError(f"{path}: not a kinfu synth changes.json ({exc})") from None
     poses_path = folder / "camera_poses.txt"
     if not poses_path.exists():
@@ -521,16 +517,53 @@ def load_ground_truth(folder: str | os.PathLike) -> GroundTruth:
             T = np.array([float(v) for v in parts[1:]]).reshape(4, 4)
         except ValueError:
             raise RecordingError(f"{poses_path}: line {lineno} is not 'stamp_s' and 16 numbers") from None
+        if not np.all(np.isfinite(T)):
+            raise RecordingError(f"{poses_path}: line {lineno} has a pose that is not finite")
         stamps.append(stamp)
         poses.append(T)
     return GroundTruth(folder, info, K, width, height, np.array(stamps, dtype=np.int64),
                        np.array(poses, dtype=float).reshape(-1, 4, 4))
 
 
+def _check_info(info: object) -> tuple[np.ndarray, int, int]:
+    """K, width, height of a changes.json document; ValueError / KeyError / TypeError when it or the parts the
+    evaluations read (changes, objects, table) are not what `kinfu synth` writes (a K of zeros gave numpy
+    warnings and NaN scores, a string for "objects" an AttributeError)."""
+    if not isinstance(info, dict):
+        raise ValueError("not a JSON object")
+    cam = info["camera"]
+    K = np.asarray(cam["K"], dtype=float).reshape(3, 3)
+    width, height = cam["width"], cam["height"]
+    if not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
+        raise ValueError(f"camera K {K.reshape(-1).tolist()} has no positive finite focal lengths")
+    if any(isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= 16384 for v in (width, height)):
+        raise ValueError(f"camera image size {width!r} x {height!r} is not 1..16384 pixels")
+    for c in info["changes"]:
+        pos = np.asarray(c["position"], dtype=float)
+        if pos.shape != (3,) or not np.all(np.isfinite(pos)):
+            raise ValueError("a change position is not [x, y, z] (three finite numbers)")
+    objects = info.get("objects", [])
+    if not isinstance(objects, list) or not all(isinstance(o, dict) and "id" in o for o in objects):
+        raise ValueError("'objects' is not a list of objects with an 'id'")
+    table = info.get("table", {})
+    if not isinstance(table, dict) or not isinstance(info.get("frames", {}), dict):
+        raise ValueError("'table' or 'frames' is not an object")
+    for key, n in (("center", 2), ("size", 2), ("top_z", 1)):
+        try:
+            ok = key not in table or np.asarray(table[key], dtype=float).reshape(-1).shape == (n,)
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            raise ValueError(f"table {key} is {table[key]!r}, expected {n} number(s)")
+    return K, width, height
+
+
 def _read_mesh(path: Path) -> o3d.geometry.TriangleMesh:
     if not path.exists():
         raise RecordingError(f"{path}: missing ground-truth mesh")
-    mesh = o3d.io.read_triangle_mesh(str(path))
+    # no reader chatter (open3d warnings, RPly's own lines on a damaged PLY): we report problems
+    with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error), c_stderr_silenced():
+        mesh = o3d.io.read_triangle_mesh(str(path))
     if len(mesh.triangles) == 0:
         raise RecordingError(f"{path}: not a triangle mesh (no triangles)")
     return mesh

@@ -12,6 +12,8 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
+from kinfu_cli.core.atomic import atomic_dir
+from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.sim.room import WORLDS, RoomScenario, make_room, write_room_ground_truth, write_room_recordings
 from kinfu_cli.sim.scenario import (Scenario, check_camera_pose_topic, make_scenario, recording_topics,
@@ -65,6 +67,7 @@ def synthesize(out: str | os.PathLike, seed: int = 0, width: int = 320, height: 
     for name, rate in (("hand_rate", hand_rate), ("frame_rate", frame_rate)):
         if not rate > 0:
             raise ConfigError(f"expected a positive rate in Hz, got {rate}", parameter=name)
+    check_number(seed, "seed", 0, 2 ** 63 - 1, integer=True)  # numpy refuses negative seeds with a bare ValueError
     if not 1 <= jpeg_quality <= 100:
         raise ConfigError(f"expected 1..100, got {jpeg_quality}", parameter="jpeg_quality")
     check_camera_pose_topic(camera_pose_topic, depth_format, color_format)
@@ -72,6 +75,24 @@ def synthesize(out: str | os.PathLike, seed: int = 0, width: int = 320, height: 
         raise ConfigError(f"expected one of {', '.join(SCENES)}, got {scene!r}", parameter="scene")
     if world not in WORLDS:
         raise ConfigError(f"expected one of {', '.join(WORLDS)}, got {world!r}", parameter="world")
+    if scene != "room" and world != "z-up":
+        raise ConfigError(f"the tabletop scene is z-up only, got {world!r}; the room scene takes either world",
+                          parameter="world")
+    # one transaction: a failed or interrupted run leaves no folder (nor an empty one that blocks the rerun), and
+    # a rerun replaces the whole earlier result instead of mixing old and new files
+    with atomic_dir(out) as tmp:
+        result = _write(tmp, seed=seed, width=width, height=height, frames=frames, formats=formats,
+                        scenario=scenario, n_objects=n_objects, hand_rate=hand_rate, frame_rate=frame_rate,
+                        noise=noise, depth_format=depth_format, color_format=color_format, jpeg_quality=jpeg_quality,
+                        quiet=quiet, camera_pose_topic=camera_pose_topic, scene=scene, world=world)
+    result.recordings = [out / p.name for p in result.recordings]
+    result.ground_truth = out / result.ground_truth.name
+    return result
+
+
+def _write(out: Path, *, seed, width, height, frames, formats, scenario, n_objects, hand_rate, frame_rate, noise,
+           depth_format, color_format, jpeg_quality, quiet, camera_pose_topic, scene, world) -> SynthResult:
+    """synthesize's writing, into the folder `out` (its temporary folder)."""
     if scene == "room":
         room = make_room(seed=seed, world=world, width=width, height=height, frames=frames, noise=noise,
                          frame_rate_hz=frame_rate)
@@ -85,9 +106,6 @@ def synthesize(out: str | os.PathLike, seed: int = 0, width: int = 320, height: 
         for p in paths + [gt]:
             _relax_permissions(p)
         return SynthResult(paths, gt, room, camera_pose_topic)
-    if world != "z-up":
-        raise ConfigError(f"the tabletop scene is z-up only, got {world!r}; the room scene takes either world",
-                          parameter="world")
     sc = make_scenario(seed=seed, kind=scenario, width=width, height=height, frames=frames, n_objects=n_objects,
                        noise=noise, hand_rate_hz=hand_rate, frame_rate_hz=frame_rate,
                        layout="objects" if scene == "objects" else "tabletop")
