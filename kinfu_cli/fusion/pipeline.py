@@ -158,6 +158,7 @@ class _PosePlan:
     source: str  # iter_frames pose_source: tf, topic or none
     description: str
     world: str  # frame of the camera poses ("" when not known)
+    warning: str = ""  # why TF poses were not taken though the recording has TF
 
 
 def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = "auto",
@@ -224,7 +225,7 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
         if vol is not None and vol.frame and plan.world and vol.frame != plan.world:
             raise RecordingError(f"{init}: the volume was fused in frame {vol.frame!r}, but {rec.path} gives "
                                  f"camera poses in {plan.world!r}", parameter="init")
-        warnings = rec.problems + poi_frame_warnings(clear_pois, plan.world or (vol.frame if vol is not None
+        warnings = rec.problems + ([plan.warning] if plan.warning else []) + poi_frame_warnings(clear_pois, plan.world or (vol.frame if vol is not None
                                                                                else ""), names["clear_pois"])
         sizing, notes = {"mode": "init" if init else "given"}, []
         if auto and vol is None:
@@ -496,7 +497,12 @@ def _pose_plan(rec: Recording, tf: TfBuffer, roles: Roles, pose: str | None, pos
         source, description = "tf", f"tf {world_frame} <- {camera_frame}"
         if mode == "icp":
             description += " (first frame only)"
-    return _PosePlan(mode, source, description, _world_frame(rec, source, roles, pose_topic))
+    warning = ""
+    if pose is None and not has_tf and tf.frames():  # TF there, but not to the camera: say so, ICP may drift
+        warning = (f"{rec.path}: the TF tree ({len(tf.frames())} frames) does not link camera frame "
+                   f"{camera_frame or '?'} to {world_frame or 'a world frame'}: camera poses come from ICP "
+                   f"tracking instead (name the frames, or pose mode 'forced' to make a missing link an error)")
+    return _PosePlan(mode, source, description, _world_frame(rec, source, roles, pose_topic), warning)
 
 
 def _world_frame(rec: Recording, source: str, roles: Roles, pose_topic: str | None) -> str:
