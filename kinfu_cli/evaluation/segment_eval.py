@@ -282,10 +282,15 @@ def _sweep_options(parameter: str, values: list[float], method: str, color: bool
     base = SegmentOptions(superquadrics=False, color=color)
     out = []
     for v in values:
+        if not np.isfinite(v):
+            raise ConfigError(f"expected finite values of {parameter}, got {v}", parameter="sweep_values")
         seg = replace(base.segmentation, **{parameter: int(round(v)) if as_int else v}, method=method,
                       up=(0.0, 0.0, 1.0), color_distance=color_distance)
         opts = replace(base, segmentation=seg)
-        opts.validate()
+        try:
+            opts.validate()
+        except ConfigError as exc:  # the value is the sweep's, not an option the user set
+            raise ConfigError(f"{v} as {parameter}: {exc.detail}", parameter="sweep_values") from None
         out.append(opts)
     return out
 

@@ -237,11 +237,14 @@ def test_cli_sweep_over_t_ff_with_mean_and_mode(tmp_path):
 
 @pytest.mark.parametrize("args, flag", [(["--color", "mean,best"], "--color"), (["--scene", "kitchen"], "--scene"),
                                         (["--sweep-parameter", "method"], "--sweep-parameter"),
-                                        (["--sweep-parameter", "t_lccp", "--sweep-values", "3"], "t_lccp")])
+                                        (["--sweep-parameter", "t_lccp", "--sweep-values", "3"], "t_lccp"),
+                                        (["--sweep-values", "nan"], "--sweep-values"),
+                                        (["--sweep-values", "200"], "--sweep-values")])
 def test_bad_sweep_options_are_one_line_errors(tmp_path, args, flag):
     r = CliRunner().invoke(cli, ["eval", "segment", "--sweep", "--resolution", "32", "--scenes", "0",
                                  "-o", str(tmp_path / "s.json"), *args])
     one_line_error(r, flag)
+    assert "--concavity-tolerance" not in r.output  # the sweep's values, not an option the user set
     assert not (tmp_path / "s.json").exists()
 
 
