@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import click
+from click.core import ParameterSource
 import numpy as np
 
 from kinfu_cli.commands._options import claim_outputs, force_option
@@ -96,6 +97,10 @@ def command(segments: Path, output: Path, hand, segment_ids, cones, cone_apertur
     hand_model = HandModel(_numbers(hand_size, 3, "hand_size"), n_points, palm_width, thumb_length, finger_length)
     workspaces = {h: w for h, w in (("right", _workspace(workspace_right, "workspace_right")),
                                     ("left", _workspace(workspace_left, "workspace_left"))) if w is not None}
+    aperture_given = click.get_current_context().get_parameter_source("cone_aperture") != ParameterSource.DEFAULT
+    if aperture_given and not any(str(c).strip().lower() in ("top", "side") for c in cones):
+        raise ConfigError("sets the aperture of the 'top' / 'side' presets: give --cone top or --cone side "
+                          "(an 'AXIS:dx,dy,dz:deg' cone carries its own)", parameter="cone_aperture")
     opts = GraspOptions(hand=hand, hand_model=hand_model, cones=[parse_cone(c, up, cone_aperture) for c in cones],
                         workspaces=workspaces or None, lifting=not no_lifting, pregrasp_distance=pregrasp_distance,
                         reach_weight=reach_weight, obstacle_weight=obstacle_weight, n_starts=n_starts,

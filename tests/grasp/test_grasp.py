@@ -177,6 +177,11 @@ def test_cli_grasps_a_segmented_box_scene(tmp_path):
     lines = [ln for ln in bad.output.splitlines() if ln.strip()]
     assert len(lines) == 1 and lines[0].startswith("kinfu: error:") and "--cone" in lines[0]
     assert not (tmp_path / "b.json").exists()
+    # --cone-aperture sets the presets' aperture: without --cone top / side it would be ignored
+    bad = CliRunner().invoke(cli, ["grasp", str(seg), "-o", str(tmp_path / "c.json"), "--cone-aperture", "20"])
+    lines = [ln for ln in bad.output.splitlines() if ln.strip()]
+    assert bad.exit_code == 2 and len(lines) == 1 and lines[0].startswith("kinfu: error: --cone-aperture")
+    assert not (tmp_path / "c.json").exists()
 
 
 def test_bad_segments_file_is_one_line_error(tmp_path):
