@@ -28,6 +28,7 @@ from kinfu_cli.core.errors import ConfigError, RecordingError, VolumeError
 from kinfu_cli.core.grid import TernaryGrid, check_up
 from kinfu_cli.core.pois import poi_frame_warnings, read_pois
 from kinfu_cli.core.progress import progress
+from kinfu_cli.core.volume_file import MAX_COORDINATE_M
 from kinfu_cli.fusion import filters
 from kinfu_cli.fusion.color_mode import check_color_mode
 from kinfu_cli.fusion.extent import SURVEY_FRAMES, AutoGrid, auto_grid, budget_bytes, face_contacts, survey
@@ -466,8 +467,9 @@ def _spheres(clear_spheres: Iterable[tuple], clear_pois: str | os.PathLike | Non
     out = []
     for s in clear_spheres:
         s = tuple(float(v) for v in s)
-        if len(s) != 4 or not all(np.isfinite(s)) or s[3] <= 0:
-            raise ConfigError(f"expected x,y,z,r with r > 0, got {s}", parameter="clear_spheres")
+        if len(s) != 4 or not all(np.isfinite(s)) or s[3] <= 0 or max(abs(v) for v in s) > MAX_COORDINATE_M:
+            raise ConfigError(f"expected x,y,z,r with r > 0, all within {MAX_COORDINATE_M:g} m, got {s}",
+                              parameter="clear_spheres")
         out.append({"center": list(s[:3]), "radius": s[3], "source": spheres_name})
     if clear_pois:
         for p in read_pois(clear_pois):

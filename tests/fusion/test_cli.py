@@ -86,6 +86,7 @@ def test_continue_clear_and_json(fused, sample_dir, tmp_path):
     (["--pose", "topic"], "--pose-topic"),
     (["--voxel-size", "0.0005", "--size", "20"], "would need up to"),
     (["--clear-sphere", "1,2,3"], "--clear-sphere"),
+    (["--clear-sphere", "0,0,0,1e300"], "--clear-sphere"),
     (["--voxel-size", "0.01", "--resolution", "64"], "not both"),
     (["--init", "/nonexistent/volume.npz"], "no such volume"),
     (["--every", "0"], "--every"),
