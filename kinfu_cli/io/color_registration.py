@@ -87,7 +87,8 @@ def register_color(reg: ColorRegistration, depth: np.ndarray, K_depth: np.ndarra
     ch, cw = color.shape[:2]
     if reg.mode != "project":
         return color, None
-    if (cw, ch) != reg.color_size:
+    sx, sy = cw / reg.color_size[0], ch / reg.color_size[1]
+    if abs(sx - sy) > 0.01 * max(sx, sy):  # a resized image (image_proc's resize) keeps its aspect ratio
         raise RecordingError(f"{where}: colour image is {cw}x{ch} but camera info {reg.info_topic} says "
                              f"{reg.color_size[0]}x{reg.color_size[1]}")
     from kinfu_cli.io.color_kernels import colour_camera_points, pinhole_pixels, zbuffer_gather
@@ -101,4 +102,6 @@ def register_color(reg: ColorRegistration, depth: np.ndarray, K_depth: np.ndarra
         uv[front] = reg.lens.project(pc[front])
     else:
         uv = pinhole_pixels(pc, np.asarray(reg.K_color, np.float64))
+    if (cw, ch) != reg.color_size:  # the same camera's image at another size: its pixels scale
+        uv = np.where(uv >= 0, uv * (sx, sy), -1.0)
     return zbuffer_gather(pc, uv, np.ascontiguousarray(color[:, :, :3]), OCCLUSION_MARGIN, h, w)

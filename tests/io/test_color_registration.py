@@ -104,3 +104,25 @@ def test_without_the_colour_camera_info_colour_is_left_out_and_said(two_cameras,
     report = json.loads((out / "report.json").read_text())
     assert report["frames"]["color_registration"]["mode"] == "none"
     assert any("fused without colour" in w for w in report["warnings"]), report["warnings"]
+
+
+def test_a_resized_colour_image_is_scaled_into(two_cameras):
+    """image_proc's resize: the colour images at half the size of their camera info."""
+    import cv2
+
+    from kinfu_cli.io.color_registration import ColorRegistration, register_color
+
+    path, truth = two_cameras
+    depth, own = truth[0]
+    with open_recording(path) as rec:
+        msg = next(m for t, _, m in rec.messages(["/camera/color/image_raw"]))
+    full = np.frombuffer(bytes(msg.data), np.uint8).reshape(HC, WC, 3)
+    half = cv2.resize(full, (WC // 2, HC // 2), interpolation=cv2.INTER_AREA)
+    reg = ColorRegistration("project", "d", "c", "/camera/color/camera_info", K_COLOR, (WC, HC),
+                            np.linalg.inv(T_DEPTH_COLOR))
+    K_depth = kinect_v1_intrinsics(WD, HD)
+    col, mask = register_color(reg, depth, K_depth, half, "/c")
+    err = np.abs(col.astype(int) - own.astype(int)).max(axis=2)[mask]
+    assert mask[depth > 0].mean() > 0.85 and np.mean(err > 30) < 0.05  # (0.90 and 0.031 measured)
+    with pytest.raises(Exception, match="colour image is 100x40"):
+        register_color(reg, depth, K_depth, np.zeros((40, 100, 3), np.uint8), "/c")
