@@ -316,12 +316,14 @@ def _check_arguments(pose: str | None, pose_topic: str | None, every: int, max_l
 
 
 def _color_warnings(stats: FrameStats, recording: str) -> list[str]:
-    """Why a run with a colour topic fused no colour (io.color_registration could not place it), or []."""
+    """What reading the frames assumed (stats.notes), and why a run with a colour topic fused no colour
+    (io.color_registration could not place it)."""
+    out = [f"{recording}: {n}" for n in stats.notes]
     reg = stats.color_registration
-    if not reg or reg["mode"] != "none":
-        return []
-    return [f"{recording}: fused without colour: {reg['reason']}, so the colour images cannot be placed on the "
-            f"depth (resizing them would paint each surface with its neighbour's)"]
+    if reg and reg["mode"] == "none":
+        out.append(f"{recording}: fused without colour: {reg['reason']}, so the colour images cannot be placed on "
+                   f"the depth (resizing them would paint each surface with its neighbour's)")
+    return out
 
 
 def _dropped(stats: FrameStats, depth_filter: DepthFilter, integrator: "_Integrator") -> dict[str, int]:

@@ -55,6 +55,7 @@ class FrameStats:
     without_color: int = 0
     dropped: dict[str, int] = field(default_factory=dict)
     color_registration: dict | None = None  # ColorRegistration.as_dict() when there is a colour topic
+    notes: list[str] = field(default_factory=list)  # what was assumed to read the frames (a warning each)
 
     def drop(self, reason: str) -> None:
         self.dropped[reason] = self.dropped.get(reason, 0) + 1
@@ -67,7 +68,8 @@ class FrameStats:
         return {"depth_messages": self.depth_messages, "used": self.used, "skipped": self.skipped,
                 "without_color": self.without_color, "dropped": dict(self.dropped),
                 "dropped_total": self.dropped_total,
-                **({"color_registration": self.color_registration} if self.color_registration else {})}
+                **({"color_registration": self.color_registration} if self.color_registration else {}),
+                **({"notes": list(self.notes)} if self.notes else {})}
 
 
 def _stamp(msg: object, log_ns: int) -> int:
@@ -350,10 +352,9 @@ class _FramePairer:
         no colour while colour is required."""
         depth = decode_depth(msg, f"{self.rec.path}: {self.depth_topic}")
         h, w = depth.shape
+        K = self.K
         if self.width and self.height and (w, h) != (self.width, self.height):
-            said = f"camera info {self.info_topic}" if self.info_topic else "the first depth image"
-            raise RecordingError(f"{self.rec.path}: depth image on {self.depth_topic} is {w}x{h} but {said} "
-                                 f"says {self.width}x{self.height}")
+            K = self._scaled_K(w, h)
         depth = self.lens.image(depth)
         T = None
         if self.pose_fn is not None:
@@ -379,8 +380,25 @@ class _FramePairer:
                 return None
             self.stats.without_color += 1
         self.stats.used += 1
-        return RGBDFrame(index=index, stamp_ns=stamp, depth=depth, color=color, K=self.K.copy(), T_world_camera=T,
+        return RGBDFrame(index=index, stamp_ns=stamp, depth=depth, color=color, K=K.copy(), T_world_camera=T,
                          color_mask=color_mask)
+
+    def _scaled_K(self, w: int, h: int) -> np.ndarray:
+        """K for depth images of w x h whose camera info is for another size with the same aspect ratio (a
+        decimation filter, image_proc's resize), said once in stats.notes; RecordingError otherwise."""
+        sx, sy = w / self.width, h / self.height
+        said = f"camera info {self.info_topic}" if self.info_topic else "the first depth image"
+        if abs(sx - sy) > 0.01 * max(sx, sy) or not self.info_topic or self.lens:
+            raise RecordingError(f"{self.rec.path}: depth image on {self.depth_topic} is {w}x{h} but {said} "
+                                 f"says {self.width}x{self.height}")
+        K = self.K.copy()
+        K[0, 0], K[1, 1] = K[0, 0] * sx, K[1, 1] * sy
+        K[0, 2], K[1, 2] = (K[0, 2] + 0.5) * sx - 0.5, (K[1, 2] + 0.5) * sy - 0.5  # pixel centres
+        note = (f"depth images on {self.depth_topic} are {w}x{h} but {said} says {self.width}x{self.height}: "
+                f"its intrinsics were scaled by {sx:.4g}")
+        if note not in self.stats.notes:
+            self.stats.notes.append(note)
+        return K
 
     def _prune(self, before: int) -> None:
         """Forget colour images too old for any depth frame from `before` on."""
