@@ -371,7 +371,7 @@ class _FramePairer:
                 where = f"{self.rec.path}: {self.color_topic}"
                 color = decode_color(best, where)
                 if self.registration is not None and self.registration.mode == "project":
-                    color, color_mask = register_color(self.registration, depth, self.K, color, where)
+                    color, color_mask = register_color(self.registration, depth, K, color, where)
                 else:  # the depth camera's own pixels: its lens too
                     color = self.lens.image(color, size_of_K=(w, h))
         if color is None:
