@@ -48,14 +48,30 @@ def preset_intrinsics(name: str, width: int | None = None, height: int | None = 
                              (height - 1) / 2.0)
 
 
-def scaled_intrinsics(K: np.ndarray, factor: float) -> np.ndarray:
-    """Intrinsics of the image resized by `factor` (pixel centres preserved)."""
+def scaled_intrinsics(K: np.ndarray, factor: float | tuple[float, float]) -> np.ndarray:
+    """Intrinsics of the image resized by `factor` (or (x factor, y factor)), pixel centres preserved."""
+    fx_, fy_ = (factor, factor) if np.isscalar(factor) else factor
     Ks = np.asarray(K, dtype=np.float64).copy()
-    Ks[0, 0] *= factor
-    Ks[1, 1] *= factor
-    Ks[0, 2] = (Ks[0, 2] + 0.5) * factor - 0.5
-    Ks[1, 2] = (Ks[1, 2] + 0.5) * factor - 0.5
+    Ks[0, 0] *= fx_
+    Ks[1, 1] *= fy_
+    Ks[0, 2] = (Ks[0, 2] + 0.5) * fx_ - 0.5
+    Ks[1, 2] = (Ks[1, 2] + 0.5) * fy_ - 0.5
     return Ks
+
+
+def parse_intrinsics(value) -> tuple[float, float, float, float] | None:
+    """'fx,fy,cx,cy' (or 4 numbers) -> tuple, None for None; ConfigError naming the intrinsics parameter for
+    anything but finite numbers with positive focal lengths."""
+    if value is None:
+        return None
+    try:
+        vals = tuple(float(v) for v in (value.split(",") if isinstance(value, str) else value))
+    except (TypeError, ValueError):
+        vals = ()
+    if len(vals) != 4 or not all(np.isfinite(vals)) or vals[0] <= 0 or vals[1] <= 0:
+        raise ConfigError(f"expected fx,fy,cx,cy (finite numbers, positive focal lengths), got {value!r}",
+                          parameter="intrinsics")
+    return vals  # type: ignore[return-value]
 
 
 @dataclass(frozen=True)

@@ -256,7 +256,7 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
             dropped = {**stats.dropped, **depth_filter.drops}
             why = "; ".join(f"{k}: {v}" for k, v in dropped.items()) or "no depth frames in the selection"
             raise RecordingError(f"{rec.path}: no usable depth frames ({why})")
-        warnings += (_color_warnings(stats, str(rec.path)) + _tracking_verdict(integrator, max_lost, str(rec.path))
+        warnings += (_frame_warnings(stats, str(rec.path)) + _tracking_verdict(integrator, max_lost, str(rec.path))
                      + _tracking_doubts(integrator.track_log))
         vol = integrator.volume
         vol.frame = vol.frame or plan.world
@@ -315,7 +315,7 @@ def _check_arguments(pose: str | None, pose_topic: str | None, every: int, max_l
         raise ConfigError(f"expected metres or 'auto', got {size!r}", parameter="size")
 
 
-def _color_warnings(stats: FrameStats, recording: str) -> list[str]:
+def _frame_warnings(stats: FrameStats, recording: str) -> list[str]:
     """What reading the frames assumed (stats.notes), and why a run with a colour topic fused no colour
     (io.color_registration could not place it)."""
     out = [f"{recording}: {n}" for n in stats.notes]
@@ -368,12 +368,12 @@ def _auto_grid(rec: Recording, roles: Roles, plan: _PosePlan, grid_spec: _GridSp
     without poses (icp with no TF) the first frame at the identity, its box grown by ICP_GROW."""
     count = rec.topics[roles.depth_topic].count if roles.depth_topic in rec.topics else 0
     step = max(1, -(-count // (selection["every"] * SURVEY_FRAMES)))
-    read = []  # frames iter_frames gave, with a pose or not
+    read = [0]  # frames iter_frames gave, with a pose or not
 
     def frames_read():
         for f in iter_frames(rec, replace(roles, color_topic=None), pose_source=plan.source,
                              **{**selection, "every": selection["every"] * step}):
-            read.append(f.T_world_camera is not None)
+            read[0] += 1
             yield f
     frames = frames_read()
     lo, hi = grid_spec.min_depth, grid_spec.max_depth
@@ -387,7 +387,7 @@ def _auto_grid(rec: Recording, roles: Roles, plan: _PosePlan, grid_spec: _GridSp
         grow = 0.0
     seen = survey(views, lo, hi)
     if seen.frames == 0:  # not "no valid depth": there was no frame to look at, or none had a pose
-        if not read:
+        if not read[0]:
             raise RecordingError(f"{rec.path}: no usable depth frames (no depth frames in the selection)")
         raise RecordingError(f"{rec.path}: no selected depth frame has a camera pose in {plan.world or 'the world'}"
                              f" frame, so the grid cannot be sized around them")

@@ -103,5 +103,5 @@ def register_color(reg: ColorRegistration, depth: np.ndarray, K_depth: np.ndarra
     else:
         uv = pinhole_pixels(pc, np.asarray(reg.K_color, np.float64))
     if (cw, ch) != reg.color_size:  # the same camera's image at another size: its pixels scale
-        uv = np.where(uv >= 0, uv * (sx, sy), -1.0)
+        uv = np.where(uv >= 0, (uv + 0.5) * (sx, sy) - 0.5, -1.0)  # pixel centres kept (core.camera)
     return zbuffer_gather(pc, uv, np.ascontiguousarray(color[:, :, :3]), OCCLUSION_MARGIN, h, w)

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from kinfu_cli.core.camera import intrinsics_matrix, scaled_intrinsics
 from kinfu_cli.core.errors import ConfigError, RecordingError, TransformError
 from kinfu_cli.io.color_registration import ColorRegistration, color_registration, register_color
 from kinfu_cli.io.messages import (POSE_TYPES, camera_info_distortion, camera_info_K, decode_color, decode_depth,
@@ -174,11 +175,10 @@ def _depth_camera(rec, roles: Roles, depth_topic: str) -> tuple[np.ndarray, int,
     """(K, width, height, lens) of the depth camera: its first camera info, or the given intrinsics (the size of
     the first depth image; no distortion)."""
     if roles.intrinsics is not None:
-        fx, fy, cx, cy = roles.intrinsics
-        K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+        K = intrinsics_matrix(*roles.intrinsics)
         first = rec.first_message(depth_topic)
         h, w = decode_depth(first, f"{rec.path}: {depth_topic}").shape if first is not None else (0, 0)
-        return K, w, h, Undistorter(K, "", np.zeros(0))
+        return K, w, h, Undistorter.pinhole(K)
     first_info = rec.first_message(roles.info_topic)
     if first_info is None:
         count = rec.topics[roles.info_topic].count
@@ -292,7 +292,7 @@ class _FramePairer:
         self.rec = rec
         self.registration = registration
         # the depth camera's distortion: the first camera info's, then each one's
-        self.lens = lens if lens is not None else Undistorter(K, "", np.zeros(0))
+        self.lens = lens if lens is not None else Undistorter.pinhole(K)
         self.depth_topic = depth_topic
         self.info_topic = roles.info_topic
         self.color_topic = roles.color_topic
@@ -373,7 +373,7 @@ class _FramePairer:
                 if self.registration is not None and self.registration.mode == "project":
                     color, color_mask = register_color(self.registration, depth, K, color, where)
                 else:  # the depth camera's own pixels: its lens too
-                    color = self.lens.image(color, size_of_K=(w, h))
+                    color = self.lens.image(color, size_of_K=(self.width, self.height))
         if color is None:
             if self.require_color:
                 self.stats.drop(DROP_NO_COLOR)
@@ -391,9 +391,7 @@ class _FramePairer:
         if abs(sx - sy) > 0.01 * max(sx, sy) or not self.info_topic or self.lens:
             raise RecordingError(f"{self.rec.path}: depth image on {self.depth_topic} is {w}x{h} but {said} "
                                  f"says {self.width}x{self.height}")
-        K = self.K.copy()
-        K[0, 0], K[1, 1] = K[0, 0] * sx, K[1, 1] * sy
-        K[0, 2], K[1, 2] = (K[0, 2] + 0.5) * sx - 0.5, (K[1, 2] + 0.5) * sy - 0.5  # pixel centres
+        K = scaled_intrinsics(self.K, (sx, sy))
         note = (f"depth images on {self.depth_topic} are {w}x{h} but {said} says {self.width}x{self.height}: "
                 f"its intrinsics were scaled by {sx:.4g}")
         if note not in self.stats.notes:

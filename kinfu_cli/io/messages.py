@@ -17,6 +17,7 @@ import numpy as np
 
 from kinfu_cli.core.errors import RecordingError
 from kinfu_cli.core.poses import quaternion_to_matrix
+from kinfu_cli.io.undistort import check_distortion
 
 DEPTH_ENCODINGS = ("16UC1", "mono16", "32FC1")
 COLOR_ENCODINGS = ("rgb8", "bgr8", "rgba8", "bgra8", "mono8", "8UC3", "8UC1", "yuv422", "uyvy", "yuv422_yuy2",
@@ -306,8 +307,6 @@ def decode_color(msg: object, topic: str = "color") -> np.ndarray:
 
 def camera_info_distortion(msg: object, topic: str = "camera_info") -> tuple[str, np.ndarray]:
     """sensor_msgs/CameraInfo -> (distortion model, D): D empty when all zero (io.undistort.check_distortion)."""
-    from kinfu_cli.io.undistort import check_distortion
-
     d = getattr(msg, "d", None)
     if d is None:
         d = getattr(msg, "D", None)

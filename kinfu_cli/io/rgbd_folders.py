@@ -37,7 +37,7 @@ import cv2
 import numpy as np
 
 from kinfu_cli.core.atomic import atomic_dir
-from kinfu_cli.core.camera import SENSOR_PRESETS
+from kinfu_cli.core.camera import SENSOR_PRESETS, parse_intrinsics
 from kinfu_cli.core.errors import ConfigError, RecordingError
 from kinfu_cli.core.grid import check_up
 from kinfu_cli.core.poses import quaternion_to_matrix
@@ -136,20 +136,6 @@ def _read_K(folder: Path, intrinsics: tuple[float, float, float, float] | None,
                                      f"fy={K[1, 1]})")
             return K, str(p.relative_to(folder.parent)) if p.parent != folder else p.name
     return None, ""
-
-
-def parse_intrinsics(text: str | None) -> tuple[float, float, float, float] | None:
-    """'fx,fy,cx,cy' -> tuple (ConfigError naming the intrinsics parameter otherwise)."""
-    if text is None:
-        return None
-    try:
-        vals = tuple(float(v) for v in text.split(","))
-    except ValueError:
-        vals = ()
-    if len(vals) != 4 or not all(math.isfinite(v) for v in vals) or vals[0] <= 0 or vals[1] <= 0:
-        raise ConfigError(f"expected fx,fy,cx,cy (finite numbers, positive focal lengths), got {text!r}",
-                          parameter="intrinsics")
-    return vals  # type: ignore[return-value]
 
 
 def parse_frames(text: str | None, n: int) -> slice:

@@ -10,8 +10,7 @@ from __future__ import annotations
 import re
 from dataclasses import asdict, dataclass
 
-import numpy as np
-
+from kinfu_cli.core.camera import parse_intrinsics
 from kinfu_cli.core.errors import ConfigError, RecordingError, TransformError
 from kinfu_cli.io.messages import DEPTH_ENCODINGS, POSE_TYPES, header_frame
 from kinfu_cli.io.tf_buffer import TfBuffer
@@ -177,7 +176,7 @@ def detect_roles(rec, depth_topic: str | None = None, color_topic: str | None = 
     override it); then no camera info topic is used.
     """
     if intrinsics is not None:
-        intrinsics = check_intrinsics(intrinsics)
+        intrinsics = parse_intrinsics(intrinsics)
         if info_topic is not None:
             raise ConfigError("give either a camera info topic or intrinsics, not both", parameter="intrinsics")
     for topic, what in ((depth_topic, "depth topic"), (color_topic, "colour topic"),
@@ -228,17 +227,4 @@ def detect_roles(rec, depth_topic: str | None = None, color_topic: str | None = 
     return Roles(depth_topic=depth_topic, color_topic=color_topic, info_topic=info_topic,
                  camera_frame=camera_frame, world_frame=world_frame, hand_topic=hand_topic,
                  hand_frame=hand_frame, intrinsics=intrinsics)
-
-
-def check_intrinsics(value) -> tuple[float, float, float, float]:
-    """(fx, fy, cx, cy) from 4 numbers or "fx,fy,cx,cy": finite, focal lengths > 0, principal point >= 0;
-    ConfigError naming parameter 'intrinsics' otherwise."""
-    try:
-        parts = [float(v) for v in (value.split(",") if isinstance(value, str) else value)]
-    except (TypeError, ValueError):
-        parts = []
-    if len(parts) != 4 or not all(np.isfinite(parts)) or parts[0] <= 0 or parts[1] <= 0 or min(parts[2:]) < 0:
-        raise ConfigError(f"expected fx,fy,cx,cy in pixels (focal lengths > 0), got {value!r}",
-                          parameter="intrinsics")
-    return tuple(parts)  # type: ignore[return-value]
 

@@ -38,7 +38,7 @@ def _decode(words, n_pixels):
     previous = np.int64(0)
     run = 0  # 0: a zeros count is next, 1: a non-zeros count, 2: values
     todo = 0
-    while pos < n_pixels or run == 2 and todo > 0:
+    while pos < n_pixels:  # a run's count is checked against the pixels left when it is read
         value = np.int64(0)
         shift = 0
         while True:

@@ -46,6 +46,11 @@ class Undistorter:
         self.K, self.model, self.D = np.asarray(K, dtype=np.float64), model, np.asarray(D, dtype=np.float64)
         self._maps: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
 
+    @classmethod
+    def pinhole(cls, K: np.ndarray) -> "Undistorter":
+        """A camera without distortion: images pass unchanged."""
+        return cls(K, "", np.zeros(0))
+
     def __bool__(self) -> bool:
         return self.D.size > 0
 

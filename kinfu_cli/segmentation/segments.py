@@ -6,7 +6,9 @@ numpy/scipy:
 1. Support plane: RANSAC (open3d's `segment_plane` redone in numpy: plane_ransac.py; up to `max_planes` rounds)
    on points whose normal is within `up_tolerance_deg` of `up`; the highest plane holding >= `min_plane_fraction`
    of the points, or >= `min_up_facing_fraction` of those up-facing points (and at least `min_segment_points`), is the
-   support (the table, not the floor); its inliers with a matching normal become segment 0.
+   support (the table, not the floor); its inliers with a matching normal become segment 0. Without `up` the
+   largest plane stands for it (only planes within SUPPORT_PARALLEL_DEG of it compete), and a plane faces the side
+   its points' normals point to.
 2. Supervoxels (VCCS-like): seeds on a `seed_resolution` grid, then a few k-means rounds where each point
    joins the closest of its 8 spatially nearest seeds under the VCCS distance
    D^2 = w_s |dx|^2 / R_seed^2 + w_n (1 - n_p . n_s) + w_c |c_p - c_s| (the colour term, as PCL's VCCS,
