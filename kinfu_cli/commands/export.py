@@ -9,6 +9,7 @@ from pathlib import Path
 import click
 
 from kinfu_cli.commands._options import claim_outputs, force_option
+from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.commands._frames import frame_kwargs, frame_options
 from kinfu_cli.commands._roles import role_kwargs, role_options
 from kinfu_cli.io.rgbd_folders import export_frames
@@ -52,6 +53,7 @@ def command(recording: str, out: str, trajectory: str | None, as_json: bool, qui
         _export_trajectory(recording, out, fk, role_kwargs(kwargs), as_json, quiet)
         return
     summary = export_frames(recording, out, roles_kw=role_kwargs(kwargs), quiet=quiet, **fk)
+    print_warnings(summary)
     if as_json:
         click.echo(json.dumps(summary, indent=2))
         return
@@ -70,10 +72,11 @@ def _export_trajectory(source: str, out: str, fk: dict, roles_kw: dict, as_json:
     else:
         stamps, poses, info = recording_trajectory(source, roles_kw, quiet=quiet, **fk)
         summary = {"source": str(source), "kind": "recording", "poses": len(stamps), "pose_source": fk.get("pose_source"),
-                   "world_frame": info["world_frame"], "stats": info["stats"]}
+                   "world_frame": info["world_frame"], "stats": info["stats"], "warnings": info["warnings"]}
         comment = f"kinfu export {source}: the recording's camera poses ({fk.get('pose_source')}) at its depth frames"
     write_tum(out, stamps, poses, comment=comment)
     summary["output"] = str(out)
+    print_warnings(summary)
     if len(stamps):
         summary["t_start_s"], summary["t_end_s"] = float(stamps[0]) * 1e-9, float(stamps[-1]) * 1e-9
     if as_json:

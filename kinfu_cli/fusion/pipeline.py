@@ -256,7 +256,7 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
             dropped = {**stats.dropped, **depth_filter.drops}
             why = "; ".join(f"{k}: {v}" for k, v in dropped.items()) or "no depth frames in the selection"
             raise RecordingError(f"{rec.path}: no usable depth frames ({why})")
-        warnings += (_frame_warnings(stats, str(rec.path)) + _tracking_verdict(integrator, max_lost, str(rec.path))
+        warnings += (stats.warnings(str(rec.path)) + _tracking_verdict(integrator, max_lost, str(rec.path))
                      + _tracking_doubts(integrator.track_log))
         vol = integrator.volume
         vol.frame = vol.frame or plan.world
@@ -313,17 +313,6 @@ def _check_arguments(pose: str | None, pose_topic: str | None, every: int, max_l
         raise ConfigError(f"expected a share of the tracked frames in [0, 1], got {max_lost}", parameter="max_lost")
     if isinstance(size, str) and size != "auto":
         raise ConfigError(f"expected metres or 'auto', got {size!r}", parameter="size")
-
-
-def _frame_warnings(stats: FrameStats, recording: str) -> list[str]:
-    """What reading the frames assumed (stats.notes), and why a run with a colour topic fused no colour
-    (io.color_registration could not place it)."""
-    out = [f"{recording}: {n}" for n in stats.notes]
-    reg = stats.color_registration
-    if reg and reg["mode"] == "none":
-        out.append(f"{recording}: fused without colour: {reg['reason']}, so the colour images cannot be placed on "
-                   f"the depth (resizing them would paint each surface with its neighbour's)")
-    return out
 
 
 def _dropped(stats: FrameStats, depth_filter: DepthFilter, integrator: "_Integrator") -> dict[str, int]:

@@ -65,6 +65,17 @@ class FrameStats:
     def dropped_total(self) -> int:
         return sum(self.dropped.values())
 
+    def warnings(self, recording: str) -> list[str]:
+        """What reading the frames assumed (notes), and why frames of a recording with a colour topic carry no
+        colour (io.color_registration could not place it): one warning each, for every command that reads
+        frames."""
+        out = [f"{recording}: {n}" for n in self.notes]
+        reg = self.color_registration
+        if reg and reg["mode"] == "none":
+            out.append(f"{recording}: frames without colour: {reg['reason']}, so the colour images cannot be placed "
+                       f"on the depth (resizing them would paint each surface with its neighbour's)")
+        return out
+
     def as_dict(self) -> dict:
         return {"depth_messages": self.depth_messages, "used": self.used, "skipped": self.skipped,
                 "without_color": self.without_color, "dropped": dict(self.dropped),

@@ -390,7 +390,8 @@ def export_frames(recording: str | os.PathLike, out: str | os.PathLike, roles_kw
 
     frame-N.depth.png (uint16 mm, 0 = invalid), frame-N.color.png (when paired), frame-N.pose.txt
     (T_world_camera, when posed), camera-intrinsics.txt (K of the first frame), frames.json (stamps, stats,
-    roles). N is the depth message index. The folder appears only when every frame was written.
+    roles, warnings: what was lost or assumed reading the recording). N is the depth message index. The folder
+    appears only when every frame was written.
     """
     stats = FrameStats()
     listing = []
@@ -420,7 +421,7 @@ def export_frames(recording: str | os.PathLike, out: str | os.PathLike, roles_kw
                                      f"{stats.dropped or 'none'}, depth messages: {stats.depth_messages})")
             summary = {"recording": str(rec.path), "output": str(out), "roles": roles.as_dict(),
                        "frames": len(listing), "stats": stats.as_dict(), "K": K0.tolist(),
-                       "list": listing}
+                       "warnings": rec.problems + stats.warnings(str(rec.path)), "list": listing}
             (tmp / "frames.json").write_text(json.dumps(summary, indent=2) + "\n")
             umask = os.umask(0)
             os.umask(umask)

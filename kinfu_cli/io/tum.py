@@ -88,7 +88,8 @@ def recording_trajectory(recording: str | os.PathLike, roles_kw: dict | None = N
                          ) -> tuple[np.ndarray, np.ndarray, dict]:
     """The recording's own camera poses (TF world <- camera, or a pose topic) at the stamp of every depth frame
     `kinfu fuse` would assemble with the same options: (N,) stamps ns, (N, 4, 4) poses, the frame statistics.
-    The ground truth that a fused trajectory.tum is compared with."""
+    The ground truth that a fused trajectory.tum is compared with. The summary's warnings say what was lost (a
+    recording cut short) or assumed."""
     if pose_source == "none":
         raise ConfigError("a trajectory needs camera poses: 'tf' or 'topic'", parameter="pose_source")
     stats = FrameStats()
@@ -106,7 +107,8 @@ def recording_trajectory(recording: str | os.PathLike, roles_kw: dict | None = N
             raise RecordingError(f"{rec.path}: no depth frame with a camera pose (dropped: {stats.dropped or 'none'}, "
                                  f"depth messages: {stats.depth_messages})")
         summary = {"recording": str(rec.path), "roles": roles.as_dict(), "stats": stats.as_dict(),
-                   "world_frame": roles.world_frame if pose_source == "tf" else pose_topic}
+                   "world_frame": roles.world_frame if pose_source == "tf" else pose_topic,
+                   "warnings": rec.problems + [f"{rec.path}: {n}" for n in stats.notes]}
     return np.array(stamps, dtype=np.int64), np.array(poses), summary
 
 

@@ -103,7 +103,7 @@ def test_without_the_colour_camera_info_colour_is_left_out_and_said(two_cameras,
     assert res.exit_code == 0, res.output
     report = json.loads((out / "report.json").read_text())
     assert report["frames"]["color_registration"]["mode"] == "none"
-    assert any("fused without colour" in w for w in report["warnings"]), report["warnings"]
+    assert any("frames without colour" in w for w in report["warnings"]), report["warnings"]
 
 
 def test_a_resized_colour_image_is_scaled_into(two_cameras):

@@ -71,3 +71,23 @@ def test_poi_from_a_cut_short_recording_says_so(sample_dir, tmp_path):
     res = CliRunner().invoke(cli, ["poi", str(cut), "-o", str(tmp_path / "pois.json"), "--json"])
     assert res.exit_code == 0, res.output
     assert "kinfu: warning: " in res.output and "truncated" in res.output
+
+
+def test_export_of_a_cut_short_recording_says_so(sample_dir, tmp_path):
+    """export (frames and trajectory) says what was lost, in frames.json and on stderr, as fuse and poi do."""
+    import json
+
+    from click.testing import CliRunner
+
+    from kinfu_cli.cli import cli
+
+    cut = _cut(sample_dir / "recording.mcap", tmp_path / "cut.mcap", 0.97)
+    res = CliRunner().invoke(cli, ["export", str(cut), "-o", str(tmp_path / "frames"), "--every", "10", "--quiet"])
+    assert res.exit_code == 0, res.output
+    assert "kinfu: warning: " in res.output and "truncated" in res.output
+    doc = json.loads((tmp_path / "frames" / "frames.json").read_text())
+    assert len(doc["warnings"]) == 1 and "truncated" in doc["warnings"][0]
+    res = CliRunner().invoke(cli, ["export", str(cut), "--trajectory", "tum", "-o", str(tmp_path / "gt.tum"),
+                                   "--json", "--quiet"])
+    assert res.exit_code == 0, res.output
+    assert "kinfu: warning: " in res.output and "truncated" in res.output
