@@ -19,6 +19,7 @@ from kinfu_cli.io.color_registration import OCCLUSION_MARGIN, ColorRegistration,
 from kinfu_cli.sim.paths import orbit_poses  # noqa: E402
 from kinfu_cli.sim.scene import primitive_tabletop_scene  # noqa: E402
 from kinfu_cli.sim.sensor import DepthSensor, kinect_v1_intrinsics  # noqa: E402
+from kinfu_cli.io.undistort import Undistorter  # noqa: E402
 
 
 def reference(reg, depth, K_depth, color):
@@ -51,7 +52,8 @@ def main() -> None:
     scene = primitive_tabletop_scene(seed=2)
     depth, _ = DepthSensor(K, 640, 480, noise=True, seed=2).render(scene, pose)
     _, color = DepthSensor(K, 640, 480, noise=False).render(scene, pose @ T_dc)
-    reg = ColorRegistration("project", "depth", "colour", "/info", K, (640, 480), np.linalg.inv(T_dc))
+    reg = ColorRegistration("project", "depth", "colour", "/info", Undistorter.pinhole(K), (640, 480),
+                            np.linalg.inv(T_dc))
     ours = register_color(reg, depth, K, color, "bench")[0]  # compile / load the cache
     ref = reference(reg, depth, K, color)
     times = {}

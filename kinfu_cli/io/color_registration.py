@@ -35,11 +35,14 @@ class ColorRegistration:
     depth_frame: str = ""
     color_frame: str = ""
     info_topic: str | None = None
-    K_color: np.ndarray | None = None
+    lens: Undistorter | None = None  # the colour camera: its K and distortion (none: Undistorter.pinhole)
     color_size: tuple[int, int] | None = None  # (width, height) of the colour camera info
     T_color_depth: np.ndarray | None = None
     reason: str = ""
-    lens: Undistorter | None = None  # the colour camera's distortion
+
+    @property
+    def K_color(self) -> np.ndarray | None:
+        return None if self.lens is None else self.lens.K
 
     def as_dict(self) -> dict:
         return {"mode": self.mode, "depth_frame": self.depth_frame, "color_frame": self.color_frame,
@@ -76,7 +79,7 @@ def color_registration(rec, depth_topic: str, color_topic: str, depth_info_topic
         T = tf.lookup(c_frame, d_frame)
     except TransformError as exc:
         return ColorRegistration("none", d_frame, c_frame, info_topic, reason=str(exc))
-    return ColorRegistration("project", d_frame, c_frame, info_topic, K, (w, h), T, lens=lens)
+    return ColorRegistration("project", d_frame, c_frame, info_topic, lens, (w, h), T)
 
 
 def register_color(reg: ColorRegistration, depth: np.ndarray, K_depth: np.ndarray, color: np.ndarray,

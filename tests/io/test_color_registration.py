@@ -14,6 +14,7 @@ from kinfu_cli.cli import cli
 from kinfu_cli.io.frames import FrameStats, iter_frames
 from kinfu_cli.io.recording import open_recording
 from kinfu_cli.io.writers import RecordingWriter
+from kinfu_cli.io.undistort import Undistorter
 from kinfu_cli.sim.paths import orbit_poses
 from kinfu_cli.sim.scene import primitive_tabletop_scene
 from kinfu_cli.sim.sensor import DepthSensor, kinect_v1_intrinsics
@@ -118,7 +119,7 @@ def test_a_resized_colour_image_is_scaled_into(two_cameras):
         msg = next(m for t, _, m in rec.messages(["/camera/color/image_raw"]))
     full = np.frombuffer(bytes(msg.data), np.uint8).reshape(HC, WC, 3)
     half = cv2.resize(full, (WC // 2, HC // 2), interpolation=cv2.INTER_AREA)
-    reg = ColorRegistration("project", "d", "c", "/camera/color/camera_info", K_COLOR, (WC, HC),
+    reg = ColorRegistration("project", "d", "c", "/camera/color/camera_info", Undistorter.pinhole(K_COLOR), (WC, HC),
                             np.linalg.inv(T_DEPTH_COLOR))
     K_depth = kinect_v1_intrinsics(WD, HD)
     col, mask = register_color(reg, depth, K_depth, half, "/c")
