@@ -473,6 +473,9 @@ def load_volume(path: str | os.PathLike, hypotheses: bool = True) -> TernaryVolu
     save): for readers of the colours only, such as segmentation; such a volume refuses integrate and save."""
     path = Path(path)
     meta, arrays = read_volume_file(path, optional=hypotheses)
+    if meta.get("block", kn.B) != kn.B:  # the pools' rows are blocks of B^3 voxels: another B reads as garbage
+        raise VolumeError(f"{path}: volume stored in blocks of {meta['block']!r} voxels a side; this kinfu reads "
+                          f"blocks of {kn.B}")
     vol = TernaryVolume(size=[s * meta["voxel_size"] for s in meta["shape"]], voxel_size=meta["voxel_size"],
                         origin=meta["origin"], truncation=meta["truncation"], max_weight=meta["max_weight"],
                         min_depth=meta["min_depth"], max_depth=meta["max_depth"], color=meta["color"],

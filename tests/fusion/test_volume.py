@@ -242,6 +242,27 @@ def test_volume_from_another_version_is_refused(fused, tmp_path):
         load_volume(tmp_path / "missing.npz")
 
 
+def test_volume_with_other_blocks_is_refused(fused, tmp_path):
+    """The pools hold blocks of B^3 voxels: a file written with another block edge (meta 'block') would be read
+    as garbage, so it is refused naming the file, as pool rows of another length are."""
+    import json
+
+    p = tmp_path / "volume.npz"
+    fused.save(p)
+    with np.load(p) as z:
+        arrays = {k: z[k] for k in z.files}
+    meta = json.loads(str(arrays["meta"]))
+    meta["block"] = 16
+    q = tmp_path / "b16.npz"
+    np.savez(q, **{**arrays, "meta": np.array(json.dumps(meta))})
+    with pytest.raises(VolumeError, match="b16.npz: volume stored in blocks of 16"):
+        load_volume(q)
+    q = tmp_path / "rows.npz"
+    np.savez(q, **{**arrays, "pool_v": arrays["pool_v"][:, :64], "pool_w": arrays["pool_w"][:, :64]})
+    with pytest.raises(VolumeError, match="rows.npz: voxel pools are"):
+        load_volume(q)
+
+
 def test_raycast_stop_at_unknown_reports_first_non_empty_voxel(fused, frames):
     """NBV ray casting: every ray ends on occupied (1), on unknown (0, vertex at the unknown voxel), or leaves
     the grid through empty space (-1); the end voxel has exactly that label."""
