@@ -224,20 +224,23 @@ def test_too_large_volume_refused_before_allocating():
         TernaryVolume(size=3.0, voxel_size=-1)
 
 
-def test_volume_from_another_version_is_refused(fused, tmp_path):
+def _edited_copy(vol, path, meta_changes=None, **arrays_changes):
+    """`vol` saved, then written again to `path` with some meta fields and arrays replaced (a foreign file)."""
     import json
 
-    p = tmp_path / "volume.npz"
-    fused.save(p)
+    p = path.with_name("saved.npz")
+    vol.save(p)
     with np.load(p) as z:
         arrays = {k: z[k] for k in z.files}
-    meta = json.loads(str(arrays["meta"]))
-    meta["format_version"] = 99
-    arrays["meta"] = np.array(json.dumps(meta))
-    q = tmp_path / "old.npz"
-    np.savez(q, **arrays)
+    meta = json.loads(str(arrays["meta"])) | (meta_changes or {})
+    arrays.update(meta=np.array(json.dumps(meta)), **{k: f(arrays[k]) for k, f in arrays_changes.items()})
+    np.savez(path, **arrays)
+    return path
+
+
+def test_volume_from_another_version_is_refused(fused, tmp_path):
     with pytest.raises(VolumeError, match="version 99"):
-        load_volume(q)
+        load_volume(_edited_copy(fused, tmp_path / "old.npz", {"format_version": 99}))
     with pytest.raises(VolumeError, match="no such volume"):
         load_volume(tmp_path / "missing.npz")
 
@@ -245,22 +248,10 @@ def test_volume_from_another_version_is_refused(fused, tmp_path):
 def test_volume_with_other_blocks_is_refused(fused, tmp_path):
     """The pools hold blocks of B^3 voxels: a file written with another block edge (meta 'block') would be read
     as garbage, so it is refused naming the file, as pool rows of another length are."""
-    import json
-
-    p = tmp_path / "volume.npz"
-    fused.save(p)
-    with np.load(p) as z:
-        arrays = {k: z[k] for k in z.files}
-    meta = json.loads(str(arrays["meta"]))
-    meta["block"] = 16
-    q = tmp_path / "b16.npz"
-    np.savez(q, **{**arrays, "meta": np.array(json.dumps(meta))})
     with pytest.raises(VolumeError, match="b16.npz: volume stored in blocks of 16"):
-        load_volume(q)
-    q = tmp_path / "rows.npz"
-    np.savez(q, **{**arrays, "pool_v": arrays["pool_v"][:, :64], "pool_w": arrays["pool_w"][:, :64]})
+        load_volume(_edited_copy(fused, tmp_path / "b16.npz", {"block": 16}))
     with pytest.raises(VolumeError, match="rows.npz: voxel pools are"):
-        load_volume(q)
+        load_volume(_edited_copy(fused, tmp_path / "rows.npz", pool_v=lambda a: a[:, :64], pool_w=lambda a: a[:, :64]))
 
 
 def test_raycast_stop_at_unknown_reports_first_non_empty_voxel(fused, frames):
