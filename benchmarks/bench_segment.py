@@ -585,6 +585,11 @@ def main() -> None:
     ap.add_argument("--no-misregistration", action="store_true",
                     help="--objects: fuse the scenes with the colour-depth misregistration off (gain and white "
                          "balance jitter kept; own cache): is a mode-vs-mean gap the misregistration's?")
+    ap.add_argument("--misregistration", default=None, metavar="DU,DV,DEG",
+                    help="--objects: the fixed colour-depth misregistration instead of PHOTOMETRIC's (own cache)")
+    ap.add_argument("--misregistration-jitter", type=float, default=0.0, metavar="PX",
+                    help="--objects: add a per-frame misregistration shift of this sigma per axis, as unsynchronised "
+                         "colour and depth of a moving camera give (own cache)")
     ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                     help="--objects: a SegmentationParams field to override (repeatable)")
     ap.add_argument("--cache", default=str(Path(tempfile.gettempdir()) / "kinfu_bench_segment"),
@@ -603,6 +608,11 @@ def main() -> None:
         if args.no_misregistration:
             photometric = {"misregistration": (0.0, 0.0, 0.0)}
             cache = Path(tempfile.gettempdir()) / "kinfu_bench_segment_objects_no_misregistration"
+        elif args.misregistration or args.misregistration_jitter:
+            mis = tuple(float(v) for v in args.misregistration.split(",")) if args.misregistration else None
+            photometric = ({"misregistration": mis} if mis else {}) | {"misregistration_jitter": args.misregistration_jitter}
+            cache = (Path(tempfile.gettempdir()) / f"kinfu_bench_segment_objects_mis_"
+                     f"{args.misregistration or 'default'}_j{args.misregistration_jitter:g}")
         bench_objects(*seeds, overrides=over, missed=args.missed, cache=cache, photometric=photometric)
         return
     if args.speed:

@@ -24,8 +24,9 @@ Photometric nonidealities, off by default (existing sequences do not change; the
 auto-gain and misregistration for colour blur): `gain_jitter` (sigma of the log of a per-frame global gain, as
 auto-exposure changes it from frame to frame), `white_balance_jitter` (sigma of the log of a per-frame, per-channel
 gain) and `misregistration` (du, dv pixels, rotation degrees about the image centre: colour pixel (u, v) sees what
-the depth camera sees at that offset). They draw from their own generator, so turning them on leaves the depth
-noise as it was.
+the depth camera sees at that offset: a calibration error, the same in every frame); `misregistration_jitter` adds
+a per-frame shift (sigma in pixels per axis), as unsynchronised colour and depth streams of a moving camera give.
+They draw from their own generators, so turning them on leaves the depth noise as it was.
 
 Ray casting is open3d C++, the noise model vectorised numpy, shading a numba kernel.
 """
@@ -51,6 +52,7 @@ warnings.filterwarnings("ignore", message="The TBB threading layer requires TBB 
 LIGHT_DIR = np.array([0.3, -0.4, 1.0]) / np.linalg.norm([0.3, -0.4, 1.0])  # towards the light, world frame
 BACKGROUND_RGB = np.array([0.08, 0.08, 0.09])
 PHOTO_STREAM = 0x9A1  # seeds the photometric effects' own generator (with the sensor seed and frame seed)
+SHIFT_STREAM = 0x9A2  # seeds the per-frame misregistration shifts (their own, so the gains stay as they were)
 
 
 def kinect_v1_intrinsics(width: int = 640, height: int = 480) -> np.ndarray:
@@ -116,7 +118,8 @@ class DepthSensor:
                  edge_jump: float = 0.03, color_noise: float = 2.0 / 255.0,
                  disparity_quantisation: bool = True, ir_focal: float = SENSOR_PRESETS["kinect_v1_ir"]["fx"],
                  subpixel: int = 8, gain_jitter: float = 0.0, white_balance_jitter: float = 0.0,
-                 misregistration: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
+                 misregistration: tuple[float, float, float] = (0.0, 0.0, 0.0),
+                 misregistration_jitter: float = 0.0) -> None:
         K = np.asarray(K, dtype=np.float64)
         if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
             raise ConfigError(f"camera intrinsics: expected a 3x3 matrix with positive focal lengths, got {K.tolist()}")
@@ -141,14 +144,17 @@ class DepthSensor:
         self.gain_jitter = float(gain_jitter)
         self.white_balance_jitter = float(white_balance_jitter)
         mis = tuple(float(x) for x in misregistration)
+        self.misregistration_jitter = float(misregistration_jitter)
         if (len(mis) != 3 or not all(np.isfinite(mis)) or not (0 <= self.gain_jitter < 1)
-                or not (0 <= self.white_balance_jitter < 1)):
-            raise ConfigError(f"photometric effects: expected gain and white balance jitters in [0, 1) and a "
-                              f"misregistration (du, dv, degrees) of finite numbers, got {self.gain_jitter}, "
-                              f"{self.white_balance_jitter}, {misregistration}")
+                or not (0 <= self.white_balance_jitter < 1) or not (0 <= self.misregistration_jitter <= 100)):
+            raise ConfigError(f"photometric effects: expected gain and white balance jitters in [0, 1), a "
+                              f"misregistration (du, dv, degrees) of finite numbers and its jitter in [0, 100] px, "
+                              f"got {self.gain_jitter}, {self.white_balance_jitter}, {misregistration}, "
+                              f"{misregistration_jitter}")
         self.misregistration = mis
         self._rng = np.random.default_rng(self.seed)
         self._photo_rng = np.random.default_rng([self.seed, PHOTO_STREAM])
+        self._shift_rng = np.random.default_rng([self.seed, SHIFT_STREAM])
         v, u = np.mgrid[0:self.height, 0:self.width]
         self._u = u.astype(np.float64)
         self._v = v.astype(np.float64)
@@ -178,7 +184,8 @@ class DepthSensor:
         hit = self._cast(target, T)
         true_depth = np.where(hit["valid"], hit["t"], 0.0)
         labels = np.where(hit["valid"], target.labels[np.minimum(hit["gid"], len(target.labels) - 1)], LABEL_NONE)
-        color = self._shade(target, hit if self._color_uv is None else self._cast(target, T, *self._color_uv), rng,
+        color_uv = self._frame_color_pixels(frame_seed)
+        color = self._shade(target, hit if color_uv is None else self._cast(target, T, *color_uv), rng,
                             self._photometric_gain(frame_seed))
         in_range = (true_depth >= self.min_range) & (true_depth <= self.max_range)
 
@@ -283,6 +290,17 @@ class DepthSensor:
         cu, cv = (self.width - 1) / 2.0, (self.height - 1) / 2.0
         x, y = self._u - cu, self._v - cv
         return (cu + du + np.cos(a) * x - np.sin(a) * y, cv + dv + np.sin(a) * x + np.cos(a) * y)
+
+    def _frame_color_pixels(self, frame_seed: int | None) -> tuple[np.ndarray, np.ndarray] | None:
+        """Depth-image positions the colour pixels of this frame look through: the fixed misregistration plus
+        this frame's shift (misregistration_jitter); None when the colour is registered."""
+        if self.misregistration_jitter <= 0:
+            return self._color_uv
+        rng = (np.random.default_rng([self.seed, SHIFT_STREAM, int(frame_seed)]) if frame_seed is not None
+               else self._shift_rng)
+        du, dv = rng.normal(0.0, self.misregistration_jitter, 2)
+        u, v = self._color_uv if self._color_uv is not None else (self._u, self._v)
+        return u + du, v + dv
 
     def _photometric_gain(self, frame_seed: int | None) -> np.ndarray | None:
         """Per-channel gain (3,) of this frame's auto-exposure and white balance; None when both are off."""

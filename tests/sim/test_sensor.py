@@ -198,3 +198,27 @@ def test_misregistration_shifts_the_colour_image():
     assert np.array_equal(mis.color[1:, :-2], ref.color[:-1, 2:])
     with pytest.raises(ConfigError):
         DepthSensor(K, W, H, misregistration=(1.0, np.nan, 0.0))
+
+
+def test_misregistration_jitter_shifts_each_frame_by_its_own_whole_image_offset():
+    """misregistration_jitter: the colour image of each frame is shifted by its own (du, dv) ~ N(0, sigma) per axis
+    (unsynchronised streams of a moving camera), on top of the fixed misregistration; the same with a frame seed."""
+    scene, T = _tabletop_view()
+    K = kinect_v1_intrinsics(W, H)
+    ref = DepthSensor(K, W, H, noise=False).render_frame(scene, T)
+    sensor = DepthSensor(K, W, H, noise=False, misregistration=(1.0, 0.0, 0.0), misregistration_jitter=3.0, seed=4)
+    shifts = []
+    for k in range(8):
+        f = sensor.render_frame(scene, T, frame_seed=k)
+        assert np.array_equal(f.depth, ref.depth)
+        assert np.array_equal(f.color, sensor.render_frame(scene, T, frame_seed=k).color)
+        # the whole-pixel shift that best explains this frame's colour
+        err = {(du, dv): np.mean(np.abs(np.roll(ref.color, (-dv, -du), axis=(0, 1))[8:-8, 8:-8].astype(int)
+                                        - f.color[8:-8, 8:-8].astype(int)))
+               for du in range(-8, 9) for dv in range(-8, 9)}
+        shifts.append(min(err, key=err.get))
+    du, dv = np.array(shifts, dtype=float).T
+    assert len(set(shifts)) >= 4  # frames differ
+    assert abs(du.mean() - 1.0) < 2.5 and np.abs(dv).mean() < 4.5  # about the fixed shift, a few px of jitter
+    with pytest.raises(ConfigError):
+        DepthSensor(K, W, H, misregistration_jitter=-1.0)
