@@ -85,6 +85,18 @@ class PoiDetection:
         return len(self.tasks) == 1 and self.tasks[0].samples == len(self.trajectory)
 
 
+def check_detection(algorithm: str = "gmm-as", params: dict | None = None, *,
+                    workspace: str | Sequence[float] | None = None, split_gap: float | None = SPLIT_GAP_S,
+                    min_task: float = MIN_TASK_S) -> tuple[float, ...] | None:
+    """The arguments of `detect_pois` checked before any trajectory is read (ConfigError naming the first bad
+    one); returns the workspace box (None: everywhere)."""
+    box = parse_workspace(workspace) if isinstance(workspace, str) else check_workspace(workspace)
+    check_split_gap(split_gap)
+    check_min_task(min_task)
+    make_detector(algorithm, params).check_params()
+    return box
+
+
 def detect_pois(source: str | os.PathLike | Trajectory, algorithm: str = "gmm-as", params: dict | None = None, *,
                 workspace: str | Sequence[float] | None = None, split_gap: float | None = SPLIT_GAP_S,
                 min_task: float = MIN_TASK_S, hand_topic: str | None = None, hand_frame: str | None = None,
@@ -97,10 +109,7 @@ def detect_pois(source: str | os.PathLike | Trajectory, algorithm: str = "gmm-as
     its text 'x0,y0,z0,x1,y1,z1'; None = everywhere. Every argument is checked before the trajectory
     is read. Raises ConfigError when no task is left.
     """
-    box = parse_workspace(workspace) if isinstance(workspace, str) else check_workspace(workspace)
-    check_split_gap(split_gap)
-    check_min_task(min_task)
-    make_detector(algorithm, params).check_params()
+    box = check_detection(algorithm, params, workspace=workspace, split_gap=split_gap, min_task=min_task)
     if isinstance(source, Trajectory):
         traj, source_name = source, source.source
     else:

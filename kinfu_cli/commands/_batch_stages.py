@@ -43,10 +43,14 @@ _COMMANDS = {
 VIEWER_FILES = {stage: files["viz"] for stage, (_, _, files) in _COMMANDS.items() if "viz" in files}
 
 
-def _command(stage: str) -> click.Command:
+def _module(stage: str):
     import importlib
 
-    return importlib.import_module(f"kinfu_cli.commands.{_COMMANDS[stage][0]}").command
+    return importlib.import_module(f"kinfu_cli.commands.{_COMMANDS[stage][0]}")
+
+
+def _command(stage: str) -> click.Command:
+    return _module(stage).command
 
 
 def _base_args(stage: str, rec) -> list[str]:
@@ -120,12 +124,27 @@ def _prog(stage: str) -> str:
 
 
 def check_stage(stage: str, rec, options: dict) -> None:
-    """Parse the stage's arguments with its command (types, choices, ranges) without running it."""
+    """Parse the stage's arguments with its command (types, choices) and build the parameter objects the command
+    would build from them, with the library's own range checks (the command module's `check_options`), without
+    reading any input: a bad value is a ConfigError naming the option as the plan spells it."""
     cmd = _command(stage)
     try:
-        cmd.make_context(_prog(stage), _args(stage, rec, options, False))
+        ctx = cmd.make_context(_prog(stage), _args(stage, rec, options, False))
     except click.ClickException as exc:
         raise ConfigError(" ".join(exc.format_message().split())) from None
+    try:
+        _module(stage).check_options(ctx.params)
+    except KinfuError as exc:
+        raise ConfigError(_plan_spelling(_flag_message(cmd, exc))) from None
+
+
+def _plan_spelling(message: str) -> str:
+    """"--voxel-size: expected ..." as the plan names the option: "voxel-size: expected ..."."""
+    head, sep, rest = message.partition(": ")
+    names = head.replace(" and ", "/").split("/")
+    if sep and all(n.startswith("--") for n in names):
+        return f"{head.replace('--', '')}: {rest}"
+    return message
 
 
 def _flag_message(cmd: click.Command, exc: KinfuError) -> str:

@@ -38,6 +38,22 @@ def _lines(doc: dict, outdir: Path) -> list[str]:
     return lines
 
 
+def change_params(p: dict) -> ChangeParams:
+    """ChangeParams from the command's parsed options (click's parameter dict), checked with --match-radius: the
+    one place that turns diff's options into library parameters, for the command and for `check_options`."""
+    params = ChangeParams(margin=p["margin"], min_volume=p["min_volume"])
+    params.check()
+    if not p["match_radius"] > 0:
+        raise ConfigError(f"--match-radius: expected a positive distance in metres, got {p['match_radius']}")
+    return params
+
+
+def check_options(params: dict) -> None:
+    """What `kinfu diff` refuses with these options before it reads the volumes (kinfu batch checks a plan with
+    it); ConfigError naming the parameter."""
+    change_params(params)
+
+
 @click.command("diff", short_help="Removed / added regions between two volumes of one place; POIs scored on them.")
 @click.argument("before", type=click.Path(dir_okay=False, path_type=Path))
 @click.argument("after", type=click.Path(dir_okay=False, path_type=Path))
@@ -73,10 +89,7 @@ def command(before: Path, after: Path, outdir: Path, pois_path, match_radius, ma
       kinfu diff before/ternary.npz after/ternary.npz --min-volume 5e-5 --json --quiet
     """
     claim_outputs({"outdir": outdir}, [before, after, pois_path], force)
-    params = ChangeParams(margin=margin, min_volume=min_volume)
-    params.check()
-    if not match_radius > 0:
-        raise ConfigError(f"--match-radius: expected a positive distance in metres, got {match_radius}")
+    params = change_params(click.get_current_context().params)
     pois = read_pois(pois_path) if pois_path is not None else None  # a bad POI file fails before any work
     result = None
     for step in progress(["diff", "write"], total=2, desc="diff", quiet=quiet):

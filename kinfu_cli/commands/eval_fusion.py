@@ -9,11 +9,18 @@ import click
 
 from kinfu_cli.commands._options import claim_outputs, result_options
 from kinfu_cli.core.atomic import write_json
-from kinfu_cli.evaluation.reconstruction import DEFAULT_SPACING, DEFAULT_THRESHOLD, evaluate_fusion
+from kinfu_cli.evaluation.reconstruction import (DEFAULT_SPACING, DEFAULT_THRESHOLD, check_fusion_evaluation,
+                                                 evaluate_fusion)
 from kinfu_cli.evaluation.tables import format_fusion_tables
 from kinfu_cli.report.eval_fusion_mesh import write_error_mesh
 
 group = "eval"
+
+
+def check_options(params: dict) -> None:
+    """What `kinfu eval fusion` refuses with these options before it reads anything (kinfu batch checks a plan
+    with it); ConfigError naming the parameter."""
+    check_fusion_evaluation(**{k: params[k] for k in ("threshold", "spacing", "margin", "min_height")})
 
 
 @click.command("fusion", short_help="Reconstruction error and object measures (paper Table 1) vs ground truth.")

@@ -10,13 +10,37 @@ from kinfu_cli.commands._engine import scheduler_option, trial_engine
 from kinfu_cli.commands._options import claim_outputs, result_options
 from kinfu_cli.commands._output import emit
 from kinfu_cli.core.pois import DEFAULT_RADIUS
-from kinfu_cli.evaluation.nbv_loop import LoopConfig, run_loop
+from kinfu_cli.evaluation.nbv_loop import EXPLORE, LoopConfig, run_loop
 from kinfu_cli.evaluation.tables import nbv_loop_table
 from kinfu_cli.nbv.gains import gain_names
-from kinfu_cli.nbv.viewpoints import PAPER_SPHERE
+from kinfu_cli.nbv.viewpoints import PAPER_SPHERE, sphere_viewpoints
 from kinfu_cli.report.eval_nbv_plot import plot_nbv_loop
 
 group = "eval"
+
+
+def loop_config(p: dict) -> LoopConfig:
+    """The checked LoopConfig from the command's parsed options (click's parameter dict): the one place that turns
+    eval nbv's options into it, for the command and for `check_options`."""
+    modes = ("kfovp", "kfom") if p["mode"] == "both" else (p["mode"],)
+    cfg = LoopConfig(strategies=tuple(s.strip() for s in p["strategies"].split(",") if s.strip()), modes=modes,
+                     views=p["views"], voxel_size=p["voxel_size"], gain=p["gain"], inc_th=p["inc_th"],
+                     poi_radius=p["poi_radius"], pois_from=p["pois_from"], oscillation_deg=p["oscillation"],
+                     scan_every=p["scan_every"], width=p["width"], height=p["height"], noise=not p["no_noise"],
+                     seed=p["seed"], optimistic=p["optimistic"],
+                     sphere=dict(lon_step=p["lon_step"], lat_step=p["lat_step"], roll_step=p["roll_step"]),
+                     poi=tuple(p["poi"]) if p["poi"] else None, scan_frames=p["scan_frames"],
+                     near_margin=p["near_margin"], score_width=p["score_width"], reject_unknown=p["reject_unknown"])
+    cfg.check()
+    return cfg
+
+
+def check_options(params: dict) -> None:
+    """What `kinfu eval nbv` refuses with these options before it reads the scene (kinfu batch checks a plan with
+    it); ConfigError naming the parameter."""
+    cfg = loop_config(params)
+    if not set(cfg.strategies) <= set(EXPLORE):  # the POI strategies rank the viewing sphere of its steps
+        sphere_viewpoints((0.0, 0.0, 0.0), **cfg.sphere)
 
 
 @click.command("nbv", short_help="Closed NBV loop in simulation: POI views vs random/fixed, objects vs standard.")
@@ -91,15 +115,7 @@ def command(scene, strategies, views, mode, voxel_size, gain, inc_th, poi_radius
       kinfu eval nbv sample_data/tabletop --strategy poi,random,fixed --mode both --workers 2
     """
     claim_outputs({"output": output, "plot": plot}, [scene], force)
-    modes = ("kfovp", "kfom") if mode == "both" else (mode,)
-    cfg = LoopConfig(strategies=tuple(s.strip() for s in strategies.split(",") if s.strip()), modes=modes,
-                     views=views, voxel_size=voxel_size, gain=gain, inc_th=inc_th, poi_radius=poi_radius,
-                     pois_from=pois_from, oscillation_deg=oscillation, scan_every=scan_every, width=width,
-                     height=height, noise=not no_noise, seed=seed, optimistic=optimistic,
-                     sphere=dict(lon_step=lon_step, lat_step=lat_step, roll_step=roll_step),
-                     poi=tuple(poi) if poi else None, scan_frames=scan_frames, near_margin=near_margin,
-                     score_width=score_width, reject_unknown=reject_unknown)
-    cfg.check()  # bad values fail before connecting to a cluster
+    cfg = loop_config(click.get_current_context().params)  # bad values fail before connecting to a cluster
     with trial_engine(scheduler, workers, desc="eval nbv", quiet=quiet) as tmap:
         doc = run_loop(scene, cfg, quiet=quiet, map_trials=tmap)
     if plot is not None:

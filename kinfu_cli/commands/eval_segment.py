@@ -10,8 +10,9 @@ import click
 from kinfu_cli.commands._options import SWEEP_ONLY_OPTIONS, claim_outputs, force_option, given_options
 from kinfu_cli.commands._output import emit
 from kinfu_cli.core.errors import ConfigError
-from kinfu_cli.evaluation.segment_eval import (RGB_T_LCCP_VALUES, SWEEP_DEFAULT, SWEEP_VALUES, default_sweep_values,
-                                               evaluate_segments, label_names, sweep_segmentation)
+from kinfu_cli.evaluation.segment_eval import (RGB_T_LCCP_VALUES, SWEEP_DEFAULT, SWEEP_VALUES, check_eval_numbers,
+                                               default_sweep_values, evaluate_segments, label_names,
+                                               sweep_segmentation)
 from kinfu_cli.evaluation.segments import MATCHINGS
 from kinfu_cli.evaluation.segment_tables import format_segment_table, format_sweep_table
 from kinfu_cli.segmentation.segments import COLOR_DISTANCES
@@ -31,6 +32,12 @@ def _numbers(text: str, option: str, kind=float) -> list:
     if not vals:
         raise ConfigError(f"{option} {text!r}: expected at least one number")
     return vals
+
+
+def check_options(params: dict) -> None:
+    """What `kinfu eval segment` (scoring SEGMENTS) refuses with these options before it reads anything (kinfu
+    batch checks a plan with it); ConfigError naming the parameter."""
+    check_eval_numbers(*(params[k] for k in ("t_eval", "max_distance", "cover", "share", "matching")))
 
 
 @click.command("segment", short_help="Segmentation boundary P/R, BCE, object recall vs labels; --sweep: PR curves.")

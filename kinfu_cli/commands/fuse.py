@@ -47,6 +47,44 @@ def _floats(value: str, name: str, n: tuple[int, ...]) -> tuple[float, ...]:
     return v
 
 
+def fuse_arguments(params: dict) -> dict:
+    """fuse_recording's keywords from the command's parsed options (click's parameter dict): the one place that
+    turns fuse's options into library arguments, for the command and for `check_options`."""
+    p = dict(params)
+    voxel_size, resolution, size, origin = p["voxel_size"], p["resolution"], p["size"], p["origin"]
+    if voxel_size is not None and resolution is not None:
+        raise ConfigError("--voxel-size and --resolution: give one of them, not both")
+    res = None
+    if resolution is not None:
+        r = _floats(resolution, "--resolution", (1, 3))
+        if any(x != int(x) or x < 1 for x in r):
+            raise ConfigError(f"--resolution: expected positive integers, got {resolution!r}")
+        res = int(r[0]) if len(r) == 1 else tuple(int(x) for x in r)
+    if size.strip().lower() == "auto":
+        grid_size = "auto"
+    else:
+        sz = _floats(size, "--size", (1, 3))
+        grid_size = sz[0] if len(sz) == 1 else sz
+    init, clear_pois = p["init"], p["clear_pois"]
+    return dict(
+        size=grid_size, resolution=res, voxel_size=voxel_size,
+        origin=_floats(origin, "--origin", (3,)) if origin else None, truncation=p["truncation"],
+        max_weight=p["max_weight"], min_depth=p["min_depth"], max_depth=p["max_depth"], color=not p["no_color"],
+        pose=p["pose"], pose_topic=p["pose_topic"], init=str(init) if init else None,
+        clear_spheres=[_floats(s, "--clear-sphere", (4,)) for s in p["clear_spheres"]],
+        clear_pois=str(clear_pois) if clear_pois else None, start_s=p["start_s"], end_s=p["end_s"],
+        every=p["every"], tolerance_s=p["tolerance_s"], fill_gaps=p["fill_gaps"], bilateral=p["bilateral"],
+        shadow_filter=p["shadow_filter"], roles=role_kwargs(p), quiet=p["quiet"], argument_names=ARGUMENT_FLAGS,
+        max_lost=_share(p["max_lost"]), max_memory=p["max_memory"], color_mode=p["color_mode"], icp=p["icp"],
+        up=None if isinstance(up_dir := parse_up(p["up"], ("auto",)), str) else up_dir)
+
+
+def check_options(params: dict) -> None:
+    """What `kinfu fuse` refuses with these options before it opens the recording (kinfu batch checks a plan
+    with it); ConfigError naming the parameter."""
+    fuse_recording(None, **fuse_arguments(params), check_only=True)
+
+
 @click.command("fuse", short_help="Fuse depth frames into a ternary TSDF volume, mesh and cloud.")
 @click.argument("recording", type=click.Path(path_type=Path))
 @click.option("-o", "--output", "outdir", type=click.Path(file_okay=False, path_type=Path), required=True,
@@ -140,29 +178,7 @@ def command(recording: Path, outdir: Path, voxel_size, resolution, size, origin,
       kinfu fuse rec2.mcap -o out/fuse2 --init out/fuse/volume.npz --clear-pois out/poi/pois.json
     """
     claim_outputs({"outdir": outdir, "viz": viz}, [recording, init, clear_pois], force)
-    if voxel_size is not None and resolution is not None:
-        raise ConfigError("--voxel-size and --resolution: give one of them, not both")
-    res = None
-    if resolution is not None:
-        r = _floats(resolution, "--resolution", (1, 3))
-        if any(x != int(x) or x < 1 for x in r):
-            raise ConfigError(f"--resolution: expected positive integers, got {resolution!r}")
-        res = int(r[0]) if len(r) == 1 else tuple(int(x) for x in r)
-    if size.strip().lower() == "auto":
-        grid_size = "auto"
-    else:
-        sz = _floats(size, "--size", (1, 3))
-        grid_size = sz[0] if len(sz) == 1 else sz
-    result = fuse_recording(
-        recording, size=grid_size, resolution=res, voxel_size=voxel_size,
-        origin=_floats(origin, "--origin", (3,)) if origin else None, truncation=truncation, max_weight=max_weight,
-        min_depth=min_depth, max_depth=max_depth, color=not no_color, pose=pose, pose_topic=pose_topic,
-        init=str(init) if init else None, clear_spheres=[_floats(s, "--clear-sphere", (4,)) for s in clear_spheres],
-        clear_pois=str(clear_pois) if clear_pois else None, start_s=start_s, end_s=end_s, every=every,
-        tolerance_s=tolerance_s, fill_gaps=fill_gaps, bilateral=bilateral, shadow_filter=shadow_filter,
-        roles=role_kwargs(kwargs), quiet=quiet, argument_names=ARGUMENT_FLAGS, max_lost=_share(max_lost),
-        max_memory=max_memory, color_mode=color_mode, icp=icp,
-        up=None if isinstance(up_dir := parse_up(up, ("auto",)), str) else up_dir)
+    result = fuse_recording(recording, **fuse_arguments(click.get_current_context().params))
     if not quiet:
         for note in result.notes:
             click.echo(f"kinfu: note: {note}", err=True)

@@ -11,12 +11,13 @@ import click
 from kinfu_cli.commands._options import claim_outputs, force_option
 from kinfu_cli.commands._output import emit
 from kinfu_cli.commands._up import parse_up
+from kinfu_cli.core.camera import CameraModel
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.pois import DEFAULT_RADIUS, poi_frame_warnings
 from kinfu_cli.fusion.volume import volume_intrinsics
 from kinfu_cli.nbv.gains import gain_names
 from kinfu_cli.nbv.sensor import camera_from_options, camera_source, preset_warning
-from kinfu_cli.nbv.viewpoints import PAPER_SPHERE, SphereSpec
+from kinfu_cli.nbv.viewpoints import PAPER_SPHERE, SphereSpec, read_candidates
 from kinfu_cli.nbv.workflow import NbvOptions, rank_object_views, rank_poi_views
 from kinfu_cli.report.nbv_plot import plot_nbv
 from kinfu_cli.report.viewer import write_viewer
@@ -33,6 +34,42 @@ def _table_z_option(value: str):
     if not math.isfinite(z) or abs(z) > 1e4:  # nan / inf would reject every view, or none, silently
         raise ConfigError(f"--table-z: expected auto, none or a height in metres, got {value!r}")
     return z
+
+
+def _up_option(value: str) -> tuple[float, float, float] | None:
+    up_dir = parse_up(value, ("auto",))
+    return None if isinstance(up_dir, str) else tuple(float(v) for v in up_dir)
+
+
+def _camera(p: dict, recorded: dict | None) -> CameraModel:
+    """The sensor model from the parsed options; `recorded`: the intrinsics the volume was fused with."""
+    return camera_from_options(p["fx"], p["fy"], p["cx"], p["cy"], p["width"], p["height"], p["camera_info"],
+                               p["min_range"], p["max_range"], p["vfov_extra"], recorded=recorded)
+
+
+def nbv_options(p: dict) -> NbvOptions:
+    """The POI planner's options from the command's parsed options (click's parameter dict): the one place that
+    turns them into NbvOptions, for the command and for `check_options`."""
+    sphere = SphereSpec(radius=p["radius"], lon_step=p["lon_step"], lat_min=p["lat_min"], lat_max=p["lat_max"],
+                        lat_step=p["lat_step"], roll_step=p["roll_step"])
+    return NbvOptions(gain=p["gain"], clear=p["clear"], top=p["top"], candidates=p["candidates"], sphere=sphere,
+                      poi_radius=p["poi_radius"], inc_th=p["inc_th"], table_z=_table_z_option(p["table_z"]),
+                      clearance=p["clearance"], share_rolls=not p["exact_rolls"], optimistic=p["optimistic"],
+                      up=_up_option(p["up"]))
+
+
+def check_options(params: dict) -> None:
+    """What `kinfu nbv` (POI mode) refuses with these options before it reads the volume and the POIs (kinfu
+    batch checks a plan with it): the options, the viewing sphere (or the --candidates file) and the sensor
+    model (unless it comes from --camera-info, a recording); ConfigError naming the parameter."""
+    opts = nbv_options(params)
+    opts.validate()
+    if opts.candidates is None:
+        opts.sphere.viewpoints((0.0, 0.0, 0.0), up=opts.up)  # the sphere's own range checks
+    else:
+        read_candidates(opts.candidates)
+    if params["camera_info"] is None:
+        _camera(params, None)
 
 
 def summary_lines(doc: dict) -> list[str]:
@@ -157,12 +194,11 @@ def command(volume, pois_path, mode, clear, gain, top, output, plot, candidates,
     claim_outputs({"output": output, "plot": plot, "viz": viz}, [volume, pois_path, candidates, camera_info], force)
     t0 = time.perf_counter()
     recorded = volume_intrinsics(volume) if Path(volume).is_file() else None
-    cam = camera_from_options(fx, fy, cx, cy, width, height, camera_info, min_range, max_range, vfov_extra,
-                              recorded=recorded)
+    params = click.get_current_context().params
+    cam = _camera(params, recorded)
     source = camera_source(fx, fy, cx, cy, camera_info, recorded)
     camera_warnings = [preset_warning()] if source == "kinect_v1 preset" else []
-    up_dir = parse_up(up, ("auto",))
-    up_dir = None if isinstance(up_dir, str) else tuple(float(v) for v in up_dir)
+    up_dir = _up_option(up)
     if mode == "objects":
         if candidates is not None:  # it was read by nobody: a damaged or wrong file passed silently
             raise ConfigError("--candidates: applies to --mode poi (--mode objects places its own views)")
@@ -178,12 +214,7 @@ def command(volume, pois_path, mode, clear, gain, top, output, plot, candidates,
         return
     if pois_path is None:
         raise ConfigError("--pois: required with --mode poi (a pois.json from `kinfu poi`)")
-    sphere = SphereSpec(radius=radius, lon_step=lon_step, lat_min=lat_min, lat_max=lat_max, lat_step=lat_step,
-                        roll_step=roll_step)
-    opts = NbvOptions(gain=gain, clear=clear, top=top, candidates=candidates, sphere=sphere, poi_radius=poi_radius,
-                      inc_th=inc_th, table_z=_table_z_option(table_z), clearance=clearance,
-                      share_rolls=not exact_rolls, optimistic=optimistic, up=up_dir)
-    ranked = rank_poi_views(volume, pois_path, cam, opts, quiet=quiet)
+    ranked = rank_poi_views(volume, pois_path, cam, nbv_options(params), quiet=quiet)
     doc = ranked.to_json()
     doc["camera_source"] = source
     doc["warnings"] = camera_warnings + poi_frame_warnings(pois_path, ranked.grid.frame, "--pois") + doc["warnings"]

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from kinfu_cli.attention.detect import PoiDetection, detect_pois
+from kinfu_cli.attention.detect import PoiDetection, check_detection, detect_pois
 from kinfu_cli.attention.tasks import MIN_TASK_S, SPLIT_GAP_S
 from kinfu_cli.commands._detector_options import detector_options, detector_params_from
 from kinfu_cli.commands._options import claim_outputs, force_option
@@ -15,6 +15,19 @@ from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.core.atomic import write_json
 from kinfu_cli.report.poi_plot import plot_pois, plot_task_pois
 from kinfu_cli.report.viewer import write_viewer
+
+
+def detection_arguments(params: dict) -> dict:
+    """detect_pois's detector arguments from the command's parsed options (click's parameter dict): the one
+    place that turns poi's options into them, for the command and for `check_options`."""
+    return dict(algorithm=params["algorithm"], params=detector_params_from(dict(params))[params["algorithm"]],
+                workspace=params["workspace"], split_gap=params["split_gap"], min_task=params["min_task"])
+
+
+def check_options(params: dict) -> None:
+    """What `kinfu poi` refuses with these options before it reads the trajectory (kinfu batch checks a plan
+    with it); ConfigError naming the parameter."""
+    check_detection(**detection_arguments(params))
 
 
 @click.command("poi", short_help="Points of interest from the hand trajectory (GMM-AS or ZVC).")
@@ -67,9 +80,8 @@ def command(source, algorithm, hand_topic, hand_frame, world_frame, workspace, s
       kinfu poi user1_cup0.traj --literal --plot literal.png
     """
     claim_outputs({"output": output, "plot": plot, "viz": viz}, [source], force)
-    params = detector_params_from(kw)[algorithm]
-    found = detect_pois(source, algorithm, params, workspace=workspace, split_gap=split_gap, min_task=min_task,
-                        hand_topic=hand_topic, hand_frame=hand_frame, world_frame=world_frame, quiet=quiet)
+    found = detect_pois(source, **detection_arguments(click.get_current_context().params), hand_topic=hand_topic,
+                        hand_frame=hand_frame, world_frame=world_frame, quiet=quiet)
     write_json(output, found.document)
     print_warnings(found.document)
     if plot is not None:

@@ -71,6 +71,37 @@ def _grasps(segments: dict, options, cones: tuple[str, ...]) -> dict:
     return out
 
 
+def segment_options(p: dict):
+    """(SegmentOptions, GraspOptions or None) from the command's parsed options (click's parameter dict): the one
+    place that turns segment's options into library options, for the command and for `check_options`."""
+    grasp_options = (_grasp_options(p["grasp_hand"], p["grasp_cones"], p["grasp_starts"], p["no_superquadrics"])
+                     if p["grasp"] else None)
+    params = SegmentationParams(seed_resolution=p["seed_resolution"], spatial_importance=p["spatial_importance"],
+                                normal_importance=p["normal_importance"], adjacency_radius=p["adjacency_radius"],
+                                method=p["method"], color_importance=p["color_importance"], t_lccp=p["t_lccp"],
+                                t_ff=p["t_ff"], color_distance=p["color_distance"],
+                                plane_color_margin=p["plane_color_margin"],
+                                cut_concave_fraction=p["concave_cut"] or None,
+                                concavity_tolerance_deg=p["concavity_tolerance"], sanity_angle_deg=p["sanity_angle"],
+                                min_segment_points=p["min_segment_points"], fragment_points=p["fragment_points"],
+                                plane_distance=p["plane_distance"], up=_up(p["up"]),
+                                up_tolerance_deg=p["up_tolerance"], seed=p["seed"])
+    opts = SegmentOptions(resolution=p["resolution"], min_weight=p["min_weight"],
+                          isolation_threshold=p["isolation_threshold"], superquadrics=not p["no_superquadrics"],
+                          sq_max_points=p["sq_max_points"],
+                          sq_exponent_bounds=_pair(p["sq_exponent_bounds"], "--sq-exponent-bounds"),
+                          sq_cost=p["sq_cost"], multi_sq=p["multi_sq"], msq_trigger=p["msq_trigger"],
+                          msq_height=p["msq_height"], msq_mu=p["msq_mu"], msq_cut=p["msq_cut"],
+                          color=not p["no_color"], segmentation=params, shape_prior=p["shape_prior"])
+    return opts, grasp_options
+
+
+def check_options(params: dict) -> None:
+    """What `kinfu segment` refuses with these options before it reads the volume (kinfu batch checks a plan
+    with it); ConfigError naming the parameter."""
+    segment_options(params)[0].validate()
+
+
 @click.command("segment", short_help="Segments, saliency and superquadrics of a fused volume.")
 @click.argument("volume", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("-o", "--output", "outdir", type=click.Path(file_okay=False, path_type=Path), default=Path("segments"),
@@ -167,21 +198,7 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
       kinfu segment out/fuse/volume.npz -o out/segments --grasp --grasp-hand right --grasp-cone top
     """
     claim_outputs({"outdir": outdir, "viz": viz}, [volume], force)
-    grasp_options = _grasp_options(grasp_hand, grasp_cones, grasp_starts, no_superquadrics) if grasp else None
-    params = SegmentationParams(seed_resolution=seed_resolution, spatial_importance=spatial_importance,
-                                normal_importance=normal_importance, adjacency_radius=adjacency_radius,
-                                method=method, color_importance=color_importance, t_lccp=t_lccp, t_ff=t_ff,
-                                color_distance=color_distance,
-                                plane_color_margin=plane_color_margin, cut_concave_fraction=concave_cut or None,
-                                concavity_tolerance_deg=concavity_tolerance, sanity_angle_deg=sanity_angle,
-                                min_segment_points=min_segment_points, fragment_points=fragment_points,
-                                plane_distance=plane_distance,
-                                up=_up(up), up_tolerance_deg=up_tolerance, seed=seed)
-    opts = SegmentOptions(resolution=resolution, min_weight=min_weight, isolation_threshold=isolation_threshold,
-                          superquadrics=not no_superquadrics, sq_max_points=sq_max_points,
-                          sq_exponent_bounds=_pair(sq_exponent_bounds, "--sq-exponent-bounds"), sq_cost=sq_cost,
-                          multi_sq=multi_sq, msq_trigger=msq_trigger, msq_height=msq_height, msq_mu=msq_mu,
-                          msq_cut=msq_cut, color=not no_color, segmentation=params, shape_prior=shape_prior)
+    opts, grasp_options = segment_options(click.get_current_context().params)
     result: SegmentResult | None = None
     doc: dict = {}
     grasps: dict | None = None

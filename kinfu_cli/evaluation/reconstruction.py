@@ -469,16 +469,22 @@ class FusionEvaluation:
     score: ReconstructionScore
 
 
+def check_fusion_evaluation(*, threshold: float = DEFAULT_THRESHOLD, spacing: float = DEFAULT_SPACING,
+                            margin: float = 0.02, min_height: float = 0.005) -> None:
+    """The distances of `evaluate_fusion` checked before anything is read (ConfigError naming the first bad one)."""
+    for name, val in (("threshold", threshold), ("spacing", spacing)):
+        check_number(val, name, 0, 10, low_open=True, unit="m")
+    for name, val in (("margin", margin), ("min_height", min_height)):
+        check_number(val, name, 0, 10, unit="m")
+
+
 def evaluate_fusion(path: str | os.PathLike, ground_truth: str | os.PathLike, state: str = "after",
                     threshold: float = DEFAULT_THRESHOLD, spacing: float = DEFAULT_SPACING, margin: float = 0.02,
                     min_height: float = 0.005, footprint: str = "rect", use_volume: bool = True, seed: int = 0,
                     quiet: bool = True) -> FusionEvaluation:
     """Score a `kinfu fuse` output folder (mesh.ply [+ volume.npz]) or a mesh file against a `kinfu synth`
     ground-truth folder (module docstring); quiet: no progress bar."""
-    for name, val in (("threshold", threshold), ("spacing", spacing)):
-        check_number(val, name, 0, 10, low_open=True, unit="m")
-    for name, val in (("margin", margin), ("min_height", min_height)):
-        check_number(val, name, 0, 10, unit="m")
+    check_fusion_evaluation(threshold=threshold, spacing=spacing, margin=margin, min_height=min_height)
     t0 = time.perf_counter()
     gt = rec = score = measures = surface = frames = None
     report = report_json_of(path)

@@ -168,8 +168,9 @@ class SegmentEvalResult:
     up: np.ndarray | None
 
 
-def _check_eval_numbers(t_eval: float, max_distance: float, cover: float, share: float,
-                        matching: str = "assignment") -> None:
+def check_eval_numbers(t_eval: float, max_distance: float, cover: float, share: float,
+                       matching: str = "assignment") -> None:
+    """The scoring numbers checked before anything is read (ConfigError naming the first bad one)."""
     if matching not in MATCHINGS:
         raise ConfigError(f"expected one of {', '.join(MATCHINGS)}, got {matching!r}", parameter="matching")
     for name, v, lo, hi in (("t_eval", t_eval, 0, 1), ("max_distance", max_distance, 0, 1), ("cover", cover, 0, 1),
@@ -216,7 +217,7 @@ def evaluate_segments(segments: str | os.PathLike | PredictedSegments, ground_tr
                       *, t_eval: float = 0.02, max_distance: float = 0.015, cover: float = 0.8, share: float = 0.2,
                       min_object_points: int = 20, matching: str = "assignment") -> SegmentEvalResult:
     """Score a segmentation (files or loaded) against ground-truth labels; see the module docstring."""
-    _check_eval_numbers(t_eval, max_distance, cover, share, matching)
+    check_eval_numbers(t_eval, max_distance, cover, share, matching)
     pred = segments if isinstance(segments, PredictedSegments) else load_predicted_segments(segments)
     gt = ground_truth if isinstance(ground_truth, LabelledCloud) else load_ground_truth_labels(ground_truth)
     doc, keep, g, err = score_labelled_points(pred.points, pred.labels, gt, t_eval=t_eval, max_distance=max_distance,
@@ -340,7 +341,7 @@ def sweep_segmentation(seeds=(0, 1, 2), parameter: str = SWEEP_DEFAULT[0], value
 
     values = default_sweep_values(parameter, color_distance) if values is None else values
     values, seeds, layouts, colors = _check_sweep_inputs(parameter, values, seeds, layouts, colors)
-    _check_eval_numbers(t_eval, max_distance, cover, share, matching)
+    check_eval_numbers(t_eval, max_distance, cover, share, matching)
     method = sweep_method(parameter, method)
     as_int = _sweep_fields()[parameter] in (int, "int")
     opts = {c: _sweep_options(parameter, values, method, c != "none", as_int, color_distance) for c in colors}

@@ -174,30 +174,28 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
                    roles: Mapping[str, str | None] | None = None, quiet: bool = True,
                    argument_names: Mapping[str, str] | None = None, up=None, max_lost: float = 0.10,
                    max_memory: float | None = None, color_mode: str | None = None,
-                   icp: str = "projective") -> FusionResult:
+                   icp: str = "projective", check_only: bool = False) -> FusionResult | None:
     """Fuse the depth frames of `recording` (MCAP, ROS 1 .bag, ROS 2 bag folder) into a TernaryVolume.
 
-    Grid: size (m, one or three values, or "auto": a box around what the selected frames observe from their
-    poses, fusion.extent), resolution (voxels per axis: with a size 512 unless voxel_size, with "auto" over
-    the box), voxel_size (m; with "auto" default 3 m / 512, coarser when the grid's worst case exceeds
-    max_memory GiB, default half the available memory up to 2 GiB), origin (minimum corner; default centred
-    on what the first frames see, with "auto" the box's corner), truncation, max_weight, min_depth/max_depth
-    (m), color. pose: forced (TF), icp, hint (ICP from TF) or topic
-    (pose_topic); default forced when TF links the camera to the world, else icp. init: a volume.npz to
-    continue. clear_spheres (x, y, z, r) and the POIs of clear_pois are forgotten (before fusing with init,
-    else after). start_s / end_s (seconds from the recording start), every, tolerance_s: frame selection as
-    io.frames.iter_frames. fill_gaps, bilateral, shadow_filter, shadow_baseline: depth filters. roles:
-    detect_roles overrides. argument_names: how the report names the init, origin, clear_spheres,
-    clear_pois and up arguments (default these names; a command line passes its options). up: the world's
-    direction against gravity (x, y, z); None decides it as fusion.up.choose_up says (the volume's up,
-    stored in volume.npz, ternary.npz and the report with its source).
-    max_lost: the largest share of tracked frames (icp, hint) that may be lost (not fused) before the run
-    fails. color_mode: "mean" or "mode" (fusion/color_mode.py); None: the init volume's, else "mean". icp: the
-    tracker's ICP, "projective" (fusion.icp) or "open3d" (tracking.ICP_METHODS)."""
+    Grid: size (m, one or three values, or "auto": a box around what the selected frames observe from their poses,
+    fusion.extent), resolution (voxels per axis: with a size 512 unless voxel_size, with "auto" over the box),
+    voxel_size (m; with "auto" default 3 m / 512, coarser when the grid's worst case exceeds max_memory GiB, default
+    half the available memory up to 2 GiB), origin (minimum corner; default centred on what the first frames see,
+    with "auto" the box's corner), truncation, max_weight, min_depth/max_depth (m), color. pose: forced (TF), icp,
+    hint (ICP from TF) or topic (pose_topic); default forced when TF links the camera to the world, else icp. init:
+    a volume.npz to continue. clear_spheres (x, y, z, r) and the POIs of clear_pois are forgotten (before fusing
+    with init, else after). start_s / end_s (seconds from the recording start), every, tolerance_s: frame selection
+    as io.frames.iter_frames. fill_gaps, bilateral, shadow_filter, shadow_baseline: depth filters. roles:
+    detect_roles overrides. argument_names: how the report names the init, origin, clear_spheres, clear_pois and up
+    arguments (default these names; a command line passes its options). up: the world's direction against gravity
+    (x, y, z); None decides it as fusion.up.choose_up says (the volume's up, stored in volume.npz, ternary.npz and
+    the report with its source). max_lost: the largest share of tracked frames (icp, hint) that may be lost (not
+    fused) before the run fails. color_mode: "mean" or "mode" (fusion/color_mode.py); None: the init volume's, else
+    "mean". icp: the tracker's ICP, "projective" (fusion.icp) or "open3d" (tracking.ICP_METHODS). check_only: check
+    the arguments as a run would, then return None without opening the recording (kinfu batch checks plans so)."""
     started = time.perf_counter()
     timing: dict[str, float] = {}
-    names = {"init": "init", "origin": "origin", "clear_spheres": "clear_spheres", "clear_pois": "clear_pois",
-             "up": "up", **(argument_names or {})}
+    names = {**{n: n for n in ("init", "origin", "clear_spheres", "clear_pois", "up")}, **(argument_names or {})}
     up = None if up is None else check_up(up, "up")
     _check_arguments(pose, pose_topic, every, max_lost, size)
     auto = isinstance(size, str)
@@ -216,7 +214,9 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
         for s in spheres:
             vol.clear_sphere(s["center"], s["radius"])
     else:
-        grid_spec.volume(origin=(0.0, 0.0, 0.0))  # refuse impossible grid settings before reading anything
+        grid_spec.volume(origin=origin or (0.0, 0.0, 0.0))  # refuse impossible grid settings before reading anything
+    if check_only:
+        return None
 
     with open_recording(recording) as rec:
         tf = TfBuffer.from_recording(rec)
