@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import re
 import time
 import uuid
 import warnings
@@ -21,6 +22,7 @@ from functools import partial
 from pathlib import Path
 
 from kinfu_cli.batch.fingerprint import input_fingerprint, output_stats
+from kinfu_cli.batch.lock import LOCK_NAME
 from kinfu_cli.batch.manifest import DONE, MANIFEST_NAME, build_manifest, read_previous, write_manifest
 from kinfu_cli.batch.plan import Plan
 from kinfu_cli.batch.stages import StageSpec
@@ -181,8 +183,37 @@ def run_task(spec: StageSpec, rec, options: Mapping, previous: dict | None, forc
     return entry
 
 
+# what a killed kinfu run leaves beside an output (core.atomic's temporaries): not a user's file
+_DEBRIS = re.compile(r"^\..+\.[a-z0-9_]{8}(\.old)?\.part(\..*)?$")
+
+
+def _user_entries(folder: Path) -> list[str]:
+    """Names in `folder` other than batch's lock file and kinfu's temporaries."""
+    return sorted(e.name for e in folder.iterdir() if e.name != LOCK_NAME and not _DEBRIS.match(e.name))
+
+
+def claim_folder(folder: Path, inputs, force: bool, where: str = "") -> None:
+    """The rule of the single commands' outputs for a folder batch writes into: refused when it is or holds an
+    input, and, unless `force`, when it exists holding entries without kinfu's ownership record
+    (core.ownership: a folder batch wrote into holds one). An empty folder is fine. `where` prefixes the error."""
+    empty = folder.is_dir() and not _user_entries(folder)
+    try:
+        claim_output(folder, inputs, force=force or empty)
+    except KinfuError as exc:
+        raise type(exc)(f"{where}{exc.detail}") from None
+
+
+def check_output_folders(plan: Plan, force: bool) -> None:
+    """The batch output folder and every recording's output folder (`claim_folder`), before anything is written."""
+    inputs = [r.path for r in plan.recordings]
+    claim_folder(plan.output, inputs, force)
+    for rec in plan.recordings:
+        claim_folder(rec.output, inputs, force, f"{plan.source}: {rec.entry}: ")
+
+
 def check_before_work(plan: Plan, table: Mapping[str, StageSpec], force: bool) -> None:
-    """Options of every (recording, stage) and every output path, before any task is submitted."""
+    """Options of every (recording, stage), every output path, then every output folder, before anything is
+    written (the command checks before it takes the lock, whose file would go into a user's folder)."""
     inputs = [r.path for r in plan.recordings]
     claim_output(plan.output / MANIFEST_NAME, inputs, force=force, parameter="output")
     for rec in plan.recordings:
@@ -194,6 +225,7 @@ def check_before_work(plan: Plan, table: Mapping[str, StageSpec], force: bool) -
                 raise ConfigError(f"{plan.source}: {rec.entry}: {s}: {exc}") from None
             for rel in spec.claims_of(rec):
                 claim_output(rec.output / rel, inputs, force=force, parameter="output")
+    check_output_folders(plan, force)  # after the paths: a user's file where a stage writes is named itself
 
 
 def run_plan(plan: Plan, table: Mapping[str, StageSpec], engine: Engine, *, force: bool = False,

@@ -56,8 +56,10 @@ def command(plan: Path, output: Path | None, workers: int | None, scheduler: str
     Resumable: a stage whose outputs exist unchanged with the same input fingerprint (inputs' size and
     modification time, options, kinfu version) is skipped; --force redoes everything. A failing recording
     does not stop the others; the exit code is 1 when one failed, 2 for a bad plan (checked before any work:
-    unknown stages or options, missing files, globs matching nothing, a diff without `before`, an evaluation
-    without ground truth, two recordings with one output folder, an unreachable --scheduler).
+    unknown stages or options, option values the stage's command refuses, missing files, globs matching
+    nothing, a diff without `before`, an evaluation without ground truth, two recordings with one output folder,
+    an existing OUTPUT or recording folder holding files kinfu did not write (unless --force, which writes
+    beside them and replaces only a file named as an output), an unreachable --scheduler).
 
     \b
     Example plan (examples/batch_plan.toml):
@@ -78,8 +80,8 @@ def command(plan: Path, output: Path | None, workers: int | None, scheduler: str
         raise ConfigError("--workers: sizes the local cluster; with --scheduler the cluster has its own workers")
     table = batch_stages()
     loaded = load_plan(plan, table, output, viz)
+    check_before_work(loaded, table, force)  # before the lock file goes into a user's folder
     with batch_lock(loaded.output):  # a second run on this folder fails here, before any work
-        check_before_work(loaded, table, force)
         engine = connect(scheduler, workers)
         try:
             doc = run_plan(loaded, table, engine, force=force, quiet=quiet)

@@ -1,10 +1,17 @@
-"""`kinfu batch` refuses option values out of the library's ranges before any work: each stage's command builds
-and validates its parameter objects without reading an input. Before, such values passed the check (click parses
-only the type), failed inside the Dask task, and the recording was marked failed (exit 1)."""
+"""`kinfu batch` refuses bad input before any work.
+
+- Option values out of the library's ranges: each stage's command builds and validates its parameter objects
+  without reading an input. Before, such values passed the check (click parses only the type), failed inside the
+  Dask task, and the recording was marked failed (exit 1).
+- Output folders it did not write: the batch output folder and each recording's folder follow the single
+  commands' rule (core.ownership). An existing folder holding a user's files and no kinfu ownership record is
+  refused unless --force; with --force the user's files stay; a folder batch wrote into is taken again (resume).
+  Before, batch wrote into any existing folder."""
 
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import pytest
@@ -13,6 +20,7 @@ from conftest import one_line_error
 
 from kinfu_cli.cli import cli
 from kinfu_cli.commands._batch_stages import _COMMANDS
+from kinfu_cli.core.atomic import write_json
 from kinfu_cli.core.errors import KinfuError
 
 # stage -> (the stages its plan lists, an option line out of the library's range, what the error line names)
@@ -110,3 +118,101 @@ def test_good_values_pass_the_check(workspace, connects):
                          "no-superquadrics = true")
     one_line_error(_batch(plan), "connected to a cluster")
     assert len(connects) == 1
+
+
+def _listing(folder: Path) -> dict[str, str]:
+    return {str(p.relative_to(folder)): p.read_text() if p.is_file() else "/" for p in sorted(folder.rglob("*"))}
+
+
+def test_foreign_output_folder_is_refused_unless_force(workspace, connects):
+    plan = _plan(workspace, ["fuse"], "fuse", "voxel-size = 0.04")
+    out = workspace / "out"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    before = _listing(out)
+    one_line_error(_batch(plan), f"{out}: an existing folder that kinfu did not write", "--force")
+    one_line_error(_batch(plan, "-o", out), f"{out}: an existing folder", "--force")
+    assert _listing(out) == before and connects == []
+    one_line_error(_batch(plan, "--force"), "connected to a cluster")  # --force gets past the checks
+    assert (out / "notes.txt").read_text() == "mine"
+
+
+def test_foreign_recording_folder_is_refused_unless_force(workspace, connects):
+    plan = _plan(workspace, ["fuse"], "fuse", "voxel-size = 0.04")
+    out = workspace / "out"
+    write_json(out / "manifest.json", {})  # batch's own output folder (its ownership record)
+    (out / "recs" / "a").mkdir(parents=True)
+    (out / "recs" / "a" / "notes.txt").write_text("mine")
+    before = _listing(out)
+    one_line_error(_batch(plan), f"{plan}: recordings[0] {workspace / 'recs' / 'a.mcap'}: {out / 'recs' / 'a'}: an "
+                                "existing folder that kinfu did not write", "--force")
+    assert _listing(out) == before and connects == []
+    one_line_error(_batch(plan, "--force"), "connected to a cluster")
+
+
+def test_empty_or_debris_only_folder_is_taken(workspace, connects):
+    """An empty folder, or one holding only batch's lock and a killed run's temporaries, is no user's."""
+    plan = _plan(workspace, ["fuse"], "fuse", "voxel-size = 0.04")
+    out = workspace / "out"
+    (out / "recs" / "a").mkdir(parents=True)
+    (out / "recs" / "a" / ".pois.k3j_9a0z.part.json").write_text("{")
+    one_line_error(_batch(plan), f"{out}: an existing folder")  # out holds recs/, a user's folder
+    shutil.rmtree(out / "recs")
+    (out / ".kinfu-batch.lock").write_text("kinfu batch lock pid 1\n")
+    (out / "recs" / "a").mkdir(parents=True)
+    (out / "recs" / "a" / ".fuse.k3j_9a0z.part").mkdir()
+    write_json(out / "manifest.json", {})
+    one_line_error(_batch(plan), "connected to a cluster")
+    assert len(connects) == 1
+
+
+def test_output_folder_holding_an_input_is_refused_even_with_force(workspace, connects):
+    plan = _plan(workspace, ["fuse"], "fuse", "voxel-size = 0.04")
+    one_line_error(_batch(plan, "-o", workspace / "recs", "--force"), "contains the input")
+    assert connects == [] and sorted(p.name for p in (workspace / "recs").iterdir()) == ["a.mcap", "ground_truth"]
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory) -> Path:
+    """A tiny synthetic tabletop recording (4 frames, 32 x 24)."""
+    from kinfu_cli.sim.synth import synthesize
+
+    base = tmp_path_factory.mktemp("folders_rec")
+    synthesize(base / "synth", seed=0, width=32, height=24, frames=4, formats=("mcap",))
+    return base / "synth" / "recording.mcap"
+
+
+@pytest.mark.slow
+def test_force_keeps_user_files_and_a_rerun_resumes(recording, scheduler, tmp_path):
+    """With --force batch writes beside the user's files, never over them; its folder is then its own, so the
+    next run without --force is taken and skips what is current; a --force rerun keeps a user's file inside a
+    folder output."""
+    (tmp_path / "recs").mkdir()
+    shutil.copy(recording, tmp_path / "recs" / "a.mcap")
+    plan = tmp_path / "plan.toml"
+    plan.write_text('output = "out"\nstages = ["fuse", "poi"]\nrecordings = ["recs/a.mcap"]\n[options.fuse]\n'
+                    'voxel-size = 0.04\n')
+    out, rec_out = tmp_path / "out", tmp_path / "out" / "recs" / "a"
+    rec_out.mkdir(parents=True)
+    for folder in (out, rec_out):
+        (folder / "notes.txt").write_text(f"mine: {folder.name}")
+    one_line_error(_batch(plan, "--scheduler", scheduler), f"{out}: an existing folder", "--force")
+    res = _batch(plan, "--scheduler", scheduler, "--force")
+    assert res.exit_code == 0, res.output
+    doc = json.loads((out / "manifest.json").read_text())
+    assert {s: e["status"] for s, e in doc["recordings"][0]["stages"].items()} == {"fuse": "ok", "poi": "ok"}
+    assert (rec_out / "fuse" / "volume.npz").is_file() and (rec_out / "pois.json").is_file()
+    for folder in (out, rec_out):
+        assert (folder / "notes.txt").read_text() == f"mine: {folder.name}"
+    (rec_out / "fuse" / "mine.txt").write_text("inside")  # a user's file inside a folder kinfu wrote
+    res = _batch(plan, "--scheduler", scheduler)  # batch's own folder now: taken, and nothing to redo
+    assert res.exit_code == 0, res.output
+    doc = json.loads((out / "manifest.json").read_text())
+    assert {s: e["status"] for s, e in doc["recordings"][0]["stages"].items()} == {"fuse": "skipped",
+                                                                                   "poi": "skipped"}
+    res = _batch(plan, "--scheduler", scheduler, "--force")  # everything redone: fuse/ replaced, mine.txt kept
+    assert res.exit_code == 0, res.output
+    doc = json.loads((out / "manifest.json").read_text())
+    assert {s: e["status"] for s, e in doc["recordings"][0]["stages"].items()} == {"fuse": "ok", "poi": "ok"}
+    assert (rec_out / "fuse" / "mine.txt").read_text() == "inside"
+    assert (out / "notes.txt").read_text() == "mine: out" and (rec_out / "notes.txt").read_text() == "mine: a"
