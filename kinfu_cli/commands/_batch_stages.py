@@ -142,7 +142,7 @@ def _plan_spelling(message: str) -> str:
     """"--voxel-size: expected ..." as the plan names the option: "voxel-size: expected ..."."""
     head, sep, rest = message.partition(": ")
     names = head.replace(" and ", "/").split("/")
-    if sep and all(n.startswith("--") for n in names):
+    if sep and all(n.startswith("--") and " " not in n for n in names):
         return f"{head.replace('--', '')}: {rest}"
     return message
 

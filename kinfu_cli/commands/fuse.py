@@ -13,6 +13,7 @@ from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.commands._roles import role_kwargs, role_options
 from kinfu_cli.commands._up import parse_up
 from kinfu_cli.core.atomic import atomic_dir, write_json
+from kinfu_cli.core.camera import parse_intrinsics
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.fusion.outputs import fusion_report, write_fusion_outputs
 from kinfu_cli.fusion.pipeline import fuse_recording
@@ -83,6 +84,7 @@ def check_options(params: dict) -> None:
     """What `kinfu fuse` refuses with these options before it opens the recording (kinfu batch checks a plan
     with it); ConfigError naming the parameter."""
     fuse_recording(None, **fuse_arguments(params), check_only=True)
+    parse_intrinsics(params["intrinsics"])  # else parsed when the recording's roles are detected
 
 
 @click.command("fuse", short_help="Fuse depth frames into a ternary TSDF volume, mesh and cloud.")

@@ -42,6 +42,7 @@ MORE = [
     ("fuse", "min-depth = 5", "fuse: min-depth/max-depth: expected 0 <= min < max"),
     ("fuse", 'origin = "1e9,0,0"', "fuse: origin: expected finite x,y,z within"),
     ("fuse", 'max-lost = "200%"', "fuse: max-lost: expected a share in [0, 1]"),
+    ("fuse", 'intrinsics = "525,-1,320,240"', "fuse: intrinsics: expected fx,fy,cx,cy"),
     ("poi", 'workspace = "1,2"', "poi: workspace: expected six numbers"),
     ("nbv", "clearance = -1", "nbv: clearance: expected a finite number >= 0"),
     ("nbv", "min-range = 9", "nbv: min-range/max-range: expected 0 <= min < max"),
