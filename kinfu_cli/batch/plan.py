@@ -90,7 +90,8 @@ def _read(source: Path) -> dict:
 
 
 def _normalise_options(source: Path, where: str, value, table: Mapping[str, StageSpec]) -> dict[str, dict]:
-    """{stage: {option-name: value}} with option names in their flag spelling (voxel_size -> voxel-size)."""
+    """{stage: {option-name: value}} with option names in their flag spelling (voxel_size -> voxel-size); the
+    stage's file options resolved against the plan's folder."""
     if value is None:
         return {}
     if not isinstance(value, dict):
@@ -102,6 +103,13 @@ def _normalise_options(source: Path, where: str, value, table: Mapping[str, Stag
         if not isinstance(opts, dict):
             raise _fail(source, f"{where}.{stage}", "expected a table of options")
         out[stage] = {str(k).replace("_", "-"): v for k, v in opts.items()}
+        for key in table[stage].file_options:  # input files named by options: relative to the plan, as recordings
+            value = out[stage].get(key)
+            if isinstance(value, str):
+                full = Path(os.path.normpath(value if os.path.isabs(value) else source.parent / value))
+                if not full.exists():
+                    raise _fail(source, f"{where}.{stage}.{key}", f"{value}: no such file")
+                out[stage][key] = str(full)
     return out
 
 

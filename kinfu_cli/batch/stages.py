@@ -38,7 +38,8 @@ class StageSpec:
     before any work); `outputs`: files whose presence and stat say the stage is complete; `inputs`: what its
     fingerprint covers; `needs`: stages of the same recording it runs after (the plan must list them);
     `wants`: stages it runs after when the recording has them (it reads their outputs if present);
-    `links`: the plan recording links it needs (the plan checks they resolve)."""
+    `links`: the plan recording links it needs (the plan checks they resolve); `file_options`: its options whose
+    value is an input file (relative to the plan's folder, part of the fingerprint)."""
 
     name: str
     needs: tuple[str, ...]
@@ -49,11 +50,13 @@ class StageSpec:
     run: Callable[[Any, Mapping, bool], StageRun]
     wants: tuple[str, ...] = ()
     links: tuple[str, ...] = ()
+    file_options: tuple[str, ...] = ()  # options naming an input file (the plan resolves them against its folder)
 
     def input_paths(self, rec) -> list[tuple[str, Path]]:
         """(label, path) of each input: RECORDING is the recording, "<link>" a link of the plan recording, the
-        others are in its output folder."""
-        out = []
+        others are in its output folder; then the files the stage's file options name."""
+        opts = rec.stage_options(self.name)
+        out = [(f"--{k}", Path(opts[k])) for k in self.file_options if isinstance(opts.get(k), str)]
         for p in _per(self.inputs, rec):
             if p == RECORDING:
                 out.append((p, rec.path))

@@ -208,12 +208,23 @@ def _segment_numbers(outdir: Path) -> dict:
 _NUMBERS = {"fuse": _fuse_numbers, "poi": _poi_numbers, "nbv": _nbv_numbers, "segment": _segment_numbers}
 
 
+def _file_options(stage: str) -> tuple[str, ...]:
+    """The command's options that read a file (click.Path) and that a plan may set (nbv's candidates and
+    camera-info): batch resolves them against the plan's folder and fingerprints the files."""
+    if stage not in _COMMANDS:
+        return ()
+    _, reserved, files = _COMMANDS[stage]
+    names = (max(p.opts, key=len)[2:] for p in _command(stage).params
+             if isinstance(p, click.Option) and isinstance(p.type, click.Path))
+    return tuple(n for n in names if n not in reserved and n not in files)
+
+
 def batch_stages() -> dict[str, StageSpec]:
     """The stage table in pipeline order (a stage comes after the stages it needs)."""
     def spec(name, needs, inputs, outputs, claims, **kw):
         return StageSpec(name=name, needs=needs, inputs=inputs, outputs=outputs, claims=claims,
                          check=kw.pop("check", partial(check_stage, name)), run=kw.pop("run", partial(run_stage, name)),
-                         **kw)
+                         file_options=_file_options(name), **kw)
 
     volume = "fuse/volume.npz"
     return {

@@ -46,7 +46,6 @@ MORE = [
     ("poi", 'workspace = "1,2"', "poi: workspace: expected six numbers"),
     ("nbv", "clearance = -1", "nbv: clearance: expected a finite number >= 0"),
     ("nbv", "min-range = 9", "nbv: min-range/max-range: expected 0 <= min < max"),
-    ("nbv", 'candidates = "no_such_poses.json"', "nbv: no_such_poses.json: no such candidate file"),
     ("segment", 'sq-exponent-bounds = "3,1"', "segment: sq-exponent-bounds: expected 0 < lo < hi <= 2"),
     ("diff", "match-radius = 0", "diff: match-radius: expected a positive distance"),
     ("eval-nbv", "lon-step = 0", "eval-nbv: lon-step: expected a step in (0, 360]"),
@@ -217,3 +216,25 @@ def test_force_keeps_user_files_and_a_rerun_resumes(recording, scheduler, tmp_pa
     assert {s: e["status"] for s, e in doc["recordings"][0]["stages"].items()} == {"fuse": "ok", "poi": "ok"}
     assert (rec_out / "fuse" / "mine.txt").read_text() == "inside"
     assert (out / "notes.txt").read_text() == "mine: out" and (rec_out / "notes.txt").read_text() == "mine: a"
+
+
+def test_a_missing_file_option_is_refused_naming_the_plan_entry(workspace, connects):
+    plan = _plan(workspace, BAD["nbv"][0], "nbv", 'candidates = "no_such_poses.json"')
+    one_line_error(_batch(plan), f"{plan}: options.nbv.candidates: no_such_poses.json: no such file")
+    assert connects == [] and not (workspace / "out").exists()
+
+
+def test_file_options_are_read_beside_the_plan_and_fingerprinted(workspace, connects, monkeypatch, tmp_path_factory):
+    """nbv's candidates / camera-info name files relative to the plan, as its recordings are, whatever the
+    current folder; the file is one of the stage's inputs, so editing it makes the stage run again."""
+    from kinfu_cli.batch.plan import load_plan
+    from kinfu_cli.commands._batch_stages import batch_stages
+
+    (workspace / "poses.json").write_text(json.dumps([[[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 1], [0, 0, 0, 1]]]))
+    plan = _plan(workspace, BAD["nbv"][0], "nbv", 'candidates = "poses.json"')
+    monkeypatch.chdir(tmp_path_factory.mktemp("elsewhere"))
+    one_line_error(_batch(plan), "connected to a cluster")  # the file was found: past every check
+    table = batch_stages()
+    rec = load_plan(plan, table, None, None).recordings[0]
+    assert rec.stage_options("nbv")["candidates"] == str(workspace / "poses.json")
+    assert ("--candidates", workspace / "poses.json") in table["nbv"].input_paths(rec)
