@@ -13,7 +13,7 @@ import sys
 import click
 
 from kinfu_cli import __version__
-from kinfu_cli.commands._options import PARAMETER_FLAGS
+from kinfu_cli.commands._options import option_flags
 from kinfu_cli.core.errors import KinfuError
 from kinfu_cli.core.ownership import ForeignOutputError
 
@@ -100,13 +100,11 @@ class _LazyGroup(click.Group):
 
 
 def _flags_of(parameter: str, group: _LazyGroup) -> str:
-    """The command-line flag(s) of a library parameter name ("a/b" for two) in the command being run:
-    PARAMETER_FLAGS first, else its option of that Python name, else the name as the library gave it."""
+    """The command-line flag(s) of a library parameter name in the command being run (option_flags)."""
     cmd: click.Command | None = group
     while isinstance(cmd, _LazyGroup):
         cmd = cmd.last_resolved
-    options = {p.name: max(p.opts, key=len) for p in (cmd.params if cmd else []) if isinstance(p, click.Option)}
-    return "/".join(PARAMETER_FLAGS.get(n) or options.get(n) or n for n in parameter.split("/"))
+    return option_flags(cmd, parameter)
 
 
 def _one_line(message: str) -> str:

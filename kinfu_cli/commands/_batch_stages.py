@@ -19,7 +19,7 @@ from pathlib import Path
 import click
 
 from kinfu_cli.batch.stages import RECORDING, StageRun, StageSpec
-from kinfu_cli.commands._options import PARAMETER_FLAGS, SWEEP_ONLY_OPTIONS
+from kinfu_cli.commands._options import SWEEP_ONLY_OPTIONS, option_flags
 from kinfu_cli.core.errors import ConfigError, KinfuError
 
 # eval segment --sweep makes its own scenes: not a stage of a recording
@@ -151,8 +151,7 @@ def _flag_message(cmd: click.Command, exc: KinfuError) -> str:
     """A library error as the command line shows it: the parameter named by its flag."""
     if not exc.parameter:
         return str(exc)
-    options = {p.name: max(p.opts, key=len) for p in cmd.params if isinstance(p, click.Option)}
-    flags = "/".join(PARAMETER_FLAGS.get(n) or options.get(n) or n for n in exc.parameter.split("/"))
+    flags = option_flags(cmd, exc.parameter)
     return f"{flags}: {exc.detail}"
 
 

@@ -25,7 +25,15 @@ PARAMETER_FLAGS: dict[str, str] = {
     "region_radius": "--poi-radius",
     "modes": "--mode",
     "up_tolerance_deg": "--up-tolerance",
+    "cut_concave_fraction": "--concave-cut",
 }
+
+
+def option_flags(cmd: click.Command | None, parameter: str) -> str:
+    """The command-line flag(s) of a library parameter name ("a/b" for two) in `cmd`: PARAMETER_FLAGS first, else
+    its option of that Python name, else the name as the library gave it."""
+    options = {p.name: max(p.opts, key=len) for p in (cmd.params if cmd else []) if isinstance(p, click.Option)}
+    return "/".join(PARAMETER_FLAGS.get(n) or options.get(n) or n for n in parameter.split("/"))
 
 #: `kinfu eval segment` options that mean something only with --sweep (long flags without the dashes): the
 #: command refuses them without --sweep, batch's eval-segment stage (one recording, never a sweep) refuses them

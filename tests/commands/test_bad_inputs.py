@@ -185,6 +185,7 @@ def test_a_topic_of_the_wrong_type_is_named_with_its_type(sample_dir, tmp_path):
     (["segment", "{vol}", "-o", "{out}", "--resolution", "1e-6"], "--resolution"),
     (["segment", "{vol}", "-o", "{out}", "--spatial-importance", "nan"], "--spatial-importance"),
     (["segment", "{vol}", "-o", "{out}", "--sanity-angle", "nan"], "--sanity-angle"),
+    (["segment", "{vol}", "-o", "{out}", "--concave-cut", "2"], "--concave-cut"),
     (["nbv", "{vol}", "--pois", "{pois}", "-o", "{out}", "--radius", "1e300"], "--radius"),
     (["nbv", "{vol}", "--pois", "{pois}", "-o", "{out}", "--poi-radius", "1e300"], "--poi-radius"),
     (["eval", "nbv", "{gt}", "--width", "0"], "--width"),
