@@ -183,3 +183,45 @@ def test_watercan_bag_says_unorganized(tmp_path):
     line = one_line_error(CliRunner().invoke(cli, ["fuse", str(WATERCAN), "-o", str(tmp_path / "o"), "--quiet"]),
                           "/euclidean_cluster_indices_decomposer/output00", "unorganized")
     assert "height 1" in line
+
+
+def test_image_preferred_cloud_named_and_foreign_camera_info_unused(rendered, tmp_path):
+    """Both an image and a cloud: the image is the depth unless the cloud is named; a camera info in another
+    frame (the IR camera's, for a depth_registered cloud) is not the cloud's: its intrinsics are recovered."""
+    path = tmp_path / "both.mcap"
+    wrong = K.copy()
+    wrong[0, 0] *= 1.1
+    with RecordingWriter(path) as w:
+        for i, (T, depth, rgb) in enumerate(rendered[:2]):
+            t = S + i * S // 10
+            w.write_tf(t, [("world", FRAME, T), ("world", "ir_frame", T)])
+            w.write_image("/camera/depth/image_rect", t, FRAME, depth, "32FC1")
+            w.write_pointcloud2(CLOUD, t, FRAME, organized_cloud(depth, K, rgb))
+            w.write_camera_info("/camera/depth_registered/camera_info", t, "ir_frame", wrong, W, H)
+    with open_recording(path) as r:
+        assert detect_roles(r).depth_topic == "/camera/depth/image_rect"
+        roles = detect_roles(r, depth_topic=CLOUD)
+        assert roles.info_topic is None and roles.color_topic is None
+        stats = FrameStats()
+        frames = list(iter_frames(r, roles, stats=stats))
+    np.testing.assert_allclose(frames[0].K, K, rtol=1e-3)
+    assert np.array_equal(frames[1].color, rendered[1][2]) and "recovered from the cloud" in stats.notes[0]
+
+
+def test_camera_info_that_misses_the_points_gives_way(rendered, tmp_path):
+    """A camera info in the cloud's frame whose K does not project the points onto their pixels (P vs K of a
+    rectified stream, another resolution mode) is not used: K is recovered, and the note says why."""
+    wrong = K.copy()
+    wrong[0, 2] += 3.0
+    path = tmp_path / "off.bag"
+    with RecordingWriter(path) as w:
+        T, depth, rgb = rendered[0]
+        w.write_pointcloud2(CLOUD, S, FRAME, organized_cloud(depth, K, rgb))
+        w.write_camera_info("/camera/depth_registered/camera_info", S, FRAME, wrong, W, H)
+    stats = FrameStats()
+    with open_recording(path) as r:
+        roles = detect_roles(r)
+        assert roles.info_topic == "/camera/depth_registered/camera_info"
+        frames = list(iter_frames(r, roles, stats=stats, pose_source="none"))
+    np.testing.assert_allclose(frames[0].K, K, rtol=1e-3)
+    assert "misses its points by 3 px RMS" in stats.notes[0], stats.notes
