@@ -225,3 +225,16 @@ def test_camera_info_that_misses_the_points_gives_way(rendered, tmp_path):
         frames = list(iter_frames(r, roles, stats=stats, pose_source="none"))
     np.testing.assert_allclose(frames[0].K, K, rtol=1e-3)
     assert "misses its points by 3 px RMS" in stats.notes[0], stats.notes
+
+
+def test_ros1_encoded_mcap_cloud_reads_like_the_bag(rendered, tmp_path):
+    """`mcap convert` of a .bag: the mcap-ros1 decoder's message objects (bytes data) decode alike."""
+    from test_mcap_ros1 import bag_to_ros1_mcap
+
+    bag = _write(tmp_path / "c.bag", rendered[:2], "cloud", info=False, float_type="f8", byteorder=">", pad=5)
+    mcap = bag_to_ros1_mcap(bag, tmp_path / "c1.mcap")
+    with open_recording(bag) as a, open_recording(mcap) as b:
+        fa, fb = list(iter_frames(a)), list(iter_frames(b))
+    assert len(fa) == len(fb) == 2
+    for x, y, (_, depth, rgb) in zip(fa, fb, rendered):
+        assert np.array_equal(y.depth, depth) and np.array_equal(y.color, rgb) and np.array_equal(x.K, y.K)
