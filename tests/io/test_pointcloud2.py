@@ -229,10 +229,22 @@ def test_camera_info_that_misses_the_points_gives_way(rendered, tmp_path):
 
 def test_ros1_encoded_mcap_cloud_reads_like_the_bag(rendered, tmp_path):
     """`mcap convert` of a .bag: the mcap-ros1 decoder's message objects (bytes data) decode alike."""
-    from test_mcap_ros1 import bag_to_ros1_mcap
+    from mcap.writer import Writer as McapWriter
+    from rosbags.highlevel import AnyReader
 
     bag = _write(tmp_path / "c.bag", rendered[:2], "cloud", info=False, float_type="f8", byteorder=">", pad=5)
-    mcap = bag_to_ros1_mcap(bag, tmp_path / "c1.mcap")
+    mcap = tmp_path / "c1.mcap"
+    with AnyReader([bag]) as reader, open(mcap, "wb") as f:  # the raw ROS 1 messages, as `mcap convert` keeps them
+        w = McapWriter(f)
+        w.start(profile="ros1")
+        channels = {}
+        for conn in reader.connections:
+            schema = w.register_schema(name=conn.msgtype.replace("/msg/", "/"), encoding="ros1msg",
+                                       data=conn.msgdef.data.encode())
+            channels[conn.id] = w.register_channel(topic=conn.topic, message_encoding="ros1", schema_id=schema)
+        for conn, stamp, raw in reader.messages():
+            w.add_message(channel_id=channels[conn.id], log_time=stamp, publish_time=stamp, data=bytes(raw))
+        w.finish()
     with open_recording(bag) as a, open_recording(mcap) as b:
         fa, fb = list(iter_frames(a)), list(iter_frames(b))
     assert len(fa) == len(fb) == 2
