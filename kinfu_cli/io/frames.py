@@ -239,9 +239,12 @@ def _cloud_camera(rec, roles: Roles, topic: str, stats: FrameStats) -> tuple[np.
 def cloud_depth_source(rec, roles: Roles) -> dict | None:
     """What an organized-cloud depth topic gives (for a summary): size, whether it carries colour, and the
     intrinsics that reading its frames will use and where they come from; `problem` instead when they cannot be
-    had. None when the depth topic is no PointCloud2 topic."""
+    had. None when the depth topic is no PointCloud2 topic (or, without a depth topic, no cloud is there)."""
     topic = roles.depth_topic
-    if topic is None or topic not in rec.topics or POINTCLOUD2 not in rec.topics[topic].msgtypes:
+    if topic is None:  # no depth topic: say why a cloud that is there is none
+        clouds = unorganized_clouds(rec)
+        return {"topic": clouds[0][0], "problem": f"not a depth source: it {clouds[0][1]}"} if clouds else None
+    if topic not in rec.topics or POINTCLOUD2 not in rec.topics[topic].msgtypes:
         return None
     first = rec.first_message(topic)
     if first is None or not is_cloud(first):

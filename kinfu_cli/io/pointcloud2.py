@@ -135,12 +135,13 @@ def fit_intrinsics(msg: object, where: str = "cloud") -> tuple[tuple[float, floa
         raise RecordingError(f"{where}: too few valid points ({u.size}) in the first cloud to recover the camera "
                              f"intrinsics; give them (fx,fy,cx,cy) or a camera info topic")
     params, res2 = [], 0.0
-    for pix, ray in ((u, a), (v, b)):
-        A = np.stack([ray, np.ones_like(ray)], axis=1)
-        (f, c), *_ = np.linalg.lstsq(A, pix, rcond=None)
-        params.append((float(f), float(c)))
-        r = A @ (f, c) - pix
-        res2 += float(np.mean(r * r))
+    for pix, ray in ((u, a), (v, b)):  # a straight line pix = f ray + c, in closed form (centred sums)
+        dr, dp = ray - ray.mean(), pix - pix.mean()
+        f = float(dr @ dp) / float(dr @ dr) if float(dr @ dr) > 0 else 0.0
+        c = float(pix.mean() - f * ray.mean())
+        params.append((f, c))
+        r = dp - f * dr
+        res2 += float(r @ r) / r.size
     (fx, cx), (fy, cy) = params
     rms = float(np.sqrt(res2))
     if not (rms <= MAX_PINHOLE_RMS_PX and fx > 0 and fy > 0):

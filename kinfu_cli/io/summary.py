@@ -142,7 +142,7 @@ def format_summary(s: dict, roles_heading: str = "roles (detected):") -> str:
 def _cloud_lines(c: dict) -> list[str]:
     """The organized point cloud read as depth: its size, colour and intrinsics (or why it cannot be read)."""
     if c.get("problem"):
-        return [f"  depth cloud:    {c['topic']}: problem: {c['problem']}"]
+        return [f"  depth cloud:    {c['topic']}: {c['problem']}"]
     k = c["intrinsics"]
     return [f"  depth cloud:    {c['width']}x{c['height']} organized point cloud, depth = z, colour: "
             f"{c['color'] or '-'}",

@@ -183,6 +183,8 @@ def test_watercan_bag_says_unorganized(tmp_path):
     line = one_line_error(CliRunner().invoke(cli, ["fuse", str(WATERCAN), "-o", str(tmp_path / "o"), "--quiet"]),
                           "/euclidean_cluster_indices_decomposer/output00", "unorganized")
     assert "height 1" in line
+    res = CliRunner().invoke(cli, ["info", str(WATERCAN)])
+    assert res.exit_code == 0 and "output00: not a depth source: it is an unorganized" in res.output, res.output
 
 
 def test_image_preferred_cloud_named_and_foreign_camera_info_unused(rendered, tmp_path):
