@@ -220,8 +220,9 @@ def _cloud_camera(rec, roles: Roles, topic: str, stats: FrameStats) -> tuple[np.
         K = intrinsics_matrix(*roles.intrinsics)
         return K, w, h, Undistorter.pinhole(K)
     disagree = ""
-    if roles.info_topic is not None:
-        K, iw, ih = camera_info_K(rec.first_message(roles.info_topic), f"{rec.path}: {roles.info_topic}")
+    info = rec.first_message(roles.info_topic) if roles.info_topic is not None else None
+    if info is not None:
+        K, iw, ih = camera_info_K(info, f"{rec.path}: {roles.info_topic}")
         if (iw, ih) != (w, h) and iw and ih:
             K = scaled_intrinsics(K, (w / iw, h / ih))
         rms = pinhole_rms(first, K, where)
