@@ -10,7 +10,7 @@ from collections.abc import Callable
 import click
 
 ROLE_HELP = {
-    "depth_topic": "Depth image topic (sensor_msgs/Image 16UC1/32FC1 or compressedDepth) [auto].",
+    "depth_topic": "Depth topic (sensor_msgs/Image 16UC1/32FC1, compressedDepth, or an organized PointCloud2) [auto].",
     "color_topic": "Colour image topic (Image or jpeg/png CompressedImage) [auto].",
     "info_topic": "sensor_msgs/CameraInfo topic of the depth camera [auto].",
     "camera_frame": "TF frame of the depth camera [frame_id of the depth images].",

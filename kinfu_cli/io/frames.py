@@ -19,7 +19,9 @@ from kinfu_cli.core.errors import ConfigError, RecordingError, TransformError
 from kinfu_cli.io.color_registration import ColorRegistration, color_registration, register_color
 from kinfu_cli.io.messages import (POSE_TYPES, camera_info_distortion, camera_info_K, decode_color, decode_depth,
                                    header_frame, header_stamp_ns, normalize_msgtype, pose_message_to_tq)
-from kinfu_cli.io.roles import Roles, detect_roles, require_role_topic
+from kinfu_cli.io.pointcloud2 import (MAX_PINHOLE_RMS_PX, POINTCLOUD2, decode_cloud, fit_intrinsics, has_color,
+                                      is_cloud, organized_problem, pinhole_rms)
+from kinfu_cli.io.roles import Roles, detect_roles, require_role_topic, unorganized_clouds
 from kinfu_cli.io.tf_buffer import TfBuffer
 from kinfu_cli.io.undistort import Undistorter
 
@@ -150,7 +152,11 @@ def iter_frames(rec, roles: Roles | None = None, pose_source: str = "tf", pose_t
         roles = detect_roles(rec, tf=tf)
     depth_topic = _require_topics(rec, roles)
     tol_ns = int(round(tolerance_s * 1e9))
-    K, width, height, lens = _depth_camera(rec, roles, depth_topic)
+    cloud = POINTCLOUD2 in rec.topics[depth_topic].msgtypes
+    if cloud:
+        K, width, height, lens = _cloud_camera(rec, roles, depth_topic, stats)
+    else:
+        K, width, height, lens = _depth_camera(rec, roles, depth_topic)
     if pose_source == "tf":
         pose_fn = _tf_poses(rec, roles, depth_topic, tf, tol_ns, stats)
     elif pose_source == "topic":
@@ -164,8 +170,10 @@ def iter_frames(rec, roles: Roles | None = None, pose_source: str = "tf", pose_t
         stats.color_registration = reg.as_dict()
         if reg.mode == "none":  # colour that cannot be placed is left out, not painted beside its surface
             roles = replace(roles, color_topic=None)
+    if cloud:  # the cloud's own camera, fixed: later camera infos are not read
+        roles = replace(roles, info_topic=None)
     pairer = _FramePairer(rec, roles, depth_topic, K, width, height, pose_fn, tol_ns, stats, require_color, reg,
-                          lens)
+                          lens, cloud)
     yield from pairer.stream(start_ns, end_ns, every)
 
 
@@ -200,14 +208,82 @@ def _depth_camera(rec, roles: Roles, depth_topic: str) -> tuple[np.ndarray, int,
     return K, width, height, Undistorter(K, *camera_info_distortion(first_info, f"{rec.path}: {roles.info_topic}"))
 
 
+def _cloud_camera(rec, roles: Roles, topic: str, stats: FrameStats) -> tuple[np.ndarray, int, int, Undistorter]:
+    """(K, width, height, pinhole lens) of an organized cloud's camera: the given intrinsics; else its camera
+    info's K (scaled to the cloud's size) when the cloud's points project onto their pixels with it; else K
+    recovered from the first cloud (io.pointcloud2.fit_intrinsics), said in stats.notes. No lens distortion: the
+    points are already in space."""
+    first = rec.first_message(topic)
+    where = f"{rec.path}: depth topic {topic}"
+    h, w = int(first.height), int(first.width)
+    if roles.intrinsics is not None:
+        K = intrinsics_matrix(*roles.intrinsics)
+        return K, w, h, Undistorter.pinhole(K)
+    disagree = ""
+    info = rec.first_message(roles.info_topic) if roles.info_topic is not None else None
+    if info is not None:
+        K, iw, ih = camera_info_K(info, f"{rec.path}: {roles.info_topic}")
+        if (iw, ih) != (w, h) and iw and ih:
+            K = scaled_intrinsics(K, (w / iw, h / ih))
+        rms = pinhole_rms(first, K, where)
+        if rms <= MAX_PINHOLE_RMS_PX:
+            return K, w, h, Undistorter.pinhole(K)
+        disagree = f"camera info {roles.info_topic} misses its points by {rms:.3g} px RMS, so "
+    (fx, fy, cx, cy), rms = fit_intrinsics(first, where)
+    stats.notes.append(f"depth from the organized point cloud {topic} ({w}x{h}): {disagree}its intrinsics were "
+                       f"recovered from the cloud: fx={fx:.2f} fy={fy:.2f} cx={cx:.2f} cy={cy:.2f} "
+                       f"({rms:.2g} px RMS)")
+    K = intrinsics_matrix(fx, fy, cx, cy)
+    return K, w, h, Undistorter.pinhole(K)
+
+
+def cloud_depth_source(rec, roles: Roles) -> dict | None:
+    """What an organized-cloud depth topic gives (for a summary): size, whether it carries colour, and the
+    intrinsics that reading its frames will use and where they come from; `problem` instead when they cannot be
+    had. None when the depth topic is no PointCloud2 topic (or, without a depth topic, no cloud is there)."""
+    topic = roles.depth_topic
+    if topic is None:  # no depth topic: say why a cloud that is there is none
+        clouds = unorganized_clouds(rec)
+        return {"topic": clouds[0][0], "problem": f"not a depth source: it {clouds[0][1]}"} if clouds else None
+    if topic not in rec.topics or POINTCLOUD2 not in rec.topics[topic].msgtypes:
+        return None
+    first = rec.first_message(topic)
+    if first is None or not is_cloud(first):
+        return {"topic": topic, "problem": "no readable message"}
+    out = {"topic": topic, "width": int(first.width), "height": int(first.height),
+           "color": "rgb field" if has_color(first) and roles.color_topic is None else roles.color_topic}
+    stats = FrameStats()
+    try:
+        _require_topics(rec, roles)
+        K, *_ = _cloud_camera(rec, roles, topic, stats)
+    except RecordingError as exc:
+        return {**out, "problem": str(exc)}
+    source = ("given" if roles.intrinsics is not None else "recovered from the cloud" if stats.notes else
+              f"camera info {roles.info_topic}")
+    return {**out, "intrinsics": {"fx": float(K[0, 0]), "fy": float(K[1, 1]), "cx": float(K[0, 2]),
+                                  "cy": float(K[1, 2])}, "intrinsics_source": source, "notes": stats.notes}
+
+
 def _require_topics(rec, roles: Roles) -> str:
-    """The depth topic; RecordingError unless the depth, camera info and (when set) colour topics are there."""
+    """The depth topic; RecordingError unless the depth, camera info (but for a cloud) and (when set) colour
+    topics are there, and a depth cloud is organized."""
     depth_topic = roles.depth_topic
     if depth_topic is None:
+        clouds = unorganized_clouds(rec)
+        if clouds:
+            name, why = clouds[0]
+            raise RecordingError(f"{rec.path}: no depth image topic found, and point cloud {name} {why}",
+                                 parameter="depth_topic")
         avail = ", ".join(f"{n} ({i.msgtype})" for n, i in rec.topics.items()) or "none"
         raise RecordingError(f"{rec.path}: no depth image topic found; topics: {avail}", parameter="depth_topic")
-    require_role_topic(rec, depth_topic, "depth topic")
-    if roles.info_topic is None and roles.intrinsics is None:
+    info = require_role_topic(rec, depth_topic, "depth topic")
+    if POINTCLOUD2 in info.msgtypes:
+        first = rec.first_message(depth_topic)
+        why = (organized_problem(first) if first is not None and is_cloud(first) else
+               f"has no readable message (of {info.count})")
+        if why:
+            raise RecordingError(f"{rec.path}: depth topic {depth_topic}: point cloud {why}", parameter="depth_topic")
+    elif roles.info_topic is None and roles.intrinsics is None:
         raise RecordingError(f"{rec.path}: no sensor_msgs/CameraInfo topic for depth topic {depth_topic} "
                              f"(give the intrinsics fx,fy,cx,cy)", parameter="intrinsics")
     if roles.info_topic is not None:
@@ -299,8 +375,10 @@ class _FramePairer:
 
     def __init__(self, rec, roles: Roles, depth_topic: str, K: np.ndarray, width: int, height: int,
                  pose_fn: PoseLookup | None, tol_ns: int, stats: FrameStats, require_color: bool,
-                 registration: ColorRegistration | None = None, lens: Undistorter | None = None) -> None:
+                 registration: ColorRegistration | None = None, lens: Undistorter | None = None,
+                 cloud: bool = False) -> None:
         self.rec = rec
+        self.cloud = cloud  # depth (and colour, with an rgb field) from an organized PointCloud2
         self.registration = registration
         # the depth camera's distortion: the first camera info's, then each one's
         self.lens = lens if lens is not None else Undistorter.pinhole(K)
@@ -361,7 +439,11 @@ class _FramePairer:
     def _emit(self, index: int, stamp: int, msg: object) -> RGBDFrame | None:
         """The frame of one depth message, or None (counted in stats) when it has no pose, no valid pixel, or
         no colour while colour is required."""
-        depth = decode_depth(msg, f"{self.rec.path}: {self.depth_topic}")
+        cloud_color = None
+        if self.cloud:
+            depth, cloud_color = decode_cloud(msg, f"{self.rec.path}: depth topic {self.depth_topic}")
+        else:
+            depth = decode_depth(msg, f"{self.rec.path}: {self.depth_topic}")
         h, w = depth.shape
         K = self.K
         if self.width and self.height and (w, h) != (self.width, self.height):
@@ -376,7 +458,9 @@ class _FramePairer:
             self.stats.drop(DROP_EMPTY)
             return None
         color = color_mask = None
-        if self.color_topic is not None and self.colors:
+        if self.color_topic is None and cloud_color is not None:
+            color = cloud_color  # registered: the same pixels
+        elif self.color_topic is not None and self.colors:
             best_stamp, best = min(self.colors, key=lambda c: abs(c[0] - stamp))
             if abs(best_stamp - stamp) <= self.tol_ns:
                 where = f"{self.rec.path}: {self.color_topic}"

@@ -12,7 +12,8 @@ from dataclasses import asdict, dataclass
 
 from kinfu_cli.core.camera import parse_intrinsics
 from kinfu_cli.core.errors import ConfigError, RecordingError, TransformError
-from kinfu_cli.io.messages import DEPTH_ENCODINGS, POSE_TYPES, header_frame
+from kinfu_cli.io.messages import DEPTH_ENCODINGS, POSE_TYPES, camera_info_K, header_frame
+from kinfu_cli.io.pointcloud2 import POINTCLOUD2, has_color, is_cloud, organized_problem
 from kinfu_cli.io.tf_buffer import TfBuffer
 
 IMAGE = "sensor_msgs/msg/Image"
@@ -20,7 +21,7 @@ COMPRESSED = "sensor_msgs/msg/CompressedImage"
 CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
 _WORLD_NAMES = ("world", "map", "odom")
 # message types a topic must carry to play a role (any one of them; a topic may mix types)
-ROLE_TYPES = {"depth topic": (IMAGE, COMPRESSED), "colour topic": (IMAGE, COMPRESSED),
+ROLE_TYPES = {"depth topic": (IMAGE, COMPRESSED, POINTCLOUD2), "colour topic": (IMAGE, COMPRESSED),
               "camera info topic": (CAMERA_INFO,), "hand topic": POSE_TYPES}
 _ROLE_PARAMETERS = {"depth topic": "depth_topic", "colour topic": "color_topic", "camera info topic": "info_topic",
                     "hand topic": "hand_topic"}
@@ -87,6 +88,30 @@ def _depth_candidates(rec) -> list[str]:
     return [n for _, n in sorted(out)]
 
 
+def _cloud_candidates(rec) -> list[str]:
+    """Organized PointCloud2 topics (a driver's /camera/depth/points): depth when no depth image topic exists;
+    those carrying rgb first, then by name."""
+    out: list[tuple[bool, str]] = []
+    for name, info in rec.topics.items():
+        if info.count and POINTCLOUD2 in info.msgtypes:
+            msg = rec.first_message(name)
+            if msg is not None and is_cloud(msg) and organized_problem(msg) is None:
+                out.append((not has_color(msg), name))
+    return [n for _, n in sorted(out)]
+
+
+def unorganized_clouds(rec) -> list[tuple[str, str]]:
+    """(topic, why it is no depth source) of each PointCloud2 topic that is not an organized x/y/z cloud."""
+    out = []
+    for name, info in rec.topics.items():
+        if info.count and POINTCLOUD2 in info.msgtypes:
+            msg = rec.first_message(name)
+            why = organized_problem(msg) if msg is not None and is_cloud(msg) else None
+            if why:
+                out.append((name, why))
+    return out
+
+
 def _color_candidates(rec, depth_topic: str | None) -> list[str]:
     out: list[tuple[int, int, str]] = []
     for name, info in rec.topics.items():
@@ -115,6 +140,31 @@ def _pick_info(rec, depth_topic: str | None) -> str | None:
         return infos[0]
     # same namespace as the depth image wins (/camera/depth/camera_info for /camera/depth/image_raw)
     return sorted(infos, key=lambda n: (-_common_prefix(n, depth_topic), "depth" not in n.lower(), n))[0]
+
+
+def _pick_cloud_info(rec, cloud_topic: str) -> str | None:
+    """The camera info of an organized cloud: one in the cloud's own optical frame whose size has the cloud's
+    aspect ratio (depth_registered clouds are in the colour camera's frame), nearest in namespace; None (the
+    intrinsics are then recovered from the cloud) when there is none."""
+    first = rec.first_message(cloud_topic)
+    frame = header_frame(first).lstrip("/") if first is not None else ""
+    if not frame:
+        return None
+    h, w = int(first.height), int(first.width)
+    found = []
+    for name, info in rec.topics.items():
+        if CAMERA_INFO not in info.msgtypes or not info.count:
+            continue
+        msg = rec.first_message(name)
+        if msg is None or header_frame(msg).lstrip("/") != frame:
+            continue
+        try:
+            _, iw, ih = camera_info_K(msg, name)
+        except RecordingError:
+            continue
+        if iw and ih and abs(iw * h - ih * w) <= 0.01 * iw * h:
+            found.append((-_common_prefix(name, cloud_topic), name))
+    return min(found)[1] if found else None
 
 
 def _pick_world(rec, tf: TfBuffer | None, camera_frame: str | None) -> str | None:
@@ -164,6 +214,14 @@ def _require_frame(rec, tf: TfBuffer | None, frame: str, what: str, parameter: s
                          parameter=parameter)
 
 
+def _first_cloud(rec, topic: str | None):
+    """The first message of `topic` when it is a PointCloud2 topic, else None."""
+    if topic is None or POINTCLOUD2 not in rec.topics[topic].msgtypes:
+        return None
+    msg = rec.first_message(topic)
+    return msg if msg is not None and is_cloud(msg) else None
+
+
 def detect_roles(rec, depth_topic: str | None = None, color_topic: str | None = None,
                  info_topic: str | None = None, camera_frame: str | None = None,
                  world_frame: str | None = None, hand_topic: str | None = None,
@@ -174,6 +232,10 @@ def detect_roles(rec, depth_topic: str | None = None, color_topic: str | None = 
     `tf` may be passed to reuse an already-read TfBuffer (else the TF topics are read here when needed).
     intrinsics: the depth camera's fx, fy, cx, cy (pixels) for a recording without its camera info (or to
     override it); then no camera info topic is used.
+    The depth topic may be an organized PointCloud2 (io.pointcloud2), detected only when no depth image topic
+    exists. When that cloud has an rgb field, its colour is the frames' colour and no colour topic is detected
+    (a colour topic given still wins); its camera info must be in the cloud's frame (else the intrinsics are
+    recovered from the cloud when reading frames).
     """
     if intrinsics is not None:
         intrinsics = parse_intrinsics(intrinsics)
@@ -185,13 +247,14 @@ def detect_roles(rec, depth_topic: str | None = None, color_topic: str | None = 
             require_role_topic(rec, topic, what)
 
     if depth_topic is None:
-        cands = _depth_candidates(rec)
+        cands = _depth_candidates(rec) or _cloud_candidates(rec)  # a depth image wins over a cloud
         depth_topic = cands[0] if cands else None
-    if color_topic is None:
+    cloud = _first_cloud(rec, depth_topic)
+    if color_topic is None and not (cloud is not None and has_color(cloud)):  # a cloud's rgb is registered colour
         cands = _color_candidates(rec, depth_topic)
         color_topic = cands[0] if cands else None
     if info_topic is None and intrinsics is None:
-        info_topic = _pick_info(rec, depth_topic)
+        info_topic = _pick_info(rec, depth_topic) if cloud is None else _pick_cloud_info(rec, depth_topic)
 
     given_camera = camera_frame
     header_frames: tuple[str, ...] = ()

@@ -13,7 +13,7 @@ from ruamel.yaml import YAML  # rosbags' own YAML library (PyYAML is not a depen
 
 from kinfu_cli.core.errors import TransformError
 from kinfu_cli.core.progress import progress
-from kinfu_cli.io.frames import FrameStats, iter_frames
+from kinfu_cli.io.frames import FrameStats, cloud_depth_source, iter_frames
 from kinfu_cli.io.recording import Recording, open_recording
 from kinfu_cli.io.roles import Roles, detect_roles
 from kinfu_cli.io.tf_buffer import TfBuffer
@@ -58,6 +58,7 @@ def summarize(rec: Recording, check_frames: dict | None = None, quiet: bool = Tr
         "message_count": rec.message_count,
         "topics": [t.as_dict() for t in rec.topics.values()],
         "roles": roles.as_dict(),
+        **({"depth_cloud": cloud} if (cloud := cloud_depth_source(rec, roles)) is not None else {}),
         "tf": {"frames": tf.frames(), "tree": tf.tree(), "links": _tf_links(tf), "rejected": dict(tf.rejected),
                "rejected_links": [{"parent": p, "child": c, "rejected": dict(r)}
                                   for (p, c), r in tf.rejected_links.items()],
@@ -128,12 +129,25 @@ def format_summary(s: dict, roles_heading: str = "roles (detected):") -> str:
     lines.append(roles_heading)
     for k, v in s["roles"].items():
         lines.append(f"  {k.replace('_', ' ') + ':':15s} {v if v is not None else '-'}")
+    if s.get("depth_cloud"):
+        lines += _cloud_lines(s["depth_cloud"])
     lines.append("")
     lines += _tf_lines(s["tf"])
     if s.get("frames") is not None:
         lines.append("")
         lines += _frames_lines(s["frames"])
     return "\n".join(lines)
+
+
+def _cloud_lines(c: dict) -> list[str]:
+    """The organized point cloud read as depth: its size, colour and intrinsics (or why it cannot be read)."""
+    if c.get("problem"):
+        return [f"  depth cloud:    {c['topic']}: {c['problem']}"]
+    k = c["intrinsics"]
+    return [f"  depth cloud:    {c['width']}x{c['height']} organized point cloud, depth = z, colour: "
+            f"{c['color'] or '-'}",
+            f"  intrinsics ({c['intrinsics_source']}): fx={k['fx']:.2f} fy={k['fy']:.2f} cx={k['cx']:.2f} "
+            f"cy={k['cy']:.2f}"]
 
 
 def _topic_lines(topics: list[dict]) -> list[str]:
@@ -200,6 +214,8 @@ def _frames_lines(fr: dict) -> list[str]:
              f"(skipped {fr['skipped']}, without colour {fr['without_color']})"]
     for reason, n in fr["dropped"].items():
         lines.append(f"  dropped {n}: {reason}")
+    for note in fr.get("notes", []):
+        lines.append(f"  note: {note}")
     reg = fr.get("color_registration")
     if reg and reg["mode"] == "project":
         lines.append(f"  colour: projected from the colour camera ({reg['color_frame']}, {reg['color_info_topic']}) "

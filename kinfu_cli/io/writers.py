@@ -280,6 +280,28 @@ class RecordingWriter:
             header=self._header(topic, stamp_ns, frame_id), format="16UC1; compressedDepth png", data=data)
         self._write(topic, "sensor_msgs/msg/CompressedImage", stamp_ns, msg)
 
+    def write_pointcloud2(self, topic: str, stamp_ns: int, frame_id: str, points: np.ndarray,
+                          row_pad: int = 0) -> None:
+        """sensor_msgs/PointCloud2 of a structured (H, W) array (io.pointcloud2.organized_cloud): its fields,
+        offsets, itemsize (point_step) and byte order as they are; `row_pad` bytes after each row."""
+        from kinfu_cli.io.pointcloud2 import point_fields
+
+        pts = np.asarray(points)
+        if pts.dtype.names is None or pts.ndim != 2:
+            raise ConfigError(f"{topic}: expected a structured (H, W) array, got {pts.dtype} {pts.shape}")
+        orders = {pts.dtype.fields[n][0].byteorder for n in pts.dtype.names} - {"|", "="}
+        big = orders == {">"}
+        h, w = pts.shape
+        step = pts.dtype.itemsize
+        rows = np.zeros((h, w * step + int(row_pad)), np.uint8)
+        rows[:, : w * step] = np.ascontiguousarray(pts).view(np.uint8).reshape(h, w * step)
+        field_t = self._type("sensor_msgs/msg/PointField")
+        fields = [field_t(name=n, offset=off, datatype=dt, count=1) for n, off, dt in point_fields(pts.dtype)]
+        msg = self._type("sensor_msgs/msg/PointCloud2")(
+            header=self._header(topic, stamp_ns, frame_id), height=h, width=w, fields=fields, is_bigendian=big,
+            point_step=step, row_step=rows.shape[1], data=rows.reshape(-1), is_dense=False)
+        self._write(topic, "sensor_msgs/msg/PointCloud2", stamp_ns, msg)
+
     def write_camera_info(self, topic: str, stamp_ns: int, frame_id: str, K: np.ndarray, width: int,
                           height: int, D: np.ndarray | None = None) -> None:
         """sensor_msgs/CameraInfo with plumb_bob distortion D (zeros when None), R = I, P = [K | 0]."""
