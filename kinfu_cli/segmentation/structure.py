@@ -49,13 +49,12 @@ STRUCT_MAX_BAND = 0.06  # the band's half width is at most this (m)
 class Structure:
     """planes (K, 4), each a, b, c, d with the unit normal facing into the scene; mask (N,) the points on
     them; reach (N,) a point's distance past the nearest plane's band edge in band half-widths (0 on or behind
-    a band, inf with no band there); nearest (N,) that plane's index (-1 with no band); height (N,) the point's
-    height over that plane's local median (m, nan with no band); info: what the search saw (JSON-ready)."""
+    a band, inf with no band there); height (N,) the point's height over that plane's local median (m, nan with
+    no band); info: what the search saw (JSON-ready)."""
 
     planes: np.ndarray
     mask: np.ndarray
     reach: np.ndarray
-    nearest: np.ndarray
     height: np.ndarray
     info: dict = field(default_factory=dict)
 
@@ -164,13 +163,13 @@ def find_structure(points: np.ndarray, normals: np.ndarray, *, max_planes: int, 
     room = len(planes) >= 2 and bool(np.any(cos <= np.cos(np.radians(STRUCT_MIN_ANGLE_DEG))))
     info["room"] = room
     n = len(points)
-    reach, nearest, height = np.full(n, np.inf), np.full(n, -1, dtype=np.int64), np.full(n, np.nan)
+    reach, height = np.full(n, np.inf), np.full(n, np.nan)
     if not room:
-        return Structure(np.zeros((0, 4)), np.zeros(n, dtype=bool), reach, nearest, height, info)
-    for i, p in enumerate(planes):
+        return Structure(np.zeros((0, 4)), np.zeros(n, dtype=bool), reach, height, info)
+    for p in planes:
         r, h = _plane_band(points, normals, p, sigmas, min_band)
         better = r < reach
-        reach[better], nearest[better], height[better] = r[better], i, h[better]
+        reach[better], height[better] = r[better], h[better]
     mask = reach <= 1.0
     info["points"] = int(mask.sum())
-    return Structure(np.array(planes), mask, reach, nearest, height, info)
+    return Structure(np.array(planes), mask, reach, height, info)
