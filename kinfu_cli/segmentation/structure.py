@@ -7,7 +7,8 @@ point anywhere (median |n . plane normal| 0.5-0.75 on the synthetic room). LCCP 
 those points and into the furniture that stands against them, and cuts the layer into hundreds of patches.
 
 1. Planes: RANSAC (`ransac_plane`) on the cloud thinned to one point per STRUCT_CELL cell, up to
-   `max_planes` rounds, inlier distance STRUCT_RANSAC_DISTANCE (about the far wall's noise).
+   `max_planes` rounds (fewer after STRUCT_MAX_MISSES planes in a row that are no structure), inlier distance
+   STRUCT_RANSAC_DISTANCE (about the far wall's noise).
 2. A plane is structure when it bounds the scene and is room-sized: no more than STRUCT_MAX_BEHIND of the
    points lie more than STRUCT_BEHIND behind it (a table top has its legs and the floor below it, a shelf's
    front the wall behind it), and its inliers span at least `min_extent` in both directions of the plane
@@ -34,6 +35,8 @@ from kinfu_cli.segmentation.plane_ransac import ransac_plane
 STRUCT_CELL = 0.05  # thinning for the plane search (m): a 5 x 4 m room's surfaces in ~50 k points
 STRUCT_RANSAC_DISTANCE = 0.03  # inlier distance of the search (m): about the noise of a wall seen from 4 m
 STRUCT_MIN_SHARE = 0.02  # the search stops at a plane holding less than this share of the thinned points
+STRUCT_MAX_MISSES = 2  # ... or after this many planes in a row that are no structure: a room's floor and walls
+# are its largest planes (the synthetic rooms' five came first, before the shelf's front and the sofa's seat)
 STRUCT_BEHIND = 0.1  # a point this far behind a plane (m) is behind it, not noise
 STRUCT_MAX_BEHIND = 0.01  # share of the points a bounding plane may have behind it
 STRUCT_MIN_ANGLE_DEG = 45.0  # a room has two bounding planes at least this far apart (a floor and a wall)
@@ -101,8 +104,9 @@ def bounding_planes(points: np.ndarray, max_planes: int, min_extent: float, iter
     info: dict = {"thinned_points": int(len(sub)), "planes_tried": 0, "rejected": []}
     found: list[np.ndarray] = []
     remaining = np.arange(len(sub))
+    misses = 0
     for _ in range(max_planes):
-        if len(remaining) < max(3, STRUCT_MIN_SHARE * len(sub)):
+        if len(remaining) < max(3, STRUCT_MIN_SHARE * len(sub)) or misses >= STRUCT_MAX_MISSES:
             break
         plane, inl = ransac_plane(sub[remaining], STRUCT_RANSAC_DISTANCE, iterations, rng)
         if len(inl) < STRUCT_MIN_SHARE * len(sub):
@@ -119,8 +123,10 @@ def bounding_planes(points: np.ndarray, max_planes: int, min_extent: float, iter
                   and abs(np.mean(inl_pts @ f[:3]) + f[3]) < STRUCT_WINDOW for f in found)
         if behind <= STRUCT_MAX_BEHIND and ext.min() >= min_extent and not dup:
             found.append(plane)
+            misses = 0
         else:
-            info["rejected"].append({"normal": [round(float(v), 3) for v in plane[:3]], "behind": round(behind, 4),
+            misses += 1
+            info["rejected"].append({"round": info["planes_tried"], "normal": [round(float(v), 3) for v in plane[:3]], "behind": round(behind, 4),
                                      "extent": [round(float(v), 2) for v in ext], "duplicate": bool(dup)})
     return found, info
 
