@@ -892,21 +892,27 @@ def _structure_foot_refine(pts: np.ndarray, labels: np.ndarray, height: np.ndarr
 
 
 def _room_structure(pts: np.ndarray, nrm: np.ndarray, good: np.ndarray, params: SegmentationParams
-                    ) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray | None, dict | None]:
-    """(mask, reach, height, info) of the room's structure (structure.py) over all points, the first three None
-    when the scene is no room (info None when the search is off)."""
+                    ) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray | None, np.ndarray | None, dict | None]:
+    """(mask, reach, height, floor, info) of the room's structure (structure.py) over all points; floor: its
+    lowest plane facing up (within up_tolerance_deg), or None; all but info None when the scene is no room (info
+    None when the search is off)."""
     if params.structure_planes <= 0:
-        return None, None, None, None
+        return None, None, None, None, None
     struct = find_structure(pts[good], nrm[good], max_planes=params.structure_planes,
                             min_extent=params.structure_min_extent, sigmas=params.structure_sigmas,
                             min_band=params.plane_distance, iterations=params.plane_iterations,
                             rng=np.random.default_rng(int(params.seed)))
     if not len(struct.planes):
-        return None, None, None, struct.info
+        return None, None, None, None, struct.info
     n = len(pts)
     mask, reach, height = np.zeros(n, dtype=bool), np.full(n, np.inf), np.full(n, np.nan)
     mask[good], reach[good], height[good] = struct.mask, struct.reach, struct.height
-    return mask, reach, height, struct.info
+    up = params.up_vector()
+    floor = None
+    if up is not None:
+        facing = [p for p in struct.planes if p[:3] @ up >= np.cos(np.radians(params.up_tolerance_deg))]
+        floor = max(facing, key=lambda p: float(p[3]), default=None)  # n . x = -d: the largest d is the lowest
+    return mask, reach, height, floor, struct.info
 
 
 def segment_cloud(points: np.ndarray, normals: np.ndarray, params: SegmentationParams | None = None,
@@ -936,9 +942,12 @@ def segment_cloud(points: np.ndarray, normals: np.ndarray, params: SegmentationP
     plane, inl = detect_support_plane(pts[good], nrm[good], params, search)
     on_plane = np.zeros(n, dtype=bool)
     on_plane[np.flatnonzero(good)[inl]] = True
-    struct_mask, reach_all, struct_height, structure_info = _room_structure(pts, nrm, good, params)
+    struct_mask, reach_all, struct_height, floor, structure_info = _room_structure(pts, nrm, good, params)
     if struct_mask is not None:
         on_plane |= struct_mask
+        if plane is None and floor is not None:  # a room whose floor is too little seen for the support's rule
+            plane = floor
+            search["from_structure"] = True
     rest = np.flatnonzero(good & ~on_plane)
     labels[on_plane] = PLANE_LABEL
     sv_all = np.full(n, -1, dtype=np.int64)
