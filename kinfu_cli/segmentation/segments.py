@@ -6,7 +6,7 @@ numpy/scipy:
 0. Room structure (structure.py; not in the thesis): in a room (two room-sized planes at an angle that bound the
    scene: a floor and a wall), the floor, walls and ceiling with a band that follows their own noise are label 0
    with the support; after LCCP, segments within STRUCT_REACH band half-widths of them join it, and the
-   furniture's feet are grown back out of the band. A tabletop scene (one bounding plane at most) never gets here.
+   furniture's feet are grown back out of the band. A tabletop scene (at most one bounding plane) is left as before.
 1. Support plane: RANSAC (open3d's `segment_plane` redone in numpy: plane_ransac.py; up to `max_planes` rounds)
    on points whose normal is within `up_tolerance_deg` of `up`; the highest plane holding >= `min_plane_fraction`
    of the points, or >= `min_up_facing_fraction` of those up-facing points (and at least `min_segment_points`), is the

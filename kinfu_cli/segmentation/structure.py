@@ -126,8 +126,9 @@ def bounding_planes(points: np.ndarray, max_planes: int, min_extent: float, iter
             misses = 0
         else:
             misses += 1
-            info["rejected"].append({"round": info["planes_tried"], "normal": [round(float(v), 3) for v in plane[:3]], "behind": round(behind, 4),
-                                     "extent": [round(float(v), 2) for v in ext], "duplicate": bool(dup)})
+            info["rejected"].append({"round": info["planes_tried"], "normal": [round(float(v), 3) for v in plane[:3]],
+                                     "behind": round(behind, 4), "extent": [round(float(v), 2) for v in ext],
+                                     "duplicate": bool(dup)})
     return found, info
 
 
