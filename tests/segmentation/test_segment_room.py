@@ -132,3 +132,15 @@ def test_tabletop_with_floor_is_no_room():
     assert not on.stats["structure"]["room"]
     assert np.array_equal(on.labels, off.labels)
     assert on.plane[3] < -0.69  # the table (z = 0.7) is the support, not the floor
+
+
+def test_room_y_down_world():
+    """The same room in a y-down world (rotated +90 deg about x, up -y, as `kinfu synth --world y-down`): the
+    structure does not assume z."""
+    pts, nrm, gt = room_cloud()
+    rot = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])  # z -> -y
+    seg = segment_cloud(pts @ rot.T, nrm @ rot.T, SegmentationParams(up=(0.0, -1.0, 0.0)))
+    lab = seg.labels
+    assert np.mean(lab[gt == 0] == PLANE_LABEL) > 0.97
+    assert all(_found(lab, gt, obj) for obj in (1, 2, 3))
+    assert abs(seg.plane[1] + 1.0) < 0.01 and abs(seg.plane[3]) < 0.02  # the floor y = 0 is the support
