@@ -42,6 +42,7 @@ from foxglove_schemas_protobuf.TextPrimitive_pb2 import TextPrimitive
 from kinfu_cli.core.atomic import atomic_path
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.report import viewer_messages as fm
+from kinfu_cli.segmentation.pipeline import support_plane_points
 from kinfu_cli.segmentation.saliency import oriented_box
 
 MAX_TRIANGLES = 300_000  # larger meshes are decimated (quadric decimation): a few tens of MB at most
@@ -248,7 +249,7 @@ def _add_segments(out: _Out, result, frame: str, t0: int, max_points: int) -> No
         e.metadata.extend(fm.metadata(saliency=s.saliency, residual_m=fits[0].residual, parts=len(fits)))
         entities.append(e)
     out.scene("/kinfu/superquadrics", t0, entities)
-    plane_pts = seg.points[seg.labels == 0]
+    plane_pts = support_plane_points(seg)
     if seg.plane is not None and len(plane_pts) >= 3:
         _add_plane(out, plane_pts, frame, t0)
 

@@ -25,6 +25,10 @@ from kinfu_cli.segmentation.segments import PLANE_LABEL, Segmentation, Segmentat
 from kinfu_cli.segmentation.superquadric import SegmentError, SuperquadricFit, fit_superquadric
 from kinfu_cli.segmentation.surface import SurfaceCloud, surface_from_volume
 
+# in a room (segments: structure) label 0 is floor and walls: the support entry's box and centroid are taken over
+# its points this close to the support plane (m; a far floor's band reaches 6 cm), the rest counted as structure
+ROOM_SUPPORT_SLAB = 0.1
+
 
 @dataclass
 class SegmentOptions:
@@ -69,6 +73,15 @@ class SegmentOptions:
                 raise ConfigError(f"expected 'radial' or 'volume', got {self.sq_cost!r}", parameter="sq_cost")
 
 
+def support_plane_points(seg: Segmentation) -> np.ndarray:
+    """The support plane's own points: label 0, or in a room (label 0 is floor and walls) those within
+    ROOM_SUPPORT_SLAB of the support plane, so that its box and centroid are the floor's."""
+    pts = seg.points[seg.labels == PLANE_LABEL]
+    if (seg.stats.get("structure") or {}).get("room") and seg.plane is not None:
+        pts = pts[np.abs(pts @ seg.plane[:3] + seg.plane[3]) <= ROOM_SUPPORT_SLAB]
+    return pts
+
+
 @dataclass
 class SegmentResult:
     """What `segment_volume` found; `to_json()` is the segments.json document."""
@@ -87,7 +100,7 @@ class SegmentResult:
     def to_json(self) -> dict:
         segs = []
         seg = self.segmentation
-        plane_pts = seg.points[seg.labels == PLANE_LABEL]
+        plane_pts = support_plane_points(seg)
         for rank, s in enumerate(self.saliency, start=1):
             sq = self.superquadrics.get(s.id)
             segs.append({
@@ -100,12 +113,15 @@ class SegmentResult:
                 **(self.shape_classes[s.id].to_json() if s.id in self.shape_classes else {}),
                 **({"multi_superquadric": self.multi[s.id].to_json()} if s.id in self.multi else {}),
             })
+        structure = seg.stats.get("structure") or {}
+        room = ({"structure": {"points": int(np.sum(seg.labels == PLANE_LABEL)), "planes": structure["planes"]}}
+                if structure.get("room") else {})
         if len(plane_pts):
             box = oriented_box(plane_pts)
             segs.append({"id": PLANE_LABEL, "kind": "support_plane", "rank": None, "point_count": int(len(plane_pts)),
                          "centroid": plane_pts.mean(axis=0).tolist(), "oriented_box": box.to_json(),
                          "plane": None if seg.plane is None else seg.plane.tolist(),
-                         "isolation": None, "roundness": None, "saliency": None, "superquadric": None})
+                         "isolation": None, "roundness": None, "saliency": None, "superquadric": None, **room})
         up = self.options.segmentation.up
         return {"segments": segs, "support_plane": None if seg.plane is None else seg.plane.tolist(),
                 "up": None if up is None else [float(v) for v in self.options.segmentation.up_vector()],

@@ -144,3 +144,20 @@ def test_room_y_down_world():
     assert np.mean(lab[gt == 0] == PLANE_LABEL) > 0.97
     assert all(_found(lab, gt, obj) for obj in (1, 2, 3))
     assert abs(seg.plane[1] + 1.0) < 0.01 and abs(seg.plane[3]) < 0.02  # the floor y = 0 is the support
+
+
+def test_room_support_entry_describes_the_floor_not_the_whole_room():
+    """segments.json's support entry: in a room label 0 is floor and walls, so its box and centroid are taken
+    over the floor's points (before: a box spanning the walls' 2 m height); the structure is counted beside."""
+    from dataclasses import replace
+
+    from kinfu_cli.segmentation.pipeline import SegmentOptions, analyse_cloud
+
+    pts, nrm, _ = room_cloud()
+    base = SegmentOptions(superquadrics=False)
+    opts = replace(base, segmentation=replace(base.segmentation, up=(0.0, 0.0, 1.0)))
+    doc = analyse_cloud(pts, nrm, opts, up_source="option").to_json()
+    (support,) = [s for s in doc["segments"] if s["kind"] == "support_plane"]
+    assert abs(support["centroid"][2]) < 0.05  # on the floor (z = 0), not halfway up the walls
+    assert max(support["oriented_box"]["extents"]) < 3.2 and min(support["oriented_box"]["extents"]) < 0.25
+    assert support["structure"]["points"] > 1.5 * support["point_count"] and len(support["structure"]["planes"]) == 3
