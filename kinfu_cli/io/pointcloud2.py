@@ -76,8 +76,8 @@ def _structured(msg: object, names: tuple[str, ...], where: str) -> np.ndarray:
             raise RecordingError(f"{where}: point field {n!r} at offset {off} does not fit point_step {step}")
     buf = np.frombuffer(msg.data if isinstance(msg.data, (bytes, bytearray, memoryview, np.ndarray))
                         else bytes(msg.data), dtype=np.uint8)
-    need = (h - 1) * row + w * step if h and w else 0
-    if row < w * step or buf.size < need:
+    need = (h - 1) * row + w * step if h > 0 and w > 0 else 0
+    if min(h, w, step, row) < 0 or row < w * step or buf.size < need:
         raise RecordingError(f"{where}: point cloud data has {buf.size} bytes, expected {h} rows of {w} points "
                              f"of {step} bytes (row_step {row})")
     dtype = np.dtype({"names": list(names), "formats": formats,
@@ -106,6 +106,9 @@ def decode_cloud(msg: object, where: str = "cloud") -> tuple[np.ndarray, np.ndar
 
 def _rays(msg: object, where: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(u, v, x/z, y/z) of the cloud's valid pixels (float64)."""
+    problem = organized_problem(msg)
+    if problem:
+        raise RecordingError(f"{where} {problem}")
     arr = _structured(msg, ("x", "y", "z"), where)
     x, y, z = (arr[n].astype(np.float64) for n in "xyz")
     with np.errstate(invalid="ignore"):

@@ -252,3 +252,34 @@ def test_ros1_encoded_mcap_cloud_reads_like_the_bag(rendered, tmp_path):
     assert len(fa) == len(fb) == 2
     for x, y, (_, depth, rgb) in zip(fa, fb, rendered):
         assert np.array_equal(y.depth, depth) and np.array_equal(y.color, rgb) and np.array_equal(x.K, y.K)
+
+
+def test_malformed_clouds_raise_recording_errors_only():
+    """Hand-made or damaged messages (sizes that do not match the data, fields missing, overlapping or out of
+    the point, odd datatypes) are RecordingErrors naming the topic, in decoding and in the intrinsics fit."""
+    from types import SimpleNamespace
+
+    from kinfu_cli.core.errors import RecordingError
+    from kinfu_cli.io.pointcloud2 import decode_cloud, fit_intrinsics, organized_cloud
+
+    K = np.array([[100.0, 0, 15.5], [0, 100.0, 11.5], [0, 0, 1]])
+    arr = organized_cloud(np.full((24, 32), 1.0), K, np.zeros((24, 32, 3), np.uint8))
+
+    def field(name, offset, datatype):
+        return SimpleNamespace(name=name, offset=offset, datatype=datatype, count=1)
+    xyz = [field("x", 0, 7), field("y", 4, 7), field("z", 8, 7)]
+    base = dict(height=24, width=32, point_step=arr.dtype.itemsize, row_step=arr.dtype.itemsize * 32,
+                is_bigendian=False, is_dense=False, fields=[*xyz, field("rgb", 16, 7)], data=arr.tobytes())
+    changes = [("height", v) for v in (0, -1, 1, 10 ** 9)] + [("width", v) for v in (0, -5, 10 ** 9)]
+    changes += [("point_step", v) for v in (0, -4, 4, 10 ** 9)] + [("row_step", v) for v in (0, -1, 10 ** 12)]
+    changes += [("data", b""), ("data", bytes(10))]
+    changes += [("fields", f) for f in ([], xyz[:1], [field(n, 0, 7) for n in "xyz"], [field("x", -4, 7), *xyz[1:]],
+                                        [field("x", 0, 99), *xyz[1:]], [*xyz, field("rgb", 16, 2)],
+                                        [*xyz, field("rgb", 30, 7)])]
+    for key, value in changes:
+        msg = SimpleNamespace(**{**base, key: value})
+        for read in (decode_cloud, fit_intrinsics):
+            try:
+                read(msg, "/cloud")
+            except RecordingError as exc:
+                assert "/cloud" in str(exc)
