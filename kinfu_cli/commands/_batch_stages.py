@@ -13,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import re
 from functools import partial
 from pathlib import Path
 
@@ -135,16 +136,16 @@ def check_stage(stage: str, rec, options: dict) -> None:
     try:
         _module(stage).check_options(ctx.params)
     except KinfuError as exc:
-        raise ConfigError(_plan_spelling(_flag_message(cmd, exc))) from None
+        raise ConfigError(_plan_spelling(_flag_message(cmd, exc), cmd)) from None
 
 
-def _plan_spelling(message: str) -> str:
-    """"--voxel-size: expected ..." as the plan names the option: "voxel-size: expected ..."."""
-    head, sep, rest = message.partition(": ")
-    names = head.replace(" and ", "/").split("/")
-    if sep and all(n.startswith("--") and " " not in n for n in names):
-        return f"{head.replace('--', '')}: {rest}"
-    return message
+def _plan_spelling(message: str, cmd: click.Command) -> str:
+    """The command's flags in a message as the plan names its options: "--voxel-size: expected ..." ->
+    "voxel-size: expected ...", "--grasp needs ...: drop --no-superquadrics" -> "grasp needs ...: drop
+    no-superquadrics" (other text with dashes is left alone)."""
+    longs = {o[2:] for p in cmd.params if isinstance(p, click.Option) for o in (*p.opts, *p.secondary_opts)
+             if o.startswith("--")}
+    return re.sub(r"(?<![\w-])--([a-z][a-z0-9-]*)", lambda m: m[1] if m[1] in longs else m[0], message)
 
 
 def _flag_message(cmd: click.Command, exc: KinfuError) -> str:

@@ -238,3 +238,11 @@ def test_file_options_are_read_beside_the_plan_and_fingerprinted(workspace, conn
     rec = load_plan(plan, table, None, None).recordings[0]
     assert rec.stage_options("nbv")["candidates"] == str(workspace / "poses.json")
     assert ("--candidates", workspace / "poses.json") in table["nbv"].input_paths(rec)
+
+
+def test_errors_name_options_as_the_plan_spells_them(workspace, connects):
+    """A command's message that names several of its flags reads with the plan's option names (no dashes)."""
+    plan = _plan(workspace, ["fuse", "segment"], "segment", "grasp = true\nno-superquadrics = true")
+    line = one_line_error(_batch(plan), "segment: ")
+    assert "grasp" in line and "no-superquadrics" in line and "--" not in line.split("segment: ", 1)[1]
+    assert connects == []
