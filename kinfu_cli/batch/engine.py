@@ -229,10 +229,11 @@ def check_before_work(plan: Plan, table: Mapping[str, StageSpec], force: bool) -
 
 
 def run_plan(plan: Plan, table: Mapping[str, StageSpec], engine: Engine, *, force: bool = False,
-             quiet: bool = False, on_entry: Callable[[dict], None] | None = None) -> dict:
-    """Submit the plan's task graph, write manifest.json after each finished task; returns the manifest."""
+             quiet: bool = False, on_entry: Callable[[dict], None] | None = None, redo: bool = False) -> dict:
+    """Submit the plan's task graph, write manifest.json after each finished task; returns the manifest.
+    force: redo every stage and write over outputs kinfu did not write; redo: only redo every stage."""
     manifest_path = plan.output / MANIFEST_NAME
-    previous = {} if force else read_previous(manifest_path)
+    previous = {} if force or redo else read_previous(manifest_path)
     run_id = uuid.uuid4().hex[:8]
     futures: dict = {}
     where: dict = {}

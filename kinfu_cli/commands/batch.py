@@ -31,10 +31,13 @@ from kinfu_cli.core.errors import ConfigError
 @click.option("--force", is_flag=True,
               help="Redo every stage even when its outputs are current, and write over outputs kinfu did not "
                    "write (an input is never written over).")
+@click.option("--redo", is_flag=True,
+              help="Redo every stage even when its outputs are current (kinfu's own outputs are replaced; unlike "
+                   "--force, outputs kinfu did not write are still refused).")
 @click.option("--json", "as_json", is_flag=True, help="Print manifest.json on stdout.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def command(plan: Path, output: Path | None, workers: int | None, scheduler: str | None, viz: str | None,
-            force: bool, as_json: bool, quiet: bool) -> None:
+            force: bool, redo: bool, as_json: bool, quiet: bool) -> None:
     """Run the stages listed in PLAN (TOML or YAML) over every recording it names: one Dask task per
     (recording, stage), the stage dependencies as the graph (poi needs the recording, segment needs fuse,
     nbv needs fuse and poi, diff needs fuse and its `before`, eval-fusion needs fuse, eval-poi needs poi,
@@ -54,7 +57,8 @@ def command(plan: Path, output: Path | None, workers: int | None, scheduler: str
     the same folder stops at once with one line naming OUTPUT/.kinfu-batch.lock.
 
     Resumable: a stage whose outputs exist unchanged with the same input fingerprint (inputs' size and
-    modification time, options, kinfu version) is skipped; --force redoes everything. A failing recording
+    modification time, options, kinfu version) is skipped; --redo redoes everything (--force too, and it also
+    writes over outputs kinfu did not write). A failing recording
     does not stop the others; the exit code is 1 when one failed, 2 for a bad plan (checked before any work:
     unknown stages or options, option values the stage's command refuses, missing files, globs matching
     nothing, a diff without `before`, an evaluation without ground truth, two recordings with one output folder,
@@ -84,7 +88,7 @@ def command(plan: Path, output: Path | None, workers: int | None, scheduler: str
     with batch_lock(loaded.output):  # a second run on this folder fails here, before any work
         engine = connect(scheduler, workers)
         try:
-            doc = run_plan(loaded, table, engine, force=force, quiet=quiet)
+            doc = run_plan(loaded, table, engine, force=force, quiet=quiet, redo=redo)
         finally:
             engine.close()
     if as_json:

@@ -246,3 +246,29 @@ def test_errors_name_options_as_the_plan_spells_them(workspace, connects):
     line = one_line_error(_batch(plan), "segment: ")
     assert "grasp" in line and "no-superquadrics" in line and "--" not in line.split("segment: ", 1)[1]
     assert connects == []
+
+
+@pytest.mark.slow
+def test_redo_runs_every_stage_again_but_keeps_the_ownership_rule(recording, scheduler, tmp_path):
+    """--redo recomputes what is current (fuse and poi run again, not skipped) without --force's licence: a
+    user's file where a stage writes is still refused."""
+    (tmp_path / "recs").mkdir()
+    shutil.copy(recording, tmp_path / "recs" / "a.mcap")
+    plan = tmp_path / "plan.toml"
+    plan.write_text('output = "out"\nstages = ["fuse", "poi"]\nrecordings = ["recs/a.mcap"]\n[options.fuse]\n'
+                    'voxel-size = 0.04\n')
+    out, rec_out = tmp_path / "out", tmp_path / "out" / "recs" / "a"
+
+    def statuses():
+        doc = json.loads((out / "manifest.json").read_text())
+        return {s: e["status"] for s, e in doc["recordings"][0]["stages"].items()}
+    assert _batch(plan, "--scheduler", scheduler).exit_code == 0
+    assert statuses() == {"fuse": "ok", "poi": "ok"}
+    assert _batch(plan, "--scheduler", scheduler).exit_code == 0
+    assert statuses() == {"fuse": "skipped", "poi": "skipped"}
+    assert _batch(plan, "--scheduler", scheduler, "--redo").exit_code == 0
+    assert statuses() == {"fuse": "ok", "poi": "ok"}
+    (rec_out / "pois.json").unlink()
+    (rec_out / "pois.json").write_text("mine")  # a user's file where poi writes
+    one_line_error(_batch(plan, "--scheduler", scheduler, "--redo"), "pois.json", "--force")
+    assert (rec_out / "pois.json").read_text() == "mine"
