@@ -28,6 +28,7 @@ from kinfu_cli.segmentation.surface import SurfaceCloud, surface_from_volume
 # in a room (segments: structure) label 0 is floor and walls: the support entry's box and centroid are taken over
 # its points this close to the support plane (m; a far floor's band reaches 6 cm), the rest counted as structure
 ROOM_SUPPORT_SLAB = 0.1
+SUPPORT_VS_UP_DEG = 45.0  # without an up, a support plane this far from the volume's own up is said to be doubtful
 
 
 @dataclass
@@ -307,7 +308,24 @@ def analyse_volume(volume: TernaryVolume | TernaryGrid, options: SegmentOptions 
     t_surface = time.perf_counter() - t
     if len(cloud) < options.segmentation.min_segment_points:
         raise VolumeError(f"volume surface has only {len(cloud)} points: nothing to segment")
-    return analyse_cloud(cloud.points, cloud.normals, options, {"surface": t_surface}, up_source, cloud.colors)
+    result = analyse_cloud(cloud.points, cloud.normals, options, {"surface": t_surface}, up_source, cloud.colors)
+    result.warnings += support_against_volume_up(result.segmentation, up_source, getattr(volume, "up", None),
+                                                 getattr(volume, "up_source", ""))
+    return result
+
+
+def support_against_volume_up(seg: Segmentation, up_source: str, volume_up, volume_up_source: str) -> list[str]:
+    """Without an up (up None) the support is the largest plane's; when the volume knows its up and that plane
+    stands more than SUPPORT_VS_UP_DEG from it, the support is likely a wall or a box face: said, not changed."""
+    if up_source != "none" or volume_up is None or seg.plane is None:
+        return []
+    up = np.asarray(volume_up, dtype=np.float64)
+    angle = float(np.degrees(np.arccos(np.clip(seg.plane[:3] @ up / np.linalg.norm(up), -1.0, 1.0))))
+    if angle <= SUPPORT_VS_UP_DEG:
+        return []
+    return [f"support plane {angle:.0f} deg from the volume's up {np.round(up, 3).tolist()} "
+            f"({volume_up_source or 'recorded'}): without an up the largest plane was taken, likely a wall or a box "
+            f"face, not the table; segment with the volume's up (the default) to use it"]
 
 
 def load_segment_input(path: str | os.PathLike) -> TernaryVolume | TernaryGrid:

@@ -73,3 +73,29 @@ def test_plane_faces_the_objects_whatever_sign_ransac_gives(flip_normals):
     for seed in range(6):  # RANSAC's sign varies with its sample
         plane, inl = detect_support_plane(pts, nrm, SegmentationParams(up=None, seed=seed))
         assert plane[2] > 0.99 and abs(plane[3] + 0.7) < 0.003 and inl.sum() >= 3900
+
+
+def test_without_up_a_support_across_the_volume_up_is_said():
+    """Without an up the largest plane is the support; when the volume knows its up (from fusion) and that plane
+    stands far from it (a wall, a box face: rgbd-tabletop-box side views), a warning says so. The segmentation
+    itself is not changed (the volume's up can be an estimate)."""
+    from kinfu_cli.segmentation.pipeline import analyse_cloud, support_against_volume_up
+
+    rng = np.random.default_rng(0)
+    table_pts, table_nrm = _table_and_boxes(rng, False)
+    wall = np.c_[rng.uniform(-1, 1, 9000), np.full(9000, 0.6), rng.uniform(0.7, 2.0, 9000)]  # larger than the table
+    pts = np.concatenate([table_pts, wall])
+    nrm = np.concatenate([table_nrm, np.tile([0.0, -1.0, 0.0], (9000, 1))])
+    up = np.array([0.0, 0.0, 1.0])  # the volume's, from fusion
+    opts = SegmentOptions(superquadrics=False)
+
+    def segment(with_up):
+        params = replace(opts.segmentation, up=tuple(up) if with_up else None)
+        return analyse_cloud(pts, nrm, replace(opts, segmentation=params), up_source="volume" if with_up else "none")
+    seg = segment(False).segmentation
+    assert abs(seg.plane[1]) > 0.99  # the wall: the largest plane
+    (warning,) = support_against_volume_up(seg, "none", up, "estimated-plane")
+    assert "90 deg from the volume's up" in warning and "wall" in warning
+    seg_up = segment(True).segmentation
+    assert seg_up.plane[2] > 0.99 and support_against_volume_up(seg_up, "volume", up, "") == []
+    assert support_against_volume_up(seg, "none", None, "") == []  # a volume that does not know its up
