@@ -329,6 +329,14 @@ class RecordingWriter:
         msg = self._type("tf2_msgs/msg/TFMessage")(transforms=items)
         self._write(topic, "tf2_msgs/msg/TFMessage", stamp_ns, msg)
 
+    def write_transform(self, topic: str, stamp_ns: int, T: np.ndarray) -> None:
+        """A bare geometry_msgs/Transform of the 4x4 T (no header: the RealSense SDK's stream extrinsics)."""
+        self._write(topic, "geometry_msgs/msg/Transform", stamp_ns, self._transform(T))
+
+    def write_float32(self, topic: str, stamp_ns: int, value: float) -> None:
+        """std_msgs/Float32 (the RealSense SDK's option values, e.g. Depth Units)."""
+        self._write(topic, "std_msgs/msg/Float32", stamp_ns, self._type("std_msgs/msg/Float32")(data=float(value)))
+
     def write_vector(self, topic: str, stamp_ns: int, frame_id: str, v) -> None:
         """geometry_msgs/Vector3Stamped of the 3-vector v in `frame_id`."""
         x, y, z = (float(c) for c in np.asarray(v, dtype=np.float64).reshape(3))
