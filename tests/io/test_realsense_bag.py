@@ -8,10 +8,16 @@ SDK bag was available): header frame_ids empty, static information (camera infos
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
+from click.testing import CliRunner
 from scipy.spatial.transform import Rotation
 
+from kinfu_cli.cli import cli
+from kinfu_cli.io.frames import FrameStats, iter_frames
+from kinfu_cli.io.recording import open_recording
 from kinfu_cli.io.writers import RecordingWriter
 from kinfu_cli.sim.paths import orbit_poses
 from kinfu_cli.sim.scene import primitive_tabletop_scene
@@ -30,7 +36,8 @@ DEPTH = "/device_0/sensor_0/Depth_0"
 COLOR = "/device_0/sensor_1/Color_0"
 
 
-def write_sdk_bag(path, units: float | None = 0.001, color_tf: bool = True, frames: int = 3, span_deg: float = 60.0):
+def write_sdk_bag(path, units: float | None = 0.001, color_tf: bool = True, frames: int = 3,
+                  span_deg: float = 60.0):
     """A RealSense SDK-layout bag of the tabletop scene; returns [(rendered depth m, colour the depth camera
     sees)] per frame. units: the Depth Units option (None: not recorded)."""
     scene = primitive_tabletop_scene(seed=4)
@@ -59,3 +66,79 @@ def write_sdk_bag(path, units: float | None = 0.001, color_tf: bool = True, fram
             w.write_image(f"{DEPTH}/image/data", t, "", raw.astype(np.uint16), "mono16")
             w.write_image(f"{COLOR}/image/data", t + 2_000_000, "", rgb, "rgb8")
     return truth
+
+
+@pytest.fixture(scope="module")
+def bags(tmp_path_factory):
+    """{units: (bag path, truth)} for 1 mm and 0.1 mm depth units."""
+    root = tmp_path_factory.mktemp("sdk_bags")
+    return {u: (root / f"u{u}.bag", write_sdk_bag(root / f"u{u}.bag", u)) for u in (0.001, 0.0001)}
+
+
+def _frames(path, **kwargs):
+    stats = FrameStats()
+    with open_recording(path) as rec:
+        frames = list(iter_frames(rec, pose_source="none", stats=stats, **kwargs))
+    return frames, stats
+
+
+@pytest.mark.parametrize("units", [0.001, 0.0001])
+def test_depth_is_read_in_the_recorded_depth_units(bags, units):
+    path, truth = bags[units]
+    frames, stats = _frames(path)
+    assert len(frames) == len(truth)
+    for f, (depth, _) in zip(frames, truth):
+        valid = depth > 0
+        assert valid.mean() > 0.5 and np.array_equal(f.depth > 0, valid)
+        # the rendered depth, but for the rounding to one depth unit
+        assert np.abs(f.depth[valid] - depth[valid]).max() <= units / 2 + 1e-6
+    assert stats.as_dict()["depth_units_m"] == pytest.approx(units)  # (report.json's frames say the scale used)
+
+
+def test_colour_is_placed_through_the_streams_extrinsics(bags):
+    path, truth = bags[0.001]
+    frames, stats = _frames(path)
+    reg = stats.color_registration
+    assert reg["mode"] == "project" and reg["color_info_topic"] == f"{COLOR}/info/camera_info"
+    # reference -> stream extrinsics composed: the colour camera's pose in the depth camera's frame, inverted
+    np.testing.assert_allclose(reg["T_color_depth"], np.linalg.inv(T_DEPTH_COLOR), atol=1e-5)
+    for f, (depth, own) in zip(frames, truth):
+        seen = f.color_mask
+        valid = depth > 0
+        assert seen[valid].mean() > 0.9 and not seen[~valid].any()
+        err = np.abs(f.color.astype(int) - own.astype(int)).max(axis=2)[seen]
+        assert np.mean(err > 30) < 0.05, np.mean(err > 30)
+
+
+def test_kinfu_info_names_the_layout_the_depth_units_and_the_colour_placement(bags):
+    path, _ = bags[0.0001]
+    res = CliRunner().invoke(cli, ["info", str(path)])
+    assert res.exit_code == 0, res.output
+    assert "RealSense SDK recording" in res.output
+    assert "0.1 mm per unit (from /device_0/sensor_0/option/Depth Units/value)" in res.output
+    assert "through the recorded stream extrinsics (15.0 mm apart)" in res.output
+    res = CliRunner().invoke(cli, ["info", str(path), "--json"])
+    summary = json.loads(res.output)
+    assert summary["realsense"]["depth_units_m"] == pytest.approx(0.0001)
+    assert summary["roles"]["depth_topic"] == f"{DEPTH}/image/data"
+    assert summary["roles"]["color_topic"] == f"{COLOR}/image/data"
+
+
+def test_without_the_colour_extrinsics_colour_is_left_out_with_a_warning(tmp_path):
+    path = tmp_path / "no_color_tf.bag"
+    write_sdk_bag(path, 0.001, color_tf=False, frames=2)
+    frames, stats = _frames(path)
+    assert len(frames) == 2 and all(f.color is None for f in frames)
+    assert stats.color_registration["mode"] == "none"
+    assert f"{COLOR}/tf/<group>" in stats.color_registration["reason"]
+    warnings = stats.warnings(str(path))
+    assert any("frames without colour" in w and "no extrinsics recorded" in w for w in warnings), warnings
+
+
+def test_without_depth_units_1_mm_is_assumed_and_said(tmp_path):
+    path = tmp_path / "no_units.bag"
+    truth = write_sdk_bag(path, None, frames=1)
+    frames, stats = _frames(path)
+    valid = truth[0][0] > 0
+    assert np.abs(frames[0].depth[valid] - truth[0][0][valid]).max() <= 0.0005 + 1e-6
+    assert any("1 mm per unit assumed" in n for n in stats.notes), stats.notes
