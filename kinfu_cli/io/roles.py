@@ -249,17 +249,18 @@ def detect_roles(rec, depth_topic: str | None = None, color_topic: str | None = 
         if topic is not None:
             require_role_topic(rec, topic, what)
 
-    if depth_topic is None and is_sdk_recording(rec):  # the RealSense SDK's layout: its Depth and Color streams
-        sdk = sdk_topic_roles(rec)
-        depth_topic = sdk["depth_topic"]
-        color_topic = color_topic if color_topic is not None else sdk["color_topic"]
+    sdk = depth_topic is None and is_sdk_recording(rec)
+    if sdk:  # the RealSense SDK's layout: its Depth and Color streams (an Infrared stream is no colour)
+        found = sdk_topic_roles(rec)
+        depth_topic = found["depth_topic"]
+        color_topic = color_topic if color_topic is not None else found["color_topic"]
         if info_topic is None and intrinsics is None:
-            info_topic = sdk["info_topic"]
+            info_topic = found["info_topic"]
     if depth_topic is None:
         cands = _depth_candidates(rec) or _cloud_candidates(rec)  # a depth image wins over a cloud
         depth_topic = cands[0] if cands else None
     cloud = _first_cloud(rec, depth_topic)
-    if color_topic is None and not (cloud is not None and has_color(cloud)):  # a cloud's rgb is registered colour
+    if color_topic is None and not sdk and not (cloud is not None and has_color(cloud)):  # a cloud's rgb: registered
         cands = _color_candidates(rec, depth_topic)
         color_topic = cands[0] if cands else None
     if info_topic is None and intrinsics is None:
