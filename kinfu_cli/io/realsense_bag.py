@@ -22,13 +22,18 @@ import re
 import numpy as np
 
 from kinfu_cli.core.errors import RecordingError
-from kinfu_cli.io.messages import camera_info_distortion, camera_info_K, transform_to_matrix
-from kinfu_cli.io.undistort import Undistorter
+from kinfu_cli.io.messages import camera_info_K, transform_to_matrix
+from kinfu_cli.io.undistort import Undistorter, check_distortion
 
 DEFAULT_DEPTH_UNITS = 0.001  # m per unit: the SDK's default for the D400 series
 _IMAGE = re.compile(r"^/device_(\d+)/sensor_(\d+)/([A-Za-z]+)_(\d+)/image/data$")
 _TF = re.compile(r"/tf/(\d+)$")
 TRANSFORM = "geometry_msgs/msg/Transform"
+# the SDK's distortion model names (rs2_distortion_to_string) as OpenCV projects points (librealsense's
+# rs2_project_point_to_pixel): Brown-Conrady is plumb_bob; the inverse and modified forms differ from it only in
+# the tangential term taking the radially distorted x, y (second order in p1, p2, ~1e-4 on a D400 colour camera)
+SDK_DISTORTION = {"brown conrady": "plumb_bob", "inverse brown conrady": "plumb_bob",
+                  "modified brown conrady": "plumb_bob", "kannala brandt4": "equidistant"}
 
 
 def _stream_prefix(image_topic: str) -> str:
@@ -113,6 +118,15 @@ def stream_extrinsics(rec, image_topic: str) -> dict[int, np.ndarray]:
     return out
 
 
+def sdk_distortion(info: object, where: str) -> tuple[str, np.ndarray]:
+    """(OpenCV model, D) of an SDK camera info, whose distortion_model is the SDK's name (SDK_DISTORTION); a
+    ROS name passes as it is. RecordingError naming `where` for another model with non-zero D."""
+    model = str(getattr(info, "distortion_model", "") or "")
+    d = getattr(info, "d", None)
+    d = getattr(info, "D", None) if d is None else d
+    return check_distortion(SDK_DISTORTION.get(model.strip().lower(), model), d, where)
+
+
 def _stream_name(image_topic: str) -> str:
     return _stream_prefix(image_topic).rsplit("/", 1)[-1]
 
@@ -130,7 +144,7 @@ def sdk_color_registration(rec, depth_topic: str, color_topic: str) -> ColorRegi
     try:
         info = rec.first_message(info_topic)
         K, w, h = camera_info_K(info, f"{rec.path}: {info_topic}")
-        lens = Undistorter(K, *camera_info_distortion(info, f"{rec.path}: {info_topic}"))
+        lens = Undistorter(K, *sdk_distortion(info, f"{rec.path}: {info_topic}"))
     except RecordingError as exc:  # a broken colour calibration costs the colour, not the run
         return ColorRegistration("none", d_name, c_name, info_topic, reason=str(exc))
     ext_d, ext_c = stream_extrinsics(rec, depth_topic), stream_extrinsics(rec, color_topic)

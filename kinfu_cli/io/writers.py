@@ -303,8 +303,8 @@ class RecordingWriter:
         self._write(topic, "sensor_msgs/msg/PointCloud2", stamp_ns, msg)
 
     def write_camera_info(self, topic: str, stamp_ns: int, frame_id: str, K: np.ndarray, width: int,
-                          height: int, D: np.ndarray | None = None) -> None:
-        """sensor_msgs/CameraInfo with plumb_bob distortion D (zeros when None), R = I, P = [K | 0]."""
+                          height: int, D: np.ndarray | None = None, model: str = "plumb_bob") -> None:
+        """sensor_msgs/CameraInfo with `model` distortion D (zeros when None), R = I, P = [K | 0]."""
         K = np.asarray(K, dtype=np.float64).reshape(3, 3)
         D = np.zeros(5) if D is None else np.asarray(D, dtype=np.float64).reshape(-1)
         P = np.zeros((3, 4))
@@ -315,7 +315,7 @@ class RecordingWriter:
         fields = dict(zip(names, (D, K.reshape(-1), np.eye(3).reshape(-1), P.reshape(-1))))
         msg = self._type("sensor_msgs/msg/CameraInfo")(
             header=self._header(topic, stamp_ns, frame_id), height=int(height), width=int(width),
-            distortion_model="plumb_bob", binning_x=0, binning_y=0, roi=roi, **fields)
+            distortion_model=model, binning_x=0, binning_y=0, roi=roi, **fields)
         self._write(topic, "sensor_msgs/msg/CameraInfo", stamp_ns, msg)
 
     def write_tf(self, stamp_ns: int, transforms: list[tuple[str, str, np.ndarray]], static: bool = False) -> None:
