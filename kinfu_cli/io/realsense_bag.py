@@ -85,7 +85,8 @@ def depth_units(rec, depth_topic: str) -> tuple[float, str, str | None]:
     for topic in (f"{sensor}/option/Depth Units/value", f"{sensor}/option/Depth_Units/value"):
         if topic not in rec.topics or not rec.topics[topic].count:
             continue
-        values = [float(getattr(msg, "data", np.nan)) for _, _, msg in rec.messages([topic])]
+        # float32 on the wire: 7 significant digits (0.0001, not 9.9999997e-05)
+        values = [float(f"{float(getattr(msg, 'data', np.nan)):.7g}") for _, _, msg in rec.messages([topic])]
         first = values[0] if values else float("nan")
         if not (np.isfinite(first) and 1e-7 <= first <= 0.1):
             raise RecordingError(f"{rec.path}: {topic}: depth units {first} m per unit is no depth scale "

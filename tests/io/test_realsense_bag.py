@@ -175,3 +175,16 @@ def test_a_colour_lens_in_the_sdk_s_distortion_model_is_projected_through(tmp_pa
         assert seen[depth > 0].mean() > 0.9
         err = np.abs(f.color.astype(int) - own.astype(int)).max(axis=2)[seen]
         assert np.mean(err > 30) < 0.05, np.mean(err > 30)
+
+
+def test_fuse_reads_an_sdk_bag_in_metres_with_icp_and_projected_colour(tmp_path):
+    path = tmp_path / "arc.bag"
+    write_sdk_bag(path, 0.0001, frames=4, span_deg=4.0)
+    out = tmp_path / "fused"
+    res = CliRunner().invoke(cli, ["fuse", str(path), "-o", str(out), "--voxel-size", "0.02", "--quiet"])
+    assert res.exit_code == 0, res.output
+    report = json.loads((out / "report.json").read_text())
+    assert report["frames"]["used"] == 4 and report["frames"]["depth_units_m"] == 0.0001
+    assert report["frames"]["color_registration"]["mode"] == "project" and report["tracking"]["lost"] == 0
+    # the scene (a table about 1 m from the camera) fits a grid of a few metres, not one 10x too far
+    assert max(report["grid"]["size_m"]) < 4.0, report["grid"]["size_m"]
