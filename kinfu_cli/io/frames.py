@@ -160,6 +160,11 @@ def iter_frames(rec, roles: Roles | None = None, pose_source: str = "tf", pose_t
         K, width, height, lens = _cloud_camera(rec, roles, depth_topic, stats)
     else:
         K, width, height, lens = _depth_camera(rec, roles, depth_topic)
+    sdk = is_sdk_stream(rec, depth_topic)  # a RealSense SDK recording: depth units, colour through its extrinsics
+    if pose_source == "tf" and sdk and not roles.camera_frame:
+        raise RecordingError(f"{rec.path}: a RealSense SDK recording has no TF camera poses (its depth frames name "
+                             f"no TF frame); take no poses (pose source 'none') or track them (ICP)",
+                             parameter="pose_source")
     if pose_source == "tf":
         pose_fn = _tf_poses(rec, roles, depth_topic, tf, tol_ns, stats)
     elif pose_source == "topic":
@@ -168,7 +173,6 @@ def iter_frames(rec, roles: Roles | None = None, pose_source: str = "tf", pose_t
         pose_fn = None
     start_ns, end_ns = _time_window(rec, start_s, end_s)
     reg = None
-    sdk = is_sdk_stream(rec, depth_topic)  # a RealSense SDK recording: depth units, colour through its extrinsics
     if sdk:
         stats.depth_units, _, note = depth_units(rec, depth_topic)
         stats.notes += [note] if note else []

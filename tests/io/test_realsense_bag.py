@@ -140,6 +140,10 @@ def test_kinfu_info_names_the_layout_the_depth_units_and_the_colour_placement(ba
     assert summary["realsense"]["depth_units_m"] == pytest.approx(0.0001)
     assert summary["roles"]["depth_topic"] == f"{DEPTH}/image/data"
     assert summary["roles"]["color_topic"] == f"{COLOR}/image/data"
+    res = CliRunner().invoke(cli, ["info", str(path), "--frames"])  # TF poses by default: there are none
+    assert res.exit_code == 2 and "a RealSense SDK recording has no TF camera poses" in res.output, res.output
+    res = CliRunner().invoke(cli, ["info", str(path), "--frames", "--pose-source", "none", "-q"])
+    assert res.exit_code == 0 and "3 usable of 3" in res.output, res.output
 
 
 def test_without_the_colour_extrinsics_colour_is_left_out_with_a_warning(tmp_path):
