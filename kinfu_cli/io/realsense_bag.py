@@ -36,6 +36,22 @@ SDK_DISTORTION = {"brown conrady": "plumb_bob", "inverse brown conrady": "plumb_
                   "modified brown conrady": "plumb_bob", "kannala brandt4": "equidistant"}
 
 
+def sdk_image(deserialize, raw, msgtype: str):
+    """A ROS 1 sensor_msgs/Image as recent librealsense versions write it (src/media/ros/ros_writer.cpp sets
+    header.version "1", and its bundled sensor_msgs/Image serializer then appends a float32 depth_units after the
+    pixel data, under the standard definition and MD5), which a strict reader refuses as a size mismatch: decoded
+    without those 4 bytes, their value kept as the message's `depth_units` (m per unit, 0 for colour). None when
+    the message is no such image."""
+    if not msgtype.endswith("sensor_msgs/msg/Image") or len(raw) < 4:
+        return None
+    try:
+        msg = deserialize(bytes(raw[:-4]), msgtype)
+    except Exception:  # not the SDK's trailer either: the caller reports the first error
+        return None
+    msg.depth_units = float(f"{float(np.frombuffer(bytes(raw[-4:]), '<f4')[0]):.7g}")
+    return msg
+
+
 def _stream_prefix(image_topic: str) -> str:
     return image_topic[: -len("/image/data")]
 
@@ -78,9 +94,10 @@ def is_sdk_stream(rec, image_topic: str | None) -> bool:
 
 def depth_units(rec, depth_topic: str) -> tuple[float, str, str | None]:
     """(metres per depth unit, where it comes from, a note or None) for an SDK depth stream: the depth sensor's
-    "Depth Units" option (SDK versions write it with a space or an underscore); 1 mm assumed, with a note, when
-    it is not recorded. RecordingError naming the topic for a value that is no plausible scale. When the option
-    changes during the recording the first value is used, with a note."""
+    "Depth Units" option (SDK versions write it with a space or an underscore), else the depth_units a recent SDK
+    appends to its depth images (sdk_image); 1 mm assumed, with a note, when neither is recorded. RecordingError
+    naming the topic for a value that is no plausible scale. When the option changes during the recording the
+    first value is used, with a note."""
     sensor = _sensor_prefix(depth_topic)
     for topic in (f"{sensor}/option/Depth Units/value", f"{sensor}/option/Depth_Units/value"):
         if topic not in rec.topics or not rec.topics[topic].count:
@@ -96,6 +113,10 @@ def depth_units(rec, depth_topic: str) -> tuple[float, str, str | None]:
             note = (f"the depth units change during the recording ({', '.join(f'{v:g}' for v in values[:5])}"
                     f"{', ...' if len(values) > 5 else ''} m); the first, {first:g} m, is used for every frame")
         return first, topic, note
+    first = rec.first_message(depth_topic)  # recent SDK versions also append it to each depth image
+    units = float(getattr(first, "depth_units", 0.0) or 0.0) if first is not None else 0.0
+    if np.isfinite(units) and 1e-7 <= units <= 0.1:
+        return units, f"{depth_topic} (depth_units)", None
     return DEFAULT_DEPTH_UNITS, "assumed", (
         f"RealSense SDK recording without the depth sensor's Depth Units option ({sensor}/option/Depth Units/"
         f"value): {DEFAULT_DEPTH_UNITS * 1000:g} mm per unit assumed")

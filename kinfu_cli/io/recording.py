@@ -27,6 +27,7 @@ from mcap.reader import make_reader
 from kinfu_cli.core.errors import RecordingError
 from kinfu_cli.io.mcap_truncated import TruncatedMcap, is_truncated_mcap
 from kinfu_cli.io.messages import normalize_msgtype
+from kinfu_cli.io.realsense_bag import sdk_image
 
 _ROS1_MAGIC = b"#ROSBAG V2.0"
 _MCAP_MAGIC = b"\x89MCAP0\r\n"
@@ -364,6 +365,10 @@ class _RosbagsBackend(_Backend):
                 try:
                     msg = self.reader.deserialize(raw, conn.msgtype)
                 except Exception as exc:
+                    msg = sdk_image(self.reader.deserialize, raw, conn.msgtype) if self.fmt == "bag" else None
+                    if msg is not None:  # a RealSense SDK image with its depth_units appended
+                        yield conn.topic, normalize_msgtype(conn.msgtype), stamp, msg
+                        continue
                     raise RecordingError(f"{self.path}: topic {conn.topic}: cannot decode a {conn.msgtype} "
                                          f"message at t={stamp} ns ({exc})") from None
                 yield conn.topic, normalize_msgtype(conn.msgtype), stamp, msg

@@ -176,13 +176,13 @@ class RecordingWriter:
             self._connections[key] = conn
         return conn
 
-    def _write(self, topic: str, msgtype: str, stamp_ns: int, msg: object) -> None:
+    def _write(self, topic: str, msgtype: str, stamp_ns: int, msg: object, trailer: bytes = b"") -> None:
         conn = self._conn(topic, msgtype)
         if self.fmt == "bag":
             data = self._typestore.serialize_ros1(msg, msgtype)
         else:
             data = self._typestore.serialize_cdr(msg, msgtype)
-        self._writer.write(conn, int(stamp_ns), data)
+        self._writer.write(conn, int(stamp_ns), bytes(data) + trailer if trailer else data)
         self.counts[topic] = self.counts.get(topic, 0) + 1
 
     def _type(self, name: str):
@@ -209,8 +209,10 @@ class RecordingWriter:
         return self._type("geometry_msgs/msg/Transform")(translation=vec, rotation=quat)
 
     # ----------------------------------------------------------------------------------- messages
-    def write_image(self, topic: str, stamp_ns: int, frame_id: str, array: np.ndarray, encoding: str) -> None:
-        """sensor_msgs/Image; `array` must match `encoding` (16UC1 uint16 mm, 32FC1 float32 m, rgb8 ...)."""
+    def write_image(self, topic: str, stamp_ns: int, frame_id: str, array: np.ndarray, encoding: str,
+                    trailer: bytes = b"") -> None:
+        """sensor_msgs/Image; `array` must match `encoding` (16UC1 uint16 mm, 32FC1 float32 m, rgb8 ...).
+        trailer: bytes after the message (recent librealsense versions append a float32 depth_units)."""
         if encoding not in _IMAGE_ENCODINGS:
             raise ConfigError(f"image encoding {encoding!r}: expected one of {', '.join(_IMAGE_ENCODINGS)}")
         dtype, channels = _IMAGE_ENCODINGS[encoding]
@@ -229,7 +231,7 @@ class RecordingWriter:
             header=self._header(topic, stamp_ns, frame_id), height=h, width=w, encoding=encoding,
             is_bigendian=0, step=w * channels * arr.dtype.itemsize,
             data=np.frombuffer(arr.tobytes(), dtype=np.uint8))
-        self._write(topic, "sensor_msgs/msg/Image", stamp_ns, msg)
+        self._write(topic, "sensor_msgs/msg/Image", stamp_ns, msg, trailer)
 
     def write_compressed_image(self, topic: str, stamp_ns: int, frame_id: str, rgb_uint8: np.ndarray,
                                fmt: str = "jpeg", quality: int = 95) -> None:

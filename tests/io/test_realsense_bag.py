@@ -53,16 +53,20 @@ def _through_lens(render, D):
 
 
 def write_sdk_bag(path, units: float | None = 0.001, color_tf: bool = True, frames: int = 3,
-                  span_deg: float = 60.0, color_D=None, color_model: str = "Inverse Brown Conrady"):
+                  span_deg: float = 60.0, color_D=None, color_model: str = "Inverse Brown Conrady",
+                  image_units: float | None = None):
     """A RealSense SDK-layout bag of the tabletop scene; returns [(rendered depth m, colour the depth camera
     sees)] per frame. units: the Depth Units option (None: not recorded); color_D: the colour lens' distortion,
-    recorded as `color_model` (the SDK's name)."""
+    recorded as `color_model` (the SDK's name); image_units: append a float32 depth_units to every image (depth:
+    this value, colour: 0), as recent librealsense versions do (and units then default to it)."""
     scene = primitive_tabletop_scene(seed=4)
     K_depth = kinect_v1_intrinsics(WD, HD)
     depth_cam = DepthSensor(K_depth, WD, HD, noise=False)
     poses = orbit_poses(frames, radius=0.85, height=1.3, target=(0.0, 0.0, 0.75), start_deg=30.0,
                         span_deg=span_deg)
-    scale = 0.001 if units is None else units
+    scale = units or image_units or 0.001
+    trailer = {} if image_units is None else {"depth": np.float32(image_units).tobytes(),
+                                              "color": np.float32(0).tobytes()}
     truth = []
     with RecordingWriter(path) as w:
         w.write_camera_info(f"{DEPTH}/info/camera_info", 0, "", K_depth, WD, HD)
@@ -81,8 +85,8 @@ def write_sdk_bag(path, units: float | None = 0.001, color_tf: bool = True, fram
             raw = np.round(depth / scale)
             raw[raw > 65534] = 0
             truth.append((np.where(raw > 0, depth, 0.0), own))
-            w.write_image(f"{DEPTH}/image/data", t, "", raw.astype(np.uint16), "mono16")
-            w.write_image(f"{COLOR}/image/data", t + 2_000_000, "", rgb, "rgb8")
+            w.write_image(f"{DEPTH}/image/data", t, "", raw.astype(np.uint16), "mono16", trailer.get("depth", b""))
+            w.write_image(f"{COLOR}/image/data", t + 2_000_000, "", rgb, "rgb8", trailer.get("color", b""))
     return truth
 
 
@@ -192,3 +196,18 @@ def test_fuse_reads_an_sdk_bag_in_metres_with_icp_and_projected_colour(tmp_path)
     assert report["frames"]["color_registration"]["mode"] == "project" and report["tracking"]["lost"] == 0
     # the scene (a table about 1 m from the camera) fits a grid of a few metres, not one 10x too far
     assert max(report["grid"]["size_m"]) < 4.0, report["grid"]["size_m"]
+
+
+def test_images_with_the_sdk_s_appended_depth_units_are_read(tmp_path):
+    """Recent librealsense versions append a float32 depth_units to each sensor_msgs/Image (under the standard
+    definition): a strict ROS 1 reader refuses them as a size mismatch. Read, with that value as the scale when
+    the Depth Units option is not recorded."""
+    path = tmp_path / "trailer.bag"
+    truth = write_sdk_bag(path, None, frames=2, image_units=0.0001)
+    frames, stats = _frames(path)
+    assert len(frames) == 2 and stats.depth_units == pytest.approx(0.0001) and not stats.notes
+    for f, (depth, own) in zip(frames, truth):
+        valid = depth > 0
+        assert np.abs(f.depth[valid] - depth[valid]).max() <= 0.00005 + 1e-6
+        err = np.abs(f.color.astype(int) - own.astype(int)).max(axis=2)[f.color_mask]
+        assert np.mean(err > 30) < 0.05
