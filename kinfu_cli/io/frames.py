@@ -21,6 +21,7 @@ from kinfu_cli.io.messages import (POSE_TYPES, camera_info_distortion, camera_in
                                    header_frame, header_stamp_ns, normalize_msgtype, pose_message_to_tq)
 from kinfu_cli.io.pointcloud2 import (MAX_PINHOLE_RMS_PX, POINTCLOUD2, decode_cloud, fit_intrinsics, has_color,
                                       is_cloud, organized_problem, pinhole_rms)
+from kinfu_cli.io.realsense_bag import depth_units, is_sdk_stream, sdk_color_registration
 from kinfu_cli.io.roles import Roles, detect_roles, require_role_topic, unorganized_clouds
 from kinfu_cli.io.tf_buffer import TfBuffer
 from kinfu_cli.io.undistort import Undistorter
@@ -59,6 +60,7 @@ class FrameStats:
     dropped: dict[str, int] = field(default_factory=dict)
     color_registration: dict | None = None  # ColorRegistration.as_dict() when there is a colour topic
     notes: list[str] = field(default_factory=list)  # what was assumed to read the frames (a warning each)
+    depth_units: float | None = None  # m per unit of 16-bit depth when not mm (a RealSense SDK recording's)
 
     def drop(self, reason: str) -> None:
         self.dropped[reason] = self.dropped.get(reason, 0) + 1
@@ -83,7 +85,8 @@ class FrameStats:
                 "without_color": self.without_color, "dropped": dict(self.dropped),
                 "dropped_total": self.dropped_total,
                 **({"color_registration": self.color_registration} if self.color_registration else {}),
-                **({"notes": list(self.notes)} if self.notes else {})}
+                **({"notes": list(self.notes)} if self.notes else {}),
+                **({"depth_units_m": self.depth_units} if self.depth_units is not None else {})}
 
 
 def _stamp(msg: object, log_ns: int) -> int:
@@ -157,6 +160,11 @@ def iter_frames(rec, roles: Roles | None = None, pose_source: str = "tf", pose_t
         K, width, height, lens = _cloud_camera(rec, roles, depth_topic, stats)
     else:
         K, width, height, lens = _depth_camera(rec, roles, depth_topic)
+    sdk = is_sdk_stream(rec, depth_topic)  # a RealSense SDK recording: depth units, colour through its extrinsics
+    if pose_source == "tf" and sdk and not roles.camera_frame:
+        raise RecordingError(f"{rec.path}: a RealSense SDK recording has no TF camera poses (its depth frames name "
+                             f"no TF frame); take no poses (pose source 'none') or track them (ICP)",
+                             parameter="pose_source")
     if pose_source == "tf":
         pose_fn = _tf_poses(rec, roles, depth_topic, tf, tol_ns, stats)
     elif pose_source == "topic":
@@ -165,15 +173,21 @@ def iter_frames(rec, roles: Roles | None = None, pose_source: str = "tf", pose_t
         pose_fn = None
     start_ns, end_ns = _time_window(rec, start_s, end_s)
     reg = None
+    if sdk:
+        stats.depth_units, _, note = depth_units(rec, depth_topic)
+        stats.notes += [note] if note else []
     if roles.color_topic is not None:
-        reg = color_registration(rec, depth_topic, roles.color_topic, roles.info_topic, tf)
+        if sdk and is_sdk_stream(rec, roles.color_topic):
+            reg = sdk_color_registration(rec, depth_topic, roles.color_topic)
+        else:
+            reg = color_registration(rec, depth_topic, roles.color_topic, roles.info_topic, tf)
         stats.color_registration = reg.as_dict()
         if reg.mode == "none":  # colour that cannot be placed is left out, not painted beside its surface
             roles = replace(roles, color_topic=None)
     if cloud:  # the cloud's own camera, fixed: later camera infos are not read
         roles = replace(roles, info_topic=None)
     pairer = _FramePairer(rec, roles, depth_topic, K, width, height, pose_fn, tol_ns, stats, require_color, reg,
-                          lens, cloud)
+                          lens, cloud, stats.depth_units)
     yield from pairer.stream(start_ns, end_ns, every)
 
 
@@ -376,8 +390,10 @@ class _FramePairer:
     def __init__(self, rec, roles: Roles, depth_topic: str, K: np.ndarray, width: int, height: int,
                  pose_fn: PoseLookup | None, tol_ns: int, stats: FrameStats, require_color: bool,
                  registration: ColorRegistration | None = None, lens: Undistorter | None = None,
-                 cloud: bool = False) -> None:
+                 cloud: bool = False, depth_units: float | None = None) -> None:
         self.rec = rec
+        # 16-bit depth in these units (m) instead of mm: a factor on decode_depth's mm reading
+        self.unit_factor = None if depth_units is None else np.float32(depth_units / 0.001)
         self.cloud = cloud  # depth (and colour, with an rgb field) from an organized PointCloud2
         self.registration = registration
         # the depth camera's distortion: the first camera info's, then each one's
@@ -444,6 +460,8 @@ class _FramePairer:
             depth, cloud_color = decode_cloud(msg, f"{self.rec.path}: depth topic {self.depth_topic}")
         else:
             depth = decode_depth(msg, f"{self.rec.path}: {self.depth_topic}")
+            if self.unit_factor is not None and str(getattr(msg, "encoding", "")) in ("16UC1", "mono16"):
+                depth *= self.unit_factor
         h, w = depth.shape
         K = self.K
         if self.width and self.height and (w, h) != (self.width, self.height):

@@ -27,6 +27,7 @@ from mcap.reader import make_reader
 from kinfu_cli.core.errors import RecordingError
 from kinfu_cli.io.mcap_truncated import TruncatedMcap, is_truncated_mcap
 from kinfu_cli.io.messages import normalize_msgtype
+from kinfu_cli.io.realsense_bag import sdk_image
 
 _ROS1_MAGIC = b"#ROSBAG V2.0"
 _MCAP_MAGIC = b"\x89MCAP0\r\n"
@@ -283,6 +284,7 @@ class _RosbagsBackend(_Backend):
         self.path = path
         self.fmt = fmt
         self.kind = _KIND_NAMES[fmt]
+        self.sdk_trailer: set[int] = set()  # connections of RealSense SDK images with depth_units appended
         open_path = path
         # AnyReader picks the reader by the suffix (.bag: ROS 1, else ROS 2 / MCAP); the format was detected by
         # the first bytes: a file named otherwise is opened through a symlink with the right suffix
@@ -361,9 +363,19 @@ class _RosbagsBackend(_Backend):
         try:
             gen = self.reader.messages(connections=conns, start=start_ns, stop=stop)
             for conn, stamp, raw in gen:
+                if conn.id in self.sdk_trailer:  # (decoded at once: not first refused)
+                    msg = sdk_image(self.reader.deserialize, raw, conn.msgtype)
+                    if msg is not None:
+                        yield conn.topic, normalize_msgtype(conn.msgtype), stamp, msg
+                        continue
                 try:
                     msg = self.reader.deserialize(raw, conn.msgtype)
                 except Exception as exc:
+                    msg = sdk_image(self.reader.deserialize, raw, conn.msgtype) if self.fmt == "bag" else None
+                    if msg is not None:  # a RealSense SDK image with its depth_units appended
+                        self.sdk_trailer.add(conn.id)
+                        yield conn.topic, normalize_msgtype(conn.msgtype), stamp, msg
+                        continue
                     raise RecordingError(f"{self.path}: topic {conn.topic}: cannot decode a {conn.msgtype} "
                                          f"message at t={stamp} ns ({exc})") from None
                 yield conn.topic, normalize_msgtype(conn.msgtype), stamp, msg

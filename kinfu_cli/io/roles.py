@@ -14,6 +14,7 @@ from kinfu_cli.core.camera import parse_intrinsics
 from kinfu_cli.core.errors import ConfigError, RecordingError, TransformError
 from kinfu_cli.io.messages import DEPTH_ENCODINGS, POSE_TYPES, camera_info_K, header_frame
 from kinfu_cli.io.pointcloud2 import POINTCLOUD2, has_color, is_cloud, organized_problem
+from kinfu_cli.io.realsense_bag import is_sdk_recording, sdk_topic_roles
 from kinfu_cli.io.tf_buffer import TfBuffer
 
 IMAGE = "sensor_msgs/msg/Image"
@@ -236,6 +237,8 @@ def detect_roles(rec, depth_topic: str | None = None, color_topic: str | None = 
     exists. When that cloud has an rgb field, its colour is the frames' colour and no colour topic is detected
     (a colour topic given still wins); its camera info must be in the cloud's frame (else the intrinsics are
     recovered from the cloud when reading frames).
+    A RealSense SDK recording (io.realsense_bag) has its first Depth and Color streams and the depth stream's
+    camera info detected.
     """
     if intrinsics is not None:
         intrinsics = parse_intrinsics(intrinsics)
@@ -246,11 +249,18 @@ def detect_roles(rec, depth_topic: str | None = None, color_topic: str | None = 
         if topic is not None:
             require_role_topic(rec, topic, what)
 
+    sdk = depth_topic is None and is_sdk_recording(rec)
+    if sdk:  # the RealSense SDK's layout: its Depth and Color streams (an Infrared stream is no colour)
+        found = sdk_topic_roles(rec)
+        depth_topic = found["depth_topic"]
+        color_topic = color_topic if color_topic is not None else found["color_topic"]
+        if info_topic is None and intrinsics is None:
+            info_topic = found["info_topic"]
     if depth_topic is None:
         cands = _depth_candidates(rec) or _cloud_candidates(rec)  # a depth image wins over a cloud
         depth_topic = cands[0] if cands else None
     cloud = _first_cloud(rec, depth_topic)
-    if color_topic is None and not (cloud is not None and has_color(cloud)):  # a cloud's rgb is registered colour
+    if color_topic is None and not sdk and not (cloud is not None and has_color(cloud)):  # a cloud's rgb: registered
         cands = _color_candidates(rec, depth_topic)
         color_topic = cands[0] if cands else None
     if info_topic is None and intrinsics is None:

@@ -9,11 +9,13 @@ import os
 from datetime import datetime, timezone
 from pathlib import Path
 
+import numpy as np
 from ruamel.yaml import YAML  # rosbags' own YAML library (PyYAML is not a dependency)
 
 from kinfu_cli.core.errors import TransformError
 from kinfu_cli.core.progress import progress
 from kinfu_cli.io.frames import FrameStats, cloud_depth_source, iter_frames
+from kinfu_cli.io.realsense_bag import sdk_summary
 from kinfu_cli.io.recording import Recording, open_recording
 from kinfu_cli.io.roles import Roles, detect_roles
 from kinfu_cli.io.tf_buffer import TfBuffer
@@ -59,6 +61,7 @@ def summarize(rec: Recording, check_frames: dict | None = None, quiet: bool = Tr
         "topics": [t.as_dict() for t in rec.topics.values()],
         "roles": roles.as_dict(),
         **({"depth_cloud": cloud} if (cloud := cloud_depth_source(rec, roles)) is not None else {}),
+        **({"realsense": rs} if (rs := sdk_summary(rec, roles.depth_topic, roles.color_topic)) is not None else {}),
         "tf": {"frames": tf.frames(), "tree": tf.tree(), "links": _tf_links(tf), "rejected": dict(tf.rejected),
                "rejected_links": [{"parent": p, "child": c, "rejected": dict(r)}
                                   for (p, c), r in tf.rejected_links.items()],
@@ -131,6 +134,8 @@ def format_summary(s: dict, roles_heading: str = "roles (detected):") -> str:
         lines.append(f"  {k.replace('_', ' ') + ':':15s} {v if v is not None else '-'}")
     if s.get("depth_cloud"):
         lines += _cloud_lines(s["depth_cloud"])
+    if s.get("realsense"):
+        lines += _realsense_lines(s["realsense"])
     lines.append("")
     lines += _tf_lines(s["tf"])
     if s.get("frames") is not None:
@@ -148,6 +153,26 @@ def _cloud_lines(c: dict) -> list[str]:
             f"{c['color'] or '-'}",
             f"  intrinsics ({c['intrinsics_source']}): fx={k['fx']:.2f} fy={k['fy']:.2f} cx={k['cx']:.2f} "
             f"cy={k['cy']:.2f}"]
+
+
+def _realsense_lines(r: dict) -> list[str]:
+    """A RealSense SDK recording: its layout, depth scale and where the colour goes (io.realsense_bag)."""
+    lines = [f"  layout:         {r['layout']}"]
+    if r.get("problem"):
+        lines.append(f"  depth units:    problem: {r['problem']}")
+    else:
+        source = "assumed" if r["depth_units_source"] == "assumed" else f"from {r['depth_units_source']}"
+        lines.append(f"  depth units:    {r['depth_units_m'] * 1000:g} mm per unit ({source})")
+    reg = r.get("color_registration")
+    if reg and reg["mode"] == "project":
+        t = reg["T_color_depth"]
+        offset = float(np.linalg.norm(np.asarray(t)[:3, 3])) * 1000
+        lines.append(f"  colour:         projected from {reg['color_frame']} ({reg['color_info_topic']}) onto "
+                     f"{reg['depth_frame']} through the recorded stream extrinsics ({offset:.1f} mm apart)")
+    elif reg:
+        lines.append(f"  colour:         left out: {reg['reason']}")
+    lines += [f"  note:           {n}" for n in r.get("notes", [])]
+    return lines
 
 
 def _topic_lines(topics: list[dict]) -> list[str]:

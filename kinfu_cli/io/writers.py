@@ -176,13 +176,13 @@ class RecordingWriter:
             self._connections[key] = conn
         return conn
 
-    def _write(self, topic: str, msgtype: str, stamp_ns: int, msg: object) -> None:
+    def _write(self, topic: str, msgtype: str, stamp_ns: int, msg: object, trailer: bytes = b"") -> None:
         conn = self._conn(topic, msgtype)
         if self.fmt == "bag":
             data = self._typestore.serialize_ros1(msg, msgtype)
         else:
             data = self._typestore.serialize_cdr(msg, msgtype)
-        self._writer.write(conn, int(stamp_ns), data)
+        self._writer.write(conn, int(stamp_ns), bytes(data) + trailer if trailer else data)
         self.counts[topic] = self.counts.get(topic, 0) + 1
 
     def _type(self, name: str):
@@ -209,8 +209,10 @@ class RecordingWriter:
         return self._type("geometry_msgs/msg/Transform")(translation=vec, rotation=quat)
 
     # ----------------------------------------------------------------------------------- messages
-    def write_image(self, topic: str, stamp_ns: int, frame_id: str, array: np.ndarray, encoding: str) -> None:
-        """sensor_msgs/Image; `array` must match `encoding` (16UC1 uint16 mm, 32FC1 float32 m, rgb8 ...)."""
+    def write_image(self, topic: str, stamp_ns: int, frame_id: str, array: np.ndarray, encoding: str,
+                    trailer: bytes = b"") -> None:
+        """sensor_msgs/Image; `array` must match `encoding` (16UC1 uint16 mm, 32FC1 float32 m, rgb8 ...).
+        trailer: bytes after the message (recent librealsense versions append a float32 depth_units)."""
         if encoding not in _IMAGE_ENCODINGS:
             raise ConfigError(f"image encoding {encoding!r}: expected one of {', '.join(_IMAGE_ENCODINGS)}")
         dtype, channels = _IMAGE_ENCODINGS[encoding]
@@ -229,7 +231,7 @@ class RecordingWriter:
             header=self._header(topic, stamp_ns, frame_id), height=h, width=w, encoding=encoding,
             is_bigendian=0, step=w * channels * arr.dtype.itemsize,
             data=np.frombuffer(arr.tobytes(), dtype=np.uint8))
-        self._write(topic, "sensor_msgs/msg/Image", stamp_ns, msg)
+        self._write(topic, "sensor_msgs/msg/Image", stamp_ns, msg, trailer)
 
     def write_compressed_image(self, topic: str, stamp_ns: int, frame_id: str, rgb_uint8: np.ndarray,
                                fmt: str = "jpeg", quality: int = 95) -> None:
@@ -303,8 +305,8 @@ class RecordingWriter:
         self._write(topic, "sensor_msgs/msg/PointCloud2", stamp_ns, msg)
 
     def write_camera_info(self, topic: str, stamp_ns: int, frame_id: str, K: np.ndarray, width: int,
-                          height: int, D: np.ndarray | None = None) -> None:
-        """sensor_msgs/CameraInfo with plumb_bob distortion D (zeros when None), R = I, P = [K | 0]."""
+                          height: int, D: np.ndarray | None = None, model: str = "plumb_bob") -> None:
+        """sensor_msgs/CameraInfo with `model` distortion D (zeros when None), R = I, P = [K | 0]."""
         K = np.asarray(K, dtype=np.float64).reshape(3, 3)
         D = np.zeros(5) if D is None else np.asarray(D, dtype=np.float64).reshape(-1)
         P = np.zeros((3, 4))
@@ -315,7 +317,7 @@ class RecordingWriter:
         fields = dict(zip(names, (D, K.reshape(-1), np.eye(3).reshape(-1), P.reshape(-1))))
         msg = self._type("sensor_msgs/msg/CameraInfo")(
             header=self._header(topic, stamp_ns, frame_id), height=int(height), width=int(width),
-            distortion_model="plumb_bob", binning_x=0, binning_y=0, roi=roi, **fields)
+            distortion_model=model, binning_x=0, binning_y=0, roi=roi, **fields)
         self._write(topic, "sensor_msgs/msg/CameraInfo", stamp_ns, msg)
 
     def write_tf(self, stamp_ns: int, transforms: list[tuple[str, str, np.ndarray]], static: bool = False) -> None:
@@ -328,6 +330,14 @@ class RecordingWriter:
                 transform=self._transform(T)))
         msg = self._type("tf2_msgs/msg/TFMessage")(transforms=items)
         self._write(topic, "tf2_msgs/msg/TFMessage", stamp_ns, msg)
+
+    def write_transform(self, topic: str, stamp_ns: int, T: np.ndarray) -> None:
+        """A bare geometry_msgs/Transform of the 4x4 T (no header: the RealSense SDK's stream extrinsics)."""
+        self._write(topic, "geometry_msgs/msg/Transform", stamp_ns, self._transform(T))
+
+    def write_float32(self, topic: str, stamp_ns: int, value: float) -> None:
+        """std_msgs/Float32 (the RealSense SDK's option values, e.g. Depth Units)."""
+        self._write(topic, "std_msgs/msg/Float32", stamp_ns, self._type("std_msgs/msg/Float32")(data=float(value)))
 
     def write_vector(self, topic: str, stamp_ns: int, frame_id: str, v) -> None:
         """geometry_msgs/Vector3Stamped of the 3-vector v in `frame_id`."""
