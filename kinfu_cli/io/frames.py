@@ -410,8 +410,8 @@ class _FramePairer:
         self.colors: deque[tuple[int, object]] = deque()  # (stamp, colour msg), decoded only when paired
 
     def stream(self, start_ns: int | None, end_ns: int | None, every: int) -> Iterator[RGBDFrame]:
-        """Frames of depth messages stamped in [start_ns, end_ns] (either None: open), every n-th; messages
-        within the tolerance outside the window are read too, as partners."""
+        """Frames of depth messages recorded (log time) in [start_ns, end_ns] (either None: open), every n-th;
+        messages within the tolerance outside the window are read too, as partners."""
         tol_ns, stats, pending = self.tol_ns, self.stats, self.pending
         read_start = None if start_ns is None else max(0, start_ns - tol_ns)
         read_end = None if end_ns is None else end_ns + tol_ns
@@ -434,9 +434,10 @@ class _FramePairer:
                 if not pending:
                     self._prune(stamp)
                 continue
-            # a depth message
+            # a depth message: the window is in the recording's time (log time, as `rosbag play --start` and the
+            # recording's start use), not the header's, whose clock may be another (a device's, simulated time)
             index += 1
-            if (start_ns is not None and stamp < start_ns) or (end_ns is not None and stamp > end_ns):
+            if (start_ns is not None and log_ns < start_ns) or (end_ns is not None and log_ns > end_ns):
                 continue  # read only for the tolerance margin of the time window
             stats.depth_messages += 1
             kept += 1
