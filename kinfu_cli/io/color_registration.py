@@ -66,9 +66,7 @@ def color_registration(rec, depth_topic: str, color_topic: str, depth_info_topic
         return ColorRegistration("none", d_frame, c_frame, reason=f"the colour images are in frame {c_frame!r}, "
                                  f"the depth images in {d_frame!r}, and no camera info topic is in {c_frame!r}")
     try:
-        info = rec.first_message(info_topic)
-        K, w, h = camera_info_K(info, f"{rec.path}: {info_topic}")
-        lens = Undistorter(K, *camera_info_distortion(info, f"{rec.path}: {info_topic}"))
+        lens, (w, h) = colour_camera(rec, info_topic)
     except RecordingError as exc:  # a broken colour calibration costs the colour, not the run
         return ColorRegistration("none", d_frame, c_frame, info_topic, reason=str(exc))
     tf = tf if tf is not None else TfBuffer.from_recording(rec)
@@ -80,6 +78,14 @@ def color_registration(rec, depth_topic: str, color_topic: str, depth_info_topic
     except TransformError as exc:
         return ColorRegistration("none", d_frame, c_frame, info_topic, reason=str(exc))
     return ColorRegistration("project", d_frame, c_frame, info_topic, lens, (w, h), T)
+
+
+def colour_camera(rec, info_topic: str, distortion=camera_info_distortion) -> tuple[Undistorter, tuple[int, int]]:
+    """The colour camera of `info_topic`'s first message: its lens (K and distortion, read by `distortion`) and
+    image size; RecordingError naming the topic when it cannot be read."""
+    info = rec.first_message(info_topic)
+    K, w, h = camera_info_K(info, f"{rec.path}: {info_topic}")
+    return Undistorter(K, *distortion(info, f"{rec.path}: {info_topic}")), (w, h)
 
 
 def register_color(reg: ColorRegistration, depth: np.ndarray, K_depth: np.ndarray, color: np.ndarray,

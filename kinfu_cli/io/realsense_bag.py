@@ -22,8 +22,8 @@ import re
 import numpy as np
 
 from kinfu_cli.core.errors import RecordingError
-from kinfu_cli.io.messages import camera_info_K, transform_to_matrix
-from kinfu_cli.io.undistort import Undistorter, check_distortion
+from kinfu_cli.io.messages import transform_to_matrix
+from kinfu_cli.io.undistort import check_distortion
 
 DEFAULT_DEPTH_UNITS = 0.001  # m per unit: the SDK's default for the D400 series
 _IMAGE = re.compile(r"^/device_(\d+)/sensor_(\d+)/([A-Za-z]+)_(\d+)/image/data$")
@@ -156,7 +156,7 @@ def _stream_name(image_topic: str) -> str:
 def sdk_color_registration(rec, depth_topic: str, color_topic: str) -> ColorRegistration:
     """How an SDK colour stream maps onto the depth stream: projected through the colour stream's camera info and
     the two streams' extrinsics (same group); mode "none" with the reason when either is missing."""
-    from kinfu_cli.io.color_registration import ColorRegistration  # (it imports io.roles, which imports us)
+    from kinfu_cli.io.color_registration import ColorRegistration, colour_camera  # (it imports io.roles: us)
 
     d_name, c_name = _stream_name(depth_topic), _stream_name(color_topic)
     info_topic = f"{_stream_prefix(color_topic)}/info/camera_info"
@@ -164,9 +164,7 @@ def sdk_color_registration(rec, depth_topic: str, color_topic: str) -> ColorRegi
         return ColorRegistration("none", d_name, c_name, reason=f"the RealSense colour stream {c_name} has no "
                                  f"camera info ({info_topic})")
     try:
-        info = rec.first_message(info_topic)
-        K, w, h = camera_info_K(info, f"{rec.path}: {info_topic}")
-        lens = Undistorter(K, *sdk_distortion(info, f"{rec.path}: {info_topic}"))
+        lens, (w, h) = colour_camera(rec, info_topic, sdk_distortion)
     except RecordingError as exc:  # a broken colour calibration costs the colour, not the run
         return ColorRegistration("none", d_name, c_name, info_topic, reason=str(exc))
     ext_d, ext_c = stream_extrinsics(rec, depth_topic), stream_extrinsics(rec, color_topic)
