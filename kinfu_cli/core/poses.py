@@ -91,3 +91,11 @@ def check_poses(poses, source: str = "poses") -> np.ndarray:
         raise ConfigError(f"{source}: pose {int(bad[0])} is not a rigid transform (rotation not orthonormal "
                           "or last row not [0 0 0 1])")
     return arr
+
+
+def plane_axes(normal: np.ndarray) -> np.ndarray:
+    """(2, 3) two orthonormal vectors spanning the plane of unit `normal` (right-handed with it)."""
+    n = np.asarray(normal, dtype=np.float64)
+    a = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
+    a /= np.linalg.norm(a)
+    return np.stack([a, np.cross(n, a)])

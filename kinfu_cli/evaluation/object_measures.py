@@ -27,6 +27,7 @@ import numpy as np
 import open3d as o3d
 
 from kinfu_cli.core.errors import ConfigError, RecordingError
+from kinfu_cli.core.poses import plane_axes
 from kinfu_cli.io.messages import c_stderr_silenced
 
 # Monica et al. RAS 2016 Table 1 (thesis Table 2.1): mean abs. / st. dev. (m) of the object measure errors
@@ -148,13 +149,6 @@ def fit_table_plane(points: np.ndarray, gt, objects: list[GroundTruthObject], ba
     return np.array([n[0], n[1], n[2], -float(n @ c)])
 
 
-def _plane_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    a = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    e1 = np.cross(n, a)
-    e1 /= np.linalg.norm(e1)
-    return e1, np.cross(n, e1)
-
-
 def footprint_axes(xy: np.ndarray, method: str = "rect") -> tuple[float, float]:
     """(major, minor) length of a 2-D point set: sides of its minimum-area rectangle ("rect", OpenCV) or its
     extents along its principal axes ("pca")."""
@@ -179,7 +173,7 @@ def measure(points: np.ndarray, plane: np.ndarray, method: str = "rect") -> dict
     """Height above the plane and footprint axes of an object's points."""
     n, d = plane[:3], plane[3]
     h = points @ n + d
-    e1, e2 = _plane_basis(n)
+    e1, e2 = plane_axes(n)
     major, minor = footprint_axes(np.stack([points @ e1, points @ e2], axis=1), method)
     return {"height": float(h.max()) if len(h) else float("nan"), "major": major, "minor": minor}
 

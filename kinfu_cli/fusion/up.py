@@ -34,6 +34,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from kinfu_cli.core.neighbours import grid_cells
+
 # fixed frames that REP-103 / REP-105 make z-up (ENU); the last path component counts ("robot1/map")
 REP103_FRAMES = ("world", "map", "odom", "earth", "base_link", "base_footprint")
 # surface points are thinned to this spacing (m) before the plane search: support planes are metres wide
@@ -97,8 +99,7 @@ def _thin(points: np.ndarray, normals: np.ndarray, spacing: float) -> tuple[np.n
     p, nrm = p[ok], nrm[ok] / length[ok, None]
     if len(p) == 0:
         return p, nrm
-    _, first = np.unique(np.floor(p / spacing).astype(np.int64), axis=0, return_index=True)
-    first = np.sort(first)
+    first = np.sort(grid_cells(p, spacing)[0])
     return p[first], nrm[first]
 
 

@@ -157,7 +157,7 @@ def iter_frames(rec, roles: Roles | None = None, pose_source: str = "tf", pose_t
     tol_ns = int(round(tolerance_s * 1e9))
     cloud = POINTCLOUD2 in rec.topics[depth_topic].msgtypes
     if cloud:
-        K, width, height, lens = _cloud_camera(rec, roles, depth_topic, stats)
+        K, width, height, lens, _ = _cloud_camera(rec, roles, depth_topic, stats)
     else:
         K, width, height, lens = _depth_camera(rec, roles, depth_topic)
     sdk = is_sdk_stream(rec, depth_topic)  # a RealSense SDK recording: depth units, colour through its extrinsics
@@ -222,17 +222,18 @@ def _depth_camera(rec, roles: Roles, depth_topic: str) -> tuple[np.ndarray, int,
     return K, width, height, Undistorter(K, *camera_info_distortion(first_info, f"{rec.path}: {roles.info_topic}"))
 
 
-def _cloud_camera(rec, roles: Roles, topic: str, stats: FrameStats) -> tuple[np.ndarray, int, int, Undistorter]:
-    """(K, width, height, pinhole lens) of an organized cloud's camera: the given intrinsics; else its camera
-    info's K (scaled to the cloud's size) when the cloud's points project onto their pixels with it; else K
-    recovered from the first cloud (io.pointcloud2.fit_intrinsics), said in stats.notes. No lens distortion: the
-    points are already in space."""
+def _cloud_camera(rec, roles: Roles, topic: str, stats: FrameStats
+                  ) -> tuple[np.ndarray, int, int, Undistorter, str]:
+    """(K, width, height, pinhole lens, where K comes from) of an organized cloud's camera: the given intrinsics;
+    else its camera info's K (scaled to the cloud's size) when the cloud's points project onto their pixels with
+    it; else K recovered from the first cloud (io.pointcloud2.fit_intrinsics), said in stats.notes. No lens
+    distortion: the points are already in space."""
     first = rec.first_message(topic)
     where = f"{rec.path}: depth topic {topic}"
     h, w = int(first.height), int(first.width)
     if roles.intrinsics is not None:
         K = intrinsics_matrix(*roles.intrinsics)
-        return K, w, h, Undistorter.pinhole(K)
+        return K, w, h, Undistorter.pinhole(K), "given"
     disagree = ""
     info = rec.first_message(roles.info_topic) if roles.info_topic is not None else None
     if info is not None:
@@ -241,14 +242,14 @@ def _cloud_camera(rec, roles: Roles, topic: str, stats: FrameStats) -> tuple[np.
             K = scaled_intrinsics(K, (w / iw, h / ih))
         rms = pinhole_rms(first, K, where)
         if rms <= MAX_PINHOLE_RMS_PX:
-            return K, w, h, Undistorter.pinhole(K)
+            return K, w, h, Undistorter.pinhole(K), f"camera info {roles.info_topic}"
         disagree = f"camera info {roles.info_topic} misses its points by {rms:.3g} px RMS, so "
     (fx, fy, cx, cy), rms = fit_intrinsics(first, where)
     stats.notes.append(f"depth from the organized point cloud {topic} ({w}x{h}): {disagree}its intrinsics were "
                        f"recovered from the cloud: fx={fx:.2f} fy={fy:.2f} cx={cx:.2f} cy={cy:.2f} "
                        f"({rms:.2g} px RMS)")
     K = intrinsics_matrix(fx, fy, cx, cy)
-    return K, w, h, Undistorter.pinhole(K)
+    return K, w, h, Undistorter.pinhole(K), "recovered from the cloud"
 
 
 def cloud_depth_source(rec, roles: Roles) -> dict | None:
@@ -269,11 +270,9 @@ def cloud_depth_source(rec, roles: Roles) -> dict | None:
     stats = FrameStats()
     try:
         _require_topics(rec, roles)
-        K, *_ = _cloud_camera(rec, roles, topic, stats)
+        K, _, _, _, source = _cloud_camera(rec, roles, topic, stats)
     except RecordingError as exc:
         return {**out, "problem": str(exc)}
-    source = ("given" if roles.intrinsics is not None else "recovered from the cloud" if stats.notes else
-              f"camera info {roles.info_topic}")
     return {**out, "intrinsics": {"fx": float(K[0, 0]), "fy": float(K[1, 1]), "cx": float(K[0, 2]),
                                   "cy": float(K[1, 2])}, "intrinsics_source": source, "notes": stats.notes}
 

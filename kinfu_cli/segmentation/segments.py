@@ -73,6 +73,7 @@ from scipy.spatial import cKDTree
 from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError, VolumeError
 from kinfu_cli.core.grid import check_up
+from kinfu_cli.core.neighbours import grid_cells
 from kinfu_cli.segmentation.plane_ransac import ransac_plane
 from kinfu_cli.segmentation.seed_assignment import assign_to_seeds
 from kinfu_cli.segmentation.structure import find_structure
@@ -329,17 +330,6 @@ def _mean_rows(values: np.ndarray, lab: np.ndarray, k: int) -> np.ndarray:
     return np.stack([np.bincount(lab, values[:, a], minlength=k) for a in range(values.shape[1])], 1) / cnt[:, None]
 
 
-def _cell_ids(points: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
-    """(first point of each occupied `cell`-sized grid cell, cell id per point), cells in lexicographic order
-    (as np.unique(axis=0) gives them, through one int64 key: several times faster)."""
-    c = np.floor(points / cell).astype(np.int64)
-    c -= c.min(axis=0)
-    span = c.max(axis=0) + 1
-    key = (c[:, 0] * span[1] + c[:, 1]) * span[2] + c[:, 2]
-    _, first, inv = np.unique(key, return_index=True, return_inverse=True)
-    return first, inv.ravel()
-
-
 def _compact(labels: np.ndarray, k: int) -> tuple[np.ndarray, int]:
     """Labels renumbered 0..K'-1 in increasing order of the used ids (np.unique's return_inverse, by bincount)."""
     used = np.bincount(labels, minlength=k) > 0
@@ -356,7 +346,7 @@ def supervoxels(points: np.ndarray, normals: np.ndarray, params: SegmentationPar
     if n == 0:
         return np.zeros(0, dtype=np.int64)
     R = float(params.seed_resolution)
-    first, inv = _cell_ids(points, R)
+    first, inv = grid_cells(points, R)
     # seeds: the centroid of each cell (position, normal, colour)
     k = len(first)
     seed_pos = _mean_rows(points, inv, k)

@@ -30,6 +30,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from kinfu_cli.core.neighbours import grid_cells
+from kinfu_cli.core.poses import plane_axes
 from kinfu_cli.segmentation.plane_ransac import ransac_plane
 
 STRUCT_CELL = 0.05  # thinning for the plane search (m): a 5 x 4 m room's surfaces in ~50 k points
@@ -62,25 +64,9 @@ class Structure:
     info: dict = field(default_factory=dict)
 
 
-def _thin(points: np.ndarray, cell: float) -> np.ndarray:
-    """Index of the first point in each occupied `cell`-sized grid cell."""
-    c = np.floor(points / cell).astype(np.int64)
-    c -= c.min(axis=0)
-    span = c.max(axis=0) + 1
-    key = (c[:, 0] * span[1] + c[:, 1]) * span[2] + c[:, 2]
-    return np.unique(key, return_index=True)[1]
-
-
-def _in_plane_axes(normal: np.ndarray) -> np.ndarray:
-    """(2, 3) two unit vectors spanning the plane."""
-    a = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
-    a /= np.linalg.norm(a)
-    return np.stack([a, np.cross(normal, a)])
-
-
 def _extents(points: np.ndarray, normal: np.ndarray) -> np.ndarray:
     """5-95 % spans of points along the principal axes of their projection on the plane (2,), largest first."""
-    uv = (points - points.mean(axis=0)) @ _in_plane_axes(normal).T
+    uv = (points - points.mean(axis=0)) @ plane_axes(normal).T
     if len(uv) < 3:
         return np.zeros(2)
     _, vec = np.linalg.eigh(np.cov(uv.T))
@@ -100,7 +86,7 @@ def _group_median(values: np.ndarray, group: np.ndarray, k: int) -> np.ndarray:
 def bounding_planes(points: np.ndarray, max_planes: int, min_extent: float, iterations: int,
                     rng: np.random.Generator) -> tuple[list[np.ndarray], dict]:
     """(planes facing into the scene, info): steps 1-2 of the module docstring."""
-    sub = points[_thin(points, STRUCT_CELL)]
+    sub = points[grid_cells(points, STRUCT_CELL)[0]]
     info: dict = {"thinned_points": int(len(sub)), "planes_tried": 0, "rejected": []}
     found: list[np.ndarray] = []
     remaining = np.arange(len(sub))
@@ -143,7 +129,7 @@ def _plane_band(points: np.ndarray, normals: np.ndarray, plane: np.ndarray, sigm
     win = np.flatnonzero(np.abs(dist) < STRUCT_WINDOW)
     if len(win) == 0:
         return out, height
-    uv = np.floor(points[win] @ _in_plane_axes(plane[:3]).T / STRUCT_TILE).astype(np.int64)
+    uv = np.floor(points[win] @ plane_axes(plane[:3]).T / STRUCT_TILE).astype(np.int64)
     uv -= uv.min(axis=0)
     tiles, tile = np.unique(uv[:, 0] * (uv[:, 1].max() + 1) + uv[:, 1], return_inverse=True)
     k = len(tiles)
