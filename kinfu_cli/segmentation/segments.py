@@ -74,6 +74,7 @@ from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError, VolumeError
 from kinfu_cli.core.grid import check_up
 from kinfu_cli.core.neighbours import grid_cells
+from kinfu_cli.segmentation.group_stats import group_percentile
 from kinfu_cli.segmentation.plane_ransac import ransac_plane
 from kinfu_cli.segmentation.seed_assignment import assign_to_seeds
 from kinfu_cli.segmentation.structure import find_structure
@@ -786,7 +787,7 @@ def _below_objects(seg: np.ndarray, h: np.ndarray, limit: float) -> np.ndarray:
     out = np.zeros(len(seg), dtype=bool)
     if (seg >= 0).any():
         ids, inv = np.unique(seg[seg >= 0], return_inverse=True)
-        out[seg >= 0] = (_group_percentile(h[seg >= 0], inv.ravel(), len(ids), 95) < limit)[inv.ravel()]
+        out[seg >= 0] = (group_percentile(h[seg >= 0], inv.ravel(), len(ids), 95) < limit)[inv.ravel()]
     return out
 
 
@@ -801,19 +802,6 @@ def _on_support(seg: np.ndarray, h: np.ndarray | None, reach: np.ndarray | None,
     if reach is not None:
         out |= _below_objects(seg, np.minimum(reach, 1e6), STRUCT_REACH)  # finite: no inf x 0 in the percentile
     return out
-
-
-def _group_percentile(values: np.ndarray, group: np.ndarray, k: int, q: float) -> np.ndarray:
-    """np.percentile(values[group == g], q) (linear interpolation) for every group g in 0..k-1, by one sort."""
-    order = np.lexsort((values, group))
-    v = values[order]
-    cnt = np.bincount(group, minlength=k)
-    start = np.concatenate([[0], np.cumsum(cnt)[:-1]])
-    pos = q / 100.0 * (np.maximum(cnt, 1) - 1)
-    lo = np.floor(pos).astype(np.int64)
-    hi = np.minimum(lo + 1, np.maximum(cnt - 1, 0))
-    frac = pos - lo
-    return v[start + lo] * (1 - frac) + v[start + hi] * frac
 
 
 def _plane_colour_refine(pts: np.ndarray, col: np.ndarray, labels: np.ndarray, plane: np.ndarray,
