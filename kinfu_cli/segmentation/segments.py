@@ -9,8 +9,9 @@ numpy/scipy:
    furniture's feet are grown back out of the band. A tabletop scene (at most one bounding plane) is left as before.
 1. Support plane: RANSAC (open3d's `segment_plane` redone in numpy: plane_ransac.py; up to `max_planes` rounds)
    on points whose normal is within `up_tolerance_deg` of `up`; the highest plane holding >= `min_plane_fraction`
-   of the points, or >= `min_up_facing_fraction` of those up-facing points (and at least `min_segment_points`), is the
-   support (the table, not the floor); its inliers with a matching normal become segment 0. Without `up` the
+   of the points, or >= `min_up_facing_fraction` of those up-facing points (and at least `min_segment_points`), or
+   (outside rooms) one that spans SUPPORT_MIN_SPAN both ways, is the support (the table, not the floor); its inliers
+   with a matching normal become segment 0. Without `up` the
    largest plane stands for it (only planes within SUPPORT_PARALLEL_DEG of it compete), and a plane faces the side
    its points' normals point to.
 2. Supervoxels (VCCS-like): seeds on a `seed_resolution` grid, then a few k-means rounds where each point
@@ -66,6 +67,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
@@ -74,6 +76,7 @@ from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError, VolumeError
 from kinfu_cli.core.grid import check_up
 from kinfu_cli.core.neighbours import grid_cells
+from kinfu_cli.core.poses import plane_axes
 from kinfu_cli.segmentation.group_stats import group_percentile
 from kinfu_cli.segmentation.plane_ransac import ransac_plane
 from kinfu_cli.segmentation.seed_assignment import assign_to_seeds
@@ -93,6 +96,11 @@ CUT_FACE_RADIUS = 0.03  # face-plane cuts: the face's points are counted within 
 # (tuning seeds 0, 1, 8-139, objects scenes, mode, with the gap as the step: 0 / 0.0025 / 0.005 gave object recall
 # 0.979 / 0.984 / 0.983)
 STEP_LEVEL_BAND = 0.0025
+# a plane too small a share of the points for the support rule still qualifies when its inliers span this much both
+# ways (5-95 %, m): a table seen with much floor around it (the bundled sample: floor 86 k points, table 11 k, so
+# the floor was the support and the table an object); objects' tops are smaller (the generated ones <= 0.3 m)
+SUPPORT_MIN_SPAN = 0.4
+SUPPORT_SPAN_CELL = 0.02  # ... of one connected patch: cells of this side (m), about three 6 mm voxels
 SUPPORT_PARALLEL_DEG = 5.0  # without an up, support candidates are the planes within this of the largest plane's
 # normal (a table and the floor are parallel within a degree or two; RANSAC's fit tilts a 1 m table by well under one)
 STRUCT_REACH = 2.0  # a segment whose points (95 %) lie within this many band half-widths of the room's structure is
@@ -253,11 +261,13 @@ class Segmentation:
 
 
 def detect_support_plane(points: np.ndarray, normals: np.ndarray, params: SegmentationParams,
-                         info: dict | None = None) -> tuple[np.ndarray | None, np.ndarray]:
+                         info: dict | None = None, span_rule: bool = True) -> tuple[np.ndarray | None, np.ndarray]:
     """(plane (4,) or None, inlier mask (N,)) by RANSAC (`ransac_plane`) on up-facing points. `info`, when
     given, receives what the search saw: points, up (the unit direction used, None for any), candidate_points
     (normal within up_tolerance_deg of up), planes_tried, largest_plane_points (of the planes with an
-    up-facing normal) and needed_points."""
+    up-facing normal), needed_points and, per qualifying plane, why (`qualified`: "share" or "span").
+    span_rule: a plane under the share also qualifies by SUPPORT_MIN_SPAN (off in rooms, whose support is
+    the floor: a table there is furniture)."""
     n = len(points)
     up = params.up_vector()
     info = {} if info is None else info
@@ -272,15 +282,18 @@ def detect_support_plane(points: np.ndarray, normals: np.ndarray, params: Segmen
     if up is not None:
         need = min(need, params.min_up_facing_fraction * cand.sum())
     need = max(need, params.min_segment_points, 3)
-    info.update(candidate_points=int(cand.sum()), needed_points=int(np.ceil(need)))
-    if cand.sum() < need:
+    least = max(params.min_segment_points, 3)
+    info.update(candidate_points=int(cand.sum()), needed_points=int(np.ceil(need)), qualified=[])
+    if cand.sum() < (least if span_rule else need):
         return none
     idx = np.flatnonzero(cand)
     rng = np.random.default_rng(int(params.seed))
     found = []  # (plane, inliers) of the planes that qualify
     remaining = idx
+    claimed = np.zeros(n, dtype=bool)  # inliers of the planes tried so far
     for _ in range(max(1, int(params.max_planes))):  # several horizontal planes (floor, table): take the highest
-        if len(remaining) < need:
+        by_share = len(remaining) >= need  # fewer left: a plane through them counts the earlier planes' points
+        if not by_share and not (span_rule and len(remaining) >= least):
             break
         model, inl_idx = ransac_plane(points[remaining], float(params.plane_distance), int(params.plane_iterations),
                                       rng)
@@ -294,12 +307,18 @@ def detect_support_plane(points: np.ndarray, normals: np.ndarray, params: Segmen
         if up is None and _faces_down(plane, dist, normals, inl, params.plane_distance):
             plane, dist = -plane, -dist
         facing = up is None or abs(plane[:3] @ up) >= cos_tol
-        ok = inl.sum() >= need and facing
+        fresh = inl & ~claimed
+        claimed |= inl
+        why = "share" if by_share and inl.sum() >= need else (
+            "span" if span_rule and fresh.sum() >= least
+            and _spans(points[fresh], plane[:3], SUPPORT_MIN_SPAN, SUPPORT_SPAN_CELL) else "")
+        ok = bool(why) and facing
         info["planes_tried"] += 1
         if facing:
             info["largest_plane_points"] = max(info["largest_plane_points"], int(inl.sum()))
         if ok:
             found.append((plane, inl))
+            info["qualified"].append(why)
         remaining = np.setdiff1d(remaining, remaining[np.asarray(inl_idx, dtype=np.int64)], assume_unique=True)
     if not found:
         return none
@@ -312,6 +331,23 @@ def detect_support_plane(points: np.ndarray, normals: np.ndarray, params: Segmen
         ref = max(found, key=lambda f: int(f[1].sum()))[0][:3]
         found = [f for f in found if abs(f[0][:3] @ ref) >= np.cos(np.radians(SUPPORT_PARALLEL_DEG))]
     return max(found, key=lambda f: float(np.mean(points[f[1]] @ ref)))
+
+
+def _spans(points: np.ndarray, normal: np.ndarray, span: float, cell: float) -> bool:
+    """Whether the largest connected patch of `points` on a plane of unit `normal` (cells of `cell` m touching
+    in 8-neighbourhood) extends at least `span` both ways in it (5-95 %). Connected: RANSAC's inliers of a
+    plane through several objects' tops at one height span the table without being one surface."""
+    uv = points @ plane_axes(normal).T
+    if np.any(uv.max(axis=0) - uv.min(axis=0) < span):
+        return False
+    ij = np.floor((uv - uv.min(axis=0)) / cell).astype(np.int64)
+    occ = np.zeros(ij.max(axis=0) + 1, dtype=bool)
+    occ[ij[:, 0], ij[:, 1]] = True
+    comp, _ = ndimage.label(occ, structure=np.ones((3, 3), dtype=bool))
+    lab = comp[ij[:, 0], ij[:, 1]]
+    patch = uv[lab == np.bincount(lab).argmax()]
+    lo, hi = np.percentile(patch, [5, 95], axis=0)
+    return bool(np.all(hi - lo >= span))
 
 
 def _faces_down(plane: np.ndarray, dist: np.ndarray, normals: np.ndarray, inl: np.ndarray, margin: float) -> bool:
@@ -917,10 +953,10 @@ def segment_cloud(points: np.ndarray, normals: np.ndarray, params: SegmentationP
     n = len(pts)
     labels = np.full(n, NOISE_LABEL, dtype=np.int64)
     search: dict = {}
-    plane, inl = detect_support_plane(pts[good], nrm[good], params, search)
+    struct_mask, reach_all, struct_height, floor, structure_info = _room_structure(pts, nrm, good, params)
+    plane, inl = detect_support_plane(pts[good], nrm[good], params, search, span_rule=struct_mask is None)
     on_plane = np.zeros(n, dtype=bool)
     on_plane[np.flatnonzero(good)[inl]] = True
-    struct_mask, reach_all, struct_height, floor, structure_info = _room_structure(pts, nrm, good, params)
     if struct_mask is not None:
         on_plane |= struct_mask
         if plane is None and floor is not None:  # a room whose floor is too little seen for the support's rule
