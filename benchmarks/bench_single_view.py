@@ -30,6 +30,7 @@ from scipy.spatial import cKDTree
 from kinfu_cli.evaluation.segments import PHOTOMETRIC
 from kinfu_cli.fusion.volume import TernaryVolume
 from kinfu_cli.segmentation.pipeline import SegmentOptions, analyse_volume
+from kinfu_cli.segmentation.segments import SegmentationParams
 from kinfu_cli.sim.household import object_kind
 from kinfu_cli.sim.scenario import make_scenario
 from kinfu_cli.sim.scene import scene_label_cloud
@@ -43,7 +44,7 @@ NEAR = 0.015  # m: a cloud point lies on the labelled surface within this distan
 MERGE_SHARE = 0.25
 
 
-def segment_view(scene, sensor, K, T, frame_seed: int, up, color: str):
+def segment_view(scene, sensor, K, T, frame_seed: int, up, color: str, overrides: dict | None = None):
     """(points, segment labels, seconds wall, seconds CPU) of one view fused alone and segmented."""
     w0, c0 = time.perf_counter(), time.process_time()
     depth, rgb = sensor.render(scene, T, frame_seed=frame_seed)
@@ -52,7 +53,7 @@ def segment_view(scene, sensor, K, T, frame_seed: int, up, color: str):
                         color_mode=color)
     vol.integrate(depth, K, T, rgb)
     o = SegmentOptions(superquadrics=False)
-    o = replace(o, segmentation=replace(o.segmentation, up=up))
+    o = replace(o, segmentation=replace(o.segmentation, up=up, **(overrides or {})))
     res = analyse_volume(vol, o)
     return res.segmentation.points, res.segmentation.labels, time.perf_counter() - w0, time.process_time() - c0
 
@@ -81,7 +82,7 @@ def score_view(points, labels, gp, gl, names: dict) -> dict:
             "visible_ids": [names[o] for o in visible]}
 
 
-def run(layout: str, seeds, frames, up, color: str) -> list[dict]:
+def run(layout: str, seeds, frames, up, color: str, overrides: dict | None = None) -> list[dict]:
     rows = []
     for seed in seeds:
         sc = make_scenario(seed, width=W, height=H, frames=24, noise=True, layout=layout)
@@ -90,7 +91,8 @@ def run(layout: str, seeds, frames, up, color: str) -> list[dict]:
         gp, gl = scene_label_cloud(scene)
         names = {scene.label_of(o.id): o.id for o in scene.present_objects}
         for k in frames:
-            pts, lab, wall, cpu = segment_view(scene, sensor, sc.K, sc.frames[k].T_world_camera, k, up, color)
+            pts, lab, wall, cpu = segment_view(scene, sensor, sc.K, sc.frames[k].T_world_camera, k, up, color,
+                                                 overrides)
             r = score_view(pts, lab, gp, gl, names) | {"layout": layout, "seed": seed, "frame": k, "wall_s": wall,
                                                       "cpu_s": cpu}
             rows.append(r)
@@ -128,19 +130,23 @@ def main() -> None:
     ap.add_argument("--up", default="none", help="none, z, or x,y,z")
     ap.add_argument("--color", default="mean", choices=("mean", "mode"))
     ap.add_argument("--json", default=None)
+    ap.add_argument("--param", action="append", default=[],
+                    help="a SegmentationParams field as name=value (none for None), repeatable")
     a = ap.parse_args()
     up = None if a.up == "none" else (0.0, 0.0, 1.0) if a.up == "z" else tuple(float(x) for x in a.up.split(","))
     frames = [int(f) for f in a.frames.split(",")]
+    overrides = {k: (None if v == "none" else type(getattr(SegmentationParams(), k) or 0.0)(v))
+                 for k, v in (p.split("=", 1) for p in a.param)}
     out = {}
     for layout in a.layouts.split(","):
         seeds = ([int(s) for s in a.seeds.split(",")] if a.seeds else
                  SEEDS[layout]["held-out" if a.held_out else "tuning"])
         if not seeds:
             continue
-        rows = run(layout, seeds, frames, up, a.color)
+        rows = run(layout, seeds, frames, up, a.color, overrides)
         s = summary(rows)
         out[layout] = {"rows": rows, "summary": s}
-        print(f"== {layout} seeds {seeds} frames {frames} up {a.up} colour {a.color}: {s['views']} views, "
+        print(f"== {layout} seeds {seeds} frames {frames} up {a.up} colour {a.color} {a.param or ''}: {s['views']} views, "
               f"mean ratio {s['mean_ratio']:.3f}, within +-30 % {s['within_30_count']}/{s['views']} "
               f"({s['within_30']:.2f}), {s['wall_s_per_view']:.1f} s/view wall, {s['cpu_s_per_view']:.1f} s CPU")
         for k, v in s["kinds"].items():
