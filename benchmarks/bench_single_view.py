@@ -14,6 +14,7 @@ held-out ones once, at the end, with --held-out); objects 0, 1, 8-11 (the sv.py 
 
 Usage: PYTHONPATH=. python benchmarks/bench_single_view.py [--layouts objects,household] [--held-out]
        [--seeds 0,1] [--frames 0,6,12,18] [--up none|z] [--color mean|mode] [--json out.json]
+       [--param NAME=VALUE] [--sensor '{"baseline": 0.05, "ir_focal": 385}']
 """
 
 from __future__ import annotations
@@ -82,12 +83,13 @@ def score_view(points, labels, gp, gl, names: dict) -> dict:
             "visible_ids": [names[o] for o in visible]}
 
 
-def run(layout: str, seeds, frames, up, color: str, overrides: dict | None = None) -> list[dict]:
+def run(layout: str, seeds, frames, up, color: str, overrides: dict | None = None, sensor_args: dict | None = None
+        ) -> list[dict]:
     rows = []
     for seed in seeds:
         sc = make_scenario(seed, width=W, height=H, frames=24, noise=True, layout=layout)
         scene = sc.scene_after
-        sensor = DepthSensor(sc.K, W, H, noise=True, seed=seed, **PHOTOMETRIC)
+        sensor = DepthSensor(sc.K, W, H, noise=True, seed=seed, **(PHOTOMETRIC | (sensor_args or {})))
         gp, gl = scene_label_cloud(scene)
         names = {scene.label_of(o.id): o.id for o in scene.present_objects}
         for k in frames:
@@ -130,6 +132,7 @@ def main() -> None:
     ap.add_argument("--up", default="none", help="none, z, or x,y,z")
     ap.add_argument("--color", default="mean", choices=("mean", "mode"))
     ap.add_argument("--json", default=None)
+    ap.add_argument("--sensor", default="{}", help='DepthSensor keywords as JSON, e.g. {"baseline": 0.05}')
     ap.add_argument("--param", action="append", default=[],
                     help="a SegmentationParams field as name=value (none for None), repeatable")
     a = ap.parse_args()
@@ -143,10 +146,10 @@ def main() -> None:
                  SEEDS[layout]["held-out" if a.held_out else "tuning"])
         if not seeds:
             continue
-        rows = run(layout, seeds, frames, up, a.color, overrides)
+        rows = run(layout, seeds, frames, up, a.color, overrides, json.loads(a.sensor))
         s = summary(rows)
         out[layout] = {"rows": rows, "summary": s}
-        print(f"== {layout} seeds {seeds} frames {frames} up {a.up} colour {a.color} {a.param or ''}: {s['views']} views, "
+        print(f"== {layout} seeds {seeds} frames {frames} up {a.up} colour {a.color} {a.param or ''} {a.sensor}: {s['views']} views, "
               f"mean ratio {s['mean_ratio']:.3f}, within +-30 % {s['within_30_count']}/{s['views']} "
               f"({s['within_30']:.2f}), {s['wall_s_per_view']:.1f} s/view wall, {s['cpu_s_per_view']:.1f} s CPU")
         for k, v in s["kinds"].items():
