@@ -899,17 +899,15 @@ def _extent(flat: np.ndarray) -> float:
 
 def _over(point: np.ndarray, flat: np.ndarray, up: np.ndarray) -> bool:
     """Whether the foot `point` lies inside the convex hull of the feet `flat` (all on the support plane)."""
-    e1 = np.cross(up, [1.0, 0.0, 0.0] if abs(up[0]) < 0.9 else [0.0, 1.0, 0.0])
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(up, e1)
-    uv = flat @ np.stack([e1, e2], 1)
+    axes = plane_axes(up)
+    uv = flat @ axes.T
     if len(uv) < 3:
         return False
     try:
         hull = ConvexHull(uv)
     except QhullError:  # fewer than 3 points or all on a line
         return False
-    return bool(np.all(hull.equations[:, :2] @ (np.stack([e1, e2]) @ point) + hull.equations[:, 2] <= 0))
+    return bool(np.all(hull.equations[:, :2] @ (axes @ point) + hull.equations[:, 2] <= 0))
 
 
 def _join_necks(seg: np.ndarray, points: np.ndarray, pairs: np.ndarray, h: np.ndarray, up: np.ndarray,
