@@ -377,6 +377,13 @@ def _time_window(rec, start_s: float | None, end_s: float | None) -> tuple[int |
     end_ns = None if end_s is None else t0 + int(end_s * 1e9)
     if start_ns is not None and end_ns is not None and end_ns < start_ns:
         raise ConfigError(f"start {start_s} s is after end {end_s} s", parameter="start_s/end_s")
+    t1 = getattr(rec, "end_ns", None)  # a window outside the recording selects nothing: said, not "no frames"
+    if start_ns is not None and t1 is not None and start_ns > t1:
+        raise ConfigError(f"start {start_s:g} s is after the recording's end (it lasts {(t1 - t0) * 1e-9:.3f} s; "
+                          f"seconds count from its first message)", parameter="start_s")
+    if end_ns is not None and rec.start_ns is not None and end_ns < t0:
+        raise ConfigError(f"end {end_s:g} s is before the recording's start (seconds count from its first "
+                          f"message)", parameter="end_s")
     return start_ns, end_ns
 
 
