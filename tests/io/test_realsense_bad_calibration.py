@@ -59,3 +59,28 @@ def test_damaged_colour_calibration_costs_the_colour_only(tmp_path, damage, reas
     reg = summary["color_registration"]
     assert reg["mode"] == "none" and reason in reg["reason"], reg
     assert COLOR in reg["reason"] or "Color_0" in reg["reason"]
+
+
+def test_depth_stream_without_camera_info_is_not_given_the_colour_cameras(tmp_path):
+    """The colour stream's camera info was taken for the depth camera's (scaled to the depth image, a warning
+    only): the depth intrinsics are refused as missing, naming the depth topic, and --intrinsics still reads it."""
+    from click.testing import CliRunner
+    from conftest import one_line_error
+
+    from kinfu_cli.cli import cli
+    from kinfu_cli.io.roles import detect_roles
+
+    path = tmp_path / "noinfo.bag"
+    with RecordingWriter(path) as w:
+        w.write_camera_info(f"{COLOR}/info/camera_info", 0, "", K * [[2], [2], [1]], 2 * W, 2 * H)
+        for i in range(2):
+            t = 1_000_000_000 + i * 33_000_000
+            w.write_image(f"{DEPTH}/image/data", t, "", np.full((H, W), 800, np.uint16), "mono16")
+            w.write_image(f"{COLOR}/image/data", t + 1_000_000, "", np.full((2 * H, 2 * W, 3), 90, np.uint8), "rgb8")
+    with open_recording(path) as rec:
+        assert detect_roles(rec).info_topic is None
+    one_line_error(CliRunner().invoke(cli, ["export", str(path), "-o", str(tmp_path / "e"), "-q", "--pose-source",
+                                            "none"]), "--intrinsics", f"{DEPTH}/image/data")
+    res = CliRunner().invoke(cli, ["export", str(path), "-o", str(tmp_path / "e"), "-q", "--pose-source", "none",
+                                   "--intrinsics", "30,30,15.5,11.5"])
+    assert res.exit_code == 0 and (tmp_path / "e" / "frame-000001.depth.png").exists(), res.output
