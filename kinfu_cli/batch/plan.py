@@ -174,6 +174,8 @@ def _recordings(source: Path, doc: dict, output: Path, table, stages: list[str])
             raise _fail(source, where, f"unknown key(s) {', '.join(sorted(unknown))} "
                                        f"(known: {', '.join(sorted(_ENTRY_KEYS))})")
         paths = _expand(source, where, e["path"])
+        if e.get("output") is not None and (isinstance(e["output"], bool) or not isinstance(e["output"], (str, int))):
+            raise _fail(source, where, f"output {e['output']!r}: expected a folder name inside the output folder")
         if e.get("output") is not None and len(paths) > 1:
             raise _fail(source, where, f"'output' names one folder but {e['path']!r} matches {len(paths)} recordings")
         opts = _normalise_options(source, f"{where}.options", e.get("options"), table)
