@@ -25,6 +25,8 @@ def folder(tmp_path):
     ("[{path: a.mcap, output: true}]", ["recordings[0]", "output True", "folder name"]),
     ("[{path: a.mcap, output: [x, y]}]", ["recordings[0]", "output ['x', 'y']", "folder name"]),
     ("[{path: a.mcap, output: {x: 1}}]", ["recordings[0]", "folder name"]),
+    ("[{path: a.mcap, output: x}, {path: b.mcap, output: x/fuse}]", ["recordings[1]", "lies inside", "side by side"]),
+    ("[{path: a.mcap, output: x/deep/er}, {path: b.mcap, output: x}]", ["recordings[0]", "lies inside"]),
 ])
 def test_bad_entry_outputs_are_refused(folder, entries, needles):
     plan = folder / "plan.yaml"
