@@ -37,7 +37,7 @@ from kinfu_cli.fusion.placement import default_origin
 from kinfu_cli.fusion.tracking import POSE_MODES, FrameToModelTracker, TrackResult, predict_pose
 from kinfu_cli.fusion.up import choose_up
 from kinfu_cli.fusion.volume import TernaryVolume, load_volume
-from kinfu_cli.io.frames import FrameStats, RGBDFrame, iter_frames, window_depth_count
+from kinfu_cli.io.frames import FrameStats, RGBDFrame, check_window, iter_frames, window_depth_count
 from kinfu_cli.io.messages import header_frame
 from kinfu_cli.io.recording import Recording, open_recording
 from kinfu_cli.io.roles import Roles, detect_roles
@@ -198,6 +198,7 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
     names = {**{n: n for n in ("init", "origin", "clear_spheres", "clear_pois", "up")}, **(argument_names or {})}
     up = None if up is None else check_up(up, "up")
     _check_arguments(pose, pose_topic, every, max_lost, size)
+    start_s, end_s = check_window(start_s, end_s)
     auto = isinstance(size, str)
     budget = budget_bytes(max_memory)
     spheres = _spheres(clear_spheres, clear_pois, names["clear_spheres"])
