@@ -240,8 +240,11 @@ def check_before_work(plan: Plan, table: Mapping[str, StageSpec], force: bool) -
                 spec.check(rec, rec.stage_options(s))
             except KinfuError as exc:
                 raise ConfigError(f"{plan.source}: {rec.entry}: {s}: {exc}") from None
-            for rel in spec.claims_of(rec):
-                claim_output(rec.output / rel, inputs, force=force, parameter="output")
+            for rel in spec.claims_of(rec):  # a stage's file, not batch's --output: named with its plan entry
+                try:
+                    claim_output(rec.output / rel, inputs, force=force)
+                except KinfuError as exc:
+                    raise type(exc)(f"{plan.source}: {rec.entry}: {s}: {exc.detail}") from None
     check_output_folders(plan, force)  # after the paths: a user's file where a stage writes is named itself
 
 

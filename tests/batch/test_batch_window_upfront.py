@@ -1,5 +1,6 @@
-"""A plan's fuse window (start / end) is checked before any work, as the other option values: NaN, a start after
-the end or a negative end passed the check, each recording then failed in its Dask task (exit 1)."""
+"""Checked before any work, as the other option values: a plan's fuse window (start / end: NaN, a start after
+the end or a negative end passed the check, each recording then failed in its Dask task, exit 1), and a user's
+file where a stage writes (named with the plan entry and stage, not as batch's --output)."""
 
 from __future__ import annotations
 
@@ -49,3 +50,17 @@ def test_a_good_window_gets_to_the_cluster(tmp_path, connects):
                     'end = 2.5\n')
     one_line_error(CliRunner().invoke(cli, ["batch", str(plan), "--quiet"], catch_exceptions=False),
                    "connected to a cluster")
+
+
+def test_a_users_file_where_a_stage_writes_is_named_with_its_plan_entry(tmp_path, connects):
+    """It was reported as `--output: .../pois.json: ...`, as if batch's -o were at fault."""
+    (tmp_path / "a.mcap").touch()
+    (tmp_path / "out" / "a").mkdir(parents=True)
+    (tmp_path / "out" / "a" / "pois.json").write_text('{"mine": 1}')
+    plan = tmp_path / "plan.toml"
+    plan.write_text('output = "out"\nstages = ["poi"]\nrecordings = ["a.mcap"]\n')
+    line = one_line_error(CliRunner().invoke(cli, ["batch", str(plan), "--quiet"], catch_exceptions=False),
+                          f"{plan}: recordings[0] {tmp_path / 'a.mcap'}: poi: {tmp_path / 'out/a/pois.json'}",
+                          "kinfu did not write", "--force")
+    assert "--output" not in line and connects == []
+    assert (tmp_path / "out" / "a" / "pois.json").read_text() == '{"mine": 1}'
