@@ -103,8 +103,7 @@ def depth_units(rec, depth_topic: str) -> tuple[float, str, str | None]:
     for topic in (f"{sensor}/option/Depth Units/value", f"{sensor}/option/Depth_Units/value"):
         if topic not in rec.topics or not rec.topics[topic].count:
             continue
-        # float32 on the wire: 7 significant digits (0.0001, not 9.9999997e-05)
-        values = [float(f"{float(getattr(msg, 'data', np.nan)):.7g}") for _, _, msg in rec.messages([topic])]
+        values = [_option_value(msg, f"{rec.path}: {topic}") for _, _, msg in rec.messages([topic])]
         first = values[0] if values else float("nan")
         if not (np.isfinite(first) and 1e-7 <= first <= 0.1):
             raise RecordingError(f"{rec.path}: {topic}: depth units {first} m per unit is no depth scale "
@@ -121,6 +120,17 @@ def depth_units(rec, depth_topic: str) -> tuple[float, str, str | None]:
     return DEFAULT_DEPTH_UNITS, "assumed", (
         f"RealSense SDK recording without the depth sensor's Depth Units option ({sensor}/option/Depth Units/"
         f"value): {DEFAULT_DEPTH_UNITS * 1000:g} mm per unit assumed")
+
+
+def _option_value(msg: object, where: str) -> float:
+    """An SDK option's value (std_msgs/Float32; NaN without a `data` field); RecordingError naming `where` for a
+    value that is no number (another message type on the option's topic)."""
+    raw = getattr(msg, "data", np.nan)
+    try:
+        return float(f"{float(raw):.7g}")  # float32 on the wire: 7 significant digits (0.0001, not 9.9999997e-05)
+    except (TypeError, ValueError):
+        raise RecordingError(f"{where}: depth units {raw!r} is no number (expected metres per unit, e.g. "
+                             f"0.001)") from None
 
 
 def stream_extrinsics(rec, image_topic: str) -> dict[int, np.ndarray]:

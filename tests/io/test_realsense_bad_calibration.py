@@ -84,3 +84,26 @@ def test_depth_stream_without_camera_info_is_not_given_the_colour_cameras(tmp_pa
     res = CliRunner().invoke(cli, ["export", str(path), "-o", str(tmp_path / "e"), "-q", "--pose-source", "none",
                                    "--intrinsics", "30,30,15.5,11.5"])
     assert res.exit_code == 0 and (tmp_path / "e" / "frame-000001.depth.png").exists(), res.output
+
+
+@pytest.mark.parametrize("msgtype, value, ok", [("std_msgs/msg/String", "abc", False),
+                                                ("std_msgs/msg/String", "0.0001", True),
+                                                ("std_msgs/msg/Float64", 0.0001, True)])
+def test_depth_units_of_another_message_type(tmp_path, msgtype, value, ok):
+    """A Depth Units option recorded as text crashed with "ValueError: could not convert string to float"."""
+    from kinfu_cli.core.errors import RecordingError
+
+    path = tmp_path / "u.bag"
+    topic = "/device_0/sensor_0/option/Depth Units/value"
+    with RecordingWriter(path) as w:
+        w.write_camera_info(f"{DEPTH}/info/camera_info", 0, "", K, W, H)
+        w._write(topic, msgtype, 0, w._type(msgtype)(data=value))
+        w.write_image(f"{DEPTH}/image/data", 1_000_000_000, "", np.full((H, W), 8000, np.uint16), "mono16")
+    with open_recording(path) as rec:
+        if ok:
+            frames = list(iter_frames(rec, pose_source="none"))
+            assert np.allclose(frames[0].depth, 0.8)
+        else:
+            with pytest.raises(RecordingError, match="depth units 'abc' is no number") as info:
+                list(iter_frames(rec, pose_source="none"))
+            assert topic in str(info.value)
