@@ -230,8 +230,12 @@ def _cloud_camera(rec, roles: Roles, topic: str, stats: FrameStats
     first = rec.first_message(topic)
     where = f"{rec.path}: depth topic {topic}"
     h, w = int(first.height), int(first.width)
-    if roles.intrinsics is not None:
+    if roles.intrinsics is not None:  # the user's word, but a K that misses the points unprojects them elsewhere
         K = intrinsics_matrix(*roles.intrinsics)
+        if (rms := pinhole_rms(first, K, where)) > MAX_PINHOLE_RMS_PX:
+            stats.notes.append(f"depth from the organized point cloud {topic} ({w}x{h}): the given intrinsics miss "
+                               f"its points by {rms:.3g} px RMS (the cloud's own camera puts each point on its "
+                               f"pixel); its depth is unprojected with them all the same")
         return K, w, h, Undistorter.pinhole(K), "given"
     disagree = ""
     info = rec.first_message(roles.info_topic) if roles.info_topic is not None else None
