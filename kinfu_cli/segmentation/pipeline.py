@@ -311,6 +311,8 @@ def analyse_volume(volume: TernaryVolume | TernaryGrid, options: SegmentOptions 
     result = analyse_cloud(cloud.points, cloud.normals, options, {"surface": t_surface}, up_source, cloud.colors)
     result.warnings += support_against_volume_up(result.segmentation, up_source, getattr(volume, "up", None),
                                                  getattr(volume, "up_source", ""))
+    result.warnings += given_up_against_volume_up(options.segmentation.up, up_source, getattr(volume, "up", None),
+                                                  getattr(volume, "up_source", ""))
     return result
 
 
@@ -326,6 +328,20 @@ def support_against_volume_up(seg: Segmentation, up_source: str, volume_up, volu
     return [f"support plane {angle:.0f} deg from the volume's up {np.round(up, 3).tolist()} "
             f"({volume_up_source or 'recorded'}): without an up the largest plane was taken, likely a wall or a box "
             f"face, not the table; segment with the volume's up (the default) to use it"]
+
+
+def given_up_against_volume_up(up, up_source: str, volume_up, volume_up_source: str) -> list[str]:
+    """An up given by the caller more than SUPPORT_VS_UP_DEG from the one the volume knows (a y-up habit on a
+    z-up world): the support is then searched among the walls. Said, not changed: the caller may know better."""
+    if up_source != "option" or volume_up is None or up is None or isinstance(up, str):
+        return []
+    a, b = np.asarray(up, dtype=np.float64), np.asarray(volume_up, dtype=np.float64)
+    angle = float(np.degrees(np.arccos(np.clip(a @ b / (np.linalg.norm(a) * np.linalg.norm(b)), -1.0, 1.0))))
+    if angle <= SUPPORT_VS_UP_DEG:
+        return []
+    return [f"the given up {np.round(a / np.linalg.norm(a), 3).tolist()} is {angle:.0f} deg from the volume's up "
+            f"{np.round(b / np.linalg.norm(b), 3).tolist()} ({volume_up_source or 'recorded'}): the support plane was "
+            f"searched among planes facing the given up; segment with the volume's up (the default) unless it is wrong"]
 
 
 def load_segment_input(path: str | os.PathLike) -> TernaryVolume | TernaryGrid:
