@@ -6,12 +6,14 @@ pattern (a drill's body, a can's rim) and loses most of its pixels in blobs; glo
 the camera where the surface normal bisects the projector and camera directions and loses a band or spot there.
 Either leaves a face in pieces separated by a band the camera never measured (5-20 px on real views).
 
-- dark: pixels whose albedo luminance is below `DARK_LUMA` are lost where a smooth seeded random field (Gaussian
+- dark: pixels whose albedo luminance is below `dark_luma` (default DARK_LUMA: the black parts; 0.35 also
+  takes the saturated red and blue inks, which absorb IR on many real prints) are lost where a smooth seeded random field (Gaussian
   white noise blurred over `blob_px` pixels) falls below its `dark_dropout` quantile: about that fraction of
   them, in blobs;
 - glossy: object pixels (label >= 3) that are not dark are lost where the angle between the normal and the
   half-vector of the projector and camera directions is below `glossy_deg` (a specular spot on flat faces, a band
-  along cylinders).
+  along cylinders). A camera looking down at 30-50 deg sees no such spot on vertical sides or tops: it needs a face
+  turned to the camera.
 
 Vectorised numpy and scipy's Gaussian filter; the random field draws from its own generator.
 """
@@ -39,14 +41,15 @@ def blob_field(shape: tuple[int, int], blob_px: float, rng: np.random.Generator)
 
 
 def material_dropout(hit: dict, albedo: np.ndarray, labels: np.ndarray, projector: np.ndarray,
-                     dark_dropout: float, glossy_deg: float, blob_px: float, rng: np.random.Generator) -> np.ndarray:
+                     dark_dropout: float, glossy_deg: float, blob_px: float, rng: np.random.Generator,
+                     dark_luma: float = DARK_LUMA) -> np.ndarray:
     """Mask (H, W) of the pixels that lose depth to dark or glossy materials.
 
     hit: a sensor cast (t, valid, gid, normals, dir, origin); albedo (G, 3) and labels (G,) per geometry id;
     projector: the IR projector's world position."""
     valid = hit["valid"]
     gid = hit["gid"]
-    dark = valid & (luminance(albedo)[gid] < DARK_LUMA)
+    dark = valid & (luminance(albedo)[gid] < dark_luma)
     lost = np.zeros(valid.shape, dtype=bool)
     if dark_dropout > 0:
         lost |= dark & (blob_field(valid.shape, blob_px, rng) < ndtri(min(float(dark_dropout), 1.0 - 1e-9)))

@@ -28,8 +28,8 @@ the depth camera sees at that offset: a calibration error, the same in every fra
 a per-frame shift (sigma in pixels per axis), as unsynchronised colour and depth streams of a moving camera give.
 They draw from their own generators, so turning them on leaves the depth noise as it was.
 
-Material dropouts, off by default: `dark_dropout` (fraction of the pixels of dark albedo lost, in blobs of about
-`dropout_blob_px` pixels) and `glossy_deg` (specular spot / band of glossy objects), see `sim.materials`: the
+Material dropouts, off by default: `dark_dropout` (fraction of the pixels of dark albedo (luma < `dark_luma`)
+lost, in blobs of about `dropout_blob_px` pixels) and `glossy_deg` (specular spot / band of glossy objects), see `sim.materials`: the
 missing-depth bands real RealSense views show on black plastic and glossy print (issue 12).
 
 Ray casting is open3d C++, the noise model vectorised numpy, shading a numba kernel.
@@ -47,7 +47,7 @@ from numba import njit, prange
 from kinfu_cli.core.camera import SENSOR_PRESETS, preset_intrinsics
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.poses import check_poses
-from kinfu_cli.sim.materials import material_dropout
+from kinfu_cli.sim.materials import DARK_LUMA, material_dropout
 from kinfu_cli.sim.scene import LABEL_NONE, RaycastTarget, Scene
 
 # numba probes the TBB threading layer at the first parallel call and warns when the installed TBB is too old;
@@ -126,7 +126,7 @@ class DepthSensor:
                  subpixel: int = 8, gain_jitter: float = 0.0, white_balance_jitter: float = 0.0,
                  misregistration: tuple[float, float, float] = (0.0, 0.0, 0.0),
                  misregistration_jitter: float = 0.0, dark_dropout: float = 0.0, glossy_deg: float = 0.0,
-                 dropout_blob_px: float = 4.0) -> None:
+                 dropout_blob_px: float = 4.0, dark_luma: float = DARK_LUMA) -> None:
         K = np.asarray(K, dtype=np.float64)
         if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
             raise ConfigError(f"camera intrinsics: expected a 3x3 matrix with positive focal lengths, got {K.tolist()}")
@@ -160,10 +160,12 @@ class DepthSensor:
                               f"{misregistration_jitter}")
         self.misregistration = mis
         self.dark_dropout, self.glossy_deg = float(dark_dropout), float(glossy_deg)
-        self.dropout_blob_px = float(dropout_blob_px)
-        if not (0 <= self.dark_dropout <= 1 and 0 <= self.glossy_deg < 90 and 0 <= self.dropout_blob_px <= 100):
-            raise ConfigError(f"material dropouts: expected dark_dropout in [0, 1], glossy_deg in [0, 90) and "
-                              f"dropout_blob_px in [0, 100], got {dark_dropout}, {glossy_deg}, {dropout_blob_px}")
+        self.dropout_blob_px, self.dark_luma = float(dropout_blob_px), float(dark_luma)
+        if not (0 <= self.dark_dropout <= 1 and 0 <= self.glossy_deg < 90 and 0 <= self.dropout_blob_px <= 100
+                and 0 <= self.dark_luma <= 1):
+            raise ConfigError(f"material dropouts: expected dark_dropout in [0, 1], glossy_deg in [0, 90), "
+                              f"dropout_blob_px in [0, 100] and dark_luma in [0, 1], got {dark_dropout}, {glossy_deg}, "
+                              f"{dropout_blob_px}, {dark_luma}")
         self._rng = np.random.default_rng(self.seed)
         self._photo_rng = np.random.default_rng([self.seed, PHOTO_STREAM])
         self._shift_rng = np.random.default_rng([self.seed, SHIFT_STREAM])
@@ -292,7 +294,7 @@ class DepthSensor:
                else self._material_rng)
         proj = T[:3, :3] @ np.array([self.baseline, 0.0, 0.0]) + T[:3, 3]
         return material_dropout(hit, target.albedo, target.labels, proj, self.dark_dropout, self.glossy_deg,
-                                self.dropout_blob_px, rng)
+                                self.dropout_blob_px, rng, self.dark_luma)
 
     @staticmethod
     def _theta(hit: dict) -> np.ndarray:
