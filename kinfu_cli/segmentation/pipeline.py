@@ -21,6 +21,7 @@ from kinfu_cli.fusion.volume import TernaryVolume, load_volume
 from kinfu_cli.segmentation.multi_superquadric import MultiSuperquadric, fit_multi_superquadric
 from kinfu_cli.segmentation.saliency import SegmentSaliency, oriented_box, segment_saliency
 from kinfu_cli.segmentation.shape_prior import classify_shape, exponent_bounds
+from kinfu_cli.segmentation.bridges import volume_space
 from kinfu_cli.segmentation.segments import PLANE_LABEL, Segmentation, SegmentationParams, segment_cloud
 from kinfu_cli.segmentation.superquadric import SegmentError, SuperquadricFit, fit_superquadric
 from kinfu_cli.segmentation.surface import SurfaceCloud, surface_from_volume
@@ -273,8 +274,8 @@ def color_warnings(seg: Segmentation, options: SegmentOptions) -> list[str]:
 
 
 def analyse_cloud(points: np.ndarray, normals: np.ndarray, options: SegmentOptions | None = None,
-                  timing: dict | None = None, up_source: str = "", colors: np.ndarray | None = None
-                  ) -> SegmentResult:
+                  timing: dict | None = None, up_source: str = "", colors: np.ndarray | None = None,
+                  space=None) -> SegmentResult:
     """Segment a surface cloud (colours (N, 3) RGB in [0, 1] or None), score saliency, fit superquadrics.
     up_source: where options.segmentation.up came from (`resolve_up`; for the result and its warnings)."""
     options = options or SegmentOptions()
@@ -282,7 +283,7 @@ def analyse_cloud(points: np.ndarray, normals: np.ndarray, options: SegmentOptio
     up_source = up_source or ("none" if up is None else "assumed-z" if isinstance(up, str) else "option")
     timing = dict(timing or {})
     t = time.perf_counter()
-    seg = segment_cloud(points, normals, options.segmentation, colors if options.color else None)
+    seg = segment_cloud(points, normals, options.segmentation, colors if options.color else None, space)
     timing["segmentation"] = time.perf_counter() - t
     t = time.perf_counter()
     sal = segment_saliency(seg.points, seg.labels, b_th=options.isolation_threshold, exclude=(-1, PLANE_LABEL))
@@ -308,7 +309,9 @@ def analyse_volume(volume: TernaryVolume | TernaryGrid, options: SegmentOptions 
     t_surface = time.perf_counter() - t
     if len(cloud) < options.segmentation.min_segment_points:
         raise VolumeError(f"volume surface has only {len(cloud)} points: nothing to segment")
-    result = analyse_cloud(cloud.points, cloud.normals, options, {"surface": t_surface}, up_source, cloud.colors)
+    space = volume_space(volume) if options.segmentation.bridge_gap > 0 else None
+    result = analyse_cloud(cloud.points, cloud.normals, options, {"surface": t_surface}, up_source, cloud.colors,
+                           space)
     result.warnings += support_against_volume_up(result.segmentation, up_source, getattr(volume, "up", None),
                                                  getattr(volume, "up_source", ""))
     result.warnings += given_up_against_volume_up(options.segmentation.up, up_source, getattr(volume, "up", None),
