@@ -11,6 +11,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import click
+from click.core import ParameterSource
 
 from kinfu_cli.commands._options import claim_outputs, force_option
 from kinfu_cli.commands._output import print_warnings
@@ -71,9 +72,10 @@ def _grasps(segments: dict, options, cones: tuple[str, ...]) -> dict:
     return out
 
 
-def segment_options(p: dict):
+def segment_options(p: dict, explicit: tuple[str, ...] = ()):
     """(SegmentOptions, GraspOptions or None) from the command's parsed options (click's parameter dict): the one
-    place that turns segment's options into library options, for the command and for `check_options`."""
+    place that turns segment's options into library options, for the command and for `check_options`. explicit:
+    the parameters given on the command line (kept, never scaled to a coarse volume's voxel)."""
     grasp_options = (_grasp_options(p["grasp_hand"], p["grasp_cones"], p["grasp_starts"], p["no_superquadrics"])
                      if p["grasp"] else None)
     params = SegmentationParams(seed_resolution=p["seed_resolution"], spatial_importance=p["spatial_importance"],
@@ -92,7 +94,8 @@ def segment_options(p: dict):
                           sq_exponent_bounds=_pair(p["sq_exponent_bounds"], "--sq-exponent-bounds"),
                           sq_cost=p["sq_cost"], multi_sq=p["multi_sq"], msq_trigger=p["msq_trigger"],
                           msq_height=p["msq_height"], msq_mu=p["msq_mu"], msq_cut=p["msq_cut"],
-                          color=not p["no_color"], segmentation=params, shape_prior=p["shape_prior"])
+                          color=not p["no_color"], segmentation=params, shape_prior=p["shape_prior"],
+                          explicit=tuple(explicit))
     return opts, grasp_options
 
 
@@ -198,7 +201,9 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
       kinfu segment out/fuse/volume.npz -o out/segments --grasp --grasp-hand right --grasp-cone top
     """
     claim_outputs({"outdir": outdir, "viz": viz}, [volume], force)
-    opts, grasp_options = segment_options(click.get_current_context().params)
+    ctx = click.get_current_context()
+    opts, grasp_options = segment_options(ctx.params, tuple(
+        k for k in ctx.params if ctx.get_parameter_source(k) not in (None, ParameterSource.DEFAULT)))
     result: SegmentResult | None = None
     doc: dict = {}
     grasps: dict | None = None
