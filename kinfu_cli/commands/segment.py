@@ -134,12 +134,14 @@ def check_options(params: dict) -> None:
               help="Object points this close to the support plane (m) join it when their colour is nearer the "
                    "plane's; 0 = off.")
 @click.option("--adjacency-radius", type=float, default=0.018, show_default=True,
-              help="Points closer than this connect supervoxels (m).")
+              help="Points closer than this connect supervoxels (m); not given: 2 voxels on a volume coarser "
+                   "than 9 mm.")
 @click.option("--concavity-tolerance", type=float, default=40.0, show_default=True,
               help="LCCP: concave edges flatter than this (deg) still merge.")
 @click.option("--sanity-angle", type=float, default=60.0, show_default=True, help="LCCP sanity criterion (deg).")
 @click.option("--min-segment-points", type=int, default=50, show_default=True,
-              help="Smaller segments join a neighbour or are dropped.")
+              help="Smaller segments join a neighbour or are dropped; not given: scaled down with the point density on "
+                   "a volume coarser than 1 cm (and --fragment-points alike).")
 @click.option("--fragment-points", type=int, default=100, show_default=True,
               help="A segment under this many points whose border runs mostly along one larger object segment "
                    "joins it (a piece of it, not an object); 0 = off.")
