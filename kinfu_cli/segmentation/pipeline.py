@@ -232,10 +232,10 @@ def _fit_multi_superquadrics(seg: Segmentation, fits: dict[int, SuperquadricFit 
 # 1.0 / 1.5 / 2.0 cm, mode colour), object recall: defaults 0.982 / 0.857 / 0.000; adjacency_radius
 # max(18 mm, k v) with k 1.5 / 2 / 2.5: 0.982 / 0.884 / 0.723, 0.991 / 0.893 / 0.723, 0.991 / 0.893 / 0.741; with
 # the point counts scaled too, k = 1.75 / 2: 0.982 / 0.902 / 0.848, 0.991 / 0.902 / 0.839 (k = 2: a margin over
-# sqrt(3)); exponent 1.5 or a floor of 20 alike; not scaling fragment_points 0.768 at 2 cm. Left alone (within one object
-# of 112 at 2 cm): seed_resolution 3 / 4 v (0.848 / 0.830), foot_height / step_min_height v / 2 / v (0.830),
-# plane_distance 0.75 / 1 v (0.848 / 0.848). What stays missed at 1.5-3 cm is objects merged with a neighbour closer than ~2 v
-# (2.5 / 3 cm: 0 -> 0.804 / 0.755). Boundary P / R at T_eval 2 cm mean little once the points are ~2 cm apart.
+# sqrt(3)); exponent 1.5 or a floor of 20 alike; not scaling fragment_points 0.768 at 2 cm. Left alone (within one
+# object of 112 at 2 cm): seed_resolution 3 / 4 v (0.848 / 0.830), foot_height / step_min_height v / 2 / v (0.830),
+# plane_distance 0.75 / 1 v (0.848 / 0.848). What stays missed at 1.5-3 cm is objects merged with a neighbour closer
+# than ~2 v (2.5 / 3 cm: 0 -> 0.804 / 0.755). Boundary P / R at T_eval 2 cm mean little once the points are ~2 cm apart.
 VOXEL_ADJACENCY = 2.0  # adjacency_radius >= this x voxel: the diagonal's sqrt(3) with a margin for TSDF noise
 CLOUD_SPACING = 0.01  # the point spacing the point counts (min_segment_points, fragment_points) were chosen at
 MIN_SCALED_POINTS = 10  # a segment keeps at least this many points (fragment_points twice this) however coarse
