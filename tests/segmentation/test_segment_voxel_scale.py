@@ -11,6 +11,7 @@ import pytest
 from click.testing import CliRunner
 
 from kinfu_cli.cli import cli
+from kinfu_cli.core.grid import EMPTY, OCCUPIED, UNKNOWN, TernaryGrid
 from kinfu_cli.evaluation.segment_eval import fuse_segmentation_scene, score_labelled_points
 from kinfu_cli.io.labelled_cloud import LabelledCloud
 from kinfu_cli.segmentation.pipeline import SegmentOptions, analyse_volume, scale_for_voxel
@@ -76,3 +77,27 @@ def test_command_keeps_a_given_adjacency_radius(coarse, tmp_path):
     assert docs["given"]["options"]["segmentation"]["adjacency_radius"] == 0.018
     objects = {k: sum(s["kind"] == "object" for s in d["segments"]) for k, d in docs.items()}
     assert objects["auto"] > objects["given"], objects
+
+
+def _box_on_table(voxel: float) -> TernaryGrid:
+    """Labels only: a 0.8 m table slab and a 12 cm cube on it (occupied shells, unknown inside, empty around)."""
+    n = int(round(0.8 / voxel))
+    lab = np.full((n, n, n // 2), EMPTY, np.int8)
+    top = n // 8
+    lab[:, :, :top] = UNKNOWN
+    lab[:, :, top] = OCCUPIED
+    b = int(round(0.12 / voxel))
+    lo = (n - b) // 2
+    lab[lo:lo + b, lo:lo + b, top + 1:top + 1 + b] = OCCUPIED
+    lab[lo + 1:lo + b - 1, lo + 1:lo + b - 1, top + 1:top + b] = UNKNOWN
+    return TernaryGrid(lab, np.zeros(3), voxel)
+
+
+@pytest.mark.parametrize("voxel", [0.02, 0.03])
+def test_a_box_on_a_coarse_labels_grid_is_one_segment(voxel):
+    opts = SegmentOptions(superquadrics=False)
+    seg = analyse_volume(_box_on_table(voxel), opts).segmentation
+    assert set(np.unique(seg.labels).tolist()) - {-1, 0} == {1}  # the box, one segment, on its support
+    assert seg.plane is not None and abs(seg.plane[2]) > 0.99
+    old = analyse_volume(_box_on_table(voxel), replace(opts, scale_to_voxel=False)).segmentation
+    assert set(np.unique(old.labels).tolist()) - {-1, 0} == set()  # the unscaled defaults found nothing
