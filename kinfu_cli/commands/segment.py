@@ -7,7 +7,7 @@ Grasp planning, plots and the viewer are imported inside the functions that use 
 from __future__ import annotations
 
 import json
-from dataclasses import replace
+from dataclasses import fields, replace
 from pathlib import Path
 
 import click
@@ -204,8 +204,9 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
     """
     claim_outputs({"outdir": outdir, "viz": viz}, [volume], force)
     ctx = click.get_current_context()
-    opts, grasp_options = segment_options(ctx.params, tuple(
-        k for k in ctx.params if ctx.get_parameter_source(k) not in (None, ParameterSource.DEFAULT)))
+    given = tuple(f.name for f in fields(SegmentationParams)
+                  if ctx.get_parameter_source(f.name) not in (None, ParameterSource.DEFAULT))
+    opts, grasp_options = segment_options(ctx.params, given)
     result: SegmentResult | None = None
     doc: dict = {}
     grasps: dict | None = None
