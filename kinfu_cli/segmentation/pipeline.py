@@ -341,7 +341,7 @@ def analyse_cloud(points: np.ndarray, normals: np.ndarray, options: SegmentOptio
 
 def analyse_volume(volume: TernaryVolume | TernaryGrid, options: SegmentOptions | None = None) -> SegmentResult:
     """From a fusion TernaryVolume (TSDF surface) or a TernaryGrid (labels only); segmentation.up "auto"
-    becomes the volume's up (`resolve_up`)."""
+    becomes the volume's up (`resolve_up`), and the volume-dependent defaults follow its voxel (`scale_for_voxel`)."""
     options, up_source = resolve_up(volume, options or SegmentOptions())
     options, scaled = scale_for_voxel(options, volume.voxel_size)
     t = time.perf_counter()
