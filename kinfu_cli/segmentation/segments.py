@@ -850,6 +850,15 @@ def _merge_fragments(seg: np.ndarray, pairs: np.ndarray, near_plane: np.ndarray,
     return np.where(seg >= 0, target[np.maximum(seg, 0)], -1), merges
 
 
+def _lowest(seg: np.ndarray, h: np.ndarray) -> tuple[int, np.ndarray]:
+    """(segment count, lowest height over the support of each segment 0..count-1; inf for an empty id)."""
+    valid = seg >= 0
+    n_seg = int(seg.max()) + 1 if valid.any() else 0
+    low = np.full(n_seg, np.inf)
+    np.minimum.at(low, seg[valid], h[valid])
+    return n_seg, low
+
+
 def _join_floating(seg: np.ndarray, points: np.ndarray, pairs: np.ndarray, h: np.ndarray, up: np.ndarray
                    ) -> tuple[np.ndarray, int]:
     """(segments, joins): step 5c. Nothing floats: a segment seen wholly above the
@@ -859,11 +868,9 @@ def _join_floating(seg: np.ndarray, points: np.ndarray, pairs: np.ndarray, h: np
     when they are at least FLOAT_SHARE of its points. An object behind another is not over it, and one resting on
     another touches it (a crease, not a gap), so neither joins."""
     valid = seg >= 0
-    n_seg = int(seg.max()) + 1 if valid.any() else 0
+    n_seg, low = _lowest(seg, h)
     if n_seg < 2:
         return seg, 0
-    low = np.full(n_seg, np.inf)
-    np.minimum.at(low, seg[valid], h[valid])
     sa, sb = seg[pairs[:, 0]], seg[pairs[:, 1]]
     m = (sa != sb) & (sa >= 0) & (sb >= 0)
     touching = np.zeros(n_seg, dtype=bool)
@@ -927,11 +934,9 @@ def _join_necks(seg: np.ndarray, points: np.ndarray, pairs: np.ndarray, h: np.nd
     on its battery) would topple if it were separate: it is a part of the standing segment and joins it. A
     segment whose centre is not over the standing one (an object behind another, its foot hidden) stays."""
     valid = seg >= 0
-    n_seg = int(seg.max()) + 1 if valid.any() else 0
+    n_seg, low = _lowest(seg, h)
     if n_seg < 2:
         return seg, 0
-    low = np.full(n_seg, np.inf)
-    np.minimum.at(low, seg[valid], h[valid])
     grounded = low < 2 * params.plane_distance
     sa, sb = seg[pairs[:, 0]], seg[pairs[:, 1]]
     m = (sa != sb) & (sa >= 0) & (sb >= 0)

@@ -1,8 +1,10 @@
-"""The Dask cluster the batch and eval-scheduler tests submit to."""
+"""The Dask cluster the batch and eval-scheduler tests submit to, and a spy for the tests that must never reach it."""
 
 from __future__ import annotations
 
 import pytest
+
+from kinfu_cli.core.errors import KinfuError
 
 
 @pytest.fixture(scope="session")
@@ -15,3 +17,20 @@ def scheduler():
                            silence_logs=50)
     yield cluster.scheduler_address
     cluster.close()
+
+
+class Connected(KinfuError):
+    """Raised by the spy standing in for the Dask connection: the run got past every check."""
+
+
+@pytest.fixture
+def connects(monkeypatch) -> list:
+    """Calls of batch's cluster connection (none may happen for bad input); a call ends the run with exit 2."""
+    calls: list = []
+
+    def spy(*args, **kwargs):
+        calls.append(args)
+        raise Connected("connected to a cluster")
+
+    monkeypatch.setattr("kinfu_cli.commands.batch.connect", spy)
+    return calls

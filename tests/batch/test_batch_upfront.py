@@ -21,7 +21,6 @@ from conftest import one_line_error
 from kinfu_cli.cli import cli
 from kinfu_cli.commands._batch_stages import _COMMANDS
 from kinfu_cli.core.atomic import write_json
-from kinfu_cli.core.errors import KinfuError
 
 # stage -> (the stages its plan lists, an option line out of the library's range, what the error line names)
 BAD = {
@@ -51,23 +50,6 @@ MORE = [
     ("eval-nbv", "lon-step = 0", "eval-nbv: lon-step: expected a step in (0, 360]"),
     ("eval-segment", "t-eval = 0", "eval-segment: t-eval: expected a number in (0, 1]"),
 ]
-
-
-class Connected(KinfuError):
-    """Raised by the spy standing in for the Dask connection: the run got past every check."""
-
-
-@pytest.fixture
-def connects(monkeypatch) -> list:
-    """Calls of batch's cluster connection (none may happen for bad input); a call ends the run with exit 2."""
-    calls: list = []
-
-    def spy(*args, **kwargs):
-        calls.append(args)
-        raise Connected("connected to a cluster")
-
-    monkeypatch.setattr("kinfu_cli.commands.batch.connect", spy)
-    return calls
 
 
 @pytest.fixture

@@ -9,23 +9,6 @@ from click.testing import CliRunner
 from conftest import one_line_error
 
 from kinfu_cli.cli import cli
-from kinfu_cli.core.errors import KinfuError
-
-
-class Connected(KinfuError):
-    """Raised by the spy standing in for the Dask connection: the run got past every check."""
-
-
-@pytest.fixture
-def connects(monkeypatch) -> list:
-    calls: list = []
-
-    def spy(*args, **kwargs):
-        calls.append(args)
-        raise Connected("connected to a cluster")
-
-    monkeypatch.setattr("kinfu_cli.commands.batch.connect", spy)
-    return calls
 
 
 @pytest.mark.parametrize("line, needle", [
