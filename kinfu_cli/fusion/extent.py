@@ -30,6 +30,12 @@ SURVEY_STRIDE = 8
 DEFAULT_BUDGET_FRACTION = 0.5
 DEFAULT_BUDGET_BYTES = 2 * 1024**3
 FACES = ("x-", "x+", "y-", "y+", "z-", "z+")
+# a face cuts the scene when its occupied voxels could form a line of surface this long (and at least
+# CUT_MIN_VOXELS): fewer are speckle, flying pixels at the far range that the survey's sparse pixels miss (real
+# 7-Scenes and tabletop frames leave 1-3 such voxels on the auto grid's faces; a grid that cuts a table or a
+# wall leaves hundreds)
+CUT_LINE_M = 0.05
+CUT_MIN_VOXELS = 3
 
 
 @dataclass
@@ -187,6 +193,12 @@ def _densest_window(points: np.ndarray, lo: np.ndarray, size: np.ndarray, new_si
 
 def _fmt(v) -> str:
     return " x ".join(f"{x:.2f}" for x in v)
+
+
+def cut_faces(faces: dict[str, int], voxel_size: float) -> dict[str, int]:
+    """The faces of `face_contacts` whose occupied voxels are enough to be a cut scene, not speckle."""
+    least = max(CUT_MIN_VOXELS, int(np.ceil(CUT_LINE_M / voxel_size - 1e-9)))
+    return {f: n for f, n in faces.items() if n >= least}
 
 
 def face_contacts(labels: np.ndarray) -> dict[str, int]:
