@@ -185,6 +185,17 @@ class PoiRanking:
                 "views": [self.scores.view_dict(i) for i in order], **self.extra}
 
 
+def least_blocked_share(scores: ViewScores) -> float | None:
+    """The smallest share, over the valid views, of considered rays that stop on an unknown voxel outside the
+    region (unobserved space in front of it); None without a valid view. Near 1: no view can see the region
+    at all, so a small gain says nothing about how complete the region is."""
+    v = scores.valid & (scores.rays > 0)
+    if not v.any():
+        return None
+    blocked = scores.counts[v, 0] - scores.gains["unknown"][v]
+    return float(np.min(blocked / scores.rays[v]))
+
+
 def default_inc_th(scores: ViewScores, fraction: float = 0.01) -> float:
     """IncTh when not given (the paper does not state it): `fraction` of the mean number of pixels
     per valid view that can see S(POI) -- i.e. the POI is reconstructed when the best view would
