@@ -34,6 +34,8 @@ from kinfu_cli.segmentation.pipeline import load_segment_input
 
 # a POI is unreachable when at least this share of every valid view's rays stops on unknown space outside S(POI)
 UNREACHABLE_SHARE = 0.5
+# ... and S(POI) still holds this share of unknown voxels (a region known all but a few voxels is reconstructed)
+UNREACHABLE_UNKNOWN = 0.01
 TableZ = str | float | None  # "auto" (found in the volume), "none" / None (no table), or a height in metres
 
 
@@ -184,13 +186,14 @@ def rank_poi_views(volume_path: str | os.PathLike, pois_path: str | os.PathLike,
 
 def _unreachable(r: PoiRanking, grid: TernaryGrid, optimistic: bool) -> str:
     """Mark a POI whose region no valid view can see (every view's rays mostly stop on unobserved space before
-    S(POI)) while S(POI) still holds unknown voxels: the paper's IncTh test would call it reconstructed, but
-    its small gain only says the way there was never observed. Such a POI is `unreachable` and not
-    reconstructed; returns its warning ("" otherwise)."""
+    S(POI)) while S(POI) still holds unknown voxels (UNREACHABLE_UNKNOWN of it): the paper's IncTh test would
+    call it reconstructed, but its small gain only says the way there was never observed. Such a POI is
+    `unreachable` and not reconstructed; returns its warning ("" otherwise)."""
     share = None if optimistic else least_blocked_share(r.scores)
     unknown = unknown_in_sphere(grid, r.center, r.radius)
-    r.extra["unreachable"] = bool(share is not None and share >= UNREACHABLE_SHARE and unknown > 0
-                                  and r.reconstructed)
+    s_voxels = 4.0 / 3.0 * np.pi * (r.radius / grid.voxel_size) ** 3
+    r.extra["unreachable"] = bool(share is not None and share >= UNREACHABLE_SHARE
+                                  and unknown >= UNREACHABLE_UNKNOWN * s_voxels and r.reconstructed)
     if not r.extra["unreachable"]:
         return ""
     r.reconstructed = False
