@@ -181,6 +181,11 @@ def rank_poi_views(volume_path: str | os.PathLike, pois_path: str | os.PathLike,
     warnings = [rejection_warning(f"POI {r.poi_id}", r.scores.rejected(), len(r.scores.reasons), table_z, up,
                                   up_source) for r in rankings if len(r.scores.reasons) and not r.scores.valid.any()]
     warnings += [w for r in rankings if (w := _unreachable(r, grid, opts.optimistic))]
+    warnings += [f"POI {r.poi_id}: every valid view scores 0 on the {opts.gain} gain though S(POI) is not "
+                 f"reconstructed (best unknown gain {r.scores.gains['unknown'][r.scores.valid].max():.0f} rays): the "
+                 f"order of its views says nothing; rank with the unknown gain"
+                 for r in rankings if not r.reconstructed and not r.extra.get("unreachable")
+                 and r.scores.valid.any() and r.best_gain <= 0]
     return PoiViews(str(volume_path), str(pois_path), opts, camera, grid, table_z, rankings, up, up_source, warnings)
 
 
