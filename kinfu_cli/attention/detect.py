@@ -92,6 +92,17 @@ class PoiDetection:
         return len(self.tasks) == 1 and self.tasks[0].samples == len(self.trajectory)
 
 
+def _recording_times(pois: list[Poi], span: tuple | None) -> None:
+    """Each POI's "recording_time_s", seconds from the recording's start (the clock of a time window), when its
+    stamp lies in the recording's span; a POI's "time" counts from the first hand sample instead."""
+    if not span or span[0] is None or span[1] is None:
+        return
+    for p in pois:
+        stamp = p.extra.get("stamp_ns")
+        if stamp is not None and span[0] - 1e9 <= stamp <= span[1] + 1e9:  # else another clock (sim time)
+            p.extra["recording_time_s"] = round((stamp - span[0]) * 1e-9, 6)
+
+
 def span_warnings(traj: Trajectory) -> list[str]:
     """A warning when the trajectory spans far more than a person's reach (HAND_SPAN_WARN_M)."""
     lo, hi = np.percentile(traj.positions, [1, 99], axis=0)
@@ -135,6 +146,7 @@ def detect_pois(source: str | os.PathLike | Trajectory, algorithm: str = "gmm-as
         source_name = str(source)
     tasks, detectors, pois = detect_by_task(traj, lambda: make_detector(algorithm, params), box, split_gap,
                                             min_task, quiet=quiet)
+    _recording_times(pois, traj.meta.get("recording_span_ns"))
     recorded = dict(detectors[0].get_params())
     if algorithm == "gmm-as":
         recorded["n_components"] = int(sum(d.n_components_ for d in detectors))  # per task in "tasks"

@@ -45,6 +45,7 @@ def load_hand_trajectory(path: str | os.PathLike, hand_topic: str | None = None,
         traj = hand_trajectory_from_recording(rec, hand_topic, hand_frame, world_frame)
         if rec.problems:  # a recording cut short: what was lost goes with the trajectory
             traj.meta["recording_problems"] = list(rec.problems)
+        traj.meta["recording_span_ns"] = (rec.start_ns, rec.end_ns)  # to place the hand's stamps in the recording
         return traj
 
 
