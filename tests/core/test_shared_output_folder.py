@@ -68,3 +68,22 @@ def test_cli_diff_then_segment_into_one_folder(tmp_path):
         res = CliRunner().invoke(cli, args)
         assert res.exit_code == 0, res.output
     assert {"changes.json", "segments.json", "segments.ply", "saliency.ply"} <= {p.name for p in out.iterdir()}
+
+
+def test_synth_rerun_keeps_what_other_commands_wrote_beside_its_recording(tmp_path):
+    """Before: `kinfu synth -o S` again deleted S/pois.json and S/fuse/ that poi and fuse had written there."""
+    from click.testing import CliRunner
+
+    from kinfu_cli.cli import cli
+
+    out = tmp_path / "S"
+    synth = ["synth", "-o", str(out), "--width", "32", "--height", "24", "--frames", "2", "--n-objects", "1", "-q"]
+    res = CliRunner().invoke(cli, synth + ["--formats", "mcap,bag"])
+    assert res.exit_code == 0, res.output
+    write_json(out / "pois.json", {"pois": []})
+    _run(out / "fuse", ("report.json",), {"report.json": "{}"})
+    res = CliRunner().invoke(cli, synth + ["--formats", "mcap", "--seed", "1"])
+    assert res.exit_code == 0, res.output
+    names = {p.name for p in out.iterdir()}
+    assert {"pois.json", "fuse", "recording.mcap", "ground_truth"} <= names
+    assert "recording.bag" not in names  # synth's own earlier output, not written this time
