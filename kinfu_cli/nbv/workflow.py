@@ -20,7 +20,7 @@ import numpy as np
 from kinfu_cli.core.camera import CameraModel
 from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError
-from kinfu_cli.core.grid import TernaryGrid, check_up
+from kinfu_cli.core.grid import OCCUPIED, TernaryGrid, check_up
 from kinfu_cli.core.poses import matrix_to_quaternion
 from kinfu_cli.core.progress import progress_bar
 from kinfu_cli.fusion.volume import load_grid
@@ -261,7 +261,11 @@ def rank_object_views(volume_path: str | os.PathLike, camera: CameraModel, *, ga
     rejected = {k: v for k, v in tally.items() if k not in ("views", "valid")}
     empty = None
     if plan.pose is None:
-        if plan.candidates_total == 0:
+        if plan.candidates_total == 0 and weights is not None and not np.any(known.labels == OCCUPIED):
+            empty = (f"no candidate views: the volume has no contour point, as no occupied voxel was observed the "
+                     f"W_th = {W_TH:g} times the planner needs to count it as known (a volume fused from fewer "
+                     f"frames?)")
+        elif plan.candidates_total == 0:
             empty = "no candidate views: the volume has no contour point (observed surface next to unknown space)"
         elif plan.candidates_evaluated == 0:
             empty = (f"no candidate views near a segment: {plan.candidates_total} candidates at the contours, "
