@@ -27,7 +27,7 @@ def _tabletop(vs: float) -> TernaryGrid:
 def test_voxels_coarser_than_the_adjacency_radius_are_a_warning():
     res = analyse_volume(_tabletop(0.02), SegmentOptions(superquadrics=False))
     (w,) = [w for w in res.warnings if "voxels" in w]
-    assert "20.0 mm" in w and "no object can form a segment" in w and "at most 10 mm" in w
+    assert "20.0 mm" in w and "no object can form a segment" in w and "at most 9 mm" in w
 
 
 def test_fine_voxels_segment_the_box_without_that_warning():
