@@ -311,23 +311,7 @@ def analyse_volume(volume: TernaryVolume | TernaryGrid, options: SegmentOptions 
     result = analyse_cloud(cloud.points, cloud.normals, options, {"surface": t_surface}, up_source, cloud.colors)
     result.warnings += support_against_volume_up(result.segmentation, up_source, getattr(volume, "up", None),
                                                  getattr(volume, "up_source", ""))
-    result.warnings += coarse_voxel_warnings(result.segmentation, float(volume.voxel_size), options.segmentation)
     return result
-
-
-def coarse_voxel_warnings(seg: Segmentation, voxel_size: float, params) -> list[str]:
-    """The volume's voxels against the segmentation's adjacency radius: the surface holds about one point per
-    voxel, and points farther apart than the radius never join. From 2 cm voxels (radius 18 mm) the synthetic
-    tabletop gave 0 segments (1115 adjacent supervoxel pairs for 8922 supervoxels), from 1 cm 3 of its 4 objects."""
-    r = float(params.adjacency_radius)
-    if voxel_size <= r / 2:
-        return []
-    pairs, k = seg.stats.get("adjacent_pairs"), seg.stats.get("supervoxels")
-    counts = f" ({pairs} adjacent supervoxel pairs for {k} supervoxels)" if pairs is not None and k else ""
-    effect = ("neighbouring surface points do not touch, so no object can form a segment" if voxel_size >= r else
-              "neighbouring surface points barely touch, so small or thin objects break apart or are lost")
-    return [f"the volume's voxels ({1000 * voxel_size:.1f} mm) are coarser than half the segmentation's adjacency "
-            f"radius ({1000 * r:.0f} mm): {effect}{counts}; fuse with voxels of at most {500 * r:.0f} mm"]
 
 
 def support_against_volume_up(seg: Segmentation, up_source: str, volume_up, volume_up_source: str) -> list[str]:
