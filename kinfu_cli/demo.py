@@ -129,9 +129,13 @@ def _summary(out: Path) -> list[str]:
         lines.append(text + f"; {out / 'diff' / 'changes.ply'}")
     if (out / "segment" / "segments.json").exists():
         s = json.loads((out / "segment" / "segments.json").read_text())["segments"]
-        top = max(s, key=lambda x: x.get("saliency") or 0.0, default=None)
+        objects = [x for x in s if x.get("kind") == "object"]
+        top = max(objects, key=lambda x: x.get("saliency") or 0.0, default=None)
+        support = " + support plane" if any(x.get("kind") == "support_plane" for x in s) else ""
+        text = f"segments: {len(objects)} objects{support}"
         if top is not None:
-            lines.append(f"segments: {len(s)}; most salient #{top['id']} saliency {top['saliency']:.3f}")
+            text += f"; most salient #{top['id']} saliency {top['saliency']:.3f}"
+        lines.append(text + f"; {out / 'segment' / 'segments.json'}")
     return lines
 
 

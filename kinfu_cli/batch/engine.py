@@ -13,6 +13,8 @@ import contextlib
 import logging
 import os
 import re
+import signal
+import threading
 import time
 import uuid
 import warnings
@@ -108,12 +110,27 @@ def connect(scheduler: str | None = None, workers: int | None = None) -> Engine:
     # no chatter on stderr: "port 8787 in use" when another cluster runs, and multiprocessing's resource
     # tracker (a process of its own, hence the environment) counting the workers' semaphores after a Ctrl-C
     os.environ.setdefault("PYTHONWARNINGS", "ignore:resource_tracker:UserWarning")
-    with warnings.catch_warnings():
+    with warnings.catch_warnings(), _workers_ignore_sigint():
         warnings.simplefilter("ignore")
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
                                dashboard_address=None, silence_logs=logging.CRITICAL,
                                env={"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"})
     return Engine(Client(cluster, set_as_default=False), cluster, f"local ({n} workers)")
+
+
+@contextlib.contextmanager
+def _workers_ignore_sigint():
+    """Worker processes started meanwhile ignore SIGINT (they inherit an ignored signal): a terminal's Ctrl-C
+    reaches the whole process group, and every worker printed its KeyboardInterrupt traceback; this process,
+    interrupted, closes the cluster. (A Ctrl-C while the cluster starts is lost: press it again.)"""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old)
 
 
 def _trial(fn: Callable, shared, item):
@@ -223,8 +240,11 @@ def check_before_work(plan: Plan, table: Mapping[str, StageSpec], force: bool) -
                 spec.check(rec, rec.stage_options(s))
             except KinfuError as exc:
                 raise ConfigError(f"{plan.source}: {rec.entry}: {s}: {exc}") from None
-            for rel in spec.claims_of(rec):
-                claim_output(rec.output / rel, inputs, force=force, parameter="output")
+            for rel in spec.claims_of(rec):  # a stage's file, not batch's --output: named with its plan entry
+                try:
+                    claim_output(rec.output / rel, inputs, force=force)
+                except KinfuError as exc:
+                    raise type(exc)(f"{plan.source}: {rec.entry}: {s}: {exc.detail}") from None
     check_output_folders(plan, force)  # after the paths: a user's file where a stage writes is named itself
 
 

@@ -174,6 +174,8 @@ def _recordings(source: Path, doc: dict, output: Path, table, stages: list[str])
             raise _fail(source, where, f"unknown key(s) {', '.join(sorted(unknown))} "
                                        f"(known: {', '.join(sorted(_ENTRY_KEYS))})")
         paths = _expand(source, where, e["path"])
+        if e.get("output") is not None and (isinstance(e["output"], bool) or not isinstance(e["output"], (str, int))):
+            raise _fail(source, where, f"output {e['output']!r}: expected a folder name inside the output folder")
         if e.get("output") is not None and len(paths) > 1:
             raise _fail(source, where, f"'output' names one folder but {e['path']!r} matches {len(paths)} recordings")
         opts = _normalise_options(source, f"{where}.options", e.get("options"), table)
@@ -192,6 +194,11 @@ def _recordings(source: Path, doc: dict, output: Path, table, stages: list[str])
                         f"{r.path} and {seen[key].path} ({seen[key].entry.split(' ')[0]}) would both write to "
                         f"{r.output}; give one of them an 'output'")
         seen[key] = r
+    for key, r in seen.items():  # one recording's folder inside another's: its outputs would replace the other's
+        if (outer := next((seen[a] for a in key.parents if a in seen), None)) is not None:
+            raise _fail(source, r.entry.split(" ")[0],
+                        f"the output folder of {r.path}, {r.output}, lies inside that of {outer.path} "
+                        f"({outer.entry.split(' ')[0]}), {outer.output}; give them folders side by side")
     return out
 
 

@@ -12,6 +12,7 @@ from kinfu_cli.commands._options import claim_outputs, force_option
 from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.commands._frames import frame_kwargs, frame_options
 from kinfu_cli.commands._roles import role_kwargs, role_options
+from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.io.rgbd_folders import export_frames
 from kinfu_cli.io.tum import fused_trajectory, recording_trajectory, write_tum
 
@@ -48,6 +49,10 @@ def command(recording: str, out: str, trajectory: str | None, as_json: bool, qui
       kinfu export out/fuse_icp --trajectory tum -o est.tum   # then: evo_ape tum gt.tum est.tum -a
     """
     claim_outputs({"out": out}, [recording], force)
+    src = Path(recording).resolve()
+    # inside a ROS 2 bag folder it would join the recording; inside a fuse output, the next fuse run replaces it
+    if src.is_dir() and src in Path(out).resolve().parents:
+        raise ConfigError(f"{out} is inside the input folder {recording}; write it elsewhere", parameter="out")
     fk = frame_kwargs(kwargs)
     if trajectory is not None:
         _export_trajectory(recording, out, fk, role_kwargs(kwargs), as_json, quiet)

@@ -7,10 +7,11 @@ Grasp planning, plots and the viewer are imported inside the functions that use 
 from __future__ import annotations
 
 import json
-from dataclasses import replace
+from dataclasses import fields, replace
 from pathlib import Path
 
 import click
+from click.core import ParameterSource
 
 from kinfu_cli.commands._options import claim_outputs, force_option
 from kinfu_cli.commands._output import print_warnings
@@ -71,9 +72,10 @@ def _grasps(segments: dict, options, cones: tuple[str, ...]) -> dict:
     return out
 
 
-def segment_options(p: dict):
+def segment_options(p: dict, explicit: tuple[str, ...] = ()):
     """(SegmentOptions, GraspOptions or None) from the command's parsed options (click's parameter dict): the one
-    place that turns segment's options into library options, for the command and for `check_options`."""
+    place that turns segment's options into library options, for the command and for `check_options`. explicit:
+    the parameters given on the command line (kept, never scaled to a coarse volume's voxel)."""
     grasp_options = (_grasp_options(p["grasp_hand"], p["grasp_cones"], p["grasp_starts"], p["no_superquadrics"])
                      if p["grasp"] else None)
     params = SegmentationParams(seed_resolution=p["seed_resolution"], spatial_importance=p["spatial_importance"],
@@ -92,7 +94,8 @@ def segment_options(p: dict):
                           sq_exponent_bounds=_pair(p["sq_exponent_bounds"], "--sq-exponent-bounds"),
                           sq_cost=p["sq_cost"], multi_sq=p["multi_sq"], msq_trigger=p["msq_trigger"],
                           msq_height=p["msq_height"], msq_mu=p["msq_mu"], msq_cut=p["msq_cut"],
-                          color=not p["no_color"], segmentation=params, shape_prior=p["shape_prior"])
+                          color=not p["no_color"], segmentation=params, shape_prior=p["shape_prior"],
+                          explicit=tuple(explicit))
     return opts, grasp_options
 
 
@@ -131,12 +134,14 @@ def check_options(params: dict) -> None:
               help="Object points this close to the support plane (m) join it when their colour is nearer the "
                    "plane's; 0 = off.")
 @click.option("--adjacency-radius", type=float, default=0.018, show_default=True,
-              help="Points closer than this connect supervoxels (m).")
+              help="Points closer than this connect supervoxels (m); not given: 2 voxels on a volume coarser "
+                   "than 9 mm.")
 @click.option("--concavity-tolerance", type=float, default=40.0, show_default=True,
               help="LCCP: concave edges flatter than this (deg) still merge.")
 @click.option("--sanity-angle", type=float, default=60.0, show_default=True, help="LCCP sanity criterion (deg).")
 @click.option("--min-segment-points", type=int, default=50, show_default=True,
-              help="Smaller segments join a neighbour or are dropped.")
+              help="Smaller segments join a neighbour or are dropped; not given: scaled down with the point density on "
+                   "a volume coarser than 1 cm (and --fragment-points alike).")
 @click.option("--fragment-points", type=int, default=100, show_default=True,
               help="A segment under this many points whose border runs mostly along one larger object segment "
                    "joins it (a piece of it, not an object); 0 = off.")
@@ -198,7 +203,10 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
       kinfu segment out/fuse/volume.npz -o out/segments --grasp --grasp-hand right --grasp-cone top
     """
     claim_outputs({"outdir": outdir, "viz": viz}, [volume], force)
-    opts, grasp_options = segment_options(click.get_current_context().params)
+    ctx = click.get_current_context()
+    given = tuple(f.name for f in fields(SegmentationParams)
+                  if ctx.get_parameter_source(f.name) not in (None, ParameterSource.DEFAULT))
+    opts, grasp_options = segment_options(ctx.params, given)
     result: SegmentResult | None = None
     doc: dict = {}
     grasps: dict | None = None

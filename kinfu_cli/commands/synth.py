@@ -24,10 +24,12 @@ def parse_formats(text: str) -> list[str]:
 @click.option("-o", "--out", "out", required=True, type=click.Path(file_okay=False),
               help="Output folder (gets recording.mcap, recording.bag, recording_ros2/, ground_truth/).")
 @click.option("--seed", default=0, show_default=True, type=int, help="Seed of the scene, camera path, hand and noise.")
-@click.option("--scene", type=click.Choice(["tabletop", "room", "objects"]), default="tabletop", show_default=True,
+@click.option("--scene", type=click.Choice(["tabletop", "room", "objects", "household"]), default="tabletop", show_default=True,
               help="tabletop: the arm scenario; room: a handheld camera walking a loop through a furnished "
                    "5 x 4 m room (no arm, no hand); objects: the arm scenario on the segmentation ground-truth "
-                   "table (stacked boxes, touching boxes of one colour, a mug, striped objects; no --n-objects).")
+                   "table (stacked boxes, touching boxes of one colour, a mug, striped objects; no --n-objects); "
+                   "household: the arm scenario on 5-11 YCB-like objects made of parts (drill, bottles with caps, "
+                   "printed boxes, cans, bowl, mug; no --n-objects).")
 @click.option("--world", type=click.Choice(["z-up", "y-down"]), default="z-up", show_default=True,
               help="Convention of the world frame (room scene): z-up (REP-103) or y-down (the room rotated so "
                    "up is -y); declared on /kinfu/world_up.")

@@ -74,10 +74,11 @@ def check_up(up, parameter: str = "up") -> np.ndarray:
         v = np.asarray(up, dtype=np.float64).reshape(3)
     except (TypeError, ValueError):
         raise ConfigError(f"expected three numbers x,y,z, got {up!r}", parameter=parameter) from None
-    n = float(np.linalg.norm(v))
-    if not (np.all(np.isfinite(v)) and n > 1e-9):
+    big = float(np.max(np.abs(v))) if np.all(np.isfinite(v)) else 0.0
+    if not big > 1e-9:  # (NaN, inf and zero vectors; a tiny but non-zero one has no reliable direction either)
         raise ConfigError(f"expected a finite non-zero direction x,y,z, got {v.tolist()}", parameter=parameter)
-    return v / n
+    v = v / big  # first to [-1, 1]: the norm of (1e300, 1e300, 0) overflows
+    return v / float(np.linalg.norm(v))
 
 
 def save_ternary(path: str | os.PathLike, grid: TernaryGrid) -> None:

@@ -38,7 +38,7 @@ from kinfu_cli.fusion.placement import default_origin
 from kinfu_cli.fusion.tracking import POSE_MODES, FrameToModelTracker, TrackResult, predict_pose
 from kinfu_cli.fusion.up import choose_up
 from kinfu_cli.fusion.volume import TernaryVolume, load_volume
-from kinfu_cli.io.frames import FrameStats, RGBDFrame, iter_frames, window_depth_count
+from kinfu_cli.io.frames import FrameStats, RGBDFrame, check_window, iter_frames, window_depth_count
 from kinfu_cli.io.messages import header_frame
 from kinfu_cli.io.recording import Recording, open_recording
 from kinfu_cli.io.roles import Roles, detect_roles
@@ -198,7 +198,7 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
     timing: dict[str, float] = {}
     names = {**{n: n for n in ("init", "origin", "clear_spheres", "clear_pois", "up")}, **(argument_names or {})}
     up = None if up is None else check_up(up, "up")
-    _check_arguments(pose, pose_topic, every, max_lost, size)
+    _check_arguments(pose, pose_topic, every, max_lost, size, start_s, end_s)
     auto = isinstance(size, str)
     budget = budget_bytes(max_memory)
     spheres = _spheres(clear_spheres, clear_pois, names["clear_spheres"])
@@ -302,8 +302,10 @@ def _load_init(init, wanted_mode: str | None) -> TernaryVolume:
     return vol
 
 
-def _check_arguments(pose: str | None, pose_topic: str | None, every: int, max_lost: float, size) -> None:
+def _check_arguments(pose: str | None, pose_topic: str | None, every: int, max_lost: float, size,
+                     start_s: float | None = None, end_s: float | None = None) -> None:
     """ConfigError naming the first argument of fuse_recording out of its range, before anything is read."""
+    check_window(start_s, end_s)
     if pose is not None and pose not in POSE_MODES:
         raise ConfigError(f"expected one of {', '.join(POSE_MODES)}, got {pose!r}", parameter="pose")
     if pose == "topic" and not pose_topic:

@@ -85,6 +85,9 @@ def colour_camera(rec, info_topic: str, distortion=camera_info_distortion) -> tu
     image size; RecordingError naming the topic when it cannot be read."""
     info = rec.first_message(info_topic)
     K, w, h = camera_info_K(info, f"{rec.path}: {info_topic}")
+    if w < 1 or h < 1:  # the colour pixels are scaled by the image's size over this one
+        raise RecordingError(f"{rec.path}: {info_topic}: CameraInfo says the colour image is {w}x{h}; expected "
+                             f"its width and height in pixels")
     return Undistorter(K, *distortion(info, f"{rec.path}: {info_topic}")), (w, h)
 
 

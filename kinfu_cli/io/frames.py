@@ -146,8 +146,7 @@ def iter_frames(rec, roles: Roles | None = None, pose_source: str = "tf", pose_t
     if every < 1:
         raise ConfigError(f"expected an integer >= 1, got {every}", parameter="every")
     tolerance_s = check_seconds(tolerance_s, "tolerance_s", minimum=0.0)
-    start_s = None if start_s is None else check_seconds(start_s, "start_s")
-    end_s = None if end_s is None else check_seconds(end_s, "end_s")
+    start_s, end_s = check_window(start_s, end_s)
     stats = stats if stats is not None else FrameStats()
     if roles is None:
         if tf is None and pose_source == "tf":
@@ -231,8 +230,12 @@ def _cloud_camera(rec, roles: Roles, topic: str, stats: FrameStats
     first = rec.first_message(topic)
     where = f"{rec.path}: depth topic {topic}"
     h, w = int(first.height), int(first.width)
-    if roles.intrinsics is not None:
+    if roles.intrinsics is not None:  # the user's word, but a K that misses the points unprojects them elsewhere
         K = intrinsics_matrix(*roles.intrinsics)
+        if (rms := pinhole_rms(first, K, where)) > MAX_PINHOLE_RMS_PX:
+            stats.notes.append(f"depth from the organized point cloud {topic} ({w}x{h}): the given intrinsics miss "
+                               f"its points by {rms:.3g} px RMS (the cloud's own camera puts each point on its "
+                               f"pixel); its depth is unprojected with them all the same")
         return K, w, h, Undistorter.pinhole(K), "given"
     disagree = ""
     info = rec.first_message(roles.info_topic) if roles.info_topic is not None else None
@@ -362,8 +365,7 @@ def window_depth_count(rec, depth_topic: str, start_s: float | None = None, end_
                        tolerance_s: float = 0.05) -> int:
     """The most depth messages iter_frames can select with this time window: those it reads (the window widened
     by the tolerance), counted without decoding them."""
-    start_s = None if start_s is None else check_seconds(start_s, "start_s")
-    end_s = None if end_s is None else check_seconds(end_s, "end_s")
+    start_s, end_s = check_window(start_s, end_s)
     start_ns, end_ns = _time_window(rec, start_s, end_s)
     tol_ns = int(round(check_seconds(tolerance_s, "tolerance_s", minimum=0.0) * 1e9))
     return rec.count_messages(depth_topic, None if start_ns is None else max(0, start_ns - tol_ns),
@@ -375,9 +377,25 @@ def _time_window(rec, start_s: float | None, end_s: float | None) -> tuple[int |
     t0 = rec.start_ns or 0
     start_ns = None if start_s is None else t0 + int(start_s * 1e9)
     end_ns = None if end_s is None else t0 + int(end_s * 1e9)
-    if start_ns is not None and end_ns is not None and end_ns < start_ns:
-        raise ConfigError(f"start {start_s} s is after end {end_s} s", parameter="start_s/end_s")
+    t1 = getattr(rec, "end_ns", None)  # a window outside the recording selects nothing: said, not "no frames"
+    if start_ns is not None and t1 is not None and start_ns > t1:
+        raise ConfigError(f"start {start_s:g} s is after the recording's end (it lasts {(t1 - t0) * 1e-9:.3f} s; "
+                          f"seconds count from its first message)", parameter="start_s")
     return start_ns, end_ns
+
+
+def check_window(start_s: float | None, end_s: float | None) -> tuple[float | None, float | None]:
+    """(start_s, end_s) checked without the recording (None: open): finite seconds, start <= end, end >= 0 (the
+    seconds count from the recording's first message: a negative end selects nothing); ConfigError naming the
+    parameter (kinfu batch checks a plan's window with it before any work)."""
+    start_s = None if start_s is None else check_seconds(start_s, "start_s")
+    end_s = None if end_s is None else check_seconds(end_s, "end_s")
+    if start_s is not None and end_s is not None and end_s < start_s:
+        raise ConfigError(f"start {start_s} s is after end {end_s} s", parameter="start_s/end_s")
+    if end_s is not None and end_s < 0:
+        raise ConfigError(f"end {end_s:g} s is before the recording's start (seconds count from its first "
+                          f"message)", parameter="end_s")
+    return start_s, end_s
 
 
 class _FramePairer:

@@ -52,6 +52,9 @@ def _checked(points: np.ndarray, labels: np.ndarray, path: Path) -> LabelledClou
             raise LabelsFileError(f"{path}: labels must be whole numbers (got fractional or NaN values)")
     elif lab.dtype.kind not in "iu":
         raise LabelsFileError(f"{path}: labels must be integers, got {lab.dtype}")
+    big = np.abs(lab.astype(np.float64)) >= 2.0 ** 62  # uint64 2**64-1 would wrap to -1 (not labelled)
+    if np.any(big):
+        raise LabelsFileError(f"{path}: labels must be object numbers below 2**62, got {lab[big][0]}")
     lab = lab.astype(np.int64)
     if lab.min() < -1:
         raise LabelsFileError(f"{path}: labels must be >= -1 (-1 = not labelled), got {int(lab.min())}")

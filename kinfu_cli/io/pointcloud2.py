@@ -92,8 +92,8 @@ def decode_cloud(msg: object, where: str = "cloud") -> tuple[np.ndarray, np.ndar
     if problem:
         raise RecordingError(f"{where} {problem}")
     arr = _structured(msg, ("x", "y", "z", *COLOR_FIELDS), where)
-    x, y, z = (arr[n].astype(np.float32) for n in "xyz")
-    with np.errstate(invalid="ignore", over="ignore"):
+    with np.errstate(invalid="ignore", over="ignore"):  # garbage bits (a wrong byte order) may be signalling NaNs
+        x, y, z = (arr[n].astype(np.float32) for n in "xyz")
         ok = np.isfinite(x) & np.isfinite(y) & np.isfinite(z) & (z > 0)
     depth = np.where(ok, z, np.float32(0.0)).astype(np.float32)
     color = None
@@ -110,11 +110,13 @@ def _rays(msg: object, where: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, 
     if problem:
         raise RecordingError(f"{where} {problem}")
     arr = _structured(msg, ("x", "y", "z"), where)
-    x, y, z = (arr[n].astype(np.float64) for n in "xyz")
-    with np.errstate(invalid="ignore"):
+    with np.errstate(invalid="ignore", over="ignore"):  # garbage bits (a wrong byte order): signalling NaNs, 1e38
+        x, y, z = (arr[n].astype(np.float64) for n in "xyz")
         ok = np.isfinite(x) & np.isfinite(y) & np.isfinite(z) & (z > 0)
-    v, u = np.nonzero(ok)
-    return u.astype(np.float64), v.astype(np.float64), x[ok] / z[ok], y[ok] / z[ok]
+        v, u = np.nonzero(ok)
+        a, b = x[ok] / z[ok], y[ok] / z[ok]
+        keep = np.isfinite(a) & np.isfinite(b)
+    return u[keep].astype(np.float64), v[keep].astype(np.float64), a[keep], b[keep]
 
 
 def pinhole_rms(msg: object, K: np.ndarray, where: str = "cloud") -> float:
@@ -124,8 +126,10 @@ def pinhole_rms(msg: object, K: np.ndarray, where: str = "cloud") -> float:
     if u.size == 0:
         return float("inf")
     K = np.asarray(K, dtype=np.float64)
-    du, dv = K[0, 0] * a + K[0, 2] - u, K[1, 1] * b + K[1, 2] - v
-    return float(np.sqrt(np.mean(du * du + dv * dv)))
+    with np.errstate(over="ignore", invalid="ignore"):  # rays of 1e30: a miss of inf pixels, said as inf
+        du, dv = K[0, 0] * a + K[0, 2] - u, K[1, 1] * b + K[1, 2] - v
+        rms = float(np.sqrt(np.mean(du * du + dv * dv)))
+    return rms if np.isfinite(rms) else float("inf")
 
 
 def fit_intrinsics(msg: object, where: str = "cloud") -> tuple[tuple[float, float, float, float], float]:
@@ -138,13 +142,14 @@ def fit_intrinsics(msg: object, where: str = "cloud") -> tuple[tuple[float, floa
         raise RecordingError(f"{where}: too few valid points ({u.size}) in the first cloud to recover the camera "
                              f"intrinsics; give them (fx,fy,cx,cy) or a camera info topic")
     params, res2 = [], 0.0
-    for pix, ray in ((u, a), (v, b)):  # a straight line pix = f ray + c, in closed form (centred sums)
-        dr, dp = ray - ray.mean(), pix - pix.mean()
-        f = float(dr @ dp) / float(dr @ dr) if float(dr @ dr) > 0 else 0.0
-        c = float(pix.mean() - f * ray.mean())
-        params.append((f, c))
-        r = dp - f * dr
-        res2 += float(r @ r) / r.size
+    with np.errstate(over="ignore", invalid="ignore"):  # rays of 1e30 (garbage bits): an inf residual, refused
+        for pix, ray in ((u, a), (v, b)):  # a straight line pix = f ray + c, in closed form (centred sums)
+            dr, dp = ray - ray.mean(), pix - pix.mean()
+            f = float(dr @ dp) / float(dr @ dr) if float(dr @ dr) > 0 else 0.0
+            c = float(pix.mean() - f * ray.mean())
+            params.append((f, c))
+            r = dp - f * dr
+            res2 += float(r @ r) / r.size
     (fx, cx), (fy, cy) = params
     rms = float(np.sqrt(res2))
     if not (rms <= MAX_PINHOLE_RMS_PX and fx > 0 and fy > 0):

@@ -21,7 +21,7 @@ import re
 
 import numpy as np
 
-from kinfu_cli.core.errors import RecordingError
+from kinfu_cli.core.errors import KinfuError, RecordingError
 from kinfu_cli.io.messages import transform_to_matrix
 from kinfu_cli.io.undistort import check_distortion
 
@@ -29,6 +29,7 @@ DEFAULT_DEPTH_UNITS = 0.001  # m per unit: the SDK's default for the D400 series
 _IMAGE = re.compile(r"^/device_(\d+)/sensor_(\d+)/([A-Za-z]+)_(\d+)/image/data$")
 _TF = re.compile(r"/tf/(\d+)$")
 TRANSFORM = "geometry_msgs/msg/Transform"
+MAX_EXTRINSIC_OFFSET_M = 10.0  # two streams of one device sit centimetres apart; more is a damaged record
 # the SDK's distortion model names (rs2_distortion_to_string) as OpenCV projects points (librealsense's
 # rs2_project_point_to_pixel): Brown-Conrady is plumb_bob; the inverse and modified forms differ from it only in
 # the tangential term taking the radially distorted x, y (second order in p1, p2, ~1e-4 on a D400 colour camera)
@@ -102,8 +103,7 @@ def depth_units(rec, depth_topic: str) -> tuple[float, str, str | None]:
     for topic in (f"{sensor}/option/Depth Units/value", f"{sensor}/option/Depth_Units/value"):
         if topic not in rec.topics or not rec.topics[topic].count:
             continue
-        # float32 on the wire: 7 significant digits (0.0001, not 9.9999997e-05)
-        values = [float(f"{float(getattr(msg, 'data', np.nan)):.7g}") for _, _, msg in rec.messages([topic])]
+        values = [_option_value(msg, f"{rec.path}: {topic}") for _, _, msg in rec.messages([topic])]
         first = values[0] if values else float("nan")
         if not (np.isfinite(first) and 1e-7 <= first <= 0.1):
             raise RecordingError(f"{rec.path}: {topic}: depth units {first} m per unit is no depth scale "
@@ -122,22 +122,38 @@ def depth_units(rec, depth_topic: str) -> tuple[float, str, str | None]:
         f"value): {DEFAULT_DEPTH_UNITS * 1000:g} mm per unit assumed")
 
 
+def _option_value(msg: object, where: str) -> float:
+    """An SDK option's value (std_msgs/Float32; NaN without a `data` field); RecordingError naming `where` for a
+    value that is no number (another message type on the option's topic)."""
+    raw = getattr(msg, "data", np.nan)
+    try:
+        return float(f"{float(raw):.7g}")  # float32 on the wire: 7 significant digits (0.0001, not 9.9999997e-05)
+    except (TypeError, ValueError):
+        raise RecordingError(f"{where}: depth units {raw!r} is no number (expected metres per unit, e.g. "
+                             f"0.001)") from None
+
+
 def stream_extrinsics(rec, image_topic: str) -> dict[int, np.ndarray]:
     """Extrinsics group -> T_stream_reference (4x4: maps the group's reference stream's points into this
     stream's frame) of an SDK stream, from its .../tf/<group> topics (the first message of each)."""
-    prefix = f"{_stream_prefix(image_topic)}/tf/"
     out = {}
-    for name, info in rec.topics.items():
-        m = _TF.search(name)
-        if not (name.startswith(prefix) and m and info.count):
-            continue
+    for name in _tf_topics(rec, image_topic):
         msg = rec.first_message(name)
         if msg is None or not hasattr(msg, "rotation"):
             continue
-        T = transform_to_matrix(msg)
-        if np.all(np.isfinite(T)) and abs(np.linalg.det(T[:3, :3]) - 1.0) < 1e-3:
-            out[int(m.group(1))] = T
+        try:
+            T = transform_to_matrix(msg)
+        except KinfuError:  # a zero or NaN quaternion: this group's extrinsics are unusable, like a NaN offset
+            continue
+        if (np.all(np.isfinite(T)) and abs(np.linalg.det(T[:3, :3]) - 1.0) < 1e-3
+                and np.abs(T[:3, 3]).max() <= MAX_EXTRINSIC_OFFSET_M):
+            out[int(_TF.search(name).group(1))] = T
     return out
+
+
+def _tf_topics(rec, image_topic: str) -> list[str]:
+    prefix = f"{_stream_prefix(image_topic)}/tf/"
+    return [n for n, info in rec.topics.items() if n.startswith(prefix) and _TF.search(n) and info.count]
 
 
 def sdk_distortion(info: object, where: str) -> tuple[str, np.ndarray]:
@@ -171,8 +187,11 @@ def sdk_color_registration(rec, depth_topic: str, color_topic: str) -> ColorRegi
     common = sorted(set(ext_d) & set(ext_c))
     if not common:
         missing = [f"{_stream_prefix(t)}/tf/<group>" for t, e in ((depth_topic, ext_d), (color_topic, ext_c))
-                   if not e]
+                   if not e and not _tf_topics(rec, t)]
+        broken = [n for t, e in ((depth_topic, ext_d), (color_topic, ext_c)) if not e for n in _tf_topics(rec, t)]
         why = (f"no extrinsics recorded ({', '.join(missing)})" if missing else
+               f"unusable extrinsics ({', '.join(broken)}: not a finite rigid transform within "
+               f"{MAX_EXTRINSIC_OFFSET_M:g} m)" if broken else
                f"their extrinsics are to different reference streams (groups {sorted(ext_d)} and {sorted(ext_c)})")
         return ColorRegistration("none", d_name, c_name, info_topic, reason=f"the RealSense colour stream "
                                  f"{c_name} cannot be placed on the depth stream {d_name}: {why}")

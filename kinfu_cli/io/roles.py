@@ -263,7 +263,8 @@ def detect_roles(rec, depth_topic: str | None = None, color_topic: str | None = 
     if color_topic is None and not sdk and not (cloud is not None and has_color(cloud)):  # a cloud's rgb: registered
         cands = _color_candidates(rec, depth_topic)
         color_topic = cands[0] if cands else None
-    if info_topic is None and intrinsics is None:
+    # an SDK depth stream's camera info is its own or none: another stream's (the colour camera's) is no depth lens
+    if info_topic is None and intrinsics is None and not sdk:
         info_topic = _pick_info(rec, depth_topic) if cloud is None else _pick_cloud_info(rec, depth_topic)
 
     given_camera = camera_frame

@@ -9,8 +9,9 @@ numpy/scipy:
    furniture's feet are grown back out of the band. A tabletop scene (at most one bounding plane) is left as before.
 1. Support plane: RANSAC (open3d's `segment_plane` redone in numpy: plane_ransac.py; up to `max_planes` rounds)
    on points whose normal is within `up_tolerance_deg` of `up`; the highest plane holding >= `min_plane_fraction`
-   of the points, or >= `min_up_facing_fraction` of those up-facing points (and at least `min_segment_points`), is the
-   support (the table, not the floor); its inliers with a matching normal become segment 0. Without `up` the
+   of the points, or >= `min_up_facing_fraction` of those up-facing points (and at least `min_segment_points`), or
+   (outside rooms) one that spans SUPPORT_MIN_SPAN both ways, is the support (the table, not the floor); its inliers
+   with a matching normal become segment 0. Without `up` the
    largest plane stands for it (only planes within SUPPORT_PARALLEL_DEG of it compete), and a plane faces the side
    its points' normals point to.
 2. Supervoxels (VCCS-like): seeds on a `seed_resolution` grid, then a few k-means rounds where each point
@@ -52,6 +53,18 @@ numpy/scipy:
 5b. Fragments: a segment under `fragment_points` whose border points lie mostly (>= `fragment_share`) against one
    larger object segment is a piece of it and joins it; a small object on the support borders mostly the plane
    and stays (real fused scenes break box rims and card packs into such pieces).
+5c. Floating pieces (not in the thesis): nothing floats, so a segment seen wholly above the support (lowest point
+   over FLOAT_HEIGHT) that touches no other segment rests on a part the view hides (a drill's barrel hides the top
+   of its handle, leaving a gap in a single view) and joins the segment under it: the one that has a lower point
+   within FLOAT_RADIUS across (along the support plane) of most of its points, when those are >= FLOAT_SHARE of
+   them. An object behind another is beside it, not over it; one resting on another touches it.
+5d. Narrow necks (not in the thesis): an object resting on another stands on a base about as wide as itself (a box
+   on a box). A segment off the support whose lowest part touches a standing segment, whose centre lies over it
+   (inside the hull of its points along the support plane) and whose contact with it spans less than NECK_RATIO
+   of its own horizontal extent (a drill's handle and barrel on its battery: it would topple alone) is a part of
+   the standing segment and joins it; an object behind another (its foot hidden) is not over it and stays.
+5e. Bridges (bridges.py, only with the volume's labels): two segments of one surface apart by a band of missing
+   depth (never-observed voxels, no observed empty one) join; between two objects the gap is observed empty.
 6. Segments smaller than `min_segment_points` join their most-connected neighbour (a large one first; fragments
    merge with each other); isolated specks join the support plane when at its level, a segment within
    `adjacency_radius`, or are dropped (label -1).
@@ -66,14 +79,18 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
+from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError, VolumeError
 from kinfu_cli.core.grid import check_up
 from kinfu_cli.core.neighbours import grid_cells
+from kinfu_cli.core.poses import plane_axes
+from kinfu_cli.segmentation.bridges import BridgeParams, join_across_unknown
+from kinfu_cli.segmentation.group_stats import group_percentile
 from kinfu_cli.segmentation.plane_ransac import ransac_plane
 from kinfu_cli.segmentation.seed_assignment import assign_to_seeds
 from kinfu_cli.segmentation.structure import find_structure
@@ -92,11 +109,29 @@ CUT_FACE_RADIUS = 0.03  # face-plane cuts: the face's points are counted within 
 # (tuning seeds 0, 1, 8-139, objects scenes, mode, with the gap as the step: 0 / 0.0025 / 0.005 gave object recall
 # 0.979 / 0.984 / 0.983)
 STEP_LEVEL_BAND = 0.0025
+# a plane too small a share of the points for the support rule still qualifies when its inliers span this much both
+# ways (5-95 %, m): a table seen with much floor around it (the bundled sample: floor 86 k points, table 11 k, so
+# the floor was the support and the table an object); objects' tops are smaller (the generated ones <= 0.3 m)
+SUPPORT_MIN_SPAN = 0.4
+SUPPORT_SPAN_CELL = 0.02  # ... of one connected patch: cells of this side (m), about three 6 mm voxels
 SUPPORT_PARALLEL_DEG = 5.0  # without an up, support candidates are the planes within this of the largest plane's
 # normal (a table and the floor are parallel within a degree or two; RANSAC's fit tilts a 1 m table by well under one)
 STRUCT_REACH = 2.0  # a segment whose points (95 %) lie within this many band half-widths of the room's structure is
 # structure (the bumpy layer off a far wall or floor, beyond its band)
 STRUCT_FOOT_ROUNDS = 3  # _structure_foot_refine grows objects into the structure's band this many times
+# floating pieces (step 5c): a segment whose lowest point is over FLOAT_HEIGHT above the support and that touches no
+# other segment joins the segment under it when >= FLOAT_SHARE of its points have a lower point of it within
+# FLOAT_RADIUS across (along the support's plane). Single views, tuning seeds: no floating segment in the objects
+# scenes (0, 1, 8-11); drill barrels over their hidden handles (household 0-5) had shares 0.13-0.56
+FLOAT_HEIGHT = 0.02
+FLOAT_RADIUS = 0.01
+FLOAT_SHARE = 0.1
+# narrow necks (step 5d): a segment off the support resting on a standing one, over it, joins it when its contact
+# with it spans less than NECK_RATIO of its own horizontal extent (contact: its points within CONTACT_BAND of its
+# lowest point that touch the standing one). Single views (bench_single_view, up none), tuning seeds only: boxes
+# on boxes (objects 0, 1, 8-11) 0.645-1.14, drill handle + barrel on its battery (household 0-5) 0.14-0.49
+NECK_RATIO = 0.55
+CONTACT_BAND = 0.015
 FOOT_BAND = 0.015  # feet (step 7): object points higher than this over the support are the object's side, never a foot (m)
 
 
@@ -181,6 +216,11 @@ class SegmentationParams:
     structure_planes: int = 8
     structure_min_extent: float = 1.5
     structure_sigmas: float = 2.0
+    # bridges across unknown space (bridges.py; needs the volume's labels, segment_cloud's `space`): segments
+    # apart by at most this much across never-observed voxels join (m; 0 = off). 5 cm: the 5-20 px bands of
+    # missing depth real views show at 0.8-1.2 m (up to 4 cm); objects and household single views (tuning seeds)
+    # unchanged at 0.05, a box face cut by a 6-10 px band at 320x240 is one segment again (tests/segmentation)
+    bridge_gap: float = 0.05
     seed: int = 0
 
     def validate(self) -> None:
@@ -189,6 +229,7 @@ class SegmentationParams:
         for name in ("seed_resolution", "adjacency_radius", "plane_distance"):
             check_number(getattr(self, name), name, 1e-4, 10, unit="m")
         check_number(self.plane_color_margin, "plane_color_margin", 0, 10, unit="m")
+        check_number(self.bridge_gap, "bridge_gap", 0, 1, unit="m")
         for name in ("spatial_importance", "normal_importance", "color_importance"):
             check_number(getattr(self, name), name, 0, 1e6)
         if self.method not in METHODS:
@@ -252,11 +293,13 @@ class Segmentation:
 
 
 def detect_support_plane(points: np.ndarray, normals: np.ndarray, params: SegmentationParams,
-                         info: dict | None = None) -> tuple[np.ndarray | None, np.ndarray]:
+                         info: dict | None = None, span_rule: bool = True) -> tuple[np.ndarray | None, np.ndarray]:
     """(plane (4,) or None, inlier mask (N,)) by RANSAC (`ransac_plane`) on up-facing points. `info`, when
     given, receives what the search saw: points, up (the unit direction used, None for any), candidate_points
     (normal within up_tolerance_deg of up), planes_tried, largest_plane_points (of the planes with an
-    up-facing normal) and needed_points."""
+    up-facing normal), needed_points and, per qualifying plane, why (`qualified`: "share" or "span").
+    span_rule: a plane under the share also qualifies by SUPPORT_MIN_SPAN (off in rooms, whose support is
+    the floor: a table there is furniture)."""
     n = len(points)
     up = params.up_vector()
     info = {} if info is None else info
@@ -271,15 +314,18 @@ def detect_support_plane(points: np.ndarray, normals: np.ndarray, params: Segmen
     if up is not None:
         need = min(need, params.min_up_facing_fraction * cand.sum())
     need = max(need, params.min_segment_points, 3)
-    info.update(candidate_points=int(cand.sum()), needed_points=int(np.ceil(need)))
-    if cand.sum() < need:
+    least = max(params.min_segment_points, 3)
+    info.update(candidate_points=int(cand.sum()), needed_points=int(np.ceil(need)), qualified=[])
+    if cand.sum() < (least if span_rule else need):
         return none
     idx = np.flatnonzero(cand)
     rng = np.random.default_rng(int(params.seed))
     found = []  # (plane, inliers) of the planes that qualify
     remaining = idx
+    claimed = np.zeros(n, dtype=bool)  # inliers of the planes tried so far
     for _ in range(max(1, int(params.max_planes))):  # several horizontal planes (floor, table): take the highest
-        if len(remaining) < need:
+        by_share = len(remaining) >= need  # fewer left: a plane through them counts the earlier planes' points
+        if not by_share and not (span_rule and len(remaining) >= least):
             break
         model, inl_idx = ransac_plane(points[remaining], float(params.plane_distance), int(params.plane_iterations),
                                       rng)
@@ -293,12 +339,18 @@ def detect_support_plane(points: np.ndarray, normals: np.ndarray, params: Segmen
         if up is None and _faces_down(plane, dist, normals, inl, params.plane_distance):
             plane, dist = -plane, -dist
         facing = up is None or abs(plane[:3] @ up) >= cos_tol
-        ok = inl.sum() >= need and facing
+        fresh = inl & ~claimed
+        claimed |= inl
+        why = "share" if by_share and inl.sum() >= need else (
+            "span" if span_rule and fresh.sum() >= least
+            and _spans(points[fresh], plane[:3], SUPPORT_MIN_SPAN, SUPPORT_SPAN_CELL) else "")
+        ok = bool(why) and facing
         info["planes_tried"] += 1
         if facing:
             info["largest_plane_points"] = max(info["largest_plane_points"], int(inl.sum()))
         if ok:
             found.append((plane, inl))
+            info["qualified"].append(why)
         remaining = np.setdiff1d(remaining, remaining[np.asarray(inl_idx, dtype=np.int64)], assume_unique=True)
     if not found:
         return none
@@ -311,6 +363,23 @@ def detect_support_plane(points: np.ndarray, normals: np.ndarray, params: Segmen
         ref = max(found, key=lambda f: int(f[1].sum()))[0][:3]
         found = [f for f in found if abs(f[0][:3] @ ref) >= np.cos(np.radians(SUPPORT_PARALLEL_DEG))]
     return max(found, key=lambda f: float(np.mean(points[f[1]] @ ref)))
+
+
+def _spans(points: np.ndarray, normal: np.ndarray, span: float, cell: float) -> bool:
+    """Whether the largest connected patch of `points` on a plane of unit `normal` (cells of `cell` m touching
+    in 8-neighbourhood) extends at least `span` both ways in it (5-95 %). Connected: RANSAC's inliers of a
+    plane through several objects' tops at one height span the table without being one surface."""
+    uv = points @ plane_axes(normal).T
+    if np.any(uv.max(axis=0) - uv.min(axis=0) < span):
+        return False
+    ij = np.floor((uv - uv.min(axis=0)) / cell).astype(np.int64)
+    occ = np.zeros(ij.max(axis=0) + 1, dtype=bool)
+    occ[ij[:, 0], ij[:, 1]] = True
+    comp, _ = ndimage.label(occ, structure=np.ones((3, 3), dtype=bool))
+    lab = comp[ij[:, 0], ij[:, 1]]
+    patch = uv[lab == np.bincount(lab).argmax()]
+    lo, hi = np.percentile(patch, [5, 95], axis=0)
+    return bool(np.all(hi - lo >= span))
 
 
 def _faces_down(plane: np.ndarray, dist: np.ndarray, normals: np.ndarray, inl: np.ndarray, margin: float) -> bool:
@@ -781,12 +850,117 @@ def _merge_fragments(seg: np.ndarray, pairs: np.ndarray, near_plane: np.ndarray,
     return np.where(seg >= 0, target[np.maximum(seg, 0)], -1), merges
 
 
+def _join_floating(seg: np.ndarray, points: np.ndarray, pairs: np.ndarray, h: np.ndarray, up: np.ndarray
+                   ) -> tuple[np.ndarray, int]:
+    """(segments, joins): step 5c. Nothing floats: a segment seen wholly above the
+    support (lowest point over FLOAT_HEIGHT) that touches no other segment rests on a part the view does not
+    show (a drill's barrel hides the top of its handle; a single view has a gap there), so it joins the segment
+    under it: the one below most of its points (a lower point of it within FLOAT_RADIUS along the support plane),
+    when they are at least FLOAT_SHARE of its points. An object behind another is not over it, and one resting on
+    another touches it (a crease, not a gap), so neither joins."""
+    valid = seg >= 0
+    n_seg = int(seg.max()) + 1 if valid.any() else 0
+    if n_seg < 2:
+        return seg, 0
+    low = np.full(n_seg, np.inf)
+    np.minimum.at(low, seg[valid], h[valid])
+    sa, sb = seg[pairs[:, 0]], seg[pairs[:, 1]]
+    m = (sa != sb) & (sa >= 0) & (sb >= 0)
+    touching = np.zeros(n_seg, dtype=bool)
+    touching[sa[m]] = True
+    touching[sb[m]] = True
+    floating = np.flatnonzero(np.isfinite(low) & (low > FLOAT_HEIGHT) & ~touching)
+    if len(floating) == 0:
+        return seg, 0
+    flat = points - np.outer(h, up)  # the points' feet on the support plane
+    others = np.flatnonzero(valid)
+    tree = cKDTree(flat[others])
+    target = np.arange(n_seg)
+    joins = 0
+    for s in floating:
+        idx = np.flatnonzero(seg == s)
+        d = cKDTree(flat[idx]).sparse_distance_matrix(tree, FLOAT_RADIUS, output_type="ndarray")
+        i, j = d["i"], others[d["j"]]
+        below = (seg[j] != s) & (h[j] < h[idx[i]])
+        key = np.unique(i[below] * np.int64(n_seg) + seg[j[below]])  # (point of s, segment under it)
+        if len(key) == 0:
+            continue
+        cnt = np.bincount(key % n_seg, minlength=n_seg)
+        t = int(np.argmax(cnt))
+        if cnt[t] >= FLOAT_SHARE * len(idx):
+            target[s] = t
+            joins += 1
+    for _ in range(n_seg):
+        nxt = target[target]
+        if np.array_equal(nxt, target):
+            break
+        target = nxt
+    return np.where(valid, target[np.maximum(seg, 0)], -1), joins
+
+
+def _extent(flat: np.ndarray) -> float:
+    """Largest distance between two of the points (m); every k-th point of a large set (at most 400)."""
+    if len(flat) < 2:
+        return 0.0
+    flat = flat[::max(1, len(flat) // 400)]
+    return float(np.sqrt(((flat[:, None, :] - flat[None, :, :]) ** 2).sum(-1).max()))
+
+
+def _over(point: np.ndarray, flat: np.ndarray, up: np.ndarray) -> bool:
+    """Whether the foot `point` lies inside the convex hull of the feet `flat` (all on the support plane)."""
+    axes = plane_axes(up)
+    uv = flat @ axes.T
+    if len(uv) < 3:
+        return False
+    try:
+        hull = ConvexHull(uv)
+    except QhullError:  # fewer than 3 points or all on a line
+        return False
+    return bool(np.all(hull.equations[:, :2] @ (axes @ point) + hull.equations[:, 2] <= 0))
+
+
+def _join_necks(seg: np.ndarray, points: np.ndarray, pairs: np.ndarray, h: np.ndarray, up: np.ndarray,
+                params: SegmentationParams) -> tuple[np.ndarray, int]:
+    """(segments, joins): step 5d. An object resting on another stands on a base about as wide as itself (a box on
+    a box, a mug on a book). A piece off the support whose lowest part touches a standing segment, whose centre
+    lies over that segment, and which spreads far beyond its narrow contact with it (a drill's handle and barrel
+    on its battery) would topple if it were separate: it is a part of the standing segment and joins it. A
+    segment whose centre is not over the standing one (an object behind another, its foot hidden) stays."""
+    valid = seg >= 0
+    n_seg = int(seg.max()) + 1 if valid.any() else 0
+    if n_seg < 2:
+        return seg, 0
+    low = np.full(n_seg, np.inf)
+    np.minimum.at(low, seg[valid], h[valid])
+    grounded = low < 2 * params.plane_distance
+    sa, sb = seg[pairs[:, 0]], seg[pairs[:, 1]]
+    m = (sa != sb) & (sa >= 0) & (sb >= 0)
+    pa, pb, sa, sb = pairs[m, 0], pairs[m, 1], sa[m], sb[m]
+    flat = points - np.outer(h, up)
+    target = np.arange(n_seg)
+    joins = 0
+    for b in np.flatnonzero(np.isfinite(low) & ~grounded):
+        mine = np.r_[pa[sb == b], pb[sa == b]]  # b's points touching another segment, and which
+        other = np.r_[sa[sb == b], sb[sa == b]]
+        ok = grounded[other] & (h[mine] <= low[b] + CONTACT_BAND)
+        if not ok.any():
+            continue
+        a = int(np.bincount(other[ok]).argmax())
+        contact = np.unique(mine[ok & (other == a)])
+        own = seg == b
+        ratio = _extent(flat[contact]) / max(_extent(flat[own]), 1e-9)
+        if ratio < NECK_RATIO and _over(flat[own].mean(axis=0), flat[seg == a], up):
+            target[b] = a
+            joins += 1
+    return np.where(valid, target[np.maximum(seg, 0)], -1), joins
+
+
 def _below_objects(seg: np.ndarray, h: np.ndarray, limit: float) -> np.ndarray:
     """Points of segments whose 95th-percentile height over the support plane is below `limit`."""
     out = np.zeros(len(seg), dtype=bool)
     if (seg >= 0).any():
         ids, inv = np.unique(seg[seg >= 0], return_inverse=True)
-        out[seg >= 0] = (_group_percentile(h[seg >= 0], inv.ravel(), len(ids), 95) < limit)[inv.ravel()]
+        out[seg >= 0] = (group_percentile(h[seg >= 0], inv.ravel(), len(ids), 95) < limit)[inv.ravel()]
     return out
 
 
@@ -801,19 +975,6 @@ def _on_support(seg: np.ndarray, h: np.ndarray | None, reach: np.ndarray | None,
     if reach is not None:
         out |= _below_objects(seg, np.minimum(reach, 1e6), STRUCT_REACH)  # finite: no inf x 0 in the percentile
     return out
-
-
-def _group_percentile(values: np.ndarray, group: np.ndarray, k: int, q: float) -> np.ndarray:
-    """np.percentile(values[group == g], q) (linear interpolation) for every group g in 0..k-1, by one sort."""
-    order = np.lexsort((values, group))
-    v = values[order]
-    cnt = np.bincount(group, minlength=k)
-    start = np.concatenate([[0], np.cumsum(cnt)[:-1]])
-    pos = q / 100.0 * (np.maximum(cnt, 1) - 1)
-    lo = np.floor(pos).astype(np.int64)
-    hi = np.minimum(lo + 1, np.maximum(cnt - 1, 0))
-    frac = pos - lo
-    return v[start + lo] * (1 - frac) + v[start + hi] * frac
 
 
 def _plane_colour_refine(pts: np.ndarray, col: np.ndarray, labels: np.ndarray, plane: np.ndarray,
@@ -906,9 +1067,10 @@ def _room_structure(pts: np.ndarray, nrm: np.ndarray, good: np.ndarray, params: 
 
 
 def segment_cloud(points: np.ndarray, normals: np.ndarray, params: SegmentationParams | None = None,
-                  colors: np.ndarray | None = None) -> Segmentation:
+                  colors: np.ndarray | None = None, space=None) -> Segmentation:
     """Segment a surface cloud (N, 3) with outward normals (N, 3) and, optionally, colours (N, 3) RGB in
-    [0, 1] (None: the colour terms are off). See the module docstring."""
+    [0, 1] (None: the colour terms are off). See the module docstring. space: the volume's labels as a
+    bridges.SpaceQuery (None: no bridges across unknown space)."""
     params = params or SegmentationParams()
     params.validate()
     pts = np.asarray(points, dtype=np.float64)
@@ -929,10 +1091,10 @@ def segment_cloud(points: np.ndarray, normals: np.ndarray, params: SegmentationP
     n = len(pts)
     labels = np.full(n, NOISE_LABEL, dtype=np.int64)
     search: dict = {}
-    plane, inl = detect_support_plane(pts[good], nrm[good], params, search)
+    struct_mask, reach_all, struct_height, floor, structure_info = _room_structure(pts, nrm, good, params)
+    plane, inl = detect_support_plane(pts[good], nrm[good], params, search, span_rule=struct_mask is None)
     on_plane = np.zeros(n, dtype=bool)
     on_plane[np.flatnonzero(good)[inl]] = True
-    struct_mask, reach_all, struct_height, floor, structure_info = _room_structure(pts, nrm, good, params)
     if struct_mask is not None:
         on_plane |= struct_mask
         if plane is None and floor is not None:  # a room whose floor is too little seen for the support's rule
@@ -980,6 +1142,12 @@ def segment_cloud(points: np.ndarray, normals: np.ndarray, params: SegmentationP
             near_plane = _near(P, pts[labels == PLANE_LABEL], params.adjacency_radius)
             seg, stats["fragments_merged"] = _merge_fragments(seg, pairs, near_plane, params.fragment_points,
                                                               params.fragment_share)
+        if h is not None:
+            seg, stats["floating_joined"] = _join_floating(seg, P, pairs, h, plane[:3])
+            seg, stats["necks_joined"] = _join_necks(seg, P, pairs, h, plane[:3], params)
+        if space is not None and params.bridge_gap > 0:
+            seg, stats["bridges_joined"] = join_across_unknown(seg, P, N, C, space, params.adjacency_radius,
+                                                               BridgeParams(max_gap=params.bridge_gap))
     else:
         seg = _absorb_small(seg, pairs, params.min_segment_points)
         keep_rest = np.ones(len(seg), dtype=bool)

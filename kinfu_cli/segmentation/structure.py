@@ -32,6 +32,7 @@ import numpy as np
 
 from kinfu_cli.core.neighbours import grid_cells
 from kinfu_cli.core.poses import plane_axes
+from kinfu_cli.segmentation.group_stats import group_percentile
 from kinfu_cli.segmentation.plane_ransac import ransac_plane
 
 STRUCT_CELL = 0.05  # thinning for the plane search (m): a 5 x 4 m room's surfaces in ~50 k points
@@ -72,15 +73,6 @@ def _extents(points: np.ndarray, normal: np.ndarray) -> np.ndarray:
     _, vec = np.linalg.eigh(np.cov(uv.T))
     uv = uv @ vec[:, ::-1]
     return np.quantile(uv, 0.95, axis=0) - np.quantile(uv, 0.05, axis=0)
-
-
-def _group_median(values: np.ndarray, group: np.ndarray, k: int) -> np.ndarray:
-    """Median (lower middle) of values per group 0..k-1 by one sort; groups without values give 0."""
-    order = np.lexsort((values, group))
-    cnt = np.bincount(group, minlength=k)
-    start = np.concatenate([[0], np.cumsum(cnt)[:-1]])
-    mid = start + np.maximum(cnt - 1, 0) // 2
-    return np.where(cnt > 0, values[order][np.minimum(mid, max(len(values) - 1, 0))], 0.0)
 
 
 def bounding_planes(points: np.ndarray, max_planes: int, min_extent: float, iterations: int,
@@ -135,8 +127,8 @@ def _plane_band(points: np.ndarray, normals: np.ndarray, plane: np.ndarray, sigm
     k = len(tiles)
     est = np.abs(normals[win] @ plane[:3]) >= np.cos(np.radians(STRUCT_NORMAL_DEG))
     d_est, t_est = dist[win][est], tile[est]
-    med = _group_median(d_est, t_est, k)
-    sigma = 1.4826 * _group_median(np.abs(d_est - med[t_est]), t_est, k)
+    med = group_percentile(d_est, t_est, k, 50)
+    sigma = 1.4826 * group_percentile(np.abs(d_est - med[t_est]), t_est, k, 50)
     half = np.clip(sigmas * sigma, min_band, STRUCT_MAX_BAND)
     ok = np.bincount(t_est, minlength=k) >= STRUCT_TILE_POINTS
     r = (dist[win] - med[tile]) / half[tile]

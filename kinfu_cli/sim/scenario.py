@@ -37,6 +37,7 @@ from kinfu_cli.io.polhemus import read_polhemus
 from kinfu_cli.io.trajectory import Trajectory
 from kinfu_cli.io.writers import RecordingWriter
 from kinfu_cli.io.messages import c_stderr_silenced
+from kinfu_cli.sim.household import household_scene
 from kinfu_cli.sim.hand import Action, HandChange, synth_hand_trajectory, write_polhemus
 from kinfu_cli.sim.robot import CAMERA_FRAME, LINKS, WORLD_FRAME, RobotArm
 from kinfu_cli.io.labelled_cloud import write_labelled_cloud
@@ -45,7 +46,8 @@ from kinfu_cli.sim.scene import (FLOOR_COLOUR, LABEL_FLOOR, LABEL_TABLE, PALETTE
 from kinfu_cli.sim.sensor import DepthSensor, SensorFrame, kinect_v1_intrinsics
 
 KINDS = ("place", "remove", "pick-and-place")
-LAYOUTS = ("tabletop", "objects")  # make_tabletop_scene, or segmentation_scene (n_objects does not apply)
+LAYOUTS = ("tabletop", "objects", "household")  # make_tabletop_scene, segmentation_scene, household_scene
+# (n_objects applies to the tabletop only)
 LABELS_SPACING = 0.004  # ground_truth/labels.ply: one labelled point per 4 mm x 4 mm of object and table surface
 LABELS_VOXEL = 0.01  # ground_truth/labels.npz: per-voxel labels on a 1 cm grid (sim.voxel_labels; 5 mm costs 8x)
 T0_NS = 1_767_225_600_000_000_000  # 2026-01-01T00:00:00Z: fixed, so recordings are reproducible
@@ -115,7 +117,8 @@ def make_scenario(seed: int = 0, kind: str = "pick-and-place", width: int = 320,
                   after_fraction: float = 1 / 3, layout: str = "tabletop") -> Scenario:
     """Build a seeded scenario. kind: place | remove | pick-and-place. frames: total depth frames, `after_fraction`
     of them after the change (at least 1 on each side). layout: "tabletop" (`make_tabletop_scene` with n_objects)
-    or "objects" (`segmentation_scene`; only objects standing alone are removed or moved)."""
+    or "objects" (`segmentation_scene`; only objects standing alone are removed or moved) or "household"
+    (`household.household_scene`, YCB-like objects, likewise)."""
     if layout not in LAYOUTS:
         raise ConfigError(f"expected one of {', '.join(LAYOUTS)}, got {layout!r}", parameter="layout")
     if kind not in KINDS:
@@ -130,7 +133,8 @@ def make_scenario(seed: int = 0, kind: str = "pick-and-place", width: int = 320,
     if kind in ("remove", "pick-and-place") and n_objects < 1:
         raise ConfigError(f"the {kind} scenario needs at least one object, got {n_objects}", parameter="n_objects")
     rng = np.random.default_rng([seed, 7])
-    scene = make_tabletop_scene(seed, n_objects) if layout == "tabletop" else segmentation_scene(seed)
+    scene = (make_tabletop_scene(seed, n_objects) if layout == "tabletop" else
+             household_scene(seed) if layout == "household" else segmentation_scene(seed))
     table = scene.table
     region = ((-0.42, 0.42), (-0.25, 0.25))  # where changes happen: well inside the table, seen by the arm
 

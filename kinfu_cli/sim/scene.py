@@ -31,6 +31,12 @@ SHAPES = ("box", "cylinder", "sphere", "torus", "cone")  # the random tabletop's
 # a mug: a cylinder body (radius, height) with a handle, a half torus (handle_radius, handle_tube) standing on
 # its +x side in the object frame's x-z plane; only the segmentation scenes use it
 MUG = "mug"
+# a cylinder lying along its object frame's x axis (radius, height = its length along x): parts of composite objects
+XCYLINDER = "xcylinder"
+# a bowl: a hemispherical shell open at the top (radius of the shell's mid-surface, thickness), a rounded rim
+BOWL = "bowl"
+# a composite object: the union of `parts` (SceneObjects in the object's frame), one label, a colour per part
+COMPOSITE = "composite"
 
 # Distinct, saturated object colours (RGB 0..1); the table is wood-like, the floor grey.
 PALETTE = np.array([
@@ -118,6 +124,8 @@ class SceneObject:
     yaw: float = 0.0
     present: bool = True
     texture: str = ""  # "" plain, "stripes": the sensor's striped albedo (a textured object)
+    # COMPOSITE only: the parts (their center and yaw in this object's frame), one ground-truth label for all
+    parts: tuple["SceneObject", ...] = ()
 
     @property
     def footprint_radius(self) -> float:
@@ -139,6 +147,16 @@ class SceneObject:
         local = np.stack([c * q[..., 0] + s * q[..., 1], -s * q[..., 0] + c * q[..., 1], q[..., 2]], axis=-1)
         if self.shape == "box":
             return _box_sdf(local, np.asarray(self.size, dtype=np.float64) / 2)
+        if self.shape == COMPOSITE:  # union of the parts (exact outside; parts overlap, so no hidden faces)
+            return np.min([part.sdf(local) for part in self.parts], axis=0)
+        if self.shape == BOWL:  # the lower half of a spherical shell: its centre t below the top (rim height)
+            r, z = np.hypot(local[..., 1], local[..., 0]), local[..., 2] - (p["radius"] / 2)
+            rim = np.hypot(r - p["radius"], z)
+            return np.where(z > 0, rim, np.abs(np.hypot(r, z) - p["radius"])) - p["thickness"] / 2
+        if self.shape == XCYLINDER:
+            d = np.stack([np.hypot(local[..., 1], local[..., 2]) - p["radius"],
+                          np.abs(local[..., 0]) - p["height"] / 2], axis=-1)
+            return np.linalg.norm(np.maximum(d, 0.0), axis=-1) + np.minimum(d.max(axis=-1), 0.0)
         radial = np.hypot(local[..., 0], local[..., 1])
         if self.shape == "cylinder":
             d = np.stack([radial - p["radius"], np.abs(local[..., 2]) - p["height"] / 2], axis=-1)
@@ -155,6 +173,13 @@ class SceneObject:
             return np.minimum(body, handle)
         raise ConfigError(f"unknown shape {self.shape!r}")
 
+    def coloured_meshes(self) -> list[tuple[o3d.geometry.TriangleMesh, np.ndarray, str]]:
+        """(world mesh, colour, texture) of each part (the object itself unless it is a composite)."""
+        if self.shape != COMPOSITE:
+            return [(self.mesh, np.asarray(self.colour), self.texture)]
+        return [(_placed(_object_mesh(part), self.yaw, self.center), np.asarray(part.colour), part.texture)
+                for part in self.parts]
+
     def moved_to(self, xy: tuple[float, float], yaw: float | None = None) -> "SceneObject":
         return dataclasses.replace(self, center=(float(xy[0]), float(xy[1]), float(self.center[2])),
                                    yaw=self.yaw if yaw is None else float(yaw))
@@ -163,7 +188,8 @@ class SceneObject:
         return {"id": self.id, "shape": self.shape, "center": [float(c) for c in self.center],
                 "size": [float(s) for s in self.size], "params": {k: float(v) for k, v in self.params.items()},
                 "colour": [float(c) for c in self.colour], "yaw": float(self.yaw),
-                **({"texture": self.texture} if self.texture else {})}
+                **({"texture": self.texture} if self.texture else {}),
+                **({"parts": [part.to_json() for part in self.parts]} if self.parts else {})}
 
 
 @dataclass
@@ -219,7 +245,7 @@ class Scene:
             parts.append((self.floor_mesh(), FLOOR_COLOUR))
         if include_table:
             parts.append((self.table.mesh(), TABLE_COLOUR))
-        parts += [(o.mesh, np.asarray(o.colour)) for o in self.present_objects]
+        parts += [(m, c) for o in self.present_objects for m, c, _ in o.coloured_meshes()]
         out = o3d.geometry.TriangleMesh()
         for m, c in parts:
             if colours:
@@ -269,7 +295,8 @@ class Scene:
         add(self.table.mesh(), LABEL_TABLE, TABLE_COLOUR, 1)
         for i, o in enumerate(self.objects):
             if o.present:
-                add(o.mesh, 3 + i, o.colour, TEXTURE_CODES[o.texture])
+                for mesh, colour, texture in o.coloured_meshes():
+                    add(mesh, 3 + i, colour, TEXTURE_CODES[texture])
         return RaycastTarget(rc, np.asarray(labels, np.int32), np.asarray(albedo), np.asarray(textured, np.int32))
 
     # ---- changes --------------------------------------------------------------------------------
@@ -357,6 +384,11 @@ def shape_size(shape: str, params: dict) -> tuple[float, float, float]:
         return float(p["x"]), float(p["y"]), float(p["z"])
     if shape in ("cylinder", "cone"):
         return 2 * p["radius"], 2 * p["radius"], float(p["height"])
+    if shape == BOWL:
+        outer = p["radius"] + p["thickness"] / 2
+        return 2 * outer, 2 * outer, p["radius"] + p["thickness"]
+    if shape == XCYLINDER:
+        return float(p["height"]), 2 * p["radius"], 2 * p["radius"]
     if shape == "sphere":
         return 2 * p["radius"], 2 * p["radius"], 2 * p["radius"]
     if shape == "torus":
@@ -635,6 +667,15 @@ def _object_mesh(o: SceneObject) -> o3d.geometry.TriangleMesh:
     elif o.shape == "cone":
         m = o3d.geometry.TriangleMesh.create_cone(p["radius"], p["height"], resolution=40)
         m.translate((0.0, 0.0, -p["height"] / 2))  # open3d's cone has its base at z = 0
+    elif o.shape == XCYLINDER:
+        m = o3d.geometry.TriangleMesh.create_cylinder(p["radius"], p["height"], resolution=40)
+        m.rotate(np.array([[0, 0, 1.0], [0, 1.0, 0], [-1.0, 0, 0]]), center=(0, 0, 0))  # axis z -> x
+    elif o.shape == BOWL:
+        m = _bowl_mesh(p["radius"], p["thickness"] / 2)
+    elif o.shape == COMPOSITE:
+        m = o3d.geometry.TriangleMesh()
+        for part in o.parts:  # hidden faces inside other parts: ray casting and the SDF agree on the union
+            m += _object_mesh(part)
     elif o.shape == MUG:
         m = o3d.geometry.TriangleMesh.create_cylinder(p["radius"], p["height"], resolution=40)
         handle = o3d.geometry.TriangleMesh.create_torus(p["handle_radius"], p["handle_tube"], radial_resolution=40,
@@ -644,8 +685,34 @@ def _object_mesh(o: SceneObject) -> o3d.geometry.TriangleMesh:
         m += handle  # the half inside the body is hidden by it (ray casting and the SDF agree on the union)
     else:
         raise ConfigError(f"unknown shape {o.shape!r}")
-    c, s = np.cos(o.yaw), np.sin(o.yaw)
+    return _placed(m, o.yaw, o.center)
+
+
+def _bowl_mesh(radius: float, half: float, n_arc: int = 24, n_rim: int = 8, n_around: int = 64
+               ) -> o3d.geometry.TriangleMesh:
+    """The bowl's surface of revolution (outer arc, rounded rim, inner arc), sphere centre at z = radius / 2."""
+    a = np.linspace(-np.pi / 2, 0.0, n_arc)
+    rim = np.linspace(0.0, np.pi, n_rim)[1:-1]
+    profile = np.concatenate([
+        np.stack([(radius + half) * np.cos(a), (radius + half) * np.sin(a)], 1),
+        np.stack([radius + half * np.cos(rim), half * np.sin(rim)], 1),
+        np.stack([(radius - half) * np.cos(a[::-1]), (radius - half) * np.sin(a[::-1])], 1)])
+    phi = np.linspace(0.0, 2 * np.pi, n_around, endpoint=False)
+    verts = np.stack([profile[:, None, 0] * np.cos(phi), profile[:, None, 0] * np.sin(phi),
+                      np.broadcast_to(profile[:, None, 1] + radius / 2, (len(profile), n_around))], -1).reshape(-1, 3)
+    i, j = np.meshgrid(np.arange(len(profile) - 1), np.arange(n_around), indexing="ij")
+    a0, a1 = i * n_around + j, i * n_around + (j + 1) % n_around
+    b0, b1 = a0 + n_around, a1 + n_around
+    tris = np.concatenate([np.stack([a0, a1, b1], -1).reshape(-1, 3), np.stack([a0, b1, b0], -1).reshape(-1, 3)])
+    m = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(verts), o3d.utility.Vector3iVector(tris))
+    m.remove_degenerate_triangles()
+    return m
+
+
+def _placed(m: o3d.geometry.TriangleMesh, yaw: float, center) -> o3d.geometry.TriangleMesh:
+    """The mesh rotated by `yaw` about z, then moved to `center` (object frame -> parent frame)."""
+    c, s = np.cos(yaw), np.sin(yaw)
     m.rotate(np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]), center=(0, 0, 0))
-    m.translate(np.asarray(o.center, dtype=float))
+    m.translate(np.asarray(center, dtype=float))
     m.compute_vertex_normals()
     return m

@@ -28,6 +28,10 @@ the depth camera sees at that offset: a calibration error, the same in every fra
 a per-frame shift (sigma in pixels per axis), as unsynchronised colour and depth streams of a moving camera give.
 They draw from their own generators, so turning them on leaves the depth noise as it was.
 
+Material dropouts, off by default: `dark_dropout` (fraction of the pixels of dark albedo (luma < `dark_luma`)
+lost, in blobs of about `dropout_blob_px` pixels) and `glossy_deg` (specular spot / band of glossy objects), see `sim.materials`: the
+missing-depth bands real RealSense views show on black plastic and glossy print (issue 12).
+
 Ray casting is open3d C++, the noise model vectorised numpy, shading a numba kernel.
 """
 
@@ -43,6 +47,7 @@ from numba import njit, prange
 from kinfu_cli.core.camera import SENSOR_PRESETS, preset_intrinsics
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.poses import check_poses
+from kinfu_cli.sim.materials import DARK_LUMA, material_dropout
 from kinfu_cli.sim.scene import LABEL_NONE, RaycastTarget, Scene
 
 # numba probes the TBB threading layer at the first parallel call and warns when the installed TBB is too old;
@@ -53,6 +58,7 @@ LIGHT_DIR = np.array([0.3, -0.4, 1.0]) / np.linalg.norm([0.3, -0.4, 1.0])  # tow
 BACKGROUND_RGB = np.array([0.08, 0.08, 0.09])
 PHOTO_STREAM = 0x9A1  # seeds the photometric effects' own generator (with the sensor seed and frame seed)
 SHIFT_STREAM = 0x9A2  # seeds the per-frame misregistration shifts (their own, so the gains stay as they were)
+MATERIAL_STREAM = 0x9A3  # seeds the dark-material blobs (sim.materials)
 
 
 def kinect_v1_intrinsics(width: int = 640, height: int = 480) -> np.ndarray:
@@ -119,7 +125,8 @@ class DepthSensor:
                  disparity_quantisation: bool = True, ir_focal: float = SENSOR_PRESETS["kinect_v1_ir"]["fx"],
                  subpixel: int = 8, gain_jitter: float = 0.0, white_balance_jitter: float = 0.0,
                  misregistration: tuple[float, float, float] = (0.0, 0.0, 0.0),
-                 misregistration_jitter: float = 0.0) -> None:
+                 misregistration_jitter: float = 0.0, dark_dropout: float = 0.0, glossy_deg: float = 0.0,
+                 dropout_blob_px: float = 4.0, dark_luma: float = DARK_LUMA) -> None:
         K = np.asarray(K, dtype=np.float64)
         if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
             raise ConfigError(f"camera intrinsics: expected a 3x3 matrix with positive focal lengths, got {K.tolist()}")
@@ -152,9 +159,17 @@ class DepthSensor:
                               f"got {self.gain_jitter}, {self.white_balance_jitter}, {misregistration}, "
                               f"{misregistration_jitter}")
         self.misregistration = mis
+        self.dark_dropout, self.glossy_deg = float(dark_dropout), float(glossy_deg)
+        self.dropout_blob_px, self.dark_luma = float(dropout_blob_px), float(dark_luma)
+        if not (0 <= self.dark_dropout <= 1 and 0 <= self.glossy_deg < 90 and 0 <= self.dropout_blob_px <= 100
+                and 0 <= self.dark_luma <= 1):
+            raise ConfigError(f"material dropouts: expected dark_dropout in [0, 1], glossy_deg in [0, 90), "
+                              f"dropout_blob_px in [0, 100] and dark_luma in [0, 1], got {dark_dropout}, {glossy_deg}, "
+                              f"{dropout_blob_px}, {dark_luma}")
         self._rng = np.random.default_rng(self.seed)
         self._photo_rng = np.random.default_rng([self.seed, PHOTO_STREAM])
         self._shift_rng = np.random.default_rng([self.seed, SHIFT_STREAM])
+        self._material_rng = np.random.default_rng([self.seed, MATERIAL_STREAM])
         v, u = np.mgrid[0:self.height, 0:self.width]
         self._u = u.astype(np.float64)
         self._v = v.astype(np.float64)
@@ -216,6 +231,8 @@ class DepthSensor:
             occluded = target.scene.test_occlusions(o3d.core.Tensor(rays), tnear=0.0, tfar=0.995).numpy()
             idx = np.flatnonzero(ok.ravel())
             ok.ravel()[idx[occluded]] = False
+        if self.dark_dropout > 0 or self.glossy_deg > 0:
+            ok &= ~self._material_dropout(target, nh, T, frame_seed)
 
         # axial noise (+ disparity quantisation, which accounts for part of the model's variance)
         sigma = nguyen_axial_sigma(z, theta)
@@ -269,6 +286,15 @@ class DepthSensor:
         return {"t": np.where(valid, t, 0.0).astype(np.float64), "gid": np.where(valid, gid, 0).astype(np.int64),
                 "valid": valid, "normals": ans["primitive_normals"].numpy(), "dir": d_world,
                 "prim": ans["primitive_ids"].numpy(), "uv": ans["primitive_uvs"].numpy(), "origin": T[:3, 3]}
+
+    def _material_dropout(self, target: RaycastTarget, hit: dict, T: np.ndarray, frame_seed: int | None
+                          ) -> np.ndarray:
+        """Pixels lost to dark or glossy materials (sim.materials), from their own generator."""
+        rng = (np.random.default_rng([self.seed, MATERIAL_STREAM, int(frame_seed)]) if frame_seed is not None
+               else self._material_rng)
+        proj = T[:3, :3] @ np.array([self.baseline, 0.0, 0.0]) + T[:3, 3]
+        return material_dropout(hit, target.albedo, target.labels, proj, self.dark_dropout, self.glossy_deg,
+                                self.dropout_blob_px, rng, self.dark_luma)
 
     @staticmethod
     def _theta(hit: dict) -> np.ndarray:

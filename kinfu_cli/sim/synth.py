@@ -19,7 +19,8 @@ from kinfu_cli.sim.room import WORLDS, RoomScenario, make_room, write_room_groun
 from kinfu_cli.sim.scenario import (Scenario, check_camera_pose_topic, make_scenario, recording_topics,
                                     write_ground_truth, write_recordings)
 
-SCENES = ("tabletop", "room", "objects")  # objects: the tabletop scenario on `sim.scene.segmentation_scene`
+SCENES = ("tabletop", "room", "objects", "household")  # objects / household: the tabletop scenario on
+# `sim.scene.segmentation_scene` / `sim.household.household_scene`
 FORMAT_NAMES = {"mcap": "recording.mcap", "bag": "recording.bag", "ros2": "recording_ros2"}
 
 
@@ -56,7 +57,8 @@ def synthesize(out: str | os.PathLike, seed: int = 0, width: int = 320, height: 
     camera_pose_topic: also write the true camera poses (PoseStamped in `world`) on this topic; quiet: no
     progress bar. scene: "tabletop" (the arm scenario) or "room" (`sim.room`: a handheld camera walking through a
     furnished room; `scenario`, `n_objects` and `hand_rate` do not apply) or "objects" (the tabletop scenario on the
-    segmentation ground-truth scene `sim.scene.segmentation_scene`; `n_objects` does not apply); world: "z-up" or
+    segmentation ground-truth scene `sim.scene.segmentation_scene`; `n_objects` does not apply) or "household" (the
+    same on `sim.household.household_scene`: 5-11 YCB-like objects made of parts); world: "z-up" or
     "y-down" (room only)."""
     out = Path(out)
     if out.exists() and not out.is_dir():
@@ -109,7 +111,7 @@ def _write(out: Path, *, seed, width, height, frames, formats, scenario, n_objec
         return SynthResult(paths, gt, room, camera_pose_topic)
     sc = make_scenario(seed=seed, kind=scenario, width=width, height=height, frames=frames, n_objects=n_objects,
                        noise=noise, hand_rate_hz=hand_rate, frame_rate_hz=frame_rate,
-                       layout="objects" if scene == "objects" else "tabletop")
+                       layout=scene if scene in ("objects", "household") else "tabletop")
     paths = [out / FORMAT_NAMES[f] for f in formats]
     write_recordings(sc, paths, depth_format=depth_format, color_format=color_format, quiet=quiet,
                      jpeg_quality=jpeg_quality, camera_pose_topic=camera_pose_topic)

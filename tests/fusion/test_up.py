@@ -254,7 +254,8 @@ def test_ignoring_up_on_the_ydown_copy_is_an_empty_result_with_a_warning(zup_ydo
     tmp = zup_ydown
     doc, res = _segments(tmp / "y" / "volume.npz", "--up", "0,0,1")
     assert doc["support_plane"] is None and doc["up_source"] == "option"
-    assert len(doc["warnings"]) == 1 and doc["warnings"][0].startswith("no support plane: of ")
+    assert len(doc["warnings"]) == 2 and doc["warnings"][0].startswith("no support plane: of ")
+    assert doc["warnings"][1].startswith("the given up [0.0, 0.0, 1.0] is 90 deg from the volume's up")
     assert "kinfu: warning: no support plane" in res.stderr
     res = run("segment", tmp / "y" / "volume.npz", "-o", tmp / "seg_z_text", "--up", "0,0,1", "--no-superquadrics")
     assert res.exit_code == 0 and "segments, no support plane from" in res.stdout, res.output

@@ -99,3 +99,15 @@ def test_without_up_a_support_across_the_volume_up_is_said():
     seg_up = segment(True).segmentation
     assert seg_up.plane[2] > 0.99 and support_against_volume_up(seg_up, "volume", up, "") == []
     assert support_against_volume_up(seg, "none", None, "") == []  # a volume that does not know its up
+
+
+def test_a_given_up_across_the_volume_up_is_said():
+    """`kinfu segment --up 1,0,0` on a z-up volume searched the walls for a support and said nothing of the
+    volume's own up; now a warning names both. Within 45 deg, or with the volume's own up, nothing is said."""
+    from kinfu_cli.segmentation.pipeline import given_up_against_volume_up
+
+    (warning,) = given_up_against_volume_up((1.0, 0.0, 0.0), "option", (0.0, 0.0, 1.0), "tf-rep103")
+    assert "90 deg" in warning and "[0.0, 0.0, 1.0]" in warning and "tf-rep103" in warning
+    assert given_up_against_volume_up((0.0, 0.2, 1.0), "option", (0.0, 0.0, 1.0), "") == []
+    assert given_up_against_volume_up("auto", "volume", (0.0, 0.0, 1.0), "") == []
+    assert given_up_against_volume_up((1.0, 0.0, 0.0), "option", None, "") == []

@@ -71,7 +71,7 @@ def test_objects_scenario_changes_only_free_standing_objects(kind):
 
 
 def test_synth_writes_labels_that_match_changes_json(tmp_path):
-    for scene in ("objects", "tabletop"):
+    for scene in ("objects", "tabletop", "household"):
         out = tmp_path / scene
         res = CliRunner().invoke(cli, ["synth", "-o", str(out), "--scene", scene, "--formats", "mcap", "--width", "32",
                                        "--height", "24", "--frames", "3", "-q"])
@@ -80,4 +80,4 @@ def test_synth_writes_labels_that_match_changes_json(tmp_path):
         cloud = read_labelled_cloud(out / "ground_truth" / "labels.ply")
         present = {o["label"] for o in gt["objects"] if o["present_after"]}
         assert set(np.unique(cloud.labels).tolist()) == {0} | present
-        assert (gt.get("layout") == "objects") == (scene == "objects")
+        assert gt.get("layout", "tabletop") == scene
