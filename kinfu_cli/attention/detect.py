@@ -12,6 +12,8 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numpy as np
+
 from kinfu_cli.attention.gmm_as import GmmActivitySaliency
 from kinfu_cli.attention.tasks import (MIN_TASK_S, SPLIT_GAP_S, TaskList, check_min_task, check_split_gap,
                                        check_workspace, detect_by_task, parse_workspace, task_entries)
@@ -22,6 +24,11 @@ from kinfu_cli.io.hand import load_hand_trajectory
 from kinfu_cli.io.trajectory import Trajectory
 
 Detector = GmmActivitySaliency | ZeroVelocityCrossing
+
+# a hand at a table stays within a few metres (the 130 Polhemus tasks of ../shared/data/hand-polhemus span at most
+# 3.1 m); a trajectory whose bulk (1st..99th percentile box) spans more is a robot's or a vehicle's path, or not in
+# metres, and the detectors' metre constants (POI radius, spatial floors, ZVC radii) do not fit it
+HAND_SPAN_WARN_M = 5.0
 
 
 def make_detector(algorithm: str, params: dict | None = None) -> Detector:
@@ -85,6 +92,28 @@ class PoiDetection:
         return len(self.tasks) == 1 and self.tasks[0].samples == len(self.trajectory)
 
 
+def _recording_times(pois: list[Poi], span: tuple | None) -> None:
+    """Each POI's "recording_time_s", seconds from the recording's start (the clock of a time window), when its
+    stamp lies in the recording's span; a POI's "time" counts from the first hand sample instead."""
+    if not span or span[0] is None or span[1] is None:
+        return
+    for p in pois:
+        stamp = p.extra.get("stamp_ns")
+        if stamp is not None and span[0] - 1e9 <= stamp <= span[1] + 1e9:  # else another clock (sim time)
+            p.extra["recording_time_s"] = round((stamp - span[0]) * 1e-9, 6)
+
+
+def span_warnings(traj: Trajectory) -> list[str]:
+    """A warning when the trajectory spans far more than a person's reach (HAND_SPAN_WARN_M)."""
+    lo, hi = np.percentile(traj.positions, [1, 99], axis=0)
+    span = float(np.linalg.norm(hi - lo))
+    if span <= HAND_SPAN_WARN_M:
+        return []
+    return [f"the hand trajectory spans {span:.1f} m (diagonal of its 1st..99th percentile box), far more than a "
+            f"person's reach at a table (under {HAND_SPAN_WARN_M:g} m): is it a hand, and in metres? A robot's or "
+            f"vehicle's path gives POIs where it slowed down, not where a person acted"]
+
+
 def check_detection(algorithm: str = "gmm-as", params: dict | None = None, *,
                     workspace: str | Sequence[float] | None = None, split_gap: float | None = SPLIT_GAP_S,
                     min_task: float = MIN_TASK_S) -> tuple[float, ...] | None:
@@ -117,12 +146,13 @@ def detect_pois(source: str | os.PathLike | Trajectory, algorithm: str = "gmm-as
         source_name = str(source)
     tasks, detectors, pois = detect_by_task(traj, lambda: make_detector(algorithm, params), box, split_gap,
                                             min_task, quiet=quiet)
+    _recording_times(pois, traj.meta.get("recording_span_ns"))
     recorded = dict(detectors[0].get_params())
     if algorithm == "gmm-as":
         recorded["n_components"] = int(sum(d.n_components_ for d in detectors))  # per task in "tasks"
     document = pois_document(pois, algorithm, recorded, frame=traj.frame, source=source_name)
     document["tasks"] = task_entries(tasks, detectors)
-    document["warnings"] = list(traj.meta.get("recording_problems", []))
+    document["warnings"] = list(traj.meta.get("recording_problems", [])) + span_warnings(traj)
     document["tasks_dropped"] = tasks.dropped
     document["task_split"] = {"workspace": list(box) if box else None,
                               "split_gap": None if split_gap is None else float(split_gap),

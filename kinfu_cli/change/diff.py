@@ -114,12 +114,22 @@ class ChangeResult:
         }
 
 
+# ups further apart than this are two world frames (estimated ups of one frame differ by a few degrees)
+UP_DISAGREE_DEG = 20.0
+
+
 def _warnings(before: TernaryGrid, after: TernaryGrid, names: tuple[str, str], pair: AlignedPair,
               masks: ChangeMasks, n_regions: int, min_voxels: int) -> list[str]:
     out = []
     fb, fa = before.frame.lstrip("/"), after.frame.lstrip("/")
     if fb and fa and fb != fa:
         out.append(f"{names[0]} is in frame {fb!r}, {names[1]} in {fa!r}; compared at their coordinates as given")
+    if before.up is not None and after.up is not None:
+        angle = float(np.degrees(np.arccos(np.clip(before.up @ after.up, -1.0, 1.0))))
+        if angle > UP_DISAGREE_DEG:
+            out.append(f"the volumes' up directions differ by {angle:.0f} deg ({np.round(before.up, 3).tolist()} "
+                       f"vs {np.round(after.up, 3).tolist()}): their world frames are not one (a z-up and a y-down "
+                       f"frame, or another tilt), so the regions mostly show that difference")
     if pair.observed_both == 0:
         out.append(f"no voxel is observed in both {names[0]} and {names[1]}: nothing can be compared")
     elif pair.overlap < MIN_OVERLAP:

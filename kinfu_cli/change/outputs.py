@@ -14,6 +14,8 @@ from kinfu_cli.core.atomic import atomic_dir, atomic_path, write_json
 from kinfu_cli.core.errors import VolumeError
 
 COLOURS = {"removed": (0.9, 0.1, 0.1), "added": (0.1, 0.8, 0.1)}
+# every entry `kinfu diff` writes in its output folder: the rest of a shared folder is left alone
+CHANGE_ENTRIES = ("changes.json", "changes.ply", "regions")
 
 
 def _write_cloud(path: Path, points: np.ndarray, colours: np.ndarray) -> Path:

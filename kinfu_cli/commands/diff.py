@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from kinfu_cli.change.diff import DEFAULT_MIN_VOXELS, ChangeParams, diff_volumes
-from kinfu_cli.change.outputs import write_change_outputs
+from kinfu_cli.change.outputs import CHANGE_ENTRIES, write_change_outputs
 from kinfu_cli.commands._options import claim_outputs, force_option
 from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.core.atomic import atomic_dir
@@ -99,7 +99,7 @@ def command(before: Path, after: Path, outdir: Path, pois_path, match_radius, ma
                 score_change_pois(result, pois, radius=match_radius, source=str(pois_path))
                 result.warnings += poi_frame_warnings(pois_path, result.frame, "--pois")
         else:
-            with atomic_dir(outdir) as tmp:  # the folder appears whole or not at all
+            with atomic_dir(outdir, own=CHANGE_ENTRIES) as tmp:  # the folder appears whole or not at all
                 write_change_outputs(result, tmp)
     doc = result.to_json()
     print_warnings(doc)

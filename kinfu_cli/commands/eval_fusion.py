@@ -8,6 +8,7 @@ from pathlib import Path
 import click
 
 from kinfu_cli.commands._options import claim_outputs, result_options
+from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.core.atomic import write_json
 from kinfu_cli.evaluation.reconstruction import (DEFAULT_SPACING, DEFAULT_THRESHOLD, check_fusion_evaluation,
                                                  evaluate_fusion)
@@ -68,6 +69,7 @@ def command(reconstruction: Path, ground_truth: Path, state: str, threshold: flo
                              margin=margin, min_height=min_height, footprint=footprint, use_volume=not no_volume,
                              quiet=quiet)
     doc = result.document
+    print_warnings(doc)
     if error_mesh is not None:
         write_error_mesh(error_mesh, result.reconstruction, result.score.vertex_distances, 2.0 * threshold)
         doc["input"]["error_mesh"] = str(error_mesh)

@@ -78,7 +78,9 @@ def _export_trajectory(source: str, out: str, fk: dict, roles_kw: dict, as_json:
         stamps, poses, info = recording_trajectory(source, roles_kw, quiet=quiet, **fk)
         summary = {"source": str(source), "kind": "recording", "poses": len(stamps), "pose_source": fk.get("pose_source"),
                    "world_frame": info["world_frame"], "stats": info["stats"], "warnings": info["warnings"]}
-        comment = f"kinfu export {source}: the recording's camera poses ({fk.get('pose_source')}) at its depth frames"
+        comment = (f"kinfu export {source}: the recording's camera poses ({fk.get('pose_source')}) at "
+                   f"{info.get('sampled_at', 'depth frames')}")
+        summary["sampled_at"] = info.get("sampled_at")
     write_tum(out, stamps, poses, comment=comment)
     summary["output"] = str(out)
     print_warnings(summary)

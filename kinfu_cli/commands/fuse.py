@@ -15,7 +15,7 @@ from kinfu_cli.commands._up import parse_up
 from kinfu_cli.core.atomic import atomic_dir, write_json
 from kinfu_cli.core.camera import parse_intrinsics
 from kinfu_cli.core.errors import ConfigError
-from kinfu_cli.fusion.outputs import fusion_report, write_fusion_outputs
+from kinfu_cli.fusion.outputs import OUTPUTS, fusion_report, write_fusion_outputs
 from kinfu_cli.fusion.pipeline import fuse_recording
 from kinfu_cli.report.viewer import write_viewer
 from kinfu_cli.report.volume_plot import plot_slices
@@ -185,7 +185,7 @@ def command(recording: Path, outdir: Path, voxel_size, resolution, size, origin,
         for note in result.notes:
             click.echo(f"kinfu: note: {note}", err=True)
     t0 = time.perf_counter()
-    with atomic_dir(outdir) as tmp:  # one transaction: the folder appears whole, report.json written last
+    with atomic_dir(outdir, own=(*OUTPUTS, "slices_*.png")) as tmp:  # one transaction: report.json written last
         write_fusion_outputs(result, tmp)
         plots = [p.name for p in plot_slices(result.grid, tmp)] if plot else []
         result.add_time("write", time.perf_counter() - t0)

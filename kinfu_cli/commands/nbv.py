@@ -77,9 +77,12 @@ def summary_lines(doc: dict) -> list[str]:
     lines = []
     for p in doc["pois"]:
         rej = ", ".join(f"{k} {v}" for k, v in p["rejected"].items() if v) or "none"
-        state = "reconstructed" if p["reconstructed"] else "not reconstructed"
+        state = ("unreachable (no view sees into it)" if p.get("unreachable") else
+                 "reconstructed" if p["reconstructed"] else "not reconstructed")
         x, y, z = p["position"]
-        best = (f"best {doc['gain']} gain {p['best_gain']:.1f} (IncTh {p['inc_th']:.1f}): {state}" if p["valid"]
+        judged = p.get("inc_th_gain", doc["gain"])
+        on = f" on the {judged} gain" if judged != doc["gain"] else ""
+        best = (f"best {doc['gain']} gain {p['best_gain']:.1f} (IncTh {p['inc_th']:.1f}{on}): {state}" if p["valid"]
                 else "no valid view to rank")
         lines.append(f"POI {p['id']} at ({x:.3f}, {y:.3f}, {z:.3f}) r={p['radius']:.2f} m: "
                      f"{p['candidates']} candidates, rejected: {rej}; {best}")

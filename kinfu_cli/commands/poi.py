@@ -117,6 +117,8 @@ def _summary_lines(found: PoiDetection, output: Path) -> list[str]:
                          f"{k}, {e['n_pois']} POI(s)")
     for p in pois:
         x, y, z = p.position
-        lines.append(f"  #{p.id}: ({x:.3f}, {y:.3f}, {z:.3f}) m at t = {p.time:.2f} s, saliency {p.saliency:.4g}"
+        rec_t = p.extra.get("recording_time_s")
+        when = f"t = {p.time:.2f} s" + (f" ({rec_t:.2f} s into the recording)" if rec_t is not None else "")
+        lines.append(f"  #{p.id}: ({x:.3f}, {y:.3f}, {z:.3f}) m at {when}, saliency {p.saliency:.4g}"
                      + (f", task {p.extra['task']}" if len(tasks) > 1 else ""))
     return lines

@@ -19,7 +19,7 @@ from kinfu_cli.commands._up import parse_up
 from kinfu_cli.core.atomic import atomic_dir, write_json
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.progress import progress
-from kinfu_cli.segmentation.outputs import write_segment_outputs
+from kinfu_cli.segmentation.outputs import SEGMENT_ENTRIES, write_segment_outputs
 from kinfu_cli.segmentation.pipeline import SegmentOptions, SegmentResult, segment_volume
 from kinfu_cli.segmentation.segments import COLOR_DISTANCES, SegmentationParams
 
@@ -218,7 +218,7 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
         elif step == "grasp":
             grasps = _grasps(doc, grasp_options, grasp_cones)
         else:
-            with atomic_dir(outdir) as tmp:  # the folder appears whole or not at all
+            with atomic_dir(outdir, own=SEGMENT_ENTRIES) as tmp:  # the folder appears whole or not at all
                 write_segment_outputs(result, tmp, doc)
                 if grasps is not None:
                     write_json(tmp / "grasps.json", grasps)

@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import contextlib
+import fnmatch
 import glob
 import json
 import os
 import shutil
 import tempfile
 import zipfile
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -75,12 +76,15 @@ def atomic_path(final: str | os.PathLike, suffix: str | None = None) -> Iterator
 
 
 @contextlib.contextmanager
-def atomic_dir(final: str | os.PathLike) -> Iterator[Path]:
+def atomic_dir(final: str | os.PathLike, own: Iterable[str] | None = None) -> Iterator[Path]:
     """Yield a temporary folder beside `final`; it replaces `final` only if the block succeeds.
 
     For outputs that are folders (ROS 2 bags, result folders with several files): the whole folder appears
     at once, so a killed run leaves no folder that looks complete or mixes old and new files. Entries of an
-    existing `final` that kinfu did not write are carried over, never removed.
+    existing `final` that kinfu did not write are carried over, never removed. own: glob patterns of every
+    entry the caller writes there (a result folder that other commands may share): kinfu entries matching
+    none of them and not written anew (another command's outputs) are carried over too; None: the folder is
+    the caller's whole (a bag, a data set).
     """
     final = Path(final)
     parent = _ensure_parent(final)
@@ -91,7 +95,7 @@ def atomic_dir(final: str | os.PathLike) -> Iterator[Path]:
         yield tmp
         record_tree(tmp)  # everything in it is kinfu's now; foreign entries are carried over only below
         if final.exists():
-            _replace_folder(tmp, final)
+            _replace_folder(tmp, final, own)
         else:
             os.replace(tmp, final)
     except BaseException:
@@ -100,7 +104,15 @@ def atomic_dir(final: str | os.PathLike) -> Iterator[Path]:
     record_written(final)
 
 
-def _replace_folder(new: Path, final: Path) -> None:
+def _other_outputs(old: Path, new: Path, own: Iterable[str]) -> list[Path]:
+    """The entries of `old` kinfu wrote that match none of the `own` patterns and are not written anew: another
+    command's outputs in a shared folder."""
+    own = tuple(own)
+    return [old / n for n in sorted(owned_entries(old) - {MANIFEST})
+            if (old / n).exists() and not (new / n).exists() and not any(fnmatch.fnmatchcase(n, p) for p in own)]
+
+
+def _replace_folder(new: Path, final: Path, own: Iterable[str] | None = None) -> None:
     """Swap the finished folder `new` in for `final`, keeping the entries of `final` kinfu did not write.
 
     A file `final` (a kinfu output, or one the caller was told to overwrite) is replaced. Foreign entries are
@@ -111,26 +123,34 @@ def _replace_folder(new: Path, final: Path) -> None:
         final.unlink()
         os.replace(new, final)
         return
-    moves, clash = _foreign_moves(final, new)
+    others = _other_outputs(final, new, own) if own is not None else []
+    moves, clash = _foreign_moves(final, new, skip={p.name for p in others})
     if clash:
         raise KinfuError(f"{final}: {', '.join(sorted(clash))} there was not written by kinfu and would be replaced")
     for src, dst in moves:
         dst.parent.mkdir(parents=True, exist_ok=True)
         os.replace(src, dst)
+    for src in others:  # still kinfu's: recorded in the new folder's manifest
+        os.replace(src, new / src.name)
+        record_written(new / src.name)
     old = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".old.part", dir=final.parent))
     os.replace(final, old / final.name)
     os.replace(new, final)
     shutil.rmtree(old, ignore_errors=True)
 
 
-def _foreign_moves(old: Path, new: Path, rel: str = "") -> tuple[list[tuple[Path, Path]], list[str]]:
+def _foreign_moves(old: Path, new: Path, rel: str = "", skip: set[str] | frozenset = frozenset()
+                   ) -> tuple[list[tuple[Path, Path]], list[str]]:
     """(source, destination) of every entry under `old` kinfu did not write, and the names that clash with
     new outputs. A kinfu-written subfolder is searched only when it records its own entries (a manifest);
-    one without (written before per-folder records) is kinfu's whole, as it always was."""
+    one without (written before per-folder records) is kinfu's whole, as it always was. `skip`: top-level
+    names moved whole elsewhere."""
     mine = owned_entries(old)
     moves: list[tuple[Path, Path]] = []
     clash: list[str] = []
     for entry in old.iterdir():
+        if entry.name in skip:
+            continue
         target = new / entry.name
         if entry.name not in mine:
             if target.exists() or target.is_symlink():

@@ -9,7 +9,8 @@ pois.json::
 Positions in metres in `frame`; time in seconds on the trajectory's clock; `radius` is the region of
 interest S(POI) around the position (0.2 m in the paper). ZVC POIs have `"gaussian": null`; GMM-AS
 Gaussians are in (x, y, z, t) with t in seconds. Optional extra keys per POI: "stamp_ns" (absolute
-time, when the trajectory came from a recording), "component"/"threshold" (GMM-AS), "segment" (ZVC), "task"
+time, when the trajectory came from a recording), "recording_time_s" (seconds from the recording's start, when
+the stamp is on its clock), "component"/"threshold" (GMM-AS), "segment" (ZVC), "task"
 (index into "tasks"). `kinfu poi` also writes "tasks" (the hand stream cut into tasks: index, t_start, t_end,
 samples, n_pois, ...), "tasks_dropped" and "task_split" (see attention/tasks.py and attention/detect.py).
 """

@@ -231,6 +231,11 @@ def object_measures(points: np.ndarray, gt, state: str = "after", margin: float 
         raise ConfigError(f"expected one of {', '.join(FOOTPRINTS)}, got {footprint!r}", parameter="footprint")
     pts = np.asarray(points, dtype=np.float64)
     objects = ground_truth_objects(gt, state)
+    settings = {"margin": margin, "min_height": min_height, "footprint": footprint, "state": state}
+    if not objects and not gt.info.get("table"):  # a scene without tabletop objects (the synthetic room)
+        none = np.full(4, np.nan)
+        return ObjectMeasuresResult([], none, none, float("nan"), None, {}, {
+            **settings, "table_plane": "none (the ground truth has no table and no objects to measure)"})
     truth_plane = table_plane_truth(gt)
     plane_source = "fitted"
     try:
@@ -261,5 +266,4 @@ def object_measures(points: np.ndarray, gt, state: str = "after", margin: float 
                    for m, v in errs.items()}
     return ObjectMeasuresResult(rows, plane, truth_plane, float(np.abs(pooled).mean()) if pooled.size else float("nan"),
                                 _std(pooled), per_measure,
-                                {"margin": margin, "min_height": min_height, "footprint": footprint,
-                                 "state": state, "table_plane": plane_source})
+                                {**settings, "table_plane": plane_source})

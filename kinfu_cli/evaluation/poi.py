@@ -89,6 +89,9 @@ def task_user(name: str) -> str:
 def find_tasks(dataset_dir: str | os.PathLike) -> list[LabelledTask]:
     """Every `*.traj` under `dataset_dir` with a `.traj.res` beside it, grouped by sub-folder."""
     root = Path(dataset_dir)
+    if root.is_file():
+        raise TrajectoryError(f"{root}: a file; the evaluation scores a data set folder (sub-folders of *.traj + "
+                              f"*.traj.res), e.g. {root.parent}")
     if not root.is_dir():
         raise TrajectoryError(f"{root}: no such data set folder (expected sub-folders of *.traj + *.traj.res)")
     tasks = []

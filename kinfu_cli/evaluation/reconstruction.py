@@ -506,8 +506,28 @@ def evaluate_fusion(path: str | os.PathLike, ground_truth: str | os.PathLike, st
         else:
             measures = object_measures(rec.vertices, gt, state, margin=margin, min_height=min_height,
                                        footprint=footprint, surface=(surface.in_bounds, surface.seen))
-    return FusionEvaluation(_document(rec, gt, state, window, report, score, measures, time.perf_counter() - t0),
-                            rec, score)
+    doc = _document(rec, gt, state, window, report, score, measures, time.perf_counter() - t0)
+    doc["warnings"] = state_warnings(gt, state, window)
+    return FusionEvaluation(doc, rec, score)
+
+
+def state_warnings(gt: GroundTruth, state: str, window: tuple | None) -> list[str]:
+    """What the fused frames (all, or those in the report's window) hold against the state scored: both sides of
+    the change (the moved objects blended between their places), or only the other state's frames."""
+    scan = gt.info.get("frames", {}).get("scan")
+    if not gt.changes or scan is None:
+        return []
+    idx = state_frames(gt, "after", window)
+    before, after = int(np.count_nonzero(idx < int(scan))), int(np.count_nonzero(idx >= int(scan)))
+    moved = ", ".join(sorted({str(c.get("object", "?")) for c in gt.changes}))
+    if before and after:
+        return [f"the fused frames span the change ({before} scan and {after} after-change frames): the objects the "
+                f"hand moved ({moved}) are blended between their places, so their measures are off; fuse a time "
+                f"window before or after the change to score one state"]
+    if (state == "after" and not after) or (state == "before" and not before):
+        return [f"the fused frames are all {'scan' if before else 'after-change'} frames, scored against the "
+                f"{state} state: the objects the hand moved ({moved}) are where the other state has them"]
+    return []
 
 
 def _document(rec: Reconstruction, gt: GroundTruth, state: str, window: tuple | None, report: dict | None,

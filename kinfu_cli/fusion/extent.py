@@ -21,8 +21,8 @@ from kinfu_cli.fusion.volume import available_bytes, worst_case_bytes
 # voxel edge when none is given: KinFu's 3 m grid of 512 voxels
 DEFAULT_VOXEL = 3.0 / 512
 # the first pass decodes at most this many frames (spread evenly over the selection) and every 8th pixel of
-# each in both directions: a few seconds for any recording, and a box that differs from the full one by less
-# than the margin (neighbouring pixels and frames see the same surfaces)
+# each in both directions, plus the farthest pixel of each 8 x 8 tile (depth may jump between sampled pixels):
+# a few seconds for any recording, and a box that differs from the full one by less than the margin
 SURVEY_FRAMES = 120
 SURVEY_STRIDE = 8
 # memory budget when none is given: half of the memory available now (the read-out copies the labels, and
@@ -30,6 +30,12 @@ SURVEY_STRIDE = 8
 DEFAULT_BUDGET_FRACTION = 0.5
 DEFAULT_BUDGET_BYTES = 2 * 1024**3
 FACES = ("x-", "x+", "y-", "y+", "z-", "z+")
+# a face cuts the scene when its occupied voxels could form a line of surface this long (and at least
+# CUT_MIN_VOXELS): fewer are speckle, flying pixels at the far range that the survey's sparse pixels miss (real
+# 7-Scenes and tabletop frames leave 1-3 such voxels on the auto grid's faces; a grid that cuts a table or a
+# wall leaves hundreds)
+CUT_LINE_M = 0.05
+CUT_MIN_VOXELS = 3
 
 
 @dataclass
@@ -76,10 +82,13 @@ class Survey:
 
 def survey(views: Iterable[tuple[np.ndarray, np.ndarray, np.ndarray]], min_depth: float,
            max_depth: float) -> Survey:
-    """World points of every SURVEY_STRIDE-th valid pixel of (depth, K, T_world_camera) views."""
+    """World points of every SURVEY_STRIDE-th valid pixel of (depth, K, T_world_camera) views, and of the farthest
+    valid pixel of each SURVEY_STRIDE x SURVEY_STRIDE tile."""
     pts, cams, spacing = [], [], 0.0
     for depth, K, T in views:
         p = backproject(depth, K, T, stride=SURVEY_STRIDE, min_depth=min_depth, max_depth=max_depth)
+        far = farthest_per_block(depth, K, T, SURVEY_STRIDE, min_depth, max_depth)
+        p = np.concatenate([p, far]) if len(far) else p
         pts.append(p)
         cams.append(np.asarray(T, dtype=np.float64)[:3, 3])
         if len(p):
@@ -87,6 +96,26 @@ def survey(views: Iterable[tuple[np.ndarray, np.ndarray, np.ndarray]], min_depth
             spacing = max(spacing, SURVEY_STRIDE * far / min(K[0, 0], K[1, 1]))
     points = np.concatenate(pts) if pts else np.zeros((0, 3))
     return Survey(points, np.array(cams).reshape(-1, 3), len(cams), spacing)
+
+
+def farthest_per_block(depth: np.ndarray, K: np.ndarray, T: np.ndarray, block: int, min_depth: float,
+                       max_depth: float) -> np.ndarray:
+    """World points of the farthest in-range pixel of each block x block tile: between two sampled pixels a
+    surface seen at a grazing angle, or through a gap, reaches deeper than either (the 7-Scenes kitchen's far
+    side went 10 cm beyond the sampled points, out of the grid's margin)."""
+    d = np.asarray(depth, dtype=np.float64)
+    h, w = (d.shape[0] // block) * block, (d.shape[1] // block) * block
+    tiles = d[:h, :w].reshape(h // block, block, w // block, block).transpose(0, 2, 1, 3).reshape(
+        h // block, w // block, block * block)
+    ok = np.isfinite(tiles) & (tiles > min_depth) & (tiles <= max_depth) & (tiles > 0)
+    k = np.argmax(np.where(ok, tiles, -1.0), axis=2)
+    has = ok.any(axis=2)
+    bi, bj = np.nonzero(has)
+    kk = k[bi, bj]
+    v, u = bi * block + kk // block, bj * block + kk % block
+    z = d[v, u]
+    pc = np.stack([(u - K[0, 2]) / K[0, 0] * z, (v - K[1, 2]) / K[1, 1] * z, z], axis=1)
+    return pc @ np.asarray(T)[:3, :3].T + np.asarray(T)[:3, 3]
 
 
 def budget_bytes(max_memory_gib: float | None) -> int:
@@ -187,6 +216,12 @@ def _densest_window(points: np.ndarray, lo: np.ndarray, size: np.ndarray, new_si
 
 def _fmt(v) -> str:
     return " x ".join(f"{x:.2f}" for x in v)
+
+
+def cut_faces(faces: dict[str, int], voxel_size: float) -> dict[str, int]:
+    """The faces of `face_contacts` whose occupied voxels are enough to be a cut scene, not speckle."""
+    least = max(CUT_MIN_VOXELS, int(np.ceil(CUT_LINE_M / voxel_size - 1e-9)))
+    return {f: n for f, n in faces.items() if n >= least}
 
 
 def face_contacts(labels: np.ndarray) -> dict[str, int]:

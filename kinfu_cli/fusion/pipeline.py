@@ -31,7 +31,8 @@ from kinfu_cli.core.progress import progress
 from kinfu_cli.core.volume_file import MAX_COORDINATE_M
 from kinfu_cli.fusion import filters
 from kinfu_cli.fusion.color_mode import check_color_mode
-from kinfu_cli.fusion.extent import SURVEY_FRAMES, AutoGrid, auto_grid, budget_bytes, face_contacts, survey
+from kinfu_cli.fusion.extent import (SURVEY_FRAMES, AutoGrid, auto_grid, budget_bytes, cut_faces, face_contacts,
+                                    survey)
 from kinfu_cli.fusion.mesh import mesh_cloud
 from kinfu_cli.fusion.placement import default_origin
 from kinfu_cli.fusion.tracking import POSE_MODES, FrameToModelTracker, TrackResult, predict_pose
@@ -272,7 +273,7 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
     warnings += up_choice.warnings
     _add(timing, "up", time.perf_counter() - t0)
     faces = face_contacts(grid.labels)
-    warnings += _face_warnings(faces)
+    warnings += _face_warnings(faces, vol.voxel_size)
     dropped = _dropped(stats, depth_filter, integrator)
     return FusionResult(
         recording=str(rec.path), roles=found, pose_mode=plan.mode, pose_source=plan.description, volume=vol,
@@ -446,8 +447,9 @@ def _tracking_doubts(track_log: list[dict]) -> list[str]:
     return out
 
 
-def _face_warnings(faces: dict[str, int]) -> list[str]:
-    touched = {f: n for f, n in faces.items() if n}
+def _face_warnings(faces: dict[str, int], voxel_size: float) -> list[str]:
+    """A warning when the grid cuts the scene; a few speckle voxels on a face are only counted (face_contacts)."""
+    touched = cut_faces(faces, voxel_size)
     if not touched:
         return []
     where = ", ".join(f"{f} ({n})" for f, n in touched.items())

@@ -9,7 +9,8 @@
    (world, map, odom, earth, base_link, base_footprint; a namespace prefix allowed), whose z axis points up,
    and the recording does not declare otherwise (imported frame folders do: their `world` is the data set's
    frame). The data estimate below is still made; when it finds a plane further than REP103_DISAGREE_DEG
-   from z, a warning says so (the up stays z: the name is the recording's own statement).
+   from z, a warning says so (the up stays z: the name is the recording's own statement). A declared up
+   (rule 3) is checked against the estimate the same way.
 5. "estimated-plane" / "camera": `estimate_up` from the fused surface and the camera poses.
 6. "unknown" (None) when nothing says anything.
 
@@ -214,12 +215,20 @@ def choose_up(*, option=None, init_up=None, init_source: str = "", declared=None
         return UpChoice(np.asarray(init_up, dtype=np.float64), init_source or "init", {"kept_from": "init"})
     if declared is not None and declared.frame != world:
         declared = None  # a declaration about another frame (the poses are in the first camera's, say)
-    if declared is not None and declared.up is not None:
-        return UpChoice(declared.up, "recording", {"declared_frame": declared.frame})
     pts = np.zeros((0, 3)) if points is None else points
     nrms = np.zeros((0, 3)) if normals is None else normals
     poses = np.zeros((0, 4, 4)) if camera_poses is None else camera_poses
     est, source, evidence = estimate_up(pts, nrms, poses)
+    if declared is not None and declared.up is not None:
+        choice = UpChoice(declared.up, "recording", {"declared_frame": declared.frame, "estimate": {
+            "up": None if est is None else np.round(est, 4).tolist(), "source": source}})
+        if source == "estimated-plane" and _angle_deg(est, declared.up) > REP103_DISAGREE_DEG:
+            choice.warnings.append(
+                f"the recording declares up {np.round(declared.up, 3).tolist()} for {declared.frame!r}, but the "
+                f"largest plane below the cameras points along {np.round(est, 3).tolist()}, "
+                f"{_angle_deg(est, declared.up):.0f} deg away; keeping the declared up (give {up_name} if the "
+                f"declaration is wrong, e.g. y-up given for a y-down frame)")
+        return choice
     if declared is None and world_from_tf and is_rep103_frame(world):
         z = np.array([0.0, 0.0, 1.0])
         choice = UpChoice(z, "tf-rep103", {"world_frame": world, "estimate": {"up": None if est is None else

@@ -36,10 +36,16 @@ def load_hand_trajectory(path: str | os.PathLike, hand_topic: str | None = None,
     path = Path(path)
     if path.suffix.lower() in TEXT_SUFFIXES:
         return read_polhemus(path)
+    if path.is_dir() and not (path / "metadata.yaml").exists():
+        text = next((p for s in TEXT_SUFFIXES for p in path.rglob(f"*{s}")), None)
+        if text is not None:  # a data set folder, which the ROS 2 reader would refuse as "no metadata.yaml"
+            raise TrajectoryError(f"{path}: a folder of trajectory files (such as {text.relative_to(path)}), not a "
+                                  f"recording; give one of its files (or score the folder with the evaluation)")
     with open_recording(path) as rec:
         traj = hand_trajectory_from_recording(rec, hand_topic, hand_frame, world_frame)
         if rec.problems:  # a recording cut short: what was lost goes with the trajectory
             traj.meta["recording_problems"] = list(rec.problems)
+        traj.meta["recording_span_ns"] = (rec.start_ns, rec.end_ns)  # to place the hand's stamps in the recording
         return traj
 
 

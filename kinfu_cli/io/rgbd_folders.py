@@ -398,7 +398,7 @@ def export_frames(recording: str | os.PathLike, out: str | os.PathLike, roles_kw
     with open_recording(recording) as rec:
         roles = detect_roles(rec, **(roles_kw or {}))
         total = rec.topics[roles.depth_topic].count if roles.depth_topic in rec.topics else None
-        with atomic_dir(out) as tmp:
+        with atomic_dir(out, own=("frame-*", "camera-intrinsics.txt", "frames.json")) as tmp:
             K0 = None
             frames = iter_frames(rec, roles, pose_source=pose_source, pose_topic=pose_topic,
                                  tolerance_s=tolerance_s, start_s=start_s, end_s=end_s, every=every, stats=stats)

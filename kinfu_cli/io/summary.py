@@ -15,6 +15,7 @@ from ruamel.yaml import YAML  # rosbags' own YAML library (PyYAML is not a depen
 from kinfu_cli.core.errors import TransformError
 from kinfu_cli.core.progress import progress
 from kinfu_cli.io.frames import FrameStats, cloud_depth_source, iter_frames
+from kinfu_cli.io.messages import POSE_TYPES
 from kinfu_cli.io.realsense_bag import sdk_summary
 from kinfu_cli.io.recording import Recording, open_recording
 from kinfu_cli.io.roles import Roles, detect_roles
@@ -68,7 +69,28 @@ def summarize(rec: Recording, check_frames: dict | None = None, quiet: bool = Tr
                "parent_changes": [list(c) for c in tf.parent_changes], "loops": tf.loops(), "problem": problem},
         "frames": frames,
         "problems": list(rec.problems),
+        "notes": usage_notes(rec, roles, tf),
     }
+
+
+def usage_notes(rec: Recording, roles: Roles, tf: TfBuffer) -> list[str]:
+    """What a recording without depth (poses or TF only) is still good for, naming its pose topics and moving
+    TF frames; [] when it has a depth source."""
+    if roles.depth_topic is not None:
+        return []
+    notes = ["no depth source (depth images or an organized point cloud): nothing to fuse, segment or export as "
+             "frames"]
+    poses = rec.topics_of_type(*POSE_TYPES)
+    moving = [c for c in tf.tree() if not tf.is_static(c)]
+    if poses:
+        notes.append(f"pose topics: {', '.join(poses)}")
+    if moving:
+        shown = ", ".join(sorted(moving)[:8]) + (f" (+{len(moving) - 8} more)" if len(moving) > 8 else "")
+        notes.append(f"moving TF frames: {shown}")
+    if roles.hand_topic is None and roles.hand_frame is None and (poses or moving):
+        notes.append("no hand detected by name: give one of these as the hand topic or hand frame for POIs, or as "
+                     "the pose topic or camera frame of a TUM trajectory export")
+    return notes
 
 
 def _frame_stats(rec: Recording, roles: Roles, tf: TfBuffer, frame_kwargs: dict, quiet: bool) -> dict:
@@ -136,6 +158,7 @@ def format_summary(s: dict, roles_heading: str = "roles (detected):") -> str:
         lines += _cloud_lines(s["depth_cloud"])
     if s.get("realsense"):
         lines += _realsense_lines(s["realsense"])
+    lines += [f"  note:           {n}" for n in s.get("notes", [])]
     lines.append("")
     lines += _tf_lines(s["tf"])
     if s.get("frames") is not None:

@@ -19,6 +19,7 @@ from kinfu_cli.core.errors import ConfigError, RecordingError, TrajectoryError
 from kinfu_cli.core.poses import check_poses, matrix_to_quaternion, quaternion_to_matrix
 from kinfu_cli.core.progress import progress
 from kinfu_cli.io.frames import FrameStats, iter_frames
+from kinfu_cli.io.hand import hand_trajectory_from_recording
 from kinfu_cli.io.recording import open_recording
 from kinfu_cli.io.roles import detect_roles
 
@@ -96,6 +97,9 @@ def recording_trajectory(recording: str | os.PathLike, roles_kw: dict | None = N
     stamps, poses = [], []
     with open_recording(recording) as rec:
         roles = detect_roles(rec, **(roles_kw or {}))
+        if roles.depth_topic is None:  # a pose-only recording (evo's data, a robot's odometry): its own samples
+            return _pose_stream(rec, roles, pose_source, pose_topic, start_s, end_s, every,
+                                (roles_kw or {}).get("world_frame"))
         total = rec.topics[roles.depth_topic].count if roles.depth_topic in rec.topics else None
         frames = iter_frames(rec, roles, pose_source=pose_source, pose_topic=pose_topic, tolerance_s=tolerance_s,
                              start_s=start_s, end_s=end_s, every=every, stats=stats)
@@ -108,8 +112,44 @@ def recording_trajectory(recording: str | os.PathLike, roles_kw: dict | None = N
                                  f"depth messages: {stats.depth_messages})")
         summary = {"recording": str(rec.path), "roles": roles.as_dict(), "stats": stats.as_dict(),
                    "world_frame": roles.world_frame if pose_source == "tf" else pose_topic,
-                   "warnings": rec.problems + [f"{rec.path}: {n}" for n in stats.notes]}
+                   "warnings": rec.problems + [f"{rec.path}: {n}" for n in stats.notes], "sampled_at": "depth frames"}
     return np.array(stamps, dtype=np.int64), np.array(poses), summary
+
+
+def _pose_stream(rec, roles, pose_source: str, pose_topic: str | None, start_s: float | None, end_s: float | None,
+                 every: int, world_frame: str | None) -> tuple[np.ndarray, np.ndarray, dict]:
+    """The poses of a recording without depth at their own samples: the pose topic's messages (in their own
+    frame unless `world_frame` is given), or the TF link world <- camera frame at each of its stamps (the camera
+    frame must be given: no depth image names it)."""
+    if pose_source == "topic":
+        traj = hand_trajectory_from_recording(rec, hand_topic=pose_topic, world_frame=world_frame)
+        what = f"pose topic {pose_topic}"
+    else:
+        if roles.camera_frame is None:
+            raise RecordingError(f"{rec.path}: no depth topic to take the camera frame from; give the TF frame whose "
+                                 f"poses to write, or a pose topic", parameter="camera_frame")
+        traj = hand_trajectory_from_recording(rec, hand_frame=roles.camera_frame, world_frame=roles.world_frame)
+        what = f"TF {traj.frame} <- {roles.camera_frame}"
+    stamps = traj.t0_ns + np.round(traj.t * 1e9).astype(np.int64)
+    rel = (stamps - (rec.start_ns or 0)) * 1e-9
+    if (start_s is not None or end_s is not None) and not (-1.0 <= rel[0] and rel[-1] <= rec.duration_s + 1.0):
+        raise ConfigError(f"{rec.path}: the {what} stamps run on another clock than the recording (sim time?), so "
+                          f"a window in seconds from the recording start does not apply to them", parameter="start_s")
+    keep = np.ones(len(stamps), dtype=bool)
+    if start_s is not None:
+        keep &= rel >= start_s
+    if end_s is not None:
+        keep &= rel <= end_s
+    idx = np.flatnonzero(keep)[::every]
+    if not idx.size:
+        raise RecordingError(f"{rec.path}: no {what} sample in the selected window")
+    T = np.tile(np.eye(4), (len(idx), 1, 1))
+    T[:, :3, :3] = traj.rotations[idx] if traj.rotations is not None else np.eye(3)
+    T[:, :3, 3] = traj.positions[idx]
+    summary = {"recording": str(rec.path), "roles": roles.as_dict(), "stats": {"depth_messages": 0,
+               "pose_samples": int(len(stamps)), "used": int(len(idx))}, "world_frame": traj.frame,
+               "warnings": list(rec.problems), "sampled_at": f"the samples of {what} (no depth topic)"}
+    return stamps[idx], T, summary
 
 
 def fused_trajectory(folder: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:

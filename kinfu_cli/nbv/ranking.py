@@ -185,6 +185,17 @@ class PoiRanking:
                 "views": [self.scores.view_dict(i) for i in order], **self.extra}
 
 
+def least_blocked_share(scores: ViewScores) -> float | None:
+    """The smallest share, over the valid views, of considered rays that stop on an unknown voxel outside the
+    region (unobserved space in front of it); None without a valid view. Near 1: no view can see the region
+    at all, so a small gain says nothing about how complete the region is."""
+    v = scores.valid & (scores.rays > 0)
+    if not v.any():
+        return None
+    blocked = scores.counts[v, 0] - scores.gains["unknown"][v]
+    return float(np.min(blocked / scores.rays[v]))
+
+
 def default_inc_th(scores: ViewScores, fraction: float = 0.01) -> float:
     """IncTh when not given (the paper does not state it): `fraction` of the mean number of pixels
     per valid view that can see S(POI) -- i.e. the POI is reconstructed when the best view would
@@ -199,7 +210,8 @@ def rank_poi(volume: TernaryGrid | RayVolume, center, camera: CameraModel, *, po
              inc_th: float | None = None, table_z: float | None = None, clearance: float = 0.0,
              share_rolls: bool = True, optimistic: bool = False, reject_unknown: bool = True,
              progress_cb=None, up=None) -> PoiRanking:
-    """Score the viewing sphere (or `candidates`) around one POI and apply IncTh.
+    """Score the viewing sphere (or `candidates`) around one POI and apply IncTh (a given inc_th to the chosen
+    gain; the default one, a number of rays, to the paper's unknown gain).
 
     sphere: the viewing sphere when no `candidates` are given (default: the paper's); up: the world's up
     direction (default z), which the sphere and the table height follow.
@@ -210,9 +222,13 @@ def rank_poi(volume: TernaryGrid | RayVolume, center, camera: CameraModel, *, po
                          share_rolls=share_rolls, optimistic=optimistic, reject_unknown=reject_unknown,
                          progress_cb=progress_cb, up=up)
     th = default_inc_th(scores) if inc_th is None else float(inc_th)
-    o = scores.order()
-    best = float(scores.gain[o[0]]) if o.size else 0.0
-    return PoiRanking(int(poi_id), center, float(radius), scores, th, bool(best < th))
+    # the default IncTh counts rays that would reveal unknown space in S: it judges the paper's unknown gain, whatever
+    # gain ranks the views (a rear or entropy gain on its own scale called a half-unknown POI reconstructed)
+    judged = gain if inc_th is not None else "unknown"
+    g = scores.gains[judged]
+    best = float(g[scores.valid].max()) if scores.valid.any() else 0.0
+    return PoiRanking(int(poi_id), center, float(radius), scores, th, bool(best < th),
+                      extra={"inc_th_gain": judged})
 
 
 # ---------------------------------------------------------------------------------------------

@@ -20,18 +20,22 @@ import numpy as np
 from kinfu_cli.core.camera import CameraModel
 from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError
-from kinfu_cli.core.grid import TernaryGrid, check_up
+from kinfu_cli.core.grid import OCCUPIED, TernaryGrid, check_up
 from kinfu_cli.core.poses import matrix_to_quaternion
 from kinfu_cli.core.progress import progress_bar
 from kinfu_cli.fusion.volume import load_grid
 from kinfu_cli.nbv.gains import get_gain
 from kinfu_cli.nbv.objects import W_TH, ObjectPlan, known_grid, nbv_scorer, plan_object_views_for_volume
-from kinfu_cli.nbv.ranking import (PoiRanking, check_region_inside, estimate_table_z, forget_around, load_pois,
-                                   rank_poi)
+from kinfu_cli.nbv.ranking import (PoiRanking, check_region_inside, estimate_table_z, forget_around,
+                                   least_blocked_share, load_pois, rank_poi, unknown_in_sphere)
 from kinfu_cli.nbv.raycast import RayVolume
 from kinfu_cli.nbv.viewpoints import PAPER_SPHERE, SphereSpec, read_candidates
 from kinfu_cli.segmentation.pipeline import load_segment_input
 
+# a POI is unreachable when at least this share of every valid view's rays stops on unknown space outside S(POI)
+UNREACHABLE_SHARE = 0.5
+# ... and S(POI) still holds this share of unknown voxels (a region known all but a few voxels is reconstructed)
+UNREACHABLE_UNKNOWN = 0.01
 TableZ = str | float | None  # "auto" (found in the volume), "none" / None (no table), or a height in metres
 
 
@@ -176,7 +180,32 @@ def rank_poi_views(volume_path: str | os.PathLike, pois_path: str | os.PathLike,
             bar.close()
     warnings = [rejection_warning(f"POI {r.poi_id}", r.scores.rejected(), len(r.scores.reasons), table_z, up,
                                   up_source) for r in rankings if len(r.scores.reasons) and not r.scores.valid.any()]
+    warnings += [w for r in rankings if (w := _unreachable(r, grid, opts.optimistic))]
+    warnings += [f"POI {r.poi_id}: every valid view scores 0 on the {opts.gain} gain though S(POI) is not "
+                 f"reconstructed (best unknown gain {r.scores.gains['unknown'][r.scores.valid].max():.0f} rays): the "
+                 f"order of its views says nothing; rank with the unknown gain"
+                 for r in rankings if not r.reconstructed and not r.extra.get("unreachable")
+                 and r.scores.valid.any() and r.best_gain <= 0]
     return PoiViews(str(volume_path), str(pois_path), opts, camera, grid, table_z, rankings, up, up_source, warnings)
+
+
+def _unreachable(r: PoiRanking, grid: TernaryGrid, optimistic: bool) -> str:
+    """Mark a POI whose region no valid view can see (every view's rays mostly stop on unobserved space before
+    S(POI)) while S(POI) still holds unknown voxels (UNREACHABLE_UNKNOWN of it): the paper's IncTh test would
+    call it reconstructed, but its small gain only says the way there was never observed. Such a POI is
+    `unreachable` and not reconstructed; returns its warning ("" otherwise)."""
+    share = None if optimistic else least_blocked_share(r.scores)
+    unknown = unknown_in_sphere(grid, r.center, r.radius)
+    s_voxels = 4.0 / 3.0 * np.pi * (r.radius / grid.voxel_size) ** 3
+    r.extra["unreachable"] = bool(share is not None and share >= UNREACHABLE_SHARE
+                                  and unknown >= UNREACHABLE_UNKNOWN * s_voxels and r.reconstructed)
+    if not r.extra["unreachable"]:
+        return ""
+    r.reconstructed = False
+    return (f"POI {r.poi_id}: no candidate view sees S(POI): at least {100 * share:.0f} % of every valid view's rays "
+            f"stop on unobserved space before it, and it holds {unknown} unknown voxels; not reconstructed but "
+            f"unreachable with this volume (too few frames, or the scan never looked there; the optimistic "
+            f"planner lets rays pass unknown space)")
 
 
 @dataclass
@@ -232,7 +261,11 @@ def rank_object_views(volume_path: str | os.PathLike, camera: CameraModel, *, ga
     rejected = {k: v for k, v in tally.items() if k not in ("views", "valid")}
     empty = None
     if plan.pose is None:
-        if plan.candidates_total == 0:
+        if plan.candidates_total == 0 and weights is not None and not np.any(known.labels == OCCUPIED):
+            empty = (f"no candidate views: the volume has no contour point, as no occupied voxel was observed the "
+                     f"W_th = {W_TH:g} times the planner needs to count it as known (a volume fused from fewer "
+                     f"frames?)")
+        elif plan.candidates_total == 0:
             empty = "no candidate views: the volume has no contour point (observed surface next to unknown space)"
         elif plan.candidates_evaluated == 0:
             empty = (f"no candidate views near a segment: {plan.candidates_total} candidates at the contours, "

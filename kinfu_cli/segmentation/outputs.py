@@ -14,6 +14,11 @@ from kinfu_cli.segmentation.pipeline import SegmentResult
 from kinfu_cli.segmentation.saliency import SegmentSaliency
 from kinfu_cli.segmentation.segments import PLANE_LABEL
 
+# every entry `kinfu segment` may write in its output folder (with --grasp and --plot): the rest of a shared folder
+# (another command's outputs) is left alone when it writes there again
+SEGMENT_ENTRIES = ("segments.json", "segments.ply", "saliency.ply", "grasps.json", "segments.png", "saliency.png",
+                   "colors.png")
+
 
 def segment_colors(labels: np.ndarray) -> np.ndarray:
     """A distinct colour per segment (support plane grey, dropped points black)."""

@@ -480,7 +480,10 @@ class GroundTruth:
         """The true scene mesh, state "before" or "after" (open3d TriangleMesh with vertex colours)."""
         if state not in ("before", "after"):
             raise ConfigError(f"ground-truth state {state!r}: expected before or after")
-        return _read_mesh(self.folder / f"scene_{state}.ply")
+        path = self.folder / f"scene_{state}.ply"
+        if not path.exists() and (self.folder / "scene.ply").exists():
+            path = self.folder / "scene.ply"  # a static scene (the room): one mesh for both states
+        return _read_mesh(path)
 
     def object_meshes(self) -> dict:
         """{id: TriangleMesh} of the after state, including "table" and "floor"."""

@@ -81,8 +81,9 @@ def synthesize(out: str | os.PathLike, seed: int = 0, width: int = 320, height: 
         raise ConfigError(f"the tabletop scene is z-up only, got {world!r}; the room scene takes either world",
                           parameter="world")
     # one transaction: a failed or interrupted run leaves no folder (nor an empty one that blocks the rerun), and
-    # a rerun replaces the whole earlier result instead of mixing old and new files
-    with atomic_dir(out) as tmp:
+    # a rerun replaces the whole earlier result instead of mixing old and new files (what other commands wrote
+    # there, such as pois.json or a fuse/ folder beside the recording, stays)
+    with atomic_dir(out, own=(*FORMAT_NAMES.values(), "ground_truth")) as tmp:
         result = _write(tmp, seed=seed, width=width, height=height, frames=frames, formats=formats,
                         scenario=scenario, n_objects=n_objects, hand_rate=hand_rate, frame_rate=frame_rate,
                         noise=noise, depth_format=depth_format, color_format=color_format, jpeg_quality=jpeg_quality,

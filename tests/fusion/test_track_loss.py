@@ -169,8 +169,8 @@ def test_auto_size_keeps_the_kitchen_a_3m_grid_cuts(kitchen, tmp_path):
     assert not any(ra["grid"]["face_contacts"].values())
     # the auto grid holds the 3 m grid's occupied box and goes on beyond each face the 3 m grid touched
     fb, ab = rf["bounding_box"]["occupied"], ra["bounding_box"]["occupied"]
-    for axis, name in enumerate("xyz"):
-        assert ab["min"][axis] <= fb["min"][axis] + VOXEL and ab["max"][axis] >= fb["max"][axis] - VOXEL
+    for axis, name in enumerate("xyz"):  # within a voxel and a half: the two grids sample the surface at other phases
+        assert ab["min"][axis] <= fb["min"][axis] + 1.5 * VOXEL and ab["max"][axis] >= fb["max"][axis] - 1.5 * VOXEL
         if f"{name}-" in touched:
             assert ab["min"][axis] < fb["min"][axis] - VOXEL
         if f"{name}+" in touched:
