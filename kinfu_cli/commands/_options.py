@@ -14,7 +14,7 @@ from pathlib import Path
 import click
 from click.core import ParameterSource
 
-from kinfu_cli.core.errors import KinfuError
+from kinfu_cli.core.errors import KinfuError, VolumeError
 from kinfu_cli.core.ownership import claim_output
 
 PARAMETER_FLAGS: dict[str, str] = {
@@ -52,6 +52,19 @@ def given_options(ctx: click.Context, flags: Iterable[str]) -> list[str]:
                 and ctx.get_parameter_source(p.name) not in (None, ParameterSource.DEFAULT)):
             given.append("/".join(long + list(p.secondary_opts)))
     return given
+
+
+def volume_file(path: Path) -> Path:
+    """A volume argument: the file itself, or a `kinfu fuse` output folder's volume.npz (its ternary.npz when it
+    holds only that), as grasp takes a segment folder for its segments.json."""
+    path = Path(path)
+    if not path.is_dir():
+        return path
+    for name in ("volume.npz", "ternary.npz"):
+        if (path / name).is_file():
+            return path / name
+    raise VolumeError(f"{path}: a folder without volume.npz or ternary.npz; expected a volume file or a kinfu fuse "
+                      f"output folder")
 
 
 def force_option(func):

@@ -9,7 +9,7 @@ import click
 
 from kinfu_cli.change.diff import DEFAULT_MIN_VOXELS, ChangeParams, diff_volumes
 from kinfu_cli.change.outputs import CHANGE_ENTRIES, write_change_outputs
-from kinfu_cli.commands._options import claim_outputs, force_option
+from kinfu_cli.commands._options import claim_outputs, force_option, volume_file
 from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.core.atomic import atomic_dir
 from kinfu_cli.core.errors import ConfigError
@@ -55,8 +55,8 @@ def check_options(params: dict) -> None:
 
 
 @click.command("diff", short_help="Removed / added regions between two volumes of one place; POIs scored on them.")
-@click.argument("before", type=click.Path(dir_okay=False, path_type=Path))
-@click.argument("after", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("before", type=click.Path(path_type=Path))
+@click.argument("after", type=click.Path(path_type=Path))
 @click.option("-o", "--output", "outdir", type=click.Path(file_okay=False, path_type=Path), default=Path("diff"),
               show_default=True, help="Output folder.")
 @click.option("--pois", "pois_path", default=None, type=click.Path(dir_okay=False, path_type=Path),
@@ -88,6 +88,7 @@ def command(before: Path, after: Path, outdir: Path, pois_path, match_radius, ma
       kinfu diff out/scan/volume.npz out/fuse/volume.npz -o out/diff --pois out/pois.json
       kinfu diff before/ternary.npz after/ternary.npz --min-volume 5e-5 --json --quiet
     """
+    before, after = volume_file(before), volume_file(after)
     claim_outputs({"outdir": outdir}, [before, after, pois_path], force)
     params = change_params(click.get_current_context().params)
     pois = read_pois(pois_path) if pois_path is not None else None  # a bad POI file fails before any work

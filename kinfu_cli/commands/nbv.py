@@ -8,7 +8,7 @@ from pathlib import Path
 
 import click
 
-from kinfu_cli.commands._options import claim_outputs, force_option
+from kinfu_cli.commands._options import claim_outputs, force_option, volume_file
 from kinfu_cli.commands._output import emit
 from kinfu_cli.commands._up import parse_up
 from kinfu_cli.core.camera import CameraModel
@@ -194,6 +194,7 @@ def command(volume, pois_path, mode, clear, gain, top, output, plot, candidates,
       kinfu nbv volume.npz --pois pois.json --gain entropy --top 5 --json
       kinfu nbv volume.npz --mode objects -o views.json
     """
+    volume = volume_file(volume)
     claim_outputs({"output": output, "plot": plot, "viz": viz}, [volume, pois_path, candidates, camera_info], force)
     t0 = time.perf_counter()
     recorded = volume_intrinsics(volume) if Path(volume).is_file() else None

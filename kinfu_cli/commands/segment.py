@@ -13,7 +13,7 @@ from pathlib import Path
 import click
 from click.core import ParameterSource
 
-from kinfu_cli.commands._options import claim_outputs, force_option
+from kinfu_cli.commands._options import claim_outputs, force_option, volume_file
 from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.commands._up import parse_up
 from kinfu_cli.core.atomic import atomic_dir, write_json
@@ -106,7 +106,7 @@ def check_options(params: dict) -> None:
 
 
 @click.command("segment", short_help="Segments, saliency and superquadrics of a fused volume.")
-@click.argument("volume", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("volume", type=click.Path(path_type=Path))
 @click.option("-o", "--output", "outdir", type=click.Path(file_okay=False, path_type=Path), default=Path("segments"),
               show_default=True, help="Output folder.")
 @click.option("--resolution", type=float, default=0.01, show_default=True, help="Surface cloud spacing (m).")
@@ -202,6 +202,7 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
       kinfu segment out/fuse/ternary.npz --isolation-threshold 0.01 --json --quiet
       kinfu segment out/fuse/volume.npz -o out/segments --grasp --grasp-hand right --grasp-cone top
     """
+    volume = volume_file(volume)
     claim_outputs({"outdir": outdir, "viz": viz}, [volume], force)
     ctx = click.get_current_context()
     given = tuple(f.name for f in fields(SegmentationParams)
