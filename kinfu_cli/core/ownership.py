@@ -58,6 +58,9 @@ def _write_manifest(folder: Path, files: dict[str, dict]) -> None:
     tmp = None
     try:
         fd, tmp = tempfile.mkstemp(prefix=f"{MANIFEST}.", suffix=".part", dir=folder)
+        mask = os.umask(0)
+        os.umask(mask)
+        os.chmod(tmp, 0o666 & ~mask)  # mkstemp makes 0600: a colleague's run could not tell kinfu's files apart
         with os.fdopen(fd, "w") as fh:
             json.dump({"written_by": "kinfu", "files": files}, fh, indent=1, sort_keys=True)
         os.replace(tmp, folder / MANIFEST)

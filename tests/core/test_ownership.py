@@ -117,3 +117,14 @@ def test_a_users_file_inside_a_kinfu_subfolder_survives_a_rerun_and_stale_output
             (d / "regions").mkdir()
             np.save(d / "regions" / "0.npy", np.ones(2))
     assert (out / "regions" / "0.npy").read_text().startswith("the user's")
+
+
+def test_the_manifest_has_the_outputs_mode(tmp_path):
+    """The manifest was 0600 (mkstemp's mode) beside 0644 outputs: a colleague's run, able to read the outputs,
+    could not read the record and took them for a user's files."""
+    mask = os.umask(0o022)
+    try:
+        out = write_json(tmp_path / "a.json", {"x": 1})
+    finally:
+        os.umask(mask)
+    assert (out.stat().st_mode & 0o777) == ((tmp_path / MANIFEST).stat().st_mode & 0o777) == 0o644
