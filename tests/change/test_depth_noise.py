@@ -92,3 +92,14 @@ def test_empty_within_is_empty_all_around_with_each_voxels_own_margin():
     assert np.array_equal(empty_within(lab, idx, margins), want)
     one = empty_all_around(lab, idx, 1)
     assert np.array_equal(empty_within(lab, idx[one], np.maximum(margins[one], 1), start=1), want[one])
+
+
+def test_bad_noise_sigmas_is_a_one_line_error_naming_the_option(tmp_path):
+    from click.testing import CliRunner
+
+    from kinfu_cli.cli import cli
+
+    before, after = _pair(tmp_path, trajectories=True)
+    res = CliRunner().invoke(cli, ["diff", str(before), str(after), "-o", str(tmp_path / "d"), "--noise-sigmas", "-1"])
+    assert res.exit_code == 2 and "--noise-sigmas" in res.output and "Traceback" not in res.output
+    assert not (tmp_path / "d").exists()
