@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from kinfu_cli.change.align import AlignedPair, align
+from kinfu_cli.change.noise import MODEL, NOISE_SIGMAS, noise_margins, read_cameras
 from kinfu_cli.change.regions import KINDS, ChangeMasks, Region, find_changes
 from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import VolumeError
@@ -32,10 +33,13 @@ MIN_OVERLAP = 0.5
 @dataclass
 class ChangeParams:
     """margin: free-space erosion in voxels (pose noise tolerated); min_volume: smallest region kept, m^3 (None:
-    DEFAULT_MIN_VOXELS voxels)."""
+    DEFAULT_MIN_VOXELS voxels); noise_sigmas: the margin also grows to this many standard deviations of the
+    depth noise at each voxel's distance from the cameras (change/noise.py; 0: off, and off when no camera
+    positions are known)."""
 
     margin: int = 1
     min_volume: float | None = None
+    noise_sigmas: float = NOISE_SIGMAS
 
     def min_voxels(self, voxel_size: float) -> int:
         if self.min_volume is None:
@@ -46,6 +50,7 @@ class ChangeParams:
         check_number(self.margin, "margin", 0, 10, integer=True)
         if self.min_volume is not None:
             check_number(self.min_volume, "min_volume", 0, 1e3, unit="m^3")
+        check_number(self.noise_sigmas, "noise_sigmas", 0, 10)
 
 
 @dataclass
@@ -87,6 +92,7 @@ class ChangeResult:
     min_voxels: int
     warnings: list[str] = field(default_factory=list)
     pois: dict | None = None  # filled by evaluation.changes.score_change_pois
+    cameras: dict[str, int] | None = None  # camera positions used for the depth-noise margin, per volume
 
     def count(self, kind: str) -> int:
         return sum(1 for r in self.regions if r.kind == kind)
@@ -101,9 +107,12 @@ class ChangeResult:
             "overlap": {"fraction": round(p.overlap, 4), "observed_before": p.observed_before,
                         "observed_after": p.observed_after, "observed_both": p.observed_both},
             "parameters": {"margin_voxels": self.params.margin, "min_volume_m3": self.min_voxels * p.voxel_size ** 3,
-                           "min_voxels": self.min_voxels, "connectivity": 26},
+                           "min_voxels": self.min_voxels, "connectivity": 26,
+                           "depth_noise": None if self.cameras is None else {
+                               "model": MODEL, "sigmas": self.params.noise_sigmas, "cameras": self.cameras}},
             "counts": {"changed_voxels": m.raw, "after_erosion": m.kept, "unknown_ignored": m.unknown_ignored,
                        "unknown_hidden_blobs": m.hidden,
+                       "within_depth_noise": m.within_noise,
                        "dropped_small_regions": m.dropped_regions, "dropped_small_voxels": m.dropped_voxels,
                        "regions": {k: self.count(k) for k in KINDS},
                        "region_voxels": {k: sum(len(r.points) for r in self.regions if r.kind == k) for k in KINDS}},
@@ -144,17 +153,27 @@ def _warnings(before: TernaryGrid, after: TernaryGrid, names: tuple[str, str], p
 
 
 def diff_grids(before: TernaryGrid, after: TernaryGrid, params: ChangeParams | None = None,
-               names: tuple[str, str] = ("before", "after")) -> ChangeResult:
-    """The change regions from `before` to `after` (grids of one place, one voxel size)."""
+               names: tuple[str, str] = ("before", "after"),
+               cameras: tuple[np.ndarray | None, np.ndarray | None] = (None, None)) -> ChangeResult:
+    """The change regions from `before` to `after` (grids of one place, one voxel size); cameras: the camera
+    positions (M, 3) each was fused from, for the depth-noise margin (one stands for both; none: fixed margin)."""
     params = params or ChangeParams()
     params.check()
     pair = align(before, after, *names)
     min_voxels = params.min_voxels(pair.voxel_size)
-    masks = find_changes(pair.before, pair.after, margin=params.margin, min_voxels=min_voxels)
+    cam_b = cameras[0] if cameras[0] is not None else cameras[1]
+    cam_a = cameras[1] if cameras[1] is not None else cameras[0]
+    margin_of = None
+    if cam_b is not None and params.noise_sigmas > 0:
+        def margin_of(idx):
+            return noise_margins(pair.centers(idx), cam_b, cam_a, params.noise_sigmas, pair.voxel_size)
+    masks = find_changes(pair.before, pair.after, margin=params.margin, min_voxels=min_voxels, margin_of=margin_of)
     regions = [ChangeRegion(i, r.kind, pair.centers(r.voxels), pair.voxel_size) for i, r in enumerate(masks.regions)]
     warnings = _warnings(before, after, names, pair, masks, len(regions), min_voxels)
+    used = None if margin_of is None else {
+        "before": 0 if cameras[0] is None else len(cameras[0]), "after": 0 if cameras[1] is None else len(cameras[1])}
     return ChangeResult(names[0], names[1], before.frame or after.frame, pair, masks, regions, params, min_voxels,
-                        warnings)
+                        warnings, cameras=used)
 
 
 def diff_volumes(before: str | os.PathLike, after: str | os.PathLike,
@@ -162,7 +181,12 @@ def diff_volumes(before: str | os.PathLike, after: str | os.PathLike,
     """`diff_grids` on two files (ternary.npz or volume.npz); VolumeError naming the file for a missing or
     foreign file."""
     (params or ChangeParams()).check()  # bad parameters fail before any file is read
-    return diff_grids(_load(before), _load(after), params, (str(Path(before)), str(Path(after))))
+    cams = [read_cameras(p) for p in (before, after)]
+    result = diff_grids(_load(before), _load(after), params, (str(Path(before)), str(Path(after))),
+                        (cams[0][0], cams[1][0]))
+    result.warnings += [f"{why}; the depth-noise margin uses the other volume's cameras or none" for _, why in cams
+                        if why]
+    return result
 
 
 def _load(path: str | os.PathLike) -> TernaryGrid:

@@ -14,12 +14,17 @@ change must lie at least `margin` voxels from every surface of the other volume,
 than three voxels, and the occupied band a TSDF keeps behind a surface (truncation / voxel size voxels, often
 2-3) is exactly that thin, so a real removed object would vanish with the noise.
 
+Depth noise (change/noise.py): far from the cameras two fusions of one surface disagree by more than pose noise;
+with `margin_of`, a voxel must also be empty all around within its own margin (`empty_within`), and the voxels
+that pass the fixed margin but not their own are counted (`within_noise`).
+
 Regions: 26-connected components of each kind (what scipy.ndimage.label gives with a 3x3x3 structure); components smaller than `min_voxels`
 are dropped as noise (counted).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -51,6 +56,7 @@ class ChangeMasks:
     regions: list[Region]
     dropped_regions: int
     dropped_voxels: int
+    within_noise: dict[str, int] | None = None  # voxels past the fixed margin but within their depth-noise margin
 
 
 def empty_all_around(labels: np.ndarray, idx: np.ndarray, margin: int, label=EMPTY) -> np.ndarray:
@@ -73,6 +79,38 @@ def empty_all_around(labels: np.ndarray, idx: np.ndarray, margin: int, label=EMP
     return ok
 
 
+def _shell(m: int) -> np.ndarray:
+    """Offsets at Chebyshev distance exactly m (the surface of the (2m+1)^3 cube)."""
+    r = np.arange(-m, m + 1)
+    offs = np.array(np.meshgrid(r, r, r, indexing="ij")).reshape(3, -1).T
+    return offs[np.abs(offs).max(axis=1) == m]
+
+
+def empty_within(labels: np.ndarray, idx: np.ndarray, margins: np.ndarray, start: int = 0,
+                 label=EMPTY) -> np.ndarray:
+    """(N,) bool: `empty_all_around(labels, idx[i], margins[i])` for each voxel, its own margin each, checking
+    shell after shell (Chebyshev distance start+1, start+2, ...) on the voxels still in question; `start`: the
+    margin already known to hold for all of them."""
+    idx = np.asarray(idx, dtype=np.int64).reshape(-1, 3)
+    margins = np.asarray(margins, dtype=np.int64).reshape(-1)
+    shape = np.array(labels.shape, dtype=np.int64)
+    ok = np.ones(len(idx), dtype=bool)
+    if start == 0:
+        ok = labels[tuple(idx.T)] == label if len(idx) else ok
+    for m in range(start + 1, int(margins.max(initial=0)) + 1):
+        ask = np.flatnonzero(ok & (margins >= m))
+        if ask.size == 0:
+            break
+        q0, good = idx[ask], np.ones(len(ask), dtype=bool)
+        for off in _shell(m):
+            q = q0 + off
+            inside = np.all((q >= 0) & (q < shape), axis=1)
+            qc = np.clip(q, 0, shape - 1)
+            good &= inside & (labels[qc[:, 0], qc[:, 1], qc[:, 2]] == label)
+        ok[ask] = good
+    return ok
+
+
 def components(idx: np.ndarray) -> list[np.ndarray]:
     """26-connected components of voxel indices (N, 3), as index arrays.
 
@@ -90,8 +128,10 @@ def components(idx: np.ndarray) -> list[np.ndarray]:
     return np.split(idx[order], np.cumsum(np.bincount(lab, minlength=n))[:-1])
 
 
-def find_changes(before: np.ndarray, after: np.ndarray, margin: int = 1, min_voxels: int = 1) -> ChangeMasks:
-    """Removed and added regions between two label arrays of one shape (see the module docstring)."""
+def find_changes(before: np.ndarray, after: np.ndarray, margin: int = 1, min_voxels: int = 1,
+                 margin_of: Callable[[np.ndarray], np.ndarray] | None = None) -> ChangeMasks:
+    """Removed and added regions between two label arrays of one shape (see the module docstring); margin_of:
+    voxel indices (N, 3) -> (N,) margins in voxels for the depth noise there (None: `margin` everywhere)."""
     raw_masks = {"removed": (before == OCCUPIED) & (after == EMPTY), "added": (before == EMPTY) & (after == OCCUPIED)}
     raw = {k: int(np.count_nonzero(m)) for k, m in raw_masks.items()}
     unknown, hidden = {}, {}
@@ -102,11 +142,16 @@ def find_changes(before: np.ndarray, after: np.ndarray, margin: int = 1, min_vox
         hidden[key] = sum(len(c) for c in components(idx[empty_all_around(other, idx, margin, UNKNOWN)])
                           if len(c) >= min_voxels)
     kept = {k: 0 for k in KINDS}
+    within_noise = None if margin_of is None else {k: 0 for k in KINDS}
     regions: list[Region] = []
     dropped_regions = dropped_voxels = 0
     for kind, other in (("removed", after), ("added", before)):
         idx = np.argwhere(raw_masks[kind])
         idx = idx[empty_all_around(other, idx, margin)]
+        if margin_of is not None and len(idx):
+            n = len(idx)
+            idx = idx[empty_within(other, idx, np.maximum(margin_of(idx), margin), start=margin)]
+            within_noise[kind] = n - len(idx)
         kept[kind] = len(idx)
         for vox in components(idx):
             if len(vox) >= min_voxels:
@@ -115,4 +160,4 @@ def find_changes(before: np.ndarray, after: np.ndarray, margin: int = 1, min_vox
                 dropped_regions += 1
                 dropped_voxels += len(vox)
     regions.sort(key=lambda r: (-len(r.voxels), KINDS.index(r.kind), tuple(r.voxels.min(axis=0))))
-    return ChangeMasks(raw, kept, unknown, hidden, regions, dropped_regions, dropped_voxels)
+    return ChangeMasks(raw, kept, unknown, hidden, regions, dropped_regions, dropped_voxels, within_noise)

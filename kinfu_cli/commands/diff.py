@@ -8,6 +8,7 @@ from pathlib import Path
 import click
 
 from kinfu_cli.change.diff import DEFAULT_MIN_VOXELS, ChangeParams, diff_volumes
+from kinfu_cli.change.noise import NOISE_SIGMAS
 from kinfu_cli.change.outputs import CHANGE_ENTRIES, write_change_outputs
 from kinfu_cli.commands._options import claim_outputs, force_option, volume_file
 from kinfu_cli.commands._output import print_warnings
@@ -41,7 +42,7 @@ def _lines(doc: dict, outdir: Path) -> list[str]:
 def change_params(p: dict) -> ChangeParams:
     """ChangeParams from the command's parsed options (click's parameter dict), checked with --match-radius: the
     one place that turns diff's options into library parameters, for the command and for `check_options`."""
-    params = ChangeParams(margin=p["margin"], min_volume=p["min_volume"])
+    params = ChangeParams(margin=p["margin"], min_volume=p["min_volume"], noise_sigmas=p["noise_sigmas"])
     params.check()
     if not p["match_radius"] > 0:
         raise ConfigError(f"--match-radius: expected a positive distance in metres, got {p['match_radius']}")
@@ -65,16 +66,21 @@ def check_options(params: dict) -> None:
               help="A POI within this distance (m) of a change's nearest voxel is a true positive (paper: 0.20).")
 @click.option("--margin", type=int, default=1, show_default=True,
               help="Pose noise tolerated, voxels: a change must lie this far from every surface of the other volume.")
+@click.option("--noise-sigmas", type=float, default=NOISE_SIGMAS, show_default=True,
+              help="Depth noise tolerated: a change must also lie this many standard deviations of the sensor's "
+                   "depth noise (at its distance from the cameras in the trajectory.tum beside each volume) from "
+                   "the other volume's surfaces; 0: only --margin.")
 @click.option("--min-volume", type=float, default=None,
               help=f"Smallest region kept (m^3) [default: {DEFAULT_MIN_VOXELS} voxels, a 3x3x3 block].")
 @force_option
 @click.option("--json", "as_json", is_flag=True, help="Print changes.json to stdout.")
 @click.option("--quiet", is_flag=True, help="No progress output.")
-def command(before: Path, after: Path, outdir: Path, pois_path, match_radius, margin, min_volume, force, as_json,
-            quiet) -> None:
+def command(before: Path, after: Path, outdir: Path, pois_path, match_radius, margin, noise_sigmas, min_volume, force,
+            as_json, quiet) -> None:
     """Compare BEFORE and AFTER (volume.npz or ternary.npz from `kinfu fuse`, same world frame and voxel size):
     removed = occupied before and empty after, added = the reverse. Voxels unknown in either are ignored (and
-    counted); a change must be --margin voxels away from every surface of the other volume (pose noise);
+    counted); a change must be --margin voxels away from every surface of the other volume (pose noise), and
+    farther where the depth noise at its distance from the cameras (trajectory.tum beside the volumes) is larger;
     26-connected changed voxels form a region, regions smaller than --min-volume are dropped. Grids with
     different origins or shapes are compared on their common box (nearest voxel).
 
