@@ -14,7 +14,8 @@ cast: the ray walk, which also adds each ray to its views' sums; accumulate: the
 wall and CPU, and the rays cast and the empty-block skips, voxel-level skips in mixed blocks and
 single-voxel steps per ray are counted.
 --objects N: also the object-driven candidates (`kinfu nbv --mode objects`, thesis ch. 3): 5 directions x 8 rolls
-at N contour points around the POI, a region of 0.3 m; every roll group has its own geometry, so one lattice
+at N contour points around the POI, a region of 0.55 m (a segment's bounding radius plus the 0.2 m margin: the
+images see it whole, as on the box volume); every roll group has its own geometry, so one lattice
 template per group (the case whose template building dominated). Timed against the same reference, with the
 system CPU seconds and minor page faults of the fast path (the cost of big per-batch temporaries).
 Run: `.venv/bin/python benchmarks/bench_nbv.py [--size 512] [--ref-views 8] [--exact] [--objects 24]`.
@@ -217,7 +218,7 @@ def objects_vs_reference(vol: RayVolume, cam: CameraModel, poi: np.ndarray, n_po
     phi = k * np.pi * (3.0 - np.sqrt(5.0))
     n = np.stack([np.sqrt(1 - z * z) * np.cos(phi), np.sqrt(1 - z * z) * np.sin(phi), z], axis=1)
     poses, _ = contour_viewpoints(poi + 0.12 * n, n)
-    radius = 0.3
+    radius = 0.55
     r0, t0, c0 = resource.getrusage(resource.RUSAGE_SELF), time.perf_counter(), time.process_time()
     fast = cast_views(vol, poses, cam, poi, radius)
     t_fast, c_fast, r1 = time.perf_counter() - t0, time.process_time() - c0, resource.getrusage(resource.RUSAGE_SELF)
