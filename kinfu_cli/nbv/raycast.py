@@ -598,10 +598,13 @@ def _mark_templates(tlat, loff, tcb, tcheck, fx, fy, cx, cy, r2, lut, tcount):
 
 
 @njit(cache=True, parallel=True)
-def _fill_templates(tlat, loff, lut, tcount, toff, tview, vtmpl, woff, Ms, win, fx, fy, cx, cy, tcell, W, npix):
+def _fill_templates(tlat, loff, lut, tcount, toff, tview, vtmpl, woff, Ms, win, fx, fy, cx, cy, tcell, W, cap,
+                    npix):
     """Per template: the lattice cell of each local ray (`tcell`) and, per view k of the template, how
     many of its pixels (inside its window) have that ray as nearest lattice ray (W[woff + ray * K + k]),
-    and npix[m]: view m's pixels that have a nearest ray (the sum of its column of W). Parallel over views (a pole position holds 96 of them), each writing its own column of W."""
+    and npix[m]: view m's pixels that have a nearest ray (the sum of its column of W), or -1 when a weight would
+    pass `cap` (W's dtype holds whole numbers up to it; the caller then builds again in float32). Parallel over
+    views (a pole position holds 96 of them), each writing its own column of W."""
     for t in prange(tlat.shape[0]):
         LW, LH = tlat[t, 2], tlat[t, 3]
         for c in range(LW * LH):
@@ -616,6 +619,7 @@ def _fill_templates(tlat, loff, lut, tcount, toff, tview, vtmpl, woff, Ms, win, 
         M = Ms[m]
         du0, du1, du2 = M[0, 0] / fx, M[1, 0] / fx, M[2, 0] / fx  # change of the ray per pixel along u
         cnt = 0
+        over = False
         for vv in range(win[m, 1], win[m, 3] + 1):
             y = (vv - cy) / fy
             x = (win[m, 0] - cx) / fx
@@ -632,12 +636,16 @@ def _fill_templates(tlat, loff, lut, tcount, toff, tview, vtmpl, woff, Ms, win, 
                     if lu >= 0 and lv >= 0 and lu < LW and lv < LH:
                         r = lut[loff[t] + lv * LW + lu]
                         if r >= 0:
-                            W[woff[t] + r * K + k] += 1.0
+                            wi = woff[t] + r * K + k
+                            if W[wi] >= cap:
+                                over = True
+                            else:
+                                W[wi] += 1
                             cnt += 1
                 dx += du0
                 dy += du1
                 dz += du2
-        npix[m] = cnt
+        npix[m] = -1 if over else cnt
 
 
 @njit(cache=True, parallel=True)
@@ -1097,13 +1105,19 @@ def _build_templates(cam, r_ext, groups: list[_Group]) -> tuple[list[dict], dict
     wsize = tcount * K
     woff = np.concatenate([[0], np.cumsum(wsize)[:-1]]).astype(np.int64)
     tcell = np.empty(int(tcount.sum()), np.int32)
-    W = np.zeros(int(wsize.sum()), np.float32)
     npix = np.zeros(int(K.sum()), np.int64)
     vtmpl = np.repeat(np.arange(len(groups), dtype=np.int64), K)
-    _fill_templates(tlat, loff, lut, tcount, toff, tview, vtmpl, woff,
-                    np.ascontiguousarray(np.concatenate([g.Ms for g in groups])),
-                    np.ascontiguousarray(np.concatenate([g.win for g in groups])), cam.fx, cam.fy, cam.cx, cam.cy,
-                    tcell, W, npix)
+    Ms = np.ascontiguousarray(np.concatenate([g.Ms for g in groups]))
+    wins = np.ascontiguousarray(np.concatenate([g.win for g in groups]))
+    # the weights are small whole numbers (pixels of one view nearest to one lattice ray: 1 or 2 for a roll),
+    # exact in uint8 and read as the same float64 by the caster: a quarter of float32's memory, which every
+    # batch maps and zeroes afresh (the kernel's system time); float32 again if one would pass 255
+    for dt, cap in ((np.uint8, 255.0), (np.float32, np.inf)):
+        W = np.zeros(int(wsize.sum()), dt)
+        _fill_templates(tlat, loff, lut, tcount, toff, tview, vtmpl, woff, Ms, wins, cam.fx, cam.fy, cam.cx, cam.cy,
+                        tcell, W, cap, npix)
+        if not (npix < 0).any():
+            break
     del lut
     d = np.empty((len(tcell), 3))
     _template_dirs(tlat, toff, tcount, tcell, float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy), d)
