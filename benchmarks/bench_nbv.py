@@ -13,7 +13,12 @@ The fast path's time is split into phases (setup: groups and pixel windows; mark
 cast: the ray walk, which also adds each ray to its views' sums; accumulate: the lanes' sums added up),
 wall and CPU, and the rays cast and the empty-block skips, voxel-level skips in mixed blocks and
 single-voxel steps per ray are counted.
-Run: `.venv/bin/python benchmarks/bench_nbv.py [--size 512] [--ref-views 8] [--exact]`.
+--objects N: also the object-driven candidates (`kinfu nbv --mode objects`, thesis ch. 3): 5 directions x 8 rolls
+at N contour points around the POI, a region of 0.55 m (a segment's bounding radius plus the 0.2 m margin: the
+images see it whole, as on the box volume); every roll group has its own geometry, so one lattice
+template per group (the case whose template building dominated). Timed against the same reference, with the
+system CPU seconds and minor page faults of the fast path (the cost of big per-batch temporaries).
+Run: `.venv/bin/python benchmarks/bench_nbv.py [--size 512] [--ref-views 8] [--exact] [--objects 24]`.
 """
 
 from __future__ import annotations
@@ -32,6 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from kinfu_cli.core.grid import EMPTY, OCCUPIED, UNKNOWN, TernaryGrid  # noqa: E402
 from kinfu_cli.core.camera import KINECT_V1, CameraModel  # noqa: E402
 from kinfu_cli.nbv.raycast import RayVolume, cast_views  # noqa: E402
+from kinfu_cli.nbv.objects import contour_viewpoints  # noqa: E402
 from kinfu_cli.nbv.ranking import forget_around  # noqa: E402
 from kinfu_cli.nbv.reference import reference_views  # noqa: E402
 from kinfu_cli.nbv.viewpoints import sphere_viewpoints  # noqa: E402
@@ -84,6 +90,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--gain-through", action="store_true", help="also time the through-unknown gains")
     ap.add_argument("--exact", action="store_true", help="also time exact per-view rays (no roll sharing)")
     ap.add_argument("--full", action="store_true", help="also time exact rays over the full images (slow)")
+    ap.add_argument("--objects", type=int, default=0,
+                    help="also time object-driven candidates at this many contour points (default 0: no)")
     ap.add_argument("--repeat", type=int, default=2, help="fast-path runs; the best is reported (default 2)")
     ap.add_argument("--json", type=Path, default=None, help="write the numbers to this JSON file")
     a = ap.parse_args(argv)
@@ -187,6 +195,8 @@ def main(argv: list[str] | None = None) -> int:
         res.update(fast_full_image_s=round(t_full, 3), rays_cast_full=int(full.rays_cast),
                    speedup_full_image_vs_reference=round(t_ref / t_full, 1),
                    max_rel_gain_err_full_image=round(rel_err(full.terms), 5))
+    if a.objects:
+        res.update(objects_vs_reference(vol, cam, poi, a.objects, a.ref_views))
     if a.gain_through:
         _, t_thr = timed(through=True)
         res["fast_shared_rolls_through_s"] = round(t_thr, 3)
@@ -195,6 +205,40 @@ def main(argv: list[str] | None = None) -> int:
     if a.json:
         a.json.write_text(json.dumps(res, indent=2) + "\n")
     return 0
+
+
+def objects_vs_reference(vol: RayVolume, cam: CameraModel, poi: np.ndarray, n_points: int, ref_views: int) -> dict:
+    """Object-driven candidates (contour points on a 0.12 m sphere about the POI, upper half, outward normals;
+    5 directions x 8 rolls each) cast by `cast_views` against the reference marcher on `ref_views` of them,
+    extrapolated; wall, CPU, system CPU and minor faults of the fast path, and its largest gain error."""
+    import resource
+
+    k = np.arange(n_points) + 0.5
+    z = 1.0 - k / n_points  # upper hemisphere, even spread
+    phi = k * np.pi * (3.0 - np.sqrt(5.0))
+    n = np.stack([np.sqrt(1 - z * z) * np.cos(phi), np.sqrt(1 - z * z) * np.sin(phi), z], axis=1)
+    poses, _ = contour_viewpoints(poi + 0.12 * n, n)
+    radius = 0.55
+    r0, t0, c0 = resource.getrusage(resource.RUSAGE_SELF), time.perf_counter(), time.process_time()
+    fast = cast_views(vol, poses, cam, poi, radius)
+    t_fast, c_fast, r1 = time.perf_counter() - t0, time.process_time() - c0, resource.getrusage(resource.RUSAGE_SELF)
+    sub = np.linspace(0, len(poses) - 1, ref_views).round().astype(int)
+    t0, c0 = time.perf_counter(), time.process_time()
+    _, ref_terms = reference_views(vol, poses[sub], cam, poi, radius)
+    t_ref = (time.perf_counter() - t0) / len(sub) * len(poses)
+    c_ref = (time.process_time() - c0) / len(sub) * len(poses)
+    g = fast.terms[sub, 0]
+    print(f"  objects: {len(poses)} views, {fast.templates} templates: fast {t_fast:.2f} s wall {c_fast:.2f} s CPU "
+          f"({r1.ru_stime - r0.ru_stime:.2f} s system), reference {t_ref:.1f} s wall extrapolated", flush=True)
+    return {"objects_views": int(len(poses)), "objects_templates": int(fast.templates),
+            "objects_rays_cast": int(fast.rays_cast), "objects_fast_s": round(t_fast, 3),
+            "objects_fast_cpu_s": round(c_fast, 3), "objects_fast_system_cpu_s": round(r1.ru_stime - r0.ru_stime, 3),
+            "objects_fast_minor_faults": int(r1.ru_minflt - r0.ru_minflt),
+            "objects_reference_s_extrapolated": round(t_ref, 1),
+            "speedup_objects_vs_reference": round(t_ref / t_fast, 1),
+            "cpu_ratio_objects_vs_reference": round(c_ref / c_fast, 1),
+            "objects_max_rel_gain_err": round(float(np.max(np.abs(g - ref_terms[:, 0])
+                                                           / np.maximum(ref_terms[:, 0], 1.0))), 5)}
 
 
 if __name__ == "__main__":

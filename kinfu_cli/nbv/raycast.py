@@ -598,10 +598,13 @@ def _mark_templates(tlat, loff, tcb, tcheck, fx, fy, cx, cy, r2, lut, tcount):
 
 
 @njit(cache=True, parallel=True)
-def _fill_templates(tlat, loff, lut, tcount, toff, tview, vtmpl, woff, Ms, win, fx, fy, cx, cy, tcell, W):
+def _fill_templates(tlat, loff, lut, tcount, toff, tview, vtmpl, woff, Ms, win, fx, fy, cx, cy, tcell, W, cap,
+                    npix):
     """Per template: the lattice cell of each local ray (`tcell`) and, per view k of the template, how
-    many of its pixels (inside its window) have that ray as nearest lattice ray (W[woff + ray * K + k]).
-    Parallel over views (a pole position holds 96 of them), each writing its own column of W."""
+    many of its pixels (inside its window) have that ray as nearest lattice ray (W[woff + ray * K + k]),
+    and npix[m]: view m's pixels that have a nearest ray (the sum of its column of W), or -1 when a weight would
+    pass `cap` (W's dtype holds whole numbers up to it; the caller then builds again in float32). Parallel over
+    views (a pole position holds 96 of them), each writing its own column of W."""
     for t in prange(tlat.shape[0]):
         LW, LH = tlat[t, 2], tlat[t, 3]
         for c in range(LW * LH):
@@ -615,6 +618,8 @@ def _fill_templates(tlat, loff, lut, tcount, toff, tview, vtmpl, woff, Ms, win, 
         k = m - tview[t]
         M = Ms[m]
         du0, du1, du2 = M[0, 0] / fx, M[1, 0] / fx, M[2, 0] / fx  # change of the ray per pixel along u
+        cnt = 0
+        over = False
         for vv in range(win[m, 1], win[m, 3] + 1):
             y = (vv - cy) / fy
             x = (win[m, 0] - cx) / fx
@@ -631,10 +636,33 @@ def _fill_templates(tlat, loff, lut, tcount, toff, tview, vtmpl, woff, Ms, win, 
                     if lu >= 0 and lv >= 0 and lu < LW and lv < LH:
                         r = lut[loff[t] + lv * LW + lu]
                         if r >= 0:
-                            W[woff[t] + r * K + k] += 1.0
+                            wi = woff[t] + r * K + k
+                            if W[wi] >= cap:
+                                over = True
+                            else:
+                                W[wi] += 1
+                            cnt += 1
                 dx += du0
                 dy += du1
                 dz += du2
+        npix[m] = -1 if over else cnt
+
+
+@njit(cache=True, parallel=True)
+def _template_dirs(tlat, toff, tcount, tcell, fx, fy, cx, cy, d):
+    """Each template ray's unit direction in the base view, from its lattice cell: the numpy expression it
+    replaces (x, y, 1) / |(x, y, 1)| op for op, so the directions are the same bits, without its
+    temporaries (a dozen arrays of every ray of the batch, freshly mapped and faulted in per batch)."""
+    for t in prange(tlat.shape[0]):
+        lu0, lv0, LW = tlat[t, 0], tlat[t, 1], tlat[t, 2]
+        for e in range(toff[t], toff[t] + tcount[t]):
+            c = np.int64(tcell[e])
+            x = (np.float64(c % LW + lu0) - cx) / fx
+            y = (np.float64(c // LW + lv0) - cy) / fy
+            n = math.sqrt(x * x + y * y + 1.0)
+            d[e, 0] = x / n
+            d[e, 1] = y / n
+            d[e, 2] = 1.0 / n
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
@@ -1059,8 +1087,10 @@ class _Ticker:
             self.t, self.c = now, cpu
 
 
-def _build_templates(cam, r_ext, groups: list[_Group]) -> list[dict]:
-    """Lattice marks and pixel weights of each group's template (one per group given)."""
+def _build_templates(cam, r_ext, groups: list[_Group]) -> tuple[list[dict], dict]:
+    """Lattice marks and pixel weights of each group's template (one per group given), and the batch arrays
+    ("dir", "W", "cone") the templates' arrays are consecutive slices of (the caster takes them as they are
+    when a batch builds all its templates, instead of copying every ray's data once more)."""
     tlat = np.array([g.lat for g in groups], dtype=np.int64).reshape(-1, 4)
     size = tlat[:, 2] * tlat[:, 3]
     loff = np.concatenate([[0], np.cumsum(size)[:-1]]).astype(np.int64)
@@ -1075,29 +1105,34 @@ def _build_templates(cam, r_ext, groups: list[_Group]) -> list[dict]:
     wsize = tcount * K
     woff = np.concatenate([[0], np.cumsum(wsize)[:-1]]).astype(np.int64)
     tcell = np.empty(int(tcount.sum()), np.int32)
-    W = np.zeros(int(wsize.sum()), np.float32)
+    npix = np.zeros(int(K.sum()), np.int64)
     vtmpl = np.repeat(np.arange(len(groups), dtype=np.int64), K)
-    _fill_templates(tlat, loff, lut, tcount, toff, tview, vtmpl, woff,
-                    np.ascontiguousarray(np.concatenate([g.Ms for g in groups])),
-                    np.ascontiguousarray(np.concatenate([g.win for g in groups])), cam.fx, cam.fy, cam.cx, cam.cy,
-                    tcell, W)
-    # each ray's unit direction in the base view
-    t_of = np.repeat(np.arange(len(groups)), tcount)
-    LW = tlat[t_of, 2]
-    d = np.stack([(tcell % LW + tlat[t_of, 0] - cam.cx) / cam.fx, (tcell // LW + tlat[t_of, 1] - cam.cy) / cam.fy,
-                  np.ones(len(tcell))], axis=1)
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    Ms = np.ascontiguousarray(np.concatenate([g.Ms for g in groups]))
+    wins = np.ascontiguousarray(np.concatenate([g.win for g in groups]))
+    # the weights are small whole numbers (pixels of one view nearest to one lattice ray: 1 or 2 for a roll),
+    # exact in uint8 and read as the same float64 by the caster: a quarter of float32's memory, which every
+    # batch maps and zeroes afresh (the kernel's system time); float32 again if one would pass 255
+    for dt, cap in ((np.uint8, 255.0), (np.float32, np.inf)):
+        W = np.zeros(int(wsize.sum()), dt)
+        _fill_templates(tlat, loff, lut, tcount, toff, tview, vtmpl, woff, Ms, wins, cam.fx, cam.fy, cam.cx, cam.cy,
+                        tcell, W, cap, npix)
+        if not (npix < 0).any():
+            break
+    del lut
+    d = np.empty((len(tcell), 3))
+    _template_dirs(tlat, toff, tcount, tcell, float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy), d)
+    cone_all = np.empty(len(tcell), np.int32)
     out = []
     for i, g in enumerate(groups):
         Wi = W[woff[i]:woff[i] + wsize[i]]
         di = d[toff[i]:toff[i] + tcount[i]]
         ncu = -(-int(tlat[i, 2]) // _CONE)
         nc = ncu * -(-int(tlat[i, 3]) // _CONE)
-        cone, axis, chord = np.empty(len(di), np.int32), np.empty((nc, 3)), np.empty(nc)
+        cone, axis, chord = cone_all[toff[i]:toff[i] + tcount[i]], np.empty((nc, 3)), np.empty(nc)
         _bundle_cones(di, tcell[toff[i]:toff[i] + tcount[i]], int(tlat[i, 2]), _CONE, ncu, cone, axis, chord)
         out.append({"n": int(tcount[i]), "K": int(K[i]), "dir": di, "W": Wi, "cone": cone, "axis": axis,
-                    "chord": chord, "npix": Wi.reshape(-1, K[i]).sum(axis=0, dtype=np.float64).round().astype(np.int64)})
-    return out
+                    "chord": chord, "npix": npix[tview[i]:tview[i + 1]]})
+    return out, {"dir": d, "W": W, "cone": cone_all}
 
 
 def _bundle_starts(vol, cam, center, r_ext, batch: list[_Group], tms: list[dict], gtmpl, R0s, t0s, march: bool):
@@ -1126,10 +1161,14 @@ def _cast_batch(vol, cam, center, radius, r_ext, flags, p_unknown, batch: list[_
     for g in batch:
         if g.key not in cache and g.key not in new:
             new[g.key] = g
+    whole = None
     if new:
-        cache.update(zip(new, _build_templates(cam, r_ext, list(new.values()))))
+        built, whole = _build_templates(cam, r_ext, list(new.values()))
+        cache.update(zip(new, built))
         out.templates += len(new)
     keys = list(dict.fromkeys(g.key for g in batch))
+    if len(new) < len(keys):
+        whole = None  # some templates come from the cache: gather them
     for k in [k for k in cache if k not in set(keys)]:
         del cache[k]
     tid = {k: i for i, k in enumerate(keys)}
@@ -1139,8 +1178,12 @@ def _cast_batch(vol, cam, center, radius, r_ext, flags, p_unknown, batch: list[_
     tview = np.concatenate([[0], np.cumsum(K)]).astype(np.int64)
     toff = np.concatenate([[0], np.cumsum(tcount)[:-1]]).astype(np.int64)
     woff = np.concatenate([[0], np.cumsum(tcount * K)[:-1]]).astype(np.int64)
-    tdir = np.ascontiguousarray(np.concatenate([t["dir"] for t in tms]))
-    W = np.concatenate([t["W"] for t in tms])
+    if whole is not None:  # every template new, built in key order: the batch arrays are the concatenations
+        tdir, W, tcone = whole["dir"], whole["W"], whole["cone"]
+    else:
+        tdir = np.ascontiguousarray(np.concatenate([t["dir"] for t in tms]))
+        W = np.concatenate([t["W"] for t in tms])
+        tcone = np.concatenate([t["cone"] for t in tms])
     gtmpl = np.array([tid[g.key] for g in batch], dtype=np.int64)
     gcount = tcount[gtmpl]
     ray_off = np.concatenate([[0], np.cumsum(gcount)]).astype(np.int64)
@@ -1156,7 +1199,7 @@ def _cast_batch(vol, cam, center, radius, r_ext, flags, p_unknown, batch: list[_
     tick("march")
     _cast_lattice(vol.shape, vol.bricks, vol.block_code(), vol.shift, vol.origin, vol.voxel_size,
                   ray_off, gtmpl, toff, tdir, tview, woff, W, gview, R0s, t0s,
-                  np.concatenate([t["cone"] for t in tms]), coff, cstart,
+                  tcone, coff, cstart,
                   cam.min_range,
                   min(cam.max_range, 1e30), center, float(radius), bool(through), bool(optimistic), float(p_unknown),
                   _CHUNK, acc, steps)
