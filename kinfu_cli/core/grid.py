@@ -60,6 +60,10 @@ class TernaryGrid:
         """Integer voxel indices (N, 3) of world points (may be out of range)."""
         return np.floor((np.asarray(points, dtype=np.float64) - self.origin) / self.voxel_size).astype(np.int64)
 
+    def labels_at(self, points: np.ndarray) -> np.ndarray:
+        """int8 (N,) labels at world points (N, 3); points outside the grid were never observed: UNKNOWN."""
+        return labels_at_indices(self.labels, self.index_of(np.asarray(points).reshape(-1, 3)))
+
     def counts(self) -> dict[str, int]:
         """Number of occupied / unknown / empty voxels."""
         flat = self.labels.ravel()
@@ -142,3 +146,12 @@ def load_ternary(path: str | os.PathLike) -> TernaryGrid:
     if grid is None:
         raise VolumeError(f"{path}: expected a ternary.npz with arrays 'ternary', 'origin', 'voxel_size'")
     return grid
+
+
+def labels_at_indices(labels: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """int8 (N,) of dense `labels` at voxel indices (N, 3); indices outside it read UNKNOWN."""
+    inside = np.all((idx >= 0) & (idx < np.array(labels.shape)), axis=1)
+    out = np.full(len(idx), UNKNOWN, dtype=np.int8)
+    i = idx[inside]
+    out[inside] = labels[i[:, 0], i[:, 1], i[:, 2]]
+    return out

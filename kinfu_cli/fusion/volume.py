@@ -19,7 +19,7 @@ from scipy.ndimage import binary_dilation
 
 from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError, VolumeError
-from kinfu_cli.core.grid import TernaryGrid, check_up, read_ternary
+from kinfu_cli.core.grid import EMPTY, OCCUPIED, UNKNOWN, TernaryGrid, check_up, read_ternary
 from kinfu_cli.core.poses import check_rigid
 from kinfu_cli.core.volume_file import (FORMAT, FORMAT_VERSION, MAX_COORDINATE_M, check_intrinsics, read_volume_file,
                                         read_volume_meta, write_volume_file)
@@ -335,6 +335,24 @@ class TernaryVolume:
         """Ternary labels int8 [x, y, z]: 1 occupied, 0 unknown, -1 empty."""
         return kn.labels_dense(self.nb, np.array(self.shape, dtype=np.int64), self.block_idx, self.block_w,
                                self.pool_v, self.pool_w)
+
+    def labels_at(self, points: np.ndarray) -> np.ndarray:
+        """int8 (N,) labels at world points (N, 3), as `labels()` gives them, read from the blocks (no dense
+        grid: 134 MB at 512^3); points outside the grid were never observed: UNKNOWN."""
+        idx = np.floor((np.asarray(points, dtype=np.float64).reshape(-1, 3) - self.origin) / self.voxel_size)
+        idx = idx.astype(np.int64)
+        inside = np.all((idx >= 0) & (idx < np.array(self.shape)), axis=1)
+        out = np.full(len(idx), UNKNOWN, dtype=np.int8)
+        g = idx[inside]
+        blk, loc = g // kn.B, g % kn.B
+        i = self.block_idx[blk[:, 0], blk[:, 1], blk[:, 2]]
+        carved = self.block_w[blk[:, 0], blk[:, 1], blk[:, 2]] > 0  # a block seen only as free space
+        k = loc[:, 0] * kn.B * kn.B + loc[:, 1] * kn.B + loc[:, 2]
+        j = np.maximum(i, 0)
+        w, v = self.pool_w[j, k], self.pool_v[j, k]
+        stored = np.where(w == 0, UNKNOWN, np.where(v <= 0, OCCUPIED, EMPTY))
+        out[inside] = np.where(i < 0, np.where(carved, EMPTY, UNKNOWN), stored)
+        return out
 
     def ternary_grid(self) -> TernaryGrid:
         return TernaryGrid(self.labels(), self.origin.copy(), self.voxel_size, self.frame, self.up, self.intrinsics)

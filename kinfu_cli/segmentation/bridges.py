@@ -29,8 +29,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from kinfu_cli.core.grid import EMPTY, OCCUPIED, UNKNOWN
-from kinfu_cli.fusion.kernels import B as BLOCK
+from kinfu_cli.core.grid import EMPTY, UNKNOWN, TernaryGrid
 
 PAIRS_PER_SEGMENT_PAIR = 5
 END_MARGIN = 1.5  # voxels: samples this close to either end lie in the measured surface's own band
@@ -53,20 +52,8 @@ class BridgeParams:
 
 def space_query(labels: np.ndarray, origin: np.ndarray, voxel_size: float) -> SpaceQuery:
     """A SpaceQuery over dense ternary labels (X, Y, Z) int8; points outside the grid are unknown."""
-    labels = np.asarray(labels)
-    origin = np.asarray(origin, dtype=np.float64).reshape(3)
-    vs = float(voxel_size)
-    shape = np.array(labels.shape)
-
-    def query(points: np.ndarray) -> np.ndarray:
-        idx = np.floor((np.asarray(points, dtype=np.float64) - origin) / vs).astype(np.int64)
-        inside = np.all((idx >= 0) & (idx < shape), axis=1)
-        out = np.full(len(idx), UNKNOWN, dtype=np.int8)
-        i = idx[inside]
-        out[inside] = labels[i[:, 0], i[:, 1], i[:, 2]]
-        return out
-
-    return query, vs
+    return TernaryGrid(np.asarray(labels, dtype=np.int8), np.asarray(origin, dtype=np.float64).reshape(3),
+                       float(voxel_size)).labels_at, float(voxel_size)
 
 
 def _nearest_pairs(points: np.ndarray, normals: np.ndarray, seg: np.ndarray, max_gap: float, touch: float,
@@ -177,28 +164,5 @@ def join_across_unknown(seg: np.ndarray, points: np.ndarray, normals: np.ndarray
 
 
 def volume_space(volume) -> SpaceQuery:
-    """The SpaceQuery of a fusion TernaryVolume (read voxel by voxel from its blocks, as its `labels()` labels
-    them, without the dense grid: 134 MB at 512^3) or of a TernaryGrid (its dense labels)."""
-    if getattr(volume, "block_idx", None) is None:
-        return space_query(volume.labels, volume.origin, volume.voxel_size)
-    origin, vs = np.asarray(volume.origin, dtype=np.float64), float(volume.voxel_size)
-    shape = np.array(volume.shape, dtype=np.int64)
-    b = int(BLOCK)
-
-    def query(points: np.ndarray) -> np.ndarray:
-        idx = np.floor((np.asarray(points, dtype=np.float64) - origin) / vs).astype(np.int64)
-        inside = np.all((idx >= 0) & (idx < shape), axis=1)
-        out = np.full(len(idx), UNKNOWN, dtype=np.int8)
-        g = idx[inside]
-        blk, loc = g // b, g % b
-        i = volume.block_idx[blk[:, 0], blk[:, 1], blk[:, 2]]
-        carved = volume.block_w[blk[:, 0], blk[:, 1], blk[:, 2]] > 0
-        k = loc[:, 0] * b * b + loc[:, 1] * b + loc[:, 2]
-        j = np.maximum(i, 0)
-        w = volume.pool_w[j, k]
-        v = volume.pool_v[j, k]
-        lab = np.where(w == 0, UNKNOWN, np.where(v <= 0, OCCUPIED, EMPTY)).astype(np.int8)
-        out[inside] = np.where(i < 0, np.where(carved, EMPTY, UNKNOWN), lab)
-        return out
-
-    return query, vs
+    """The SpaceQuery of a fusion TernaryVolume or a TernaryGrid: their own `labels_at`."""
+    return volume.labels_at, float(volume.voxel_size)

@@ -164,17 +164,22 @@ def recording(tmp_path_factory) -> Path:
     return base / "synth" / "recording.mcap"
 
 
-@pytest.mark.slow
-def test_force_keeps_user_files_and_a_rerun_resumes(recording, scheduler, tmp_path):
-    """With --force batch writes beside the user's files, never over them; its folder is then its own, so the
-    next run without --force is taken and skips what is current; a --force rerun keeps a user's file inside a
-    folder output."""
+def _fuse_poi_plan(recording, tmp_path):
+    """(plan, output folder, the recording's output folder) of a fuse + poi plan over a copy of `recording`."""
     (tmp_path / "recs").mkdir()
     shutil.copy(recording, tmp_path / "recs" / "a.mcap")
     plan = tmp_path / "plan.toml"
     plan.write_text('output = "out"\nstages = ["fuse", "poi"]\nrecordings = ["recs/a.mcap"]\n[options.fuse]\n'
                     'voxel-size = 0.04\n')
-    out, rec_out = tmp_path / "out", tmp_path / "out" / "recs" / "a"
+    return plan, tmp_path / "out", tmp_path / "out" / "recs" / "a"
+
+
+@pytest.mark.slow
+def test_force_keeps_user_files_and_a_rerun_resumes(recording, scheduler, tmp_path):
+    """With --force batch writes beside the user's files, never over them; its folder is then its own, so the
+    next run without --force is taken and skips what is current; a --force rerun keeps a user's file inside a
+    folder output."""
+    plan, out, rec_out = _fuse_poi_plan(recording, tmp_path)
     rec_out.mkdir(parents=True)
     for folder in (out, rec_out):
         (folder / "notes.txt").write_text(f"mine: {folder.name}")
@@ -234,12 +239,7 @@ def test_errors_name_options_as_the_plan_spells_them(workspace, connects):
 def test_redo_runs_every_stage_again_but_keeps_the_ownership_rule(recording, scheduler, tmp_path):
     """--redo recomputes what is current (fuse and poi run again, not skipped) without --force's licence: a
     user's file where a stage writes is still refused."""
-    (tmp_path / "recs").mkdir()
-    shutil.copy(recording, tmp_path / "recs" / "a.mcap")
-    plan = tmp_path / "plan.toml"
-    plan.write_text('output = "out"\nstages = ["fuse", "poi"]\nrecordings = ["recs/a.mcap"]\n[options.fuse]\n'
-                    'voxel-size = 0.04\n')
-    out, rec_out = tmp_path / "out", tmp_path / "out" / "recs" / "a"
+    plan, out, rec_out = _fuse_poi_plan(recording, tmp_path)
 
     def statuses():
         doc = json.loads((out / "manifest.json").read_text())
