@@ -29,7 +29,7 @@ from kinfu_cli.batch.manifest import DONE, MANIFEST_NAME, build_manifest, read_p
 from kinfu_cli.batch.plan import Plan
 from kinfu_cli.batch.stages import StageSpec
 from kinfu_cli.core.errors import ConfigError, KinfuError
-from kinfu_cli.core.ownership import claim_output
+from kinfu_cli.core.ownership import changed_since_written, claim_output
 from kinfu_cli.core.progress import progress
 
 CONNECT_TIMEOUT_S = 5
@@ -214,6 +214,10 @@ def run_task(spec: StageSpec, rec, options: Mapping, previous: dict | None, forc
                 "stage": spec.name, "folder": str(rec.output)}
     try:
         outdir, outputs = rec.output, spec.outputs_of(rec)
+        if not force and (edited := [c for rel in spec.claims_of(rec) for c in changed_since_written(outdir / rel)]):
+            raise KinfuError(f"{', '.join(edited)} in {outdir} changed since kinfu wrote it: the {spec.name} outputs "
+                             f"are no longer current, and kinfu does not replace a file it did not write; move it "
+                             f"away to redo the stage")
         fp = input_fingerprint(spec.name, spec.input_paths(rec), options)
         if (not force and previous and previous.get("status") in DONE and previous.get("fingerprint") == fp
                 and output_stats(outdir, outputs) == previous.get("outputs")):
