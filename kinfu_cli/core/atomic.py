@@ -29,6 +29,16 @@ def _ensure_parent(final: Path) -> Path:
     return parent
 
 
+@contextlib.contextmanager
+def _writable(folder: Path) -> Iterator[None]:
+    """A folder kinfu cannot write into (read-only, not its user's, a full disk) is one KinfuError naming the
+    folder, not the temporary file's name in an OSError."""
+    try:
+        yield
+    except OSError as exc:
+        raise KinfuError(f"{folder}: cannot write into this folder ({exc.strerror or exc})") from None
+
+
 # tempfile's random part of a name: 8 characters (mkstemp / mkdtemp). Debris patterns match exactly the
 # names kinfu's temporaries get, so a user's file such as `.report.notes.part.json` is never touched.
 _RANDOM = "[a-z0-9_]" * 8
@@ -55,16 +65,18 @@ def atomic_path(final: str | os.PathLike, suffix: str | None = None) -> Iterator
     parent = _ensure_parent(final)
     suffix = final.suffix if suffix is None else suffix
     _clear_debris(parent, f".{glob.escape(final.stem)}.{_RANDOM}.part{glob.escape(suffix)}")
-    fd, tmp = tempfile.mkstemp(prefix=f".{final.stem}.", suffix=f".part{suffix}", dir=parent)
+    with _writable(parent):
+        fd, tmp = tempfile.mkstemp(prefix=f".{final.stem}.", suffix=f".part{suffix}", dir=parent)
     os.close(fd)
     tmp_path = Path(tmp)
     os.chmod(tmp_path, 0o666 & ~_umask())  # mkstemp makes 0600; outputs get the usual mode
     try:
         yield tmp_path
-        if tmp_path.is_dir() and final.exists():
-            _replace_folder(tmp_path, final)
-        else:
-            os.replace(tmp_path, final)
+        with _writable(parent):
+            if tmp_path.is_dir() and final.exists():
+                _replace_folder(tmp_path, final)
+            else:
+                os.replace(tmp_path, final)
     except BaseException:
         if tmp_path.is_dir():
             shutil.rmtree(tmp_path, ignore_errors=True)
@@ -89,15 +101,17 @@ def atomic_dir(final: str | os.PathLike, own: Iterable[str] | None = None) -> It
     final = Path(final)
     parent = _ensure_parent(final)
     _clear_debris(parent, f".{glob.escape(final.name)}.{_RANDOM}.part", f".{glob.escape(final.name)}.{_RANDOM}.old.part")
-    tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".part", dir=parent))
+    with _writable(parent):
+        tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".part", dir=parent))
     os.chmod(tmp, 0o777 & ~_umask())
     try:
         yield tmp
         record_tree(tmp)  # everything in it is kinfu's now; foreign entries are carried over only below
-        if final.exists():
-            _replace_folder(tmp, final, own)
-        else:
-            os.replace(tmp, final)
+        with _writable(parent):
+            if final.exists():
+                _replace_folder(tmp, final, own)
+            else:
+                os.replace(tmp, final)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
