@@ -34,7 +34,7 @@ from distributed import LocalCluster
 init, mark = LocalCluster.__init__, sys.argv[1]
 def marked(self, *a, **k):
     open(mark, "w").close()
-    time.sleep(0.5)
+    time.sleep(0.2)
     init(self, *a, **k)
 LocalCluster.__init__ = marked
 sys.argv = ["kinfu"] + sys.argv[2:]
@@ -51,7 +51,7 @@ def test_a_ctrl_c_during_the_start_up_is_taken_at_once():
             closed.set()
 
     def start():
-        time.sleep(1.0)
+        time.sleep(2.0)
         return Slow()
 
     timer = threading.Timer(0.2, os.kill, (os.getpid(), signal.SIGINT))
@@ -59,8 +59,8 @@ def test_a_ctrl_c_during_the_start_up_is_taken_at_once():
     timer.start()
     with pytest.raises(KeyboardInterrupt):
         _started_deaf_to_sigint(start)
-    assert time.perf_counter() - t0 < 0.8  # not after the start-up
-    assert closed.wait(3.0)  # the engine that came up later is closed
+    assert time.perf_counter() - t0 < 1.5  # not after the start-up
+    assert closed.wait(4.0)  # the engine that came up later is closed
 
 
 def test_kinfu_batch_stops_on_one_ctrl_c_while_the_cluster_starts(tmp_path):
@@ -68,7 +68,7 @@ def test_kinfu_batch_stops_on_one_ctrl_c_while_the_cluster_starts(tmp_path):
     plan.write_text(f'output = "{tmp_path / "out"}"\nstages = ["poi"]\nrecordings = ["{SAMPLE}"]\n')
     env = {**os.environ, "PYTHONPATH": str(REPO), "NUMBA_NUM_THREADS": "1"}
     runs = []
-    for delay in (0.0, 0.4):  # as the cluster starts to be built, and while its worker starts
+    for delay in (0.0, 0.3):  # as the cluster starts to be built, and while its worker starts
         mark = tmp_path / f"mark{delay}"
         out = tmp_path / f"out{delay}"
         cmd = [sys.executable, "-c", DRIVER, str(mark), "batch", str(plan), "-o", str(out), "--workers", "1",
@@ -85,7 +85,7 @@ def test_kinfu_batch_stops_on_one_ctrl_c_while_the_cluster_starts(tmp_path):
             os.killpg(proc.pid, signal.SIGINT)  # a terminal's Ctrl-C: the whole process group
             sent = time.monotonic()
             proc.wait(timeout=10)
-            assert time.monotonic() - sent < 3.0
+            assert time.monotonic() - sent < 5.0  # (0.1 s measured; before, the run went on to its end)
             err = proc.communicate()[1]
             assert proc.returncode == 130 and err == "kinfu: interrupted\n", (delay, proc.returncode, err)
             assert not out.exists()  # nothing that looks like a run
