@@ -216,8 +216,8 @@ def run_task(spec: StageSpec, rec, options: Mapping, previous: dict | None, forc
         outdir, outputs = rec.output, spec.outputs_of(rec)
         if not force and (edited := [c for rel in spec.claims_of(rec) for c in changed_since_written(outdir / rel)]):
             raise KinfuError(f"{', '.join(edited)} in {outdir} changed since kinfu wrote it: the {spec.name} outputs "
-                             f"are no longer current, and kinfu does not replace a file it did not write; move it "
-                             f"away to redo the stage")
+                             f"are no longer current, and redoing the stage would replace the file; move it away, "
+                             f"or force the run to replace it")
         fp = input_fingerprint(spec.name, spec.input_paths(rec), options)
         if (not force and previous and previous.get("status") in DONE and previous.get("fingerprint") == fp
                 and output_stats(outdir, outputs) == previous.get("outputs")):

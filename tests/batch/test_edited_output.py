@@ -3,7 +3,8 @@ uses or replaces the file, and names it.
 
 Before: after a batch run of fuse + eval-fusion on the sample, moving the vertices of fuse/mesh.ply 5 cm up
 left fuse `skipped` (volume.npz and report.json unchanged) and re-ran eval-fusion on the edited mesh (`ok`, no
-word); only --redo stopped, at the folder swap ("mesh.ply there was not written by kinfu and would be replaced").
+word); only --redo stopped, at the folder swap ("mesh.ply there was not written by kinfu and would be replaced"),
+and --force stopped there too, though it is to write over outputs kinfu did not write.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from kinfu_cli.core.atomic import atomic_dir, write_json
 
 def _fuse_like(rec, options, force):
     """A stage writing a folder as `kinfu fuse` does: volume + report (its outputs), mesh + cloud beside them."""
-    with atomic_dir(rec.output / "fuse", own=("*",)) as tmp:
+    with atomic_dir(rec.output / "fuse", own=("*",), force=force) as tmp:
         for name in ("volume.npz", "mesh.ply", "cloud.ply"):
             (tmp / name).write_bytes(b"kinfu " + name.encode())
         write_json(tmp / "report.json", {"frames": {"used": 3}})
@@ -60,3 +61,13 @@ def test_an_edited_single_file_output_is_named(tmp_path):
     (rec.output / "pois.json").write_text('{"pois": [{"id": 0}]}')
     again = run_task(POIS, rec, {}, first, False)
     assert again["status"] == "failed" and again["error"].startswith("pois.json in "), again
+
+
+def test_force_replaces_the_edited_file_and_keeps_the_users_others(tmp_path):
+    rec = _rec(tmp_path)
+    run_task(SPEC, rec, {}, None, False)
+    (rec.output / "fuse" / "mesh.ply").write_bytes(b"the user's mesh")
+    (rec.output / "fuse" / "notes.txt").write_text("mine")
+    assert run_task(SPEC, rec, {}, None, True)["status"] == "ok"
+    assert (rec.output / "fuse" / "mesh.ply").read_bytes() == b"kinfu mesh.ply"
+    assert (rec.output / "fuse" / "notes.txt").read_text() == "mine"
