@@ -1,0 +1,122 @@
+"""Long-sequence tracking drift into new territory: a hand-held 30 Hz path through the synthetic room.
+
+Run:  .venv/bin/python benchmarks/bench_room_drift.py [--frames 200] [--width 640] [--seed 0]
+      [--methods projective,open3d] [--no-noise] [--from-truth]
+
+The 7-Scenes frames we have (60) revisit one corner; the later frames of such a sequence walk into parts of the
+room the model has not seen. This generates that case: the camera walks 1.6 m along the synthetic room
+(sim.room, Kinect v1 noise model, 4 m range) at 0.25 m/s while panning 150 degrees from a corner with furniture
+towards the bare walls, with hand-like wobble. Each method tracks frame-to-model as `kinfu fuse --pose icp` does
+(constant-velocity prediction, 30 Hz; re-localisation on) and prints ATE against the true poses every 20
+frames, frames lost and re-localised. --from-truth instead fuses the TRUE poses and tracks each frame from its
+true pose against that clean model: how far ICP itself moves away from the truth (no drift can build up).
+
+What it showed (2026-11-27, 640x480, seed 0, 200 frames): projective ICP ATE 4.45 cm (max 13.6, 1 lost, 27
+re-localised), open3d's 4.28 cm (max 6.1, none lost): the error builds up in frames 60-100, where the view holds
+the +y wall, the floor and one table edge, and stays. --from-truth: with noise-free depth both ICPs stay within
+0.3 cm of the truth and refuse the same 11 frames as degenerate (condition number > 2.5e3); with noise the condition
+number there reads ~165 (the noisy model normals on the planes look like information along the wall) and projective
+ICP jumps 12-16 cm off the truth (13 frames, refused only by the speed limit), open3d's up to 7 cm (accepted).
+Model normals from the TSDF gradient kept projective ICP within ~1 cm from the truth there but lost the full track
+at frame 90: not adopted. Not a test: a finding for the tracking work.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from kinfu_cli.core.poses import look_at  # noqa: E402
+from kinfu_cli.fusion.tracking import FrameToModelTracker, ate_rmse, predict_pose  # noqa: E402
+from kinfu_cli.fusion.volume import TernaryVolume  # noqa: E402
+from kinfu_cli.sim.room import make_room  # noqa: E402
+from kinfu_cli.sim.sensor import DepthSensor, kinect_v1_intrinsics, mesh_target  # noqa: E402
+
+
+def hand_held_path(n: int, seed: int) -> list[np.ndarray]:
+    """Camera poses (z-up room frame) of the walk: 0.24 m/s along x, a 150 deg pan, wobble and a random walk."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / 30.0
+    eye = np.stack([-1.2 + 0.24 * t, -0.6 + 0.05 * np.sin(1.3 * t), 1.45 + 0.04 * np.sin(2.1 * t)], 1)
+    eye += np.cumsum(rng.normal(0, 0.0008, (n, 3)), 0)
+    yaw = np.radians(20.0 + 150 * t / t[-1]) + 0.05 * np.sin(3.0 * t)
+    pitch = np.radians(-25 + 8 * np.sin(0.9 * t))
+    fwd = np.stack([np.cos(yaw) * np.cos(pitch), np.sin(yaw) * np.cos(pitch), np.sin(pitch)], 1)
+    return [look_at(e, e + d) for e, d in zip(eye, fwd)]
+
+
+def room_volume() -> TernaryVolume:
+    return TernaryVolume(size=(6.0, 5.0, 3.0), voxel_size=6.0 / 512, origin=(-3.0, -2.5, -0.2), truncation=0.03,
+                         color=False, min_depth=0.3, max_depth=4.0)
+
+
+def track(method: str, depths, K, poses) -> dict:
+    """`kinfu fuse --pose icp` on the frames: estimated poses, lost and re-localised counts."""
+    vol = room_volume()
+    vol.integrate(depths[0], K, poses[0])
+    tracker = FrameToModelTracker(icp=method)
+    est, lost, reloc = [poses[0]], 0, 0
+    for d in depths[1:]:
+        pred = predict_pose(est[-1], est[-2] if len(est) > 1 else None, 1 / 30, 1 / 30)
+        r = tracker.track(vol, d, K, [pred, est[-1]], T_ref=est[-1], dt_s=1 / 30)
+        lost += r.lost
+        reloc += (not r.lost) and r.relocalised
+        est.append(est[-1] if r.lost else r.T_world_camera)
+        if not r.lost:
+            vol.integrate(d, K, r.T_world_camera)
+    return {"est": est, "lost": lost, "relocalised": reloc}
+
+
+def from_truth(method: str, depths, K, poses) -> np.ndarray:
+    """Per frame (from the second): how far ICP started at the true pose moves, against the model fused from the
+    true poses of the frames before (m; NaN when the frame is refused)."""
+    vol = room_volume()
+    vol.integrate(depths[0], K, poses[0])
+    tracker = FrameToModelTracker(icp=method, relocalise=False)
+    out = []
+    for d, T in zip(depths[1:], poses[1:]):
+        r = tracker.track(vol, d, K, T)
+        out.append(np.nan if r.lost else float(np.linalg.norm(r.T_world_camera[:3, 3] - T[:3, 3])))
+        vol.integrate(d, K, T)
+    return np.array(out)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--frames", type=int, default=200)
+    ap.add_argument("--width", type=int, default=640, help="image width (4:3)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--methods", default="projective,open3d")
+    ap.add_argument("--no-noise", action="store_true", help="noise-free depth")
+    ap.add_argument("--from-truth", action="store_true", help="ICP from the true pose on a model of true poses")
+    a = ap.parse_args()
+    W, H = a.width, a.width * 3 // 4
+    K = kinect_v1_intrinsics(W, H)
+    room = make_room(seed=a.seed, width=W, height=H, frames=3)
+    sensor = DepthSensor(K, W, H, max_range=4.0, noise=not a.no_noise, seed=a.seed)
+    target = mesh_target(room.mesh())
+    poses = hand_held_path(a.frames, a.seed)
+    depths = [sensor.render_frame(target, T, frame_seed=i).depth for i, T in enumerate(poses)]
+    print(f"room walk: {a.frames} frames {W}x{H}, seed {a.seed}, noise {'off' if a.no_noise else 'on'}")
+    for method in a.methods.split(","):
+        if a.from_truth:
+            moved = from_truth(method, depths, K, poses)
+            ok = np.isfinite(moved)
+            print(f"{method:>10}: from the true pose, moved median {100 * np.median(moved[ok]):.2f} cm, max "
+                  f"{100 * np.max(moved[ok]):.2f} cm (frame {int(np.nanargmax(moved)) + 1}), "
+                  f"{int((~ok).sum())} refused")
+            continue
+        r = track(method, depths, K, poses)
+        err = np.array([np.linalg.norm(e[:3, 3] - t[:3, 3]) for e, t in zip(r["est"], poses)])
+        print(f"{method:>10}: ATE {100 * ate_rmse(r['est'], poses):.2f} cm, max {100 * err.max():.2f} cm, lost "
+              f"{r['lost']}, re-localised {r['relocalised']}; error every 20 frames (cm): "
+              f"{' '.join(f'{100 * e:.1f}' for e in err[::20])}")
+
+
+if __name__ == "__main__":
+    main()
