@@ -29,7 +29,7 @@ from kinfu_cli.batch.manifest import DONE, MANIFEST_NAME, build_manifest, read_p
 from kinfu_cli.batch.plan import Plan
 from kinfu_cli.batch.stages import StageSpec
 from kinfu_cli.core.errors import ConfigError, KinfuError
-from kinfu_cli.core.ownership import claim_output
+from kinfu_cli.core.ownership import changed_since_written, claim_output
 from kinfu_cli.core.progress import progress
 
 CONNECT_TIMEOUT_S = 5
@@ -92,7 +92,7 @@ def connect(scheduler: str | None = None, workers: int | None = None) -> Engine:
     """A client on `scheduler` (tcp://host:port of a running dask.distributed scheduler), or on a new local
     cluster of `workers` single-threaded worker processes (default: one per core). An unreachable scheduler
     is a one-line KinfuError naming it, raised before any work."""
-    from dask.distributed import Client, LocalCluster
+    from dask.distributed import Client
 
     if scheduler is not None:
         if "://" not in scheduler or not scheduler.split("://", 1)[1]:
@@ -110,7 +110,14 @@ def connect(scheduler: str | None = None, workers: int | None = None) -> Engine:
     # no chatter on stderr: "port 8787 in use" when another cluster runs, and multiprocessing's resource
     # tracker (a process of its own, hence the environment) counting the workers' semaphores after a Ctrl-C
     os.environ.setdefault("PYTHONWARNINGS", "ignore:resource_tracker:UserWarning")
-    with warnings.catch_warnings(), _workers_ignore_sigint():
+    return _started_deaf_to_sigint(partial(_local_engine, n))
+
+
+def _local_engine(n: int) -> Engine:
+    """A client on a new local cluster of n single-threaded worker processes."""
+    from dask.distributed import Client, LocalCluster
+
+    with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
                                dashboard_address=None, silence_logs=logging.CRITICAL,
@@ -118,19 +125,49 @@ def connect(scheduler: str | None = None, workers: int | None = None) -> Engine:
     return Engine(Client(cluster, set_as_default=False), cluster, f"local ({n} workers)")
 
 
-@contextlib.contextmanager
-def _workers_ignore_sigint():
-    """Worker processes started meanwhile ignore SIGINT (they inherit an ignored signal): a terminal's Ctrl-C
-    reaches the whole process group, and every worker printed its KeyboardInterrupt traceback; this process,
-    interrupted, closes the cluster. (A Ctrl-C while the cluster starts is lost: press it again.)"""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+def _started_deaf_to_sigint(start: Callable[[], Engine]) -> Engine:
+    """start() run in a thread that blocks SIGINT, so the worker processes it starts (from threads it starts)
+    inherit the blocked signal: a terminal's Ctrl-C reaches the whole process group, and every worker printed
+    its KeyboardInterrupt traceback. This thread keeps SIGINT and waits in short joins, so one Ctrl-C at any
+    moment of the start-up is a KeyboardInterrupt here at once (before, SIGINT was ignored while the cluster
+    started, 1-3 s, and the press was lost); an engine that comes up after that is closed in the background."""
+    if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "pthread_sigmask"):
+        return start()
+    with contextlib.suppress(Exception):  # its first start unblocks SIGINT in the starting thread: start it here
+        from multiprocessing import resource_tracker
+
+        resource_tracker.ensure_running()
+    box: dict = {}
+    lock, abandoned = threading.Lock(), threading.Event()
+
+    def run():
+        try:
+            box["engine"] = start()
+        except BaseException as exc:  # handed to the waiting thread
+            box["error"] = exc
+        with lock:
+            box["done"] = True
+            if abandoned.is_set() and "engine" in box:
+                box["engine"].close()
+
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
-        yield
+        starter = threading.Thread(target=run, name="kinfu-cluster-start", daemon=True)
+        starter.start()
     finally:
-        signal.signal(signal.SIGINT, old)
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+    try:
+        while starter.is_alive():
+            starter.join(0.05)
+    except BaseException:
+        with lock:
+            abandoned.set()
+            if box.get("done") and "engine" in box:
+                threading.Thread(target=box["engine"].close, daemon=True).start()
+        raise
+    if "error" in box:
+        raise box["error"]
+    return box["engine"]
 
 
 def _trial(fn: Callable, shared, item):
@@ -177,6 +214,10 @@ def run_task(spec: StageSpec, rec, options: Mapping, previous: dict | None, forc
                 "stage": spec.name, "folder": str(rec.output)}
     try:
         outdir, outputs = rec.output, spec.outputs_of(rec)
+        if not force and (edited := [c for rel in spec.claims_of(rec) for c in changed_since_written(outdir / rel)]):
+            raise KinfuError(f"{', '.join(edited)} in {outdir} changed since kinfu wrote it: the {spec.name} outputs "
+                             f"are no longer current, and redoing the stage would replace the file; move it away, "
+                             f"or force the run to replace it")
         fp = input_fingerprint(spec.name, spec.input_paths(rec), options)
         if (not force and previous and previous.get("status") in DONE and previous.get("fingerprint") == fp
                 and output_stats(outdir, outputs) == previous.get("outputs")):

@@ -7,6 +7,7 @@ centres; `to_json()` is changes.json (its keys are documented in README.md, sect
 
 from __future__ import annotations
 
+import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -14,7 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from kinfu_cli.change.align import AlignedPair, align
-from kinfu_cli.change.noise import MODEL, NOISE_SIGMAS, noise_margins, read_cameras
+from kinfu_cli.change.noise import (MODEL, NOISE_SIGMAS, nearest_distance, noise_margins, read_cameras,
+                                   sensor_evidence)
 from kinfu_cli.change.regions import KINDS, ChangeMasks, Region, find_changes
 from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import VolumeError
@@ -93,6 +95,7 @@ class ChangeResult:
     warnings: list[str] = field(default_factory=list)
     pois: dict | None = None  # filled by evaluation.changes.score_change_pois
     cameras: dict[str, int] | None = None  # camera positions used for the depth-noise margin, per volume
+    sensors: dict[str, dict] | None = None  # per volume, whether its camera looks like the noise model's (noise.py)
 
     def count(self, kind: str) -> int:
         return sum(1 for r in self.regions if r.kind == kind)
@@ -109,10 +112,13 @@ class ChangeResult:
             "parameters": {"margin_voxels": self.params.margin, "min_volume_m3": self.min_voxels * p.voxel_size ** 3,
                            "min_voxels": self.min_voxels, "connectivity": 26,
                            "depth_noise": None if self.cameras is None else {
-                               "model": MODEL, "sigmas": self.params.noise_sigmas, "cameras": self.cameras}},
+                               "model": MODEL, "sigmas": self.params.noise_sigmas, "cameras": self.cameras,
+                               "sensors": self.sensors}},
             "counts": {"changed_voxels": m.raw, "after_erosion": m.kept, "unknown_ignored": m.unknown_ignored,
                        "unknown_hidden_blobs": m.hidden,
                        "within_depth_noise": m.within_noise,
+                       "within_depth_noise_regions": None if m.within_noise is None else {
+                           k: sum(r.kind == k for r in m.within_noise_regions) for k in KINDS},
                        "dropped_small_regions": m.dropped_regions, "dropped_small_voxels": m.dropped_voxels,
                        "regions": {k: self.count(k) for k in KINDS},
                        "region_voxels": {k: sum(len(r.points) for r in self.regions if r.kind == k) for k in KINDS}},
@@ -154,9 +160,11 @@ def _warnings(before: TernaryGrid, after: TernaryGrid, names: tuple[str, str], p
 
 def diff_grids(before: TernaryGrid, after: TernaryGrid, params: ChangeParams | None = None,
                names: tuple[str, str] = ("before", "after"),
-               cameras: tuple[np.ndarray | None, np.ndarray | None] = (None, None)) -> ChangeResult:
+               cameras: tuple[np.ndarray | None, np.ndarray | None] = (None, None),
+               reports: tuple[dict | None, dict | None] = (None, None)) -> ChangeResult:
     """The change regions from `before` to `after` (grids of one place, one voxel size); cameras: the camera
-    positions (M, 3) each was fused from, for the depth-noise margin (one stands for both; none: fixed margin)."""
+    positions (M, 3) each was fused from, for the depth-noise margin (one stands for both; none: fixed margin);
+    reports: the report.json of the `kinfu fuse` runs that wrote them (what sensor they saw), when known."""
     params = params or ChangeParams()
     params.check()
     pair = align(before, after, *names)
@@ -170,10 +178,38 @@ def diff_grids(before: TernaryGrid, after: TernaryGrid, params: ChangeParams | N
     masks = find_changes(pair.before, pair.after, margin=params.margin, min_voxels=min_voxels, margin_of=margin_of)
     regions = [ChangeRegion(i, r.kind, pair.centers(r.voxels), pair.voxel_size) for i, r in enumerate(masks.regions)]
     warnings = _warnings(before, after, names, pair, masks, len(regions), min_voxels)
-    used = None if margin_of is None else {
-        "before": 0 if cameras[0] is None else len(cameras[0]), "after": 0 if cameras[1] is None else len(cameras[1])}
+    used = sensors = None
+    if margin_of is not None:
+        used = {"before": 0 if cameras[0] is None else len(cameras[0]),
+                "after": 0 if cameras[1] is None else len(cameras[1])}
+        sensors = {k: sensor_evidence(g.intrinsics, rep) for k, g, rep in zip(("before", "after"), (before, after),
+                                                                               reports)}
+        warnings += _noise_warnings(pair, masks, (cam_b, cam_a), names, sensors)
     return ChangeResult(names[0], names[1], before.frame or after.frame, pair, masks, regions, params, min_voxels,
-                        warnings, cameras=used)
+                        warnings, cameras=used, sensors=sensors)
+
+
+def _noise_warnings(pair: AlignedPair, masks: ChangeMasks, cameras: tuple[np.ndarray, np.ndarray],
+                    names: tuple[str, str], sensors: dict[str, dict]) -> list[str]:
+    """What the depth-noise margin may hide: clusters as large as a region it dropped (how many, of which kind,
+    how far from the nearest camera), and a volume whose camera is evidently not the noise model's sensor."""
+    out = []
+    if masks.within_noise_regions:
+        far = [float(np.median(np.minimum(nearest_distance(pair.centers(r.voxels), cameras[0]),
+                                          nearest_distance(pair.centers(r.voxels), cameras[1]))))
+               for r in masks.within_noise_regions]
+        kinds = ", ".join(f"{sum(r.kind == k for r in masks.within_noise_regions)} {k}" for k in KINDS
+                          if any(r.kind == k for r in masks.within_noise_regions))
+        voxels = sorted(len(r.voxels) for r in masks.within_noise_regions)
+        span = f"{min(far):.1f} m" if max(far) - min(far) < 0.05 else f"{min(far):.1f}-{max(far):.1f} m"
+        out.append(f"{len(far)} cluster(s) of changed voxels as large as a region ({kinds}; {voxels[0]}"
+                   f"{'' if len(voxels) == 1 else f'-{voxels[-1]}'} voxels), {span} from the cameras, were dropped "
+                   f"as depth noise: a real change may hide there (a smaller noise_sigmas keeps them as regions)")
+    for key, name in zip(("before", "after"), names):
+        if sensors[key]["kinect_like"] is False:
+            out.append(f"{name}: {sensors[key]['evidence']}: the depth-noise margin uses the Kinect v1 model, not "
+                       f"this sensor's, so how much it drops far from the cameras is only indicative")
+    return out
 
 
 def diff_volumes(before: str | os.PathLike, after: str | os.PathLike,
@@ -183,10 +219,19 @@ def diff_volumes(before: str | os.PathLike, after: str | os.PathLike,
     (params or ChangeParams()).check()  # bad parameters fail before any file is read
     cams = [read_cameras(p) for p in (before, after)]
     result = diff_grids(_load(before), _load(after), params, (str(Path(before)), str(Path(after))),
-                        (cams[0][0], cams[1][0]))
+                        (cams[0][0], cams[1][0]), tuple(_fuse_report(p) for p in (before, after)))
     result.warnings += [f"{why}; the depth-noise margin uses the other volume's cameras or none" for _, why in cams
                         if why]
     return result
+
+
+def _fuse_report(path: str | os.PathLike) -> dict | None:
+    """The report.json beside a volume (the `kinfu fuse` run that wrote it), or None."""
+    try:
+        doc = json.loads((Path(path).parent / "report.json").read_text())
+    except (OSError, ValueError, RecursionError):
+        return None
+    return doc if isinstance(doc, dict) else None
 
 
 def _load(path: str | os.PathLike) -> TernaryGrid:

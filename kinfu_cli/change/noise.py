@@ -10,6 +10,11 @@ away from every surface of the other volume, sigma_* taken at the voxel's distan
 each fusion. The nearest camera gives a lower bound on the distance the voxel was seen from, hence on the
 noise: the margin never exceeds what the sensor model asks for.
 
+The model is a Kinect v1's; other sensors' noise grows otherwise (a RealSense D400's RMS error is distance^2 x
+subpixel / (focal length x baseline), Intel's depth tuning guide, but the baseline is not in a volume), so a
+volume whose camera is evidently not Kinect-like (a RealSense SDK recording's depth units, a depth image that is
+not 4:3, a RealSense driver's topic names) is named in a warning rather than given an invented model.
+
 The volumes do not store camera positions: the `trajectory.tum` that `kinfu fuse` writes beside its
 volume.npz / ternary.npz is read when present; with one trajectory it stands for both; with none the fixed
 margin alone applies (and changes.json says so).
@@ -34,6 +39,31 @@ NOISE_SIGMAS = 2.0
 #: Largest margin the noise may ask for, voxels (a far wall at 8 m with 5 mm voxels asks for ~50 voxels).
 MAX_NOISE_MARGIN = 24
 MODEL = "kinect-v1: sigma(z) = 1.2 mm + 1.9 mm (z - 0.4 m)^2, z = distance to the nearest camera"
+
+
+# topics only a RealSense driver names so (realsense2_camera; its SDK bags say so by their depth units)
+_REALSENSE_TOPICS = ("realsense", "aligned_depth_to_color", "image_rect_raw", "/device_0/sensor_")
+
+
+def sensor_evidence(intrinsics: dict | None, report: dict | None) -> dict:
+    """Whether the depth camera a volume was fused from looks like a Kinect v1 (the noise model's sensor):
+    {"kinect_like": True / False / None (nothing known), "evidence": what says so}, from the volume's intrinsics
+    and the report.json of the `kinfu fuse` run that wrote it."""
+    report = report if isinstance(report, dict) else {}
+    frames = report.get("frames") if isinstance(report.get("frames"), dict) else {}
+    units = frames.get("depth_units_m")
+    if isinstance(units, (int, float)) and not isinstance(units, bool):
+        return {"kinect_like": False, "evidence": f"a RealSense SDK recording (depth units {units:g} m)"}
+    roles = report.get("roles") if isinstance(report.get("roles"), dict) else {}
+    topic = roles.get("depth_topic")
+    if isinstance(topic, str) and any(t in topic for t in _REALSENSE_TOPICS):
+        return {"kinect_like": False, "evidence": f"depth topic {topic} (a RealSense driver's)"}
+    if isinstance(intrinsics, dict) and intrinsics.get("width") and intrinsics.get("height"):
+        w, h = int(intrinsics["width"]), int(intrinsics["height"])
+        if abs(w / h - 4 / 3) > 0.02:
+            return {"kinect_like": False, "evidence": f"depth images {w}x{h}, not the 4:3 of a Kinect v1"}
+        return {"kinect_like": True, "evidence": f"depth images {w}x{h}, 4:3 like a Kinect v1's"}
+    return {"kinect_like": None, "evidence": "no intrinsics recorded"}
 
 
 def depth_sigma(distance: np.ndarray) -> np.ndarray:

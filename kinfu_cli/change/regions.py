@@ -25,7 +25,7 @@ are dropped as noise (counted).
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.sparse import coo_matrix
@@ -57,6 +57,8 @@ class ChangeMasks:
     dropped_regions: int
     dropped_voxels: int
     within_noise: dict[str, int] | None = None  # voxels past the fixed margin but within their depth-noise margin
+    # of those, the clusters of min_voxels or more: regions but for the depth noise (a real change may hide there)
+    within_noise_regions: list[Region] = field(default_factory=list)
 
 
 def empty_all_around(labels: np.ndarray, idx: np.ndarray, margin: int, label=EMPTY) -> np.ndarray:
@@ -144,14 +146,16 @@ def find_changes(before: np.ndarray, after: np.ndarray, margin: int = 1, min_vox
     kept = {k: 0 for k in KINDS}
     within_noise = None if margin_of is None else {k: 0 for k in KINDS}
     regions: list[Region] = []
+    noise_regions: list[Region] = []
     dropped_regions = dropped_voxels = 0
     for kind, other in (("removed", after), ("added", before)):
         idx = np.argwhere(raw_masks[kind])
         idx = idx[empty_all_around(other, idx, margin)]
         if margin_of is not None and len(idx):
-            n = len(idx)
-            idx = idx[empty_within(other, idx, np.maximum(margin_of(idx), margin), start=margin)]
-            within_noise[kind] = n - len(idx)
+            ok = empty_within(other, idx, np.maximum(margin_of(idx), margin), start=margin)
+            within_noise[kind] = int(np.count_nonzero(~ok))
+            noise_regions += [Region(kind, c) for c in components(idx[~ok]) if len(c) >= min_voxels]
+            idx = idx[ok]
         kept[kind] = len(idx)
         for vox in components(idx):
             if len(vox) >= min_voxels:
@@ -160,4 +164,5 @@ def find_changes(before: np.ndarray, after: np.ndarray, margin: int = 1, min_vox
                 dropped_regions += 1
                 dropped_voxels += len(vox)
     regions.sort(key=lambda r: (-len(r.voxels), KINDS.index(r.kind), tuple(r.voxels.min(axis=0))))
-    return ChangeMasks(raw, kept, unknown, hidden, regions, dropped_regions, dropped_voxels, within_noise)
+    return ChangeMasks(raw, kept, unknown, hidden, regions, dropped_regions, dropped_voxels, within_noise,
+                       noise_regions)

@@ -106,7 +106,7 @@ def command(before: Path, after: Path, outdir: Path, pois_path, match_radius, ma
                 score_change_pois(result, pois, radius=match_radius, source=str(pois_path))
                 result.warnings += poi_frame_warnings(pois_path, result.frame, "--pois")
         else:
-            with atomic_dir(outdir, own=CHANGE_ENTRIES) as tmp:  # the folder appears whole or not at all
+            with atomic_dir(outdir, own=CHANGE_ENTRIES, force=force) as tmp:  # the folder appears whole or not at all
                 write_change_outputs(result, tmp)
     doc = result.to_json()
     print_warnings(doc)

@@ -185,7 +185,7 @@ def command(recording: Path, outdir: Path, voxel_size, resolution, size, origin,
         for note in result.notes:
             click.echo(f"kinfu: note: {note}", err=True)
     t0 = time.perf_counter()
-    with atomic_dir(outdir, own=(*OUTPUTS, "slices_*.png")) as tmp:  # one transaction: report.json written last
+    with atomic_dir(outdir, own=(*OUTPUTS, "slices_*.png"), force=force) as tmp:  # one transaction: report.json written last
         write_fusion_outputs(result, tmp)
         plots = [p.name for p in plot_slices(result.grid, tmp)] if plot else []
         result.add_time("write", time.perf_counter() - t0)

@@ -219,7 +219,7 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
         elif step == "grasp":
             grasps = _grasps(doc, grasp_options, grasp_cones)
         else:
-            with atomic_dir(outdir, own=SEGMENT_ENTRIES) as tmp:  # the folder appears whole or not at all
+            with atomic_dir(outdir, own=SEGMENT_ENTRIES, force=force) as tmp:  # the folder appears whole or not at all
                 write_segment_outputs(result, tmp, doc)
                 if grasps is not None:
                     write_json(tmp / "grasps.json", grasps)

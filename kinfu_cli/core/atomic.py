@@ -29,6 +29,16 @@ def _ensure_parent(final: Path) -> Path:
     return parent
 
 
+@contextlib.contextmanager
+def _writable(folder: Path) -> Iterator[None]:
+    """A folder kinfu cannot write into (read-only, not its user's, a full disk) is one KinfuError naming the
+    folder, not the temporary file's name in an OSError."""
+    try:
+        yield
+    except OSError as exc:
+        raise KinfuError(f"{folder}: cannot write into this folder ({exc.strerror or exc})") from None
+
+
 # tempfile's random part of a name: 8 characters (mkstemp / mkdtemp). Debris patterns match exactly the
 # names kinfu's temporaries get, so a user's file such as `.report.notes.part.json` is never touched.
 _RANDOM = "[a-z0-9_]" * 8
@@ -55,16 +65,18 @@ def atomic_path(final: str | os.PathLike, suffix: str | None = None) -> Iterator
     parent = _ensure_parent(final)
     suffix = final.suffix if suffix is None else suffix
     _clear_debris(parent, f".{glob.escape(final.stem)}.{_RANDOM}.part{glob.escape(suffix)}")
-    fd, tmp = tempfile.mkstemp(prefix=f".{final.stem}.", suffix=f".part{suffix}", dir=parent)
+    with _writable(parent):
+        fd, tmp = tempfile.mkstemp(prefix=f".{final.stem}.", suffix=f".part{suffix}", dir=parent)
     os.close(fd)
     tmp_path = Path(tmp)
     os.chmod(tmp_path, 0o666 & ~_umask())  # mkstemp makes 0600; outputs get the usual mode
     try:
         yield tmp_path
-        if tmp_path.is_dir() and final.exists():
-            _replace_folder(tmp_path, final)
-        else:
-            os.replace(tmp_path, final)
+        with _writable(parent):
+            if tmp_path.is_dir() and final.exists():
+                _replace_folder(tmp_path, final)
+            else:
+                os.replace(tmp_path, final)
     except BaseException:
         if tmp_path.is_dir():
             shutil.rmtree(tmp_path, ignore_errors=True)
@@ -76,7 +88,7 @@ def atomic_path(final: str | os.PathLike, suffix: str | None = None) -> Iterator
 
 
 @contextlib.contextmanager
-def atomic_dir(final: str | os.PathLike, own: Iterable[str] | None = None) -> Iterator[Path]:
+def atomic_dir(final: str | os.PathLike, own: Iterable[str] | None = None, force: bool = False) -> Iterator[Path]:
     """Yield a temporary folder beside `final`; it replaces `final` only if the block succeeds.
 
     For outputs that are folders (ROS 2 bags, result folders with several files): the whole folder appears
@@ -84,20 +96,23 @@ def atomic_dir(final: str | os.PathLike, own: Iterable[str] | None = None) -> It
     existing `final` that kinfu did not write are carried over, never removed. own: glob patterns of every
     entry the caller writes there (a result folder that other commands may share): kinfu entries matching
     none of them and not written anew (another command's outputs) are carried over too; None: the folder is
-    the caller's whole (a bag, a data set).
+    the caller's whole (a bag, a data set). force: a foreign entry with the name of a new output (a user's file,
+    or kinfu's edited since) is replaced, as the caller was told to; otherwise the swap stops (KinfuError).
     """
     final = Path(final)
     parent = _ensure_parent(final)
     _clear_debris(parent, f".{glob.escape(final.name)}.{_RANDOM}.part", f".{glob.escape(final.name)}.{_RANDOM}.old.part")
-    tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".part", dir=parent))
+    with _writable(parent):
+        tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".part", dir=parent))
     os.chmod(tmp, 0o777 & ~_umask())
     try:
         yield tmp
         record_tree(tmp)  # everything in it is kinfu's now; foreign entries are carried over only below
-        if final.exists():
-            _replace_folder(tmp, final, own)
-        else:
-            os.replace(tmp, final)
+        with _writable(parent):
+            if final.exists():
+                _replace_folder(tmp, final, own, force)
+            else:
+                os.replace(tmp, final)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
@@ -112,20 +127,20 @@ def _other_outputs(old: Path, new: Path, own: Iterable[str]) -> list[Path]:
             if (old / n).exists() and not (new / n).exists() and not any(fnmatch.fnmatchcase(n, p) for p in own)]
 
 
-def _replace_folder(new: Path, final: Path, own: Iterable[str] | None = None) -> None:
+def _replace_folder(new: Path, final: Path, own: Iterable[str] | None = None, force: bool = False) -> None:
     """Swap the finished folder `new` in for `final`, keeping the entries of `final` kinfu did not write.
 
     A file `final` (a kinfu output, or one the caller was told to overwrite) is replaced. Foreign entries are
     carried over at any depth: a user's file inside a kinfu-written subfolder (one with its own manifest)
-    survives too. A foreign entry with the name of a new output stops the swap: the new outputs stay in `new`
-    and the error says so."""
+    survives too. A foreign entry with the name of a new output stops the swap (the new outputs stay in `new`
+    and the error says so), unless `force`: then it is replaced."""
     if not final.is_dir():
         final.unlink()
         os.replace(new, final)
         return
     others = _other_outputs(final, new, own) if own is not None else []
     moves, clash = _foreign_moves(final, new, skip={p.name for p in others})
-    if clash:
+    if clash and not force:
         raise KinfuError(f"{final}: {', '.join(sorted(clash))} there was not written by kinfu and would be replaced")
     for src, dst in moves:
         dst.parent.mkdir(parents=True, exist_ok=True)

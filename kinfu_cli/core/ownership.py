@@ -100,6 +100,27 @@ def written_by_kinfu(path: str | os.PathLike) -> bool:
         entry.get("size") == now["size"] and entry.get("mtime_ns") == now["mtime_ns"]))
 
 
+def changed_since_written(path: str | os.PathLike) -> list[str]:
+    """The files kinfu recorded at `path` (a file, or every file of a kinfu folder, at any depth where a manifest
+    records them) that still exist but were changed since (size or time): a user's now, relative to `path`'s
+    folder."""
+    path = Path(path)
+    folder = path.parent if str(path.parent) else Path(".")
+    if path.is_dir() and not path.is_symlink():
+        if not (path / MANIFEST).is_file():
+            return []
+        out = []
+        for name, entry in sorted(_read_manifest(path).items()):
+            sub = path / name
+            if isinstance(entry, dict) and entry.get("kind") == "folder" and sub.is_dir():
+                out += [f"{path.name}/{c}" for c in changed_since_written(sub)]
+            elif isinstance(entry, dict) and sub.is_file() and not written_by_kinfu(sub):
+                out.append(f"{path.name}/{name}")
+        return out
+    entry = _read_manifest(folder).get(path.name)
+    return [path.name] if isinstance(entry, dict) and path.is_file() and not written_by_kinfu(path) else []
+
+
 def owned_entries(folder: str | os.PathLike) -> set[str]:
     """Names inside a kinfu output folder that kinfu wrote (the manifest itself included)."""
     folder = Path(folder)

@@ -507,8 +507,41 @@ def evaluate_fusion(path: str | os.PathLike, ground_truth: str | os.PathLike, st
             measures = object_measures(rec.vertices, gt, state, margin=margin, min_height=min_height,
                                        footprint=footprint, surface=(surface.in_bounds, surface.seen))
     doc = _document(rec, gt, state, window, report, score, measures, time.perf_counter() - t0)
-    doc["warnings"] = state_warnings(gt, state, window)
+    doc["warnings"] = state_warnings(gt, state, window) + init_warnings(report, gt)
     return FusionEvaluation(doc, rec, score)
+
+
+def init_warnings(report: dict | None, gt: GroundTruth | None = None) -> list[str]:
+    """A volume that continued another (fuse's init) with no sphere forgotten (no POIs, no spheres cleared): the
+    state check above sees only this run's window, but the init volume's frames, taken before it, are in the
+    reconstruction too, so where the scene changed both states blend with no word. One warning (the init volume,
+    how many of the volume's frames it brought, its window when its report.json says it)."""
+    grid = (report or {}).get("grid") if isinstance(report, dict) else None
+    if not isinstance(grid, dict) or not isinstance(grid.get("sizing"), dict) or grid["sizing"].get("mode") != "init":
+        return []
+    if report.get("cleared_spheres"):
+        return []
+    placement = grid.get("placement") if isinstance(grid.get("placement"), str) else ""
+    init = placement.split(" ", 1)[1] if " " in placement else "another volume"
+    total, used = grid.get("frames_in_volume"), (report.get("frames") or {}).get("used")
+    brought = ""
+    if all(isinstance(v, int) and not isinstance(v, bool) for v in (total, used)) and total > used:
+        brought = f" ({total - used} of its {total} frames)"
+    earlier = fused_window(report_json_of(init)) if init != "another volume" else None
+    when = "" if earlier is None else (f", fused from {_seconds(earlier[0], 'the start')} to "
+                                       f"{_seconds(earlier[1], 'the end')}")
+    moved = ""
+    if gt is not None and gt.changes:
+        moved = f" (here {', '.join(sorted({str(c.get('object', '?')) for c in gt.changes}))} moved)"
+    return [f"the volume continues {init}{brought}{when}, and no POI or sphere was forgotten before fusing: the "
+            f"states are checked only against this run's frames, but the earlier frames are in the reconstruction "
+            f"too, so where the scene changed{moved} both states are blended; forget the POIs' spheres when "
+            f"continuing a volume (fuse's clear_pois), or fuse one window alone"]
+
+
+def _seconds(v, open_end: str) -> str:
+    """A window end in seconds, or what an open end means."""
+    return open_end if v is None else f"{v:g} s"
 
 
 def state_warnings(gt: GroundTruth, state: str, window: tuple | None) -> list[str]:

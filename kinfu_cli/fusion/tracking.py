@@ -23,8 +23,9 @@ When is a frame lost? ICP always returns some pose; it is kept only when all the
    noise, depth edges, occluders and moved objects disagree; a pose a few centimetres off moves whole walls
    out of the band. This is the check that catches ICP converging to a wrong pose with a fair fitness
    (projective ICP measures it against the model maps it tracked against, with no second ray cast);
-3. projective ICP: the condition number of its 6x6 system <= max_condition (degenerate geometry such as a
-   flat wall lets the pose slide along it: such a pose is a guess);
+3. the condition number of the point-to-plane 6x6 system at the pose <= max_condition (degenerate geometry
+   such as a flat wall lets the pose slide along it: such a pose is a guess); open3d's ICP and re-localisation
+   are checked with projective ICP's system at the pose they found;
 4. the camera moved no faster than max_speed / max_turn since the last good pose (KinFu's per-frame ICP
    limits of 0.10 m and 20 degrees at 30 Hz, as speeds, so sub-sampled frames may move further).
 When the first attempt fails, the tracker re-localises before declaring the frame lost: a wider
@@ -93,7 +94,7 @@ class TrackResult:
     agreement: float = float("nan")  # share of overlapping pixels whose depth agrees with the model
     relocalised: bool = False  # found by the wider re-localisation search, not the first attempt
     attempts: int = 1
-    condition: float = float("nan")  # projective ICP: condition number of the final 6x6 system
+    condition: float = float("nan")  # condition number of the point-to-plane 6x6 system at the pose
 
 
 def _angle_deg(R: np.ndarray) -> float:
@@ -236,29 +237,17 @@ class FrameToModelTracker:
     def _projective_attempt(self, volume, depth, K, T_init, T_ref, dt_s) -> TrackResult | None:
         """Projective ICP (fusion.icp) against the model maps ray cast from T_init, then the checks (the
         agreement against the same maps); None when the model shows too little from there."""
-        # the finest level ICP uses and the level the model map matches: icp_scale / map_scale of the frame, but
-        # never narrower than MIN_ICP_WIDTH / MIN_MODEL_WIDTH pixels (a small frame is tracked at full size)
-        f = min(self._level(1 / self.icp_scale), self._narrowest(depth.shape[1], MIN_ICP_WIDTH))
-        levels = max(f + len(self.projective_iterations), self._level(self.agreement_stride) + 1)
-        clock = self.timing
-        pyr = data_pyramid(depth, K, levels, volume.min_depth, volume.max_depth, self.bilateral,
-                           first=min(f, self._level(self.agreement_stride)), timing=clock)
-        m = min(self._level(1 / self.map_scale), self._narrowest(depth.shape[1], MIN_MODEL_WIDTH), levels - 1)
+        pyr, f, m = self._pyramid(volume, depth, K)
         its = self.projective_iterations
         dists = (self.projective_distance,) * len(its)
         T_model = T_init
         for recast in range(1 + RECASTS):
-            t0 = time.perf_counter()
-            mz, mv, _, state = band_raycast(volume, pyr[m].K, T_model, pyr[m].depth, self.band, tsdf_normals=False,
-                                            start=self.band_start * volume.truncation if self.band_start > 0 else None)
-            t1 = time.perf_counter()
-            mn = vertex_normals(mv, mz, *T_model[:3, 3], EDGE_JUMP_PER_M)
-            _add(clock, "raycast", t1 - t0)
-            _add(clock, "model normals", time.perf_counter() - t1)
-            if np.count_nonzero(np.isfinite(mn[..., 0])) < self.min_points // 4 ** m:
+            maps = self._model_maps(volume, pyr[m], T_model, m)
+            if maps is None:
                 return None
+            mz, mv, mn, state = maps
             r = projective_icp(pyr[f:], mv, mn, pyr[m].K, T_model, r.T_world_camera if recast else T_init, its, dists,
-                               self.max_angle, converged=self.icp_converged, timing=clock)
+                               self.max_angle, converged=self.icp_converged, timing=self.timing)
             moved = np.linalg.inv(T_model) @ r.T_world_camera
             if np.linalg.norm(moved[:3, 3]) < RECAST_M and _angle_deg(moved[:3, :3]) < RECAST_DEG:
                 break
@@ -266,9 +255,47 @@ class FrameToModelTracker:
         t0 = time.perf_counter()
         agreement = model_agreement(pyr[self._level(self.agreement_stride)], r.T_world_camera, mz, state, pyr[m].K,
                                     T_model, BAND_HIT, BAND_OCCLUDED, volume.truncation)
-        _add(clock, "agreement", time.perf_counter() - t0)
+        _add(self.timing, "agreement", time.perf_counter() - t0)
         return self._checked(r.T_world_camera, r.fitness, r.rmse, volume, depth, K, T_ref, dt_s, r.condition,
                              agreement)
+
+    def _pyramid(self, volume, depth, K) -> tuple[list, int, int]:
+        """The frame's data pyramid, the finest level ICP uses and the level the model maps match: icp_scale /
+        map_scale of the frame, but never narrower than MIN_ICP_WIDTH / MIN_MODEL_WIDTH pixels (a small frame is
+        tracked at full size)."""
+        f = min(self._level(1 / self.icp_scale), self._narrowest(depth.shape[1], MIN_ICP_WIDTH))
+        levels = max(f + len(self.projective_iterations), self._level(self.agreement_stride) + 1)
+        pyr = data_pyramid(depth, K, levels, volume.min_depth, volume.max_depth, self.bilateral,
+                           first=min(f, self._level(self.agreement_stride)), timing=self.timing)
+        m = min(self._level(1 / self.map_scale), self._narrowest(depth.shape[1], MIN_MODEL_WIDTH), levels - 1)
+        return pyr, f, m
+
+    def _model_maps(self, volume, level, T_model, m: int):
+        """(depth, vertex, normal, state) maps of the model ray cast from T_model at the pyramid level's size,
+        within the band around its readings; None when they hold too few normals to track against."""
+        t0 = time.perf_counter()
+        mz, mv, _, state = band_raycast(volume, level.K, T_model, level.depth, self.band, tsdf_normals=False,
+                                        start=self.band_start * volume.truncation if self.band_start > 0 else None)
+        t1 = time.perf_counter()
+        mn = vertex_normals(mv, mz, *T_model[:3, 3], EDGE_JUMP_PER_M)
+        _add(self.timing, "raycast", t1 - t0)
+        _add(self.timing, "model normals", time.perf_counter() - t1)
+        if np.count_nonzero(np.isfinite(mn[..., 0])) < self.min_points // 4 ** m:
+            return None
+        return mz, mv, mn, state
+
+    def _condition_at(self, volume, depth, K, T) -> float:
+        """The condition number of the point-to-plane system at pose T, as projective ICP measures it (its finest
+        level against the model maps cast from T): open3d's ICP (the reference, and re-localisation) reports
+        none, and without it a frame of a flat wall slides along the wall unchecked; inf when the model shows too
+        little from T."""
+        pyr, f, m = self._pyramid(volume, depth, K)
+        maps = self._model_maps(volume, pyr[m], T, m)
+        if maps is None:
+            return float("inf")
+        _, mv, mn, _ = maps
+        return projective_icp(pyr[f:f + 1], mv, mn, pyr[m].K, T, T, (0,), (self.projective_distance,),
+                              self.max_angle).condition
 
     @staticmethod
     def _narrowest(width: int, min_width: int) -> int:
@@ -293,7 +320,8 @@ class FrameToModelTracker:
             res = reg.registration_icp(source(voxel), target, dist, T, est,
                                        reg.ICPConvergenceCriteria(max_iteration=it))
             T = np.asarray(res.transformation).copy()
-        return self._checked(T, float(res.fitness), float(res.inlier_rmse), volume, depth, K, T_ref, dt_s)
+        return self._checked(T, float(res.fitness), float(res.inlier_rmse), volume, depth, K, T_ref, dt_s,
+                             self._condition_at(volume, depth, K, T))
 
     def _checked(self, T, fitness, rmse, volume, depth, K, T_ref, dt_s, condition=float("nan"),
                  agreement=None) -> TrackResult:

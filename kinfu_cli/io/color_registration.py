@@ -13,15 +13,20 @@ no colour.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from kinfu_cli.core.errors import RecordingError, TransformError
-from kinfu_cli.io.messages import camera_info_distortion, camera_info_K, header_frame
+from kinfu_cli.io.messages import camera_info_distortion, camera_info_K, decode_color, header_frame, is_compressed
 from kinfu_cli.io.roles import CAMERA_INFO
 from kinfu_cli.io.tf_buffer import TfBuffer
 from kinfu_cli.io.undistort import Undistorter
+
+class ColorSizeError(RecordingError):
+    """A colour image whose size is not its camera info's, nor that camera resized (another aspect ratio): its
+    pixels cannot be placed, so a reader leaves the colour out rather than the run."""
+
 
 OCCLUSION_MARGIN = 0.02  # m: a point farther than the colour camera's nearest surface at its pixel by this is hidden
 
@@ -80,6 +85,33 @@ def color_registration(rec, depth_topic: str, color_topic: str, depth_info_topic
     return ColorRegistration("project", d_frame, c_frame, info_topic, lens, (w, h), T)
 
 
+def check_color_size(reg: ColorRegistration, rec, color_topic: str) -> ColorRegistration:
+    """`reg`, or no colour (mode "none", the reason naming the topic and both sizes) when the colour topic's first
+    image is neither its camera info's size nor that size resized (register_color could place none of them)."""
+    if reg.mode != "project" or reg.color_size is None:
+        return reg
+    msg = rec.first_message(color_topic)
+    if msg is None:
+        return reg
+    if is_compressed(msg):
+        try:
+            ch, cw = decode_color(msg, f"{rec.path}: {color_topic}").shape[:2]
+        except RecordingError:  # a broken image: each frame says so itself
+            return reg
+    else:
+        cw, ch = int(getattr(msg, "width", 0)), int(getattr(msg, "height", 0))
+    w, h = reg.color_size
+    if cw < 1 or ch < 1 or abs(cw / w - ch / h) <= 0.01 * max(cw / w, ch / h):
+        return reg
+    return replace(reg, mode="none", reason=color_size_reason(color_topic, (cw, ch), reg))
+
+
+def color_size_reason(color_topic: str, size: tuple[int, int], reg: ColorRegistration) -> str:
+    """Why colour images of `size` (width, height) cannot be placed through `reg`'s camera info."""
+    return (f"the colour images on {color_topic} are {size[0]}x{size[1]} but camera info {reg.info_topic} says "
+            f"{reg.color_size[0]}x{reg.color_size[1]} (another aspect ratio: not that camera resized)")
+
+
 def colour_camera(rec, info_topic: str, distortion=camera_info_distortion) -> tuple[Undistorter, tuple[int, int]]:
     """The colour camera of `info_topic`'s first message: its lens (K and distortion, read by `distortion`) and
     image size; RecordingError naming the topic when it cannot be read."""
@@ -101,7 +133,7 @@ def register_color(reg: ColorRegistration, depth: np.ndarray, K_depth: np.ndarra
         return color, None
     sx, sy = cw / reg.color_size[0], ch / reg.color_size[1]
     if abs(sx - sy) > 0.01 * max(sx, sy):  # a resized image (image_proc's resize) keeps its aspect ratio
-        raise RecordingError(f"{where}: colour image is {cw}x{ch} but camera info {reg.info_topic} says "
+        raise ColorSizeError(f"{where}: colour image is {cw}x{ch} but camera info {reg.info_topic} says "
                              f"{reg.color_size[0]}x{reg.color_size[1]}")
     from kinfu_cli.io.color_kernels import colour_camera_points, pinhole_pixels, zbuffer_gather
 

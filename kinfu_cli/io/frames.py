@@ -16,7 +16,8 @@ import numpy as np
 
 from kinfu_cli.core.camera import intrinsics_matrix, scaled_intrinsics
 from kinfu_cli.core.errors import ConfigError, RecordingError, TransformError
-from kinfu_cli.io.color_registration import ColorRegistration, color_registration, register_color
+from kinfu_cli.io.color_registration import (ColorRegistration, ColorSizeError, check_color_size, color_registration,
+                                             color_size_reason, register_color)
 from kinfu_cli.io.messages import (POSE_TYPES, camera_info_distortion, camera_info_K, decode_color, decode_depth,
                                    header_frame, header_stamp_ns, normalize_msgtype, pose_message_to_tq)
 from kinfu_cli.io.pointcloud2 import (MAX_PINHOLE_RMS_PX, POINTCLOUD2, decode_cloud, fit_intrinsics, has_color,
@@ -180,6 +181,7 @@ def iter_frames(rec, roles: Roles | None = None, pose_source: str = "tf", pose_t
             reg = sdk_color_registration(rec, depth_topic, roles.color_topic)
         else:
             reg = color_registration(rec, depth_topic, roles.color_topic, roles.info_topic, tf)
+        reg = check_color_size(reg, rec, roles.color_topic)
         stats.color_registration = reg.as_dict()
         if reg.mode == "none":  # colour that cannot be placed is left out, not painted beside its surface
             roles = replace(roles, color_topic=None)
@@ -496,13 +498,17 @@ class _FramePairer:
         color = color_mask = None
         if self.color_topic is None and cloud_color is not None:
             color = cloud_color  # registered: the same pixels
-        elif self.color_topic is not None and self.colors:
+        elif self.color_topic is not None and self.colors and self.registration_mode() != "none":
             best_stamp, best = min(self.colors, key=lambda c: abs(c[0] - stamp))
             if abs(best_stamp - stamp) <= self.tol_ns:
                 where = f"{self.rec.path}: {self.color_topic}"
                 color = decode_color(best, where)
-                if self.registration is not None and self.registration.mode == "project":
-                    color, color_mask = register_color(self.registration, depth, K, color, where)
+                if self.registration_mode() == "project":
+                    try:
+                        color, color_mask = register_color(self.registration, depth, K, color, where)
+                    except ColorSizeError:  # the images changed size mid-run: no colour from here on
+                        self._lose_color(color.shape[1::-1], index)
+                        color = color_mask = None
                 else:  # the depth camera's own pixels: its lens too
                     color = self.lens.image(color, size_of_K=(self.width, self.height))
         if color is None:
@@ -513,6 +519,17 @@ class _FramePairer:
         self.stats.used += 1
         return RGBDFrame(index=index, stamp_ns=stamp, depth=depth, color=color, K=K.copy(), T_world_camera=T,
                          color_mask=color_mask)
+
+    def registration_mode(self) -> str:
+        """How colour images map onto the depth: "same-frame", "project" or "none" (left out)."""
+        return "same-frame" if self.registration is None else self.registration.mode
+
+    def _lose_color(self, size: tuple[int, int], index: int) -> None:
+        """Colour images that stopped fitting their camera info (register_color could place none): the colour is
+        left out from depth frame `index` on, with the reason in stats (the warning of FrameStats.warnings)."""
+        reason = f"{color_size_reason(self.color_topic, size, self.registration)} from depth frame {index} on"
+        self.registration = replace(self.registration, mode="none", reason=reason)
+        self.stats.color_registration = self.registration.as_dict()
 
     def _scaled_K(self, w: int, h: int) -> np.ndarray:
         """K for depth images of w x h whose camera info is for another size with the same aspect ratio (a
