@@ -19,6 +19,11 @@ Departures from the thesis, on purpose:
   which voxels receive the frame's colour samples (kernels._update_block, mode branch): a voxel takes the pixel's
   colour when it is within the colour band of the raw depth (as without the filter) and within GATE_VOXELS of the
   enhanced depth. Letting the enhanced depth alone decide lost the mode filter's lead at strong colour pruning.
+- A gated sample is not dropped: it goes to the running mean colour (the mean path's), which only a voxel without
+  hypotheses shows (mode_winners writes the winner over it everywhere else). So a voxel that took colour samples
+  always ends with a colour (dropping them left ~9 % of the border voxels black, exported as such), and where gated
+  and ungated samples both arrived, the ungated ones alone decide, as before. Chosen on the tuning seeds over
+  taking a voxel's first sample ungated (benchmarks/bench_guided_depth.py: the better PR points at 3 of 4 T_lccp).
 - Only pixels with a depth reading and a colour sample enter the window means (normalised by their count).
 - sigma_c = 0.02 instead of 0.005 and the gate of 2 voxels (not the 1.2-voxel colour band: on a slanted face next to
   a colour edge the window's fit is biased by up to a voxel or two, and a tight gate dropped that face's own

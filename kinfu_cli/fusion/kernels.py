@@ -359,6 +359,19 @@ def _carve_voxels(pool_v, pool_w, i, mw):
         pool_w[i, k] = np.uint8(min(w0 + 1, mw))
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def _mean_color(pool_c, pool_w, i, k, color_f, p):
+    """The running mean colour of voxel k of block i with pixel p's sample."""
+    one = np.float32(1.0)
+    # black = never coloured: take the sample, else a running mean that forgets slowly
+    fresh = pool_c[i, k, 0] == 0 and pool_c[i, k, 1] == 0 and pool_c[i, k, 2] == 0
+    alpha = one if fresh else max(one / np.float32(pool_w[i, k]), np.float32(0.1))
+    for ch in range(3):
+        c0 = np.float32(pool_c[i, k, ch])
+        cn = np.float32(color_f[p, ch])
+        pool_c[i, k, ch] = np.uint8(min(np.float32(255.0), c0 + alpha * (cn - c0) + np.float32(0.5)))
+
+
 @njit(cache=True, error_model="numpy")
 def _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, nx, ny, nz, fx, fy, cx, cy, width,
                   height, depth_rl, color_f, color_ok, has_color, trunc, mw, color_band, mode_thr2, pix, zz, sdf,
@@ -373,7 +386,8 @@ def _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, n
     zero (a voxel at z = 0 fails the z > 0 test anyway), which is what lets the loops vectorise.
     With colour hypotheses (pool_hc / pool_hn not None: the mode filter, see color_mode.py) the colour goes to
     mode_update instead of the running mean, and only when the voxel is within the colour band of the guided depth
-    depth_e too (guide_band wide, in units of the truncation; see guided_depth.py; empty: no such gate). color_ok: per
+    depth_e too (guide_band wide, in units of the truncation; see guided_depth.py; empty: no such gate); a gated
+    sample goes to the running mean in pool_c, which only a voxel without hypotheses shows. color_ok: per
     pixel 1 where the colour image has a sample (empty: everywhere), e.g. not where a colour camera beside the
     depth camera does not see the point.
     """
@@ -439,7 +453,10 @@ def _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, n
             if p < 0 or not (t > -one and abs(t) < color_band) or (color_ok.shape[0] > 0 and not color_ok[p]):
                 continue
             if guided and not abs((depth_e[p] - zz[k]) * depth_rl[p, 1] * inv_trunc) < guide_band:
-                continue  # the guided depth puts this pixel's colour on another surface
+                # the guided depth puts this pixel's colour on another surface: not a hypothesis' sample, only the
+                # running mean's, the colour of a voxel that no ungated sample reached (mode_winners keeps it)
+                _mean_color(pool_c, pool_w, i, k, color_f, p)
+                continue
             mode_update(pool_hc, pool_hn, i, k, color_f[p, 0], color_f[p, 1], color_f[p, 2], mode_thr2)
         return
     for k in range(B3):
@@ -447,13 +464,7 @@ def _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, n
         t = sdf[k]
         if p < 0 or not (t > -one and abs(t) < color_band) or (color_ok.shape[0] > 0 and not color_ok[p]):
             continue
-        # black = never coloured: take the sample, else a running mean that forgets slowly
-        fresh = pool_c[i, k, 0] == 0 and pool_c[i, k, 1] == 0 and pool_c[i, k, 2] == 0
-        alpha = one if fresh else max(one / np.float32(pool_w[i, k]), np.float32(0.1))
-        for ch in range(3):
-            c0 = np.float32(pool_c[i, k, ch])
-            cn = np.float32(color_f[p, ch])
-            pool_c[i, k, ch] = np.uint8(min(np.float32(255.0), c0 + alpha * (cn - c0) + half))
+        _mean_color(pool_c, pool_w, i, k, color_f, p)
 
 
 @njit(cache=True, parallel=True)
@@ -477,8 +488,8 @@ def integrate_blocks(cls, nb, dims, block_idx_flat, block_w_flat, pool_v, pool_w
     VOXEL blocks voxel by voxel (_update_block). `work` lists the blocks to visit; it is cut into one run per
     worker task, each with its own scratch rows. pool_hc / pool_hn: colour hypotheses of the mode filter (None:
     running mean, compiled without the mode code), mode_thr its colour distance threshold (RGB 0..255 units),
-    depth_e the guided depth (H * W float32) that gates its colour samples: a voxel takes one only within
-    guide_voxels of it too (empty: no such gate)."""
+    depth_e the guided depth (H * W float32) that gates its colour samples: a voxel takes one as a hypothesis'
+    only within guide_voxels of it too (empty: no such gate), else as the running mean's."""
     nby, nbz = nb[1], nb[2]
     has_color = pool_c.shape[0] > 0 and color.shape[0] == height * width
     mw = np.int32(max_w)
