@@ -13,10 +13,10 @@ sigma = T / 5: the thesis' new-mode threshold is K sigma_c with K = 5). At read-
 fills, so meshes, clouds and segmentation use it unchanged.
 
 Deliberate departures from the thesis: counts instead of the image-centre weights w_uv (the mean path counts
-observations too); no position hypotheses and no guided depth filter (the TSDF fuses geometry); M and T are
-small and were chosen on generated sequences (benchmarks/bench_color_mode.py, its choose mode), not taken from the
-thesis (M_max = 10, K sigma_c = 0.025 of the unit cube), whose memory and gain-sensitivity do not suit
-512^3 voxel grids and auto-gain cameras.
+observations too); no position hypotheses (the TSDF fuses geometry; the guided depth, guided_depth.py, only gates
+which samples a voxel's hypotheses take); M and T are small and were chosen on generated sequences
+(benchmarks/bench_color_mode.py, its choose mode), not taken from the thesis (M_max = 10, K sigma_c = 0.025 of the
+unit cube), whose memory and gain-sensitivity do not suit 512^3 voxel grids and auto-gain cameras.
 
 Storage, only with color_mode "mode": pool_hc uint8 (n, 512, M, 3) colours and pool_hn uint8 (n, 512, M)
 counts, per stored block (M = 2: 4 bytes per hypothesis, 8 bytes per voxel). A count reaching 255 halves

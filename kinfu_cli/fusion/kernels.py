@@ -359,9 +359,23 @@ def _carve_voxels(pool_v, pool_w, i, mw):
         pool_w[i, k] = np.uint8(min(w0 + 1, mw))
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def _mean_color(pool_c, pool_w, i, k, color_f, p):
+    """The running mean colour of voxel k of block i with pixel p's sample."""
+    one = np.float32(1.0)
+    # black = never coloured: take the sample, else a running mean that forgets slowly
+    fresh = pool_c[i, k, 0] == 0 and pool_c[i, k, 1] == 0 and pool_c[i, k, 2] == 0
+    alpha = one if fresh else max(one / np.float32(pool_w[i, k]), np.float32(0.1))
+    for ch in range(3):
+        c0 = np.float32(pool_c[i, k, ch])
+        cn = np.float32(color_f[p, ch])
+        pool_c[i, k, ch] = np.uint8(min(np.float32(255.0), c0 + alpha * (cn - c0) + np.float32(0.5)))
+
+
 @njit(cache=True, error_model="numpy")
 def _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, nx, ny, nz, fx, fy, cx, cy, width,
-                  height, depth_rl, color_f, color_ok, has_color, trunc, mw, color_band, mode_thr2, pix, zz, sdf):
+                  height, depth_rl, color_f, color_ok, has_color, trunc, mw, color_band, mode_thr2, pix, zz, sdf,
+                  depth_e, guide_band):
     """Projective update of every voxel of stored block i, as three flat loops over its 512 voxels.
 
     p0: camera-frame position of voxel (0, 0, 0); ex / ey / ez: camera-frame step per local x / y / z; nx, ny,
@@ -371,8 +385,11 @@ def _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, n
     (gathers are slower than scalar loads on current x86). error_model="numpy": 1 / z is not checked for
     zero (a voxel at z = 0 fails the z > 0 test anyway), which is what lets the loops vectorise.
     With colour hypotheses (pool_hc / pool_hn not None: the mode filter, see color_mode.py) the colour goes to
-    mode_update instead of the running mean. color_ok: per pixel 1 where the colour image has a sample (empty:
-    everywhere), e.g. not where a colour camera beside the depth camera does not see the point.
+    mode_update instead of the running mean, and only when the voxel is within the colour band of the guided depth
+    depth_e too (guide_band wide, in units of the truncation; see guided_depth.py; empty: no such gate); a gated
+    sample goes to the running mean in pool_c, which only a voxel without hypotheses shows. color_ok: per
+    pixel 1 where the colour image has a sample (empty: everywhere), e.g. not where a colour camera beside the
+    depth camera does not see the point.
     """
     one = np.float32(1.0)
     half = np.float32(0.5)
@@ -429,24 +446,25 @@ def _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, n
     if not (has_color and n_color > 0):
         return
     if pool_hn is not None:  # None (the mean path): numba prunes this branch at compile time
+        guided = depth_e.shape[0] > 0
         for k in range(B3):
             p = pix[k]
             t = sdf[k]
-            if p >= 0 and t > -one and abs(t) < color_band and (color_ok.shape[0] == 0 or color_ok[p]):
-                mode_update(pool_hc, pool_hn, i, k, color_f[p, 0], color_f[p, 1], color_f[p, 2], mode_thr2)
+            if p < 0 or not (t > -one and abs(t) < color_band) or (color_ok.shape[0] > 0 and not color_ok[p]):
+                continue
+            if guided and not abs((depth_e[p] - zz[k]) * depth_rl[p, 1] * inv_trunc) < guide_band:
+                # the guided depth puts this pixel's colour on another surface: not a hypothesis' sample, only the
+                # running mean's, the colour of a voxel that no ungated sample reached (mode_winners keeps it)
+                _mean_color(pool_c, pool_w, i, k, color_f, p)
+                continue
+            mode_update(pool_hc, pool_hn, i, k, color_f[p, 0], color_f[p, 1], color_f[p, 2], mode_thr2)
         return
     for k in range(B3):
         p = pix[k]
         t = sdf[k]
         if p < 0 or not (t > -one and abs(t) < color_band) or (color_ok.shape[0] > 0 and not color_ok[p]):
             continue
-        # black = never coloured: take the sample, else a running mean that forgets slowly
-        fresh = pool_c[i, k, 0] == 0 and pool_c[i, k, 1] == 0 and pool_c[i, k, 2] == 0
-        alpha = one if fresh else max(one / np.float32(pool_w[i, k]), np.float32(0.1))
-        for ch in range(3):
-            c0 = np.float32(pool_c[i, k, ch])
-            cn = np.float32(color_f[p, ch])
-            pool_c[i, k, ch] = np.uint8(min(np.float32(255.0), c0 + alpha * (cn - c0) + half))
+        _mean_color(pool_c, pool_w, i, k, color_f, p)
 
 
 @njit(cache=True, parallel=True)
@@ -465,17 +483,20 @@ def depth_and_raylen(depth, raylen):
 @njit(cache=True, parallel=True)
 def integrate_blocks(cls, nb, dims, block_idx_flat, block_w_flat, pool_v, pool_w, pool_c, pool_hc, pool_hn,
                      origin, vs, T_cw, fx, fy, cx, cy, width, height, depth_rl, color, color_ok, trunc, max_w,
-                     work, mode_thr):
+                     work, mode_thr, depth_e, guide_voxels):
     """Apply one frame: CARVE blocks in bulk (a weight step for uniform blocks, tsdf = 1 for stored ones);
     VOXEL blocks voxel by voxel (_update_block). `work` lists the blocks to visit; it is cut into one run per
     worker task, each with its own scratch rows. pool_hc / pool_hn: colour hypotheses of the mode filter (None:
-    running mean, compiled without the mode code), mode_thr its colour distance threshold (RGB 0..255 units)."""
+    running mean, compiled without the mode code), mode_thr its colour distance threshold (RGB 0..255 units),
+    depth_e the guided depth (H * W float32) that gates its colour samples: a voxel takes one as a hypothesis'
+    only within guide_voxels of it too (empty: no such gate), else as the running mean's."""
     nby, nbz = nb[1], nb[2]
     has_color = pool_c.shape[0] > 0 and color.shape[0] == height * width
     mw = np.int32(max_w)
     # colour the voxels within about a voxel of the surface: marching-cubes vertices take the nearest one's
     color_band = np.float32(min(1.0, 1.2 * vs / trunc))
     mode_thr2 = np.float32(mode_thr * mode_thr)
+    guide_band = np.float32(guide_voxels * vs / trunc)  # the same test against the guided depth, its own width
     ex = np.empty(3, dtype=np.float32)
     ey = np.empty(3, dtype=np.float32)
     ez = np.empty(3, dtype=np.float32)
@@ -515,7 +536,7 @@ def integrate_blocks(cls, nb, dims, block_idx_flat, block_w_flat, pool_v, pool_w
             _update_block(pool_v, pool_w, pool_c, pool_hc, pool_hn, i, p0, ex, ey, ez, min(B, dims[0] - bx * B),
                           min(B, dims[1] - by * B), min(B, dims[2] - bz * B), fx32, fy32, cx32, cy32, width,
                           height, depth_rl, color, color_ok, has_color, trunc, mw, color_band, mode_thr2, pix, zz,
-                          sdf)
+                          sdf, depth_e, guide_band)
 
 
 @njit(cache=True, parallel=True)

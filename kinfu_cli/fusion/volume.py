@@ -23,6 +23,7 @@ from kinfu_cli.core.grid import EMPTY, OCCUPIED, UNKNOWN, TernaryGrid, check_up,
 from kinfu_cli.core.poses import check_rigid
 from kinfu_cli.core.volume_file import (FORMAT, FORMAT_VERSION, MAX_COORDINATE_M, check_intrinsics, read_volume_file,
                                         read_volume_meta, write_volume_file)
+from kinfu_cli.fusion import guided_depth as gdf
 from kinfu_cli.fusion import kernels as kn
 from kinfu_cli.fusion.color_mode import MAX_HYPOTHESES, MODE_THRESHOLD, check_color_mode, mode_winners
 from kinfu_cli.fusion.mesh import extract_mesh
@@ -125,6 +126,7 @@ class TernaryVolume:
         self._winners_stale = False  # mode: hypotheses changed since pool_c last got the winners
         self.mode_hypotheses = MAX_HYPOTHESES  # M and T of the mode filter (color_mode.py); set before integrating
         self.mode_threshold = MODE_THRESHOLD
+        self.mode_guided = True  # mode: colour samples gated by the guided depth (fusion/guided_depth.py)
         self.nb = np.array([(d + kn.B - 1) // kn.B for d in self.shape], dtype=np.int64)
         self._check_memory()
         self._raylen_cache: dict = {}
@@ -266,10 +268,14 @@ class TernaryVolume:
         if new_b.size:
             self._ensure_capacity(self.n_used + new_b.size)
             self.n_used = kn.allocate_new(new_b, bidx, bw, self.pool_v, self.pool_w, self.pool_c, self.n_used)
+        guided = np.zeros(0, dtype=np.float32)
+        if self.color_mode == "mode" and self.mode_guided and col.shape[0] > 0:
+            guided = gdf.guided_depth(d, col, ok).reshape(-1)
         kn.integrate_blocks(cls, self.nb, np.array(self.shape, dtype=np.int64), bidx, bw, self.pool_v,
                             self.pool_w, self.pool_c, *self._hypotheses(), self.origin, self.voxel_size,
                             T_cw, fx, fy, cx, cy, w, h, kn.depth_and_raylen(d, self._raylen(K, w, h)),
-                            col.reshape(-1, 3), ok, self.truncation, self.max_weight, work, float(self.mode_threshold))
+                            col.reshape(-1, 3), ok, self.truncation, self.max_weight, work, float(self.mode_threshold),
+                            guided, float(gdf.GATE_VOXELS))
         self._winners_stale = self._winners_stale or (self.color_mode == "mode" and col.shape[0] > 0)
         self.frames_integrated += 1
         return {"blocks_carved": int(n_carve), "blocks_voxelwise": int(n_voxel),
