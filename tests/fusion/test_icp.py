@@ -20,6 +20,15 @@ def _box_volume(voxel=0.01):
                          color=False)
 
 
+def _wall_volume(K, W, H):
+    """A volume that has seen one fronto-parallel wall 1 m away, and that wall's depth image."""
+    vol = TernaryVolume(size=(2.0, 2.0, 2.0), voxel_size=0.01, origin=(-1.0, -1.0, 0.0), min_depth=0.1,
+                        color=False)
+    wall = np.full((H, W), 1.0, np.float32)
+    vol.integrate(wall, K, np.eye(4))
+    return vol, wall
+
+
 def _track_30hz(vol, depths, K, first_T):
     """`kinfu fuse --pose icp` on 30 Hz depth images: the first fused at first_T, each next one tracked (the
     default tracker, from the constant-velocity prediction and the last pose) and fused when not lost. Returns
@@ -83,10 +92,7 @@ def test_flat_wall_is_degenerate():
     tracker with a condition limit reports the frame lost instead of returning a guess."""
     W, H = 160, 120
     K = preset_intrinsics("kinect_v1", W, H)
-    vol = TernaryVolume(size=(2.0, 2.0, 2.0), voxel_size=0.01, origin=(-1.0, -1.0, 0.0), min_depth=0.1,
-                        color=False)
-    wall = np.full((H, W), 1.0, np.float32)
-    vol.integrate(wall, K, np.eye(4))
+    vol, wall = _wall_volume(K, W, H)
     res = FrameToModelTracker(relocalise=False, max_condition=float("inf")).track(vol, wall, K, np.eye(4))
     assert not res.lost and res.condition > MAX_CONDITION
     res = FrameToModelTracker(relocalise=False).track(vol, wall, K, np.eye(4))
@@ -152,10 +158,7 @@ def test_relocalisation_keeps_the_flat_wall_check():
     slid 29 cm in 10 frames, none lost)."""
     W, H = 160, 120
     K = preset_intrinsics("kinect_v1", W, H)
-    vol = TernaryVolume(size=(2.0, 2.0, 2.0), voxel_size=0.01, origin=(-1.0, -1.0, 0.0), min_depth=0.1,
-                        color=False)
-    wall = np.full((H, W), 1.0, np.float32)
-    vol.integrate(wall, K, np.eye(4))
+    vol, wall = _wall_volume(K, W, H)
     shifted = np.eye(4)
     shifted[0, 3] = 0.03
     res = FrameToModelTracker().track(vol, wall, K, shifted)
