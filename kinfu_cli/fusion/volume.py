@@ -221,8 +221,8 @@ class TernaryVolume:
         """Fuse one depth image (metres, float32 (H, W); 0/NaN = no reading) taken from T_world_camera.
 
         color: uint8 RGB (H, W, 3) registered to the depth image, or None; color_mask: bool (H, W), False where
-        `color` has no sample (None: it has one everywhere). Returns counts of blocks carved in bulk and updated
-        voxel by voxel.
+        `color` has no sample (None: it has one everywhere; an exactly black pixel never has one). Returns counts of
+        blocks carved in bulk and updated voxel by voxel.
         """
         K = np.asarray(K, dtype=np.float64)
         if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
@@ -253,6 +253,13 @@ class TernaryVolume:
             if m.shape != col.shape[:2]:
                 raise VolumeError(f"color_mask: expected shape {col.shape[:2]}, got {m.shape}")
             ok = np.ascontiguousarray(m.reshape(-1), dtype=np.uint8)
+        if col.size:
+            # an exactly black pixel is no colour sample: registered colour images (a RealSense's aligned colour)
+            # mark their holes so, and black is the volume's "never coloured" (a black sample would only darken
+            # the running mean of a coloured voxel)
+            seen = col.reshape(-1, 3).any(axis=1)
+            if not seen.all():
+                ok = np.ascontiguousarray(seen if ok.size == 0 else seen & ok.astype(bool), dtype=np.uint8)
         T_cw = np.linalg.inv(T)
         fx, fy, cx, cy = float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])
         pm = self._pyramid_buffer(h, w)

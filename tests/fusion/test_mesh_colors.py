@@ -44,3 +44,20 @@ def test_a_floor_seen_at_a_grazing_angle_is_coloured():
     c = np.asarray(vol.extract_mesh().vertex_colors)
     assert len(c) > 1000
     assert (~c.any(axis=1)).mean() < 0.1
+
+
+def test_black_pixels_are_no_colour_samples():
+    """A registered colour image marks its holes black (a RealSense's aligned colour): a wall seen red and then
+    through such a hole stays red. Before, the hole's black pulled the running mean down to half."""
+    W, H = 64, 48
+    K = preset_intrinsics("kinect_v1", W, H)
+    wall = np.full((H, W), 1.0, np.float32)
+    red = np.zeros((H, W, 3), np.uint8)
+    red[...] = (200, 40, 40)
+    for mode in ("mean", "mode"):
+        vol = TernaryVolume(size=(2.0, 2.0, 2.0), voxel_size=0.02, origin=(-1.0, -1.0, 0.0), min_depth=0.1,
+                            color=True, color_mode=mode)
+        vol.integrate(wall, K, np.eye(4), red)
+        vol.integrate(wall, K, np.eye(4), np.zeros_like(red))
+        c = np.asarray(vol.extract_mesh().vertex_colors) * 255
+        assert len(c) > 100 and np.all(np.abs(c - (200, 40, 40)).max(axis=1) <= 1), mode
