@@ -85,25 +85,48 @@ def color_registration(rec, depth_topic: str, color_topic: str, depth_info_topic
     return ColorRegistration("project", d_frame, c_frame, info_topic, lens, (w, h), T)
 
 
-def check_color_size(reg: ColorRegistration, rec, color_topic: str) -> ColorRegistration:
+def check_color_size(reg: ColorRegistration, rec, color_topic: str,
+                     depth_size: tuple[int, int] | None = None) -> ColorRegistration:
     """`reg`, or no colour (mode "none", the reason naming the topic and both sizes) when the colour topic's first
-    image is neither its camera info's size nor that size resized (register_color could place none of them)."""
+    image is neither its camera info's size nor that size resized (register_color could place none of them), or,
+    colour in the depth camera's own frame ("same-frame"), when it is not the depth image (depth_size: width,
+    height) resized: another aspect ratio is another camera, and stretching it would paint colours beside their
+    surfaces."""
+    if reg.mode == "same-frame" and depth_size is not None and all(depth_size):
+        size = _first_color_size(rec, color_topic)
+        w, h = depth_size
+        if size is None or abs(size[0] / w - size[1] / h) <= 0.01 * max(size[0] / w, size[1] / h):
+            return reg
+        return replace(reg, mode="none", reason=(
+            f"the colour images on {color_topic} are {size[0]}x{size[1]} and the depth images {w}x{h} in the same "
+            f"frame {reg.depth_frame!r}: another aspect ratio, so not the depth camera's pixels resized (a colour "
+            "camera needs its own frame and camera info to be projected)"))
     if reg.mode != "project" or reg.color_size is None:
         return reg
+    size = _first_color_size(rec, color_topic)
+    if size is None:
+        return reg
+    cw, ch = size
+    w, h = reg.color_size
+    if abs(cw / w - ch / h) <= 0.01 * max(cw / w, ch / h):
+        return reg
+    return replace(reg, mode="none", reason=color_size_reason(color_topic, (cw, ch), reg))
+
+
+def _first_color_size(rec, color_topic: str) -> tuple[int, int] | None:
+    """(width, height) of the colour topic's first image; None when there is none, it cannot be decoded (each frame
+    says so itself) or it has no pixels."""
     msg = rec.first_message(color_topic)
     if msg is None:
-        return reg
+        return None
     if is_compressed(msg):
         try:
             ch, cw = decode_color(msg, f"{rec.path}: {color_topic}").shape[:2]
         except RecordingError:  # a broken image: each frame says so itself
-            return reg
+            return None
     else:
         cw, ch = int(getattr(msg, "width", 0)), int(getattr(msg, "height", 0))
-    w, h = reg.color_size
-    if cw < 1 or ch < 1 or abs(cw / w - ch / h) <= 0.01 * max(cw / w, ch / h):
-        return reg
-    return replace(reg, mode="none", reason=color_size_reason(color_topic, (cw, ch), reg))
+    return (cw, ch) if cw >= 1 and ch >= 1 else None
 
 
 def color_size_reason(color_topic: str, size: tuple[int, int], reg: ColorRegistration) -> str:

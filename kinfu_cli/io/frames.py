@@ -181,7 +181,7 @@ def iter_frames(rec, roles: Roles | None = None, pose_source: str = "tf", pose_t
             reg = sdk_color_registration(rec, depth_topic, roles.color_topic)
         else:
             reg = color_registration(rec, depth_topic, roles.color_topic, roles.info_topic, tf)
-        reg = check_color_size(reg, rec, roles.color_topic)
+        reg = check_color_size(reg, rec, roles.color_topic, None if cloud else (width, height))
         stats.color_registration = reg.as_dict()
         if reg.mode == "none":  # colour that cannot be placed is left out, not painted beside its surface
             roles = replace(roles, color_topic=None)
