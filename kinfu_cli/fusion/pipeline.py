@@ -631,11 +631,13 @@ class _Integrator:
 
 
 def _track_entry(frame: RGBDFrame, res: TrackResult, T_given: np.ndarray | None) -> dict:
-    """One frame's tracking in the report: fitness, rmse, agreement, lost and why, the pose (None when lost) and,
-    with given poses, the distance between given and tracked camera positions."""
+    """One frame's tracking in the report: fitness, rmse, agreement, the condition number of its point-to-plane
+    system (how well the view pins the pose down; the tracker refuses MAX_CONDITION and above), lost and why, the pose
+    (None when lost) and, with given poses, the distance between given and tracked camera positions."""
     e = {"index": frame.index, "stamp_ns": frame.stamp_ns, "fitness": round(res.fitness, 4),
          "rmse": None if not np.isfinite(res.rmse) else round(res.rmse, 5),
-         "agreement": None if not np.isfinite(res.agreement) else round(res.agreement, 4), "lost": res.lost,
+         "agreement": None if not np.isfinite(res.agreement) else round(res.agreement, 4),
+         "condition": None if not np.isfinite(res.condition) else float(f"{res.condition:.3g}"), "lost": res.lost,
          "reason": res.reason, "relocalised": res.relocalised, "attempts": res.attempts,
          "T_world_camera": None if res.lost else np.round(res.T_world_camera, 6).tolist()}
     if T_given is not None and not res.lost:

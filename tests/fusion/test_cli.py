@@ -10,6 +10,7 @@ from click.testing import CliRunner
 
 from kinfu_cli.cli import cli
 from kinfu_cli.core.grid import load_ternary
+from kinfu_cli.fusion.tracking import MAX_CONDITION
 from kinfu_cli.fusion.volume import load_volume
 
 FAST = ["--voxel-size", "0.02", "--size", "2.0", "--quiet"]
@@ -145,6 +146,8 @@ def test_imported_7scenes_fuses_forced_and_icp(shared_data, tmp_path):
     ri = json.loads((icp / "report.json").read_text())
     track = ri["tracking"]["frames"]
     assert len(track) == 9 and ri["tracking"]["lost"] == 0
+    # each tracked frame says how well its view pinned the pose down (the kitchen reads 1e2-1e3)
+    assert all(10 < t["condition"] < MAX_CONDITION for t in track)
     truth = [np.loadtxt(root / f"frame-{i:06d}.pose.txt") for i in range(6, 60, 6)]
     err = [np.linalg.norm(np.asarray(t["T_world_camera"])[:3, 3] - g[:3, 3]) for t, g in zip(track, truth)]
     still = [np.linalg.norm(truth[0][:3, 3] - g[:3, 3]) for g in truth]
