@@ -105,3 +105,23 @@ def pytest_runtest_protocol(item, nextitem):
     with open(path, "a") as fh:
         fh.write(f"{cpu() - c0:.2f} {time.perf_counter() - t0:.2f} {item.nodeid}\n")
     return True
+
+
+def small_tabletop_volume(seed: int = 3, *, voxel: float = 0.01, truncation: float = 0.04, frames: int = 3,
+                          noise: bool = False, **volume_options):
+    """A TernaryVolume of the primitive tabletop scene `seed` fused from `frames` 160x120 views of an orbit above it
+    (the small fused volume several tests segment or write)."""
+    from kinfu_cli.fusion.volume import TernaryVolume
+    from kinfu_cli.sim.paths import orbit_poses
+    from kinfu_cli.sim.scene import primitive_tabletop_scene
+    from kinfu_cli.sim.sensor import DepthSensor, kinect_v1_intrinsics
+
+    scene = primitive_tabletop_scene(seed)
+    K = kinect_v1_intrinsics(160, 120)
+    sensor = DepthSensor(K, 160, 120, noise=noise, seed=seed)
+    vol = TernaryVolume(size=(1.28, 0.8, 0.4), voxel_size=voxel, origin=(-0.64, -0.4, 0.6), truncation=truncation,
+                        min_depth=0.2, max_depth=2.0, **volume_options)
+    for T in orbit_poses(frames, radius=0.85, height=1.3, target=(0, 0, 0.75)):
+        depth, colour = sensor.render(scene, T)
+        vol.integrate(depth, K, T, colour)
+    return vol

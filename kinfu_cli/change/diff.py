@@ -7,7 +7,6 @@ centres; `to_json()` is changes.json (its keys are documented in README.md, sect
 
 from __future__ import annotations
 
-import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,7 +20,7 @@ from kinfu_cli.change.regions import KINDS, ChangeMasks, Region, find_changes
 from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import VolumeError
 from kinfu_cli.core.grid import TernaryGrid, read_ternary
-from kinfu_cli.core.volume_file import read_volume_meta
+from kinfu_cli.core.volume_file import read_volume_meta, report_json_of
 from kinfu_cli.fusion.volume import load_volume
 
 #: Smallest region kept, in voxels, when no minimum volume is given: a 3 x 3 x 3 block. Pose noise is already
@@ -219,19 +218,10 @@ def diff_volumes(before: str | os.PathLike, after: str | os.PathLike,
     (params or ChangeParams()).check()  # bad parameters fail before any file is read
     cams = [read_cameras(p) for p in (before, after)]
     result = diff_grids(_load(before), _load(after), params, (str(Path(before)), str(Path(after))),
-                        (cams[0][0], cams[1][0]), tuple(_fuse_report(p) for p in (before, after)))
+                        (cams[0][0], cams[1][0]), tuple(report_json_of(p) for p in (before, after)))
     result.warnings += [f"{why}; the depth-noise margin uses the other volume's cameras or none" for _, why in cams
                         if why]
     return result
-
-
-def _fuse_report(path: str | os.PathLike) -> dict | None:
-    """The report.json beside a volume (the `kinfu fuse` run that wrote it), or None."""
-    try:
-        doc = json.loads((Path(path).parent / "report.json").read_text())
-    except (OSError, ValueError, RecursionError):
-        return None
-    return doc if isinstance(doc, dict) else None
 
 
 def _load(path: str | os.PathLike) -> TernaryGrid:

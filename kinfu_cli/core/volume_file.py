@@ -190,3 +190,16 @@ def check_intrinsics(value, path) -> dict | None:
         raise VolumeError(f"{path}: 'intrinsics' out of range: {value!r}")
     out["width"], out["height"] = int(out["width"]), int(out["height"])
     return out
+
+
+def report_json_of(path: str | os.PathLike) -> dict | None:
+    """The report.json of the `kinfu fuse` run beside a volume file (or in a fuse output folder), if any: what the
+    volume's own meta does not hold (its recording, window, sensor), read for provenance and warnings; None when
+    absent or not a JSON object."""
+    p = Path(path)
+    p = p / "report.json" if p.is_dir() else p.parent / "report.json"
+    try:
+        doc = json.loads(p.read_text())
+    except (OSError, ValueError, RecursionError):
+        return None
+    return doc if isinstance(doc, dict) else None

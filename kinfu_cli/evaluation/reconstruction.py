@@ -27,7 +27,6 @@ from) out. Tables are formatted by `evaluation.tables`, the error-coloured mesh 
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import time
@@ -43,6 +42,7 @@ from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError, RecordingError, VolumeError
 from kinfu_cli.core.grid import UNKNOWN
 from kinfu_cli.core.progress import progress
+from kinfu_cli.core.volume_file import report_json_of
 from kinfu_cli.io.messages import c_stderr_silenced
 from kinfu_cli.evaluation.object_measures import PAPER_TABLE_1, ObjectMeasuresResult, object_measures
 from kinfu_cli.fusion.volume import TernaryVolume, load_volume
@@ -440,19 +440,6 @@ def score_reconstruction(rec: Reconstruction, gt: GroundTruth, state: str = "aft
                                surface.frames, coverage, notes, per_vertex)
 
 
-def report_json_of(path: str | os.PathLike) -> dict | None:
-    """The report.json beside a `kinfu fuse` output, if any (for provenance in the results)."""
-    p = Path(path)
-    p = p / "report.json" if p.is_dir() else p.parent / "report.json"
-    if not p.exists():
-        return None
-    try:
-        doc = json.loads(p.read_text())
-    except (OSError, ValueError, RecursionError):
-        return None
-    return doc if isinstance(doc, dict) else None
-
-
 # ---------------------------------------------------------------------------------------------- the whole evaluation
 POSE_MODE_LABELS = {"forced": "robot kinematics (forced)", "icp": "egomotion (icp)",
                     "hint": "icp, kinematics hint", "topic": "pose topic"}
@@ -521,8 +508,10 @@ def init_warnings(report: dict | None, gt: GroundTruth | None = None) -> list[st
         return []
     if report.get("cleared_spheres"):
         return []
-    placement = grid.get("placement") if isinstance(grid.get("placement"), str) else ""
-    init = placement.split(" ", 1)[1] if " " in placement else "another volume"
+    init = grid["sizing"].get("init")
+    if not isinstance(init, str):  # a report written before sizing named the init volume: its placement line does
+        placement = grid.get("placement") if isinstance(grid.get("placement"), str) else ""
+        init = placement.split(" ", 1)[1] if " " in placement else "another volume"
     total, used = grid.get("frames_in_volume"), (report.get("frames") or {}).get("used")
     brought = ""
     if all(isinstance(v, int) and not isinstance(v, bool) for v in (total, used)) and total > used:

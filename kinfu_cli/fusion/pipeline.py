@@ -229,7 +229,7 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
                                  f"camera poses in {plan.world!r}", parameter="init")
         warnings = rec.problems + ([plan.warning] if plan.warning else []) + poi_frame_warnings(clear_pois, plan.world or (vol.frame if vol is not None
                                                                                else ""), names["clear_pois"])
-        sizing, notes = {"mode": "init" if init else "given"}, []
+        sizing, notes = ({"mode": "init", "init": str(init)} if init else {"mode": "given"}), []
         if auto and vol is None:
             t0 = time.perf_counter()
             chosen = _auto_grid(rec, found, plan, grid_spec, resolution, voxel_size, origin, budget,

@@ -7,24 +7,13 @@ from __future__ import annotations
 import json
 
 from click.testing import CliRunner
-from conftest import one_line_error
+from conftest import one_line_error, small_tabletop_volume
 
 from kinfu_cli.cli import cli
-from kinfu_cli.fusion.volume import TernaryVolume
-from kinfu_cli.sim.paths import orbit_poses
-from kinfu_cli.sim.scene import primitive_tabletop_scene
-from kinfu_cli.sim.sensor import DepthSensor, kinect_v1_intrinsics
 
 
 def _fuse_folder(path):
-    scene = primitive_tabletop_scene(3)
-    K = kinect_v1_intrinsics(160, 120)
-    sensor = DepthSensor(K, 160, 120, noise=False, seed=3)
-    vol = TernaryVolume(size=(1.28, 0.8, 0.4), voxel_size=0.01, origin=(-0.64, -0.4, 0.6), truncation=0.04,
-                        min_depth=0.2, max_depth=2.0)
-    for T in orbit_poses(3, radius=0.85, height=1.3, target=(0, 0, 0.75)):
-        depth, colour = sensor.render(scene, T)
-        vol.integrate(depth, K, T, colour)
+    vol = small_tabletop_volume(3)
     path.mkdir()
     vol.save(path / "volume.npz")
     return path

@@ -4,12 +4,10 @@ chunks: the same vertices, bit for bit (speed for `kinfu segment`, not a differe
 from __future__ import annotations
 
 import numpy as np
+from conftest import small_tabletop_volume
 
 from kinfu_cli.fusion.volume import TernaryVolume
 from kinfu_cli.segmentation.surface import surface_from_volume
-from kinfu_cli.sim.paths import orbit_poses
-from kinfu_cli.sim.scene import primitive_tabletop_scene
-from kinfu_cli.sim.sensor import DepthSensor, kinect_v1_intrinsics
 
 
 class _WholeChunks:
@@ -26,14 +24,7 @@ class _WholeChunks:
 
 
 def test_trimmed_chunks_give_the_vertices_of_whole_chunks(monkeypatch):
-    scene = primitive_tabletop_scene(5)
-    K = kinect_v1_intrinsics(160, 120)
-    sensor = DepthSensor(K, 160, 120, noise=True, seed=5)
-    vol = TernaryVolume(size=(1.28, 0.8, 0.4), voxel_size=0.005, origin=(-0.64, -0.4, 0.6), truncation=0.02,
-                        min_depth=0.2, max_depth=2.0)
-    for T in orbit_poses(4, radius=0.85, height=1.3, target=(0, 0, 0.75)):
-        depth, colour = sensor.render(scene, T)
-        vol.integrate(depth, K, T, colour)
+    vol = small_tabletop_volume(5, voxel=0.005, truncation=0.02, frames=4, noise=True)
     read = []
     real = TernaryVolume.tsdf_weights
 
