@@ -25,6 +25,7 @@ $(STAMP): pyproject.toml | syslibs
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet -e '.[test]'
+	@$(BIN)/python -m kinfu_cli.warmup || echo "warning: compiling the numba kernels ahead failed; the first runs compile them"
 	@touch $(STAMP)
 
 demo: bootstrap

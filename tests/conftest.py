@@ -14,19 +14,17 @@ SHARED_DATA = REPO.parent / "shared" / "data"
 
 @pytest.hookimpl(tryfirst=True)
 def pytest_sessionstart(session):
-    """With xdist workers, compile the numba kernels once first (tests/warm_kernels.py says why);
-    KINFU_NO_WARM=1 skips it."""
+    """With xdist workers, compile the numba kernels once first (kinfu_cli.warmup: two processes side by side
+    instead of every worker compiling the same kernels for itself); KINFU_NO_WARM=1 skips it. A failure there only
+    means the workers compile as before: the tests themselves judge the code."""
     config = session.config
     if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
         return
     if os.environ.get("KINFU_NO_WARM") or os.environ.get("NUMBA_DISABLE_JIT"):
         return
-    import importlib.util
+    from kinfu_cli.warmup import warm
 
-    spec = importlib.util.spec_from_file_location("warm_kernels", Path(__file__).with_name("warm_kernels.py"))
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    module.warm()
+    warm()
 
 
 def shared_path(*parts: str) -> Path:
