@@ -44,8 +44,6 @@ def jobs(rec: Path, gt: Path, out: Path) -> dict[str, list[list[str]]]:
             ["nbv", str(out / "scan" / "volume.npz"), "--mode", "objects", "-o", str(out / "oviews.json"),
              "--quiet", "--force"],
             ["segment", str(out / "scan" / "volume.npz"), "-o", str(out / "seg"), "--quiet", "--force"],
-            ["diff", str(out / "scan" / "volume.npz"), str(out / "icp" / "volume.npz"), "-o", str(out / "diff"),
-             "--force"],
             ["eval", "fusion", str(out / "scan"), "--ground-truth", str(gt), "-o", str(out / "ef.json"),
              "--quiet", "--force"],
             ["eval", "nbv", str(gt), "--views", "1", "--strategy", "poi,random", "--width", "80", "--height", "60",
