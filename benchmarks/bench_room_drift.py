@@ -11,14 +11,27 @@ towards the bare walls, with hand-like wobble. Each method tracks frame-to-model
 frames, frames lost and re-localised. --from-truth instead fuses the TRUE poses and tracks each frame from its
 true pose against that clean model: how far ICP itself moves away from the truth (no drift can build up).
 
-What it showed (2026-11-27, 640x480, seed 0, 200 frames): projective ICP ATE 4.45 cm (max 13.6, 1 lost, 27
-re-localised), open3d's 4.28 cm (max 6.1, none lost): the error builds up in frames 60-100, where the view holds
-the +y wall, the floor and one table edge, and stays. --from-truth: with noise-free depth both ICPs stay within
+What it showed (2026-11-27, 640x480, seed 0, 200 frames, the loop's first version with a fixed 1/30 s step):
+projective ICP ATE 4.45 cm (max 13.6, 1 lost, 27 re-localised), open3d's 4.28 cm (max 6.1, none lost): the error
+builds up in frames 60-100, where the view holds the +y wall, the floor and one table edge, and stays. --from-truth: with noise-free depth both ICPs stay within
 0.3 cm of the truth and refuse the same 11 frames as degenerate (condition number > 2.5e3); with noise the condition
 number there reads ~165 (the noisy model normals on the planes look like information along the wall) and projective
 ICP jumps 12-16 cm off the truth (13 frames, refused only by the speed limit), open3d's up to 7 cm (accepted).
 Model normals from the TSDF gradient kept projective ICP within ~1 cm from the truth there but lost the full track
 at frame 90: not adopted. Not a test: a finding for the tracking work.
+
+2026-11-27, second look (the loop now tracks as the pipeline does: time since the last good pose; projective
+5.03 cm, max 13.9, 1 lost, 23 re-localised; open3d 3.90 cm, max 5.6):
+- The mechanism: in those views ICP moves the pose ~1 cm along the wall-floor line from wherever it starts (from
+  the true pose too, in either walking direction: a push, not a wrong optimum; noise-free depth does not push).
+  The constant-velocity prediction adds each push to the velocity, so the error's second difference is the push:
+  quadratic growth (0/15/6 iterations: 1 -> 50 cm in 10 frames, agreement 0.99, condition ~200).
+- What stops the push from the true pose (frames 40-130): no iterations on the 80 px level (max 1.2 cm instead of
+  17.5), full-size maps (0.7 cm) or model normals from neighbours 2 px apart (2.8 cm). Each of them made the full
+  run worse (ATE about 1 m): the better the normals, the less the system holds along the wall, and nothing holds the
+  prediction there. With 2 px normals these views read condition 466-645 against 188-275 on the kitchen (vertex
+  normals: ~200 against 151-243), a margin a degeneracy-aware update (keep the prediction along directions the
+  system does not hold, Zhang et al. 2016) could use; not built: it needs real sequences with such views.
 """
 
 from __future__ import annotations
@@ -56,18 +69,24 @@ def room_volume() -> TernaryVolume:
 
 
 def track(method: str, depths, K, poses) -> dict:
-    """`kinfu fuse --pose icp` on the frames: estimated poses, lost and re-localised counts."""
+    """`kinfu fuse --pose icp` on the frames, as its integrator tracks (fusion.pipeline): from the constant-velocity
+    prediction of the last two good poses, then the last good pose; the speed check over the time since the last
+    good pose (a lost frame is not fused and the next is tracked from that pose). Estimated poses (the last good
+    one for a lost frame), lost and re-localised counts."""
     vol = room_volume()
     vol.integrate(depths[0], K, poses[0])
     tracker = FrameToModelTracker(icp=method)
-    est, lost, reloc = [poses[0]], 0, 0
-    for d in depths[1:]:
-        pred = predict_pose(est[-1], est[-2] if len(est) > 1 else None, 1 / 30, 1 / 30)
-        r = tracker.track(vol, d, K, [pred, est[-1]], T_ref=est[-1], dt_s=1 / 30)
+    est, good, lost, reloc = [poses[0]], [(poses[0], 0.0)], 0, 0
+    for i, d in enumerate(depths[1:], start=1):
+        (T1, s1), s = good[-1], i / 30
+        T2, s2 = good[-2] if len(good) > 1 else (None, None)
+        pred = predict_pose(T1, T2, None if s2 is None else s1 - s2, s - s1)
+        r = tracker.track(vol, d, K, [pred, T1], T_ref=T1, dt_s=s - s1)
         lost += r.lost
         reloc += (not r.lost) and r.relocalised
-        est.append(est[-1] if r.lost else r.T_world_camera)
+        est.append(T1 if r.lost else r.T_world_camera)
         if not r.lost:
+            good.append((r.T_world_camera, s))
             vol.integrate(d, K, r.T_world_camera)
     return {"est": est, "lost": lost, "relocalised": reloc}
 
