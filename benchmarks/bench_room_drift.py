@@ -16,7 +16,8 @@ projective ICP ATE 4.45 cm (max 13.6, 1 lost, 27 re-localised), open3d's 4.28 cm
 builds up in frames 60-100, where the view holds the +y wall, the floor and one table edge, and stays.
 --from-truth: with noise-free depth both ICPs stay within 0.3 cm of the truth and refuse the same 11 frames as
 degenerate (condition number > 2.5e3); with noise the condition number there reads ~165 (the noisy model normals
-on the planes look like information along the wall) and projective ICP jumps 12-16 cm off the truth (13 frames, refused only by the speed limit), open3d's up to 7 cm (accepted).
+on the planes look like information along the wall) and projective ICP jumps 12-16 cm off the truth (13 frames,
+refused only by the speed limit), open3d's up to 7 cm (accepted).
 Model normals from the TSDF gradient kept projective ICP within ~1 cm from the truth there but lost the full track
 at frame 90: not adopted. Not a test: a finding for the tracking work.
 
