@@ -24,3 +24,10 @@ def test_a_failing_command_is_named(tmp_path):
 
 def test_no_sample_recording_is_not_a_failure(tmp_path):
     assert warmup.warm(sample=tmp_path) == []
+
+
+def test_kernel_sources_are_the_files_that_define_kernels():
+    pkg = Path(warmup.__file__).parent
+    assert warmup.KERNEL.search((pkg / "fusion" / "icp.py").read_text())
+    assert not warmup.KERNEL.search((pkg / "warmup.py").read_text())
+    assert not warmup.KERNEL.search((pkg / "nbv" / "contours.py").read_text())  # names njit, defines none
