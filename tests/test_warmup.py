@@ -31,3 +31,8 @@ def test_kernel_sources_are_the_files_that_define_kernels():
     assert warmup.KERNEL.search((pkg / "fusion" / "icp.py").read_text())
     assert not warmup.KERNEL.search((pkg / "warmup.py").read_text())
     assert not warmup.KERNEL.search((pkg / "nbv" / "contours.py").read_text())  # names njit, defines none
+
+
+def test_reader_kernels_run_as_the_readers_call_them():
+    same, coloured = warmup.reader_kernels()
+    assert same and coloured == 12  # the colour camera at the depth camera's place colours every pixel
