@@ -112,14 +112,20 @@ def warm(sample: Path = SAMPLE, timeout_s: float = 900) -> list[str]:
         procs = {name: subprocess.Popen([sys.executable, "-m", "kinfu_cli.warmup", "--job", name, "--out", tmp,
                                          "--data", str(sample)], cwd=REPO, stdout=subprocess.PIPE,
                                         stderr=subprocess.DEVNULL, text=True) for name in ("fusion", "planning")}
-        for name, p in procs.items():
-            try:
-                said, _ = p.communicate(timeout=timeout_s)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                said = f"did not end within {timeout_s:.0f} s"
-            if p.returncode != 0:
-                failed.append(f"{name}: {said.strip()}")
+        try:
+            for name, p in procs.items():
+                try:
+                    said, _ = p.communicate(timeout=timeout_s)
+                except subprocess.TimeoutExpired:
+                    p.kill()
+                    said = f"did not end within {timeout_s:.0f} s"
+                if p.returncode != 0:
+                    failed.append(f"{name}: {said.strip()}")
+        finally:  # interrupted: no job goes on compiling into a folder that is gone
+            for p in procs.values():
+                if p.poll() is None:
+                    p.kill()
+                    p.wait()
     return failed
 
 
@@ -155,4 +161,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    try:
+        sys.exit(main())
+    except KeyboardInterrupt:  # the jobs share the terminal's process group: they stop too
+        print("warmup: interrupted (the kernels compile in the first runs instead)", file=sys.stderr)
+        sys.exit(130)
