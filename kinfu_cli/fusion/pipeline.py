@@ -527,7 +527,7 @@ class _Integrator:
         self.origin_name = origin_name
         self.recording = recording
         self.timing = timing
-        self.tracker = FrameToModelTracker(icp=icp) if mode in ("icp", "hint") else None
+        self.tracker = FrameToModelTracker(icp=icp, init_is_hint=mode == "hint") if mode in ("icp", "hint") else None
         self.track_log: list[dict] = []
         self.lost: list[int] = []  # indices of the frames tracking lost (not fused)
         self.placement = ""
