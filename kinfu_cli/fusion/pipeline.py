@@ -398,12 +398,15 @@ def _tracking_verdict(integrator: _Integrator, max_lost: float, recording: str,
     shown = ", ".join(str(i) for i in lost[:10]) + (", ..." if len(lost) > 10 else "")
     what = (f"tracking ({integrator.mode}) lost {len(lost)} of {tracked} tracked frames "
             f"({100 * len(lost) / tracked:.0f} %): frames {shown}")
+    # hint mode has its poses: the way out is to take them as they are (or a grid that holds the scene)
+    advice = "sub-sample less, or give camera poses" if integrator.mode != "hint" else \
+        "take the TF poses as they are (pose mode forced), or check that the grid holds the scene"
     if bound is not None:
         raise RecordingError(f"{recording}: {what}; stopped: more than {100 * max_lost:.0f} % of the {bound} frames "
-                             f"selected (sub-sample less, or give camera poses)", parameter="max_lost")
+                             f"selected ({advice})", parameter="max_lost")
     if len(lost) > max_lost * tracked:
-        raise RecordingError(f"{recording}: {what}; more than the {100 * max_lost:.0f} % allowed (sub-sample "
-                             f"less, or give camera poses)", parameter="max_lost")
+        raise RecordingError(f"{recording}: {what}; more than the {100 * max_lost:.0f} % allowed ({advice})",
+                             parameter="max_lost")
     return [f"{what}; they were not fused"]
 
 

@@ -27,7 +27,8 @@ When is a frame lost? ICP always returns some pose; it is kept only when all the
    such as a flat wall lets the pose slide along it: such a pose is a guess); open3d's ICP and re-localisation
    are checked with projective ICP's system at the pose they found;
 4. the camera moved no faster than max_speed / max_turn since the last good pose (KinFu's per-frame ICP
-   limits of 0.10 m and 20 degrees at 30 Hz, as speeds, so sub-sampled frames may move further).
+   limits of 0.10 m and 20 degrees at 30 Hz, as speeds, so sub-sampled frames may move further);
+5. hint mode: the pose lies within HINT_MAX_M / HINT_MAX_DEG of the TF pose.
 When the first attempt fails, the tracker re-localises before declaring the frame lost: a wider
 coarse-to-fine pyramid (30 cm correspondences on a 4 cm cloud down to the finest level) from each of the
 candidate initial poses the caller gives (in icp mode the prediction and the last good pose; in hint mode the
@@ -89,6 +90,11 @@ RELOCALISE_LEVELS = ((0.30, 15, 0.04), (0.15, 15, 0.04), (0.08, 10, 0.02), (0.04
 # it. The sample recording with its exact TF: 5.1 cm RMS from the TF poses with them, 0.44 cm without; with a
 # hand-eye error of 1 / 2 cm both correct it alike (0.94 / 1.80 cm against 0.88 / 1.76 cm, from 1.52 / 3.04)
 HINT_ITERATIONS = 10
+# hint mode: a pose further than this from the TF pose is refused (the TF and ICP disagree: a robot's TF is good to a
+# few centimetres; KinFu's per-frame ICP limit, 10 cm, as the bound). On the sample recording with a 2 m grid that cut
+# its last views, re-localisation returned a pose 18 cm from the exact TF that passed every other check
+HINT_MAX_M = 0.10
+HINT_MAX_DEG = 10.0
 
 
 @dataclass
@@ -157,6 +163,7 @@ class FrameToModelTracker:
         self.map_scale = float(map_scale)
         self.band_start = float(band_start)
         self.init_is_hint = bool(init_is_hint)
+        self._hint: np.ndarray | None = None  # the current frame's TF pose (init_is_hint)
         self.timing: dict[str, float] = {}  # seconds per phase of projective tracking, summed over the frames
         self.max_distances = tuple(float(x) for x in max_distances)
         self.iterations = tuple(int(x) for x in iterations)
@@ -184,6 +191,7 @@ class FrameToModelTracker:
         """
         inits = [np.asarray(T_init, dtype=np.float64)] if np.ndim(T_init) == 2 else \
             [np.asarray(T, dtype=np.float64) for T in T_init]
+        self._hint = inits[0] if self.init_is_hint else None  # check 5 (_checked)
         T_ref = inits[0] if T_ref is None else np.asarray(T_ref, dtype=np.float64)
         d = np.asarray(depth, dtype=np.float32)
         s = self.stride
@@ -357,6 +365,12 @@ class FrameToModelTracker:
         elif step_m > lim_m or step_deg > lim_deg:
             out.lost, out.reason = True, (f"moved {step_m:.2f} m / {step_deg:.0f} deg since the last good pose "
                                           f"(limit {lim_m:.2f} m / {lim_deg:.0f} deg)")
+        elif self._hint is not None:
+            off = np.linalg.inv(self._hint) @ T
+            off_m, off_deg = float(np.linalg.norm(off[:3, 3])), _angle_deg(off[:3, :3])
+            if off_m > HINT_MAX_M or off_deg > HINT_MAX_DEG:
+                out.lost, out.reason = True, (f"{off_m:.2f} m / {off_deg:.0f} deg from the TF pose (limit "
+                                              f"{HINT_MAX_M:.2f} m / {HINT_MAX_DEG:.0f} deg): TF and ICP disagree")
         return out
 
     def agreement(self, volume, depth: np.ndarray, K: np.ndarray, T_world_camera: np.ndarray) -> float:

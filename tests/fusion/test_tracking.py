@@ -107,3 +107,24 @@ def test_icp_on_tabletop_box_with_line_artefacts(shared_data):
     assert not any(r.lost for r in results)
     assert ate < 0.3 * ate_none
     assert ate < 0.02
+
+
+def test_hint_mode_refuses_a_pose_far_from_the_tf_pose():
+    """Hint mode: a TF pose 15 cm off, and the true pose as the second candidate (re-localisation finds it):
+    TF and ICP disagree by more than a robot's TF errs, so the frame is lost, not fused at either pose. The
+    same tracker without the hint flag accepts the pose it found."""
+    from kinfu_cli.fusion.tracking import HINT_MAX_M
+
+    K = preset_intrinsics("kinect_v1", W, H)
+    poses = orbit_poses(3, radius=0.8, height=0.6, span_deg=10)
+    sensor = DepthSensor(K, W, H, noise=False)
+    vol = TernaryVolume(size=(1.2, 1.2, 0.6), voxel_size=0.008, origin=(-0.6, -0.6, -0.1), min_depth=0.1,
+                        color=False)
+    vol.integrate(sensor.render(box_scene(), poses[0])[0], K, poses[0])
+    depth = sensor.render(box_scene(), poses[1])[0]
+    tf = poses[1].copy()
+    tf[:3, 3] += [0.15, 0.0, 0.0]
+    free = FrameToModelTracker().track(vol, depth, K, [tf, poses[1]], T_ref=poses[0])
+    assert not free.lost and np.linalg.norm(free.T_world_camera[:3, 3] - poses[1][:3, 3]) < 0.01
+    hint = FrameToModelTracker(init_is_hint=True).track(vol, depth, K, [tf, poses[1]], T_ref=poses[0])
+    assert hint.lost and "from the TF pose" in hint.reason and HINT_MAX_M < 0.15
