@@ -164,6 +164,7 @@ class FrameToModelTracker:
         self.band_start = float(band_start)
         self.init_is_hint = bool(init_is_hint)
         self._hint: np.ndarray | None = None  # the current frame's TF pose (init_is_hint)
+        self._frame_pyramid: tuple | None = None  # the current frame's data pyramid (_pyramid)
         self.timing: dict[str, float] = {}  # seconds per phase of projective tracking, summed over the frames
         self.max_distances = tuple(float(x) for x in max_distances)
         self.iterations = tuple(int(x) for x in iterations)
@@ -192,6 +193,7 @@ class FrameToModelTracker:
         inits = [np.asarray(T_init, dtype=np.float64)] if np.ndim(T_init) == 2 else \
             [np.asarray(T, dtype=np.float64) for T in T_init]
         self._hint = inits[0] if self.init_is_hint else None  # check 5 (_checked)
+        self._frame_pyramid = None  # this frame's data pyramid, built once (_pyramid)
         T_ref = inits[0] if T_ref is None else np.asarray(T_ref, dtype=np.float64)
         d = np.asarray(depth, dtype=np.float32)
         s = self.stride
@@ -282,13 +284,17 @@ class FrameToModelTracker:
     def _pyramid(self, volume, depth, K) -> tuple[list, int, int]:
         """The frame's data pyramid, the finest level ICP uses and the level the model maps match: icp_scale /
         map_scale of the frame, but never narrower than MIN_ICP_WIDTH / MIN_MODEL_WIDTH pixels (a small frame is
-        tracked at full size)."""
+        tracked at full size). Built once per frame: the first attempt and every re-localised pose's condition check
+        share it."""
+        if self._frame_pyramid is not None:
+            return self._frame_pyramid
         f = min(self._level(1 / self.icp_scale), self._narrowest(depth.shape[1], MIN_ICP_WIDTH))
         levels = max(f + len(self.projective_iterations), self._level(self.agreement_stride) + 1)
         pyr = data_pyramid(depth, K, levels, volume.min_depth, volume.max_depth, self.bilateral,
                            first=min(f, self._level(self.agreement_stride)), timing=self.timing)
         m = min(self._level(1 / self.map_scale), self._narrowest(depth.shape[1], MIN_MODEL_WIDTH), levels - 1)
-        return pyr, f, m
+        self._frame_pyramid = (pyr, f, m)
+        return self._frame_pyramid
 
     def _model_maps(self, volume, level, T_model, m: int):
         """(depth, vertex, normal, state) maps of the model ray cast from T_model at the pyramid level's size,
