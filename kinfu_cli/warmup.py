@@ -75,7 +75,7 @@ def reader_kernels() -> tuple[bool, int]:
 
 
 def run_job(commands: list[list[str]]) -> list[str]:
-    """Runs the commands in this process; the first line of what each failed one said."""
+    """Runs the commands in this process; for each that failed, the last line it said."""
     from click.testing import CliRunner
 
     from kinfu_cli.cli import cli

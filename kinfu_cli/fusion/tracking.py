@@ -192,8 +192,17 @@ class FrameToModelTracker:
         """
         inits = [np.asarray(T_init, dtype=np.float64)] if np.ndim(T_init) == 2 else \
             [np.asarray(T, dtype=np.float64) for T in T_init]
-        self._hint = inits[0] if self.init_is_hint else None  # check 5 (_checked)
-        self._frame_pyramid = None  # this frame's data pyramid, built once (_pyramid)
+        # this frame's state, read by the checks and the attempts, gone when the call ends: the TF pose (check 5)
+        # and the data pyramid, built once (_pyramid)
+        self._hint = inits[0] if self.init_is_hint else None
+        self._frame_pyramid = None
+        try:
+            return self._track(volume, depth, K, inits, T_ref, dt_s)
+        finally:
+            self._hint = self._frame_pyramid = None
+
+    def _track(self, volume, depth, K, inits: list[np.ndarray], T_ref, dt_s) -> TrackResult:
+        """track() on the candidate list."""
         T_ref = inits[0] if T_ref is None else np.asarray(T_ref, dtype=np.float64)
         d = np.asarray(depth, dtype=np.float32)
         s = self.stride
