@@ -398,9 +398,14 @@ def _tracking_verdict(integrator: _Integrator, max_lost: float, recording: str,
     shown = ", ".join(str(i) for i in lost[:10]) + (", ..." if len(lost) > 10 else "")
     what = (f"tracking ({integrator.mode}) lost {len(lost)} of {tracked} tracked frames "
             f"({100 * len(lost) / tracked:.0f} %): frames {shown}")
-    # hint mode has its poses: the way out is to take them as they are (or a grid that holds the scene)
-    advice = "sub-sample less, or give camera poses" if integrator.mode != "hint" else \
-        "take the TF poses as they are (pose mode forced), or check that the grid holds the scene"
+    # hint mode has its poses: the way out is to take them as they are (or a grid that holds the scene), unless ICP
+    # found them far off (tracking check 5): then the TF itself is suspect (a wrong camera frame, a broken link)
+    advice = "sub-sample less, or give camera poses"
+    if integrator.mode == "hint":
+        disagree = any("from the TF pose" in t["reason"] for t in integrator.track_log if t["lost"])
+        advice = ("ICP put frames far from their TF poses: check the camera frame and the TF chain to it"
+                  if disagree else "take the TF poses as they are (pose mode forced), or check that the grid holds "
+                                   "the scene")
     if bound is not None:
         raise RecordingError(f"{recording}: {what}; stopped: more than {100 * max_lost:.0f} % of the {bound} frames "
                              f"selected ({advice})", parameter="max_lost")

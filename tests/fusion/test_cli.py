@@ -184,6 +184,15 @@ def test_hint_mode_with_exact_tf_does_not_drift_over_the_recording(sample_dir, t
     assert t["lost"] == 0 and t["ate_vs_given_m"]["rmse"] < 0.015 and t["ate_vs_given_m"]["max"] < 0.04
 
 
+def test_hint_mode_on_a_wrong_camera_frame_says_the_tf_is_suspect(sample_dir, tmp_path):
+    # link3 is in the TF tree but is not the camera: ICP puts the frames 0.2-1.4 m from their TF poses, refused
+    res = run([str(sample_dir / "recording.mcap"), "-o", str(tmp_path / "out"), "--quiet", "--pose", "hint",
+               "--camera-frame", "link3"])
+    assert res.exit_code == 2, res.output
+    assert res.output.count("kinfu: error:") == 1 and "check the camera frame and the TF chain" in res.output
+    assert "Traceback" not in res.output and not (tmp_path / "out" / "report.json").exists()
+
+
 def test_clear_pois_forgets_spheres_after_fusing(sample_dir, tmp_path):
     pois = tmp_path / "pois.json"
     center, radius = [0.03, 0.14, 0.77], 0.12  # around obj1 on the table
