@@ -110,14 +110,15 @@ def check_options(params: dict) -> None:
 @click.option("--min-depth", type=float, default=0.3, show_default=True, help="Ignore closer readings (m).")
 @click.option("--max-depth", type=float, default=4.0, show_default=True, help="Ignore farther readings (m).")
 @click.option("--pose", type=click.Choice(["forced", "icp", "hint", "topic"]), default=None,
-              help="Camera poses: forced (TF, no tracking), icp (frame-to-model), hint (ICP from TF), "
-                   "topic (--pose-topic) [forced when TF has the camera frame, else icp].")
+              help="Camera poses: forced (TF, no tracking), icp (frame-to-model), hint (ICP from TF; a frame ICP "
+                   "cannot refine is fused at its TF pose), topic (--pose-topic) [forced when TF has the camera "
+                   "frame, else icp].")
 @click.option("--pose-topic", default=None, metavar="TOPIC", help="PoseStamped/Odometry topic for --pose topic.")
 @click.option("--max-lost", default="10%", show_default=True, metavar="SHARE",
               help="With --pose icp/hint: fail when tracking loses more than this share of the tracked frames "
                    "(0.1 or 10%). Lost frames (ICP fitness < 0.3, depth agreeing with the model on < 75 % of "
-                   "the shared pixels, or a jump faster than 3 m/s or 600 deg/s; re-localisation tried first) "
-                   "are never fused.")
+                   "the shared pixels, a flat view, or a jump faster than 3 m/s or 600 deg/s; re-localisation "
+                   "tried first) are never fused. hint loses only frames ICP puts over 10 cm / 10 deg from TF.")
 @click.option("--icp", type=click.Choice(["projective", "open3d"]), default="projective", show_default=True,
               help="With --pose icp/hint: the tracker's ICP: projective (KinFu's projective point-to-plane on a "
                    "depth pyramid, numba, real time) or open3d (point-to-plane on clouds, ~20x slower; reference).")
@@ -168,7 +169,9 @@ def command(recording: Path, outdir: Path, voxel_size, resolution, size, origin,
     The grid is sized to the scene by default (--size auto) and the note line says what was chosen;
     occupied voxels on a face of the grid give a warning (the scene goes on beyond it). With --pose icp or
     hint, frames whose tracking is lost are reported (report.json tracking.lost, per-frame fitness, rmse,
-    agreement) and not fused; more than --max-lost of them fail the run (exit 2). With recorded poses the
+    agreement) and not fused; more than --max-lost of them fail the run (exit 2). In hint mode a frame ICP
+    cannot refine (new territory, too little overlap, a flat view) is fused at its TF pose, as forced would
+    (tracking.tf_fallback_frames); only a pose ICP finds far from TF is lost. With recorded poses the
     report gives the tracked trajectory's error against them (tracking.ate_vs_given_m).
 
     \b
@@ -201,6 +204,7 @@ def command(recording: Path, outdir: Path, voxel_size, resolution, size, origin,
         f = report["frames"]
         t = report["tracking"]
         lost = f", {t['lost']} lost by tracking" if t and t["lost"] else ""
+        lost += f", {t['tf_fallback']} at their TF pose (ICP failed)" if t and t["tf_fallback"] else ""
         ate = t and t["ate_vs_given_m"]
         ate = f", {ate['rmse'] * 100:.2f} cm RMS from the recorded poses" if ate else ""
         click.echo(f"fused {f['used']} frames ({f['dropped_total']} dropped{lost}) with poses {report['pose_mode']}"

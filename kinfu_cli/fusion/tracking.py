@@ -28,7 +28,8 @@ When is a frame lost? ICP always returns some pose; it is kept only when all the
    are checked with projective ICP's system at the pose they found;
 4. the camera moved no faster than max_speed / max_turn since the last good pose (KinFu's per-frame ICP
    limits of 0.10 m and 20 degrees at 30 Hz, as speeds, so sub-sampled frames may move further);
-5. hint mode: the pose lies within HINT_MAX_M / HINT_MAX_DEG of the TF pose.
+5. hint mode: the pose lies within HINT_MAX_M / HINT_MAX_DEG of the TF pose (TrackResult.tf_disagrees when not:
+   the only loss after which the fusion pipeline does not fall back to the TF pose).
 When the first attempt fails, the tracker re-localises before declaring the frame lost: a wider
 coarse-to-fine pyramid (30 cm correspondences on a 4 cm cloud down to the finest level) from each of the
 candidate initial poses the caller gives (in icp mode the prediction and the last good pose; in hint mode the
@@ -108,6 +109,7 @@ class TrackResult:
     relocalised: bool = False  # found by the wider re-localisation search, not the first attempt
     attempts: int = 1
     condition: float = float("nan")  # condition number of the point-to-plane 6x6 system at the pose
+    tf_disagrees: bool = False  # lost by check 5: ICP found a pose far from the TF pose (hint mode)
 
 
 def _angle_deg(R: np.ndarray) -> float:
@@ -384,8 +386,9 @@ class FrameToModelTracker:
             off = np.linalg.inv(self._hint) @ T
             off_m, off_deg = float(np.linalg.norm(off[:3, 3])), _angle_deg(off[:3, :3])
             if off_m > HINT_MAX_M or off_deg > HINT_MAX_DEG:
-                out.lost, out.reason = True, (f"{off_m:.2f} m / {off_deg:.0f} deg from the TF pose (limit "
-                                              f"{HINT_MAX_M:.2f} m / {HINT_MAX_DEG:.0f} deg): TF and ICP disagree")
+                out.lost, out.tf_disagrees = True, True
+                out.reason = (f"{off_m:.2f} m / {off_deg:.0f} deg from the TF pose (limit {HINT_MAX_M:.2f} m / "
+                              f"{HINT_MAX_DEG:.0f} deg): TF and ICP disagree")
         return out
 
     def agreement(self, volume, depth: np.ndarray, K: np.ndarray, T_world_camera: np.ndarray) -> float:

@@ -1,10 +1,12 @@
-"""Tracked poses that look wrong although no frame was lost are reported (fusion/pipeline._tracking_doubts)."""
+"""Tracked poses that look wrong although no frame was lost are reported (fusion/pipeline._tracking_doubts), and hint
+mode's frames fused at their TF pose are told apart (_hint_falls_back, _fallback_warnings)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from kinfu_cli.fusion.pipeline import _tracking_doubts
+from kinfu_cli.fusion.pipeline import _fallback_warnings, _hint_falls_back, _tracking_doubts, ate_vs_given
+from kinfu_cli.fusion.tracking import TrackResult
 
 
 def track_log(dev_m: float, relocalised: int, n: int = 20) -> list[dict]:
@@ -39,3 +41,25 @@ def test_frames_found_only_by_relocalisation_are_reported():
         del t["given_minus_tracked_m"]  # no given poses: the re-localisation share is the only evidence
     w = _tracking_doubts(log)
     assert len(w) == 1 and "10 of 20 tracked frames" in w[0] and "1.0 cm / 2.0 deg" in w[0]
+
+
+def test_hint_mode_falls_back_to_the_tf_pose_unless_icp_found_it_wrong():
+    T = np.eye(4)
+    lost = TrackResult(T, 0.1, 0.01, True, "fitness 0.10 < 0.3")
+    assert _hint_falls_back(lost)  # ICP could not refine: the TF pose is kept
+    assert _hint_falls_back(TrackResult(T, 0.6, 0.01, False, relocalised=True))  # no better evidence than the TF
+    assert not _hint_falls_back(TrackResult(T, 0.6, 0.01, False))  # refined by the first attempt
+    far = TrackResult(T, 0.6, 0.01, True, "0.15 m / 2 deg from the TF pose", relocalised=True, tf_disagrees=True)
+    assert not _hint_falls_back(far)  # a confident pose far from the TF: the TF is suspect, the frame is lost
+
+
+def test_frames_fused_at_their_tf_pose_are_counted_apart_and_warned_about_past_max_lost():
+    log = track_log(0.004, 0)
+    for t in log[:5]:
+        t.update(tf_fallback=True, given_minus_tracked_m=0.0, reason="fitness 0.02 < 0.3")
+    log[5].update(tf_fallback=True, given_minus_tracked_m=0.0, reason="re-localised near the TF pose (not trusted)")
+    assert ate_vs_given(log)["frames"] == 14  # the ICP-placed ones only
+    w = _fallback_warnings(log, 0.10)
+    assert len(w) == 1 and "only 14 of 20" in w[0] and "too little overlap: 5" in w[0]
+    assert "only re-localisation found a pose: 1" in w[0]
+    assert _fallback_warnings(log, 0.5) == [] and _fallback_warnings(track_log(0.0, 0), 0.0) == []

@@ -8,6 +8,7 @@ from click.testing import CliRunner
 
 from kinfu_cli.cli import cli
 from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.core.grid import load_ternary
 from kinfu_cli.sim.room import ROOM_SIZE, make_room, world_rotation
 from kinfu_cli.sim.synth import synthesize
 
@@ -119,3 +120,24 @@ def test_y_down_room_extent_and_support_plane(rooms, tmp_path):
     assert abs(abs(n[1]) - 1.0) < 0.01  # horizontal in the y-down world
     height = d / n[1]  # the plane y = -d / n_y, its height above the floor (up is -y)
     assert min(abs(height - 0.0), abs(height - 0.75)) < 2 * VOXEL  # the floor or the table top
+
+
+def test_hint_mode_fuses_views_of_new_territory_at_their_tf_pose(rooms, tmp_path):
+    # consecutive room views barely overlap: ICP from the TF pose cannot refine them (it used to lose every frame
+    # and fail the run); hint keeps the robot's pose for them, as forced mode would, and says so
+    rec, forced, _ = rooms["y-down"]
+    out = tmp_path / "hint"
+    res = CliRunner().invoke(cli, ["fuse", str(rec / "recording.mcap"), "-o", str(out), "--voxel-size", str(VOXEL),
+                                   "--pose", "hint", "--quiet"])
+    assert res.exit_code == 0, res.output
+    report = json.loads((out / "report.json").read_text())
+    t = report["tracking"]
+    assert t["lost"] == 0 and t["tf_fallback"] == len(t["tf_fallback_frames"]) > 0.5 * t["tracked"]
+    fell = [f for f in t["frames"] if f["tf_fallback"]]
+    assert all(f["given_minus_tracked_m"] == 0 and f["reason"] for f in fell)
+    assert any("fused at their TF pose" in w for w in report["warnings"]) and "fused at their TF pose" in res.output
+    # the frames ICP did refine sit on their exact TF poses too: the volume is forced mode's
+    a = load_ternary(forced / "ternary.npz").labels
+    b = load_ternary(out / "ternary.npz").labels
+    seen = (a != 0) | (b != 0)
+    assert a.shape == b.shape and (a == b)[seen].mean() > 0.99
