@@ -9,6 +9,7 @@ from pathlib import Path
 import click
 
 from kinfu_cli.commands._options import claim_outputs, force_option
+from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.commands._up import parse_up
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.io.rgbd_folders import import_folder
@@ -42,7 +43,8 @@ def command(folder: str, out: str, rate: float, frames: str | None, color: str, 
     The recording holds /camera/depth/image_raw (16UC1 mm), /camera/depth/camera_info, colour on
     /camera/color/image_raw/compressed, /tf world -> camera_optical from the poses, and /kinfu/world_up:
     the --up direction, or zero when not given ("world" is the data set's frame, often the first camera,
-    not a z-up REP-103 frame).
+    not a z-up REP-103 frame). A 7-Scenes frame without a usable pose (pose file missing, -inf or NaN)
+    among posed frames is left out, with a warning, rather than given a pose interpolated by fusion.
 
     \b
     Example:
@@ -57,12 +59,14 @@ def command(folder: str, out: str, rate: float, frames: str | None, color: str, 
     summary = import_folder(folder, out, rate=rate, frames=frames, color=color, intrinsics=intrinsics,
                             compress=not no_compress, quiet=quiet, intrinsics_source="--intrinsics",
                             up=parse_up(up))
+    print_warnings(summary)
     if as_json:
         click.echo(json.dumps(summary, indent=2))
         return
+    left_out = f", {summary['frames_left_out']} left out without a pose" if summary["frames_left_out"] else ""
     click.echo(f"wrote {summary['output']} ({summary['format']}): {summary['frames']} of "
-               f"{summary['frames_in_folder']} frames ({summary['layout']} layout), {summary['color_frames']} "
-               f"colour images, {summary['tf_samples']} TF samples {summary['topics']['tf']}")
+               f"{summary['frames_in_folder']} frames ({summary['layout']} layout{left_out}), "
+               f"{summary['color_frames']} colour images, {summary['tf_samples']} TF samples {summary['topics']['tf']}")
     up_text = ",".join(f"{v:g}" for v in summary["up"]) if summary["up"] else "not known (kinfu fuse estimates it)"
     click.echo(f"world frame up: {up_text}, declared on {summary['topics']['world_up']}")
     for note in summary["notes"]:

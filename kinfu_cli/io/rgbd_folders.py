@@ -7,7 +7,8 @@ Layouts
 - TUM RGB-D: `depth.txt`, `rgb.txt` ("stamp path" lines), `groundtruth.txt` ("stamp tx ty tz qx qy qz qw",
   camera-to-world). Depth PNGs hold 5000 units per metre; they are converted to millimetres (0.2 mm
   rounding). K from an intrinsics file in the folder, the `intrinsics` argument, or the TUM camera named in
-  the folder name (freiburg1/2/3), else the TUM default 525/525/319.5/239.5.
+  the folder name (freiburg1/2/3), else the TUM default 525/525/319.5/239.5 (with a warning); the last two are
+  for 640x480 images only (other sizes need the intrinsics).
 
 Recordings written by `import_folder` (names documented for users and tests):
 - `/camera/depth/image_raw` sensor_msgs/Image 16UC1 (mm), frame `camera_optical`
@@ -17,7 +18,8 @@ Recordings written by `import_folder` (names documented for users and tests):
   not registered to the depth camera: use it for texture only)
 - `/tf`: `world -> camera_optical` (T_world_camera), at each depth stamp (7-Scenes) or each ground-truth
   sample around the frames (TUM). Rotations are projected onto the nearest rotation matrix (SVD): 7-Scenes
-  poses are orthonormal only to ~1e-4.
+  poses are orthonormal only to ~1e-4. A 7-Scenes frame without a usable pose (no pose file, -inf/NaN) among
+  posed frames is left out, with a warning: fusion would interpolate a pose for it from its neighbours.
 - `/kinfu/world_up` geometry_msgs/Vector3Stamped (io.world_up), once at the first stamp, frame `world`: the
   `up` direction given to the import, else the zero vector. `world` here is the data set's frame (7-Scenes: a
   KinectFusion volume frame, TUM: the motion-capture frame, a 3DMatch or tabletop folder: often the first
@@ -30,6 +32,7 @@ import json
 import math
 import os
 import re
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -70,13 +73,15 @@ _JPEG_MAGIC = b"\xff\xd8\xff"
 
 @dataclass
 class FolderFrame:
-    """One frame of a folder: its number, stamp, files, and pose (None when the folder has none)."""
+    """One frame of a folder: its number, stamp, files, and pose (None when the folder has none; then
+    pose_problem says why for a 7-Scenes frame: "missing" pose file or "not finite")."""
 
     number: int
     stamp_ns: int
     depth_path: Path
     color_path: Path | None
     T_world_camera: np.ndarray | None
+    pose_problem: str | None = None
 
 
 @dataclass
@@ -87,9 +92,11 @@ class RGBDFolder:
     K: np.ndarray
     depth_units_per_m: float  # 1000 (mm) or 5000 (TUM)
     k_source: str
+    k_assumed: bool = False  # K is a TUM calibration picked by folder name or TUM's default, not read or given
     gt_stamps_ns: np.ndarray | None = None  # TUM ground truth, all samples
     gt_poses: np.ndarray | None = None
     notes: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
 
 
 def nearest_rotation(R: np.ndarray) -> np.ndarray:
@@ -101,7 +108,9 @@ def nearest_rotation(R: np.ndarray) -> np.ndarray:
 
 def _read_matrix(path: Path, shape: tuple[int, int], what: str) -> np.ndarray:
     try:
-        M = np.loadtxt(path, dtype=np.float64, ndmin=2)
+        with warnings.catch_warnings():  # an empty file: numpy warns, the size check below says it
+            warnings.simplefilter("ignore")
+            M = np.loadtxt(path, dtype=np.float64, ndmin=2)
     except (OSError, ValueError) as exc:
         raise RecordingError(f"{path}: cannot read the {what} ({exc})") from None
     if M.size != shape[0] * shape[1]:
@@ -124,17 +133,25 @@ def _check_rigid(T: np.ndarray, path: Path) -> None:
 
 def _read_K(folder: Path, intrinsics: tuple[float, float, float, float] | None,
             intrinsics_source: str) -> tuple[np.ndarray | None, str]:
-    """K and where it came from: the caller's intrinsics, else an intrinsics file of the folder or its parent."""
+    """K and where it came from: the caller's intrinsics, else the intrinsics files of the folder or, when it has
+    none, of its parent (3DMatch: the scene root). Files of one folder that disagree are an error."""
     if intrinsics is not None:
         fx, fy, cx, cy = intrinsics
         return np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]]), intrinsics_source
-    for p in [d / name for d in (folder, folder.parent) for name in _INTRINSICS_FILES]:  # 3DMatch: scene root
-        if p.is_file():
-            K = _read_matrix(p, (3, 3), "intrinsics")
+    for d in (folder, folder.parent):
+        found = [d / name for name in _INTRINSICS_FILES if (d / name).is_file()]
+        if not found:
+            continue
+        Ks = [_read_matrix(p, (3, 3), "intrinsics") for p in found]
+        for p, K in zip(found, Ks):
             if not (np.all(np.isfinite(K)) and K[0, 0] > 0 and K[1, 1] > 0):
                 raise RecordingError(f"{p}: intrinsics are not finite with positive focal lengths (fx={K[0, 0]}, "
                                      f"fy={K[1, 1]})")
-            return K, str(p.relative_to(folder.parent)) if p.parent != folder else p.name
+            if not np.allclose(K, Ks[0], rtol=1e-6, atol=1e-9):
+                raise RecordingError(f"{found[0]} and {p}: the intrinsics files disagree ({Ks[0].tolist()} vs "
+                                     f"{K.tolist()}); expected one K: remove the wrong file")
+        p = found[0]
+        return Ks[0], str(p.relative_to(folder.parent)) if p.parent != folder else p.name
     return None, ""
 
 
@@ -181,24 +198,20 @@ def scan_folder(path: str | os.PathLike, rate: float = 30.0,
         raise RecordingError(f"{folder}: no camera-intrinsics.txt or intrinsics.K.txt (3x3 K); give the "
                              f"intrinsics fx,fy,cx,cy", parameter="intrinsics")
     frames = []
-    notes = []
-    bad_poses = 0
     for number, depth_path in depth_files:
         stem = depth_path.name[: -len(".depth.png")]
         color = next((folder / f"{stem}.color.{ext}" for ext in ("png", "jpg", "jpeg")
                       if (folder / f"{stem}.color.{ext}").is_file()), None)
         pose_path = folder / f"{stem}.pose.txt"
-        T = None
+        T, problem = None, "missing"
         if pose_path.is_file():
-            T = _read_matrix(pose_path, (4, 4), "pose")
+            T, problem = _read_matrix(pose_path, (4, 4), "pose"), None
             if not np.all(np.isfinite(T)):  # 7-Scenes / 3DMatch mark frames without a pose with -inf
-                T, bad_poses = None, bad_poses + 1
+                T, problem = None, "not finite"
             else:
                 _check_rigid(T, pose_path)
-        frames.append(FolderFrame(number, int(round(number / rate * 1e9)), depth_path, color, T))
-    if bad_poses:
-        notes.append(f"{bad_poses} frames have non-finite poses (no TF written for them)")
-    return RGBDFolder(folder, "7scenes", frames, K, 1000.0, k_source, notes=notes)
+        frames.append(FolderFrame(number, int(round(number / rate * 1e9)), depth_path, color, T, problem))
+    return RGBDFolder(folder, "7scenes", frames, K, 1000.0, k_source)
 
 
 def _read_list(path: Path, ncols: int) -> list[list[str]]:
@@ -244,14 +257,17 @@ def _scan_tum(folder: Path, intrinsics, intrinsics_source: str) -> RGBDFolder:
         rgb = [(_stamp_ns(r[0], str(folder / "rgb.txt")), folder / r[1]) for r in _read_list(folder / "rgb.txt", 2)]
     rgb_st = np.array([s for s, _ in rgb], dtype=np.int64)
     gt_st = gt_T = None
-    if (folder / "groundtruth.txt").is_file():
-        rows = _read_list(folder / "groundtruth.txt", 8)
+    folder_warnings = []
+    gt_path = folder / "groundtruth.txt"
+    rows = _read_list(gt_path, 8) if gt_path.is_file() else []
+    if gt_path.is_file() and not rows:  # as without the file: no poses, but a file that says nothing is doubtful
+        folder_warnings.append(f"{gt_path}: no 'stamp tx ty tz qx qy qz qw' sample (empty or only comments); "
+                               f"the recording has no camera poses")
+    if rows:
         try:
             vals = np.array([[float(v) for v in r[1:8]] for r in rows], dtype=np.float64)
         except ValueError:
-            raise RecordingError(f"{folder / 'groundtruth.txt'}: expected 'stamp tx ty tz qx qy qz qw' "
-                                 f"numbers") from None
-        gt_path = folder / "groundtruth.txt"
+            raise RecordingError(f"{gt_path}: expected 'stamp tx ty tz qx qy qz qw' numbers") from None
         for i, v in enumerate(vals):
             why = _gt_problem(v)
             if why:
@@ -264,6 +280,7 @@ def _scan_tum(folder: Path, intrinsics, intrinsics_source: str) -> RGBDFolder:
         gt_T[:, :3, :3] = quaternion_to_matrix(vals[:, 3:7])
         gt_T[:, :3, 3] = vals[:, :3]
     K, k_source = _read_K(folder, intrinsics, intrinsics_source)
+    k_assumed = K is None
     if K is None:
         name = next((k for k in _TUM_K if k in str(folder.resolve()).lower()), None)
         fx, fy, cx, cy = _TUM_K[name] if name else _TUM_DEFAULT_K
@@ -277,8 +294,8 @@ def _scan_tum(folder: Path, intrinsics, intrinsics_source: str) -> RGBDFolder:
             j = int(np.argmin(np.abs(rgb_st - s)))
             color = rgb[j][1]
         frames.append(FolderFrame(i, s, folder / row[1], color, None))
-    return RGBDFolder(folder, "tum", frames, K, 5000.0, k_source, gt_st, gt_T,
-                      notes=["TUM depth (1/5000 m) converted to millimetres"])
+    return RGBDFolder(folder, "tum", frames, K, 5000.0, k_source, k_assumed, gt_st, gt_T,
+                      notes=["TUM depth (1/5000 m) converted to millimetres"], warnings=folder_warnings)
 
 
 def read_depth_mm(frame: FolderFrame, units_per_m: float) -> np.ndarray:
@@ -295,6 +312,47 @@ def read_depth_mm(frame: FolderFrame, units_per_m: float) -> np.ndarray:
     return np.clip(mm, 0, 65535).astype(np.uint16)
 
 
+def _secs(stamp_ns: int) -> str:
+    return f"{stamp_ns // 1_000_000_000}.{stamp_ns % 1_000_000_000:09d}"
+
+
+def _drop_unposed(chosen: list[FolderFrame], layout: str, warnings_: list[str]) -> tuple[list[FolderFrame], int]:
+    """The 7-Scenes frames to write and how many were left out: a frame without a pose among posed frames is left
+    out (fusion would otherwise interpolate a pose for it from its neighbours). Appends what was left out, and
+    why, to warnings_. Frames that all lack a pose are all kept, without TF (fusion then tracks them)."""
+    if layout != "7scenes":
+        return chosen, 0
+    unposed = [f for f in chosen if f.T_world_camera is None]
+    reasons = {why: sum(f.pose_problem == why for f in unposed) for why in ("not finite", "missing")}
+    text = ", ".join(f"pose.txt {why}: {n}" for why, n in reasons.items() if n)
+    folder = chosen[0].depth_path.parent
+    if len(unposed) == len(chosen):
+        if reasons["not finite"]:
+            warnings_.append(f"{folder}: none of the {len(chosen)} frames has a usable pose ({text}); written "
+                             f"without TF")
+        return chosen, 0
+    if unposed:
+        names = ", ".join(f.depth_path.name[: -len(".depth.png")] for f in unposed[:5])
+        more = f", ... ({len(unposed) - 5} more)" if len(unposed) > 5 else ""
+        warnings_.append(f"{folder}: {len(unposed)} of {len(chosen)} frames left out, they have no usable pose "
+                         f"({text}): {names}{more}")
+    return [f for f in chosen if f.T_world_camera is not None], len(unposed)
+
+
+def _check_assumed_K(folder: RGBDFolder, width: int, height: int, warnings_: list[str]) -> None:
+    """TUM's calibrations (and its default K) are for 640x480 images: RecordingError naming the intrinsics
+    parameter for any other size. TUM's default is a guess, not a calibration: a warning says it was assumed."""
+    if (width, height) != (640, 480):
+        raise RecordingError(f"{folder.path}: no intrinsics file, and the {folder.k_source} K is for 640x480 "
+                             f"images, these are {width}x{height}; give the depth camera's fx,fy,cx,cy",
+                             parameter="intrinsics")
+    if folder.k_source.startswith("TUM default"):
+        warnings_.append(f"{folder.path}: no intrinsics file and no freiburg1/2/3 in the folder name; assumed "
+                         f"the {folder.k_source} intrinsics, give the depth camera's own when known")
+    else:
+        folder.notes.append(f"K from the {folder.k_source} (named by the folder)")
+
+
 def import_folder(src: str | os.PathLike, out: str | os.PathLike, rate: float = 30.0, frames: str | None = None,
                   color: str = "compressed", intrinsics: str | None = None, fmt: str | None = None,
                   compress: bool = True, quiet: bool = True, intrinsics_source: str = "intrinsics argument",
@@ -304,6 +362,8 @@ def import_folder(src: str | os.PathLike, out: str | os.PathLike, rate: float = 
     intrinsics: "fx,fy,cx,cy" when the folder has no intrinsics file; intrinsics_source: how the summary's
     K_source names them. up: the direction against gravity (x, y, z) in the folder's pose frame, when known;
     declared on /kinfu/world_up (the zero vector when not given: the frame is not taken for REP-103 z-up).
+    The summary's warnings say what was doubtful (frames left out for want of a pose, an assumed K, ground
+    truth that gives no pose).
     """
     up = None if up is None else check_up(up, "up")
     if color not in ("compressed", "raw", "none"):
@@ -313,6 +373,8 @@ def import_folder(src: str | os.PathLike, out: str | os.PathLike, rate: float = 
     if not chosen:
         raise ConfigError(f"{frames!r} selects none of the {len(folder.frames)} frames of {folder.path}",
                           parameter="frames")
+    warnings_ = list(folder.warnings)
+    chosen, left_out = _drop_unposed(chosen, folder.layout, warnings_)
     out = Path(out)
     kind = format_for(out, fmt)
     compression = ({"mcap": "zstd", "bag": "lz4", "ros2": None}[kind]) if compress else None
@@ -320,6 +382,8 @@ def import_folder(src: str | os.PathLike, out: str | os.PathLike, rate: float = 
     if first is None:
         raise RecordingError(f"{chosen[0].depth_path}: cannot read the depth image")
     height, width = first.shape[:2]
+    if folder.k_assumed:
+        _check_assumed_K(folder, width, height, warnings_)
 
     # TF samples: each frame's pose (7-Scenes), or ground truth around the chosen frames (TUM)
     tf_samples: list[tuple[int, np.ndarray]] = []
@@ -329,6 +393,11 @@ def import_folder(src: str | os.PathLike, out: str | os.PathLike, rate: float = 
         lo, hi = chosen[0].stamp_ns - 100_000_000, chosen[-1].stamp_ns + 100_000_000
         sel = np.flatnonzero((folder.gt_stamps_ns >= lo) & (folder.gt_stamps_ns <= hi))
         tf_samples = [(int(folder.gt_stamps_ns[i]), folder.gt_poses[i]) for i in sel]
+        if not tf_samples:
+            gt = folder.gt_stamps_ns
+            warnings_.append(f"{folder.path / 'groundtruth.txt'}: no ground-truth pose within the depth frames' "
+                             f"time span ({_secs(chosen[0].stamp_ns)} .. {_secs(chosen[-1].stamp_ns)} s; ground "
+                             f"truth spans {_secs(gt[0])} .. {_secs(gt[-1])} s); the recording has no camera poses")
     ortho = 0.0
     fixed = []
     for s, T in tf_samples:
@@ -371,14 +440,14 @@ def import_folder(src: str | os.PathLike, out: str | os.PathLike, rate: float = 
                 n_color += 1
     return {
         "source": str(folder.path), "layout": folder.layout, "output": str(out), "format": kind,
-        "frames": len(chosen), "frames_in_folder": len(folder.frames), "color_frames": n_color,
-        "tf_samples": len(fixed), "width": width, "height": height, "K": folder.K.tolist(),
+        "frames": len(chosen), "frames_in_folder": len(folder.frames), "frames_left_out": left_out,
+        "color_frames": n_color, "tf_samples": len(fixed), "width": width, "height": height, "K": folder.K.tolist(),
         "K_source": folder.k_source, "max_rotation_orthonormality_error": ortho,
         "first_stamp_ns": chosen[0].stamp_ns, "last_stamp_ns": chosen[-1].stamp_ns,
         "topics": {"depth": DEPTH_TOPIC, "camera_info": INFO_TOPIC, "color": color_topic if n_color else None,
                    "tf": f"/tf {WORLD_FRAME} -> {CAMERA_FRAME}", "world_up": WORLD_UP_TOPIC},
         "up": None if up is None else up.tolist(),
-        "notes": folder.notes,
+        "notes": folder.notes, "warnings": warnings_,
     }
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import warnings
 
 import cv2
 import numpy as np
@@ -77,9 +78,10 @@ def test_import_tabletop_subset(tmp_path, shared_data, name):
     np.testing.assert_allclose(frames[0].T_world_camera, np.eye(4), atol=1e-12)  # poses relative to frame 15
 
 
-def _tum_folder(tmp_path):
-    """A small TUM-layout folder: depth in 1/5000 m, rgb stamps offset, ground truth at 100 Hz."""
-    d = tmp_path / "rgbd_dataset_freiburg1_xyz"
+def _tum_folder(tmp_path, name="rgbd_dataset_freiburg1_xyz", shape=(480, 640), gt_shift_s=0.0):
+    """A small TUM-layout folder of 4 frames: depth in 1/5000 m, rgb stamps offset, ground truth at 100 Hz
+    (shifted by gt_shift_s). No intrinsics file: TUM's calibrations, which are for 640x480, apply."""
+    d = tmp_path / name
     (d / "depth").mkdir(parents=True)
     (d / "rgb").mkdir()
     rng = np.random.default_rng(3)
@@ -87,14 +89,14 @@ def _tum_folder(tmp_path):
     raws = []
     for i in range(4):
         t = 1305031102.0 + i / 30
-        raw = rng.integers(0, 30000, (12, 16)).astype(np.uint16)
+        raw = rng.integers(0, 30000, shape).astype(np.uint16)
         raws.append(raw)
         cv2.imwrite(str(d / "depth" / f"{t:.6f}.png"), raw)
-        cv2.imwrite(str(d / "rgb" / f"{t + 0.004:.6f}.png"), np.full((12, 16, 3), 40 * i, np.uint8))
+        cv2.imwrite(str(d / "rgb" / f"{t + 0.004:.6f}.png"), np.full((*shape, 3), 40 * i, np.uint8))
         depth_lines.append(f"{t:.6f} depth/{t:.6f}.png")
         rgb_lines.append(f"{t + 0.004:.6f} rgb/{t + 0.004:.6f}.png")
     for k in range(-5, 20):
-        t = 1305031102.0 + k / 100
+        t = 1305031102.0 + k / 100 + gt_shift_s
         q = Rotation.from_rotvec([0, 0, 0.3 * k / 100]).as_quat()
         gt_lines.append(f"{t:.4f} {0.1 * k / 100:.6f} 0.5 1.0 {q[0]:.9f} {q[1]:.9f} {q[2]:.9f} {q[3]:.9f}")
     (d / "depth.txt").write_text("\n".join(depth_lines) + "\n")
@@ -108,9 +110,9 @@ def test_import_tum_layout(tmp_path):
     out = tmp_path / "tum.bag"
     res = run("import", folder, "-o", out, "--json", "-q")
     assert res.exit_code == 0, res.output
-    s = json.loads(res.output)
+    s = json.loads(res.stdout)
     assert s["layout"] == "tum" and s["frames"] == 4 and s["K_source"] == "TUM freiburg1 calibration"
-    assert s["K"][0][0] == 517.3
+    assert s["K"][0][0] == 517.3 and s["warnings"] == []
     with open_recording(out) as rec:
         frames = list(iter_frames(rec, tolerance_s=0.01))
     assert len(frames) == 4
@@ -161,3 +163,128 @@ def test_3dmatch_scene_with_sequence_folders(tmp_path, shared_data):
     res = run("import", seq, "-o", tmp_path / "seq.mcap", "-q")
     assert res.exit_code == 0, res.output
     _check_folder(tmp_path / "seq.mcap", src, [0, 1], "jpg")
+
+
+def _warnings(res):
+    return [l[len("kinfu: warning: "):] for l in res.stderr.splitlines() if l.startswith("kinfu: warning: ")]
+
+
+@pytest.mark.parametrize("text", ["", "# timestamp tx ty tz qx qy qz qw\n"])
+def test_tum_groundtruth_without_samples_is_a_warning_not_a_traceback(tmp_path, text):
+    """Like a folder without groundtruth.txt (no poses), but the file that says nothing is named."""
+    folder, _ = _tum_folder(tmp_path)
+    (folder / "groundtruth.txt").write_text(text)
+    res = run("import", folder, "-o", tmp_path / "x.mcap", "--json", "-q")
+    assert res.exit_code == 0 and "Traceback" not in res.output, res.output
+    s = json.loads(res.stdout)
+    assert s["tf_samples"] == 0 and s["frames"] == 4
+    [w] = _warnings(res)
+    assert "groundtruth.txt" in w and "no camera poses" in w and w == s["warnings"][0]
+
+
+def test_tum_groundtruth_outside_the_depth_frames_is_a_warning(tmp_path):
+    folder, _ = _tum_folder(tmp_path, gt_shift_s=100.0)
+    res = run("import", folder, "-o", tmp_path / "x.mcap", "-q")
+    assert res.exit_code == 0, res.output
+    assert "0 TF samples" in res.stdout
+    [w] = _warnings(res)
+    assert "groundtruth.txt" in w and "no ground-truth pose within the depth frames' time span" in w
+
+
+def test_tum_default_intrinsics_only_for_640x480(tmp_path):
+    """TUM's default K (and its freiburg calibrations) are for 640x480: other sizes need --intrinsics, and at
+    640x480 the guessed default is said."""
+    small, _ = _tum_folder(tmp_path, name="tum_small", shape=(48, 64))
+    one_line_error(run("import", small, "-o", tmp_path / "x.mcap", "-q"), "--intrinsics", "tum_small", "640x480",
+                   "64x48")
+    named, _ = _tum_folder(tmp_path, name="rgbd_dataset_freiburg2_small", shape=(48, 64))
+    one_line_error(run("import", named, "-o", tmp_path / "x.mcap", "-q"), "--intrinsics", "freiburg2", "64x48")
+    res = run("import", small, "-o", tmp_path / "x.mcap", "-q", "--intrinsics", "60,60,31.5,23.5")
+    assert res.exit_code == 0 and _warnings(res) == [], res.output
+    vga, _ = _tum_folder(tmp_path, name="tum_vga")
+    res = run("import", vga, "-o", tmp_path / "vga.mcap", "--json", "-q")
+    assert res.exit_code == 0, res.output
+    s = json.loads(res.stdout)
+    assert s["K"] == [[525.0, 0.0, 319.5], [0.0, 525.0, 239.5], [0.0, 0.0, 1.0]]
+    [w] = _warnings(res)
+    assert "tum_vga" in w and "TUM default" in w and w == s["warnings"][0]
+
+
+def _7scenes_folder(d, n=6, poses=None):
+    """n frames of 8x6 depth with identity-rotation poses moving along x; poses: {frame: text of its pose file,
+    or None for no file}."""
+    d.mkdir(parents=True)
+    (d / "camera-intrinsics.txt").write_text("6 0 3.5\n0 6 2.5\n0 0 1\n")
+    for i in range(n):
+        cv2.imwrite(str(d / f"frame-{i:06d}.depth.png"), np.full((6, 8), 1000 + i, np.uint16))
+        T = np.eye(4)
+        T[0, 3] = 0.1 * i
+        text = (poses or {}).get(i, "\n".join(" ".join(f"{v:g}" for v in row) for row in T))
+        if text is not None:
+            (d / f"frame-{i:06d}.pose.txt").write_text(text)
+    return d
+
+
+@pytest.mark.parametrize("name, path, text", [("pose_empty", "frame-000002.pose.txt", ""),
+                                             ("pose_blank", "frame-000002.pose.txt", "  \n\n"),
+                                             ("intr_empty", "camera-intrinsics.txt", "")])
+def test_empty_matrix_file_gives_the_error_without_numpy_warning(tmp_path, name, path, text):
+    folder = _7scenes_folder(tmp_path / name)
+    (folder / path).write_text(text)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = run("import", folder, "-o", tmp_path / "x.mcap", "-q")
+    one_line_error(res, path, "0 numbers")
+    assert [str(w.message) for w in caught] == []
+
+
+def test_two_intrinsics_files_must_agree(tmp_path):
+    folder = _7scenes_folder(tmp_path / "both")
+    (folder / "intrinsics.K.txt").write_text("6.0 0 3.5\n0 6.0 2.5\n0 0 1.0\n")  # the same K
+    res = run("import", folder, "-o", tmp_path / "x.mcap", "--json", "-q")
+    assert res.exit_code == 0 and json.loads(res.stdout)["K_source"] == "camera-intrinsics.txt", res.output
+    (folder / "intrinsics.K.txt").write_text("9 0 3.5\n0 9 2.5\n0 0 1\n")
+    one_line_error(run("import", folder, "-o", tmp_path / "y.mcap", "-q"), "camera-intrinsics.txt",
+                   "intrinsics.K.txt", "disagree")
+
+
+def test_7scenes_frames_without_pose_are_left_out(tmp_path):
+    """A frame whose pose is -inf, NaN or missing among posed frames is not written (fusion would interpolate
+    a pose for it); the output counts the frames left out and says why."""
+    inf = "\n".join(["-inf -inf -inf -inf"] * 4)
+    nan = "\n".join(["nan nan nan nan"] * 4)
+    folder = _7scenes_folder(tmp_path / "seq", poses={1: inf, 2: nan, 4: None})
+    out = tmp_path / "x.mcap"
+    res = run("import", folder, "-o", out, "--json", "-q")
+    assert res.exit_code == 0, res.output
+    s = json.loads(res.stdout)
+    assert (s["frames"], s["frames_in_folder"], s["frames_left_out"], s["tf_samples"]) == (3, 6, 3, 3)
+    [w] = _warnings(res)
+    assert "3 of 6 frames left out" in w and "not finite: 2" in w and "missing: 1" in w
+    assert "frame-000001" in w and "frame-000004" in w
+    with open_recording(out) as rec:
+        stats = FrameStats()
+        frames = list(iter_frames(rec, tolerance_s=0.001, stats=stats))
+    assert [round(f.stamp_ns * 30e-9) for f in frames] == [0, 3, 5] and stats.dropped_total == 0
+    for f in frames:
+        n = round(f.stamp_ns * 30e-9)
+        np.testing.assert_allclose(f.T_world_camera[0, 3], 0.1 * n, atol=1e-12)  # its own pose, not interpolated
+        assert f.depth[0, 0] == np.float32((1000 + n) * 0.001)
+    res = run("import", folder, "-o", tmp_path / "text.mcap", "-q")
+    assert "3 of 6 frames (7scenes layout, 3 left out without a pose)" in res.stdout
+
+
+def test_7scenes_frames_all_without_pose_are_kept(tmp_path):
+    """No usable pose at all: every frame is written without TF (fusion tracks them), with a warning when pose
+    files were there but not finite; a folder without pose files is plain."""
+    inf = "\n".join(["-inf -inf -inf -inf"] * 4)
+    folder = _7scenes_folder(tmp_path / "inf", n=3, poses={0: inf, 1: inf, 2: inf})
+    res = run("import", folder, "-o", tmp_path / "x.mcap", "--json", "-q")
+    assert res.exit_code == 0, res.output
+    s = json.loads(res.stdout)
+    assert (s["frames"], s["frames_left_out"], s["tf_samples"]) == (3, 0, 0)
+    [w] = _warnings(res)
+    assert "none of the 3 frames has a usable pose" in w and "not finite: 3" in w
+    bare = _7scenes_folder(tmp_path / "bare", n=3, poses={0: None, 1: None, 2: None})
+    res = run("import", bare, "-o", tmp_path / "y.mcap", "-q")
+    assert res.exit_code == 0 and _warnings(res) == [] and "3 of 3 frames" in res.stdout, res.output
