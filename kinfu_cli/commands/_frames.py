@@ -6,6 +6,7 @@ from collections.abc import Callable
 
 import click
 
+from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.io.frames import POSE_SOURCES
 
 FRAME_OPTIONS = ("pose_source", "pose_topic", "tolerance_s", "start_s", "end_s", "every")
@@ -15,9 +16,9 @@ def frame_options(func: Callable) -> Callable:
     """click decorator adding --pose-source, --pose-topic, --tolerance, --start, --end, --every; hand the
     values to iter_frames with `iter_frames(rec, roles, **frame_kwargs(kwargs))`."""
     opts = [
-        click.option("--pose-source", "pose_source", type=click.Choice(list(POSE_SOURCES)), default="tf",
-                     show_default=True, help="Camera poses from TF (world frame <- camera frame), a pose topic, "
-                                             "or none."),
+        click.option("--pose-source", "pose_source", type=click.Choice(list(POSE_SOURCES)), default=None,
+                     help="Camera poses from TF (world frame <- camera frame), a pose topic, or none [default: "
+                          "topic with --pose-topic, else tf]."),
         click.option("--pose-topic", "pose_topic", default=None, metavar="TOPIC",
                      help="Camera pose topic (PoseStamped, Odometry, ...) for --pose-source topic."),
         click.option("--tolerance", "tolerance_s", default=0.05, show_default=True, type=float,
@@ -33,5 +34,13 @@ def frame_options(func: Callable) -> Callable:
 
 
 def frame_kwargs(kwargs: dict) -> dict:
-    """Pop the frame options out of a command's kwargs (for iter_frames)."""
-    return {name: kwargs.pop(name) for name in FRAME_OPTIONS if name in kwargs}
+    """Pop the frame options out of a command's kwargs (for iter_frames); a pose topic given means pose source
+    topic, and goes with no other (it used to be ignored without a word)."""
+    out = {name: kwargs.pop(name) for name in FRAME_OPTIONS if name in kwargs}
+    if "pose_source" in out:
+        topic = out.get("pose_topic")
+        out["pose_source"] = out["pose_source"] or ("topic" if topic else "tf")
+        if topic and out["pose_source"] != "topic":
+            raise ConfigError(f"a pose topic is read only with pose source 'topic', not {out['pose_source']!r}",
+                              parameter="pose_topic")
+    return out

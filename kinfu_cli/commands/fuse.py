@@ -105,7 +105,8 @@ def check_options(params: dict) -> None:
 @click.option("--origin", default=None, help="World position x,y,z of the grid's minimum corner [with --size "
                                              "auto the observed box's; else centred on what the first frames "
                                              "observe].")
-@click.option("--truncation", type=float, default=0.03, show_default=True, help="TSDF truncation M_v (m).")
+@click.option("--truncation", type=float, default=None,
+              help="TSDF truncation M_v (m) [default: 0.03, or 0.75 voxel for voxels over 4 cm].")
 @click.option("--max-weight", type=int, default=128, show_default=True, help="Weight cap M_w (1..255).")
 @click.option("--min-depth", type=float, default=0.3, show_default=True, help="Ignore closer readings (m).")
 @click.option("--max-depth", type=float, default=4.0, show_default=True, help="Ignore farther readings (m).")

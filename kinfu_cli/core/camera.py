@@ -29,6 +29,24 @@ SENSOR_PRESETS = {
 KINECT_V1 = SENSOR_PRESETS["kinect_v1"]
 
 
+# the widest field of view taken for a depth camera's pinhole intrinsics (depth cameras see 55-90 degrees, wide
+# ones up to ~120): wider means focal lengths in other units than pixels (normalised by the image size, or mm)
+MAX_FIELD_OF_VIEW_DEG = 170.0
+
+
+def field_of_view_problem(K: np.ndarray, width: int, height: int) -> str | None:
+    """Why K cannot hold a depth camera's focal lengths in pixels for width x height images (a field of view over
+    MAX_FIELD_OF_VIEW_DEG), or None (also when the size is unknown)."""
+    if width <= 0 or height <= 0:
+        return None
+    fx, fy = float(K[0, 0]), float(K[1, 1])
+    fov = max(2 * math.degrees(math.atan2(width / 2, fx)), 2 * math.degrees(math.atan2(height / 2, fy)))
+    if fov <= MAX_FIELD_OF_VIEW_DEG:
+        return None
+    return (f"fx={fx:.3g}, fy={fy:.3g} give a {fov:.1f} deg field of view over {width}x{height} px images (over "
+            f"{MAX_FIELD_OF_VIEW_DEG:.0f}: expected focal lengths in pixels)")
+
+
 def intrinsics_matrix(fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
     """3x3 pinhole matrix K."""
     return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]], dtype=np.float64)

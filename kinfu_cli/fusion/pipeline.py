@@ -37,7 +37,7 @@ from kinfu_cli.fusion.mesh import mesh_cloud
 from kinfu_cli.fusion.placement import default_origin
 from kinfu_cli.fusion.tracking import POSE_MODES, FrameToModelTracker, TrackResult, predict_pose
 from kinfu_cli.fusion.up import choose_up
-from kinfu_cli.fusion.volume import TernaryVolume, load_volume
+from kinfu_cli.fusion.volume import DEFAULT_TRUNCATION_M, TernaryVolume, load_volume
 from kinfu_cli.io.frames import FrameStats, RGBDFrame, check_window, iter_frames, window_depth_count
 from kinfu_cli.io.messages import header_frame
 from kinfu_cli.io.recording import Recording, open_recording
@@ -107,7 +107,7 @@ class _GridSpec:
     size: float | tuple
     resolution: int | tuple | None  # 512 when voxel_size is None too
     voxel_size: float | None
-    truncation: float
+    truncation: float | None  # None: volume.default_truncation of the voxel
     max_weight: int
     min_depth: float
     max_depth: float
@@ -165,7 +165,7 @@ class _PosePlan:
 
 def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = "auto",
                    resolution: int | tuple | None = None,
-                   voxel_size: float | None = None, origin: tuple | None = None, truncation: float = 0.03,
+                   voxel_size: float | None = None, origin: tuple | None = None, truncation: float | None = None,
                    max_weight: int = 128, min_depth: float = 0.3, max_depth: float = 4.0, color: bool = True,
                    pose: str | None = None, pose_topic: str | None = None, init: str | os.PathLike | None = None,
                    clear_spheres: Iterable[tuple] = (), clear_pois: str | os.PathLike | None = None,
@@ -182,7 +182,7 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
     fusion.extent), resolution (voxels per axis: with a size 512 unless voxel_size, with "auto" over the box),
     voxel_size (m; with "auto" default 3 m / 512, coarser when the grid's worst case exceeds max_memory GiB, default
     half the available memory up to 2 GiB), origin (minimum corner; default centred on what the first frames see,
-    with "auto" the box's corner), truncation, max_weight, min_depth/max_depth (m), color. pose: forced (TF), icp,
+    with "auto" the box's corner), truncation (None: 3 cm, or 0.75 voxel over 4 cm voxels), max_weight, min_depth/max_depth (m), color. pose: forced (TF), icp,
     hint (ICP from TF) or topic (pose_topic); default forced when TF links the camera to the world, else icp. init:
     a volume.npz to continue. clear_spheres (x, y, z, r) and the POIs of clear_pois are forgotten (before fusing
     with init, else after). start_s / end_s (seconds from the recording start), every, tolerance_s: frame selection
@@ -384,7 +384,7 @@ def _auto_grid(rec: Recording, roles: Roles, plan: _PosePlan, grid_spec: _GridSp
         raise RecordingError(f"{rec.path}: no selected depth frame has a camera pose in {plan.world or 'the world'}"
                              f" frame, so the grid cannot be sized around them")
     return auto_grid(seen, voxel_size=voxel_size, resolution=resolution,
-                     truncation=grid_spec.truncation, budget=budget, origin=origin, grow=grow,
+                     truncation=grid_spec.truncation or DEFAULT_TRUNCATION_M, budget=budget, origin=origin, grow=grow,
                      color="mode" if grid_spec.color and grid_spec.color_mode == "mode" else grid_spec.color)
 
 
@@ -505,12 +505,15 @@ def _spheres(clear_spheres: Iterable[tuple], clear_pois: str | os.PathLike | Non
 
 
 def _pose_plan(rec: Recording, tf: TfBuffer, roles: Roles, pose: str | None, pose_topic: str | None) -> _PosePlan:
-    """Pose mode (the requested one, else forced when TF links camera and world, else icp) and its source."""
+    """Pose mode (the requested one, else topic when pose_topic is given, forced when TF links camera and world,
+    else icp) and its source."""
     world_frame, camera_frame = roles.world_frame, roles.camera_frame
     # both frames named exactly as in the TF tree, and linked by a chain of transforms
     has_tf = bool(world_frame and camera_frame and {world_frame, camera_frame} <= set(tf.frames())
                   and tf.connected(world_frame, camera_frame))
-    mode = pose or ("forced" if has_tf else "icp")
+    mode = pose or ("topic" if pose_topic else "forced" if has_tf else "icp")  # a pose topic given is meant to be used
+    if pose_topic and mode != "topic":
+        raise ConfigError(f"a pose topic is read only in pose mode 'topic', not {mode!r}", parameter="pose_topic")
     if mode in ("forced", "hint") and not has_tf:
         raise RecordingError(f"{rec.path}: pose mode {mode!r} needs TF from {world_frame or 'a world frame'} to "
                              f"camera frame {camera_frame or '?'} (use pose mode 'icp' or 'topic', or name the "

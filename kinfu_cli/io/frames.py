@@ -14,7 +14,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from kinfu_cli.core.camera import intrinsics_matrix, scaled_intrinsics
+from kinfu_cli.core.camera import field_of_view_problem, intrinsics_matrix, scaled_intrinsics
 from kinfu_cli.core.errors import ConfigError, RecordingError, TransformError
 from kinfu_cli.io.color_registration import (ColorRegistration, ColorSizeError, check_color_size, color_registration,
                                              color_size_reason, register_color)
@@ -50,6 +50,11 @@ class RGBDFrame:
     color_mask: np.ndarray | None = None  # bool (H, W): False where colour has no sample (projected colour)
 
 
+# the share of a run's frames that may lack a colour image within the tolerance before a warning (the first and
+# last frames often do: the colour stream starts and stops at other times)
+UNPAIRED_COLOR_WARN = 0.10
+
+
 @dataclass
 class FrameStats:
     """How many depth frames were used, skipped (every n-th, time window) and dropped (reason -> count)."""
@@ -62,6 +67,11 @@ class FrameStats:
     color_registration: dict | None = None  # ColorRegistration.as_dict() when there is a colour topic
     notes: list[str] = field(default_factory=list)  # what was assumed to read the frames (a warning each)
     depth_units: float | None = None  # m per unit of 16-bit depth when not mm (a RealSense SDK recording's)
+    # frames used without colour although the colour topic could be placed: no colour image within the tolerance;
+    # the nearest one's distance in time (None when there was none at all) and the tolerance
+    color_unpaired: int = 0
+    color_nearest_ns: int | None = None
+    tolerance_ns: int = 0
 
     def drop(self, reason: str) -> None:
         self.dropped[reason] = self.dropped.get(reason, 0) + 1
@@ -79,6 +89,12 @@ class FrameStats:
         if reg and reg["mode"] == "none":
             out.append(f"{recording}: frames without colour: {reg['reason']}, so the colour images cannot be placed "
                        f"on the depth (resizing them would paint each surface with its neighbour's)")
+        if self.color_unpaired > UNPAIRED_COLOR_WARN * max(self.used, 1):  # a few at the ends are usual
+            near = ("no colour image at all in the frames' time window" if self.color_nearest_ns is None else
+                    f"the nearest colour image {self.color_nearest_ns / 1e6:.0f} ms from a depth frame, over "
+                    f"the {self.tolerance_ns / 1e6:.0f} ms tolerance")
+            out.append(f"{recording}: {self.color_unpaired} of {self.used} frames have no colour ({near}); their "
+                       f"surfaces stay uncoloured (a larger tolerance pairs images further apart in time)")
         return out
 
     def as_dict(self) -> dict:
@@ -155,17 +171,19 @@ def iter_frames(rec, roles: Roles | None = None, pose_source: str = "tf", pose_t
         roles = detect_roles(rec, tf=tf)
     depth_topic = _require_topics(rec, roles)
     tol_ns = int(round(tolerance_s * 1e9))
+    stats.tolerance_ns = tol_ns
     cloud = POINTCLOUD2 in rec.topics[depth_topic].msgtypes
     if cloud:
         K, width, height, lens, _ = _cloud_camera(rec, roles, depth_topic, stats)
     else:
-        K, width, height, lens = _depth_camera(rec, roles, depth_topic)
+        K, width, height, lens = _depth_camera(rec, roles, depth_topic, stats.notes)
     sdk = is_sdk_stream(rec, depth_topic)  # a RealSense SDK recording: depth units, colour through its extrinsics
     if pose_source == "tf" and sdk and not roles.camera_frame:
         raise RecordingError(f"{rec.path}: a RealSense SDK recording has no TF camera poses (its depth frames name "
                              f"no TF frame); take no poses (pose source 'none') or track them (ICP)",
                              parameter="pose_source")
     if pose_source == "tf":
+        tf = tf if tf is not None else TfBuffer.from_recording(rec)
         pose_fn = _tf_poses(rec, roles, depth_topic, tf, tol_ns, stats)
     elif pose_source == "topic":
         pose_fn = _topic_poses(rec, pose_topic, tol_ns, stats)
@@ -190,6 +208,8 @@ def iter_frames(rec, roles: Roles | None = None, pose_source: str = "tf", pose_t
     pairer = _FramePairer(rec, roles, depth_topic, K, width, height, pose_fn, tol_ns, stats, require_color, reg,
                           lens, cloud, stats.depth_units)
     yield from pairer.stream(start_ns, end_ns, every)
+    if pose_source == "tf":  # poses interpolated across a long gap in a TF link: known once the frames are read
+        stats.notes += [w for w in tf.gap_warnings() if w not in stats.notes]
 
 
 def check_seconds(value: float, parameter: str, minimum: float = -MAX_SECONDS) -> float:
@@ -205,13 +225,15 @@ def check_seconds(value: float, parameter: str, minimum: float = -MAX_SECONDS) -
     return v
 
 
-def _depth_camera(rec, roles: Roles, depth_topic: str) -> tuple[np.ndarray, int, int, Undistorter]:
+def _depth_camera(rec, roles: Roles, depth_topic: str, notes: list[str]) -> tuple[np.ndarray, int, int, Undistorter]:
     """(K, width, height, lens) of the depth camera: its first camera info, or the given intrinsics (the size of
-    the first depth image; no distortion)."""
+    the first depth image; no distortion); a camera info in another frame than the depth images is said in notes."""
     if roles.intrinsics is not None:
         K = intrinsics_matrix(*roles.intrinsics)
         first = rec.first_message(depth_topic)
         h, w = decode_depth(first, f"{rec.path}: {depth_topic}").shape if first is not None else (0, 0)
+        if (problem := field_of_view_problem(K, w, h)) is not None:
+            raise ConfigError(f"{rec.path}: {depth_topic}: {problem}", parameter="intrinsics")
         return K, w, h, Undistorter.pinhole(K)
     first_info = rec.first_message(roles.info_topic)
     if first_info is None:
@@ -220,6 +242,12 @@ def _depth_camera(rec, roles: Roles, depth_topic: str) -> tuple[np.ndarray, int,
                              f"{rec.path}: camera info topic {roles.info_topic} lists {count} messages but none "
                              f"could be read")
     K, width, height = camera_info_K(first_info, f"{rec.path}: {roles.info_topic}")
+    first = rec.first_message(depth_topic)
+    info_frame, depth_frame = (header_frame(m).lstrip("/") if m is not None else "" for m in (first_info, first))
+    if info_frame and depth_frame and info_frame != depth_frame:  # no info in the depth frame: roles took this one
+        notes.append(f"camera info {roles.info_topic} is in frame {info_frame!r}, the depth images in "
+                     f"{depth_frame!r}: its intrinsics (fx={K[0, 0]:.4g}) may be another camera's (give the "
+                     f"depth camera's intrinsics if they are)")
     return K, width, height, Undistorter(K, *camera_info_distortion(first_info, f"{rec.path}: {roles.info_topic}"))
 
 
@@ -234,6 +262,8 @@ def _cloud_camera(rec, roles: Roles, topic: str, stats: FrameStats
     h, w = int(first.height), int(first.width)
     if roles.intrinsics is not None:  # the user's word, but a K that misses the points unprojects them elsewhere
         K = intrinsics_matrix(*roles.intrinsics)
+        if (problem := field_of_view_problem(K, w, h)) is not None:
+            raise ConfigError(f"{where}: {problem}", parameter="intrinsics")
         if (rms := pinhole_rms(first, K, where)) > MAX_PINHOLE_RMS_PX:
             stats.notes.append(f"depth from the organized point cloud {topic} ({w}x{h}): the given intrinsics miss "
                                f"its points by {rms:.3g} px RMS (the cloud's own camera puts each point on its "
@@ -496,11 +526,16 @@ class _FramePairer:
             self.stats.drop(DROP_EMPTY)
             return None
         color = color_mask = None
+        unpaired = False
         if self.color_topic is None and cloud_color is not None:
             color = cloud_color  # registered: the same pixels
-        elif self.color_topic is not None and self.colors and self.registration_mode() != "none":
-            best_stamp, best = min(self.colors, key=lambda c: abs(c[0] - stamp))
-            if abs(best_stamp - stamp) <= self.tol_ns:
+        elif self.color_topic is not None and self.registration_mode() != "none":
+            best_stamp, best = min(self.colors, key=lambda c: abs(c[0] - stamp)) if self.colors else (None, None)
+            if best_stamp is not None and abs(best_stamp - stamp) > self.tol_ns:
+                gap, seen = abs(best_stamp - stamp), self.stats.color_nearest_ns
+                self.stats.color_nearest_ns = gap if seen is None else min(seen, gap)
+            unpaired = best_stamp is None or abs(best_stamp - stamp) > self.tol_ns
+            if not unpaired:
                 where = f"{self.rec.path}: {self.color_topic}"
                 color = decode_color(best, where)
                 if self.registration_mode() == "project":
@@ -516,6 +551,7 @@ class _FramePairer:
                 self.stats.drop(DROP_NO_COLOR)
                 return None
             self.stats.without_color += 1
+            self.stats.color_unpaired += unpaired
         self.stats.used += 1
         return RGBDFrame(index=index, stamp_ns=stamp, depth=depth, color=color, K=K.copy(), T_world_camera=T,
                          color_mask=color_mask)

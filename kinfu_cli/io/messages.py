@@ -15,6 +15,7 @@ from collections.abc import Iterator
 import cv2
 import numpy as np
 
+from kinfu_cli.core.camera import field_of_view_problem
 from kinfu_cli.core.errors import RecordingError
 from kinfu_cli.core.poses import quaternion_to_matrix
 from kinfu_cli.io.undistort import check_distortion
@@ -323,4 +324,6 @@ def camera_info_K(msg: object, topic: str = "camera_info") -> tuple[np.ndarray, 
     K = np.asarray(list(k) if not isinstance(k, np.ndarray) else k, dtype=np.float64).reshape(3, 3)
     if K[0, 0] <= 0 or K[1, 1] <= 0 or not np.all(np.isfinite(K)):
         raise RecordingError(f"{topic}: CameraInfo K has no valid focal lengths (fx={K[0, 0]}, fy={K[1, 1]})")
+    if (problem := field_of_view_problem(K, int(msg.width), int(msg.height))) is not None:
+        raise RecordingError(f"{topic}: CameraInfo K: {problem}")
     return K, int(msg.width), int(msg.height)

@@ -139,8 +139,18 @@ def _pick_info(rec, depth_topic: str | None) -> str | None:
         return None
     if depth_topic is None:
         return infos[0]
-    # same namespace as the depth image wins (/camera/depth/camera_info for /camera/depth/image_raw)
-    return sorted(infos, key=lambda n: (-_common_prefix(n, depth_topic), "depth" not in n.lower(), n))[0]
+    # one in the depth image's optical frame wins (a colour camera's info holds another lens: fx 100 against the
+    # depth camera's 58.5 was taken silently); then the same namespace (/camera/depth/camera_info for
+    # /camera/depth/image_raw)
+    depth_frame = _first_frame(rec, depth_topic)
+    return sorted(infos, key=lambda n: (not depth_frame or _first_frame(rec, n) != depth_frame,
+                                        -_common_prefix(n, depth_topic), "depth" not in n.lower(), n))[0]
+
+
+def _first_frame(rec, topic: str) -> str:
+    """The header frame of a topic's first message ("" when none)."""
+    msg = rec.first_message(topic)
+    return header_frame(msg).lstrip("/") if msg is not None else ""
 
 
 def _pick_cloud_info(rec, cloud_topic: str) -> str | None:
@@ -259,6 +269,8 @@ def detect_roles(rec, depth_topic: str | None = None, color_topic: str | None = 
     if depth_topic is None:
         cands = _depth_candidates(rec) or _cloud_candidates(rec)  # a depth image wins over a cloud
         depth_topic = cands[0] if cands else None
+    if color_topic is not None and color_topic == depth_topic:
+        raise ConfigError(f"{color_topic} is the depth topic: expected a colour image topic", parameter="color_topic")
     cloud = _first_cloud(rec, depth_topic)
     if color_topic is None and not sdk and not (cloud is not None and has_color(cloud)):  # a cloud's rgb: registered
         cands = _color_candidates(rec, depth_topic)

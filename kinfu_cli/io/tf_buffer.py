@@ -7,6 +7,15 @@ stored; `add_message` counts it by reason (`rejected`) and by link (`rejected_li
 rejected transforms can be reported naming the link. Chains are walked with a loop check: links that form a
 cycle raise TransformError naming the frames of the loop instead of walking forever.
 
+A frame may be re-parented over time (tf2 allows it): the later parent's link is kept (`parent_changes`). A frame
+that goes back to a parent it had before is published under two parents at once (two publishers: a broken tree,
+whose lookups tf2 would flip between the chains); its link is taken from the parent with the most transforms and
+`parent_warnings` says so, naming the parents (`from_recording` puts it in the recording's problems).
+
+Like tf2, a lookup interpolates across any stretch without transforms; one that falls in a gap much longer than
+the link's usual spacing (GAP_FACTOR x its median period and more than GAP_MIN_NS) is counted by stamp, and
+`gap_warnings` names the link, the gap and how many stamps fell in such gaps.
+
 Each link is stored as `T_parent_child` (maps child coordinates into the parent frame), the convention of
 tf2's TransformStamped (header.frame_id = parent, child_frame_id = child). Between two samples of a dynamic
 link the translation is interpolated linearly and the rotation by slerp. `lookup_many` evaluates a whole
@@ -30,6 +39,8 @@ from kinfu_cli.io.messages import header_frame, normalize_msgtype, time_to_ns
 TF_TYPES = ("tf2_msgs/msg/TFMessage", "tf/msg/tfMessage")
 QUAT_NORM2_TOLERANCE = 0.01  # tf2's QUATERNION_NORMALIZATION_TOLERANCE on | |q|^2 - 1 |
 MAX_TRANSLATION_M = 1e6  # a link longer than this is corrupt data, not a robot (and would overflow products)
+GAP_FACTOR = 10  # a stretch without transforms this many times the link's median period is a gap ...
+GAP_MIN_NS = 500_000_000  # ... when it is also longer than this
 
 
 @dataclass
@@ -42,6 +53,11 @@ class _Link:
     values: array = field(default_factory=lambda: array("d"))  # tx ty tz qx qy qz qw per sample
     _arrays: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
     _last_T: np.ndarray | None = None  # matrix of the latest sample, cached
+    # gaps (set with the arrays): sorted start and end stamps of stretches much longer than the median period
+    gap_starts: list[int] = field(default_factory=list)
+    gap_ends: list[int] = field(default_factory=list)
+    period_ns: float = 0.0  # median spacing of the samples
+    gap_hits: set[int] = field(default_factory=set)  # stamps looked up inside a gap
 
     def add(self, stamp_ns: int, trans, quat) -> None:
         self.stamps.append(int(stamp_ns))
@@ -64,8 +80,34 @@ class _Link:
             keep[:-1] = st[1:] != st[:-1]  # last of each run of equal stamps
             v = vals[order[keep]]
             self._arrays = (st[keep], np.ascontiguousarray(v[:, :3]), np.ascontiguousarray(v[:, 3:]))
+            self._find_gaps(self._arrays[0])
         return self._arrays
 
+    def _find_gaps(self, st: np.ndarray) -> None:
+        """Stretches of a dynamic link without samples, much longer than its median period (module docstring)."""
+        steps = np.diff(st)
+        self.gap_starts, self.gap_ends, self.period_ns = [], [], 0.0
+        if self.static or steps.size == 0:
+            return
+        self.period_ns = float(np.median(steps))
+        at = np.flatnonzero(steps > max(GAP_FACTOR * self.period_ns, GAP_MIN_NS))
+        self.gap_starts, self.gap_ends = st[at].tolist(), st[at + 1].tolist()
+
+    def note_gaps(self, stamps: np.ndarray) -> None:
+        """Remember the stamps (within the link's range) that fall strictly inside one of its gaps: bisect for one
+        stamp (the per-frame path), searchsorted for many."""
+        if stamps.shape[0] == 1:
+            s = int(stamps[0])
+            j = bisect.bisect_right(self.gap_starts, s) - 1
+            if j >= 0 and self.gap_starts[j] < s < self.gap_ends[j]:
+                self.gap_hits.add(s)
+            return
+        starts, ends = np.asarray(self.gap_starts, dtype=np.int64), np.asarray(self.gap_ends, dtype=np.int64)
+        j = np.searchsorted(starts, stamps, side="right") - 1
+        jj = np.maximum(j, 0)
+        inside = (j >= 0) & (stamps > starts[jj]) & (stamps < ends[jj])
+        if inside.any():
+            self.gap_hits.update(stamps[inside].tolist())
 
 def slerp(q0: np.ndarray, q1: np.ndarray, a: np.ndarray) -> np.ndarray:
     """Spherical linear interpolation of quaternions (N,4) at fractions a (N,); shortest arc."""
@@ -107,12 +149,20 @@ def _fmt_s(ns: int) -> str:
     return f"{ns * 1e-9:.3f}"
 
 
+# parent changes that make a frame "under two parents at once" (two publishers alternate at every message) rather
+# than re-parented a few times (a grasped object: table -> gripper -> table)
+TWO_PARENTS_MIN_SWITCHES = 4
+
+
 class TfBuffer:
     """Static + dynamic TF links; `lookup(target, source, stamp_ns) -> T_target_source`."""
 
     def __init__(self) -> None:
-        self._links: dict[str, _Link] = {}
-        self.parent_changes: list[tuple[str, str, str]] = []  # (child, old parent, new parent)
+        self._links: dict[str, _Link] = {}  # child -> the link its lookups take
+        self._parents: dict[str, dict[str, _Link]] = {}  # child -> parent -> link, in the order first seen
+        self._last_parent: dict[str, str] = {}  # child -> parent of its latest transform
+        self._moves: dict[str, list[str]] = {}  # child -> the parents it moved between, in order (re-parented)
+        self._switches: dict[str, int] = {}  # child -> parent changes, for a child under two parents at once
         self.rejected: dict[str, int] = {}  # transforms from messages that were skipped, by reason
         self.rejected_links: dict[tuple[str, str], dict[str, int]] = {}  # (parent, child) -> reason -> count
 
@@ -134,16 +184,118 @@ class TfBuffer:
         if reason is not None:
             raise TransformError(f"TF link {parent!r} -> {child!r}: {reason}")
         norm = float(np.linalg.norm(quat))
-        link = self._links.get(child)
-        if link is not None and link.parent != parent:
-            self.parent_changes.append((child, link.parent, parent))
-            link = None
+        last = self._last_parent.get(child)
+        if last is not None and last != parent:
+            self._note_move(child, last, parent)
+        self._last_parent[child] = parent
+        parents = self._parents.setdefault(child, {})
+        link = parents.get(parent)
         if link is None or link.static != static:
-            link = _Link(parent, static)
-            self._links[child] = link
+            link = parents[parent] = _Link(parent, static)
         if static:
             link.clear()
         link.add(stamp_ns, trans.tolist(), (quat / norm).tolist())
+        if child in self._switches:  # two parents at once: the one with the most transforms (the first on a tie)
+            link = max(parents.values(), key=lambda candidate: len(candidate.stamps))
+        self._links[child] = link
+
+    def _note_move(self, child: str, old: str, new: str) -> None:
+        """A transform of `child` under another parent than its last one: a re-parenting, or, when `new` was its
+        parent before, a second parent at the same time."""
+        if child in self._switches:
+            self._switches[child] += 1
+            return
+        moves = self._moves.setdefault(child, [old])
+        if new in moves:
+            self._switches[child] = len(moves)
+            del self._moves[child]
+        else:
+            moves.append(new)
+
+    @property
+    def parent_changes(self) -> list[tuple[str, str, str]]:
+        """(child, old parent, new parent) for each re-parenting, the later link kept (not for frames under two
+        parents at once: parent_warnings)."""
+        return [(child, old, new) for child, moves in self._moves.items() for old, new in zip(moves, moves[1:])]
+
+    def parent_warnings(self) -> list[str]:
+        """One warning per frame published under two (or more) parents at once: the parents, how many transforms
+        each, which one lookups take, and how far apart the parents place the frame."""
+        out = []
+        for child, switches in self._switches.items():
+            if switches < TWO_PARENTS_MIN_SWITCHES:  # an object picked from A, held by B, put back on A
+                continue
+            parents, used = self._parents[child], self._links[child]
+            counts = ", ".join(f"{p!r} ({len(link.stamps)} transforms)" for p, link in parents.items())
+            others = [p for p in parents if p != used.parent]
+            tie = sum(len(link.stamps) == len(used.stamps) for link in parents.values()) > 1
+            text = (f"TF frame {child!r} is published under {len(parents)} parents at once, {counts}, switching "
+                    f"between them {switches} times (two publishers of one frame: a broken TF tree); poses through "
+                    f"{child!r} take its link from {used.parent!r} (the parent with the most transforms"
+                    f"{', the first seen of those' if tie else ''}) and ignore its transforms from "
+                    f"{', '.join(repr(p) for p in others)}")
+            apart = self._parents_apart(child, others)
+            if apart is not None:
+                text += f"; the parents place {child!r} up to {apart:.3g} m apart"
+            out.append(text)
+        return out
+
+    def gap_warnings(self) -> list[str]:
+        """One warning per link that lookups interpolated across a gap much longer than its usual spacing (the
+        module docstring): the link, the gap(s), and at how many stamps."""
+        out = []
+        for child, link in self._links.items():
+            if not link.gap_hits:
+                continue
+            hits = np.fromiter(link.gap_hits, dtype=np.int64)
+            starts, ends = np.asarray(link.gap_starts, dtype=np.int64), np.asarray(link.gap_ends, dtype=np.int64)
+            j = np.searchsorted(starts, hits, side="right") - 1
+            j = j[(j >= 0) & (hits > starts[np.maximum(j, 0)]) & (hits < ends[np.maximum(j, 0)])]  # (samples since)
+            if not j.size:
+                continue
+            gaps = np.unique(j)
+            longest = int(gaps[np.argmax(ends[gaps] - starts[gaps])])
+            length, start, end = link.gap_ends[longest] - link.gap_starts[longest], starts[longest], ends[longest]
+            one = gaps.size == 1
+            what = (f"no transform for {length * 1e-9:.3f} s (stamps {_fmt_s(start)} .. {_fmt_s(end)} s)" if one else
+                    f"{gaps.size} gaps without transforms, the longest {length * 1e-9:.3f} s (stamps "
+                    f"{_fmt_s(start)} .. {_fmt_s(end)} s),")
+            out.append(f"TF link {link.parent} -> {child} has {what} though its transforms are usually "
+                       f"{link.period_ns * 1e-9:.3g} s apart: {j.size} lookups fell in "
+                       f"{'that gap' if one else 'those gaps'} and were interpolated across "
+                       f"{'it' if one else 'them'}, so they may be far off")
+        return out
+
+    def _parents_apart(self, child: str, others: list[str]) -> float | None:
+        """How far apart (m, at most) the taken parent and the ignored ones place `child`, at the ignored
+        transforms' stamps that both chains cover (at most 500 of them); None where they cannot be compared."""
+        apart = None
+        try:
+            root = self.chain(child)[-1]
+            for other in others:
+                link = self._parents[child][other]
+                chain = self.chain(other)
+                if child in chain or chain[-1] != root:
+                    continue
+                st, tr, qu = link.arrays()
+                keep = np.ones(st.shape[0], bool)
+                for rng in (self.time_range(root, child), self.time_range(root, other)):
+                    if rng is not None:
+                        keep &= (st >= rng[0]) & (st <= rng[1])
+                idx = np.flatnonzero(keep)
+                if not idx.size:
+                    continue
+                idx = idx[np.linspace(0, idx.size - 1, min(idx.size, 500)).round().astype(int)]
+                stamps = None if link.static else st[idx]
+                idx = idx[-1:] if link.static else idx
+                taken = self._chain_T(root, child, stamps, 0)[:, :3, 3]
+                ignored = self._chain_T(root, other, stamps, 0)
+                ignored = ignored[:, :3, :3] @ tr[idx, :, None] + ignored[:, :3, 3:]
+                d = float(np.max(np.linalg.norm(taken - ignored[..., 0], axis=1)))
+                apart = d if apart is None else max(apart, d)
+        except TransformError:
+            return apart
+        return apart
 
     def add_message(self, msg: object, static: bool = False) -> int:
         """Add every TransformStamped of a tf2_msgs/TFMessage or tf/tfMessage; returns how many. A transform that
@@ -181,6 +333,11 @@ class TfBuffer:
             if msgtype not in TF_TYPES:
                 continue
             buf.add_message(msg, static=topic.rstrip("/").endswith("tf_static"))
+        problems = getattr(rec, "problems", None)
+        for warning in buf.parent_warnings():  # said once, however often the recording's TF is read
+            line = f"{rec.path}: {warning}"
+            if problems is not None and line not in problems:
+                problems.append(line)
         return buf
 
     # ----------------------------------------------------------------------------------- queries
@@ -235,16 +392,26 @@ class TfBuffer:
 
     def lookup_many(self, target: str, source: str, stamps_ns: np.ndarray | None,
                     tolerance_ns: int = 0) -> np.ndarray:
-        """T_target_source for each stamp: (N,4,4). Stamps within tolerance_ns outside a link's range clamp."""
+        """T_target_source for each stamp: (N,4,4). Stamps within tolerance_ns outside a link's range clamp.
+        Stamps inside a gap of a link are counted (gap_warnings) when the whole lookup succeeds."""
+        in_gaps: list[tuple[_Link, np.ndarray]] = []
+        T = self._chain_T(target, source, stamps_ns, tolerance_ns, in_gaps)
+        for link, stamps in in_gaps:
+            link.note_gaps(stamps)
+        return T
+
+    def _chain_T(self, target: str, source: str, stamps_ns: np.ndarray | None, tolerance_ns: int,
+                 in_gaps: list | None = None) -> np.ndarray:
+        """lookup_many; the stamps of links that have gaps go to in_gaps (None: not counted)."""
         target, source = _strip(target), _strip(source)
         n = 1 if stamps_ns is None else int(np.asarray(stamps_ns).reshape(-1).shape[0])
         up_src, up_tgt = self._split_path(target, source)
         T_anc_src = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
         for child in up_src:  # source upwards: T_anc_src = T_parent_child @ T_anc_src
-            T_anc_src = self._edge(child, stamps_ns, n, tolerance_ns) @ T_anc_src
+            T_anc_src = self._edge(child, stamps_ns, n, tolerance_ns, in_gaps) @ T_anc_src
         T_anc_tgt = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
         for child in up_tgt:
-            T_anc_tgt = self._edge(child, stamps_ns, n, tolerance_ns) @ T_anc_tgt
+            T_anc_tgt = self._edge(child, stamps_ns, n, tolerance_ns, in_gaps) @ T_anc_tgt
         return _inv(T_anc_tgt) @ T_anc_src
 
     # ----------------------------------------------------------------------------------- internals
@@ -317,7 +484,8 @@ class TfBuffer:
         up_src, up_tgt = self._split_path(target, source)
         return up_src + up_tgt
 
-    def _edge(self, child: str, stamps_ns: np.ndarray | None, n: int, tolerance_ns: int) -> np.ndarray:
+    def _edge(self, child: str, stamps_ns: np.ndarray | None, n: int, tolerance_ns: int,
+              in_gaps: list | None = None) -> np.ndarray:
         link = self._links[child]
         st, tr, qu = link.arrays()
         if link.static or stamps_ns is None:
@@ -330,6 +498,8 @@ class TfBuffer:
         s = np.asarray(stamps_ns, dtype=np.int64).reshape(-1)
         lo, hi = st[0], st[-1]
         if s.shape[0] == 1 and lo - tolerance_ns <= s[0] <= hi + tolerance_ns:
+            if in_gaps is not None and link.gap_starts:
+                in_gaps.append((link, s))
             return _edge_one(st, tr, qu, int(s[0]))[None]
         bad = (s < lo - tolerance_ns) | (s > hi + tolerance_ns)
         if bad.any():
@@ -337,6 +507,8 @@ class TfBuffer:
             raise TransformError(f"TF link {link.parent} -> {child}: time {_fmt_s(t)} s is outside the buffered "
                                  f"range [{_fmt_s(int(lo))}, {_fmt_s(int(hi))}] s")
         s = np.clip(s, lo, hi)
+        if in_gaps is not None and link.gap_starts:
+            in_gaps.append((link, s))
         if st.shape[0] == 1:
             trans, quat = np.repeat(tr, s.shape[0], 0), np.repeat(qu, s.shape[0], 0)
         else:

@@ -213,3 +213,19 @@ def test_pose_topic_that_changes_frame_is_refused(posed, tmp_path):
     lines = res.output.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("kinfu: error:") and POSE_TOPIC in lines[0]
     assert "'world'" in lines[0] and "'odom'" in lines[0] and not out.exists()
+
+
+def test_a_pose_topic_given_means_pose_mode_topic_and_goes_with_no_other(posed, fused, tmp_path):
+    # --pose-topic without --pose used to be ignored (TF poses, pose mode forced), with any other mode too
+    rec = posed / "recording.mcap"
+    grid, report = fuse(rec, tmp_path / "implied", "--pose-topic", POSE_TOPIC)
+    assert report["pose_mode"] == "topic" and POSE_TOPIC in report["pose_source"]
+    assert np.array_equal(grid.labels, fused("recording.mcap", "topic")[0].labels)
+    for mode in ("forced", "icp"):
+        res = CliRunner().invoke(cli, ["fuse", str(rec), "-o", str(tmp_path / mode), *FAST, "--pose", mode,
+                                       "--pose-topic", POSE_TOPIC])
+        assert res.exit_code == 2 and res.output.startswith("kinfu: error: --pose-topic:"), res.output
+        assert f"not {mode!r}" in res.output and not (tmp_path / mode).exists()
+    res = CliRunner().invoke(cli, ["export", str(rec), "-o", str(tmp_path / "traj.tum"), "--trajectory", "tum",
+                                   "--pose-source", "tf", "--pose-topic", POSE_TOPIC])
+    assert res.exit_code == 2 and "--pose-topic" in res.output and "'tf'" in res.output

@@ -358,3 +358,22 @@ def test_block_sparse_update_equals_dense_reference_in_open_space():
     assert (ww == w_ref).mean() > 0.9999
     both = (ww == w_ref) & (ww > 0)
     assert np.abs(vv[both] - v_ref[both]).max() < 2e-4
+
+
+def test_a_new_grid_that_cannot_hold_a_surface_is_refused():
+    # a 3 m voxel in a 2 m box made a one-voxel grid that fused nothing; a band under half a voxel lost the surfaces
+    # (0.03 m at 0.1 m voxels kept 2 occupied voxels of the sample's table scene)
+    with pytest.raises(ConfigError) as err:
+        TernaryVolume(size=2.0, voxel_size=3.0)
+    assert err.value.parameter == "voxel_size" and "1x1x1 voxels" in str(err.value)
+    with pytest.raises(ConfigError) as err:
+        TernaryVolume(size=2.0, resolution=2)
+    assert err.value.parameter == "size/resolution"
+    with pytest.raises(ConfigError) as err:
+        TernaryVolume(size=2.0, voxel_size=0.1, truncation=0.03)
+    assert err.value.parameter == "truncation" and "0.05 m" in str(err.value)
+    TernaryVolume(size=(0.4, 0.4, 0.16), voxel_size=0.04, truncation=0.03)  # 4 voxels, 0.75 voxel: the room tests'
+    # none given: 3 cm, widened to 0.75 voxel on coarse grids (a 10 cm voxel kept 510 occupied voxels of the scene
+    # above instead of 2)
+    assert TernaryVolume(size=2.0, voxel_size=0.1, truncation=None).truncation == pytest.approx(0.075)
+    assert TernaryVolume(size=2.0, voxel_size=0.02, truncation=None).truncation == 0.03

@@ -60,9 +60,12 @@ def test_info_text_on_written_recording(tmp_path):
     assert "\n  world\n    base_link  (static)\n      wrist  (" in out
     assert "        camera_optical  (static)" in out
     # an override wins
-    res = run("info", path, "--json", "--world-frame", "base_link", "--color-topic", "/camera/depth/image_raw")
+    res = run("info", path, "--json", "--world-frame", "base_link", "--info-topic", "/camera/depth/camera_info")
     roles = json.loads(res.output)["roles"]
-    assert roles["world_frame"] == "base_link" and roles["color_topic"] == "/camera/depth/image_raw"
+    assert roles["world_frame"] == "base_link" and roles["info_topic"] == "/camera/depth/camera_info"
+    # the depth topic named as the colour topic is refused (fuse went on to "no depth frames in the selection")
+    res = run("info", path, "--color-topic", "/camera/depth/image_raw")
+    assert res.exit_code == 2 and res.output.startswith("kinfu: error: --color-topic:") and "depth topic" in res.output
 
 
 def test_info_bad_input(tmp_path, shared_data):

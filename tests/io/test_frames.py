@@ -108,3 +108,18 @@ def test_bad_recordings_raise_clear_errors(tmp_path):
         assert exc.value.parameter == "camera_frame"
         with pytest.raises(ConfigError, match="every"):
             list(iter_frames(rec, every=0))
+
+
+def test_colour_that_never_pairs_with_the_depth_frames_is_warned_about(tmp_path):
+    # colour stamped 100 ms after each depth image, over the 50 ms tolerance: every surface stayed black, silently
+    late = make_recording(tmp_path / "late.mcap", n=6, fps=2.0, color_offset_ns=100_000_000)
+    with open_recording(late) as rec:
+        stats = FrameStats()
+        frames = list(iter_frames(rec, detect_roles(rec), stats=stats))
+    assert len(frames) == 6 and all(f.color is None for f in frames) and stats.color_unpaired == 6
+    w = [x for x in stats.warnings("late.mcap") if "have no colour" in x]
+    assert len(w) == 1 and "6 of 6 frames" in w[0] and "100 ms from a depth frame" in w[0] and "50 ms" in w[0]
+    with open_recording(late) as rec:  # a tolerance that reaches them pairs them
+        stats = FrameStats()
+        assert all(f.color is not None for f in iter_frames(rec, detect_roles(rec), stats=stats, tolerance_s=0.12))
+    assert stats.color_unpaired == 0 and not [x for x in stats.warnings("late.mcap") if "have no colour" in x]

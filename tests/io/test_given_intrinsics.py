@@ -49,3 +49,21 @@ def test_fuse_and_info_take_intrinsics(tmp_path):
                                             "--intrinsics", "30,30"]), "--intrinsics", "fx,fy,cx,cy")
     res = CliRunner().invoke(cli, ["info", str(rec), "--frames", "-q", "--intrinsics", "30,30,9.5,7.5"])
     assert res.exit_code == 0 and "4 usable of 4" in res.output, res.output
+
+
+def test_focal_lengths_not_in_pixels_are_refused_naming_where_they_came_from(tmp_path):
+    # normalised (fx ~ 0.9 for 64 px) or near-zero focal lengths: a field of view near 180 deg. They used to run
+    # on, into a 3.5 km grid or an error blaming --size / --origin
+    from kinfu_cli.core.camera import field_of_view_problem
+    from kinfu_cli.core.camera import intrinsics_matrix as Km
+
+    assert field_of_view_problem(Km(0.9, 0.9, 0.5, 0.5), 64, 48) is not None
+    assert field_of_view_problem(Km(1e-9, 1e-9, 31.5, 23.5), 64, 48) is not None
+    assert field_of_view_problem(Km(58.5, 58.5, 31.5, 23.5), 64, 48) is None  # the Kinect's 57 deg
+    assert field_of_view_problem(Km(160.0, 160.0, 319.5, 239.5), 640, 480) is None  # a 127 deg wide lens
+    assert field_of_view_problem(Km(0.9, 0.9, 0.5, 0.5), 0, 0) is None  # size unknown: nothing to say
+    rec = make_recording(tmp_path / "noinfo.mcap", n=2, info=False)
+    res = CliRunner().invoke(cli, ["fuse", str(rec), "-o", str(tmp_path / "o"), "--intrinsics", "0.4,0.4,0.5,0.5",
+                                   "--quiet"])
+    one_line_error(res, "--intrinsics", "field of view", "expected focal lengths in pixels")
+    assert not (tmp_path / "o").exists()

@@ -1,0 +1,160 @@
+"""TF data that lookups can use but should not trust silently: a frame published under two parents at once (two
+publishers), and a link interpolated across a gap much longer than its usual spacing."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from recordings import K, T0, T_WORLD_BASE, T_WRIST_CAM, H, S, W, T_base_wrist, depth_mm, expected_pose
+
+from kinfu_cli.cli import cli
+from kinfu_cli.core.errors import TransformError
+from kinfu_cli.io.frames import FrameStats, iter_frames
+from kinfu_cli.io.recording import open_recording
+from kinfu_cli.io.tf_buffer import TfBuffer
+from kinfu_cli.io.writers import RecordingWriter
+
+MS = 1_000_000
+
+
+def _T(t) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, 3] = t
+    return T
+
+
+def _two_parent_recording(path, n=6):
+    """world -> base_link (static) -> wrist (100 Hz) -> camera_optical (static), and a second publisher of wrist
+    under world, 5 m off, in every /tf message."""
+    far = _T([5.0, 5.0, 5.0])
+    with RecordingWriter(path) as w:
+        w.write_tf(T0, [("world", "base_link", T_WORLD_BASE), ("wrist", "camera_optical", T_WRIST_CAM)],
+                   static=True)
+        events = [(T0 + k * 10 * MS, "tf", k) for k in range(int((n / 30 + 0.2) * 100))]
+        events += [(T0 + int(round(i / 30 * S)) + 50 * MS, "depth", i) for i in range(n)]
+        for stamp, kind, i in sorted(events):
+            if kind == "tf":
+                w.write_tf(stamp, [("base_link", "wrist", T_base_wrist((stamp - T0) / S)), ("world", "wrist", far)])
+            else:
+                w.write_image("/camera/depth/image_raw", stamp, "camera_optical", depth_mm(i), "16UC1")
+                w.write_camera_info("/camera/depth/camera_info", stamp, "camera_optical", K, W, H)
+    return path
+
+
+def test_frame_under_two_parents_is_one_warning_and_its_frames_are_used(tmp_path):
+    path = _two_parent_recording(tmp_path / "two.mcap")
+    with open_recording(path) as rec:
+        tf = TfBuffer.from_recording(rec)
+        TfBuffer.from_recording(rec)  # read twice (roles, frames): still said once
+        assert tf.parent_changes == []  # not one "changed parent" note per message
+        assert len(rec.problems) == 1
+        warning = rec.problems[0]
+        for word in ("'wrist'", "'base_link'", "'world'", "2 parents", "take its link from 'base_link'",
+                     "ignore its transforms from 'world'", "broken TF tree"):
+            assert word in warning, word
+        assert "m apart" in warning and float(warning.split("up to ")[1].split(" m")[0]) > 5.0
+        stats = FrameStats()
+        frames = list(iter_frames(rec, tf=tf, stats=stats))
+    # every frame keeps its pose, through the parent the warning names (before: all but one dropped as "no camera
+    # pose within the TF range", because each message threw the other parent's samples away)
+    assert len(frames) == 6 and stats.dropped == {}
+    for f in frames:
+        np.testing.assert_allclose(f.T_world_camera, expected_pose(f.stamp_ns), atol=1e-6)
+
+    res = CliRunner().invoke(cli, ["info", str(path)])
+    assert res.exit_code == 0, res.output
+    assert "changed parent" not in res.output
+    assert res.output.count("published under 2 parents") == 1
+    summary = json.loads(CliRunner().invoke(cli, ["info", str(path), "--json"]).output)
+    assert summary["tf"]["tree"]["wrist"] == "base_link" and summary["tf"]["parent_changes"] == []
+
+
+def test_the_parent_with_most_transforms_is_taken_and_a_one_way_reparenting_is_only_noted():
+    tf = TfBuffer()
+    for k in range(10):
+        tf.add("a", "c", k * S, _T([1, 0, 0]))
+        if k in (2, 6):  # stray transforms under another parent
+            tf.add("b", "c", k * S + S // 2, _T([0, 9, 0]))
+    tf.add("root", "a", 0, np.eye(4), static=True)
+    tf.add("root", "b", 0, np.eye(4), static=True)
+    assert tf.tree()["c"] == "a" and tf.parent_changes == []
+    (warning,) = tf.parent_warnings()
+    assert "'a' (10 transforms), 'b' (2 transforms)" in warning and "take its link from 'a'" in warning
+    assert "the first seen" not in warning and "up to 9.06 m apart" in warning
+    np.testing.assert_allclose(tf.lookup("root", "c", 6 * S + S // 2)[:3, 3], [1, 0, 0])
+
+    grasped = TfBuffer()  # table -> gripper -> table (an object picked and put back): no broken tree to warn about
+    for k, parent in enumerate(("table", "table", "gripper", "gripper", "table", "table")):
+        grasped.add(parent, "obj", k * S, np.eye(4))
+    assert grasped.parent_warnings() == []
+
+    moved = TfBuffer()  # re-parented once (tf2 allows it): the later link, a note, no warning
+    moved.add("a", "c", 0, np.eye(4))
+    moved.add("b", "c", S, np.eye(4))
+    assert moved.parent_changes == [("c", "a", "b")] and moved.tree()["c"] == "b"
+    assert moved.parent_warnings() == []
+
+
+def _gap_buffer() -> TfBuffer:
+    """world -> arm at 10 Hz over 0..10 s, nothing from 0.6 to 9.0 s; arm -> cam at 10 Hz over 0..10 s."""
+    tf = TfBuffer()
+    for k in range(101):
+        t = k * 100 * MS
+        if not 600 * MS < t < 9 * S:
+            tf.add("world", "arm", t, _T([t / S, 0, 0]))
+        tf.add("arm", "cam", t, _T([0, 0, 0.01 * k]))
+    return tf
+
+
+def test_lookups_across_a_long_gap_are_counted_and_named():
+    tf = _gap_buffer()
+    tf.lookup("world", "cam", 300 * MS)  # before the gap
+    for t in (1 * S, 2 * S, 2 * S, 5 * S + 3):  # one stamp twice: counted once
+        tf.lookup("world", "cam", t)
+    tf.lookup_many("world", "cam", np.array([600 * MS, 4 * S, 8 * S, 9 * S, 9500 * MS]))  # gap ends: not in it
+    (warning,) = tf.gap_warnings()
+    assert warning.startswith("TF link world -> arm has no transform for 8.400 s")
+    assert "usually 0.1 s apart" in warning and "5 lookups fell in that gap" in warning
+    assert tf.lookup("world", "cam", 5 * S)[0, 3] == pytest.approx(5.0)  # still interpolated, as tf2 does
+
+
+def test_gap_checks_count_only_lookups_that_succeed_and_only_real_gaps():
+    tf = _gap_buffer()
+    tf.add("map", "world", 0, np.eye(4))
+    tf.add("map", "world", 2 * S, np.eye(4))
+    with pytest.raises(TransformError):  # the gap link (walked first) is fine at 5 s, but map -> world ends at 2 s
+        tf.lookup("map", "cam", 5 * S)
+    assert tf.gap_warnings() == []
+
+    sparse = TfBuffer()  # 1 Hz with one 3 s step (3x its period) and a 0.45 s step at 50 Hz: no gaps
+    for t in [0, 1, 2, 3, 6, 7, 8]:
+        sparse.add("world", "a", t * S, np.eye(4))
+    for k in range(50):
+        sparse.add("a", "b", k * 20 * MS + (450 * MS if k >= 25 else 0), np.eye(4))
+    sparse.lookup_many("world", "b", np.arange(0, 1400 * MS, 10 * MS))
+    sparse.lookup("world", "b", 700 * MS)
+    assert sparse.gap_warnings() == []
+
+
+def test_frames_interpolated_across_a_tf_gap_are_counted(tmp_path):
+    """The frame assembly's lookups (one stamp each) are the ones counted: 4 of 8 depth frames fall in the gap."""
+    path = tmp_path / "gap.mcap"
+    with RecordingWriter(path) as w:
+        w.write_tf(T0, [("world", "base_link", T_WORLD_BASE), ("wrist", "camera_optical", T_WRIST_CAM)],
+                   static=True)
+        events = [(T0 + k * 100 * MS, "tf", k) for k in range(101) if not 6 < k < 90]
+        events += [(T0 + (500 + 200 * i if i < 5 else 9200 + 200 * (i - 5)) * MS, "depth", i) for i in range(8)]
+        for stamp, kind, i in sorted(events):
+            if kind == "tf":
+                w.write_tf(stamp, [("base_link", "wrist", T_base_wrist((stamp - T0) / S))])
+            else:
+                w.write_image("/camera/depth/image_raw", stamp, "camera_optical", depth_mm(i), "16UC1")
+                w.write_camera_info("/camera/depth/camera_info", stamp, "camera_optical", K, W, H)
+    with open_recording(path) as rec:
+        tf = TfBuffer.from_recording(rec)
+        assert len(list(iter_frames(rec, tf=tf))) == 8
+    (warning,) = tf.gap_warnings()
+    assert "base_link -> wrist has no transform for 8.400 s" in warning and "4 lookups fell in that gap" in warning
