@@ -87,6 +87,11 @@ def claim_outputs(outputs: dict[str, str | os.PathLike | None], inputs: Iterable
             if real in seen:  # the second write would replace the first (poi -o p.json --plot p.json)
                 raise KinfuError(f"{path} is given for both; name two different paths",
                                  parameter=f"{seen[real]}/{name}")
+            for other, other_name in seen.items():  # segment -o seg --viz seg/segments.json wrote over its result
+                if os.path.commonpath([real, other]) in (real, other):
+                    inner, outer = (path, outputs[other_name]) if len(real) > len(other) else (outputs[other_name], path)
+                    raise KinfuError(f"{inner} lies inside the output folder {outer}; name a path outside it",
+                                     parameter=f"{other_name}/{name}")
             seen[real] = name
 
 

@@ -162,4 +162,14 @@ def claim_output(output: str | os.PathLike | None, inputs: Iterable[str | os.Pat
         what = "folder" if out.is_dir() else "file"
         raise ForeignOutputError(f"{out}: an existing {what} that kinfu did not write; choose another path",
                                  parameter=parameter)
+    if out.is_file() and not force and _part_of_folder_output(real):  # grasp --plot seg/segments.ply
+        raise ForeignOutputError(f"{out} is a file of the kinfu output folder {out.parent}, written with it as one "
+                                 f"result (replacing it alone would break that result); choose another path",
+                                 parameter=parameter)
     return out
+
+
+def _part_of_folder_output(path: Path) -> bool:
+    """Whether the file `path` lies in a folder that kinfu wrote whole (its parent's manifest lists the folder)."""
+    entry = _read_manifest(path.parent.parent).get(path.parent.name)
+    return isinstance(entry, dict) and entry.get("kind") == "folder"

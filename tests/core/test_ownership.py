@@ -128,3 +128,23 @@ def test_the_manifest_has_the_outputs_mode(tmp_path):
     finally:
         os.umask(mask)
     assert (out.stat().st_mode & 0o777) == ((tmp_path / MANIFEST).stat().st_mode & 0o777) == 0o644
+
+
+def test_a_file_of_a_folder_output_is_not_replaced_alone_and_outputs_do_not_nest(tmp_path):
+    # grasp --plot seg/segments.ply replaced segment's cloud with a PNG; segment -o seg --viz seg/segments.json
+    # replaced its own result with an MCAP; both exited 0
+    from kinfu_cli.commands._options import claim_outputs
+
+    with atomic_dir(tmp_path / "seg") as tmp:
+        write_json(tmp / "segments.json", {"segments": []})
+    part = tmp_path / "seg" / "segments.json"
+    with pytest.raises(ForeignOutputError, match="file of the kinfu output folder"):
+        claim_output(part, parameter="plot")
+    assert claim_output(part, force=True) == part
+    assert claim_output(tmp_path / "seg" / "new.png") == tmp_path / "seg" / "new.png"  # a new file beside them
+    single = write_json(tmp_path / "views.json", {"x": 1})  # a single-file output is still replaced
+    assert claim_output(single) == single
+    with pytest.raises(KinfuError, match="inside the output folder") as err:
+        claim_outputs({"outdir": tmp_path / "new", "viz": tmp_path / "new" / "segments.json"}, [], False)
+    assert err.value.parameter == "outdir/viz"
+    claim_outputs({"outdir": tmp_path / "new", "viz": tmp_path / "new.mcap"}, [], False)

@@ -123,3 +123,37 @@ def test_colour_that_never_pairs_with_the_depth_frames_is_warned_about(tmp_path)
         stats = FrameStats()
         assert all(f.color is not None for f in iter_frames(rec, detect_roles(rec), stats=stats, tolerance_s=0.12))
     assert stats.color_unpaired == 0 and not [x for x in stats.warnings("late.mcap") if "have no colour" in x]
+
+
+def _infos_recording(path, infos):
+    """Depth images in camera_optical (no TF) and the camera infos `infos`: (topic, frame, K)."""
+    from kinfu_cli.io.writers import RecordingWriter
+
+    with RecordingWriter(path) as w:
+        for i in range(3):
+            stamp = T0 + i * S // 10
+            w.write_image("/camera/depth/image_raw", stamp, "camera_optical", depth_mm(i), "16UC1")
+            for topic, frame, k in infos:
+                w.write_camera_info(topic, stamp, frame, k, W, H)
+    return path
+
+
+def test_a_camera_info_in_the_depth_frame_wins_and_one_in_another_frame_is_warned_about(tmp_path):
+    # the colour camera's info (another lens) was taken as the depth intrinsics without a word
+    colour_K = K.copy()
+    colour_K[0, 0] = colour_K[1, 1] = 45.0
+    only_colour = _infos_recording(tmp_path / "c.mcap", [("/camera/color/camera_info", "camera_color", colour_K)])
+    with open_recording(only_colour) as rec:
+        stats = FrameStats()
+        frames = list(iter_frames(rec, detect_roles(rec), stats=stats, pose_source="none"))
+    assert len(frames) == 3 and frames[0].K[0, 0] == 45.0
+    w = [x for x in stats.warnings("c.mcap") if "may be another camera's" in x]
+    assert len(w) == 1 and "'camera_color'" in w[0] and "'camera_optical'" in w[0]
+    both = _infos_recording(tmp_path / "b.mcap", [("/camera/color/camera_info", "camera_color", colour_K),
+                                                   ("/ir/info", "camera_optical", K)])
+    with open_recording(both) as rec:  # the namespace prefers the colour one; the frame decides
+        roles = detect_roles(rec)
+        stats = FrameStats()
+        frames = list(iter_frames(rec, roles, stats=stats, pose_source="none"))
+    assert roles.info_topic == "/ir/info" and frames[0].K[0, 0] == 30.0
+    assert not [x for x in stats.warnings("b.mcap") if "another camera's" in x]
