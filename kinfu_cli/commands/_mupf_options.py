@@ -17,4 +17,5 @@ def mupf_filter_options(fn):
                       help="Rotation perturbation of sigma points and samples: a rotation vector at each particle, "
                            "or the thesis' Euler-angle state (see README).")(fn)
     return click.option("--beta", type=float, default=30.0, show_default=True,
-                        help="Unscented transform beta (Table 4.1).")(fn)
+                        help="Unscented transform beta (Table 4.1), 0-1000: the centre sigma point's weight in the "
+                             "covariances (2 is the textbook value for Gaussian noise).")(fn)

@@ -11,8 +11,8 @@ from kinfu_cli.commands._mupf_options import mupf_filter_options
 from kinfu_cli.commands._options import claim_outputs, force_option
 from kinfu_cli.commands._output import emit
 from kinfu_cli.core.errors import ConfigError
-from kinfu_cli.localization.evaluate import METHODS, evaluate_localization, evaluate_recognition, \
-    format_localization_table
+from kinfu_cli.localization.evaluate import METHODS, check_recognition, evaluate_localization, \
+    evaluate_recognition, format_localization_table
 from kinfu_cli.localization.mupf import NO_REFINE, PAPER_WEIGHTS, MupfParameters
 from kinfu_cli.localization.shapes import SIMULATION_SHAPES
 
@@ -66,6 +66,7 @@ def command(shapes: str, trials: int, methods: str, noise: float, particles: int
                             noise=noise if noise > 0 else MupfParameters.noise,
                             **(PAPER_WEIGHTS if paper_weights else {}), **(NO_REFINE if no_refine else {}))
     params.check()
+    check_recognition(recognition_trials, recognition_points)
     doc = evaluate_localization(names, trials=trials, noise=noise, params=params, methods=meths, seed=seed,
                                 quiet=quiet)
     if recognition_trials:

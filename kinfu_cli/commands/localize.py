@@ -54,7 +54,8 @@ def _lines(doc: dict) -> list[str]:
 @click.option("--segment", type=int, default=None, help="Segment id in --segments.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write pose.json here.")
-@click.option("--particles", type=int, default=700, show_default=True, help="N particles (thesis Table 4.1).")
+@click.option("--particles", type=int, default=700, show_default=True,
+              help="N particles (thesis Table 4.1); about 2 kB of memory each.")
 @click.option("--window", type=int, default=None, help="Memory window m (default: half the points, thesis ch. 5).")
 @click.option("--sigma-p", type=float, default=0.01, show_default=True,
               help="Measurement noise std sigma_p (m); Table 4.1 uses 0.01, real tactile data 0.02.")

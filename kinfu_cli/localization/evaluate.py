@@ -12,6 +12,7 @@ import numpy as np
 from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.progress import progress
+from kinfu_cli.fusion.volume import available_bytes
 from kinfu_cli.localization import shapes
 from kinfu_cli.localization.baselines import localize_ransac_icp, localize_scaling_series
 from kinfu_cli.localization.mesh_model import pose_matrix
@@ -30,6 +31,9 @@ THESIS = {
 }
 SUCCESS_ADD_S = 0.01  # m: mean surface-to-surface distance of a correct pose (symmetric shapes)
 SUCCESS_DEG, SUCCESS_M = 30.0, 0.02  # non-symmetric shapes: also within these of the true pose
+# bytes a recognition trial holds per point: 170 generating it, 280 in the filter (tracemalloc peaks, 200 000
+# points), open3d's and numba's buffers besides
+BYTES_PER_RECOGNITION_POINT = 1024
 
 
 def _summary(rows: list[dict]) -> dict:
@@ -118,12 +122,24 @@ def evaluate_localization(names=tuple(shapes.SIMULATION_SHAPES), *, trials: int 
     return doc
 
 
+def check_recognition(trials: int, n_points: int) -> None:
+    """ConfigError unless `evaluate_recognition` can run these (a command checks before its long first part):
+    trials >= 0, 3 <= n_points and their memory within what is available."""
+    check_number(trials, "recognition_trials", 0, integer=True)
+    check_number(n_points, "recognition_points", 3, integer=True)
+    avail = available_bytes()
+    if n_points * BYTES_PER_RECOGNITION_POINT > 0.8 * avail:
+        raise ConfigError(f"{n_points} points would need about {n_points * BYTES_PER_RECOGNITION_POINT / 1024**3:.1f} "
+                          f"GB ({avail / 1024**3:.1f} GB available): expected at most "
+                          f"{int(0.8 * avail // BYTES_PER_RECOGNITION_POINT)} (the thesis uses about 170)",
+                          parameter="recognition_points")
+
+
 def evaluate_recognition(*, trials: int = 1, n_points: int = 170, noise: float = 0.0,
                          params: MupfParameters = MupfParameters(), seed: int = 0, quiet: bool = True) -> dict:
     """Ch. 5 in simulation: for each of the six near-identical blocks, `trials` sets of n_points surface
     points at a Table 4.2-style pose; MUPF on every model (m = L/2), the lowest I_L names the object."""
-    check_number(trials, "recognition_trials", 0, integer=True)
-    check_number(n_points, "recognition_points", 3, integer=True)
+    check_recognition(trials, n_points)
     check_number(seed, "seed", 0, 2 ** 63 - 1, integer=True)
     models = list(shapes.recognition_shapes())
     for m in models:

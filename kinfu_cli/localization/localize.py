@@ -11,7 +11,8 @@ from scipy.spatial.transform import Rotation
 from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.localization.mesh_model import MeshModel
-from kinfu_cli.localization.mupf import MupfParameters, MupfResult, check_points, localize_mupf, parameters_json
+from kinfu_cli.localization.mupf import MupfParameters, MupfResult, check_points, degenerate_spread, localize_mupf, \
+    parameters_json
 
 
 def pose_json(result: MupfResult) -> dict | None:
@@ -105,6 +106,8 @@ def localize_points(models: list[MeshModel], points: np.ndarray, params: MupfPar
         res.warnings.append(f"MUPF did not converge: the points do not fit at the noise level (I_L {r.index:.4f} m, "
                             f"90th percentile {r.index_p90:.4f} m; limits {r.max_index:.4f} / "
                             f"{r.max_index * 5 / 3:.4f} m; no pose reported)")
+    elif results[res.chosen].ambiguous and (free := degenerate_spread(pts, models[res.chosen].diameter)):
+        res.warnings.append(f"the points do not pin the pose: they {free} (status ambiguous)")
     elif results[res.chosen].ambiguous:
         res.warnings.append(f"the points do not pin the pose: standard deviations "
                             f"{np.round(results[res.chosen].pose_std, 4).tolist()} (m, rad) exceed 0.01 m / 5 deg "

@@ -23,12 +23,22 @@ import numpy as np
 from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.progress import progress
+from kinfu_cli.core.volume_file import MAX_COORDINATE_M
+from kinfu_cli.fusion.volume import available_bytes
 from kinfu_cli.localization import ukf
 from kinfu_cli.localization.mesh_model import MeshModel, matrix_pose, pose_matrix, pose_rotations
 from kinfu_cli.localization.refine import pose_std, refine_exact, refine_field
 
 N_X = 6
 MIN_POINTS = 3  # three points fix a rigid pose of a generic surface; fewer leave a continuum of poses
+# the unscented transform's beta (eq. 4.9: W0^(c) = lambda / (n + lambda) + 1 - alpha^2 + beta) weighs the centre
+# sigma point in the covariances: 2 is the textbook value for a Gaussian, 30 the thesis'. Below 0 that weight can
+# turn negative and the covariances indefinite (a crash in the Kalman gain); above 1000 it only adds overflow risk
+MAX_BETA = 1000.0
+# float64s a particle holds at the peak of a step (localize_mupf): state, covariance, its Cholesky factor, the UKF
+# mean and the sample (~165), their copies at resampling (51) and the MAP candidates (~35), 8 bytes each; 1.8 kB
+# measured (peak RSS, 5000 vs 20000 particles)
+BYTES_PER_PARTICLE = 2048
 
 
 @dataclass(frozen=True)
@@ -80,10 +90,18 @@ class MupfParameters:
 
     def check(self) -> None:
         check_number(self.particles, "particles", 1, integer=True)
+        avail = available_bytes()
+        if self.particles * BYTES_PER_PARTICLE > 0.8 * avail:
+            raise ConfigError(f"{self.particles} particles would need about "
+                              f"{self.particles * BYTES_PER_PARTICLE / 1024**3:.1f} GB ({BYTES_PER_PARTICLE} bytes "
+                              f"each; {avail / 1024**3:.1f} GB available): expected at most "
+                              f"{int(0.8 * avail // BYTES_PER_PARTICLE)} (the thesis uses 700-1200)",
+                              parameter="particles")
         if self.window is not None:
             check_number(self.window, "window", 1, integer=True)
         check_number(self.t0, "t0", 0, integer=True)
         check_number(self.alpha, "alpha", 0, low_open=True)
+        check_number(self.beta, "beta", 0, MAX_BETA)
         if self.rotation not in ("local", "euler"):
             raise ConfigError(f"expected 'local' or 'euler', got {self.rotation!r}", parameter="rotation")
         if self.map_candidates not in ("both", "particles"):
@@ -142,12 +160,16 @@ class MupfResult:
 
 
 def check_points(points: np.ndarray, source: str = "points") -> np.ndarray:
-    """(L, 3) finite measurements, at least MIN_POINTS of them."""
+    """(L, 3) finite measurements within MAX_COORDINATE_M of the origin (farther is corrupt data, and the pose
+    arithmetic loses its rotation there), at least MIN_POINTS of them."""
     pts = np.asarray(points, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] != 3:
         raise ConfigError(f"{source}: expected (L, 3) points, got shape {pts.shape}")
     if not np.all(np.isfinite(pts)):
         raise ConfigError(f"{source}: points are not finite")
+    if pts.size and np.abs(pts).max() > MAX_COORDINATE_M:
+        raise ConfigError(f"{source}: a coordinate of {np.abs(pts).max():g} m; expected points within "
+                          f"{MAX_COORDINATE_M:g} m of the origin (in metres)")
     if len(pts) < MIN_POINTS:
         raise ConfigError(f"{source}: {len(pts)} points; localisation needs at least {MIN_POINTS}")
     return pts
@@ -244,10 +266,12 @@ def localize_mupf(model: MeshModel, points: np.ndarray, params: MupfParameters =
     std = pose_std(model, ys, pose[:3], Rp, params.noise)
     return MupfResult(pose=pose, index=index, converged=converged_rule(index, p90, max_index),
                       max_index=max_index, seconds=seconds, window=m, index_history=history, index_p90=p90,
-                      pose_std=std, ambiguous=not pinned(std))
+                      pose_std=std, ambiguous=not pinned(std) or degenerate_spread(ys, model.diameter) is not None)
 
 
 MAX_POSE_STD = (0.01, math.radians(5.0))  # m, rad: a pose the points pin less than this is ambiguous
+# points within this fraction of the model's size of one point or of a line leave the turns about it free
+DEGENERATE_SPREAD = 1e-3
 
 
 def converged_rule(index: float, p90: float, max_index: float) -> bool:
@@ -260,6 +284,23 @@ def pinned(std: np.ndarray) -> bool:
     """The points fix the pose within MAX_POSE_STD along every axis (refine.pose_std); else other poses fit
     them as well (a box touched on four faces slides; a dome touched on its cap turns)."""
     return bool(np.all(std[:3] <= MAX_POSE_STD[0]) and np.all(std[3:] <= MAX_POSE_STD[1]))
+
+
+def degenerate_spread(points: np.ndarray, size: float) -> str | None:
+    """What leaves the pose free when every point lies within DEGENERATE_SPREAD x size (the model's diameter) of one
+    point ("one point": every turn about it fits) or of a line ("a line": the turn about it fits, the points
+    being on the axis); None otherwise."""
+    centred = points - points.mean(0)
+    tol = DEGENERATE_SPREAD * size
+    far = float(np.linalg.norm(centred, axis=1).max())
+    if far <= tol:
+        return f"lie within {far:.2g} m of one point: every turn about it fits them as well"
+    axis = np.linalg.svd(centred, full_matrices=False)[2][0]
+    off = float(np.linalg.norm(centred - np.outer(centred @ axis, axis), axis=1).max())
+    if off <= tol:
+        return (f"lie within {off:.2g} m of a line along {np.round(axis, 3).tolist()}: the turn about it fits "
+                f"them as well")
+    return None
 
 
 def _distinct(tc: np.ndarray, Rc: np.ndarray, order: np.ndarray, k: int, min_m: float = 0.01,

@@ -10,8 +10,10 @@ from pathlib import Path
 
 import numpy as np
 
+from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.io.labelled_cloud import LabelsFileError, ply_points, read_ply_vertices
 from kinfu_cli.localization.mesh_model import LocalizationError
+from kinfu_cli.localization.mupf import check_points
 from kinfu_cli.segmentation.outputs import segment_colors
 
 
@@ -22,7 +24,7 @@ def read_points(path: str | os.PathLike) -> np.ndarray:
         raise LocalizationError(f"{path}: no such points file")
     if path.suffix.lower() == ".ply":
         try:
-            return ply_points(read_ply_vertices(path), path)
+            return _checked(ply_points(read_ply_vertices(path), path), path)
         except LabelsFileError as e:
             raise LocalizationError(str(e)) from None
     try:
@@ -34,7 +36,17 @@ def read_points(path: str | os.PathLike) -> np.ndarray:
         raise LocalizationError(f"{path}: expected lines of three numbers 'x y z' (a text points file)") from None
     if pts.size and pts.shape[1] != 3:
         raise LocalizationError(f"{path}: expected three numbers per line, found {pts.shape[1]}")
-    return pts.reshape(-1, 3)
+    return _checked(pts.reshape(-1, 3), path)
+
+
+def _checked(pts: np.ndarray, path: Path) -> np.ndarray:
+    """pts when `mupf.check_points` takes them (finite, within MAX_COORDINATE_M, enough); else its complaint
+    naming the file."""
+    try:
+        check_points(pts, str(path))
+    except ConfigError as e:
+        raise LocalizationError(str(e)) from None
+    return pts
 
 
 def read_segment_points(segments_json: str | os.PathLike, segment: int) -> np.ndarray:
@@ -64,4 +76,4 @@ def read_segment_points(segments_json: str | os.PathLike, segment: int) -> np.nd
     if int(mask.sum()) != count:
         raise LocalizationError(f"{ply}: {int(mask.sum())} points carry segment {segment}'s colour, segments.json "
                                 f"says {count} (another segment may share it)")
-    return pts[mask]
+    return _checked(pts[mask], ply)

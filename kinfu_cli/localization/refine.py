@@ -141,6 +141,13 @@ def pose_std(model, ys: np.ndarray, t: np.ndarray, R: np.ndarray, noise: float) 
     Jm = _jacobian(sp @ R.T + t, sn @ R.T, centre, radius)
     ev, V = np.linalg.eigh(Jm.T @ Jm / len(Jm))
     Q = V[:, ev > 1e-4 * ev.max()]  # the directions the surface itself constrains
-    cov = Q @ (noise ** 2 * np.linalg.pinv(Q.T @ (J.T @ J) @ Q, rcond=1e-12)) @ Q.T
+    # the points' information along them; a direction they do not constrain at all (points on a line turn
+    # freely about it) has eigenvalue 0, which a pseudo-inverse would make a zero spread: floor it instead, so
+    # its spread comes out huge (a row of J has norm >= 1, so 1e-12 L is far below any real constraint)
+    evp, W = np.linalg.eigh(Q.T @ (J.T @ J) @ Q)
+    QW = Q @ W
+    cov = (QW / np.maximum(evp, 1e-12 * len(ys))) @ QW.T * noise ** 2
     scale = np.r_[1.0, 1.0, 1.0, 1 / radius, 1 / radius, 1 / radius]
-    return np.sqrt(np.maximum(np.diag(cov), 0.0)) * scale
+    std = np.sqrt(np.maximum(np.diag(cov), 0.0)) * scale
+    std[3:] = np.minimum(std[3:], math.pi)  # a free turn: any angle, not thousands of radians
+    return std
