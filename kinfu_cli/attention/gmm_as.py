@@ -85,6 +85,8 @@ THRESHOLD_MODES = ("available", "literal")
 SELECTION_MODES = ("first-minimum", "best")
 #: A sample gap longer than this many median periods is a tracking dropout, not dwell time.
 GAP_FACTOR = 5.0
+# the fewest Gaussians a resampled task must have samples for (resample >= this x min_samples_per_component)
+RESAMPLE_GAUSSIANS = 4
 
 
 class GmmActivitySaliency:
@@ -191,6 +193,11 @@ class GmmActivitySaliency:
         check_number(self.max_iter, "max_iter", 1, 1e6, integer=True)
         check_number(self.tol, "tol", 0, 1, low_open=True)
         check_number(self.min_samples_per_component, "min_samples_per_component", 1, 1e6, integer=True)
+        # a resampled task must hold a few Gaussians' samples: 1 ran as raw samples, 2-5 fitted nothing (0 POIs)
+        fewest = RESAMPLE_GAUSSIANS * int(self.min_samples_per_component)
+        if 0 < int(self.resample) < fewest:
+            raise ConfigError(f"expected 0 (raw samples) or at least {fewest} samples ({RESAMPLE_GAUSSIANS} Gaussians of "
+                              f"min_samples_per_component), got {self.resample}", parameter="resample")
 
     # --- steps ---------------------------------------------------------------------------------
     def _samples(self, traj: Trajectory, smooth: int = 0) -> tuple[np.ndarray, float, tuple[np.ndarray, np.ndarray]]:
@@ -204,7 +211,7 @@ class GmmActivitySaliency:
         clock = (t, traj.t - traj.t[0])
         if smooth > 0:
             pos = mean_filter(pos, smooth)
-        if self.resample and int(self.resample) >= 2:
+        if self.resample:
             tt = np.linspace(0.0, t[-1], int(self.resample))
             pos = np.column_stack([np.interp(tt, t, pos[:, i]) for i in range(3)])
             t = tt

@@ -168,7 +168,8 @@ def objects_summary_lines(doc: dict) -> list[str]:
 @click.option("--up", default="auto", show_default=True, metavar="X,Y,Z|auto",
               help="The world's up direction (viewing sphere, table): auto = the volume's (z when it has none).")
 @click.option("--clearance", default=0.0, show_default=True, type=float,
-              help="Reject sensor positions within this distance (m) of occupied/unknown voxels.")
+              help="Reject sensor positions within this distance (m) of occupied/unknown voxels; with a clearance, "
+                   "space outside the volume counts as unknown (never observed).")
 @click.option("--optimistic", is_flag=True,
               help="Unknown voxels outside S(POI) do not stop rays (the paper: the first unknown voxel stops a ray).")
 @click.option("--exact-rolls", is_flag=True, help="Cast every view's own rays (no sharing between rolls; slower).")

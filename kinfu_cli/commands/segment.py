@@ -13,7 +13,7 @@ from pathlib import Path
 import click
 from click.core import ParameterSource
 
-from kinfu_cli.commands._options import claim_outputs, force_option, volume_file
+from kinfu_cli.commands._options import claim_outputs, force_option, given_options, volume_file
 from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.commands._up import parse_up
 from kinfu_cli.core.atomic import atomic_dir, write_json
@@ -207,6 +207,8 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
     ctx = click.get_current_context()
     given = tuple(f.name for f in fields(SegmentationParams)
                   if ctx.get_parameter_source(f.name) not in (None, ParameterSource.DEFAULT))
+    if not grasp and (grasp_only := given_options(ctx, ("grasp-hand", "grasp-cone", "grasp-starts"))):
+        raise ConfigError(f"{', '.join(grasp_only)}: needs --grasp (no grasps are planned without it)")
     opts, grasp_options = segment_options(ctx.params, given)
     result: SegmentResult | None = None
     doc: dict = {}

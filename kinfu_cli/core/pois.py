@@ -18,7 +18,6 @@ samples, n_pois, ...), "tasks_dropped" and "task_split" (see attention/tasks.py 
 from __future__ import annotations
 
 import json
-import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,8 +26,10 @@ import numpy as np
 
 from kinfu_cli.core.atomic import write_json
 from kinfu_cli.core.errors import ConfigError, TrajectoryError
+from kinfu_cli.core.volume_file import MAX_COORDINATE_M
 
 DEFAULT_RADIUS = 0.2
+MAX_RADIUS_M = 100.0  # the largest S(POI) radius `kinfu poi` writes (its --radius range)
 ALGORITHMS = ("gmm-as", "zvc")
 
 
@@ -108,50 +109,80 @@ def read_pois_document(path: str | os.PathLike) -> dict:
     return doc
 
 
+def _is_number(v: object) -> bool:
+    """A JSON number a float holds: int or float, not a bool (True is an int to Python), a string of digits nor an
+    integer of more than 308 digits."""
+    return isinstance(v, float) or (isinstance(v, int) and not isinstance(v, bool) and abs(v) < 10 ** 308)
+
+
+def _numbers(v: object, shape: tuple[int, ...]) -> np.ndarray | None:
+    """`v` as a finite float array of `shape` when it is nested lists of JSON numbers, else None."""
+    def ok(x, dims):
+        if not dims:
+            return _is_number(x)
+        return isinstance(x, list) and len(x) == dims[0] and all(ok(y, dims[1:]) for y in x)
+    if not ok(v, shape):
+        return None
+    arr = np.asarray(v, dtype=np.float64)
+    return arr if np.all(np.isfinite(arr)) else None
+
+
 def _parse_poi(path: Path, i: int, d: object) -> Poi:
     if not isinstance(d, dict):
         raise PoiFileError(f"{path}: pois[{i}] is not an object")
     pos = d.get("position")
-    try:
-        arr = np.asarray(pos, dtype=np.float64)
-    except (TypeError, ValueError):
-        arr = np.zeros(0)
-    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
-        raise PoiFileError(f"{path}: pois[{i}].position is {pos!r}, expected [x, y, z] (three finite numbers)")
+    arr = _numbers(pos, (3,))
+    if arr is None or np.any(np.abs(arr) > MAX_COORDINATE_M):
+        raise PoiFileError(f"{path}: pois[{i}].position is {_short(pos)}, expected [x, y, z] (three finite numbers "
+                           f"within {MAX_COORDINATE_M:g} m)")
     radius = d.get("radius", DEFAULT_RADIUS)
-    if not isinstance(radius, (int, float)) or not math.isfinite(radius) or radius <= 0:
-        raise PoiFileError(f"{path}: pois[{i}].radius is {radius!r}, expected a positive number of metres")
+    if not _is_number(radius) or not 0 < radius <= MAX_RADIUS_M:  # also refuses NaN and inf
+        raise PoiFileError(f"{path}: pois[{i}].radius is {_short(radius)}, expected a positive number of metres, "
+                           f"at most {MAX_RADIUS_M:g}")
+    poi_id = d.get("id", i)
+    if not _is_number(poi_id) or not float(poi_id).is_integer():  # 2.0 is 2, 1.7 is no id
+        raise PoiFileError(f"{path}: pois[{i}].id is {_short(poi_id)}, expected an integer")
+    for key in ("time", "saliency"):
+        if key in d and not _is_number(d[key]):  # missing: NaN (not known)
+            raise PoiFileError(f"{path}: pois[{i}].{key} is {_short(d[key])}, expected a number")
     gaussian = None
     g = d.get("gaussian")
     if g is not None:
-        try:
-            mean = np.asarray(g["mean"], dtype=np.float64)
-            cov = np.asarray(g["covariance"], dtype=np.float64)
-            weight = float(g["weight"])
-        except (TypeError, KeyError, ValueError):
-            raise PoiFileError(f"{path}: pois[{i}].gaussian needs mean [4], covariance 4x4 and weight") from None
-        if mean.shape != (4,) or cov.shape != (4, 4):
-            raise PoiFileError(f"{path}: pois[{i}].gaussian needs mean [4] and covariance 4x4, "
-                               f"got {mean.shape} and {cov.shape}")
-        gaussian = Gaussian4(mean, cov, weight)
+        # GMM-AS's component that made the POI, kept for the record (the planners do not read it): a damaged one
+        # says the file is, so it is refused rather than passed on
+        parts = (_numbers(g.get("mean"), (4,)), _numbers(g.get("covariance"), (4, 4)),
+                 _numbers(g.get("weight"), ())) if isinstance(g, dict) else (None,)
+        if any(v is None for v in parts) or not 0 <= parts[2] <= 1:
+            raise PoiFileError(f"{path}: pois[{i}].gaussian needs mean [4], covariance 4x4 (finite numbers) and a "
+                               f"weight in [0, 1], or null")
+        gaussian = Gaussian4(parts[0], parts[1], float(parts[2]))
     known = {"id", "position", "time", "saliency", "radius", "gaussian"}
-    try:
-        return Poi(id=int(d.get("id", i)), position=arr, time=float(d.get("time", float("nan"))),
-                   saliency=float(d.get("saliency", float("nan"))), radius=float(radius), gaussian=gaussian,
-                   extra={k: v for k, v in d.items() if k not in known})
-    except (TypeError, ValueError):
-        raise PoiFileError(f"{path}: pois[{i}] has a non-numeric id, time or saliency") from None
+    return Poi(id=int(poi_id), position=arr, time=float(d.get("time", float("nan"))),
+               saliency=float(d.get("saliency", float("nan"))), radius=float(radius), gaussian=gaussian,
+               extra={k: v for k, v in d.items() if k not in known})
+
+
+def _short(value: object, limit: int = 60) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit] + "..."
 
 
 def read_pois(path: str | os.PathLike) -> list[Poi]:
     """Read the POIs of a pois.json file.
 
     Raises PoiFileError (a TrajectoryError, so the CLI prints one line and exits 2) when the file is
-    missing, not JSON, has no "pois" list, or a POI has no finite [x, y, z] position.
+    missing, not JSON, has no "pois" list, or a POI is malformed: no finite [x, y, z] position, a radius
+    that is not a number in (0, MAX_RADIUS_M], an id that is not an integer or repeats another POI's.
     """
     path = Path(path)
     doc = read_pois_document(path)
-    return [_parse_poi(path, i, d) for i, d in enumerate(doc["pois"])]
+    pois = [_parse_poi(path, i, d) for i, d in enumerate(doc["pois"])]
+    first: dict[int, int] = {}
+    for i, p in enumerate(pois):
+        if p.id in first:  # views.json and the fusion's clearing name POIs by id: two would be one
+            raise PoiFileError(f"{path}: pois[{i}].id {p.id} repeats pois[{first[p.id]}].id, expected unique ids")
+        first[p.id] = i
+    return pois
 
 
 def poi_frame_warnings(pois_path, frame: str, option: str = "") -> list[str]:

@@ -16,6 +16,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from scipy.ndimage import binary_erosion
+from scipy.spatial import cKDTree
 
 from kinfu_cli.core.camera import CameraModel
 from kinfu_cli.core.errors import ConfigError, VolumeError
@@ -78,28 +80,69 @@ def as_ray_volume(volume: TernaryGrid | RayVolume) -> RayVolume:
     return volume if isinstance(volume, RayVolume) else RayVolume.from_grid(volume)
 
 
+def _near_voxels(vol: RayVolume, pos: np.ndarray, clearance: float, bad, outside_bad: bool) -> np.ndarray:
+    """Per position (N, 3): does the voxel holding it, or any voxel whose centre lies within `clearance` of it,
+    satisfy `bad` (a boolean function of a labels block)? Voxels outside the grid count as `outside_bad`.
+
+    Exact and monotonic in `clearance`: the nearest bad voxel centre to a point outside bad space is a bad voxel
+    with a 6-neighbour that is not bad (a step towards the point would be closer otherwise), so a k-d tree of
+    those surface voxels answers for the whole ball; only the box the balls can reach is examined (its cut
+    faces add bad voxels to the tree, never wrong ones), and one layer around the grid stands for all outside."""
+    vs, n = vol.voxel_size, np.array(vol.shape)
+    idx = np.floor((pos - vol.origin) / vs)
+    inside = np.all((idx >= 0) & (idx < n), axis=1)
+    near = np.full(len(pos), outside_bad) & ~inside
+    ii = idx[inside].astype(np.int64)
+    near[inside] = bad(vol.labels[ii[:, 0], ii[:, 1], ii[:, 2]])
+    reach = clearance / vs + 1
+    lo = np.clip(np.floor(idx.min(axis=0) - reach), -1, n + 1).astype(np.int64)  # -1 and n: the outside layer
+    hi = np.clip(np.floor(idx.max(axis=0) + reach) + 1, -1, n + 1).astype(np.int64)
+    if np.any(hi <= lo):
+        return near
+    box = np.full(hi - lo, outside_bad, dtype=bool)
+    glo, ghi = np.maximum(lo, 0), np.minimum(hi, n)
+    if np.all(ghi > glo):
+        box[tuple(slice(a - b, c - b) for a, b, c in zip(glo, lo, ghi))] = bad(
+            vol.labels[glo[0]:ghi[0], glo[1]:ghi[1], glo[2]:ghi[2]])
+    surface = np.argwhere(box & ~binary_erosion(box))
+    if len(surface) and not near.all():
+        dist, _ = cKDTree(vol.origin + (surface + lo + 0.5) * vs).query(
+            pos[~near], distance_upper_bound=clearance * (1 + 1e-9) + 1e-12)
+        near[~near] = np.isfinite(dist)
+    return near
+
+
 def reject_reasons(vol: RayVolume, poses: np.ndarray, *, table_z: float | None = None,
                    clearance: float = 0.0, reject_unknown: bool = True, up=None) -> list[str | None]:
     """Why each sensor position is impossible, or None: below the table plane (height `table_z` along
-    `up`, default z), or inside (within `clearance` metres of) an occupied or (when `reject_unknown`, as
-    the paper's planner) an unknown voxel. Positions outside the volume are allowed."""
+    `up`, default z), or inside an occupied or (when `reject_unknown`, as the paper's planner) an unknown
+    voxel -- with a `clearance` > 0, the voxel holding it or any voxel whose centre is within `clearance`
+    metres of it (occupied wins over unknown).
+
+    Without a clearance, positions outside the volume are allowed (the viewing sphere reaches past the
+    volume; the paper's planner does not reject them). With one, space outside the volume counts as unknown:
+    it was never observed, so nothing vouches that the ball there is free (`TernaryGrid.labels_at` reads it
+    the same way); the more clearance, the fewer positions pass."""
     pos = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)[:, :3, 3]
     height = pos[:, 2] if up is None else pos @ check_up(up, "up")
-    worst = vol.label_at(pos)
+    below = np.zeros(len(pos), dtype=bool) if table_z is None else height < table_z
     if clearance > 0:
-        r = clearance
-        offs = np.array([[dx, dy, dz] for dx in (-r, 0, r) for dy in (-r, 0, r) for dz in (-r, 0, r)])
-        labs = vol.label_at((pos[:, None, :] + offs[None]).reshape(-1, 3)).reshape(len(pos), -1)
-        inside = vol.inside((pos[:, None, :] + offs[None]).reshape(-1, 3)).reshape(len(pos), -1)
-        occ = np.any((labs == OCCUPIED) & inside, axis=1)
-        unk = np.any((labs == UNKNOWN) & inside, axis=1)
+        occ = np.zeros(len(pos), dtype=bool)
+        unk = np.zeros(len(pos), dtype=bool)
+        todo = ~below  # a position rejected for one reason is not examined for the next
+        if todo.any():
+            occ[todo] = _near_voxels(vol, pos[todo], clearance, lambda lab: lab == OCCUPIED, False)
+        todo &= ~occ
+        if reject_unknown and todo.any():
+            unk[todo] = _near_voxels(vol, pos[todo], clearance, lambda lab: lab == UNKNOWN, True)
     else:
+        worst = vol.label_at(pos)
         inside = vol.inside(pos)
         occ = (worst == OCCUPIED) & inside
         unk = (worst == UNKNOWN) & inside
     out: list[str | None] = []
     for i in range(len(pos)):
-        if table_z is not None and height[i] < table_z:
+        if below[i]:
             out.append("below_table")
         elif occ[i]:
             out.append("inside_occupied")

@@ -15,6 +15,7 @@ position are consecutive), which lets the ray caster share the rays of the rolls
 from __future__ import annotations
 
 import json
+import math
 import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -49,16 +50,48 @@ class SphereSpec:
 PAPER_SPHERE = SphereSpec()
 
 
-def _angles(start: float, stop: float, step: float, *, closed: bool, name: str) -> np.ndarray:
+def _angle_count(start: float, stop: float, step: float, *, closed: bool, name: str) -> int:
+    """How many angles `_angles` returns, computed without making them (a tiny step would fill the memory)."""
     if not 0 < step <= 360:  # also refuses NaN and inf
         raise ConfigError(f"expected a step in (0, 360] degrees, got {step}", parameter=f"{name}_step")
     if stop < start:
         raise ConfigError(f"expected min <= max, got {start} > {stop}", parameter=f"{name}_min/{name}_max")
-    n = int(np.floor((stop - start) / step + 1e-9))
-    vals = start + step * np.arange(n + 1)
-    if not closed and vals.size > 1 and np.isclose(vals[-1] - start, 360.0):
-        vals = vals[:-1]
-    return vals
+    n = int(math.floor((stop - start) / step + 1e-9))
+    if not closed and n > 0 and np.isclose(step * n, 360.0):
+        return n  # 360 is 0 again
+    return n + 1
+
+
+def _angles(start: float, stop: float, step: float, *, closed: bool, name: str) -> np.ndarray:
+    n = _angle_count(start, stop, step, closed=closed, name=name)
+    return start + step * np.arange(n)
+
+
+# Most candidate views one viewing sphere may hold: ~100 x the paper's 960. A candidate costs ~1.2 kB of peak memory
+# through `kinfu nbv` (its pose, sphere temporaries, scores and, with --top 0, its listed view; measured 450 MB for
+# 2 x 96,000) and ~0.1 ms, so the limit keeps a POI near 0.1 GB and 10-20 s, where a 0.01 deg step took 1.7 GB.
+MAX_SPHERE_VIEWS = 100_000
+
+
+def sphere_view_count(lon_step: float = PAPER_SPHERE.lon_step, lat_min: float = PAPER_SPHERE.lat_min,
+                      lat_max: float = PAPER_SPHERE.lat_max, lat_step: float = PAPER_SPHERE.lat_step,
+                      roll_step: float = PAPER_SPHERE.roll_step) -> int:
+    """Number of poses `sphere_viewpoints` makes with these angles; ConfigError naming the steps when it exceeds
+    MAX_SPHERE_VIEWS (checked before any pose is made)."""
+    if not (-90 <= lat_min <= lat_max <= 90):
+        raise ConfigError(f"expected -90 <= min <= max <= 90, got {lat_min}, {lat_max}", parameter="lat_min/lat_max")
+    n_lon = _angle_count(0.0, 360.0, lon_step, closed=False, name="lon")
+    n_lat = _angle_count(lat_min, lat_max, lat_step, closed=True, name="lat")
+    n_roll = _angle_count(0.0, 360.0, roll_step, closed=False, name="roll")
+    total = n_lon * n_lat * n_roll
+    if total > MAX_SPHERE_VIEWS:
+        def num(n: int) -> str:
+            return f"{n:,}" if n < 10 ** 12 else f"~{str(n)[0]}e{len(str(n)) - 1}"
+        raise ConfigError(f"the viewing sphere would hold {num(total)} candidate views ({num(n_lon)} longitudes x "
+                          f"{num(n_lat)} latitudes x {num(n_roll)} rolls), more than the {MAX_SPHERE_VIEWS:,} allowed "
+                          f"(the paper's sphere holds 960); use larger steps or a narrower latitude range",
+                          parameter="lon_step/lat_step/roll_step")
+    return total
 
 
 MIN_RADIUS_M, MAX_RADIUS_M = 0.01, 100.0  # viewing sphere radius
@@ -78,11 +111,8 @@ def sphere_viewpoints(center, radius: float = PAPER_SPHERE.radius, lon_step: flo
     if not (MIN_RADIUS_M <= radius <= MAX_RADIUS_M):  # also refuses NaN; farther or nearer hangs the ray caster
         raise ConfigError(f"expected a distance in [{MIN_RADIUS_M:g}, {MAX_RADIUS_M:g}] m, got {radius}",
                           parameter="radius")
-    if not (-90 <= lat_min <= lat_max <= 90):
-        raise ConfigError(f"expected -90 <= min <= max <= 90, got {lat_min}, {lat_max}", parameter="lat_min/lat_max")
+    sphere_view_count(lon_step, lat_min, lat_max, lat_step, roll_step)
     lons = np.radians(_angles(0.0, 360.0, lon_step, closed=False, name="lon"))
-    if lons.size > 1 and np.isclose(np.degrees(lons[-1]), 360.0):
-        lons = lons[:-1]
     lats = np.radians(_angles(lat_min, lat_max, lat_step, closed=True, name="lat"))
     rolls = np.radians(_angles(0.0, 360.0, roll_step, closed=False, name="roll"))
     lon, lat, roll = (a.ravel() for a in np.meshgrid(lons, lats, rolls, indexing="ij"))

@@ -46,7 +46,7 @@ class NbvOptions:
     gain: a name of `gains.GAINS`; clear: ForgetAround every POI first; top: views listed per POI
     (0 = all); candidates: a pose file scored instead of the viewing `sphere`; poi_radius: replaces each
     POI's radius (m); inc_th: IncTh (None: 1 % of the pixels that see S(POI)); table_z: see `TableZ`;
-    clearance: reject sensor positions this close (m) to occupied/unknown voxels; share_rolls: rolls
+    clearance: reject sensor positions this close (m) to occupied/unknown voxels (outside the grid counts as unknown); share_rolls: rolls
     of one position share their rays; optimistic: unknown voxels outside S(POI) do not stop rays; up:
     the world's up direction instead of the volume's.
     """

@@ -282,9 +282,18 @@ def resolve_up(volume, options: SegmentOptions) -> tuple[SegmentOptions, str]:
 
 
 def support_plane_warnings(seg: Segmentation, up_source: str) -> list[str]:
-    """Why there is no support plane, with the counts of the search, or [] when there is one."""
-    if seg.plane is not None or len(seg.points) == 0:
+    """Why there is no support plane, with the counts of the search; or that the plane took every point (no
+    object: a flipped up, stored in the volume, did that silently); [] otherwise."""
+    if len(seg.points) == 0:
         return []
+    if seg.plane is not None:
+        if np.any(seg.labels > 0):
+            return []
+        up = seg.stats.get("support_plane_search", {}).get("up")
+        whose = {"assumed-z": "assumed", "volume": "the volume's"}.get(up_source, up_source or "given")
+        return [f"no objects: the support plane's segment holds all {int(np.sum(seg.labels == 0))} surface points"
+                + ("" if up is None else f"; if nothing stands on a surface facing up {[round(v, 3) for v in up]} "
+                                         f"({whose}), that up direction is wrong (flipped?): give the up")]
     s = seg.stats.get("support_plane_search", {})
     up = s.get("up")
     params_up = "any direction" if up is None else (

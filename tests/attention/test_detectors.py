@@ -316,3 +316,15 @@ def test_a_long_pause_split_over_two_gaussians_is_one_poi():
     to_gt, _ = _dists(merged.pois_, changes)
     assert to_gt.max() < 0.01
     assert changes[0].t_start <= merged.pois_[0].time <= changes[0].t_end
+
+
+def test_resample_to_fewer_samples_than_a_few_gaussians_need_is_refused():
+    # resample 1 ran as raw samples and 2-5 fitted nothing (0 POIs), both without a word
+    from kinfu_cli.attention.gmm_as import RESAMPLE_GAUSSIANS, GmmActivitySaliency
+
+    for bad in (1, 2, 5, RESAMPLE_GAUSSIANS * 8 - 1):
+        with pytest.raises(ConfigError, match="at least 32 samples") as err:
+            GmmActivitySaliency(resample=bad).check_params()
+        assert err.value.parameter == "resample"
+    GmmActivitySaliency(resample=0).check_params()
+    GmmActivitySaliency(resample=32).check_params()

@@ -65,7 +65,9 @@ def test_segment_grasp_bad_options_are_one_line_errors_before_any_output(tmp_pat
     for args, word in ((["--grasp", "--no-superquadrics"], "--grasp"),
                        (["--grasp", "--grasp-cone", "z:0,0,-1:10", "--grasp-cone", "x:0,0,-1:10"], "--grasp-cone"),
                        (["--grasp", "--grasp-cone", "sideways"], "--grasp-cone"),
-                       (["--grasp", "--grasp-starts", "0"], "--grasp-starts")):
+                       (["--grasp", "--grasp-starts", "0"], "--grasp-starts"),
+                       # the --grasp-* options without --grasp were ignored without a word
+                       (["--grasp-cone", "top"], "needs --grasp"), (["--grasp-hand", "left"], "--grasp-hand")):
         out = tmp_path / "seg"
         r = CliRunner().invoke(cli, ["segment", str(path), "-o", str(out), *args])
         lines = _lines(r)
