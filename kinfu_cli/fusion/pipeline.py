@@ -35,7 +35,7 @@ from kinfu_cli.fusion.extent import (SURVEY_FRAMES, AutoGrid, auto_grid, budget_
                                     survey)
 from kinfu_cli.fusion.mesh import mesh_cloud
 from kinfu_cli.fusion.placement import default_origin
-from kinfu_cli.fusion.tracking import POSE_MODES, FrameToModelTracker, TrackResult, predict_pose
+from kinfu_cli.fusion.tracking import LOSS_CHECKS, POSE_MODES, FrameToModelTracker, TrackResult, predict_pose
 from kinfu_cli.fusion.up import choose_up
 from kinfu_cli.fusion.volume import DEFAULT_TRUNCATION_M, TernaryVolume, load_volume
 from kinfu_cli.io.frames import FrameStats, RGBDFrame, check_window, iter_frames, window_depth_count
@@ -453,13 +453,6 @@ def _tracking_doubts(track_log: list[dict]) -> list[str]:
     return out
 
 
-# the tracker's loss reasons (tracking.FrameToModelTracker._checked), by a word they hold, in a few words
-_ICP_FAILURES = (("too few depth", "too few depth points"), ("not visible", "model not in view"),
-                 ("fitness", "too little overlap"), ("agrees", "depth disagrees with the model"),
-                 ("pins the pose", "flat view"), ("since the last good pose", "too fast"),
-                 ("re-localised near", "only re-localisation found a pose"))
-
-
 def _fallback_warnings(track_log: list[dict], max_lost: float) -> list[str]:
     """Hint mode: a warning when ICP refined too few frames (more than max_lost of them fused at their TF pose),
     with why ICP failed on them, counted."""
@@ -468,7 +461,7 @@ def _fallback_warnings(track_log: list[dict], max_lost: float) -> list[str]:
         return []
     why: dict[str, int] = {}
     for t in fell:
-        key = next((kind for words, kind in _ICP_FAILURES if words in t["reason"]), t["reason"])
+        key = LOSS_CHECKS.get(t.get("check", ""), "only re-localisation found a pose")
         why[key] = why.get(key, 0) + 1
     reasons = ", ".join(f"{k}: {n}" for k, n in sorted(why.items(), key=lambda kv: -kv[1]))
     return [f"ICP refined the TF pose of only {len(track_log) - len(fell)} of {len(track_log)} tracked frames; "
@@ -692,7 +685,7 @@ def _track_entry(frame: RGBDFrame, res: TrackResult, T_given: np.ndarray | None,
          "rmse": None if not np.isfinite(res.rmse) else round(res.rmse, 5),
          "agreement": None if not np.isfinite(res.agreement) else round(res.agreement, 4),
          "condition": None if not np.isfinite(res.condition) else float(f"{res.condition:.3g}"), "lost": lost,
-         "tf_fallback": fallback is not None, "reason": reason, "relocalised": res.relocalised,
+         "tf_fallback": fallback is not None, "reason": reason, "check": res.check, "relocalised": res.relocalised,
          "attempts": res.attempts, "T_world_camera": None if lost else np.round(T, 6).tolist()}
     if T_given is not None and not lost:
         e["given_minus_tracked_m"] = round(float(np.linalg.norm(np.asarray(T_given)[:3, 3] - T[:3, 3])), 5)

@@ -98,6 +98,12 @@ HINT_MAX_M = 0.10
 HINT_MAX_DEG = 10.0
 
 
+# why a frame was lost, in a few words, by TrackResult.check
+LOSS_CHECKS = {"depth": "too few depth points", "model": "model not in view", "fitness": "too little overlap",
+               "agreement": "depth disagrees with the model", "condition": "flat view", "speed": "too fast",
+               "tf": "far from the TF pose"}
+
+
 @dataclass
 class TrackResult:
     T_world_camera: np.ndarray  # the tracked pose; the (first) initial pose when lost
@@ -110,6 +116,7 @@ class TrackResult:
     attempts: int = 1
     condition: float = float("nan")  # condition number of the point-to-plane 6x6 system at the pose
     tf_disagrees: bool = False  # lost by check 5: ICP found a pose far from the TF pose (hint mode)
+    check: str = ""  # the check that lost it (LOSS_CHECKS), "" when kept
 
 
 def _angle_deg(R: np.ndarray) -> float:
@@ -210,7 +217,7 @@ class FrameToModelTracker:
         s = self.stride
         ds = d[::s, ::s]
         if np.count_nonzero((ds >= volume.min_depth) & (ds <= volume.max_depth)) < self.min_points:
-            return TrackResult(inits[0].copy(), 0.0, float("nan"), True, "too few depth points")
+            return TrackResult(inits[0].copy(), 0.0, float("nan"), True, "too few depth points", check="depth")
         h, w = depth.shape
         cache: dict = {}
 
@@ -259,7 +266,8 @@ class FrameToModelTracker:
             if best is None or _better(res, best):
                 best = res
         if best is None:
-            return TrackResult(inits[0].copy(), 0.0, float("nan"), True, "model surface not visible", attempts=0)
+            return TrackResult(inits[0].copy(), 0.0, float("nan"), True, "model surface not visible", attempts=0,
+                               check="model")
         best.attempts = attempts
         if best.lost:
             best.T_world_camera = inits[0].copy()
@@ -373,20 +381,21 @@ class FrameToModelTracker:
         else:
             lim_m, lim_deg = self.max_jump_m, self.max_jump_deg
         if fitness < self.min_fitness:
-            out.lost, out.reason = True, f"fitness {fitness:.2f} < {self.min_fitness}"
+            out.lost, out.check, out.reason = True, "fitness", f"fitness {fitness:.2f} < {self.min_fitness}"
         elif not agreement >= self.min_agreement:
-            out.lost, out.reason = True, f"depth agrees with the model on {agreement:.2f} < {self.min_agreement}"
+            out.lost, out.check = True, "agreement"
+            out.reason = f"depth agrees with the model on {agreement:.2f} < {self.min_agreement}"
         elif condition > self.max_condition:
-            out.lost, out.reason = True, (f"the scene pins the pose down poorly (condition number {condition:.2g} > "
+            out.lost, out.check, out.reason = True, "condition", (f"the scene pins the pose down poorly (condition number {condition:.2g} > "
                                           f"{self.max_condition:.2g}: e.g. a flat wall)")
         elif step_m > lim_m or step_deg > lim_deg:
-            out.lost, out.reason = True, (f"moved {step_m:.2f} m / {step_deg:.0f} deg since the last good pose "
+            out.lost, out.check, out.reason = True, "speed", (f"moved {step_m:.2f} m / {step_deg:.0f} deg since the last good pose "
                                           f"(limit {lim_m:.2f} m / {lim_deg:.0f} deg)")
         elif self._hint is not None:
             off = np.linalg.inv(self._hint) @ T
             off_m, off_deg = float(np.linalg.norm(off[:3, 3])), _angle_deg(off[:3, :3])
             if off_m > HINT_MAX_M or off_deg > HINT_MAX_DEG:
-                out.lost, out.tf_disagrees = True, True
+                out.lost, out.tf_disagrees, out.check = True, True, "tf"
                 out.reason = (f"{off_m:.2f} m / {off_deg:.0f} deg from the TF pose (limit {HINT_MAX_M:.2f} m / "
                               f"{HINT_MAX_DEG:.0f} deg): TF and ICP disagree")
         return out

@@ -247,12 +247,9 @@ class TfBuffer:
         for child, link in self._links.items():
             if not link.gap_hits:
                 continue
-            hits = np.fromiter(link.gap_hits, dtype=np.int64)
+            hits = np.fromiter(link.gap_hits, dtype=np.int64)  # each inside a gap (note_gaps)
             starts, ends = np.asarray(link.gap_starts, dtype=np.int64), np.asarray(link.gap_ends, dtype=np.int64)
-            j = np.searchsorted(starts, hits, side="right") - 1
-            j = j[(j >= 0) & (hits > starts[np.maximum(j, 0)]) & (hits < ends[np.maximum(j, 0)])]  # (samples since)
-            if not j.size:
-                continue
+            j = np.searchsorted(starts, hits, side="right") - 1  # the gap each hit fell in
             gaps = np.unique(j)
             longest = int(gaps[np.argmax(ends[gaps] - starts[gaps])])
             length, start, end = link.gap_ends[longest] - link.gap_starts[longest], starts[longest], ends[longest]

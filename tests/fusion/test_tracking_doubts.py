@@ -56,7 +56,7 @@ def test_hint_mode_falls_back_to_the_tf_pose_unless_icp_found_it_wrong():
 def test_frames_fused_at_their_tf_pose_are_counted_apart_and_warned_about_past_max_lost():
     log = track_log(0.004, 0)
     for t in log[:5]:
-        t.update(tf_fallback=True, given_minus_tracked_m=0.0, reason="fitness 0.02 < 0.3")
+        t.update(tf_fallback=True, given_minus_tracked_m=0.0, reason="fitness 0.02 < 0.3", check="fitness")
     log[5].update(tf_fallback=True, given_minus_tracked_m=0.0, reason="re-localised near the TF pose (not trusted)")
     assert ate_vs_given(log)["frames"] == 14  # the ICP-placed ones only
     w = _fallback_warnings(log, 0.10)
