@@ -16,7 +16,8 @@ import numpy as np
 
 from kinfu_cli.core.errors import ConfigError, VolumeError
 from kinfu_cli.fusion.placement import backproject
-from kinfu_cli.fusion.volume import available_bytes, worst_case_bytes
+from kinfu_cli.core.memory import available_bytes
+from kinfu_cli.fusion.volume import worst_case_bytes
 
 # voxel edge when none is given: KinFu's 3 m grid of 512 voxels
 DEFAULT_VOXEL = 3.0 / 512

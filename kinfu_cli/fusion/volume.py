@@ -20,6 +20,7 @@ from scipy.ndimage import binary_dilation
 from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError, VolumeError
 from kinfu_cli.core.grid import EMPTY, OCCUPIED, UNKNOWN, TernaryGrid, check_up, read_ternary
+from kinfu_cli.core.memory import available_bytes
 from kinfu_cli.core.poses import check_rigid
 from kinfu_cli.core.volume_file import (FORMAT, FORMAT_VERSION, MAX_COORDINATE_M, check_intrinsics, read_volume_file,
                                         read_volume_meta, write_volume_file)
@@ -53,18 +54,6 @@ def worst_case_bytes(shape, color, hypotheses: int = MAX_HYPOTHESES) -> int:
     if isinstance(color, str) and color == "mode":
         per_voxel += hypotheses * BYTES_PER_HYPOTHESIS
     return nblocks * (kn.B3 * per_voxel + 5)
-
-
-def available_bytes() -> int:
-    """Memory available now (MemAvailable of /proc/meminfo; 16 GiB when it cannot be read)."""
-    try:
-        with open("/proc/meminfo") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    return 16 * 1024**3
 
 
 # the fewest voxels a new grid may have along an axis: fewer hold no surface worth a mesh (a 3 m voxel in a 2 m box

@@ -12,7 +12,7 @@ import numpy as np
 from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.progress import progress
-from kinfu_cli.fusion.volume import available_bytes
+from kinfu_cli.core.memory import available_bytes
 from kinfu_cli.localization import shapes
 from kinfu_cli.localization.baselines import localize_ransac_icp, localize_scaling_series
 from kinfu_cli.localization.mesh_model import pose_matrix

@@ -22,9 +22,9 @@ import numpy as np
 
 from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.core.memory import available_bytes
 from kinfu_cli.core.progress import progress
 from kinfu_cli.core.volume_file import MAX_COORDINATE_M
-from kinfu_cli.fusion.volume import available_bytes
 from kinfu_cli.localization import ukf
 from kinfu_cli.localization.mesh_model import MeshModel, matrix_pose, pose_matrix, pose_rotations
 from kinfu_cli.localization.refine import pose_std, refine_exact, refine_field
