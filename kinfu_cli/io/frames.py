@@ -53,6 +53,7 @@ class RGBDFrame:
 # the share of a run's frames that may lack a colour image within the tolerance before a warning (the first and
 # last frames often do: the colour stream starts and stops at other times)
 UNPAIRED_COLOR_WARN = 0.10
+MAX_16BIT_MM = 65535  # the largest depth a 16-bit millimetre image holds (65535 itself reads as no measurement)
 
 
 @dataclass
@@ -72,6 +73,12 @@ class FrameStats:
     color_unpaired: int = 0
     color_nearest_ns: int | None = None
     tolerance_ns: int = 0
+    # depth images whose stamp is equal to or earlier than the one before (kept: said in a warning); the first one
+    stamps_not_increasing: int = 0
+    first_not_increasing_ns: int | None = None
+    # 32FC1 depth pixels beyond what a 16-bit millimetre image holds (65.535 m: millimetres stored as metres?)
+    pixels_over_16bit_mm: int = 0
+    frames_over_16bit_mm: int = 0
 
     def drop(self, reason: str) -> None:
         self.dropped[reason] = self.dropped.get(reason, 0) + 1
@@ -95,6 +102,16 @@ class FrameStats:
                     f"the {self.tolerance_ns / 1e6:.0f} ms tolerance")
             out.append(f"{recording}: {self.color_unpaired} of {self.used} frames have no colour ({near}); their "
                        f"surfaces stay uncoloured (a larger tolerance pairs images further apart in time)")
+        if self.stamps_not_increasing:
+            out.append(f"{recording}: {self.stamps_not_increasing} of {self.depth_messages} depth images have a "
+                       f"stamp equal to or earlier than the one before (the first at {self.first_not_increasing_ns} "
+                       f"ns): repeated or backward stamps (a driver or clock fault?); they are used at the stamps "
+                       f"they carry")
+        if self.pixels_over_16bit_mm:
+            out.append(f"{recording}: {self.pixels_over_16bit_mm} depth pixels in {self.frames_over_16bit_mm} "
+                       f"frames read {MAX_16BIT_MM / 1000:g} m or more (32FC1 depth is in metres: millimetres "
+                       f"stored as metres?); a 16-bit millimetre depth image (kinfu export) cannot hold them and "
+                       f"writes them as no measurement (65535)")
         return out
 
     def as_dict(self) -> dict:
@@ -103,7 +120,9 @@ class FrameStats:
                 "dropped_total": self.dropped_total,
                 **({"color_registration": self.color_registration} if self.color_registration else {}),
                 **({"notes": list(self.notes)} if self.notes else {}),
-                **({"depth_units_m": self.depth_units} if self.depth_units is not None else {})}
+                **({"depth_units_m": self.depth_units} if self.depth_units is not None else {}),
+                **({"stamps_not_increasing": self.stamps_not_increasing} if self.stamps_not_increasing else {}),
+                **({"pixels_over_16bit_mm": self.pixels_over_16bit_mm} if self.pixels_over_16bit_mm else {})}
 
 
 def _stamp(msg: object, log_ns: int) -> int:
@@ -317,13 +336,15 @@ def _require_topics(rec, roles: Roles) -> str:
     topics are there, and a depth cloud is organized."""
     depth_topic = roles.depth_topic
     if depth_topic is None:
+        cut = rec.cut_note() if hasattr(rec, "cut_note") else ""  # a truncated file: it may be in the lost part
         clouds = unorganized_clouds(rec)
         if clouds:
             name, why = clouds[0]
-            raise RecordingError(f"{rec.path}: no depth image topic found, and point cloud {name} {why}",
+            raise RecordingError(f"{rec.path}: no depth image topic found{cut}, and point cloud {name} {why}",
                                  parameter="depth_topic")
         avail = ", ".join(f"{n} ({i.msgtype})" for n, i in rec.topics.items()) or "none"
-        raise RecordingError(f"{rec.path}: no depth image topic found; topics: {avail}", parameter="depth_topic")
+        raise RecordingError(f"{rec.path}: no depth image topic found{cut}; topics: {avail}",
+                             parameter="depth_topic")
     info = require_role_topic(rec, depth_topic, "depth topic")
     if POINTCLOUD2 in info.msgtypes:
         first = rec.first_message(depth_topic)
@@ -467,6 +488,7 @@ class _FramePairer:
         topics = [self.depth_topic] + [t for t in (self.info_topic, self.color_topic) if t]
         index = 0  # position of the depth message on its topic among those read
         kept = 0  # depth messages inside the window so far
+        last_stamp = None  # of the previous depth message inside the window
         for topic, log_ns, msg in self.rec.messages(topics, start_ns=read_start, end_ns=read_end):
             if topic == self.info_topic:
                 where = f"{self.rec.path}: {self.info_topic}"
@@ -489,6 +511,11 @@ class _FramePairer:
             if (start_ns is not None and log_ns < start_ns) or (end_ns is not None and log_ns > end_ns):
                 continue  # read only for the tolerance margin of the time window
             stats.depth_messages += 1
+            if last_stamp is not None and stamp <= last_stamp:
+                stats.stamps_not_increasing += 1
+                if stats.first_not_increasing_ns is None:
+                    stats.first_not_increasing_ns = stamp
+            last_stamp = stamp
             kept += 1
             if (kept - 1) % every:
                 stats.skipped += 1
@@ -512,6 +539,10 @@ class _FramePairer:
             depth = decode_depth(msg, f"{self.rec.path}: {self.depth_topic}")
             if self.unit_factor is not None and str(getattr(msg, "encoding", "")) in ("16UC1", "mono16"):
                 depth *= self.unit_factor
+        over = int(np.count_nonzero(depth >= np.float32((MAX_16BIT_MM - 0.5) / 1000)))
+        if over:  # millimetres rounded to 65535 or more: "no measurement" in a 16-bit image (kinfu export)
+            self.stats.pixels_over_16bit_mm += over
+            self.stats.frames_over_16bit_mm += 1
         h, w = depth.shape
         K = self.K
         if self.width and self.height and (w, h) != (self.width, self.height):

@@ -30,7 +30,8 @@ def load_hand_trajectory(path: str | os.PathLike, hand_topic: str | None = None,
 
     hand_topic: a PoseStamped / PoseWithCovarianceStamped / Odometry / TransformStamped topic.
     hand_frame: a TF frame; the trajectory is world_frame <- hand_frame at each stamp of the hand frame's link.
-    world_frame: frame to express the trajectory in (a pose topic in another frame is moved through TF).
+    world_frame: frame to express the trajectory in (a pose topic in another frame is moved through TF, as are the
+    samples of one whose frame_id changes mid-stream, said in the recording's problems).
     With neither, the hand is detected by name (a pose topic named hand/wrist/tracker, or a TF frame named hand).
     """
     path = Path(path)
@@ -86,7 +87,7 @@ def _from_topic(rec: Recording, topic: str, world_frame: str | None, tf: TfBuffe
     if not set(POSE_TYPES) & set(info.msgtypes):
         raise RecordingError(f"{rec.path}: hand topic {topic} carries {info.msgtype}, expected one of "
                              f"{', '.join(POSE_TYPES)}")
-    stamps, trans, quats, frame = [], [], [], ""
+    stamps, trans, quats, frames = [], [], [], []
     for _, msgtype, log_ns, msg in rec.typed_messages([topic]):
         if msgtype not in POSE_TYPES:
             continue
@@ -95,7 +96,8 @@ def _from_topic(rec: Recording, topic: str, world_frame: str | None, tf: TfBuffe
         t, q = pose_message_to_tq(msg, msgtype)
         trans.append(t)
         quats.append(q)
-        frame = frame or header_frame(msg).lstrip("/")
+        frames.append(header_frame(msg).lstrip("/"))
+    frame = next((f for f in frames if f), "")
     source = f"{rec.path}:{topic}"
     stamps_a = np.asarray(stamps, dtype=np.int64)
     T = np.zeros((len(stamps), 4, 4))
@@ -110,6 +112,9 @@ def _from_topic(rec: Recording, topic: str, world_frame: str | None, tf: TfBuffe
         T[:, :3, 3] = np.asarray(trans, dtype=np.float64)
         T[:, 3, 3] = 1.0
     meta = {"topic": topic, "msgtype": info.msgtype}
+    if len(set(frames) - {""}) > 1:  # the poses of one topic in several frames: moved into one through TF
+        tf = tf if tf is not None else TfBuffer.from_recording(rec)
+        stamps_a, T, frame = _into_one_frame(rec, topic, source, stamps_a, T, frames, world_frame or frame, tf, meta)
     if world_frame and frame and world_frame != frame:
         tf = tf if tf is not None else TfBuffer.from_recording(rec)
         rng = tf.time_range(world_frame, frame)
@@ -124,6 +129,39 @@ def _from_topic(rec: Recording, topic: str, world_frame: str | None, tf: TfBuffe
         meta["moved_from_frame"] = frame
         frame = world_frame
     return _finish(stamps_a, T, frame or (world_frame or ""), source, meta)
+
+
+def _into_one_frame(rec: Recording, topic: str, source: str, stamps: np.ndarray, T: np.ndarray, frames: list[str],
+                    target: str, tf: TfBuffer, meta: dict) -> tuple[np.ndarray, np.ndarray, str]:
+    """(stamps, T, target) of a pose topic whose frame_id changes mid-stream: each sample in another frame than
+    `target` moved into it through TF (those outside the TF range dropped, counted in meta), said in the
+    recording's problems; TrajectoryError when no TF chain links the frames (the positions cannot be mixed)."""
+    frames_a = np.asarray(frames, dtype=object)
+    first = next(f for f in frames if f)
+    change = next(i for i, f in enumerate(frames) if f and f != first)
+    said = (f"hand topic {topic} changes frame_id from {first!r} to {frames[change]!r} at stamp "
+            f"{int(stamps[change])} ns")
+    keep = np.ones(stamps.shape[0], bool)
+    moved = 0
+    for f in sorted(set(frames) - {"", target}):
+        if not tf.connected(target, f):
+            raise TrajectoryError(f"{source}: {said}, and no TF chain links {target!r} and {f!r}: the positions "
+                                  f"cannot be brought into one frame; expected one frame_id")
+        in_f = frames_a == f
+        movable = in_f.copy()
+        rng = tf.time_range(target, f)
+        if rng is not None:  # samples outside the TF range of the chain cannot be moved
+            movable &= (stamps >= rng[0]) & (stamps <= rng[1])
+            keep &= ~(in_f & ~movable)
+        if movable.any():
+            T[movable] = tf.lookup_many(target, f, stamps[movable]) @ T[movable]
+        moved += int(movable.sum())
+    lost = int((~keep).sum())
+    meta["frame_ids"] = sorted(set(frames) - {""})
+    meta["outside_tf_range"] = meta.get("outside_tf_range", 0) + lost
+    rec.problems.append(f"{rec.path}: {said}: its {moved} samples in other frames than {target!r} were moved into "
+                        f"it through TF" + (f" ({lost} outside the TF range left out)" if lost else ""))
+    return stamps[keep], T[keep], target
 
 
 def _from_tf(rec: Recording, hand_frame: str, world_frame: str | None, tf: TfBuffer | None) -> Trajectory:

@@ -27,8 +27,10 @@ def is_truncated_mcap(path: Path) -> bool:
             head = f.read(8)
             f.seek(0, 2)
             size = f.tell()
-            if head != MCAP_MAGIC or size < 16:
+            if head != MCAP_MAGIC:
                 return False
+            if size < 16:  # the magic and hardly more: cut within its first record
+                return True
             f.seek(size - 8)
             return f.read(8) != MCAP_MAGIC
     except OSError:
@@ -59,8 +61,8 @@ class TruncatedMcap:
         self.problem = (f"{path}: MCAP file truncated (no footer: the recording was cut short): read {n} messages "
                         f"from the first {self.read_bytes} of {size} bytes; the rest is lost")
         if not self.channels:
-            raise RecordingError(f"{path}: MCAP file truncated (no footer) within its first records or chunk: "
-                                 f"nothing whole to read")
+            raise RecordingError(f"{path}: MCAP file truncated at byte {size} (no footer) within its first records "
+                                 f"or chunk: not a complete MCAP file, nothing whole to read")
 
     def _records(self) -> Iterator[object]:
         """Schema, Channel and Message records in file order (each chunk's messages by log time), up to the cut."""
@@ -136,9 +138,12 @@ class TruncatedMcap:
                 decoders[rec.channel_id] = self._decoder(ch)
             try:
                 msg = decoders[rec.channel_id](rec.data)
-            except Exception as exc:
-                raise RecordingError(f"{self.path}: topic {ch.topic}: cannot decode a message at t={rec.log_time} "
-                                     f"ns ({exc})") from None
+            except Exception as exc:  # one corrupt message: Recording decides whether to skip it
+                from kinfu_cli.io.recording import Undecodable, _short_text
+
+                reason = _short_text(exc)
+                msg = Undecodable(rec.log_time, reason, f"{self.path}: topic {ch.topic}: cannot decode a message at "
+                                                        f"t={rec.log_time} ns ({reason})")
             yield ch.topic, normalize_msgtype(self._type(rec.channel_id)), rec.log_time, msg
 
     def _decoder(self, ch: Channel):

@@ -28,11 +28,16 @@ from kinfu_cli.core.errors import RecordingError
 from kinfu_cli.io.mcap_truncated import TruncatedMcap, is_truncated_mcap
 from kinfu_cli.io.messages import normalize_msgtype
 from kinfu_cli.io.realsense_bag import sdk_image
+from kinfu_cli.io.tf_buffer import TF_TYPES
 
 _ROS1_MAGIC = b"#ROSBAG V2.0"
 _MCAP_MAGIC = b"\x89MCAP0\r\n"
 _SQLITE_MAGIC = b"SQLite format 3\x00"
 _KINDS = "a ROS 1 .bag, an MCAP file or a ROS 2 bag folder (metadata.yaml)"
+# message types of which a corrupt message is skipped (and counted) rather than fatal: TF, whose many small
+# samples are interpolated across a lost one; a topic with more than this share corrupt is refused
+SKIPPABLE_TYPES = TF_TYPES
+MAX_CORRUPT_SHARE = 0.5
 
 
 @dataclass
@@ -109,6 +114,9 @@ def detect_format(path: str | os.PathLike) -> str:
         return "bag"
     if head.startswith(_MCAP_MAGIC):
         return "mcap"
+    if len(head) < len(_MCAP_MAGIC) and _MCAP_MAGIC.startswith(head):
+        raise RecordingError(f"{path}: MCAP file truncated at byte {len(head)} (within its magic): not a complete "
+                             f"MCAP file, nothing to read")
     if head.startswith(_SQLITE_MAGIC) and (path.parent / "metadata.yaml").is_file():
         return "ros2"
     raise RecordingError(f"{path}: not a recording (unknown header {head[:12]!r}), expected {_KINDS}")
@@ -130,6 +138,7 @@ class Recording:
             self.path = self.path.parent
         self._stack = contextlib.ExitStack()
         self._topics: dict[str, TopicInfo] | None = None
+        self._corrupt: dict[str, tuple[int, str]] = {}  # topic -> (most corrupt messages skipped in a pass, line)
         self._backend: _Backend
         try:
             if self.format == "mcap" and is_truncated_mcap(self.path):
@@ -139,6 +148,7 @@ class Recording:
                 self._backend = _McapBackend(self.path, self._stack)
             else:
                 self._backend = _RosbagsBackend(self.path, self.format, self._stack)
+                self.problems += self._backend.count_problems
         except BaseException:
             self._stack.close()
             raise
@@ -201,8 +211,17 @@ class Recording:
         info = self.topics.get(topic)
         if info is None:
             avail = ", ".join(self.topics) or "none"
-            raise RecordingError(f"{self.path}: {what} {topic!r} not found (available topics: {avail})")
+            raise RecordingError(f"{self.path}: {what} {topic!r} not found{self.cut_note()} (available topics: "
+                                 f"{avail})")
         return info
+
+    def cut_note(self) -> str:
+        """'' for a whole file; for a truncated one, where it was cut, to say after "not found": what is missing
+        may be in the lost part."""
+        if not isinstance(self._backend, TruncatedMcap):
+            return ""
+        return (f" in the readable part of the file: MCAP file truncated (the recording was cut short), only its "
+                f"first {self._backend.read_bytes} of {self.path.stat().st_size} bytes could be read")
 
     # messages
     def typed_messages(self, topics: Iterable[str] | str | None = None, start_ns: int | None = None,
@@ -214,7 +233,38 @@ class Recording:
             topics = list(topics)
             for t in topics:
                 self.require_topic(t)
-        yield from self._backend.messages(topics, start_ns, end_ns)
+        read: dict[str, int] = {}
+        skipped: dict[str, list[Undecodable]] = {}
+        try:
+            for topic, msgtype, stamp, msg in self._backend.messages(topics, start_ns, end_ns):
+                read[topic] = read.get(topic, 0) + 1
+                if isinstance(msg, Undecodable):
+                    if msgtype not in SKIPPABLE_TYPES:
+                        raise RecordingError(msg.error)
+                    skipped.setdefault(topic, []).append(msg)
+                    continue
+                yield topic, msgtype, stamp, msg
+        finally:
+            for topic, bad in skipped.items():
+                self._note_corrupt(topic, len(bad), read[topic], bad[0])
+        for topic, bad in skipped.items():
+            if len(bad) > MAX_CORRUPT_SHARE * read[topic]:
+                raise RecordingError(f"{bad[0].error}; {len(bad)} of the {read[topic]} messages read on {topic} "
+                                     f"cannot be decoded (expected at most {MAX_CORRUPT_SHARE:.0%} corrupt)")
+
+    def _note_corrupt(self, topic: str, n: int, of: int, first: "Undecodable") -> None:
+        """Say (once, in problems) that n of `of` messages on `topic` were skipped as corrupt; a later pass over
+        the topic replaces the line when it skipped more."""
+        seen, line = self._corrupt.get(topic, (0, None))
+        if n <= seen:
+            return
+        text = (f"{self.path}: topic {topic}: skipped {n} corrupt message{'s' if n > 1 else ''} of {of} read "
+                f"(the first at t={first.stamp} ns: {first.reason})")
+        if line in self.problems:
+            self.problems[self.problems.index(line)] = text
+        else:
+            self.problems.append(text)
+        self._corrupt[topic] = (n, text)
 
     def messages(self, topics: Iterable[str] | str | None = None, start_ns: int | None = None,
                  end_ns: int | None = None) -> Iterator[tuple[str, int, object]]:
@@ -241,6 +291,16 @@ class Recording:
 def open_recording(path: str | os.PathLike) -> Recording:
     """Open a ROS 1 .bag, MCAP file or ROS 2 bag folder; RecordingError naming the file when it cannot."""
     return Recording(path)
+
+
+@dataclass
+class Undecodable:
+    """What a backend yields in place of a message it cannot decode: Recording.typed_messages skips it (counted)
+    for SKIPPABLE_TYPES and raises `error` otherwise."""
+
+    stamp: int
+    reason: str
+    error: str
 
 
 # ------------------------------------------------------------------------------------------- backends
@@ -301,6 +361,35 @@ class _RosbagsBackend(_Backend):
         except Exception as exc:  # rosbags raises its own errors, struct/zstd errors, KeyError on bad schemas
             raise _read_error(path, exc, self.kind) from None
         stack.callback(self._close)
+        self.storage_counts = self._storage_counts() if fmt == "ros2" else None
+        self.count_problems = self._count_disagreements()
+
+    def _storage_counts(self) -> dict[str, int] | None:
+        """Messages per topic as a ROS 2 bag's storage files hold them (rosbags reads the sqlite3 database's
+        count, an MCAP file's statistics, when it opens them), rather than as metadata.yaml says; None when
+        rosbags does not show them."""
+        counts: dict[str, int] = {}
+        try:
+            for storage in self.reader.readers[0].storage.storages:
+                for conn in storage.connections:
+                    counts[conn.topic] = counts.get(conn.topic, 0) + int(conn.msgcount)
+        except Exception:  # another rosbags layout: metadata.yaml's counts stand
+            return None
+        return counts
+
+    def _count_disagreements(self) -> list[str]:
+        """A problem when metadata.yaml's message counts are not what the storage holds (the storage's are used)."""
+        if self.storage_counts is None:
+            return []
+        listed: dict[str, int] = {}
+        for conn in self.reader.connections:
+            listed[conn.topic] = listed.get(conn.topic, 0) + conn.msgcount
+        wrong = [f"{topic} {n} listed, {self.storage_counts.get(topic, 0)} stored" for topic, n in listed.items()
+                 if n != self.storage_counts.get(topic, 0)]
+        if not wrong:
+            return []
+        return [f"{self.path}: metadata.yaml's message counts disagree with its storage on {len(wrong)} "
+                f"topic{'s' if len(wrong) > 1 else ''} ({'; '.join(wrong)}): the stored counts are used"]
 
     def _close(self) -> None:
         with contextlib.suppress(Exception):
@@ -308,6 +397,9 @@ class _RosbagsBackend(_Backend):
 
     def topic_infos(self) -> dict[str, TopicInfo]:
         infos = _topic_infos((c.topic, c.msgtype, c.msgcount) for c in self.reader.connections)
+        if self.storage_counts is not None:  # a ROS 2 bag: what its storage holds, not what metadata.yaml says
+            for name, info in infos.items():
+                info.count = self.storage_counts.get(name, 0)
         # first/last stamps: from the ROS 1 index at once; else one pass over the raw records, when asked for
         if self.stamps_known:
             reader = self.reader.readers[0]
@@ -376,8 +468,9 @@ class _RosbagsBackend(_Backend):
                         self.sdk_trailer.add(conn.id)
                         yield conn.topic, normalize_msgtype(conn.msgtype), stamp, msg
                         continue
-                    raise RecordingError(f"{self.path}: topic {conn.topic}: cannot decode a {conn.msgtype} "
-                                         f"message at t={stamp} ns ({exc})") from None
+                    reason = _short_text(exc)
+                    msg = Undecodable(stamp, reason, f"{self.path}: topic {conn.topic}: cannot decode a "
+                                                     f"{conn.msgtype} message at t={stamp} ns ({reason})")
                 yield conn.topic, normalize_msgtype(conn.msgtype), stamp, msg
         except RecordingError:
             raise
@@ -462,9 +555,11 @@ class _McapBackend(_Backend):
         from mcap_ros2.decoder import DecoderFactory as Ros2Decoder
 
         self.path = path
+        self._factories = [Ros1Decoder(), Ros2Decoder()]
+        self._decoders: dict[int, Callable[[bytes], object]] = {}
         try:
             self.file = stack.enter_context(path.open("rb"))
-            self.reader = make_reader(self.file, decoder_factories=[Ros1Decoder(), Ros2Decoder()])
+            self.reader = make_reader(self.file, decoder_factories=self._factories)
             self.summary = self.reader.get_summary()
         except Exception as exc:
             raise _read_error(path, exc, "MCAP file") from None
@@ -505,9 +600,17 @@ class _McapBackend(_Backend):
     def messages(self, topics, start_ns, end_ns):
         stop = None if end_ns is None else int(end_ns) + 1
         try:
-            for schema, ch, msg, decoded in self.reader.iter_decoded_messages(
-                    topics=topics, starting_at=start_ns, ending_before=stop, log_time_order=True):
-                yield ch.topic, normalize_msgtype(schema.name if schema else ""), msg.log_time, decoded
+            for schema, ch, msg in self.reader.iter_messages(topics=topics, starting_at=start_ns,
+                                                             ending_before=stop, log_time_order=True):
+                msgtype = schema.name if schema else ""
+                decode = self._decoder(schema, ch)
+                try:
+                    decoded = decode(msg.data)
+                except Exception as exc:  # one corrupt message: Recording decides whether to skip it
+                    reason = _short_text(exc)
+                    decoded = Undecodable(msg.log_time, reason, f"{self.path}: topic {ch.topic}: cannot decode a "
+                                                                f"{msgtype} message at t={msg.log_time} ns ({reason})")
+                yield ch.topic, normalize_msgtype(msgtype), msg.log_time, decoded
         except RecordingError:
             raise
         except DecoderNotFoundError as exc:  # not damage: a channel in an encoding no ROS decoder reads
@@ -516,3 +619,15 @@ class _McapBackend(_Backend):
                                  f"messages") from None
         except Exception as exc:
             raise _read_error(self.path, exc, "MCAP file") from None
+
+    def _decoder(self, schema, channel) -> Callable[[bytes], object]:
+        """The ROS 1 or ROS 2 decoder of a channel; DecoderNotFoundError when neither reads its encoding."""
+        decoder = self._decoders.get(channel.id)
+        if decoder is None:
+            decoder = next((d for f in self._factories
+                            if (d := f.decoder_for(channel.message_encoding, schema)) is not None), None)
+            if decoder is None:
+                raise DecoderNotFoundError(f"no decoder for message encoding {channel.message_encoding}, "
+                                           f"schema {schema.name if schema else None}")
+            self._decoders[channel.id] = decoder
+        return decoder
