@@ -7,8 +7,10 @@ stored; `add_message` counts it by reason (`rejected`) and by link (`rejected_li
 rejected transforms can be reported naming the link. Chains are walked with a loop check: links that form a
 cycle raise TransformError naming the frames of the loop instead of walking forever.
 
-A frame may be re-parented over time (tf2 allows it): the later parent's link is kept (`parent_changes`). A frame
-that goes back to a parent it had before is published under two parents at once (two publishers: a broken tree,
+A frame may be re-parented over time (tf2 allows it; `parent_changes` notes it): a lookup at a stamp goes through
+the parent the frame had then, as tf2's does (an object taken from the table by the gripper and put back: table,
+gripper, table again), while the tree (`tree`, `chain`) shows the latest parent. A frame that switches parents
+again and again (TWO_PARENTS_MIN_SWITCHES) is published under two parents at once (two publishers: a broken tree,
 whose lookups tf2 would flip between the chains); its link is taken from the parent with the most transforms and
 `parent_warnings` says so, naming the parents (`from_recording` puts it in the recording's problems).
 
@@ -163,6 +165,8 @@ class TfBuffer:
         self._last_parent: dict[str, str] = {}  # child -> parent of its latest transform
         self._moves: dict[str, list[str]] = {}  # child -> the parents it moved between, in order (re-parented)
         self._switches: dict[str, int] = {}  # child -> parent changes, for a child under two parents at once
+        self._runs: dict[str, list[tuple[int, str]]] = {}  # child -> (first stamp, parent) of each run under a parent
+        self._timed: dict[str, tuple[np.ndarray, list[_Link]]] | None = None  # _timed_parents, until the next add
         self.rejected: dict[str, int] = {}  # transforms from messages that were skipped, by reason
         self.rejected_links: dict[tuple[str, str], dict[str, int]] = {}  # (parent, child) -> reason -> count
 
@@ -188,6 +192,10 @@ class TfBuffer:
         if last is not None and last != parent:
             self._note_move(child, last, parent)
         self._last_parent[child] = parent
+        runs = self._runs.setdefault(child, [])
+        if not runs or runs[-1][1] != parent:
+            runs.append((int(stamp_ns), parent))
+        self._timed = None
         parents = self._parents.setdefault(child, {})
         link = parents.get(parent)
         if link is None or link.static != static:
@@ -214,8 +222,8 @@ class TfBuffer:
 
     @property
     def parent_changes(self) -> list[tuple[str, str, str]]:
-        """(child, old parent, new parent) for each re-parenting, the later link kept (not for frames under two
-        parents at once: parent_warnings)."""
+        """(child, old parent, new parent) for each re-parenting; lookups take the parent of their stamp (not for
+        frames under two parents at once: parent_warnings)."""
         return [(child, old, new) for child, moves in self._moves.items() for old, new in zip(moves, moves[1:])]
 
     def parent_warnings(self) -> list[str]:
@@ -340,7 +348,7 @@ class TfBuffer:
     # ----------------------------------------------------------------------------------- queries
     def frames(self) -> list[str]:
         names = set(self._links)
-        names.update(link.parent for link in self._links.values())
+        names.update(parent for parents in self._parents.values() for parent in parents)  # earlier parents too
         return sorted(names)
 
     def tree(self) -> dict[str, str]:
@@ -358,15 +366,18 @@ class TfBuffer:
         return link.arrays()[0]
 
     def time_range(self, target: str, source: str) -> tuple[int, int] | None:
-        """[first, last] stamps (ns) over which lookup(target, source) works; None when all links are static."""
+        """[first, last] stamps (ns) over which lookup(target, source) works; None when all links are static. A
+        frame re-parented over time counts from its first parent's first transform to its last one's last."""
         lo, hi = None, None
+        timed = self._timed_parents()
         for child in self._path_links(_strip(target), _strip(source)):
-            link = self._links[child]
-            if link.static:
+            links = timed[child][1] if child in timed else [self._links[child]]
+            if all(link.static for link in links):
                 continue
-            st = link.arrays()[0]
-            lo = st[0] if lo is None else max(lo, st[0])
-            hi = st[-1] if hi is None else min(hi, st[-1])
+            first = min(int(link.arrays()[0][0]) for link in links)
+            last = max(int(link.arrays()[0][-1]) for link in links)
+            lo = first if lo is None else max(lo, first)
+            hi = last if hi is None else min(hi, last)
         return None if lo is None else (int(lo), int(hi))
 
     def require_chain(self, target: str, source: str) -> None:
@@ -399,27 +410,62 @@ class TfBuffer:
 
     def _chain_T(self, target: str, source: str, stamps_ns: np.ndarray | None, tolerance_ns: int,
                  in_gaps: list | None = None) -> np.ndarray:
-        """lookup_many; the stamps of links that have gaps go to in_gaps (None: not counted)."""
+        """lookup_many; the stamps of links that have gaps go to in_gaps (None: not counted). Stamps are grouped by
+        the parents re-parented frames had at them (`_timed_parents`), each group looked up along its own tree."""
         target, source = _strip(target), _strip(source)
+        timed = self._timed_parents() if stamps_ns is not None else {}
+        if not timed:
+            return self._tree_T(target, source, stamps_ns, tolerance_ns, in_gaps, self._links)
+        s = np.asarray(stamps_ns, dtype=np.int64).reshape(-1)
+        runs = np.stack([np.maximum(np.searchsorted(starts, s, side="right") - 1, 0)
+                         for starts, _ in timed.values()], axis=1)
+        picks, group = np.unique(runs, axis=0, return_inverse=True)
+        group = group.reshape(-1)
+        out = np.empty((s.shape[0], 4, 4))
+        for g, pick in enumerate(picks):
+            links = {**self._links, **{child: timed[child][1][k] for child, k in zip(timed, pick.tolist())}}
+            idx = np.flatnonzero(group == g)
+            out[idx] = self._tree_T(target, source, s[idx], tolerance_ns, in_gaps, links)
+        return out
+
+    def _tree_T(self, target: str, source: str, stamps_ns: np.ndarray | None, tolerance_ns: int,
+                in_gaps: list | None, links: dict[str, "_Link"]) -> np.ndarray:
+        """_chain_T along the tree `links` (child -> the link its lookups take)."""
         n = 1 if stamps_ns is None else int(np.asarray(stamps_ns).reshape(-1).shape[0])
-        up_src, up_tgt = self._split_path(target, source)
+        up_src, up_tgt = self._split_path(target, source, links)
         T_anc_src = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
         for child in up_src:  # source upwards: T_anc_src = T_parent_child @ T_anc_src
-            T_anc_src = self._edge(child, stamps_ns, n, tolerance_ns, in_gaps) @ T_anc_src
+            T_anc_src = self._edge(links[child], child, stamps_ns, n, tolerance_ns, in_gaps) @ T_anc_src
         T_anc_tgt = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
         for child in up_tgt:
-            T_anc_tgt = self._edge(child, stamps_ns, n, tolerance_ns, in_gaps) @ T_anc_tgt
+            T_anc_tgt = self._edge(links[child], child, stamps_ns, n, tolerance_ns, in_gaps) @ T_anc_tgt
         return _inv(T_anc_tgt) @ T_anc_src
 
+    def _timed_parents(self) -> dict[str, tuple[np.ndarray, list["_Link"]]]:
+        """child -> (first stamps, links) of the runs of transforms under one parent, in stamp order, for each
+        dynamic frame re-parented over time (not one under two parents at once: it keeps its one link)."""
+        if self._timed is None:
+            self._timed = {}
+            for child, runs in self._runs.items():
+                parents = self._parents[child]
+                if (len(runs) < 2 or self._switches.get(child, 0) >= TWO_PARENTS_MIN_SWITCHES
+                        or any(link.static for link in parents.values())):
+                    continue
+                runs = sorted(runs)
+                self._timed[child] = (np.array([stamp for stamp, _ in runs], dtype=np.int64),
+                                      [parents[parent] for _, parent in runs])
+        return self._timed
+
     # ----------------------------------------------------------------------------------- internals
-    def chain(self, frame: str) -> list[str]:
-        """`frame`, its parent, the parent's parent, ... up to a root; TransformError naming the frames when the
-        links form a loop."""
+    def chain(self, frame: str, links: dict[str, "_Link"] | None = None) -> list[str]:
+        """`frame`, its parent, the parent's parent, ... up to a root (in the tree `links`, default the latest);
+        TransformError naming the frames when the links form a loop."""
+        links = self._links if links is None else links
         frame = _strip(frame)
         chain = [frame]
         seen = {frame: 0}
-        while chain[-1] in self._links:
-            parent = self._links[chain[-1]].parent
+        while chain[-1] in links:
+            parent = links[chain[-1]].parent
             if parent in seen:
                 loop = chain[seen[parent]:] + [parent]
                 raise TransformError(f"TF links form a loop: {' -> '.join(reversed(loop))} (parent -> child)")
@@ -460,17 +506,15 @@ class TfBuffer:
             text += f"; transforms {p!r} -> {c!r} were rejected ({why})"
         return text
 
-    def _ancestors(self, frame: str) -> list[str]:
-        return self.chain(frame)
-
-    def _split_path(self, target: str, source: str) -> tuple[list[str], list[str]]:
+    def _split_path(self, target: str, source: str, links: dict[str, "_Link"] | None = None
+                    ) -> tuple[list[str], list[str]]:
         known = set(self.frames())
         for name, role in ((source, "source"), (target, "target")):
             if name not in known:
                 avail = ", ".join(sorted(known)) or "none"
                 raise TransformError(f"TF lookup {target} <- {source}: {role} frame {name!r} is not in the TF tree "
                                      f"(frames: {avail})")
-        a_src, a_tgt = self._ancestors(source), self._ancestors(target)
+        a_src, a_tgt = self.chain(source, links), self.chain(target, links)
         common = next((f for f in a_src if f in set(a_tgt)), None)
         if common is None:
             raise TransformError(f"TF lookup {target} <- {source}: no chain of links connects the two frames "
@@ -481,9 +525,8 @@ class TfBuffer:
         up_src, up_tgt = self._split_path(target, source)
         return up_src + up_tgt
 
-    def _edge(self, child: str, stamps_ns: np.ndarray | None, n: int, tolerance_ns: int,
+    def _edge(self, link: "_Link", child: str, stamps_ns: np.ndarray | None, n: int, tolerance_ns: int,
               in_gaps: list | None = None) -> np.ndarray:
-        link = self._links[child]
         st, tr, qu = link.arrays()
         if link.static or stamps_ns is None:
             if link._last_T is None:

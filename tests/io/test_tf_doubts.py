@@ -158,3 +158,33 @@ def test_frames_interpolated_across_a_tf_gap_are_counted(tmp_path):
         assert len(list(iter_frames(rec, tf=tf))) == 8
     (warning,) = tf.gap_warnings()
     assert "base_link -> wrist has no transform for 8.400 s" in warning and "4 lookups fell in that gap" in warning
+
+
+def test_a_reparented_frame_is_looked_up_through_the_parent_it_had_at_the_stamp():
+    """tf2 keeps a frame's parent per transform. Before, only the latest parent's link was kept: a frame re-parented
+    once was out of TF range before the change (its frames dropped), and an object picked and put back took the
+    table's link for the whole span, interpolated across the time the gripper held it."""
+    tf = TfBuffer()
+    tf.add("world", "table", 0, _T([1, 0, 0]), static=True)
+    for k in range(11):  # the gripper sweeps along y, 1 m a second
+        tf.add("world", "gripper", k * S, _T([0, k, 0]))
+    for k, parent in enumerate(["table"] * 3 + ["gripper"] * 4 + ["table"] * 4):  # picked at 3 s, put back at 7 s
+        tf.add(parent, "obj", k * S, _T([0, 0, 0.5 if parent == "table" else -0.1]))
+    assert tf.parent_warnings() == [] and tf.tree()["obj"] == "table"
+    np.testing.assert_allclose(tf.lookup("world", "obj", 1 * S + S // 2)[:3, 3], [1, 0, 0.5])
+    np.testing.assert_allclose(tf.lookup("world", "obj", 4 * S + S // 2)[:3, 3], [0, 4.5, -0.1])  # in the gripper
+    np.testing.assert_allclose(tf.lookup("world", "obj", 8 * S)[:3, 3], [1, 0, 0.5])
+    stamps = np.array([1, 4, 5, 8, 2]) * S
+    many = tf.lookup_many("world", "obj", stamps)
+    np.testing.assert_allclose(many[:, :3, 3], [[1, 0, 0.5], [0, 4, -0.1], [0, 5, -0.1], [1, 0, 0.5], [1, 0, 0.5]])
+    assert tf.time_range("world", "obj") == (0, 10 * S)
+
+    moved = TfBuffer()  # re-parented once: the old parent before the change, the new one after
+    moved.add("world", "a", 0, _T([1, 0, 0]), static=True)
+    moved.add("world", "b", 0, _T([0, 2, 0]), static=True)
+    for k in range(6):
+        moved.add("a" if k < 3 else "b", "c", k * S, np.eye(4))
+    assert moved.parent_changes == [("c", "a", "b")] and moved.tree()["c"] == "b"
+    np.testing.assert_allclose(moved.lookup("world", "c", S)[:3, 3], [1, 0, 0])  # was: outside the buffered range
+    np.testing.assert_allclose(moved.lookup("world", "c", 4 * S)[:3, 3], [0, 2, 0])
+    assert moved.time_range("world", "c") == (0, 5 * S)
