@@ -217,11 +217,33 @@ def diff_volumes(before: str | os.PathLike, after: str | os.PathLike,
     foreign file."""
     (params or ChangeParams()).check()  # bad parameters fail before any file is read
     cams = [read_cameras(p) for p in (before, after)]
-    result = diff_grids(_load(before), _load(after), params, (str(Path(before)), str(Path(after))),
-                        (cams[0][0], cams[1][0]), tuple(report_json_of(p) for p in (before, after)))
+    grids = _load(before), _load(after)
+    names = str(Path(before)), str(Path(after))
+    result = diff_grids(*grids, params, names, (cams[0][0], cams[1][0]),
+                        tuple(report_json_of(p) for p in (before, after)))
+    result.warnings[:0] = _same_volume_warnings(before, after, *grids, len(result.regions))
     result.warnings += [f"{why}; the depth-noise margin uses the other volume's cameras or none" for _, why in cams
                         if why]
     return result
+
+
+def _same_volume_warnings(before: str | os.PathLike, after: str | os.PathLike, grid_before: TernaryGrid,
+                          grid_after: TernaryGrid, n_regions: int) -> list[str]:
+    """A volume diffed with itself (one file under two names: the same path, a symlink, a hard link; or two files
+    holding identical grids) finds nothing by construction: its 0 changes say nothing about the scene."""
+    try:
+        same_file = os.path.samefile(before, after)
+    except OSError:
+        same_file = False
+    if same_file:
+        return [f"before and after are the same file ({Path(before)}): no change can be found, so {n_regions} "
+                f"changes is not a finding"]
+    if (grid_before.shape == grid_after.shape and grid_before.voxel_size == grid_after.voxel_size
+            and np.array_equal(grid_before.origin, grid_after.origin)
+            and np.array_equal(grid_before.labels, grid_after.labels)):
+        return [f"{Path(before)} and {Path(after)} hold identical volumes (same grid, every voxel the same): no change "
+                f"can be found, so {n_regions} changes is not a finding"]
+    return []
 
 
 def _load(path: str | os.PathLike) -> TernaryGrid:

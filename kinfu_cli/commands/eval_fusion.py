@@ -14,6 +14,7 @@ from kinfu_cli.evaluation.reconstruction import (DEFAULT_SPACING, DEFAULT_THRESH
                                                  evaluate_fusion)
 from kinfu_cli.evaluation.tables import format_fusion_tables
 from kinfu_cli.report.eval_fusion_mesh import write_error_mesh
+from kinfu_cli.sim.sampling import MAX_SAMPLES
 
 group = "eval"
 
@@ -33,7 +34,8 @@ def check_options(params: dict) -> None:
 @click.option("--threshold", type=float, default=DEFAULT_THRESHOLD, show_default=True,
               help="Distance (m) for precision / completeness.")
 @click.option("--spacing", type=float, default=DEFAULT_SPACING, show_default=True,
-              help="True-surface sample spacing (m).")
+              help=f"True-surface sample spacing (m); at most {MAX_SAMPLES:,} samples (and at least one) are drawn, "
+                   "so a spacing beyond that is changed, with a warning giving both.")
 @click.option("--margin", type=float, default=0.02, show_default=True,
               help="Points within this distance (m) of an object's true box are its points.")
 @click.option("--min-height", type=float, default=0.005, show_default=True,

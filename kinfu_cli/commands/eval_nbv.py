@@ -60,7 +60,8 @@ def check_options(params: dict) -> None:
 @click.option("--poi-radius", default=DEFAULT_RADIUS, show_default=True, type=float, help="Radius of S(POI) (m).")
 @click.option("--pois-from", default="gmm-as", show_default=True, type=click.Choice(["gmm-as", "truth"]),
               help="POIs from GMM-AS on the simulated hand trajectory, or the true changes.")
-@click.option("--poi", nargs=3, type=float, default=None, help="POI x y z for a bare mesh SCENE.")
+@click.option("--poi", nargs=3, type=float, default=None,
+              help="POI x y z for a bare mesh SCENE (poi, random, fixed; a kinfu synth folder brings its own).")
 @click.option("--optimistic/--paper-stop", default=True, show_default=True,
               help="Unknown voxels outside S(POI) do not stop rays (the initial scan leaves the space around "
                    "the table unseen) / stop them as in the paper.")

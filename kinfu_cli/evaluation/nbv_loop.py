@@ -124,6 +124,8 @@ class LoopConfig:
 
     def check(self) -> None:
         """ConfigError naming the first field out of range (and the gain when it is unknown)."""
+        if not self.strategies:  # "," splits to nothing: a run of no strategy is no comparison
+            raise ConfigError(f"expected at least one of {', '.join(STRATEGIES)}", parameter="strategies")
         for s in self.strategies:
             if s not in STRATEGIES:
                 raise ConfigError(f"expected some of {', '.join(STRATEGIES)}, got {s!r}", parameter="strategies")
@@ -185,6 +187,12 @@ def load_scene(path: str | os.PathLike, cfg: LoopConfig) -> SimScene:
     if not path.exists():
         raise RecordingError(f"{path}: no such scene (expected a kinfu synth ground_truth folder or a mesh file)")
     if path.is_dir():
+        if cfg.poi is not None:  # recorded in the result but not used, it would read as the POI looked at
+            if all(s in EXPLORE for s in cfg.strategies):
+                raise ConfigError(f"the POI-free exploration ({','.join(cfg.strategies)}) takes no POI; the POI "
+                                  f"position is for poi, random or fixed on a bare mesh SCENE", parameter="poi")
+            raise ConfigError(f"{path}: a kinfu synth folder brings its POIs (from {cfg.pois_from}); give the POI "
+                              f"position only for a bare mesh SCENE", parameter="poi")
         gt = load_ground_truth(path)
         table = gt.info.get("table", {})
         cx, cy = table.get("center", [0.0, 0.0])
@@ -203,7 +211,7 @@ def load_scene(path: str | os.PathLike, cfg: LoopConfig) -> SimScene:
         mesh = o3d.io.read_triangle_mesh(str(path))
     if len(mesh.triangles) == 0:
         raise RecordingError(f"{path}: not a triangle mesh (no triangles)")
-    if cfg.poi is None:
+    if cfg.poi is None and not all(s in EXPLORE for s in cfg.strategies):  # the exploration says why it cannot
         raise ConfigError(f"{path}: a bare mesh has no hand trajectory; give the POI position (x, y, z)",
                           parameter="poi")
     bb = mesh.get_axis_aligned_bounding_box()
@@ -212,7 +220,7 @@ def load_scene(path: str | os.PathLike, cfg: LoopConfig) -> SimScene:
     scan = sphere_viewpoints(centre, radius=float(np.linalg.norm(hi - lo)) / 2 + 0.3, lon_step=45, lat_min=30,
                              lat_max=30, roll_step=360)
     K = kinect_v1_intrinsics(320, 240)
-    poi = np.asarray(cfg.poi, dtype=float).reshape(1, 3)
+    poi = np.asarray(cfg.poi if cfg.poi is not None else [], dtype=float).reshape(-1, 3)
     return SimScene(path.stem, mesh, mesh, K, 320, 240, scan, None, poi, None, lo, hi)
 
 

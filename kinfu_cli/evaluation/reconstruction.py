@@ -46,7 +46,7 @@ from kinfu_cli.core.volume_file import report_json_of
 from kinfu_cli.io.messages import c_stderr_silenced
 from kinfu_cli.evaluation.object_measures import PAPER_TABLE_1, ObjectMeasuresResult, object_measures
 from kinfu_cli.fusion.volume import TernaryVolume, load_volume
-from kinfu_cli.sim.sampling import sample_surface
+from kinfu_cli.sim.sampling import MAX_SAMPLES, sample_surface, surface_area
 from kinfu_cli.sim.scenario import GroundTruth, load_ground_truth
 from kinfu_cli.sim.sensor import ideal_depth
 
@@ -356,8 +356,9 @@ class ObservedSurface:
     seen: np.ndarray
     total: int
     frames: int
-    spacing: float
+    spacing: float  # the spacing sampled at: the one asked for unless the sampler's count limits changed it
     bounds: tuple
+    warnings: list[str] = field(default_factory=list)
 
     @property
     def observed(self) -> np.ndarray:
@@ -378,12 +379,27 @@ def observed_surface(gt: GroundTruth, state: str, bounds: tuple, spacing: float 
     if len(frames) == 0:
         raise RecordingError(f"{gt.folder}: no ground-truth camera pose of the {state} state was used")
     cam = gt.info.get("camera", {})
-    samples, normals = sample_surface(tv, tf, spacing, seed=seed)
+    samples, normals = sample_surface(tv, tf, spacing, seed=seed, max_samples=MAX_SAMPLES)
+    used, warnings = _sampled_spacing(surface_area(tv, tf), len(samples), spacing, state)
     lo, hi = (np.asarray(b, dtype=np.float64) for b in bounds)
     keep = _in_box(samples, lo, hi)
     seen = visible_mask(samples[keep], normals[keep], scene, gt.poses[frames], gt.K, gt.width, gt.height,
                         float(cam.get("min_range", 0.3)), float(cam.get("max_range", 4.0)), visibility_tolerance)
-    return ObservedSurface(samples[keep], seen, int(len(samples)), int(len(frames)), float(spacing), (lo, hi))
+    return ObservedSurface(samples[keep], seen, int(len(samples)), int(len(frames)), used, (lo, hi), warnings)
+
+
+def _sampled_spacing(area: float, count: int, spacing: float, state: str) -> tuple[float, list[str]]:
+    """The spacing `sample_surface` really sampled at and a warning when it is not `spacing`: it draws at most
+    MAX_SAMPLES points and at least one, so a finer or coarser spacing is changed, depending on the mesh's area."""
+    wanted = area / spacing ** 2 if area > 0 else 0.0
+    if count == 0 or MAX_SAMPLES >= wanted >= 0.5:  # within the sampler's limits (0.5 rounds to one sample)
+        return float(spacing), []
+    used = math.sqrt(area / count)
+    why = (f"would need {wanted:.3g} samples of the {area:.3g} m^2 true {state} surface, more than the sampler's "
+           f"{MAX_SAMPLES}" if wanted > MAX_SAMPLES
+           else f"is coarser than the whole {area:.3g} m^2 true {state} surface, which got one sample")
+    return used, [f"the true-surface sample spacing {spacing:g} m {why}: it was sampled every {used:.3g} m instead "
+                  f"(completeness is measured at that spacing)"]
 
 
 def reconstruction_bounds(rec: Reconstruction, margin: float = 0.05) -> tuple[np.ndarray, np.ndarray]:
@@ -415,7 +431,8 @@ def score_reconstruction(rec: Reconstruction, gt: GroundTruth, state: str = "aft
     notes = []
     if len(observed) == 0:
         raise RecordingError(f"{gt.folder}: no part of the true {state} surface is visible from the camera poses"
-                             + (" inside the volume grid" if rec.volume is not None else " near the reconstruction"))
+                             + (" inside the volume grid" if rec.volume is not None else " near the reconstruction")
+                             + "".join(f" ({w})" for w in surface.warnings))
     lo = observed.min(axis=0) - region_margin
     hi = observed.max(axis=0) + region_margin
     inside = _in_box(rec.vertices, lo, hi)
@@ -494,7 +511,7 @@ def evaluate_fusion(path: str | os.PathLike, ground_truth: str | os.PathLike, st
             measures = object_measures(rec.vertices, gt, state, margin=margin, min_height=min_height,
                                        footprint=footprint, surface=(surface.in_bounds, surface.seen))
     doc = _document(rec, gt, state, window, report, score, measures, time.perf_counter() - t0)
-    doc["warnings"] = state_warnings(gt, state, window) + init_warnings(report, gt)
+    doc["warnings"] = surface.warnings + state_warnings(gt, state, window) + init_warnings(report, gt)
     return FusionEvaluation(doc, rec, score)
 
 

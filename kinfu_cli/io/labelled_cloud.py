@@ -11,6 +11,9 @@ and normals may be present and are ignored. A `.npz` with `points` (N, 3) and `l
 from __future__ import annotations
 
 import os
+import re
+import zipfile
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -35,9 +38,47 @@ class LabelledCloud:
     path: Path | None = None
 
 
+NPZ_EXPECTED = "expected a .npz archive of arrays 'points' (N, 3) and 'labels' (N,)"
+
+
+def _read_npz(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """The points and labels arrays of a .npz; a truncated or foreign file is a LabelsFileError naming it."""
+    try:
+        archive = np.load(path, allow_pickle=False)
+    except MemoryError:
+        raise LabelsFileError(f"{path}: {NPZ_EXPECTED}; it declares arrays too large to read") from None
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as e:
+        raise LabelsFileError(f"{path}: {NPZ_EXPECTED}; it is truncated or not a .npz ({_first_line(e)})") from None
+    if not isinstance(archive, np.lib.npyio.NpzFile):
+        raise LabelsFileError(f"{path}: {NPZ_EXPECTED}, found a single .npy array")
+    with archive:
+        if "points" not in archive or "labels" not in archive:
+            raise LabelsFileError(f"{path}: {NPZ_EXPECTED}, found {', '.join(archive.files) or 'none'}")
+        try:  # members are read (and checked) only here: a damaged one fails now
+            points, labels = archive["points"], archive["labels"]
+        except MemoryError:
+            raise LabelsFileError(f"{path}: {NPZ_EXPECTED}; it declares arrays too large to read") from None
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as e:
+            raise LabelsFileError(f"{path}: {NPZ_EXPECTED}; an array is truncated or damaged ({_first_line(e)})") \
+                from None
+    for name, arr in (("points", points), ("labels", labels)):
+        if not isinstance(arr, np.ndarray):  # a zip member that is no .npy array comes back as bytes
+            raise LabelsFileError(f"{path}: {NPZ_EXPECTED}; '{name}' is not a numpy array")
+    return points, labels
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
 def _checked(points: np.ndarray, labels: np.ndarray, path: Path) -> LabelledCloud:
-    pts = np.asarray(points, dtype=np.float64)
-    lab = np.asarray(labels)
+    points, lab = np.asarray(points), np.asarray(labels)
+    if points.dtype.kind not in "iuf":  # complex, strings, records: no coordinates (and no silent casts)
+        raise LabelsFileError(f"{path}: expected points of real numbers, got dtype {points.dtype}")
+    if lab.ndim not in (1, 2) or (lab.ndim == 2 and lab.shape[1] != 1):
+        raise LabelsFileError(f"{path}: expected labels of shape (N,) or (N, 1), got {lab.shape}")
+    pts = points.astype(np.float64)
     if pts.ndim != 2 or pts.shape[1] != 3:
         raise LabelsFileError(f"{path}: expected points of shape (N, 3), got {pts.shape}")
     lab = lab.reshape(-1)
@@ -67,14 +108,7 @@ def read_labelled_cloud(path: str | os.PathLike) -> LabelledCloud:
     if not path.is_file():
         raise LabelsFileError(f"{path}: no such labels file")
     if path.suffix.lower() == ".npz":
-        try:
-            with np.load(path, allow_pickle=False) as z:
-                if "points" not in z or "labels" not in z:
-                    raise LabelsFileError(f"{path}: expected arrays 'points' (N, 3) and 'labels' (N,), "
-                                          f"found {', '.join(z.files) or 'none'}")
-                return _checked(z["points"], z["labels"], path)
-        except (OSError, ValueError) as e:
-            raise LabelsFileError(f"{path}: not a readable .npz ({e})") from None
+        return _checked(*_read_npz(path), path)
     if path.suffix.lower() != ".ply":
         raise LabelsFileError(f"{path}: expected a .ply point cloud with a per-point 'label' or a .npz")
     vertex = read_ply_vertices(path)
@@ -87,7 +121,7 @@ def read_labelled_cloud(path: str | os.PathLike) -> LabelledCloud:
 
 def read_ply_vertices(path: Path) -> np.ndarray:
     """The vertex element of a PLY file as a numpy structured array (LabelsFileError when unreadable)."""
-    from plyfile import PlyData, PlyParseError  # only labels files need it
+    from plyfile import PlyData, PlyElementParseError, PlyParseError  # only labels files need it
 
     try:
         with open(path, "rb") as fh:
@@ -95,15 +129,54 @@ def read_ply_vertices(path: Path) -> np.ndarray:
                 raise LabelsFileError(f"{path}: not a PLY file")
             fh.seek(0)
             ply = PlyData.read(fh)
+            # binary: plyfile stops right after the declared rows; ascii rows are counted below (its text
+            # reader reads ahead and closes fh)
+            bytes_after = None if ply.text else os.fstat(fh.fileno()).st_size - fh.tell()
         vertex = ply["vertex"].data
     except LabelsFileError:
         raise
     except KeyError:
         raise LabelsFileError(f"{path}: PLY file without a vertex element") from None
+    except PlyElementParseError as e:
+        if e.message == "early end-of-file" and e.element is not None and e.row is not None:
+            raise LabelsFileError(f"{path}: the header declares {e.element.count} {e.element.name} rows "
+                                  f"(element {e.element.name} {e.element.count}) but the file holds {e.row}: "
+                                  f"truncated, or a wrong count in the header") from None
+        raise LabelsFileError(f"{path}: unreadable PLY (truncated or malformed: {_first_line(e)})") from None
+    except MemoryError:
+        raise LabelsFileError(f"{path}: the PLY header declares more rows than can be read (a wrong element "
+                              f"count?)") from None
     except (PlyParseError, ValueError, EOFError, OSError, IndexError, TypeError) as e:
-        msg = str(e).splitlines()[0] if str(e) else type(e).__name__
-        raise LabelsFileError(f"{path}: unreadable PLY (truncated or malformed: {msg})") from None
+        raise LabelsFileError(f"{path}: unreadable PLY (truncated or malformed: {_first_line(e)})") from None
+    _check_no_extra_rows(path, ply, bytes_after)
     return vertex
+
+
+def _check_no_extra_rows(path: Path, ply, bytes_after: int | None) -> None:
+    """Rows past the header's counts mean the counts are wrong: plyfile stops at them and would hand back a
+    partial cloud (a truncated file fails in plyfile already)."""
+    declared = ", ".join(f"element {el.name} {el.count}" for el in ply.elements)
+    last = ply.elements[-1] if ply.elements else None
+    if bytes_after is not None:
+        if bytes_after == 0:
+            return
+        row_size = last.data.dtype.itemsize if last is not None and last.data.dtype.fields else 0
+        if row_size and not any(t.kind == "O" for t, *_ in last.data.dtype.fields.values()) \
+                and bytes_after % row_size == 0:
+            rows = bytes_after // row_size
+            extra = f"{rows} more {last.name} row{'s' * (rows != 1)}"
+        else:
+            extra = f"{bytes_after} more bytes"
+        raise LabelsFileError(f"{path}: the header declares {declared} but the file holds {extra}: a wrong count "
+                              f"in the header (or a damaged file)")
+    data = path.read_bytes()
+    end = re.search(rb"^[ \t]*end_header[^\r\n]*(\r\n|\r|\n)", data, re.MULTILINE)
+    if end is None:
+        return
+    rows = sum(1 for line in data[end.end():].splitlines() if line.strip()) - sum(el.count for el in ply.elements)
+    if rows > 0:
+        raise LabelsFileError(f"{path}: the header declares {declared} but the file holds {rows} more "
+                              f"row{'s' * (rows != 1)}: a wrong count in the header")
 
 
 def ply_points(vertex: np.ndarray, path: Path) -> np.ndarray:

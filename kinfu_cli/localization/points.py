@@ -67,8 +67,11 @@ def read_segment_points(segments_json: str | os.PathLike, segment: int) -> np.nd
     try:
         vertex = read_ply_vertices(ply)
         pts = ply_points(vertex, ply)
+    except LabelsFileError as e:  # it names the file: a wrong row count, a damaged file
+        raise LocalizationError(str(e)) from None
+    try:
         rgb = np.stack([vertex["red"], vertex["green"], vertex["blue"]], axis=1).astype(np.int64)
-    except (LabelsFileError, ValueError) as e:
+    except ValueError as e:
         raise LocalizationError(f"{ply}: segment colours unreadable ({e})") from None
     want = np.round(segment_colors(np.array([segment]))[0] * 255).astype(np.int64)
     mask = np.all(np.abs(rgb - want) <= 1, axis=1)

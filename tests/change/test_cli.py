@@ -70,13 +70,14 @@ def test_diff_writes_changes_json_region_plys_and_scores_pois(pair, tmp_path):
     assert res.exit_code == 0 and json.loads(res.stdout)["regions"] == doc["regions"]
 
 
-def test_identical_volumes_give_no_region_and_no_warning(pair, tmp_path):
+def test_identical_volumes_give_no_region_and_say_so(pair, tmp_path):
     b, _ = pair
     res = run("diff", b, b, "-o", tmp_path / "d", "--json")
     assert res.exit_code == 0, res.output
     doc = json.loads(res.stdout)
-    assert doc["regions"] == [] and doc["warnings"] == [] and doc["counts"]["changed_voxels"] == {"removed": 0,
-                                                                                                 "added": 0}
+    assert doc["regions"] == [] and doc["counts"]["changed_voxels"] == {"removed": 0, "added": 0}
+    (warning,) = doc["warnings"]  # 0 changes of a volume against itself is no finding
+    assert "the same file" in warning
     assert doc["changes_ply"] is None and not (tmp_path / "d" / "changes.ply").exists()
     assert not list((tmp_path / "d" / "regions").glob("*.ply")) and (tmp_path / "d" / "changes.json").exists()
 
