@@ -14,8 +14,9 @@ or a volume.npz / ternary.npz) and the
 `ground-truth` of its evaluations (default: the ground_truth folder beside the recording, kinfu synth's
 layout). Paths are relative to the plan file. Everything is checked before any work: unknown keys or stages, a
 stage without the stages it needs, a stage without its inputs (diff without `before`, an evaluation without
-ground truth), a path that does not exist or a glob that matches nothing, and two recordings that would write
-to the same output folder are one-line errors naming the plan entry.
+ground truth), a path that does not exist or a glob that matches nothing, options for a stage that no
+recording runs (an entry's options: that the recording does not run), and two recordings that would write to
+the same output folder are one-line errors naming the plan entry.
 """
 
 from __future__ import annotations
@@ -266,6 +267,29 @@ def _links(source: Path, pairs: list[tuple[PlanRecording, dict]], viz: str | Non
     return out
 
 
+def _check_options_used(source: Path, common: dict[str, dict], recs: list[PlanRecording]) -> None:
+    """Options for a stage that would never run are a mistake (a stage left out of `stages`, options under the
+    wrong entry), not options kept for later: they were neither checked nor used, so refuse them. The plan's
+    common options need some recording with the stage; an entry's options need the stage in its own list."""
+    def keys(opts: dict) -> str:
+        return ", ".join(opts) or "an empty table"
+
+    every = {s for r in recs for s in r.stages}
+    for stage, opts in common.items():
+        if stage not in every:
+            raise _fail(source, f"options.{stage}", f"options ({keys(opts)}) for a stage that no recording of the "
+                                                     f"plan runs (stages: {', '.join(sorted(every))}): add {stage} "
+                                                     f"to 'stages' or remove its options")
+    for rec in recs:
+        for stage, opts in rec.options.items():
+            if stage not in rec.stages:
+                where = rec.entry.split(" ")[0]
+                raise _fail(source, f"{where}.options.{stage}",
+                            f"options ({keys(opts)}) for a stage that {rec.path} does not run (its stages: "
+                            f"{', '.join(s for s in rec.stages if s != VIZ_STAGE)}): add {stage} to its "
+                            f"stages or remove its options")
+
+
 #: stages that write a viewer file of their own (the combined file of a recording is made from them)
 VIZ_PARTS = ("fuse", "poi", "nbv", "segment")
 
@@ -300,6 +324,7 @@ def load_plan(source: str | os.PathLike, table: Mapping[str, StageSpec], output:
         raise _fail(source, "viz", "this stage table has no viewer stage")
     common = _normalise_options(source, "options", doc.get("options"), table)
     recs = _links(source, _recordings(source, doc, out, table, stages), viz, out)
+    _check_options_used(source, common, recs)
     merged = []
     for r in recs:
         opts = {s: {**common.get(s, {}), **r.options.get(s, {})} for s in r.stages}

@@ -60,10 +60,11 @@ def command(plan: Path, output: Path | None, workers: int | None, scheduler: str
     modification time, options, kinfu version) is skipped; --redo redoes everything (--force too, and it also
     writes over outputs kinfu did not write). A failing recording
     does not stop the others; the exit code is 1 when one failed, 2 for a bad plan (checked before any work:
-    unknown stages or options, option values the stage's command refuses, missing files, globs matching
-    nothing, a diff without `before`, an evaluation without ground truth, two recordings with one output folder,
-    an existing OUTPUT or recording folder holding files kinfu did not write (unless --force, which writes
-    beside them and replaces only a file named as an output), an unreachable --scheduler).
+    unknown stages or options, options for a stage no recording runs, option values the stage's command refuses,
+    missing files, globs matching nothing, a diff without `before`, an evaluation without ground truth, two
+    recordings with one output folder, an existing OUTPUT or recording folder holding files kinfu did not
+    write (unless --force, which writes beside them and replaces only a file named as an output), an
+    unreachable --scheduler).
 
     \b
     Example plan (examples/batch_plan.toml):

@@ -81,7 +81,8 @@ def command(segments: Path, output: Path, hand, segment_ids, cones, cone_apertur
     --multi-sq) get one candidate per part with the other parts as obstacles (eq. 8.2). Writes per segment
     the hand pose (4x4, position, quaternion x,y,z,w), the pre-grasp pose, cost, active constraints and
     the hand chosen; a segment whose optimisation does not converge is reported with converged false
-    and no pose. Reachability is only a proxy (distance to the workspace centre): inverse kinematics is
+    and no pose; one whose superquadric lies outside the box of its points is skipped with a warning
+    (skipped_segments). Reachability is only a proxy (distance to the workspace centre): inverse kinematics is
     the robot's job.
 
     \b
@@ -90,7 +91,8 @@ def command(segments: Path, output: Path, hand, segment_ids, cones, cone_apertur
       kinfu grasp out/segments/segments.json -o out/grasps.json --plot out/grasps.png
       kinfu grasp out/segments --hand right --cone top --json --quiet
     """
-    claim_outputs({"output": output, "plot": plot}, [segments / "segments.json" if segments.is_dir() else segments], force)
+    segments = segments / "segments.json" if segments.is_dir() else segments  # errors name the file
+    claim_outputs({"output": output, "plot": plot}, [segments], force)
     doc = read_segments(segments)
     plane = support_plane(doc, str(segments))
     up = plane[:3] if plane is not None else np.array([0.0, 0.0, 1.0])

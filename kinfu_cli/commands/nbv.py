@@ -44,7 +44,8 @@ def _up_option(value: str) -> tuple[float, float, float] | None:
 def _camera(p: dict, recorded: dict | None) -> CameraModel:
     """The sensor model from the parsed options; `recorded`: the intrinsics the volume was fused with."""
     return camera_from_options(p["fx"], p["fy"], p["cx"], p["cy"], p["width"], p["height"], p["camera_info"],
-                               p["min_range"], p["max_range"], p["vfov_extra"], recorded=recorded)
+                               p["min_range"], p["max_range"], p["vfov_extra"], recorded=recorded,
+                               recorded_from=str(p.get("volume") or "the volume"))
 
 
 def nbv_options(p: dict) -> NbvOptions:

@@ -10,7 +10,9 @@ overlap_rms (m) is the F term as a distance (RMS radial distance of H's L points
 (m) the palm's distance to the hand's workspace centre: a proxy for the thesis' E_p, E_o, which need the
 robot's inverse kinematics (the robot's job, not kinfu's); the last term (eq. 8.11, S parts) keeps a
 multi-part grasp away from the other parts. A segment with no converged candidate is reported with
-converged = false and no pose.
+converged = false and no pose. A segment whose superquadric's centre lies outside the oriented box of its points
+grown by the superquadric's largest semi-axis is not a fit of them: it is skipped with a warning and listed in
+`skipped_segments`; two segments with one id are an error.
 """
 
 from __future__ import annotations
@@ -130,6 +132,7 @@ class GraspResult:
     warnings: list[str]
     source: str = ""
     timing: dict = field(default_factory=dict)
+    skipped: dict[int, str] = field(default_factory=dict)  # segment id -> why it was not grasped
 
     def to_json(self) -> dict:
         o = self.options
@@ -143,7 +146,9 @@ class GraspResult:
                 "lifting": o.lifting, "pregrasp_distance": o.pregrasp_distance,
                 "reachability": "distance of the palm to the hand's workspace centre (a proxy: real inverse "
                                 "kinematics is the robot's job)",
-                "grasps": [g.to_json() for g in self.objects], "warnings": list(self.warnings),
+                "grasps": [g.to_json() for g in self.objects],
+                "skipped_segments": [{"segment": sid, "reason": why} for sid, why in self.skipped.items()],
+                "warnings": list(self.warnings),
                 "timing_s": self.timing}
 
 
@@ -190,12 +195,51 @@ def _segment_id(s: dict, i: int, source: str) -> int:
     return int(sid)
 
 
-def segment_parts(doc: dict, source: str) -> dict[int, list[Superquadric]]:
-    """Object segment id -> its superquadric parts (the multi-superquadric parts when present)."""
-    out = {}
+def _check_unique_ids(doc: dict, source: str) -> None:
+    """Two segments with one id: which one a chosen segment id and a grasp's `segment` mean is a guess: refuse."""
+    seen: dict[int, int] = {}
     for i, s in enumerate(doc["segments"]):
         if not isinstance(s, dict):
             raise GraspError(f"{source}: segments[{i}] is {type(s).__name__}, expected an object")
+        if s.get("kind") != "object" and (isinstance(s.get("id"), bool) or not isinstance(s.get("id"), int)):
+            continue  # only object segments need an integer id
+        sid = _segment_id(s, i, source)
+        if sid in seen:
+            raise GraspError(f"{source}: segments[{i}].id {sid} repeats segments[{seen[sid]}].id: expected one "
+                             f"segment per id")
+        seen[sid] = i
+
+
+def _box_problem(box, parts: list[Superquadric]) -> str | None:
+    """Why the superquadric parts cannot be fits of the segment's points (its 'oriented_box'): a part whose centre
+    lies outside the box grown on every side by the part's largest semi-axis; None when they fit or the segment
+    has no (readable) box."""
+    try:
+        center = np.asarray(box["center"], dtype=np.float64)
+        axes = np.asarray(box["axes"], dtype=np.float64)  # rows: the box's unit axes
+        extents = np.asarray(box["extents"], dtype=np.float64)
+        if center.shape != (3,) or axes.shape != (3, 3) or extents.shape != (3,) or not (
+                np.all(np.isfinite(center)) and np.all(np.isfinite(axes)) and np.all(np.isfinite(extents))):
+            return None
+    except (KeyError, TypeError, ValueError):
+        return None
+    for k, q in enumerate(parts):
+        local = np.abs(axes @ (q.center - center))
+        reach = extents / 2 + float(np.max(q.size))
+        if np.any(local > reach):
+            outside = float(np.max(local - reach))
+            name = "superquadric" if len(parts) == 1 else f"superquadric part {k}"
+            return (f"its {name}'s centre {np.round(q.center, 3).tolist()} m lies {outside:.3g} m outside the box of "
+                    f"its points (centre {np.round(center, 3).tolist()} m, sides {np.round(extents, 3).tolist()} m) "
+                    f"grown by its size {float(np.max(q.size)):.3g} m: not a fit of its points")
+    return None
+
+
+def segment_parts(doc: dict, source: str) -> dict[int, list[Superquadric]]:
+    """Object segment id -> its superquadric parts (the multi-superquadric parts when present)."""
+    _check_unique_ids(doc, source)
+    out = {}
+    for i, s in enumerate(doc["segments"]):
         if s.get("kind") != "object":
             continue
         sid = _segment_id(s, i, source)
@@ -208,6 +252,14 @@ def segment_parts(doc: dict, source: str) -> dict[int, list[Superquadric]]:
         elif s.get("superquadric"):
             out[sid] = [superquadric_from_json(s["superquadric"], f"{source}: segment {sid}")]
     return out
+
+
+def doubtful_segments(doc: dict, parts: dict[int, list[Superquadric]]) -> dict[int, str]:
+    """Segment id -> why its superquadric(s) lie far from its points (`_box_problem`), for the segments of `parts`
+    whose segments.json entry carries an oriented_box."""
+    boxes = {s.get("id"): s.get("oriented_box") for s in doc["segments"] if s.get("kind") == "object"}
+    return {sid: why for sid, ps in parts.items()
+            if isinstance(boxes.get(sid), dict) and (why := _box_problem(boxes[sid], ps))}
 
 
 def support_plane(doc: dict, source: str) -> np.ndarray | None:
@@ -261,7 +313,6 @@ def plan_grasps(segments: str | os.PathLike | dict, options: GraspOptions | None
     doc = read_segments(segments) if not isinstance(segments, dict) else segments
     plane = support_plane(doc, source)
     parts = segment_parts(doc, source)
-    warnings = []
     if options.segment_ids is not None:
         missing = [s for s in options.segment_ids if s not in parts]
         if missing:
@@ -271,6 +322,14 @@ def plan_grasps(segments: str | os.PathLike | dict, options: GraspOptions | None
     if not parts:
         raise GraspError(f"{source}: no object segment has a superquadric to grasp (run kinfu segment with "
                          f"superquadrics)")
+    # a grasp of a superquadric away from its object looks right and grasps air; it would also move the workspaces
+    skipped = doubtful_segments(doc, parts)
+    if skipped and len(skipped) == len(parts):
+        sid, why = next(iter(skipped.items()))
+        raise GraspError(f"{source}: no object segment has a superquadric that fits its points (segment {sid}: "
+                         f"{why}); run kinfu segment again")
+    warnings = [f"segment {sid}: {why}: skipped (listed in skipped_segments)" for sid, why in skipped.items()]
+    parts = {sid: ps for sid, ps in parts.items() if sid not in skipped}
     if plane is None:
         warnings.append("segments.json has no support plane: grasps are not kept above any table")
     up = plane[:3] if plane is not None else np.array([0.0, 0.0, 1.0])
@@ -298,4 +357,4 @@ def plan_grasps(segments: str | os.PathLike | dict, options: GraspOptions | None
             warnings.append(f"segment {o.segment}: no grasp satisfies every constraint (reported with converged "
                             f"false, no pose)")
     return GraspResult(objs, plane, {h: workspaces[h] for h in options.hands()}, options, warnings, source,
-                       {"total": time.perf_counter() - t0})
+                       {"total": time.perf_counter() - t0}, skipped)

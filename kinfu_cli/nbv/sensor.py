@@ -3,24 +3,32 @@ fused with, or (none of them) the Kinect v1 preset."""
 
 from __future__ import annotations
 
+import math
 import os
 
-from kinfu_cli.core.camera import SENSOR_PRESETS, CameraModel
+from kinfu_cli.core.camera import SENSOR_PRESETS, CameraModel, field_of_view_problem
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.io.camera_info import intrinsics_from_recording
+
+# Most pixels an NBV sensor image may hold: 4096 x 4096, ~55 x the Kinect v1's 640 x 480 and above any depth
+# camera's. Casting grows with the pixels: 16 x the Kinect's took ~12 s more per POI at the paper's sphere (peak
+# memory 0.45 -> 0.65 GB), so this bound is ~45 s a POI; a 1e9 px wide image ran out of memory.
+MAX_IMAGE_PIXELS = 4096 * 4096
 
 
 def camera_from_options(fx: float | None = None, fy: float | None = None, cx: float | None = None,
                         cy: float | None = None, width: int | None = None, height: int | None = None,
                         camera_info: str | os.PathLike | None = None, min_range: float = 0.5,
                         max_range: float = 4.0, vfov_extra_deg: float = 0.0,
-                        recorded: dict | None = None) -> CameraModel:
+                        recorded: dict | None = None, recorded_from: str = "the volume") -> CameraModel:
     """Build the NBV sensor model from explicit intrinsics, a recording, the volume's, or the default preset.
 
     Either all of fx, fy, cx, cy (width/height default 640x480), or `camera_info` (a recording with a
     sensor_msgs/CameraInfo topic), or none of them: then `recorded` (fx, fy, cx, cy, width, height: the
-    camera the volume was fused with, `fusion.volume.volume_intrinsics`), else the Kinect v1 calibration the
-    paper used (`camera_source` says which).
+    camera the volume was fused with, `fusion.volume.volume_intrinsics`; `recorded_from` names that volume in
+    errors), else the Kinect v1 calibration the paper used (`camera_source` says which). An image over
+    MAX_IMAGE_PIXELS, focal lengths that cannot be in pixels, or a field of view that `vfov_extra_deg` widens to
+    180 degrees is a ConfigError naming where the intrinsics came from.
     """
     given = {k: v for k, v in dict(fx=fx, fy=fy, cx=cx, cy=cy).items() if v is not None}
     if camera_info is not None:
@@ -39,9 +47,41 @@ def camera_from_options(fx: float | None = None, fy: float | None = None, cx: fl
         intr = dict(SENSOR_PRESETS["kinect_v1"] if recorded is None else recorded)
         if width is not None or height is not None:
             raise ConfigError("an image size needs fx, fy, cx, cy (or camera_info) as well", parameter="width/height")
-    return CameraModel(float(intr["fx"]), float(intr["fy"]), float(intr["cx"]), float(intr["cy"]),
-                       int(intr["width"]), int(intr["height"]), float(min_range), float(max_range),
-                       float(vfov_extra_deg))
+    cam = CameraModel(float(intr["fx"]), float(intr["fy"]), float(intr["cx"]), float(intr["cy"]),
+                      int(intr["width"]), int(intr["height"]), float(min_range), float(max_range),
+                      float(vfov_extra_deg))
+    if camera_info is not None:
+        source, parameter = f"{camera_info}: its CameraInfo's", "camera_info"
+    elif given:
+        source, parameter = "the given", None
+    elif recorded is not None:
+        source, parameter = f"{recorded_from}: the camera it was fused with, its", None
+    else:
+        source, parameter = "the Kinect v1 preset's", None
+    _check_sensor(cam, source, parameter)
+    return cam
+
+
+def _check_sensor(cam: CameraModel, source: str, parameter: str | None) -> None:
+    """Refuse a sensor image too large to cast or with an impossible field of view, naming `source` (where the
+    intrinsics came from; `parameter` the option that gave them, None: fx/fy/cx/cy/width/height themselves):
+    otherwise a huge image runs out of memory, or its widening blames vfov_extra_deg, which was not wrong."""
+    if cam.width * cam.height > MAX_IMAGE_PIXELS:
+        side = math.isqrt(MAX_IMAGE_PIXELS)
+        raise ConfigError(f"{source} image size {cam.width}x{cam.height} px holds {cam.width * cam.height:,} "
+                          f"pixels, more than the {MAX_IMAGE_PIXELS:,} ({side}x{side}) an NBV sensor may have; "
+                          f"expected a depth camera's image size", parameter=parameter or "width/height")
+    if problem := field_of_view_problem(cam.K, cam.width, cam.height):
+        raise ConfigError(f"{source} intrinsics: {problem}", parameter=parameter or "fx/fy/width/height")
+    if cam.vfov_extra_deg > 0:
+        top = math.degrees(math.atan((cam.cy + 0.5) / cam.fy))
+        bottom = math.degrees(math.atan((cam.height - 0.5 - cam.cy) / cam.fy))
+        if max(top, bottom) + cam.vfov_extra_deg >= 90:
+            raise ConfigError(f"{source} fy={cam.fy:g}, cy={cam.cy:g}, height {cam.height} px see {top:.1f} deg "
+                              f"above and {bottom:.1f} deg below the optical axis; {cam.vfov_extra_deg:g} deg more "
+                              f"on each side (vfov_extra_deg) reach 180 degrees: expected a principal point inside "
+                              f"the image and a depth camera's focal length in pixels",
+                              parameter=parameter or "fy/cy/height")
 
 
 def camera_source(fx=None, fy=None, cx=None, cy=None, camera_info=None, recorded: dict | None = None) -> str:

@@ -39,6 +39,10 @@ class SphereSpec:
     lat_step: float = 10.0
     roll_step: float = 45.0
 
+    def view_count(self) -> int:
+        """Number of poses `viewpoints` makes (ConfigError beyond MAX_SPHERE_VIEWS), without making them."""
+        return sphere_view_count(self.lon_step, self.lat_min, self.lat_max, self.lat_step, self.roll_step)
+
     def viewpoints(self, center, up=None) -> np.ndarray:
         """(N, 4, 4) camera-to-world poses on this sphere around `center` (see `sphere_viewpoints`)."""
         return sphere_viewpoints(center, **asdict(self), up=up)
@@ -71,6 +75,11 @@ def _angles(start: float, stop: float, step: float, *, closed: bool, name: str) 
 # through `kinfu nbv` (its pose, sphere temporaries, scores and, with --top 0, its listed view; measured 450 MB for
 # 2 x 96,000) and ~0.1 ms, so the limit keeps a POI near 0.1 GB and 10-20 s, where a 0.01 deg step took 1.7 GB.
 MAX_SPHERE_VIEWS = 100_000
+# Most candidate views one run may rank over all its POIs (each POI gets its own sphere, all made up front): at the
+# same ~1.2 kB a candidate that is ~1.2 GB of peak memory and 2-7 min of casting (0.1-0.4 ms a view, the latter
+# measured on the sample's POIs); 1,000 POIs at the paper's 960 views, or 10 spheres at MAX_SPHERE_VIEWS. 2,000
+# POIs made 1.9 M poses and a run of many minutes.
+MAX_RUN_VIEWS = 1_000_000
 
 
 def sphere_view_count(lon_step: float = PAPER_SPHERE.lon_step, lat_min: float = PAPER_SPHERE.lat_min,

@@ -29,7 +29,7 @@ from kinfu_cli.nbv.objects import W_TH, ObjectPlan, known_grid, nbv_scorer, plan
 from kinfu_cli.nbv.ranking import (PoiRanking, check_region_inside, estimate_table_z, forget_around,
                                    least_blocked_share, load_pois, rank_poi, unknown_in_sphere)
 from kinfu_cli.nbv.raycast import RayVolume
-from kinfu_cli.nbv.viewpoints import PAPER_SPHERE, SphereSpec, read_candidates
+from kinfu_cli.nbv.viewpoints import MAX_RUN_VIEWS, PAPER_SPHERE, SphereSpec, read_candidates
 from kinfu_cli.segmentation.pipeline import load_segment_input
 
 # a POI is unreachable when at least this share of every valid view's rays stops on unknown space outside S(POI)
@@ -149,16 +149,34 @@ def _view_bar(total: int, quiet: bool):
     return progress_bar(total, desc="nbv candidates", unit="view", quiet=quiet)
 
 
+def check_run_size(pois_path, n_pois: int, opts: NbvOptions, n_candidates: int | None = None) -> int:
+    """The number of candidate views the run ranks (every POI's sphere, or the candidate file once per POI);
+    ConfigError naming the POI file and the sphere options (or the candidate file) when it exceeds
+    MAX_RUN_VIEWS, before any pose is made."""
+    per_poi = opts.sphere.view_count() if n_candidates is None else n_candidates
+    total = n_pois * per_poi
+    if total > MAX_RUN_VIEWS:
+        what = "views on each viewing sphere" if n_candidates is None else f"candidates in {opts.candidates}"
+        fix = ("use larger sphere steps or a narrower latitude range" if n_candidates is None
+               else "give fewer candidates")
+        raise ConfigError(f"{pois_path}: {n_pois:,} POIs x {per_poi:,} {what} = {total:,} candidate views, more "
+                          f"than the {MAX_RUN_VIEWS:,} one run ranks (~1.2 kB of memory each); rank the POIs in "
+                          f"several runs (split the file) or {fix}",
+                          parameter="lon_step/lat_step/roll_step" if n_candidates is None else "candidates")
+    return total
+
+
 def rank_poi_views(volume_path: str | os.PathLike, pois_path: str | os.PathLike, camera: CameraModel,
                    options: NbvOptions | None = None, *, quiet: bool = True) -> PoiViews:
     """Rank the views of every POI of `pois_path` in the volume (a ternary.npz or a volume.npz)."""
     opts = options or NbvOptions()
     opts.validate()
     pois = load_pois(pois_path, opts.poi_radius)
+    candidates = read_candidates(opts.candidates) if opts.candidates is not None else None
+    check_run_size(pois_path, len(pois), opts, None if candidates is None else len(candidates))
     grid = load_grid(volume_path)
     for p in pois:
         check_region_inside(grid, p.position, f"{pois_path}: POI {p.id}")
-    candidates = read_candidates(opts.candidates) if opts.candidates is not None else None
     cleared = {p.id: forget_around(grid, p.position, p.radius) for p in pois} if opts.clear else {}
     up, up_source = resolve_up(grid, opts.up)
     table_z = resolve_table_z(grid, opts.table_z, up)
