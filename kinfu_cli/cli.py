@@ -148,7 +148,12 @@ class _Main(_LazyGroup):
             click.echo("kinfu: interrupted", err=True)
             ctx.exit(130)
         except MemoryError:
-            click.echo("kinfu: error: out of memory (try a coarser --voxel-size or smaller --size)", err=True)
+            click.echo(f"kinfu: error: out of memory{self._memory_advice(ctx)}", err=True)
+            ctx.exit(2)
+        except EOFError as exc:  # kinfu reads no terminal input: a reader met the end of a cut file (click's main
+            # would take it for Ctrl-D and abort)
+            why = f" ({exc})" if str(exc) else ""
+            click.echo(f"kinfu: error: {_one_line(f'an input file ends early, it may be truncated{why}')}", err=True)
             ctx.exit(2)
         except OSError as exc:
             where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
@@ -160,6 +165,17 @@ class _Main(_LazyGroup):
             click.echo("kinfu: interrupted", err=True)
             ctx.exit(130)
 
+    def _memory_advice(self, ctx: click.Context) -> str:
+        """The grid options of the command that ran out of memory, when it has them (nbv, poi, ... do not)."""
+        name = ctx.invoked_subcommand
+        command = self.get_command(ctx, name) if name else None
+        if isinstance(command, click.Group):  # eval fusion, eval nbv, ...: the leaf command is not known here
+            return ""
+        flags = {opt for p in getattr(command, "params", ()) for opt in p.opts}
+        grid = [f for f in ("--voxel-size", "--size") if f in flags]
+        return " (try a coarser --voxel-size or a smaller --size)" if len(grid) == 2 else (
+            f" (try a coarser {grid[0]})" if grid else "")
+
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
         try:
             code = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
@@ -167,7 +183,7 @@ class _Main(_LazyGroup):
         except click.ClickException as exc:
             click.echo(f"kinfu: error: {_one_line(_usage_message(exc))}", err=True)
             code = exc.exit_code
-        except (KeyboardInterrupt, click.Abort, EOFError):
+        except (KeyboardInterrupt, click.Abort):
             click.echo("kinfu: interrupted", err=True)
             code = 130
         if standalone_mode:

@@ -240,7 +240,7 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
         stats = FrameStats()
         frames = iter_frames(rec, found, pose_source=plan.source, pose_topic=pose_topic, start_s=start_s,
                              end_s=end_s, every=every, stats=stats, tf=tf, tolerance_s=tolerance_s)
-        integrator = _Integrator(vol, plan.mode, grid_spec, origin, names["origin"], str(rec.path), timing, icp)
+        integrator = _Integrator(vol, plan, grid_spec, origin, names["origin"], str(rec.path), timing, icp)
         # past max_lost of the most frames the time window can select (counted before reading, when tracking): stop
         bound = (-(-window_depth_count(rec, found.depth_topic, start_s, end_s, tolerance_s) // every)
                  if integrator.tracker is not None else 0)
@@ -391,7 +391,8 @@ def _auto_grid(rec: Recording, roles: Roles, plan: _PosePlan, grid_spec: _GridSp
 def _tracking_verdict(integrator: _Integrator, max_lost: float, recording: str,
                       bound: int | None = None) -> list[str]:
     """Warnings about frames lost by tracking; RecordingError when more than max_lost of the tracked frames were,
-    or (while fusing) of `bound`, the most frames the selection can have."""
+    or (while fusing) of `bound`, the most frames the selection can have. When tracking ran only because TF does
+    not reach the camera (integrator.no_tf_link), a run that fails names that cause, not max_lost."""
     lost, tracked = integrator.lost, len(integrator.track_log)
     if not lost:
         return []
@@ -403,12 +404,15 @@ def _tracking_verdict(integrator: _Integrator, max_lost: float, recording: str,
     advice = "sub-sample less, or give camera poses"
     if integrator.mode == "hint":
         advice = "ICP put frames far from their TF poses: check the camera frame and the TF chain to it"
+    parameter: str | None = "max_lost"
+    if integrator.no_tf_link:  # tracking only because TF did not reach the camera: the missing link is what to mend
+        advice, parameter = integrator.no_tf_link.removeprefix(f"{recording}: "), None
     if bound is not None:
         raise RecordingError(f"{recording}: {what}; stopped: more than {100 * max_lost:.0f} % of the {bound} frames "
-                             f"selected ({advice})", parameter="max_lost")
+                             f"selected ({advice})", parameter=parameter)
     if len(lost) > max_lost * tracked:
         raise RecordingError(f"{recording}: {what}; more than the {100 * max_lost:.0f} % allowed ({advice})",
-                             parameter="max_lost")
+                             parameter=parameter)
     return [f"{what}; they were not fused"]
 
 
@@ -543,10 +547,11 @@ class _Integrator:
     """Integrates filtered frames into the volume: creates it on the first frames when there is none yet,
     takes each camera pose as given or tracks it (icp from the previous pose, hint from the given one)."""
 
-    def __init__(self, volume: TernaryVolume | None, mode: str, grid_spec: _GridSpec, origin: tuple | None,
+    def __init__(self, volume: TernaryVolume | None, plan: _PosePlan, grid_spec: _GridSpec, origin: tuple | None,
                  origin_name: str, recording: str, timing: dict[str, float], icp: str = "projective") -> None:
         self.volume = volume
-        self.mode = mode
+        self.mode = mode = plan.mode
+        self.no_tf_link = plan.warning  # why ICP tracks though the recording has TF ("" when it does not)
         self.grid_spec = grid_spec
         self.origin = origin
         self.origin_name = origin_name

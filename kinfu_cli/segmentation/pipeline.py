@@ -22,7 +22,7 @@ from kinfu_cli.segmentation.multi_superquadric import MultiSuperquadric, fit_mul
 from kinfu_cli.segmentation.saliency import SegmentSaliency, oriented_box, segment_saliency
 from kinfu_cli.segmentation.shape_prior import classify_shape, exponent_bounds
 from kinfu_cli.segmentation.bridges import volume_space
-from kinfu_cli.segmentation.segments import PLANE_LABEL, Segmentation, SegmentationParams, segment_cloud
+from kinfu_cli.segmentation.segments import MAX_DISTANCE_M, PLANE_LABEL, Segmentation, SegmentationParams, segment_cloud
 from kinfu_cli.segmentation.superquadric import SegmentError, SuperquadricFit, fit_superquadric
 from kinfu_cli.segmentation.surface import SurfaceCloud, surface_from_volume
 
@@ -252,6 +252,10 @@ def scale_for_voxel(options: SegmentOptions, voxel_size: float) -> tuple[Segment
     v = float(voxel_size)
     share = (CLOUD_SPACING / max(CLOUD_SPACING, v)) ** 2  # points per area against the tuned cloud's
     default = SegmentationParams()
+    if VOXEL_ADJACENCY * v > MAX_DISTANCE_M and "adjacency_radius" not in options.explicit:
+        raise VolumeError(f"voxel size {v:g} m is too coarse to segment: neighbouring surface points lie "
+                          f"{VOXEL_ADJACENCY:g} voxels ({VOXEL_ADJACENCY * v:g} m) apart, beyond any scene "
+                          f"(adjacency radius at most {MAX_DISTANCE_M:g} m)")
     wanted = {"adjacency_radius": max(default.adjacency_radius, VOXEL_ADJACENCY * v),
               "min_segment_points": max(MIN_SCALED_POINTS, round(default.min_segment_points * share)),
               "fragment_points": max(2 * MIN_SCALED_POINTS, round(default.fragment_points * share))}
@@ -427,8 +431,14 @@ def segment_volume(volume: str | os.PathLike | TernaryVolume | TernaryGrid,
     t0 = time.perf_counter()
     options = options or SegmentOptions()
     options.validate()
+    path = None
     if isinstance(volume, (str, os.PathLike)):
-        volume = load_segment_input(volume)
-    result = analyse_volume(volume, options)
+        path, volume = str(volume), load_segment_input(volume)
+    try:
+        result = analyse_volume(volume, options)
+    except VolumeError as exc:  # what is wrong with the volume (too coarse, no surface) names its file
+        if path is None or str(exc).startswith(path):
+            raise
+        raise VolumeError(f"{path}: {exc}", parameter=exc.parameter) from None
     result.timing["total"] = time.perf_counter() - t0
     return result

@@ -135,6 +135,9 @@ CONTACT_BAND = 0.015
 FOOT_BAND = 0.015  # feet (step 7): object points higher than this over the support are the object's side, never a foot (m)
 
 
+MAX_DISTANCE_M = 10.0  # the largest seed_resolution, adjacency_radius, plane_distance: beyond any scene
+
+
 @dataclass
 class SegmentationParams:
     """Every knob of the segmentation, with its thesis/PCL meaning (defaults: thesis ch. 4 VCCS values)."""
@@ -227,7 +230,7 @@ class SegmentationParams:
         """ConfigError naming the first parameter out of its range."""
         check_number(self.up_tolerance_deg, "up_tolerance_deg", 0, 90, unit="deg")
         for name in ("seed_resolution", "adjacency_radius", "plane_distance"):
-            check_number(getattr(self, name), name, 1e-4, 10, unit="m")
+            check_number(getattr(self, name), name, 1e-4, MAX_DISTANCE_M, unit="m")
         check_number(self.plane_color_margin, "plane_color_margin", 0, 10, unit="m")
         check_number(self.bridge_gap, "bridge_gap", 0, 1, unit="m")
         for name in ("spatial_importance", "normal_importance", "color_importance"):

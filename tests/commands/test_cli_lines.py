@@ -55,3 +55,37 @@ def test_ctrl_c_is_one_line_and_exit_130(tmp_path):
     assert err == "kinfu: interrupted\n"
     assert not (tmp_path / "out").exists()
     assert [p.name for p in tmp_path.iterdir()] == []  # no debris either
+
+
+
+@pytest.mark.parametrize("command, advice", [("fuse", " (try a coarser --voxel-size or a smaller --size)"),
+                                             ("info", "")])
+def test_out_of_memory_is_one_line_advising_only_options_the_command_has(monkeypatch, command, advice):
+    """An nbv or info run out of memory was told to try --voxel-size / --size, options it does not have."""
+    import click
+
+    real = cli.get_command(click.Context(cli), command)
+
+    def no_memory(**kwargs):
+        raise MemoryError
+
+    fake = click.Command(command, params=real.params, callback=no_memory)
+    monkeypatch.setattr(type(cli), "get_command", lambda self, ctx, name: fake if name == command else None)
+    res = CliRunner().invoke(cli, [command, "x.mcap"] + (["-o", "out"] if command == "fuse" else []))
+    assert res.exit_code == 2 and res.output == f"kinfu: error: out of memory{advice}\n", res.output
+
+
+def test_a_reader_meeting_the_end_of_a_cut_file_is_an_error_not_an_interrupt(monkeypatch):
+    """An EOFError (np.load of an empty file, a reader at the end of a cut one) was reported as Ctrl-C."""
+    import click
+
+    real = cli.get_command(click.Context(cli), "info")
+
+    def cut_short(**kwargs):
+        raise EOFError("No data left in file")
+
+    fake = click.Command("info", params=real.params, callback=cut_short)
+    monkeypatch.setattr(type(cli), "get_command", lambda self, ctx, name: fake if name == "info" else None)
+    res = CliRunner().invoke(cli, ["info", "x.mcap"])
+    assert res.exit_code == 2
+    assert res.output == "kinfu: error: an input file ends early, it may be truncated (No data left in file)\n"

@@ -63,3 +63,25 @@ def test_frames_fused_at_their_tf_pose_are_counted_apart_and_warned_about_past_m
     assert len(w) == 1 and "only 14 of 20" in w[0] and "too little overlap: 5" in w[0]
     assert "only re-localisation found a pose: 1" in w[0]
     assert _fallback_warnings(log, 0.5) == [] and _fallback_warnings(track_log(0.0, 0), 0.0) == []
+
+
+def test_a_run_tracked_only_because_tf_misses_the_camera_blames_the_missing_link_not_max_lost():
+    """Pose mode chosen automatically: the recording has TF, but not to the depth frame, so ICP tracked; when too
+    many frames are lost the error names that cause (the fix is naming the frames), not max_lost."""
+    from types import SimpleNamespace
+
+    import pytest
+
+    from kinfu_cli.core.errors import RecordingError
+    from kinfu_cli.fusion.pipeline import _tracking_verdict
+
+    integrator = SimpleNamespace(lost=[1, 2], track_log=[{}] * 3, mode="icp", no_tf_link="")
+    with pytest.raises(RecordingError) as plain:
+        _tracking_verdict(integrator, 0.1, "rec.mcap")
+    assert plain.value.parameter == "max_lost" and "give camera poses" in str(plain.value)
+    why = "rec.mcap: the TF tree (10 frames) does not link camera frame cam to world: camera poses come from ICP"
+    for bound in (None, 8):
+        with pytest.raises(RecordingError) as err:
+            _tracking_verdict(SimpleNamespace(**{**vars(integrator), "no_tf_link": why}), 0.1, "rec.mcap", bound)
+        assert err.value.parameter is None
+        assert "does not link camera frame cam to world" in str(err.value) and "give camera poses" not in str(err.value)

@@ -111,3 +111,20 @@ def test_voxels_coarser_than_2_cm_are_a_warning(coarse):
     res = analyse_volume(_box_on_table(0.03), opts)
     (warning,) = [w for w in res.warnings if "coarser than" in w]
     assert "30 mm" in warning and "15 cm" in warning
+
+
+def test_a_voxel_too_coarse_for_any_neighbourhood_is_an_error_naming_the_file_not_an_option(tmp_path):
+    """A 1000 m voxel (a damaged or foreign file) scaled the adjacency radius to 2000 m, and the error then blamed
+    --adjacency-radius, an option nobody gave; it now names the file and its voxel size."""
+    from kinfu_cli.core.grid import save_ternary
+
+    grid = _box_on_table(0.02)
+    path = tmp_path / "huge.npz"
+    save_ternary(path, TernaryGrid(grid.labels, grid.origin, 1000.0))
+    res = CliRunner().invoke(cli, ["segment", str(path), "-o", str(tmp_path / "seg"), "--quiet"])
+    assert res.exit_code == 2
+    assert f"{path}: voxel size 1000 m is too coarse to segment" in res.output
+    assert "--adjacency-radius" not in res.output and not (tmp_path / "seg").exists()
+    given = CliRunner().invoke(cli, ["segment", str(path), "-o", str(tmp_path / "seg"), "--quiet",
+                                     "--adjacency-radius", "0.02"])
+    assert "too coarse" not in given.output  # the caller's own radius is theirs: no scaling, no such error
