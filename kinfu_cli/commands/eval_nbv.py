@@ -58,8 +58,9 @@ def check_options(params: dict) -> None:
               type=click.Choice(list(gain_names())), help="Gain function.")
 @click.option("--inc-th", type=float, default=None, help="IncTh [default: 1% of the pixels that see S(POI)].")
 @click.option("--poi-radius", default=DEFAULT_RADIUS, show_default=True, type=float, help="Radius of S(POI) (m).")
-@click.option("--pois-from", default="gmm-as", show_default=True, type=click.Choice(["gmm-as", "truth"]),
-              help="POIs from GMM-AS on the simulated hand trajectory, or the true changes.")
+@click.option("--pois-from", default=None, type=click.Choice(["gmm-as", "truth"]),
+              help="POIs of a kinfu synth folder SCENE from GMM-AS on the simulated hand trajectory, or the true "
+                   "changes (poi, random, fixed; a bare mesh takes --poi).  [default: gmm-as]")
 @click.option("--poi", nargs=3, type=float, default=None,
               help="POI x y z for a bare mesh SCENE (poi, random, fixed; a kinfu synth folder brings its own).")
 @click.option("--optimistic/--paper-stop", default=True, show_default=True,

@@ -69,7 +69,8 @@ def _lines(doc: dict) -> list[str]:
 @mupf_filter_options
 @click.option("--max-points", type=int, default=MAX_POINTS, show_default=True,
               help="Thin more points than this to this many, in their order (the thesis runs on 100 points of a "
-                   "cloud; a fused segment has thousands); 0 = all.")
+                   "cloud; a fused segment has thousands); 0 = all. A run estimated to filter for over 10 minutes "
+                   "(particles x points x window) is refused.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed.")
 @click.option("--json", "as_json", is_flag=True, help="Print pose.json to stdout.")
 @click.option("--quiet", is_flag=True, help="No progress output.")

@@ -95,7 +95,7 @@ class LoopConfig:
     gain: str = "unknown"
     inc_th: float | None = None
     poi_radius: float = DEFAULT_RADIUS
-    pois_from: str = "gmm-as"
+    pois_from: str | None = None  # gmm-as or truth for a kinfu synth folder; None: gmm-as (a bare mesh takes poi)
     oscillation_deg: float = 5.0
     path_step: float = 0.1
     scan_every: int = 1
@@ -139,8 +139,11 @@ class LoopConfig:
         check_number(self.views, "views", 1, 1000, integer=True)
         if not (0.002 <= self.voxel_size <= 0.1):
             raise ConfigError(f"expected 0.002 to 0.1 m, got {self.voxel_size}", parameter="voxel_size")
-        if self.pois_from not in ("gmm-as", "truth"):
+        if self.pois_from is not None and self.pois_from not in ("gmm-as", "truth"):
             raise ConfigError(f"expected gmm-as or truth, got {self.pois_from!r}", parameter="pois_from")
+        if self.pois_from is not None and all(explore):  # recorded in the result but not used
+            raise ConfigError(f"the POI-free exploration ({','.join(self.strategies)}) finds no POIs; the POI "
+                              f"source is for poi, random or fixed on a kinfu synth folder", parameter="pois_from")
         if self.scan_every < 1:
             raise ConfigError(f"expected at least 1, got {self.scan_every}", parameter="scan_every")
         check_number(self.explore_view_frames, "explore_view_frames", 1, 1000, integer=True)
@@ -191,8 +194,8 @@ def load_scene(path: str | os.PathLike, cfg: LoopConfig) -> SimScene:
             if all(s in EXPLORE for s in cfg.strategies):
                 raise ConfigError(f"the POI-free exploration ({','.join(cfg.strategies)}) takes no POI; the POI "
                                   f"position is for poi, random or fixed on a bare mesh SCENE", parameter="poi")
-            raise ConfigError(f"{path}: a kinfu synth folder brings its POIs (from {cfg.pois_from}); give the POI "
-                              f"position only for a bare mesh SCENE", parameter="poi")
+            raise ConfigError(f"{path}: a kinfu synth folder brings its POIs (from {cfg.pois_from or 'gmm-as'}); "
+                              f"give the POI position only for a bare mesh SCENE", parameter="poi")
         gt = load_ground_truth(path)
         table = gt.info.get("table", {})
         cx, cy = table.get("center", [0.0, 0.0])
@@ -211,6 +214,10 @@ def load_scene(path: str | os.PathLike, cfg: LoopConfig) -> SimScene:
         mesh = o3d.io.read_triangle_mesh(str(path))
     if len(mesh.triangles) == 0:
         raise RecordingError(f"{path}: not a triangle mesh (no triangles)")
+    if cfg.pois_from is not None:  # neither a hand trajectory nor true changes: it would read as the POIs' source
+        raise ConfigError(f"{path}: a bare mesh has no hand trajectory (gmm-as) nor true changes (truth) to find "
+                          f"POIs from; give the POI position instead, or a kinfu synth folder as SCENE",
+                          parameter="pois_from")
     if cfg.poi is None and not all(s in EXPLORE for s in cfg.strategies):  # the exploration says why it cannot
         raise ConfigError(f"{path}: a bare mesh has no hand trajectory; give the POI position (x, y, z)",
                           parameter="poi")
@@ -385,7 +392,9 @@ def run_loop(scene_path: str | os.PathLike, cfg: LoopConfig, quiet: bool = True,
     pois = _find_pois(sc, cfg)
     inside = [p for p in pois if np.all(p >= base.origin) and np.all(p < base.origin + np.array(base.shape) * base.voxel_size)]
     if not inside:
-        raise ConfigError(f"{scene_path}: no POI inside the simulated volume ({len(pois)} found by {cfg.pois_from})")
+        found_by = ((cfg.pois_from or "gmm-as") if sc.hand is not None else
+                    "the given POI position" if cfg.poi is not None else "truth")
+        raise ConfigError(f"{scene_path}: no POI inside the simulated volume ({len(pois)} found by {found_by})")
     pois = np.array(inside)
     timer.add("pois", time.perf_counter() - t)
 
@@ -420,6 +429,8 @@ def _cfg_doc(cfg: LoopConfig) -> dict:
     d = asdict(cfg)
     d["strategies"] = list(cfg.strategies)
     d["modes"] = list(cfg.modes)
+    if d["pois_from"] is None:  # the source the run used: gmm-as unless a bare mesh's given position
+        d["pois_from"] = "poi" if cfg.poi is not None else "gmm-as"
     return d
 
 

@@ -402,6 +402,19 @@ def _sampled_spacing(area: float, count: int, spacing: float, state: str) -> tup
                   f"(completeness is measured at that spacing)"]
 
 
+def coarse_spacing_warnings(spacing: float, threshold: float, observed: int) -> list[str]:
+    """A warning when the true surface was sampled (`spacing`: the spacing really used, `_sampled_spacing`)
+    farther apart than the `threshold` completeness is measured at: a hole narrower than the spacing can fall
+    between the samples, and a few samples make the share jump (spacing 1 m left 6 observed samples of the sample
+    scene, completeness 1.0)."""
+    if spacing <= threshold:
+        return []
+    return [f"the true-surface sample spacing {spacing:.3g} m is coarser than the distance threshold {threshold:g} m "
+            f"completeness is measured at: it rests on {observed} observed sample{'s' if observed != 1 else ''} and "
+            f"misses holes narrower than the spacing; give a spacing of at most the threshold (default "
+            f"{DEFAULT_SPACING:g} m)"]
+
+
 def reconstruction_bounds(rec: Reconstruction, margin: float = 0.05) -> tuple[np.ndarray, np.ndarray]:
     """Where the reconstruction could have surface: its volume's grid, else its bounding box grown by margin."""
     if rec.volume is not None:
@@ -511,7 +524,8 @@ def evaluate_fusion(path: str | os.PathLike, ground_truth: str | os.PathLike, st
             measures = object_measures(rec.vertices, gt, state, margin=margin, min_height=min_height,
                                        footprint=footprint, surface=(surface.in_bounds, surface.seen))
     doc = _document(rec, gt, state, window, report, score, measures, time.perf_counter() - t0)
-    doc["warnings"] = surface.warnings + state_warnings(gt, state, window) + init_warnings(report, gt)
+    doc["warnings"] = (surface.warnings + coarse_spacing_warnings(surface.spacing, threshold, len(surface.observed))
+                       + state_warnings(gt, state, window) + init_warnings(report, gt))
     return FusionEvaluation(doc, rec, score)
 
 

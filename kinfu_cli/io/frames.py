@@ -139,6 +139,7 @@ class _PosePath:
         if wrong:
             raise RecordingError(f"{rec.path}: pose topic {topic} carries {', '.join(wrong)}; expected one of "
                                  f"{', '.join(POSE_TYPES)}")
+        self.rec_path, self.topic = rec.path, topic
         self.tf = TfBuffer()
         self.frame = None
         for _, msgtype, log_ns, msg in rec.typed_messages([topic]):
@@ -162,6 +163,11 @@ class _PosePath:
 
     def pose(self, stamp_ns: int) -> np.ndarray:
         return self.tf.lookup(self.frame, "__camera__", stamp_ns, tolerance_ns=self.tolerance_ns)
+
+    def gap_warnings(self) -> list[str]:
+        """The TF buffer's warnings for lookups interpolated across a long gap, naming the topic."""
+        link = f"TF link {self.frame} -> __camera__"
+        return [w.replace(link, f"{self.rec_path}: pose topic {self.topic}") for w in self.tf.gap_warnings()]
 
 
 def iter_frames(rec, roles: Roles | None = None, pose_source: str = "tf", pose_topic: str | None = None,
@@ -229,6 +235,8 @@ def iter_frames(rec, roles: Roles | None = None, pose_source: str = "tf", pose_t
     yield from pairer.stream(start_ns, end_ns, every)
     if pose_source == "tf":  # poses interpolated across a long gap in a TF link: known once the frames are read
         stats.notes += [w for w in tf.gap_warnings() if w not in stats.notes]
+    elif pose_source == "topic":  # or across a long gap of the pose topic
+        stats.notes += [w for w in pose_fn.gap_warnings() if w not in stats.notes]
 
 
 def check_seconds(value: float, parameter: str, minimum: float = -MAX_SECONDS) -> float:
@@ -411,6 +419,7 @@ def _topic_poses(rec, pose_topic: str | None, tol_ns: int, stats: FrameStats) ->
             stats.drop(DROP_NO_POSE_TOPIC)
             return None
 
+    pose.gap_warnings = path.gap_warnings  # type: ignore[attr-defined]  # read once the frames are
     return pose
 
 

@@ -362,7 +362,8 @@ class _RosbagsBackend(_Backend):
             raise _read_error(path, exc, self.kind) from None
         stack.callback(self._close)
         self.storage_counts = self._storage_counts() if fmt == "ros2" else None
-        self.count_problems = self._count_disagreements()
+        self.storage_span = self._storage_span() if fmt == "ros2" else None
+        self.count_problems = self._count_disagreements() + self._span_disagreement()
 
     def _storage_counts(self) -> dict[str, int] | None:
         """Messages per topic as a ROS 2 bag's storage files hold them (rosbags reads the sqlite3 database's
@@ -390,6 +391,37 @@ class _RosbagsBackend(_Backend):
             return []
         return [f"{self.path}: metadata.yaml's message counts disagree with its storage on {len(wrong)} "
                 f"topic{'s' if len(wrong) > 1 else ''} ({'; '.join(wrong)}): the stored counts are used"]
+
+    def _storage_span(self) -> tuple[int | None, int | None] | None:
+        """First and last log stamps (ns) a ROS 2 bag's storage files hold (rosbags reads the sqlite3 database's
+        MIN/MAX timestamp, an MCAP file's statistics, when it opens them), (None, None) when they hold no message;
+        None when rosbags does not show them (metadata.yaml's span stands)."""
+        try:
+            spans = [(int(st.metadata.start_time), int(st.metadata.end_time) - 1)  # rosbags' end is exclusive
+                     for st in self.reader.readers[0].storage.storages if st.metadata.message_count]
+        except Exception:  # another rosbags layout
+            return None
+        return (min(a for a, _ in spans), max(b for _, b in spans)) if spans else (None, None)
+
+    def _span_disagreement(self) -> list[str]:
+        """A problem when metadata.yaml's starting_time / duration are not the span the storage holds."""
+        if self.storage_span is None or self.storage_span == self._listed_span():
+            return []
+
+        def text(span):
+            a, b = span
+            return "none" if a is None else f"{a} .. {b} ns ({(b - a) * 1e-9:.3f} s)"
+
+        return [f"{self.path}: metadata.yaml's time span (starting_time, duration) disagrees with its storage: "
+                f"{text(self._listed_span())} listed, {text(self.storage_span)} stored: the stored span is used"]
+
+    def _listed_span(self) -> tuple[int | None, int | None]:
+        if not self.reader.connections or sum(c.msgcount for c in self.reader.connections) == 0:
+            return None, None
+        try:
+            return int(self.reader.start_time), int(self.reader.end_time) - 1  # rosbags' end is exclusive
+        except Exception as exc:
+            raise _read_error(self.path, exc, self.kind) from None
 
     def _close(self) -> None:
         with contextlib.suppress(Exception):
@@ -422,12 +454,8 @@ class _RosbagsBackend(_Backend):
             raise _read_error(self.path, exc, self.kind) from None
 
     def time_range(self) -> tuple[int | None, int | None]:
-        if not self.reader.connections or sum(c.msgcount for c in self.reader.connections) == 0:
-            return None, None
-        try:
-            return int(self.reader.start_time), int(self.reader.end_time) - 1  # rosbags' end is exclusive
-        except Exception as exc:
-            raise _read_error(self.path, exc, self.kind) from None
+        """A ROS 2 bag's span as its storage holds it, else as the container lists it."""
+        return self.storage_span if self.storage_span is not None else self._listed_span()
 
     def count(self, topic: str, start_ns: int | None, end_ns: int | None) -> int:
         conns = [c for c in self.reader.connections if c.topic == topic]

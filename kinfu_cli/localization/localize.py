@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -11,8 +12,8 @@ from scipy.spatial.transform import Rotation
 from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.localization.mesh_model import MeshModel
-from kinfu_cli.localization.mupf import MupfParameters, MupfResult, check_points, degenerate_spread, localize_mupf, \
-    parameters_json
+from kinfu_cli.localization.mupf import MupfParameters, MupfResult, check_points, degenerate_spread, \
+    estimated_seconds, localize_mupf, parameters_json
 
 
 def pose_json(result: MupfResult) -> dict | None:
@@ -62,6 +63,29 @@ class LocalizationResult:
 
 # points the filter runs on at most: thesis ch. 5 localises objects from 100 points of the filtered cloud
 MAX_POINTS = 100
+# longest filtering a run may be estimated to take (`mupf.estimated_seconds`, measured on this machine, summed over
+# the models): 10 minutes. The default 700 particles over 100 points take under 1 s a model (estimated 2 s), 700
+# over 5000 points (max_points 0 on a fused segment) ~9 min, over 10000 ~34 min; 50,000 particles ~4 min on the MAP
+MAX_SECONDS = 600.0
+
+
+def check_run_time(params: MupfParameters, n_points: int, n_models: int = 1, n_given: int | None = None) -> float:
+    """The estimated seconds of filtering n_points for n_models; ConfigError naming the particles, the points
+    (max_points: n_given were given) and the window when it is over MAX_SECONDS, before any filtering."""
+    seconds = n_models * estimated_seconds(params, n_points)
+    if seconds <= MAX_SECONDS:
+        return seconds
+    window = params.window if params.window is not None else f"{max(1, math.ceil(n_points / 2))} (half the points)"
+    points = f"{n_points} points" + (f" (of {n_given})" if n_given is not None and n_given != n_points else "")
+    models = f" x {n_models} models" if n_models > 1 else ""
+    raise ConfigError(f"{params.particles} particles over {points}, window {window}{models} would take about "
+                      f"{_duration(seconds)} of filtering (time grows with particles x points x window, and with "
+                      f"particles^2); expected at most {_duration(MAX_SECONDS)}: use fewer particles (the thesis "
+                      f"uses 700-1200) or fewer points", parameter="particles/max_points/window")
+
+
+def _duration(seconds: float) -> str:
+    return f"{seconds / 3600:.1f} h" if seconds >= 5400 else f"{seconds / 60:.0f} min"
 
 
 def localize_points(models: list[MeshModel], points: np.ndarray, params: MupfParameters = MupfParameters(), *,
@@ -85,6 +109,7 @@ def localize_points(models: list[MeshModel], points: np.ndarray, params: MupfPar
     params.check()
     if params.window is not None and params.window > len(pts):
         raise ConfigError(f"window {params.window} exceeds the {len(pts)} points", parameter="window")
+    check_run_time(params, len(pts), len(models), n_given)
     results, priors = [], []
     for model in models:
         model.build_field()

@@ -39,6 +39,18 @@ MAX_BETA = 1000.0
 # mean and the sample (~165), their copies at resampling (51) and the MAP candidates (~35), 8 bytes each; 1.8 kB
 # measured (peak RSS, 5000 vs 20000 particles)
 BYTES_PER_PARTICLE = 2048
+# Seconds of filtering (`estimated_seconds`), measured on this project's 2-core machine with other work running (an
+# idle machine is up to ~1.5x faster) on a 27 cm sample object (sample_data/tabletop obj1.ply), refine 0:
+# - every step moves each particle's sigma points and samples (per particle and step), and weighs the points of its
+#   memory window (per particle and window point): N = 700 took 10.7-21.7 s over L = 800 points (window 400),
+#   55 s over 1600 (window 800), N = 1400 over 400 / 800 points 17.3 / 49 s, N = 2800 over 200 / 400 10.2 / 24.3 s,
+#   N = 700 over 3000 points (refine 100) 220-241 s a model;
+# - the MAP estimate (eq. 4.28) scores 2N candidates against N particles: N = 4000 / 8000 / 16000 over 10 points
+#   took 1.4 / 5.0 / 24 s (quadratic);
+# - polishing (refine 100) added under 1 s over 1600 points: left out.
+SECONDS_PER_PARTICLE_STEP = 2.5e-5
+SECONDS_PER_PARTICLE_WINDOW_POINT = 7e-8
+SECONDS_PER_MAP_PAIR = 5e-8
 
 
 @dataclass(frozen=True)
@@ -129,6 +141,24 @@ class MupfParameters:
         wm[0] = lam / (N_X + lam)
         wc[0] = lam / (N_X + lam) + (1 - self.alpha ** 2 + self.beta)
         return wm, wc, N_X + lam
+
+
+def window_points(n_points: int, window: int | None) -> int:
+    """Points the filter weighs over all its steps: step k weighs the last min(k, m) points (m: the window, None:
+    ceil(L/2) as `localize_mupf` takes it), about 3/8 L^2 with the default window."""
+    m = window if window is not None else max(1, math.ceil(n_points / 2))
+    m = min(m, n_points)
+    return m * (m + 1) // 2 + (n_points - m) * m
+
+
+def estimated_seconds(params: MupfParameters, n_points: int) -> float:
+    """Seconds `localize_mupf` is expected to take over n_points on this project's machine (the constants above):
+    linear in the particles N and the points L through the steps, in N x the window points (~3/8 L^2), and
+    quadratic in N through the MAP estimate."""
+    n = params.particles
+    return (SECONDS_PER_PARTICLE_STEP * n * n_points
+            + SECONDS_PER_PARTICLE_WINDOW_POINT * n * window_points(n_points, params.window)
+            + SECONDS_PER_MAP_PAIR * 2 * n * n)
 
 
 # the weights and MAP candidates exactly as printed (eqs. 4.18, 4.24, 4.28)

@@ -14,6 +14,11 @@ from kinfu_cli.io.camera_info import intrinsics_from_recording
 # camera's. Casting grows with the pixels: 16 x the Kinect's took ~12 s more per POI at the paper's sphere (peak
 # memory 0.45 -> 0.65 GB), so this bound is ~45 s a POI; a 1e9 px wide image ran out of memory.
 MAX_IMAGE_PIXELS = 4096 * 4096
+# How far outside the image the principal point may lie, as a share of the image's width (height): a calibrated
+# camera has it near the centre, a cropped image or a shifted lens off it, even past an edge, so half an image of
+# margin on either side; farther out the optical axis misses the image and the views look past the POI they aim at
+# (cy = 5000 px in a 480 px image at fy = 525 tilts them by 83 deg) and see nothing.
+PRINCIPAL_POINT_MARGIN = 0.5
 
 
 def camera_from_options(fx: float | None = None, fy: float | None = None, cx: float | None = None,
@@ -27,8 +32,9 @@ def camera_from_options(fx: float | None = None, fy: float | None = None, cx: fl
     sensor_msgs/CameraInfo topic), or none of them: then `recorded` (fx, fy, cx, cy, width, height: the
     camera the volume was fused with, `fusion.volume.volume_intrinsics`; `recorded_from` names that volume in
     errors), else the Kinect v1 calibration the paper used (`camera_source` says which). An image over
-    MAX_IMAGE_PIXELS, focal lengths that cannot be in pixels, or a field of view that `vfov_extra_deg` widens to
-    180 degrees is a ConfigError naming where the intrinsics came from.
+    MAX_IMAGE_PIXELS, focal lengths that cannot be in pixels, a field of view that `vfov_extra_deg` widens to
+    180 degrees or a principal point over PRINCIPAL_POINT_MARGIN images outside the image is a ConfigError naming
+    where the intrinsics came from.
     """
     given = {k: v for k, v in dict(fx=fx, fy=fy, cx=cx, cy=cy).items() if v is not None}
     if camera_info is not None:
@@ -63,9 +69,10 @@ def camera_from_options(fx: float | None = None, fy: float | None = None, cx: fl
 
 
 def _check_sensor(cam: CameraModel, source: str, parameter: str | None) -> None:
-    """Refuse a sensor image too large to cast or with an impossible field of view, naming `source` (where the
-    intrinsics came from; `parameter` the option that gave them, None: fx/fy/cx/cy/width/height themselves):
-    otherwise a huge image runs out of memory, or its widening blames vfov_extra_deg, which was not wrong."""
+    """Refuse a sensor image too large to cast, with an impossible field of view or with its principal point far
+    outside it, naming `source` (where the intrinsics came from; `parameter` the option that gave them, None:
+    fx/fy/cx/cy/width/height themselves): otherwise a huge image runs out of memory, its widening blames
+    vfov_extra_deg, which was not wrong, or the views see nothing and only a generic warning follows."""
     if cam.width * cam.height > MAX_IMAGE_PIXELS:
         side = math.isqrt(MAX_IMAGE_PIXELS)
         raise ConfigError(f"{source} image size {cam.width}x{cam.height} px holds {cam.width * cam.height:,} "
@@ -82,6 +89,14 @@ def _check_sensor(cam: CameraModel, source: str, parameter: str | None) -> None:
                               f"on each side (vfov_extra_deg) reach 180 degrees: expected a principal point inside "
                               f"the image and a depth camera's focal length in pixels",
                               parameter=parameter or "fy/cy/height")
+    outside = [f"{name}={value:g} is outside [{-PRINCIPAL_POINT_MARGIN * size:g}, "
+               f"{(1 + PRINCIPAL_POINT_MARGIN) * size:g}] for a {side} of {size} px"
+               for name, value, size, side in (("cx", cam.cx, cam.width, "width"), ("cy", cam.cy, cam.height, "height"))
+               if not -PRINCIPAL_POINT_MARGIN * size <= value <= (1 + PRINCIPAL_POINT_MARGIN) * size]
+    if outside:
+        raise ConfigError(f"{source} principal point {', '.join(outside)}: the views would look past the POI they "
+                          f"aim at and see nothing; expected a principal point within half an image of the image "
+                          f"(near its centre)", parameter=parameter or "cx/cy")
 
 
 def camera_source(fx=None, fy=None, cx=None, cy=None, camera_info=None, recorded: dict | None = None) -> str:

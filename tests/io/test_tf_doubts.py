@@ -188,3 +188,24 @@ def test_a_reparented_frame_is_looked_up_through_the_parent_it_had_at_the_stamp(
     np.testing.assert_allclose(moved.lookup("world", "c", S)[:3, 3], [1, 0, 0])  # was: outside the buffered range
     np.testing.assert_allclose(moved.lookup("world", "c", 4 * S)[:3, 3], [0, 2, 0])
     assert moved.time_range("world", "c") == (0, 5 * S)
+
+
+def test_frames_interpolated_across_a_pose_topic_gap_are_counted(tmp_path):
+    """A camera pose topic that stops for 8.4 s: its poses were interpolated across the gap without a word (the TF
+    gap check did not look at pose topics)."""
+    path = tmp_path / "pose_gap.mcap"
+    with RecordingWriter(path) as w:
+        events = [(T0 + k * 100 * MS, "pose", k) for k in range(101) if not 6 < k < 90]
+        events += [(T0 + (500 + 200 * i if i < 5 else 9200 + 200 * (i - 5)) * MS, "depth", i) for i in range(8)]
+        for stamp, kind, i in sorted(events):
+            if kind == "pose":
+                w.write_pose("/camera/pose", stamp, "world", expected_pose(stamp))
+            else:
+                w.write_image("/camera/depth/image_raw", stamp, "camera_optical", depth_mm(i), "16UC1")
+                w.write_camera_info("/camera/depth/camera_info", stamp, "camera_optical", K, W, H)
+    stats = FrameStats()
+    with open_recording(path) as rec:
+        assert len(list(iter_frames(rec, pose_source="topic", pose_topic="/camera/pose", stats=stats))) == 8
+    (warning,) = [n for n in stats.notes if "pose topic /camera/pose" in n]
+    assert "no transform for 8.400 s" in warning and "4 lookups fell in that gap" in warning
+    assert "__camera__" not in warning and str(path) in warning
