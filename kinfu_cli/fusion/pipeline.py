@@ -524,10 +524,15 @@ def _pose_plan(rec: Recording, tf: TfBuffer, roles: Roles, pose: str | None, pos
         if mode == "icp":
             description += " (first frame only)"
     warning = ""
+    camera = camera_frame or "? (the depth images carry no frame_id)"
     if pose is None and not has_tf and tf.frames():  # TF there, but not to the camera: say so, ICP may drift
         warning = (f"{rec.path}: the TF tree ({len(tf.frames())} frames) does not link camera frame "
-                   f"{camera_frame or '?'} to {world_frame or 'a world frame'}: camera poses come from ICP "
+                   f"{camera} to {world_frame or 'a world frame'}: camera poses come from ICP "
                    f"tracking instead (name the frames, or pose mode 'forced' to make a missing link an error)")
+    elif source == "tf" and camera_frame == world_frame:  # a lookup of a frame in itself: every pose the identity
+        warning = (f"{rec.path}: the camera frame is the world frame {world_frame!r}: every depth frame is fused at "
+                   f"the identity pose (a camera that never moves; name the camera frame if the depth images' "
+                   f"frame_id is wrong)")
     return _PosePlan(mode, source, description, _world_frame(rec, source, roles, pose_topic), warning)
 
 
@@ -551,7 +556,7 @@ class _Integrator:
                  origin_name: str, recording: str, timing: dict[str, float], icp: str = "projective") -> None:
         self.volume = volume
         self.mode = mode = plan.mode
-        self.no_tf_link = plan.warning  # why ICP tracks though the recording has TF ("" when it does not)
+        self.no_tf_link = plan.warning if plan.source != "tf" else ""  # why ICP tracks though the recording has TF
         self.grid_spec = grid_spec
         self.origin = origin
         self.origin_name = origin_name

@@ -195,6 +195,8 @@ def _pick_world(rec, tf: TfBuffer | None, camera_frame: str | None) -> str | Non
             if name in chain:
                 return name
         world = next((name for name in _WORLD_NAMES if name in frames), None)
+        if world is not None and tf.connected(world, camera_frame):  # re-parented: linked to it at other times
+            return world
         if world is not None:
             raise TransformError(f"{rec.path}: {tf.broken_chain(camera_frame, world)}; name the world frame to "
                                  f"use {chain[-1]!r}")

@@ -251,7 +251,7 @@ def _tf_lines(tf: dict) -> list[str]:
         for reason, n in tf.get("rejected", {}).items():
             lines.append(f"  skipped {n} transforms: {reason}")
     for child, old, new in tf.get("parent_changes", []):
-        lines.append(f"  note: {child} changed parent from {old} to {new} (the later link is kept)")
+        lines.append(f"  note: {child} changed parent from {old} to {new} (lookups take the parent of their stamp)")
     if tf.get("problem"):
         lines.append(f"  problem: {tf['problem']}")
     return lines

@@ -7,12 +7,17 @@ stored; `add_message` counts it by reason (`rejected`) and by link (`rejected_li
 rejected transforms can be reported naming the link. Chains are walked with a loop check: links that form a
 cycle raise TransformError naming the frames of the loop instead of walking forever.
 
-A frame may be re-parented over time (tf2 allows it; `parent_changes` notes it): a lookup at a stamp goes through
-the parent the frame had then, as tf2's does (an object taken from the table by the gripper and put back: table,
-gripper, table again), while the tree (`tree`, `chain`) shows the latest parent. A frame that switches parents
-again and again (TWO_PARENTS_MIN_SWITCHES) is published under two parents at once (two publishers: a broken tree,
-whose lookups tf2 would flip between the chains); its link is taken from the parent with the most transforms and
-`parent_warnings` says so, naming the parents (`from_recording` puts it in the recording's problems).
+A frame may be re-parented over time (tf2 allows it; `parent_changes` notes it). Its transforms, in stamp order
+(not the order messages were logged), fall into runs under one parent; a lookup at a stamp goes through the parent
+of the run it falls in, and between the last transform of a run and the first of the next it takes the run's last
+transform, as tf2 takes the earlier of two samples under different parents (a camera moved from the arm to a
+tripod; an object taken from the table by the gripper and put back, any number of times). The tree (`tree`,
+`chain`) shows the latest parent; a chain that exists only at some times (before the frame moved onto a parent
+linked to nothing) still counts as connected, and the lookups outside those times fail. A frame whose transforms
+switch parents at a large share of them (TWO_PARENTS_MIN_SWITCHES, TWO_PARENTS_MIN_SHARE) is published under two
+parents at once (two publishers: a broken tree, whose lookups tf2 would flip between the chains); its link is
+taken from the parent with the most transforms and `parent_warnings` says so, naming the parents
+(`from_recording` puts it in the recording's problems).
 
 Like tf2, a lookup interpolates across any stretch without transforms; one that falls in a gap much longer than
 the link's usual spacing (GAP_FACTOR x its median period and more than GAP_MIN_NS) is counted by stamp, and
@@ -43,6 +48,7 @@ QUAT_NORM2_TOLERANCE = 0.01  # tf2's QUATERNION_NORMALIZATION_TOLERANCE on | |q|
 MAX_TRANSLATION_M = 1e6  # a link longer than this is corrupt data, not a robot (and would overflow products)
 GAP_FACTOR = 10  # a stretch without transforms this many times the link's median period is a gap ...
 GAP_MIN_NS = 500_000_000  # ... when it is also longer than this
+FOREVER_NS = 2**62  # time_range's bound on a side that only static links hold (a frame moved onto a static parent)
 
 
 @dataclass
@@ -151,22 +157,35 @@ def _fmt_s(ns: int) -> str:
     return f"{ns * 1e-9:.3f}"
 
 
-# parent changes that make a frame "under two parents at once" (two publishers alternate at every message) rather
-# than re-parented a few times (a grasped object: table -> gripper -> table)
+# parent changes (in stamp order) that make a frame "under two parents at once" (two publishers alternating at
+# nearly every transform) rather than re-parented now and then (a camera moved to a tripod, an object picked and put
+# back again and again, two publishers overlapping for a moment at a hand-over): at least this many switches ...
 TWO_PARENTS_MIN_SWITCHES = 4
+# ... that are also at least this share of the frame's transforms (alternating publishers: ~1; a pick-and-place
+# with TF at 100 Hz: 4 switches in thousands of transforms)
+TWO_PARENTS_MIN_SHARE = 0.1
+
+
+@dataclass
+class _Runs:
+    """A re-parented frame's transforms in stamp order, as runs under one parent: run k spans the stamps
+    [starts[k], ends[k]] under links[k]."""
+
+    starts: np.ndarray
+    ends: np.ndarray
+    links: list[_Link]
 
 
 class TfBuffer:
     """Static + dynamic TF links; `lookup(target, source, stamp_ns) -> T_target_source`."""
 
     def __init__(self) -> None:
-        self._links: dict[str, _Link] = {}  # child -> the link its lookups take
+        self._links: dict[str, _Link] = {}  # child -> its link in the tree (the latest parent's; see _refresh)
         self._parents: dict[str, dict[str, _Link]] = {}  # child -> parent -> link, in the order first seen
-        self._last_parent: dict[str, str] = {}  # child -> parent of its latest transform
-        self._moves: dict[str, list[str]] = {}  # child -> the parents it moved between, in order (re-parented)
-        self._switches: dict[str, int] = {}  # child -> parent changes, for a child under two parents at once
-        self._runs: dict[str, list[tuple[int, str]]] = {}  # child -> (first stamp, parent) of each run under a parent
-        self._timed: dict[str, tuple[np.ndarray, list[_Link]]] | None = None  # _timed_parents, until the next add
+        self._multi: set[str] = set()  # children with transforms under more than one parent
+        self._stale = False  # a child of _multi got a transform since _refresh
+        self._runs: dict[str, _Runs] = {}  # re-parented children (_refresh)
+        self._at_once: dict[str, int] = {}  # children under two parents at once -> parent switches (_refresh)
         self.rejected: dict[str, int] = {}  # transforms from messages that were skipped, by reason
         self.rejected_links: dict[tuple[str, str], dict[str, int]] = {}  # (parent, child) -> reason -> count
 
@@ -188,14 +207,6 @@ class TfBuffer:
         if reason is not None:
             raise TransformError(f"TF link {parent!r} -> {child!r}: {reason}")
         norm = float(np.linalg.norm(quat))
-        last = self._last_parent.get(child)
-        if last is not None and last != parent:
-            self._note_move(child, last, parent)
-        self._last_parent[child] = parent
-        runs = self._runs.setdefault(child, [])
-        if not runs or runs[-1][1] != parent:
-            runs.append((int(stamp_ns), parent))
-        self._timed = None
         parents = self._parents.setdefault(child, {})
         link = parents.get(parent)
         if link is None or link.static != static:
@@ -203,36 +214,50 @@ class TfBuffer:
         if static:
             link.clear()
         link.add(stamp_ns, trans.tolist(), (quat / norm).tolist())
-        if child in self._switches:  # two parents at once: the one with the most transforms (the first on a tie)
-            link = max(parents.values(), key=lambda candidate: len(candidate.stamps))
-        self._links[child] = link
-
-    def _note_move(self, child: str, old: str, new: str) -> None:
-        """A transform of `child` under another parent than its last one: a re-parenting, or, when `new` was its
-        parent before, a second parent at the same time."""
-        if child in self._switches:
-            self._switches[child] += 1
-            return
-        moves = self._moves.setdefault(child, [old])
-        if new in moves:
-            self._switches[child] = len(moves)
-            del self._moves[child]
+        if len(parents) > 1:  # which link the tree and each stamp take is settled on the next query
+            self._multi.add(child)
+            self._stale = True
         else:
-            moves.append(new)
+            self._links[child] = link
+
+    def _refresh(self) -> None:
+        """Settle the frames with transforms under several parents (module docstring): their transforms in stamp
+        order, cut into runs under one parent; many switches make a frame one under two parents at once (the
+        link with the most transforms, the first seen on a tie), else it is re-parented (the tree takes the last
+        run's link, lookups the run of their stamp)."""
+        if not self._stale:
+            return
+        self._stale = False
+        self._runs, self._at_once = {}, {}
+        for child in self._multi:
+            links = list(self._parents[child].values())
+            st = np.concatenate([link.arrays()[0] for link in links])
+            lab = np.concatenate([np.full(link.arrays()[0].shape[0], i) for i, link in enumerate(links)])
+            order = np.argsort(st, kind="stable")
+            st, lab = st[order], lab[order]
+            change = np.flatnonzero(lab[1:] != lab[:-1]) + 1
+            if change.size >= TWO_PARENTS_MIN_SWITCHES and change.size >= TWO_PARENTS_MIN_SHARE * st.size:
+                self._at_once[child] = int(change.size)
+                self._links[child] = max(links, key=lambda candidate: len(candidate.stamps))
+                continue
+            first, last = np.r_[0, change], np.r_[change - 1, st.size - 1]
+            self._runs[child] = _Runs(st[first], st[last], [links[i] for i in lab[first]])
+            self._links[child] = self._runs[child].links[-1]
 
     @property
     def parent_changes(self) -> list[tuple[str, str, str]]:
-        """(child, old parent, new parent) for each re-parenting; lookups take the parent of their stamp (not for
-        frames under two parents at once: parent_warnings)."""
-        return [(child, old, new) for child, moves in self._moves.items() for old, new in zip(moves, moves[1:])]
+        """(child, old parent, new parent) for each re-parenting, in stamp order; lookups take the parent of
+        their stamp (not for frames under two parents at once: parent_warnings)."""
+        self._refresh()
+        return [(child, a.parent, b.parent) for child, runs in sorted(self._runs.items())
+                for a, b in zip(runs.links, runs.links[1:])]
 
     def parent_warnings(self) -> list[str]:
         """One warning per frame published under two (or more) parents at once: the parents, how many transforms
         each, which one lookups take, and how far apart the parents place the frame."""
+        self._refresh()
         out = []
-        for child, switches in self._switches.items():
-            if switches < TWO_PARENTS_MIN_SWITCHES:  # an object picked from A, held by B, put back on A
-                continue
+        for child, switches in self._at_once.items():
             parents, used = self._parents[child], self._links[child]
             counts = ", ".join(f"{p!r} ({len(link.stamps)} transforms)" for p, link in parents.items())
             others = [p for p in parents if p != used.parent]
@@ -252,7 +277,7 @@ class TfBuffer:
         """One warning per link that lookups interpolated across a gap much longer than its usual spacing (the
         module docstring): the link, the gap(s), and at how many stamps."""
         out = []
-        for child, link in self._links.items():
+        for child, link in ((c, link) for c, parents in self._parents.items() for link in parents.values()):
             if not link.gap_hits:
                 continue
             hits = np.fromiter(link.gap_hits, dtype=np.int64)  # each inside a gap (note_gaps)
@@ -347,42 +372,84 @@ class TfBuffer:
 
     # ----------------------------------------------------------------------------------- queries
     def frames(self) -> list[str]:
+        self._refresh()
         names = set(self._links)
         names.update(parent for parents in self._parents.values() for parent in parents)  # earlier parents too
         return sorted(names)
 
     def tree(self) -> dict[str, str]:
-        """child -> parent for every link."""
+        """child -> parent for every link (a re-parented frame: its latest parent)."""
+        self._refresh()
         return {child: link.parent for child, link in sorted(self._links.items())}
 
     def is_static(self, child: str) -> bool:
+        self._refresh()
         return self._links[_strip(child)].static
 
     def link_stamps(self, child: str) -> np.ndarray:
-        """Sorted stamps (ns) of the link parent(child) -> child."""
-        link = self._links.get(_strip(child))
+        """Sorted stamps (ns) of the link parent(child) -> child (of a re-parented frame: under every parent)."""
+        self._refresh()
+        child = _strip(child)
+        link = self._links.get(child)
         if link is None:
             raise TransformError(f"frame {child!r} has no parent link in the TF tree")
+        if child in self._runs:
+            return np.unique(np.concatenate([run.arrays()[0] for run in self._runs[child].links]))
         return link.arrays()[0]
 
     def time_range(self, target: str, source: str) -> tuple[int, int] | None:
         """[first, last] stamps (ns) over which lookup(target, source) works; None when all links are static. A
-        frame re-parented over time counts from its first parent's first transform to its last one's last."""
+        frame re-parented over time counts from its first transform to its last (+-FOREVER_NS on a side where it
+        sits on a static parent), along the tree of the latest time that connects the two frames."""
         lo, hi = None, None
-        timed = self._timed_parents()
-        for child in self._path_links(_strip(target), _strip(source)):
-            links = timed[child][1] if child in timed else [self._links[child]]
-            if all(link.static for link in links):
-                continue
-            first = min(int(link.arrays()[0][0]) for link in links)
-            last = max(int(link.arrays()[0][-1]) for link in links)
-            lo = first if lo is None else max(lo, first)
-            hi = last if hi is None else min(hi, last)
-        return None if lo is None else (int(lo), int(hi))
+        links = self._connecting_tree(_strip(target), _strip(source))
+        up_src, up_tgt = self._split_path(_strip(target), _strip(source), links)
+        for child in up_src + up_tgt:
+            runs = self._runs.get(child)
+            if runs is None:
+                link = links[child]
+                first = last = None if link.static else link.arrays()[0]
+                first, last = (None, None) if first is None else (int(first[0]), int(last[-1]))
+            else:  # a static link holds from before its first run, or after its last one, for ever
+                first = None if runs.links[0].static else int(runs.starts[0])
+                last = None if runs.links[-1].static else int(runs.ends[-1])
+            if first is not None:
+                lo = first if lo is None else max(lo, first)
+            if last is not None:
+                hi = last if hi is None else min(hi, last)
+        if lo is None and hi is None:
+            return None
+        return (int(lo) if lo is not None else -FOREVER_NS, int(hi) if hi is not None else FOREVER_NS)
 
     def require_chain(self, target: str, source: str) -> None:
-        """TransformError (naming both frames) unless a chain of links connects target and source."""
-        self._split_path(_strip(target), _strip(source))
+        """TransformError (naming both frames) unless a chain of links connects target and source at some time
+        (re-parented frames: the tree at the start of any of their runs)."""
+        self._connecting_tree(_strip(target), _strip(source))
+
+    def _connecting_tree(self, target: str, source: str) -> dict[str, _Link]:
+        """The tree (child -> link) of the latest time at which a chain connects the two frames: the latest tree,
+        else the trees at the starts of the re-parented frames' runs, latest first; TransformError of the latest
+        tree when none does."""
+        self._refresh()
+        try:
+            self._split_path(target, source)
+            return self._links
+        except TransformError as latest:
+            for stamp in sorted({int(t) for runs in self._runs.values() for t in runs.starts}, reverse=True):
+                links = self._tree_at(stamp)
+                try:
+                    self._split_path(target, source, links)
+                except TransformError:
+                    continue
+                return links
+            raise latest
+
+    def _tree_at(self, stamp: int) -> dict[str, _Link]:
+        """The tree at `stamp`: each re-parented frame under the parent of its run there."""
+        links = dict(self._links)
+        for child, runs in self._runs.items():
+            links[child] = runs.links[max(int(np.searchsorted(runs.starts, stamp, side="right")) - 1, 0)]
+        return links
 
     def connected(self, target: str, source: str) -> bool:
         """True when a chain of links connects the two frames (at some time)."""
@@ -411,56 +478,51 @@ class TfBuffer:
     def _chain_T(self, target: str, source: str, stamps_ns: np.ndarray | None, tolerance_ns: int,
                  in_gaps: list | None = None) -> np.ndarray:
         """lookup_many; the stamps of links that have gaps go to in_gaps (None: not counted). Stamps are grouped by
-        the parents re-parented frames had at them (`_timed_parents`), each group looked up along its own tree."""
+        the runs re-parented frames are in at them (module docstring), each group looked up along its own tree; a
+        stamp between two runs takes the earlier run's last transform."""
         target, source = _strip(target), _strip(source)
-        timed = self._timed_parents() if stamps_ns is not None else {}
-        if not timed:
-            return self._tree_T(target, source, stamps_ns, tolerance_ns, in_gaps, self._links)
+        self._refresh()
+        if stamps_ns is None or not self._runs:
+            return self._tree_T(target, source, stamps_ns, tolerance_ns, in_gaps, self._links, {})
         s = np.asarray(stamps_ns, dtype=np.int64).reshape(-1)
-        runs = np.stack([np.maximum(np.searchsorted(starts, s, side="right") - 1, 0)
-                         for starts, _ in timed.values()], axis=1)
-        picks, group = np.unique(runs, axis=0, return_inverse=True)
+        timed = list(self._runs.items())
+        picks = np.stack([np.maximum(np.searchsorted(runs.starts, s, side="right") - 1, 0) for _, runs in timed], 1)
+        keys, group = np.unique(picks, axis=0, return_inverse=True)
         group = group.reshape(-1)
         out = np.empty((s.shape[0], 4, 4))
-        for g, pick in enumerate(picks):
-            links = {**self._links, **{child: timed[child][1][k] for child, k in zip(timed, pick.tolist())}}
+        for g, key in enumerate(keys.tolist()):
             idx = np.flatnonzero(group == g)
-            out[idx] = self._tree_T(target, source, s[idx], tolerance_ns, in_gaps, links)
+            links, clamped = dict(self._links), {}
+            for (child, runs), k in zip(timed, key):
+                links[child] = runs.links[k]
+                if k < len(runs.links) - 1:  # not the last run: hold its last transform until the next run
+                    clamped[child] = np.minimum(s[idx], runs.ends[k])
+            out[idx] = self._tree_T(target, source, s[idx], tolerance_ns, in_gaps, links, clamped)
         return out
 
     def _tree_T(self, target: str, source: str, stamps_ns: np.ndarray | None, tolerance_ns: int,
-                in_gaps: list | None, links: dict[str, "_Link"]) -> np.ndarray:
-        """_chain_T along the tree `links` (child -> the link its lookups take)."""
+                in_gaps: list | None, links: dict[str, "_Link"], stamps_of: dict[str, np.ndarray]) -> np.ndarray:
+        """_chain_T along the tree `links` (child -> the link its lookups take); stamps_of: other stamps for some
+        children's links."""
         n = 1 if stamps_ns is None else int(np.asarray(stamps_ns).reshape(-1).shape[0])
         up_src, up_tgt = self._split_path(target, source, links)
         T_anc_src = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
         for child in up_src:  # source upwards: T_anc_src = T_parent_child @ T_anc_src
-            T_anc_src = self._edge(links[child], child, stamps_ns, n, tolerance_ns, in_gaps) @ T_anc_src
+            T_anc_src = self._edge(links[child], child, stamps_of.get(child, stamps_ns), n, tolerance_ns,
+                                   in_gaps) @ T_anc_src
         T_anc_tgt = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
         for child in up_tgt:
-            T_anc_tgt = self._edge(links[child], child, stamps_ns, n, tolerance_ns, in_gaps) @ T_anc_tgt
+            T_anc_tgt = self._edge(links[child], child, stamps_of.get(child, stamps_ns), n, tolerance_ns,
+                                   in_gaps) @ T_anc_tgt
         return _inv(T_anc_tgt) @ T_anc_src
-
-    def _timed_parents(self) -> dict[str, tuple[np.ndarray, list["_Link"]]]:
-        """child -> (first stamps, links) of the runs of transforms under one parent, in stamp order, for each
-        dynamic frame re-parented over time (not one under two parents at once: it keeps its one link)."""
-        if self._timed is None:
-            self._timed = {}
-            for child, runs in self._runs.items():
-                parents = self._parents[child]
-                if (len(runs) < 2 or self._switches.get(child, 0) >= TWO_PARENTS_MIN_SWITCHES
-                        or any(link.static for link in parents.values())):
-                    continue
-                runs = sorted(runs)
-                self._timed[child] = (np.array([stamp for stamp, _ in runs], dtype=np.int64),
-                                      [parents[parent] for _, parent in runs])
-        return self._timed
 
     # ----------------------------------------------------------------------------------- internals
     def chain(self, frame: str, links: dict[str, "_Link"] | None = None) -> list[str]:
         """`frame`, its parent, the parent's parent, ... up to a root (in the tree `links`, default the latest);
         TransformError naming the frames when the links form a loop."""
-        links = self._links if links is None else links
+        if links is None:
+            self._refresh()
+            links = self._links
         frame = _strip(frame)
         chain = [frame]
         seen = {frame: 0}
@@ -475,6 +537,7 @@ class TfBuffer:
 
     def loops(self) -> list[list[str]]:
         """Each loop of links once, as its frames from parent to child (the first again at the end)."""
+        self._refresh()
         found: list[list[str]] = []
         done: set[str] = set()
         for start in sorted(self._links):
@@ -520,10 +583,6 @@ class TfBuffer:
             raise TransformError(f"TF lookup {target} <- {source}: no chain of links connects the two frames "
                                  f"(roots {a_tgt[-1]!r} and {a_src[-1]!r})")
         return a_src[: a_src.index(common)], a_tgt[: a_tgt.index(common)]
-
-    def _path_links(self, target: str, source: str) -> list[str]:
-        up_src, up_tgt = self._split_path(target, source)
-        return up_src + up_tgt
 
     def _edge(self, link: "_Link", child: str, stamps_ns: np.ndarray | None, n: int, tolerance_ns: int,
               in_gaps: list | None = None) -> np.ndarray:

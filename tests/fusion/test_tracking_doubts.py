@@ -85,3 +85,22 @@ def test_a_run_tracked_only_because_tf_misses_the_camera_blames_the_missing_link
             _tracking_verdict(SimpleNamespace(**{**vars(integrator), "no_tf_link": why}), 0.1, "rec.mcap", bound)
         assert err.value.parameter is None
         assert "does not link camera frame cam to world" in str(err.value) and "give camera poses" not in str(err.value)
+
+
+def test_a_camera_frame_that_is_the_world_frame_or_missing_is_said_plainly():
+    """Depth images in the world frame were fused at the identity pose without a word; depth images without a
+    frame_id were reported as 'camera frame ?'."""
+    from types import SimpleNamespace
+
+    from kinfu_cli.fusion.pipeline import _pose_plan
+    from kinfu_cli.io.tf_buffer import TfBuffer
+
+    tf = TfBuffer()
+    tf.add("world", "base", 0, np.eye(4), static=True)
+    rec = SimpleNamespace(path="rec.mcap")
+    same = _pose_plan(rec, tf, SimpleNamespace(world_frame="world", camera_frame="world"), None, None)
+    assert same.mode == "forced" and "fused at the identity pose" in same.warning
+    missing = _pose_plan(rec, tf, SimpleNamespace(world_frame="world", camera_frame=None), None, None)
+    assert missing.mode == "icp" and "the depth images carry no frame_id" in missing.warning
+    fine = _pose_plan(rec, tf, SimpleNamespace(world_frame="world", camera_frame="base"), None, None)
+    assert fine.warning == ""

@@ -14,7 +14,7 @@ from kinfu_cli.cli import cli
 from kinfu_cli.core.errors import TransformError
 from kinfu_cli.io.frames import FrameStats, iter_frames
 from kinfu_cli.io.recording import open_recording
-from kinfu_cli.io.tf_buffer import TfBuffer
+from kinfu_cli.io.tf_buffer import FOREVER_NS, TfBuffer
 from kinfu_cli.io.writers import RecordingWriter
 
 MS = 1_000_000
@@ -209,3 +209,90 @@ def test_frames_interpolated_across_a_pose_topic_gap_are_counted(tmp_path):
     (warning,) = [n for n in stats.notes if "pose topic /camera/pose" in n]
     assert "no transform for 8.400 s" in warning and "4 lookups fell in that gap" in warning
     assert "__camera__" not in warning and str(path) in warning
+
+
+def _tripod_buffer(picks: list[tuple[float, float]], late: set[int] = frozenset(), static_tripod: bool = False,
+                   linked: bool = True) -> TfBuffer:
+    """A camera on a wrist that sweeps along y (1 m/s, TF at 10 Hz) and on a tripod at x = 2 during `picks`
+    (start, end s); `late`: tick numbers whose wrist message is logged last (stamps still in order)."""
+    tf = TfBuffer()
+    for k in range(101):
+        tf.add("world", "wrist", k * S // 10, _T([0, k / 10, 0]))
+    if linked:
+        tf.add("world", "tripod", 0, _T([2, 0, 0]), static=True)
+    ticks = sorted(range(101), key=lambda k: (k in late, k))
+    for k in ticks:
+        t = k / 10
+        on = any(a <= t < b for a, b in picks)
+        if on and static_tripod:
+            if not any(a <= t - 0.1 < b for a, b in picks):  # one static transform when it moves there
+                tf.add("tripod", "cam", k * S // 10, np.eye(4), static=True)
+            continue
+        tf.add("tripod" if on else "wrist", "cam", k * S // 10, _T([0, 0, 0.1]))
+    return tf
+
+
+def test_a_reparented_camera_follows_its_parents_in_stamp_order_not_message_order():
+    """The wrist's last camera transforms before the move, logged late, made the camera read as under two parents
+    at once (7 switches in message order): 18 of 30 poses were dropped."""
+    tf = _tripod_buffer([(4.0, 99.0)], late={37, 38, 39})
+    assert tf.parent_warnings() == [] and tf.parent_changes == [("cam", "wrist", "tripod")]
+    np.testing.assert_allclose(tf.lookup("world", "cam", 35 * S // 10)[:3, 3], [0, 3.5, 0.1])
+    np.testing.assert_allclose(tf.lookup("world", "cam", 50 * S // 10)[:3, 3], [2, 0, 0.1])
+
+
+def test_an_object_picked_and_put_back_again_and_again_is_not_two_publishers():
+    """Two picks (4 parent switches) were read as a broken tree: the tripod spans were interpolated through the
+    wrist, up to 0.6 m off, with a warning blaming two publishers."""
+    tf = _tripod_buffer([(2.0, 4.0), (6.0, 8.0)])
+    assert tf.parent_warnings() == [] and len(tf.parent_changes) == 4
+    for t, where in ((1.0, [0, 1, 0.1]), (3.0, [2, 0, 0.1]), (5.0, [0, 5, 0.1]), (7.0, [2, 0, 0.1]),
+                     (9.0, [0, 9, 0.1])):
+        np.testing.assert_allclose(tf.lookup("world", "cam", int(t * S))[:3, 3], where)
+    many = tf.lookup_many("world", "cam", np.array([1.0, 3.0, 5.0, 7.0, 9.0]) * S)
+    np.testing.assert_allclose(many[:, 0, 3], [0, 2, 0, 2, 0])
+
+
+def test_a_camera_moved_onto_a_static_parent_keeps_its_arm_poses_before():
+    """Re-parenting onto a /tf_static link gave the static pose for the whole recording (1.1 m off before)."""
+    tf = _tripod_buffer([(4.0, 99.0)], static_tripod=True)
+    np.testing.assert_allclose(tf.lookup("world", "cam", 2 * S)[:3, 3], [0, 2, 0.1])
+    np.testing.assert_allclose(tf.lookup("world", "cam", 6 * S)[:3, 3], [2, 0, 0])
+    assert tf.time_range("world", "cam") == (0, FOREVER_NS)  # on the tripod for ever after
+
+
+def test_a_stamp_between_two_runs_holds_the_earlier_runs_last_transform():
+    """tf2 takes the earlier of two samples under different parents; the lookup failed as out of range."""
+    tf = TfBuffer()
+    tf.add("world", "a", 0, _T([1, 0, 0]), static=True)
+    tf.add("world", "b", 0, _T([0, 2, 0]), static=True)
+    for k in range(4):
+        tf.add("a", "c", k * S, _T([0, 0, k]))
+    for k in range(6, 9):
+        tf.add("b", "c", k * S, np.eye(4))
+    np.testing.assert_allclose(tf.lookup("world", "c", 5 * S)[:3, 3], [1, 0, 3])  # a's last transform (3 s)
+    with pytest.raises(TransformError):  # after the last run: out of range as before
+        tf.lookup("world", "c", 9 * S)
+
+
+def test_a_camera_moved_onto_an_unlinked_parent_is_connected_for_the_time_before():
+    """Connectivity was decided on the latest tree only: a camera moved onto a tripod linked to nothing failed the
+    whole run, though its first 4 s had a chain to the world."""
+    tf = _tripod_buffer([(4.0, 99.0)], linked=False)
+    assert tf.connected("world", "cam") and tf.chain("cam") == ["cam", "tripod"]
+    np.testing.assert_allclose(tf.lookup("world", "cam", 2 * S)[:3, 3], [0, 2, 0.1])
+    with pytest.raises(TransformError):
+        tf.lookup("world", "cam", 6 * S)
+    assert tf.time_range("world", "cam")[0] == 0
+
+
+def test_a_gap_on_an_earlier_parents_link_is_still_said():
+    tf = TfBuffer()
+    for k in [*range(0, 14), *range(35, 40)]:
+        tf.add("world", "cam", k * S // 10, _T([0, k / 10, 0]))
+    for k in range(40, 60):
+        tf.add("tripod", "cam", k * S // 10, np.eye(4))
+    tf.add("world", "tripod", 0, np.eye(4), static=True)
+    tf.lookup("world", "cam", 2 * S)
+    (warning,) = tf.gap_warnings()
+    assert "TF link world -> cam has no transform for 2.200 s" in warning
