@@ -81,6 +81,8 @@ def _export_trajectory(source: str, out: str, fk: dict, roles_kw: dict, as_json:
         comment = (f"kinfu export {source}: the recording's camera poses ({fk.get('pose_source')}) at "
                    f"{info.get('sampled_at', 'depth frames')}")
         summary["sampled_at"] = info.get("sampled_at")
+        if dropped := _dropped_warning(source, info["stats"]):
+            summary["warnings"] = summary["warnings"] + [dropped]
     write_tum(out, stamps, poses, comment=comment)
     summary["output"] = str(out)
     print_warnings(summary)
@@ -90,3 +92,14 @@ def _export_trajectory(source: str, out: str, fk: dict, roles_kw: dict, as_json:
         click.echo(json.dumps(summary, indent=2))
     else:
         click.echo(f"wrote {out}: {len(stamps)} camera poses ({summary['kind']}) as TUM")
+
+
+def _dropped_warning(source: str, stats: dict) -> str | None:
+    """The depth frames left out of a recording's trajectory, by reason (as fuse reports the frames it dropped):
+    a TUM file holds no line for them, and evo then scores a shorter trajectory without a word."""
+    total = stats.get("dropped_total", 0)
+    if not total:
+        return None
+    why = "; ".join(f"{reason}: {n}" for reason, n in stats["dropped"].items())
+    return (f"{source}: {total} of the {stats['depth_messages']} depth frames dropped ({why}); the trajectory has "
+            f"no pose at their stamps")

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import click
 
-from kinfu_cli.commands._options import claim_outputs, force_option, volume_file
+from kinfu_cli.commands._options import claim_outputs, force_option, given_options, volume_file
 from kinfu_cli.commands._output import emit
 from kinfu_cli.commands._up import parse_up
 from kinfu_cli.core.camera import CameraModel
@@ -39,6 +39,13 @@ def _table_z_option(value: str):
 def _up_option(value: str) -> tuple[float, float, float] | None:
     up_dir = parse_up(value, ("auto",))
     return None if isinstance(up_dir, str) else tuple(float(v) for v in up_dir)
+
+
+# options of the POI mode's viewing sphere and ranking that --mode objects has no use for: its candidates are 5
+# directions x 8 rolls at 0.8 m around each contour point (nbv.objects), no sphere around a POI
+# (a --candidates or --pois file given there would be read by nobody: a damaged or wrong one passed silently)
+POI_MODE_ONLY = ("pois", "candidates", "clear", "plot", "radius", "lon-step", "lat-min", "lat-max", "lat-step",
+                 "roll-step", "poi-radius", "clearance", "optimistic", "exact-rolls")
 
 
 def _camera(p: dict, recorded: dict | None) -> CameraModel:
@@ -196,6 +203,10 @@ def command(volume, pois_path, mode, clear, gain, top, output, plot, candidates,
       kinfu nbv volume.npz --pois pois.json --gain entropy --top 5 --json
       kinfu nbv volume.npz --mode objects -o views.json
     """
+    if mode == "objects" and (unused := given_options(click.get_current_context(), POI_MODE_ONLY)):
+        raise ConfigError(f"{', '.join(unused)}: appl{'ies' if len(unused) == 1 else 'y'} to --mode poi (--mode "
+                          f"objects places its own views: 5 directions x 8 rolls at 0.8 m around each contour "
+                          f"point, no viewing sphere around a POI)")
     volume = volume_file(volume)
     claim_outputs({"output": output, "plot": plot, "viz": viz}, [volume, pois_path, candidates, camera_info], force)
     t0 = time.perf_counter()
@@ -206,8 +217,6 @@ def command(volume, pois_path, mode, clear, gain, top, output, plot, candidates,
     camera_warnings = [preset_warning()] if source == "kinect_v1 preset" else []
     up_dir = _up_option(up)
     if mode == "objects":
-        if candidates is not None:  # it was read by nobody: a damaged or wrong file passed silently
-            raise ConfigError("--candidates: applies to --mode poi (--mode objects places its own views)")
         planned = rank_object_views(volume, cam, gain=gain, table_z=_table_z_option(table_z),
                                     score_threshold=0.0 if inc_th is None else inc_th, top=top, up=up_dir)
         doc = planned.to_json()

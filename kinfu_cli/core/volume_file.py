@@ -36,6 +36,10 @@ OPTIONAL_ARRAYS = ("pool_hc", "pool_hn")  # colour mode filter hypotheses, only 
 COLOR_MODES = ("mean", "mode")
 VOXELS_PER_BLOCK = 512  # a pool row: one 8x8x8 block
 MAX_COORDINATE_M = 1e6  # farther than this from the world origin is corrupt data, not a scene
+# the bounds of a grid, for TernaryVolume (fusion/volume.py) and its files: a file beyond them is refused here,
+# naming the file, rather than by the volume without it
+MIN_VOXEL_M = 1e-4  # a tenth of a millimetre: finer is no depth sensor's scale
+MAX_RANGE_M = 100.0  # voxel edge, truncation and depth range: farther is no depth sensor (and overflows float32 casts)
 MAX_VOXELS_PER_AXIS = 1 << 16
 
 # what a damaged or foreign .npz raises inside np.load / zipfile / zlib: the file is unreadable, not kinfu broken
@@ -134,17 +138,17 @@ def _check(path: Path, meta: object, arrays: dict[str, np.ndarray]) -> None:
             isinstance(n, int) and not isinstance(n, bool) and 1 <= n <= MAX_VOXELS_PER_AXIS for n in shape)):
         raise VolumeError(f"{path}: volume metadata 'shape' is {shape!r}, expected three voxel counts in "
                           f"[1, {MAX_VOXELS_PER_AXIS}]")
-    _number(meta, "voxel_size", path, 0.0, 1e3, low_open=True)
+    _number(meta, "voxel_size", path, MIN_VOXEL_M, MAX_RANGE_M)
     origin = meta.get("origin")
     if not (isinstance(origin, list) and len(origin) == 3 and all(
             isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
             and abs(v) <= MAX_COORDINATE_M for v in origin)):
         raise VolumeError(f"{path}: volume metadata 'origin' is {origin!r}, expected three finite coordinates "
                           f"within {MAX_COORDINATE_M:g} m")
-    _number(meta, "truncation", path, 0.0, 1e3, low_open=True)
+    _number(meta, "truncation", path, 0.0, MAX_RANGE_M, low_open=True)
     _number(meta, "max_weight", path, 1, 255, integer=True)
-    lo = _number(meta, "min_depth", path, 0.0, 1e3)
-    hi = _number(meta, "max_depth", path, 0.0, 1e3)
+    lo = _number(meta, "min_depth", path, 0.0, MAX_RANGE_M)
+    hi = _number(meta, "max_depth", path, 0.0, MAX_RANGE_M)
     if not lo < hi:
         raise VolumeError(f"{path}: volume metadata min_depth {lo} is not below max_depth {hi}")
     if not isinstance(meta.get("color"), bool):

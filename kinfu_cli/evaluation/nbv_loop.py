@@ -72,6 +72,7 @@ from kinfu_cli.fusion.volume import TernaryVolume
 from kinfu_cli.nbv.gains import get_gain
 from kinfu_cli.nbv.objects import known_grid, nbv_scorer, plan_object_views, plan_standard_views, volume_contours
 from kinfu_cli.nbv.ranking import default_inc_th, score_views, unknown_in_sphere
+from kinfu_cli.nbv.sensor import MAX_IMAGE_PIXELS
 from kinfu_cli.nbv.viewpoints import sphere_viewpoints
 from kinfu_cli.segmentation.pipeline import SegmentOptions, analyse_volume
 from kinfu_cli.sim.sampling import sample_triangles, surface_area
@@ -156,6 +157,8 @@ class LoopConfig:
         for name in ("width", "height"):  # None: the scene's camera; 0 is not "default"
             if getattr(self, name) is not None:
                 check_number(getattr(self, name), name, 8, 8192, integer=True, unit="pixels")
+        if self.width is not None and self.height is not None:
+            _check_image_size(self.width, self.height, "the given")
         check_number(self.oscillation_deg, "oscillation_deg", 0, 45, unit="degrees")
         check_number(self.poi_radius, "poi_radius", 0, 100, low_open=True, unit="m")
         if self.inc_th is not None:
@@ -482,6 +485,15 @@ def _take_view(vol, T_cur, T_goal, mode, sc, cfg, sensor, K, timer, frames: int,
     return frames
 
 
+def _check_image_size(width: int, height: int, source: str) -> None:
+    """The bound `kinfu nbv` puts on a sensor image (nbv.sensor.MAX_IMAGE_PIXELS): a larger one takes tens of
+    GB to cast and fuse."""
+    if width * height > MAX_IMAGE_PIXELS:
+        side = math.isqrt(MAX_IMAGE_PIXELS)
+        raise ConfigError(f"{source} image size {width}x{height} px holds {width * height:,} pixels, more than "
+                          f"the {MAX_IMAGE_PIXELS:,} ({side}x{side}) an NBV sensor may have", parameter="width/height")
+
+
 def _sensor_setup(sc: SimScene, cfg: LoopConfig):
     """Room-enclosed render meshes, the simulated sensor and the NBV camera model (same image, same ranges)."""
     centre = (sc.box_lo + sc.box_hi) / 2
@@ -489,6 +501,7 @@ def _sensor_setup(sc: SimScene, cfg: LoopConfig):
     sc.render_after = _with_room(sc.after, centre, cfg.room) if cfg.room > 0 else sc.after
     w = cfg.width or sc.width
     h = cfg.height or sc.height
+    _check_image_size(w, h, "the given" if cfg.width and cfg.height else f"scene {sc.name}: the sensor's")
     K = _scaled_K(sc.K, sc.width, sc.height, w, h)
     sensor = DepthSensor(K, w, h, noise=cfg.noise, seed=cfg.seed)
     cam = CameraModel(K[0, 0], K[1, 1], K[0, 2], K[1, 2], w, h, min_range=sensor.min_range,

@@ -38,7 +38,8 @@ from kinfu_cli.fusion.placement import default_origin
 from kinfu_cli.fusion.tracking import LOSS_CHECKS, POSE_MODES, FrameToModelTracker, TrackResult, predict_pose
 from kinfu_cli.fusion.up import choose_up
 from kinfu_cli.fusion.volume import DEFAULT_TRUNCATION_M, TernaryVolume, load_volume
-from kinfu_cli.io.frames import FrameStats, RGBDFrame, check_window, iter_frames, window_depth_count
+from kinfu_cli.io.frames import (DROP_NO_POSE, DROP_NO_POSE_TOPIC, FrameStats, RGBDFrame, check_window, iter_frames,
+                                  window_depth_count)
 from kinfu_cli.io.messages import header_frame
 from kinfu_cli.io.recording import Recording, open_recording
 from kinfu_cli.io.roles import Roles, detect_roles
@@ -257,8 +258,7 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
             dropped = {**stats.dropped, **depth_filter.drops}
             why = "; ".join(f"{k}: {v}" for k, v in dropped.items()) or "no depth frames in the selection"
             raise RecordingError(f"{rec.path}: no usable depth frames ({why})")
-        warnings += (stats.warnings(str(rec.path)) + _tracking_verdict(integrator, max_lost, str(rec.path))
-                     + _tracking_doubts(integrator.track_log) + _fallback_warnings(integrator.track_log, max_lost))
+        warnings += _frames_warnings(stats, integrator, max_lost, str(rec.path))
         vol = integrator.volume
         vol.frame = vol.frame or plan.world
 
@@ -386,6 +386,31 @@ def _auto_grid(rec: Recording, roles: Roles, plan: _PosePlan, grid_spec: _GridSp
     return auto_grid(seen, voxel_size=voxel_size, resolution=resolution,
                      truncation=grid_spec.truncation or DEFAULT_TRUNCATION_M, budget=budget, origin=origin, grow=grow,
                      color="mode" if grid_spec.color and grid_spec.color_mode == "mode" else grid_spec.color)
+
+
+# more than this share of the depth frames without a camera pose (outside the TF or pose topic's time, a chain that
+# breaks) is a warning: a few at the ends are usual (TF starts after the camera), a share of the scene is not
+NO_POSE_WARN = 0.10
+
+
+def _frames_warnings(stats: FrameStats, integrator: "_Integrator", max_lost: float, recording: str) -> list[str]:
+    """What the frames read and fused leave in doubt: the readers' warnings, frames without a camera pose, frames
+    tracking lost (RecordingError past max_lost), tracked poses that look wrong, frames fused at their TF pose."""
+    return (stats.warnings(recording) + _pose_drop_warnings(stats, recording)
+            + _tracking_verdict(integrator, max_lost, recording) + _tracking_doubts(integrator.track_log)
+            + _fallback_warnings(integrator.track_log, max_lost))
+
+
+def _pose_drop_warnings(stats: FrameStats, recording: str) -> list[str]:
+    """A warning when more than NO_POSE_WARN of the depth frames were not fused for want of a camera pose (they
+    were counted in the report only, and the volume lacked what they saw)."""
+    counts = {r: stats.dropped.get(r, 0) for r in (DROP_NO_POSE, DROP_NO_POSE_TOPIC) if stats.dropped.get(r, 0)}
+    n = sum(counts.values())
+    if n <= NO_POSE_WARN * max(stats.depth_messages, 1):
+        return []
+    why = "; ".join(f"{r}: {c}" for r, c in counts.items())
+    return [f"{recording}: {n} of the {stats.depth_messages} depth frames have no camera pose ({why}) and were not "
+            f"fused: the volume lacks what they saw"]
 
 
 def _tracking_verdict(integrator: _Integrator, max_lost: float, recording: str,

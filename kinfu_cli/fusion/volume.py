@@ -22,8 +22,8 @@ from kinfu_cli.core.errors import ConfigError, VolumeError
 from kinfu_cli.core.grid import EMPTY, OCCUPIED, UNKNOWN, TernaryGrid, check_up, read_ternary
 from kinfu_cli.core.memory import available_bytes
 from kinfu_cli.core.poses import check_rigid
-from kinfu_cli.core.volume_file import (FORMAT, FORMAT_VERSION, MAX_COORDINATE_M, check_intrinsics, read_volume_file,
-                                        read_volume_meta, write_volume_file)
+from kinfu_cli.core.volume_file import (FORMAT, FORMAT_VERSION, MAX_COORDINATE_M, MAX_RANGE_M, MIN_VOXEL_M,
+                                        check_intrinsics, read_volume_file, read_volume_meta, write_volume_file)
 from kinfu_cli.fusion import guided_depth as gdf
 from kinfu_cli.fusion import kernels as kn
 from kinfu_cli.fusion.color_mode import MAX_HYPOTHESES, MODE_THRESHOLD, check_color_mode, mode_winners
@@ -32,8 +32,6 @@ from kinfu_cli.fusion.mesh import extract_mesh
 BYTES_PER_VOXEL = 3  # v int16 + w uint8
 BYTES_PER_VOXEL_COLOR = 3
 BYTES_PER_HYPOTHESIS = 4  # colour mode filter: uint8 RGB + uint8 count
-MIN_VOXEL_M = 1e-4  # a tenth of a millimetre: finer is no depth sensor's scale
-MAX_RANGE_M = 100.0  # bound of depths and truncation: farther is no depth sensor (and overflows float32 casts)
 
 
 def _triple(x, name: str, kind=float) -> tuple:

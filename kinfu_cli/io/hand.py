@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from kinfu_cli.core.errors import RecordingError, TrajectoryError
+from kinfu_cli.core.errors import KinfuError, RecordingError, TrajectoryError
 from kinfu_cli.core.poses import quaternion_to_matrix
 from kinfu_cli.io.messages import POSE_TYPES, header_frame, header_stamp_ns, pose_message_to_tq
 from kinfu_cli.io.polhemus import read_polhemus
@@ -31,7 +31,8 @@ def load_hand_trajectory(path: str | os.PathLike, hand_topic: str | None = None,
     hand_topic: a PoseStamped / PoseWithCovarianceStamped / Odometry / TransformStamped topic.
     hand_frame: a TF frame; the trajectory is world_frame <- hand_frame at each stamp of the hand frame's link.
     world_frame: frame to express the trajectory in (a pose topic in another frame is moved through TF, as are the
-    samples of one whose frame_id changes mid-stream, said in the recording's problems).
+    samples of one whose frame_id changes mid-stream, said in the recording's problems; without it, those are
+    moved into the detected world frame, see _common_frame; an empty frame_id is the frame of the sample before).
     With neither, the hand is detected by name (a pose topic named hand/wrist/tracker, or a TF frame named hand).
     """
     path = Path(path)
@@ -97,7 +98,8 @@ def _from_topic(rec: Recording, topic: str, world_frame: str | None, tf: TfBuffe
         trans.append(t)
         quats.append(q)
         frames.append(header_frame(msg).lstrip("/"))
-    frame = next((f for f in frames if f), "")
+    frames = _fill_empty_frames(frames)
+    frame = frames[0] if frames else ""
     source = f"{rec.path}:{topic}"
     stamps_a = np.asarray(stamps, dtype=np.int64)
     T = np.zeros((len(stamps), 4, 4))
@@ -114,7 +116,8 @@ def _from_topic(rec: Recording, topic: str, world_frame: str | None, tf: TfBuffe
     meta = {"topic": topic, "msgtype": info.msgtype}
     if len(set(frames) - {""}) > 1:  # the poses of one topic in several frames: moved into one through TF
         tf = tf if tf is not None else TfBuffer.from_recording(rec)
-        stamps_a, T, frame = _into_one_frame(rec, topic, source, stamps_a, T, frames, world_frame or frame, tf, meta)
+        target = world_frame or _common_frame(rec, topic, frames, tf)
+        stamps_a, T, frame = _into_one_frame(rec, topic, source, stamps_a, T, frames, target, tf, meta)
     if world_frame and frame and world_frame != frame:
         tf = tf if tf is not None else TfBuffer.from_recording(rec)
         rng = tf.time_range(world_frame, frame)
@@ -129,6 +132,34 @@ def _from_topic(rec: Recording, topic: str, world_frame: str | None, tf: TfBuffe
         meta["moved_from_frame"] = frame
         frame = world_frame
     return _finish(stamps_a, T, frame or (world_frame or ""), source, meta)
+
+
+def _fill_empty_frames(frames: list[str]) -> list[str]:
+    """An empty frame_id (a driver that sometimes leaves it out) is the frame of the sample before it; leading
+    empty ones the first non-empty frame_id."""
+    last = next((f for f in frames if f), "")
+    filled = []
+    for f in frames:
+        last = f or last
+        filled.append(last)
+    return filled
+
+
+def _common_frame(rec: Recording, topic: str, frames: list[str], tf: TfBuffer) -> str:
+    """The frame to bring the samples of a topic in several frames into when no world frame is given: the world
+    frame detection picks (as the commands would), when TF links it to every frame_id; else a frame_id that is a
+    TF root or hangs from its root by static links only (a moving link such as an arm's would make the hand move
+    with the arm); else the first frame_id."""
+    names = list(dict.fromkeys(f for f in frames if f))
+    try:
+        world = detect_roles(rec, hand_topic=topic, tf=tf).world_frame
+    except KinfuError:  # a camera whose TF chain is broken: no detected world to go by
+        world = None
+    if world and all(f == world or tf.connected(world, f) for f in names):
+        return world
+    tree = tf.tree()
+    fixed = [f for f in names if all(tf.is_static(c) for c in chain_up(tree, f, None))]
+    return fixed[0] if fixed else names[0]
 
 
 def _into_one_frame(rec: Recording, topic: str, source: str, stamps: np.ndarray, T: np.ndarray, frames: list[str],

@@ -119,6 +119,11 @@ def read_labelled_cloud(path: str | os.PathLike) -> LabelledCloud:
     return _checked(ply_points(vertex, path), vertex[field], path)
 
 
+# whitespace after a binary PLY's last row that is taken as a trailing line end, not as bytes of rows the header
+# does not count
+MAX_TRAILING_WHITESPACE = 64
+
+
 def read_ply_vertices(path: Path) -> np.ndarray:
     """The vertex element of a PLY file as a numpy structured array (LabelsFileError when unreadable)."""
     from plyfile import PlyData, PlyElementParseError, PlyParseError  # only labels files need it
@@ -132,6 +137,8 @@ def read_ply_vertices(path: Path) -> np.ndarray:
             # binary: plyfile stops right after the declared rows; ascii rows are counted below (its text
             # reader reads ahead and closes fh)
             bytes_after = None if ply.text else os.fstat(fh.fileno()).st_size - fh.tell()
+            if bytes_after and bytes_after <= MAX_TRAILING_WHITESPACE and not fh.read().strip(b" \t\r\n"):
+                bytes_after = 0  # a line end written after the data (by hand or a text tool): no row
         vertex = ply["vertex"].data
     except LabelsFileError:
         raise

@@ -35,9 +35,16 @@ _MCAP_MAGIC = b"\x89MCAP0\r\n"
 _SQLITE_MAGIC = b"SQLite format 3\x00"
 _KINDS = "a ROS 1 .bag, an MCAP file or a ROS 2 bag folder (metadata.yaml)"
 # message types of which a corrupt message is skipped (and counted) rather than fatal: TF, whose many small
-# samples are interpolated across a lost one; a topic with more than this share corrupt is refused
+# samples are interpolated across a lost one (not on a static TF topic, see is_static_tf_topic); a topic with
+# more than this share corrupt is refused
 SKIPPABLE_TYPES = TF_TYPES
 MAX_CORRUPT_SHARE = 0.5
+
+
+def is_static_tf_topic(topic: str) -> bool:
+    """A static TF topic (/tf_static, /robot/tf_static): its few messages each carry links sent once and given
+    by no other message, so a corrupt one is never skipped."""
+    return topic.rstrip("/").endswith("tf_static")
 
 
 @dataclass
@@ -241,6 +248,9 @@ class Recording:
                 if isinstance(msg, Undecodable):
                     if msgtype not in SKIPPABLE_TYPES:
                         raise RecordingError(msg.error)
+                    if is_static_tf_topic(topic):
+                        raise RecordingError(f"{msg.error}; a static TF message is not skipped: its links are "
+                                             f"sent once and no other message gives them")
                     skipped.setdefault(topic, []).append(msg)
                     continue
                 yield topic, msgtype, stamp, msg

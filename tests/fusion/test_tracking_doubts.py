@@ -104,3 +104,16 @@ def test_a_camera_frame_that_is_the_world_frame_or_missing_is_said_plainly():
     assert missing.mode == "icp" and "the depth images carry no frame_id" in missing.warning
     fine = _pose_plan(rec, tf, SimpleNamespace(world_frame="world", camera_frame="base"), None, None)
     assert fine.warning == ""
+
+
+def test_many_frames_without_a_camera_pose_are_a_warning():
+    """A camera whose TF chain broke for 12 of 30 frames was fused from the other 18, said only in report.json."""
+    from kinfu_cli.fusion.pipeline import _pose_drop_warnings
+    from kinfu_cli.io.frames import DROP_NO_POSE, FrameStats
+
+    stats = FrameStats(depth_messages=30)
+    stats.dropped[DROP_NO_POSE] = 2  # TF starting after the camera: usual
+    assert _pose_drop_warnings(stats, "rec.mcap") == []
+    stats.dropped[DROP_NO_POSE] = 12
+    (warning,) = _pose_drop_warnings(stats, "rec.mcap")
+    assert warning.startswith("rec.mcap: 12 of the 30 depth frames have no camera pose") and "not fused" in warning
