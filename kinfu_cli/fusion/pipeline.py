@@ -536,10 +536,11 @@ def _pose_plan(rec: Recording, tf: TfBuffer, roles: Roles, pose: str | None, pos
     mode = pose or ("topic" if pose_topic else "forced" if has_tf else "icp")  # a pose topic given is meant to be used
     if pose_topic and mode != "topic":
         raise ConfigError(f"a pose topic is read only in pose mode 'topic', not {mode!r}", parameter="pose_topic")
+    camera = camera_frame or "? (the depth images carry no frame_id)"
     if mode in ("forced", "hint") and not has_tf:
         raise RecordingError(f"{rec.path}: pose mode {mode!r} needs TF from {world_frame or 'a world frame'} to "
-                             f"camera frame {camera_frame or '?'} (use pose mode 'icp' or 'topic', or name the "
-                             f"camera and world frames)", parameter="pose")
+                             f"camera frame {camera} (use pose mode 'icp' or 'topic', or name the camera and world "
+                             f"frames)", parameter="pose")
     if mode == "topic":
         source, description = "topic", f"topic {pose_topic}"
     elif mode == "icp" and not has_tf:
@@ -549,12 +550,11 @@ def _pose_plan(rec: Recording, tf: TfBuffer, roles: Roles, pose: str | None, pos
         if mode == "icp":
             description += " (first frame only)"
     warning = ""
-    camera = camera_frame or "? (the depth images carry no frame_id)"
     if pose is None and not has_tf and tf.frames():  # TF there, but not to the camera: say so, ICP may drift
         warning = (f"{rec.path}: the TF tree ({len(tf.frames())} frames) does not link camera frame "
                    f"{camera} to {world_frame or 'a world frame'}: camera poses come from ICP "
                    f"tracking instead (name the frames, or pose mode 'forced' to make a missing link an error)")
-    elif source == "tf" and camera_frame == world_frame:  # a lookup of a frame in itself: every pose the identity
+    elif mode in ("forced", "hint") and camera_frame == world_frame:  # a frame in itself: every pose the identity
         warning = (f"{rec.path}: the camera frame is the world frame {world_frame!r}: every depth frame is fused at "
                    f"the identity pose (a camera that never moves; name the camera frame if the depth images' "
                    f"frame_id is wrong)")

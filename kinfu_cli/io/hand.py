@@ -121,8 +121,8 @@ def _from_topic(rec: Recording, topic: str, world_frame: str | None, tf: TfBuffe
     if world_frame and frame and world_frame != frame:
         tf = tf if tf is not None else TfBuffer.from_recording(rec)
         rng = tf.time_range(world_frame, frame)
-        if rng is not None:  # samples before the first / after the last TF of the chain cannot be moved
-            ok = (stamps_a >= rng[0]) & (stamps_a <= rng[1])
+        if rng is not None:  # samples where no chain with transforms reaches the world cannot be moved
+            ok = tf.covers(world_frame, frame, stamps_a)
             meta["outside_tf_range"] = int((~ok).sum())
             if not ok.any():
                 raise TrajectoryError(f"{source}: no sample lies within the TF range of {world_frame} <- {frame} "
@@ -180,9 +180,8 @@ def _into_one_frame(rec: Recording, topic: str, source: str, stamps: np.ndarray,
                                   f"cannot be brought into one frame; expected one frame_id")
         in_f = frames_a == f
         movable = in_f.copy()
-        rng = tf.time_range(target, f)
-        if rng is not None:  # samples outside the TF range of the chain cannot be moved
-            movable &= (stamps >= rng[0]) & (stamps <= rng[1])
+        if tf.time_range(target, f) is not None:  # samples outside the TF range of the chain cannot be moved
+            movable &= tf.covers(target, f, stamps)
             keep &= ~(in_f & ~movable)
         if movable.any():
             T[movable] = tf.lookup_many(target, f, stamps[movable]) @ T[movable]
@@ -214,9 +213,8 @@ def _from_tf(rec: Recording, hand_frame: str, world_frame: str | None, tf: TfBuf
         raise TrajectoryError(f"{rec.path}: every TF link from {world_frame} to {hand_frame} is static; a hand "
                               f"trajectory needs a moving frame")
     stamps = tf.link_stamps(moving)
-    rng = tf.time_range(world_frame, hand_frame)
-    if rng is not None:  # other moving links on the chain may cover less time
-        stamps = stamps[(stamps >= rng[0]) & (stamps <= rng[1])]
+    if tf.time_range(world_frame, hand_frame) is not None:  # other moving links on the chain may cover less time
+        stamps = stamps[tf.covers(world_frame, hand_frame, stamps)]
     T = tf.lookup_many(world_frame, hand_frame, stamps) if stamps.size else np.zeros((0, 4, 4))
     source = f"{rec.path}:tf {world_frame}<-{hand_frame}"
     return _finish(stamps, T, world_frame, source, {"hand_frame": hand_frame})

@@ -162,8 +162,12 @@ def _fmt_s(ns: int) -> str:
 # back again and again, two publishers overlapping for a moment at a hand-over): at least this many switches ...
 TWO_PARENTS_MIN_SWITCHES = 4
 # ... that are also at least this share of the frame's transforms (alternating publishers: ~1; a pick-and-place
-# with TF at 100 Hz: 4 switches in thousands of transforms)
+# with TF at 100 Hz: 4 switches in thousands of transforms) ...
 TWO_PARENTS_MIN_SHARE = 0.1
+# ... and where one parent's runs are mostly (half or more) this short: one publisher's messages between the
+# other's (an object picked every second with TF at 10 Hz switches at 20 % of its transforms, in runs of ~5 under
+# both parents)
+TWO_PARENTS_RUN = 2
 
 
 @dataclass
@@ -236,11 +240,14 @@ class TfBuffer:
             order = np.argsort(st, kind="stable")
             st, lab = st[order], lab[order]
             change = np.flatnonzero(lab[1:] != lab[:-1]) + 1
-            if change.size >= TWO_PARENTS_MIN_SWITCHES and change.size >= TWO_PARENTS_MIN_SHARE * st.size:
+            first = np.r_[0, change]
+            short = np.diff(np.r_[first, st.size]) <= TWO_PARENTS_RUN
+            if (change.size >= TWO_PARENTS_MIN_SWITCHES and change.size >= TWO_PARENTS_MIN_SHARE * st.size
+                    and any(np.mean(short[lab[first] == i]) >= 0.5 for i in np.unique(lab))):
                 self._at_once[child] = int(change.size)
                 self._links[child] = max(links, key=lambda candidate: len(candidate.stamps))
                 continue
-            first, last = np.r_[0, change], np.r_[change - 1, st.size - 1]
+            last = np.r_[change - 1, st.size - 1]
             self._runs[child] = _Runs(st[first], st[last], [links[i] for i in lab[first]])
             self._links[child] = self._runs[child].links[-1]
 
@@ -383,8 +390,12 @@ class TfBuffer:
         return {child: link.parent for child, link in sorted(self._links.items())}
 
     def is_static(self, child: str) -> bool:
+        """Whether `child`'s link never moves (a re-parented frame: whether all its parents' links are static)."""
         self._refresh()
-        return self._links[_strip(child)].static
+        child = _strip(child)
+        if child in self._runs:
+            return all(link.static for link in self._runs[child].links)
+        return self._links[child].static
 
     def link_stamps(self, child: str) -> np.ndarray:
         """Sorted stamps (ns) of the link parent(child) -> child (of a re-parented frame: under every parent)."""
@@ -398,28 +409,53 @@ class TfBuffer:
         return link.arrays()[0]
 
     def time_range(self, target: str, source: str) -> tuple[int, int] | None:
-        """[first, last] stamps (ns) over which lookup(target, source) works; None when all links are static. A
-        frame re-parented over time counts from its first transform to its last (+-FOREVER_NS on a side where it
-        sits on a static parent), along the tree of the latest time that connects the two frames."""
-        lo, hi = None, None
-        links = self._connecting_tree(_strip(target), _strip(source))
-        up_src, up_tgt = self._split_path(_strip(target), _strip(source), links)
-        for child in up_src + up_tgt:
-            runs = self._runs.get(child)
-            if runs is None:
+        """[first, last] stamps (ns) over which lookup(target, source) works, the hull of `intervals` (a stamp
+        inside may still fall where no chain connects: `covers` tells); None when all links are static."""
+        spans = self.intervals(_strip(target), _strip(source))
+        if not spans:
+            self._connecting_tree(_strip(target), _strip(source))  # TransformError naming the frames
+            return 0, -1  # chains, but never with transforms of all their moving links at once
+        lo, hi = min(a for a, _ in spans), max(b for _, b in spans)
+        return None if (lo, hi) == (-FOREVER_NS, FOREVER_NS) else (lo, hi)
+
+    def intervals(self, target: str, source: str) -> list[tuple[int, int]]:
+        """The stamp intervals [lo, hi] (ns) where a chain connects the two frames and its moving links have
+        transforms, one per stretch between the runs of re-parented frames (+-FOREVER_NS where static links
+        hold the chain for ever); [] where no chain ever connects them."""
+        self._refresh()
+        target, source = _strip(target), _strip(source)
+        cuts = sorted({int(t) for runs in self._runs.values() for t in runs.starts[1:]})
+        bounds = [-FOREVER_NS, *cuts, FOREVER_NS]
+        out: list[tuple[int, int]] = []
+        for lo, hi in zip(bounds, bounds[1:]):
+            links = self._tree_at(lo)
+            try:
+                up_src, up_tgt = self._split_path(target, source, links)
+            except TransformError:
+                continue
+            end = hi - 1 if hi < FOREVER_NS else hi
+            for child in up_src + up_tgt:
+                runs = self._runs.get(child)
                 link = links[child]
-                first = last = None if link.static else link.arrays()[0]
-                first, last = (None, None) if first is None else (int(first[0]), int(last[-1]))
-            else:  # a static link holds from before its first run, or after its last one, for ever
-                first = None if runs.links[0].static else int(runs.starts[0])
-                last = None if runs.links[-1].static else int(runs.ends[-1])
-            if first is not None:
-                lo = first if lo is None else max(lo, first)
-            if last is not None:
-                hi = last if hi is None else min(hi, last)
-        if lo is None and hi is None:
-            return None
-        return (int(lo) if lo is not None else -FOREVER_NS, int(hi) if hi is not None else FOREVER_NS)
+                if link.static:
+                    continue
+                st = link.arrays()[0]
+                first = int(st[0]) if runs is None or link is runs.links[0] else lo  # a later run holds its last
+                last = int(st[-1]) if runs is None or link is runs.links[-1] else end  # transform until the next
+                lo, end = max(lo, first), min(end, last)
+            if lo <= end and out and out[-1][1] + 1 >= lo:  # continues the last one
+                out[-1] = (out[-1][0], max(out[-1][1], end))
+            elif lo <= end:
+                out.append((lo, end))
+        return out
+
+    def covers(self, target: str, source: str, stamps_ns: np.ndarray) -> np.ndarray:
+        """bool per stamp: whether a lookup there works (it lies in one of `intervals`)."""
+        s = np.asarray(stamps_ns, dtype=np.int64).reshape(-1)
+        ok = np.zeros(s.shape[0], bool)
+        for lo, hi in self.intervals(target, source):
+            ok |= (s >= lo) & (s <= hi)
+        return ok
 
     def require_chain(self, target: str, source: str) -> None:
         """TransformError (naming both frames) unless a chain of links connects target and source at some time
@@ -445,7 +481,7 @@ class TfBuffer:
             raise latest
 
     def _tree_at(self, stamp: int) -> dict[str, _Link]:
-        """The tree at `stamp`: each re-parented frame under the parent of its run there."""
+        """The tree at `stamp`: each re-parented frame under the parent of its run there (its first run before)."""
         links = dict(self._links)
         for child, runs in self._runs.items():
             links[child] = runs.links[max(int(np.searchsorted(runs.starts, stamp, side="right")) - 1, 0)]
@@ -539,13 +575,22 @@ class TfBuffer:
         """Each loop of links once, as its frames from parent to child (the first again at the end)."""
         self._refresh()
         found: list[list[str]] = []
+        for links in [self._links] + [self._tree_at(int(t)) for runs in self._runs.values() for t in runs.starts]:
+            for loop in self._loops_in(links):
+                if loop not in found:
+                    found.append(loop)
+        return found
+
+    def _loops_in(self, links: dict[str, _Link]) -> list[list[str]]:
+        """The loops of the tree `links`, each once, from parent to child (the first frame again at the end)."""
+        found: list[list[str]] = []
         done: set[str] = set()
-        for start in sorted(self._links):
+        for start in sorted(links):
             path: dict[str, int] = {}
             frame = start
-            while frame in self._links and frame not in done and frame not in path:
+            while frame in links and frame not in done and frame not in path:
                 path[frame] = len(path)
-                frame = self._links[frame].parent
+                frame = links[frame].parent
             if frame in path:  # walked into this walk's own path: a new loop
                 order = list(path)
                 loop = order[path[frame]:][::-1]

@@ -149,12 +149,25 @@ def _view_bar(total: int, quiet: bool):
     return progress_bar(total, desc="nbv candidates", unit="view", quiet=quiet)
 
 
-def check_run_size(pois_path, n_pois: int, opts: NbvOptions, n_candidates: int | None = None) -> int:
+# most rays one run may cast (candidate views x sensor pixels): what MAX_RUN_VIEWS costs at the Kinect's 640 x 480
+# (2-7 min at 0.1-0.4 ms a view). A view's cost grows with the pixels, and faster than them (16000 x 1000 px: 145 s
+# for 2 POIs, ~75 ms a view, measured by the fuzzing session), so at the largest sensor the bound is ~25 min; the
+# view bound alone let a 4096 x 4096 sensor run for days.
+MAX_RUN_RAYS = MAX_RUN_VIEWS * 640 * 480
+
+
+def check_run_size(pois_path, n_pois: int, opts: NbvOptions, n_candidates: int | None = None,
+                   pixels: int | None = None) -> int:
     """The number of candidate views the run ranks (every POI's sphere, or the candidate file once per POI);
     ConfigError naming the POI file and the sphere options (or the candidate file) when it exceeds
-    MAX_RUN_VIEWS, before any pose is made."""
+    MAX_RUN_VIEWS, or, with the sensor's `pixels`, when views x pixels exceed MAX_RUN_RAYS, before any pose is
+    made."""
     per_poi = opts.sphere.view_count() if n_candidates is None else n_candidates
     total = n_pois * per_poi
+    if pixels is not None and total <= MAX_RUN_VIEWS and total * pixels > MAX_RUN_RAYS:
+        raise ConfigError(f"{pois_path}: {total:,} candidate views x {pixels:,} sensor pixels = {total * pixels:.3g} "
+                          f"rays, more than the {MAX_RUN_RAYS:.3g} one run casts (hours of ray casting); use a "
+                          f"smaller sensor image, fewer views (larger sphere steps) or fewer POIs a run")
     if total > MAX_RUN_VIEWS:
         what = "views on each viewing sphere" if n_candidates is None else f"candidates in {opts.candidates}"
         fix = ("use larger sphere steps or a narrower latitude range" if n_candidates is None
@@ -173,7 +186,8 @@ def rank_poi_views(volume_path: str | os.PathLike, pois_path: str | os.PathLike,
     opts.validate()
     pois = load_pois(pois_path, opts.poi_radius)
     candidates = read_candidates(opts.candidates) if opts.candidates is not None else None
-    check_run_size(pois_path, len(pois), opts, None if candidates is None else len(candidates))
+    check_run_size(pois_path, len(pois), opts, None if candidates is None else len(candidates),
+                   camera.width * camera.height)
     grid = load_grid(volume_path)
     for p in pois:
         check_region_inside(grid, p.position, f"{pois_path}: POI {p.id}")

@@ -104,6 +104,8 @@ def test_a_camera_frame_that_is_the_world_frame_or_missing_is_said_plainly():
     assert missing.mode == "icp" and "the depth images carry no frame_id" in missing.warning
     fine = _pose_plan(rec, tf, SimpleNamespace(world_frame="world", camera_frame="base"), None, None)
     assert fine.warning == ""
+    tracked = _pose_plan(rec, tf, SimpleNamespace(world_frame="world", camera_frame="world"), "icp", None)
+    assert tracked.warning == ""  # ICP places the frames: not the identity
 
 
 def test_many_frames_without_a_camera_pose_are_a_warning():

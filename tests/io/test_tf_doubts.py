@@ -296,3 +296,51 @@ def test_a_gap_on_an_earlier_parents_link_is_still_said():
     tf.lookup("world", "cam", 2 * S)
     (warning,) = tf.gap_warnings()
     assert "TF link world -> cam has no transform for 2.200 s" in warning
+
+
+def test_lookups_are_covered_wherever_some_runs_chain_reaches_the_world():
+    """A tool under the arm (0-5 s), then under a cart whose own link exists only from 5 s: time_range took the
+    cart's range and dropped the first half of the hand samples without a word."""
+    tf = TfBuffer()
+    for k in range(101):
+        tf.add("world", "arm", k * S // 10, _T([0, k / 10, 0]))
+        if k >= 50:
+            tf.add("world", "cart", k * S // 10, _T([3, 0, 0]))
+        tf.add("arm" if k < 50 else "cart", "tool", k * S // 10, _T([0, 0, 1]))
+    assert tf.time_range("world", "tool") == (0, 10 * S)
+    stamps = np.array([1, 4, 6, 9]) * S
+    assert tf.covers("world", "tool", stamps).all()
+    np.testing.assert_allclose(tf.lookup_many("world", "tool", stamps)[:, :3, 3],
+                               [[0, 1, 1], [0, 4, 1], [3, 0, 1], [3, 0, 1]])
+    assert not tf.is_static("tool")
+
+
+def test_a_frame_set_down_on_a_static_parent_still_moves_and_loops_of_one_run_are_found():
+    tf = TfBuffer()
+    for k in range(10):
+        tf.add("world", "arm", k * S, _T([0, k, 0]))
+    for k in range(5):
+        tf.add("arm", "tool", k * S, np.eye(4))
+    tf.add("world", "table", 0, np.eye(4), static=True)
+    tf.add("table", "tool", 5 * S, np.eye(4), static=True)  # set down at 5 s
+    assert tf.tree()["tool"] == "table" and not tf.is_static("tool")
+    looped = TfBuffer()
+    looped.add("A", "tool", 0, np.eye(4), static=True)  # tool hangs from A: A under tool at 4 s is a loop
+    for k in range(10):
+        looped.add("tool" if k == 4 else "world", "A", k * S, np.eye(4))
+    assert ["A", "tool", "A"] in looped.loops() or ["tool", "A", "tool"] in looped.loops()
+    assert not looped.covers("world", "A", np.array([4 * S + S // 2])).any()  # the loop's time is not covered
+    assert looped.covers("world", "A", np.array([2 * S, 7 * S])).all()
+
+
+def test_frequent_picks_at_a_low_tf_rate_are_not_two_publishers():
+    """An object picked every second with TF at 10 Hz switches at 20 % of its transforms, in runs of 5: read as two
+    publishers, every lookup took the table (9 m from the gripper)."""
+    tf = TfBuffer()
+    tf.add("world", "table", 0, _T([9, 0, 0]), static=True)
+    tf.add("world", "gripper", 0, np.eye(4), static=True)
+    for k in range(200):
+        tf.add("gripper" if (k // 5) % 2 else "table", "obj", k * S // 10, np.eye(4))
+    assert tf.parent_warnings() == []
+    np.testing.assert_allclose(tf.lookup("world", "obj", 7 * S // 10)[:3, 3], [0, 0, 0])  # in the gripper
+    np.testing.assert_allclose(tf.lookup("world", "obj", 12 * S // 10)[:3, 3], [9, 0, 0])

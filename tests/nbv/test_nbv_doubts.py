@@ -69,3 +69,16 @@ def test_the_volumes_recorded_camera_is_named_when_it_is_too_large():
         camera_from_options(recorded=recorded, recorded_from="scan/volume.npz", vfov_extra_deg=5.0)
     assert "scan/volume.npz: the camera it was fused with" in str(err.value) and "100000x100000 px" in str(err.value)
     assert camera_from_options(recorded=dict(recorded, width=640, height=480)).height == 480
+
+
+def test_views_times_sensor_pixels_are_bounded_before_any_pose_is_made():
+    """The view bound alone let 1,000 POIs at 4096 x 4096 px cast 1.6e13 rays (days); the Kinect's 640 x 480 at
+    the view bound is the budget."""
+    from kinfu_cli.nbv.workflow import MAX_RUN_RAYS
+
+    assert check_run_size("pois.json", 1000, NbvOptions(), None, 640 * 480) == 960_000  # the bound's own case
+    assert 960_000 * 640 * 480 <= MAX_RUN_RAYS
+    assert check_run_size("pois.json", 2, NbvOptions(), None, 4096 * 4096) == 1920
+    with pytest.raises(ConfigError) as err:
+        check_run_size("pois.json", 20, NbvOptions(), None, 4096 * 4096)
+    assert "sensor pixels" in str(err.value) and err.value.parameter is None  # the image may be the volume's
