@@ -66,7 +66,7 @@ def command(shapes: str, trials: int, methods: str, noise: float, particles: int
                             noise=noise if noise > 0 else MupfParameters.noise,
                             **(PAPER_WEIGHTS if paper_weights else {}), **(NO_REFINE if no_refine else {}))
     params.check()
-    check_recognition(recognition_trials, recognition_points)
+    check_recognition(recognition_trials, recognition_points, params)
     doc = evaluate_localization(names, trials=trials, noise=noise, params=params, methods=meths, seed=seed,
                                 quiet=quiet)
     if recognition_trials:

@@ -8,7 +8,8 @@ import click
 
 from kinfu_cli.commands._engine import scheduler_option, trial_engine
 from kinfu_cli.commands._options import claim_outputs, result_options
-from kinfu_cli.commands._output import emit
+from kinfu_cli.commands._output import emit, print_warnings
+from kinfu_cli.core.atomic import write_json
 from kinfu_cli.core.pois import DEFAULT_RADIUS
 from kinfu_cli.evaluation.nbv_loop import EXPLORE, LoopConfig, run_loop
 from kinfu_cli.evaluation.tables import nbv_loop_table
@@ -60,7 +61,8 @@ def check_options(params: dict) -> None:
 @click.option("--poi-radius", default=DEFAULT_RADIUS, show_default=True, type=float, help="Radius of S(POI) (m).")
 @click.option("--pois-from", default=None, type=click.Choice(["gmm-as", "truth"]),
               help="POIs of a kinfu synth folder SCENE from GMM-AS on the simulated hand trajectory, or the true "
-                   "changes (poi, random, fixed; a bare mesh takes --poi).  [default: gmm-as]")
+                   "changes (poi, random, fixed; a bare mesh takes --poi). A folder without hand.traj has only the "
+                   "true changes: by default they are taken with a warning, gmm-as is refused.  [default: gmm-as]")
 @click.option("--poi", nargs=3, type=float, default=None,
               help="POI x y z for a bare mesh SCENE (poi, random, fixed; a kinfu synth folder brings its own).")
 @click.option("--optimistic/--paper-stop", default=True, show_default=True,
@@ -87,7 +89,8 @@ def check_options(params: dict) -> None:
 @click.option("--workers", type=click.IntRange(min=1), default=None,
               help="Run the strategy trials on a local Dask cluster of this many processes [in this process].")
 @scheduler_option
-@result_options(output="Write the result JSON here.", json="Print the result JSON on stdout.", quiet="No progress bar.",
+@result_options(output="Write the result JSON here.", json="Print the result JSON on stdout.",
+                quiet="Only warnings and errors: no progress bar, no tables (--json still prints the JSON).",
                 plot="PNG: unknown voxels in each POI sphere vs views (the paper's Fig. 20).", dir_okay=True)
 def command(scene, strategies, views, mode, voxel_size, gain, inc_th, poi_radius, pois_from, poi, optimistic,
             oscillation, width, height, scan_every, lon_step, lat_step, roll_step, scan_frames, near_margin,
@@ -123,4 +126,9 @@ def command(scene, strategies, views, mode, voxel_size, gain, inc_th, poi_radius
     if plot is not None:
         plot_nbv_loop(plot, doc)
         doc["plot"] = str(plot)
-    emit(doc, output, as_json, nbv_loop_table)
+    if quiet and not as_json:  # only warnings and errors, as segment, fuse and poi do
+        print_warnings(doc)
+        if output is not None:
+            write_json(output, doc)
+    else:
+        emit(doc, output, as_json, nbv_loop_table)

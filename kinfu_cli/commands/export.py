@@ -13,7 +13,7 @@ from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.commands._frames import frame_kwargs, frame_options
 from kinfu_cli.commands._roles import role_kwargs, role_options
 from kinfu_cli.core.errors import ConfigError
-from kinfu_cli.io.rgbd_folders import export_frames
+from kinfu_cli.io.rgbd_folders import dropped_frames_warning, export_frames
 from kinfu_cli.io.tum import fused_trajectory, recording_trajectory, write_tum
 
 
@@ -95,11 +95,6 @@ def _export_trajectory(source: str, out: str, fk: dict, roles_kw: dict, as_json:
 
 
 def _dropped_warning(source: str, stats: dict) -> str | None:
-    """The depth frames left out of a recording's trajectory, by reason (as fuse reports the frames it dropped):
-    a TUM file holds no line for them, and evo then scores a shorter trajectory without a word."""
-    total = stats.get("dropped_total", 0)
-    if not total:
-        return None
-    why = "; ".join(f"{reason}: {n}" for reason, n in stats["dropped"].items())
-    return (f"{source}: {total} of the {stats['depth_messages']} depth frames dropped ({why}); the trajectory has "
-            f"no pose at their stamps")
+    """The depth frames left out of a recording's trajectory, by reason: a TUM file holds no line for them, and
+    evo then scores a shorter trajectory without a word."""
+    return dropped_frames_warning(source, stats, "the trajectory has no pose")

@@ -209,8 +209,10 @@ def load_scene(path: str | os.PathLike, cfg: LoopConfig) -> SimScene:
         n_scan = int(gt.info.get("frames", {}).get("scan") or len(gt.poses))
         present = {o["id"] for o in gt.objects if o.get("present_after", True)}
         spheres = bounding_spheres([m for k, m in gt.object_meshes().items() if k in present])
+        # no hand.traj (removed, or a folder another tool wrote): run_loop says the POIs come from the truth
+        hand = gt.hand() if (gt.folder / "hand.traj").exists() else None
         return SimScene(gt.folder.name, gt.mesh("before"), gt.mesh("after"), gt.K, gt.width, gt.height,
-                        gt.poses[:n_scan:cfg.scan_every], gt.hand(), gt.change_positions, tz, lo, hi,
+                        gt.poses[:n_scan:cfg.scan_every], hand, gt.change_positions, tz, lo, hi,
                         object_spheres=spheres)
     # no reader chatter (open3d warnings, RPly's own lines on a damaged PLY): we report problems
     with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error), c_stderr_silenced():
@@ -382,6 +384,7 @@ def run_loop(scene_path: str | os.PathLike, cfg: LoopConfig, quiet: bool = True,
     timer = _Timer()
     t0 = time.perf_counter()
     sc = load_scene(scene_path, cfg)
+    warnings = _pois_source_warnings(sc, cfg, scene_path)
     sensor, K, cam = _sensor_setup(sc, cfg)
     timer.add("load", time.perf_counter() - t0)
 
@@ -415,7 +418,7 @@ def run_loop(scene_path: str | os.PathLike, cfg: LoopConfig, quiet: bool = True,
         for k, v in times.items():
             timer.add(k, v)
     doc = {
-        "scene": str(scene_path), "config": _cfg_doc(cfg), "camera": cam.to_dict(),
+        "scene": str(scene_path), "config": _cfg_doc(cfg, sc), "camera": cam.to_dict(),
         "volume": {"shape": list(base.shape), "voxel_size": base.voxel_size, "origin": base.origin.tolist()},
         "initial_scan_views": int(n_int),
         "pois": [{"id": i, "position": p.tolist(),
@@ -423,17 +426,31 @@ def run_loop(scene_path: str | os.PathLike, cfg: LoopConfig, quiet: bool = True,
                   if len(sc.changes) else None} for i, p in enumerate(pois)],
         "strategies": runs,
         "time_s": {k: round(v, 3) for k, v in timer.t.items()},
+        "warnings": warnings,
     }
     doc["time_s"]["total"] = round(time.perf_counter() - t0, 3)
     return doc
 
 
-def _cfg_doc(cfg: LoopConfig) -> dict:
+def _pois_source_warnings(sc: SimScene, cfg: LoopConfig, scene_path) -> list[str]:
+    """A kinfu synth folder without a hand trajectory has its POIs from the true changes: a warning when the
+    source was left to its default (gmm-as), ConfigError when gmm-as was asked for (it would read as GMM-AS's)."""
+    if sc.hand is not None or cfg.poi is not None or cfg.pois_from == "truth":
+        return []
+    if cfg.pois_from == "gmm-as":
+        raise ConfigError(f"{scene_path}: the kinfu synth folder has no hand trajectory (hand.traj) for GMM-AS to "
+                          f"find POIs in; give truth to take the true changes", parameter="pois_from")
+    return [f"{scene_path}: the POIs are the {len(sc.changes)} true changes, not GMM-AS's (the default "
+            f"pois_from gmm-as): the kinfu synth folder has no hand trajectory (hand.traj)"]
+
+
+def _cfg_doc(cfg: LoopConfig, sc: SimScene | None = None) -> dict:
     d = asdict(cfg)
     d["strategies"] = list(cfg.strategies)
     d["modes"] = list(cfg.modes)
-    if d["pois_from"] is None:  # the source the run used: gmm-as unless a bare mesh's given position
-        d["pois_from"] = "poi" if cfg.poi is not None else "gmm-as"
+    if d["pois_from"] is None:  # the source the run used: gmm-as unless a bare mesh's given position or no hand
+        d["pois_from"] = ("poi" if cfg.poi is not None else
+                          "truth" if sc is not None and sc.hand is None else "gmm-as")
     return d
 
 

@@ -451,6 +451,18 @@ def import_folder(src: str | os.PathLike, out: str | os.PathLike, rate: float = 
     }
 
 
+def dropped_frames_warning(source: str, stats: dict, lacking: str) -> str | None:
+    """The depth frames a recording's export left out, by reason (as fuse reports the frames it dropped), and
+    what the output lacks for them (`lacking` ... at their stamps); None when none was dropped. Said only in the
+    stats, the export reads as the whole recording."""
+    total = stats.get("dropped_total", 0)
+    if not total:
+        return None
+    why = "; ".join(f"{reason}: {n}" for reason, n in stats["dropped"].items())
+    return (f"{source}: {total} of the {stats['depth_messages']} depth frames dropped ({why}); {lacking} at their "
+            f"stamps")
+
+
 def export_frames(recording: str | os.PathLike, out: str | os.PathLike, roles_kw: dict | None = None,
                   pose_source: str = "tf", pose_topic: str | None = None, tolerance_s: float = 0.05,
                   start_s: float | None = None, end_s: float | None = None, every: int = 1,
@@ -491,6 +503,8 @@ def export_frames(recording: str | os.PathLike, out: str | os.PathLike, roles_kw
             summary = {"recording": str(rec.path), "output": str(out), "roles": roles.as_dict(),
                        "frames": len(listing), "stats": stats.as_dict(), "K": K0.tolist(),
                        "warnings": rec.problems + stats.warnings(str(rec.path)), "list": listing}
+            if dropped := dropped_frames_warning(str(rec.path), summary["stats"], "the folder has no frame"):
+                summary["warnings"].append(dropped)
             (tmp / "frames.json").write_text(json.dumps(summary, indent=2) + "\n")
             umask = os.umask(0)
             os.umask(umask)

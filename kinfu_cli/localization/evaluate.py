@@ -14,6 +14,7 @@ from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.progress import progress
 from kinfu_cli.core.memory import available_bytes
 from kinfu_cli.localization import shapes
+from kinfu_cli.localization.localize import check_run_time
 from kinfu_cli.localization.baselines import localize_ransac_icp, localize_scaling_series
 from kinfu_cli.localization.mesh_model import pose_matrix
 from kinfu_cli.localization.mupf import MupfParameters, localize_mupf
@@ -81,6 +82,10 @@ def evaluate_localization(names=tuple(shapes.SIMULATION_SHAPES), *, trials: int 
     bad = [m for m in methods if m not in METHODS]
     if bad:
         raise ConfigError(f"unknown method(s) {', '.join(bad)} (expected {', '.join(METHODS)})", parameter="methods")
+    if "mupf" in methods:  # localize's upfront bound on one filter run, before the first trial
+        for name in names:
+            L, m = shapes.TABLE_4_3[name]
+            check_run_time(replace(params, window=m), L)
     rng = np.random.default_rng(seed)
     doc: dict = {"protocol": {"trials": trials, "noise_m": noise, "offset_m": [0.05, 0.1], "rotation_deg": [45, 90],
                               "success": f"ADD-S <= {SUCCESS_ADD_S} m, and for non-symmetric shapes rotation error "
@@ -122,9 +127,10 @@ def evaluate_localization(names=tuple(shapes.SIMULATION_SHAPES), *, trials: int 
     return doc
 
 
-def check_recognition(trials: int, n_points: int) -> None:
+def check_recognition(trials: int, n_points: int, params: MupfParameters = MupfParameters()) -> None:
     """ConfigError unless `evaluate_recognition` can run these (a command checks before its long first part):
-    trials >= 0, 3 <= n_points and their memory within what is available."""
+    trials >= 0, 3 <= n_points, their memory within what is available and a trial's filtering (MUPF on every
+    block) within localize's bound (check_run_time)."""
     check_number(trials, "recognition_trials", 0, integer=True)
     check_number(n_points, "recognition_points", 3, integer=True)
     avail = available_bytes()
@@ -133,13 +139,15 @@ def check_recognition(trials: int, n_points: int) -> None:
                           f"GB ({avail / 1024**3:.1f} GB available): expected at most "
                           f"{int(0.8 * avail // BYTES_PER_RECOGNITION_POINT)} (the thesis uses about 170)",
                           parameter="recognition_points")
+    if trials:
+        check_run_time(_recognition_params(params, n_points), n_points, len(shapes.RECOGNITION_NAMES))
 
 
 def evaluate_recognition(*, trials: int = 1, n_points: int = 170, noise: float = 0.0,
                          params: MupfParameters = MupfParameters(), seed: int = 0, quiet: bool = True) -> dict:
     """Ch. 5 in simulation: for each of the six near-identical blocks, `trials` sets of n_points surface
     points at a Table 4.2-style pose; MUPF on every model (m = L/2), the lowest I_L names the object."""
-    check_recognition(trials, n_points)
+    check_recognition(trials, n_points, params)
     check_number(seed, "seed", 0, 2 ** 63 - 1, integer=True)
     models = list(shapes.recognition_shapes())
     for m in models:
@@ -151,7 +159,7 @@ def evaluate_recognition(*, trials: int = 1, n_points: int = 170, noise: float =
     for i, _ in progress(jobs, total=len(jobs), desc="eval recognition", quiet=quiet, unit="trial"):
         trial = make_trial(models[i], n_points, noise, rng)
         s = int(rng.integers(2 ** 31))
-        p = replace(params, window=max(1, math.ceil(n_points / 2)))
+        p = _recognition_params(params, n_points)
         res = [localize_mupf(m, trial.points, p, seed=s) for m in models]
         idx = [r.index for r in res]
         j = int(np.argmin(idx))
@@ -162,6 +170,10 @@ def evaluate_recognition(*, trials: int = 1, n_points: int = 170, noise: float =
     return {"models": [m.name for m in models], "points": n_points, "noise_m": noise, "trials_per_object": trials,
             "confusion": confusion.tolist(), "correct": int(np.trace(confusion)), "total": int(confusion.sum()),
             "trials": rows, "thesis": "6/6 in simulation (about 170 noiseless points), 4/6 on real data"}
+
+
+def _recognition_params(params: MupfParameters, n_points: int) -> MupfParameters:
+    return replace(params, window=max(1, math.ceil(n_points / 2)))  # m = L / 2
 
 
 def format_localization_table(doc: dict) -> str:

@@ -79,7 +79,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import ConvexHull, QhullError, cKDTree
@@ -136,6 +135,12 @@ FOOT_BAND = 0.015  # feet (step 7): object points higher than this over the supp
 
 
 MAX_DISTANCE_M = 10.0  # the largest seed_resolution, adjacency_radius, plane_distance: beyond any scene
+# The adjacency pairs' memory: ~115 B a pair at the peak (scipy's pair vector, the (E, 2) array, LCCP's per-pair
+# arrays and graphs; the sample fused at 6.9 mm, adjacency_radius 0.16 m: 24 M pairs, 3.0 GB). 20 M pairs (~2.3 GB)
+# is 70x the sample's 0.29 M at the default radius; a radius spanning the cloud makes N^2 / 2 pairs (the same
+# cloud at 10 m: 2.3e9 pairs, 17 GB and out of memory after a minute). The count is estimated on a sample first.
+MAX_ADJACENCY_PAIRS = 20_000_000
+PAIR_SAMPLE = 1000  # points whose neighbours within the radius are counted for that estimate
 
 
 @dataclass
@@ -376,10 +381,16 @@ def _spans(points: np.ndarray, normal: np.ndarray, span: float, cell: float) -> 
     if np.any(uv.max(axis=0) - uv.min(axis=0) < span):
         return False
     ij = np.floor((uv - uv.min(axis=0)) / cell).astype(np.int64)
-    occ = np.zeros(ij.max(axis=0) + 1, dtype=bool)
-    occ[ij[:, 0], ij[:, 1]] = True
-    comp, _ = ndimage.label(occ, structure=np.ones((3, 3), dtype=bool))
-    lab = comp[ij[:, 0], ij[:, 1]]
+    # the occupied cells only: a dense grid over a coarse volume's extent (6 m voxels: 1e10 cells) ran out of memory
+    cells, at = np.unique(ij, axis=0, return_inverse=True)
+    width = int(cells[:, 1].max()) + 3  # j + 1 + dj stays in 0..width-1 for dj in -1..1
+    key = cells[:, 0] * width + cells[:, 1] + 1  # increasing: np.unique sorts the rows
+    edges = []
+    for di, dj in ((0, 1), (1, -1), (1, 0), (1, 1)):  # half the 8-neighbourhood: the edges are undirected
+        pos = np.minimum(np.searchsorted(key, key + di * width + dj), len(key) - 1)
+        hit = key[pos] == key + di * width + dj
+        edges.append(np.column_stack([np.flatnonzero(hit), pos[hit]]))
+    lab = _components(len(cells), np.concatenate(edges))[at.ravel()]
     patch = uv[lab == np.bincount(lab).argmax()]
     lo, hi = np.percentile(patch, [5, 95], axis=0)
     return bool(np.all(hi - lo >= span))
@@ -441,8 +452,27 @@ def supervoxels(points: np.ndarray, normals: np.ndarray, params: SegmentationPar
             seed_col = _mean_rows(colors, labels, k)
     # split into spatially connected parts
     if pairs is None:
-        pairs = cKDTree(points).query_pairs(r=params.adjacency_radius, output_type="ndarray")
+        pairs = adjacency_pairs(points, params.adjacency_radius)
     return _components(n, pairs[labels[pairs[:, 0]] == labels[pairs[:, 1]]])
+
+
+def adjacency_pairs(points: np.ndarray, radius: float) -> np.ndarray:
+    """The point pairs (E, 2) closer than `radius` (adjacency_radius). ConfigError first when they would be more
+    than MAX_ADJACENCY_PAIRS (estimated from PAIR_SAMPLE points' neighbour counts): a radius spanning the cloud
+    makes N^2 / 2 pairs and the search runs out of memory instead of answering."""
+    n = len(points)
+    tree = cKDTree(points)
+    if n > 1:
+        m = min(n, PAIR_SAMPLE)
+        pick = np.random.default_rng(0).choice(n, m, replace=False) if m < n else np.arange(n)
+        within = int(cKDTree(points[pick]).count_neighbors(tree, radius))  # (sample, any) pairs, itself included
+        expected = (within - m) * n / m / 2
+        if expected > MAX_ADJACENCY_PAIRS:
+            raise ConfigError(f"{radius:g} m joins about {expected:.3g} point pairs among the {n} surface points "
+                              f"(at most {MAX_ADJACENCY_PAIRS:.3g}, beyond which the search runs out of memory); "
+                              f"expected a radius near the points' spacing "
+                              f"(default {SegmentationParams.adjacency_radius:g} m)", parameter="adjacency_radius")
+    return tree.query_pairs(r=radius, output_type="ndarray")
 
 
 def _components(n: int, edges: np.ndarray) -> np.ndarray:
@@ -1120,7 +1150,7 @@ def segment_cloud(points: np.ndarray, normals: np.ndarray, params: SegmentationP
         return Segmentation(pts, nrm, labels, plane, sv_all, 0, stats, col)
     P, N = pts[rest], nrm[rest]
     C = None if col is None else col[rest]
-    pairs = cKDTree(P).query_pairs(r=params.adjacency_radius, output_type="ndarray")
+    pairs = adjacency_pairs(P, params.adjacency_radius)
     if params.method == "flood-fill":
         seg, grow = flood_fill_segments(N, pairs, params, C)
         k = 0

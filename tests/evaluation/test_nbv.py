@@ -45,7 +45,7 @@ def test_cli_eval_nbv_writes_table_json_and_plot(sample_dir, tmp_path):
     res = CliRunner().invoke(cli, ["eval", "nbv", str(sample_dir), "--strategy", "fixed", "--views", "1",
                                    "--voxel-size", "0.025", "--width", "80", "--height", "60", "--scan-every", "4",
                                    "--lon-step", "90", "--lat-step", "45", "--roll-step", "180", "--no-noise",
-                                   "--quiet", "-o", str(out), "--plot", str(png)])
+                                   "-o", str(out), "--plot", str(png)])
     assert res.exit_code == 0, res.output
     assert "unknown voxels in each POI sphere" in res.output and "fixed" in res.output
     doc = json.loads(out.read_text())

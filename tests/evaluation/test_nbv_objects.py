@@ -84,7 +84,7 @@ def test_near_object_voxels_are_inside_the_enlarged_spheres_above_the_table():
 def test_cli_eval_nbv_objects_table_and_json(sample_dir, tmp_path):
     out = tmp_path / "explore.json"
     args = ["eval", "nbv", str(sample_dir), "--strategy", "objects", "--views", "1", "--width", "160",
-            "--height", "120", "--score-width", "48", "--no-noise", "--quiet"]
+            "--height", "120", "--score-width", "48", "--no-noise"]
     res = CliRunner().invoke(cli, args + ["-o", str(out)])
     assert res.exit_code == 0, res.output
     assert "unknown voxels near objects" in res.output and "candidate views ray-cast" in res.output
@@ -93,7 +93,7 @@ def test_cli_eval_nbv_objects_table_and_json(sample_dir, tmp_path):
     assert doc["kind"] == "exploration" and len(r["unknown_near"]) == 2
     assert r["unknown_near"][1] < 0.85 * r["unknown_near"][0]  # W_th = 5 unknown: 71.8k -> 58.0k at 48 px
     assert 0 < r["candidates_cast_total"] <= 2000 and r["segments"][0] is not None
-    res = CliRunner().invoke(cli, args + ["--json"])
+    res = CliRunner().invoke(cli, args + ["--json", "--quiet"])
     assert res.exit_code == 0 and json.loads(res.output)["strategies"]["objects"]["unknown_near"] == r["unknown_near"]
 
 
