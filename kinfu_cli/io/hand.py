@@ -98,8 +98,12 @@ def _from_topic(rec: Recording, topic: str, world_frame: str | None, tf: TfBuffe
         trans.append(t)
         quats.append(q)
         frames.append(header_frame(msg).lstrip("/"))
+    empty = sum(not f for f in frames)
     frames = _fill_empty_frames(frames)
     frame = frames[0] if frames else ""
+    if empty and len(set(frames) - {""}) > 1:  # which frame those samples were in is a guess: say it
+        rec.problems.append(f"{rec.path}: hand topic {topic}: {empty} samples without frame_id were taken in the "
+                            f"frame of the sample before them")
     source = f"{rec.path}:{topic}"
     stamps_a = np.asarray(stamps, dtype=np.int64)
     T = np.zeros((len(stamps), 4, 4))

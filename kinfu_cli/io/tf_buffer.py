@@ -213,6 +213,8 @@ class TfBuffer:
         norm = float(np.linalg.norm(quat))
         parents = self._parents.setdefault(child, {})
         link = parents.get(parent)
+        if link is not None and static and not link.static:  # a moving link sent once on /tf_static: one more
+            static = False  # sample, as tf2 keeps it in the frame's time cache (its /tf samples were thrown away)
         if link is None or link.static != static:
             link = parents[parent] = _Link(parent, static)
         if static:

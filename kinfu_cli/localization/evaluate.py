@@ -85,7 +85,7 @@ def evaluate_localization(names=tuple(shapes.SIMULATION_SHAPES), *, trials: int 
     if "mupf" in methods:  # localize's upfront bound on one filter run, before the first trial
         for name in names:
             L, m = shapes.TABLE_4_3[name]
-            check_run_time(replace(params, window=m), L)
+            _check_time(replace(params, window=m), L, 1, "particles")
     rng = np.random.default_rng(seed)
     doc: dict = {"protocol": {"trials": trials, "noise_m": noise, "offset_m": [0.05, 0.1], "rotation_deg": [45, 90],
                               "success": f"ADD-S <= {SUCCESS_ADD_S} m, and for non-symmetric shapes rotation error "
@@ -140,7 +140,17 @@ def check_recognition(trials: int, n_points: int, params: MupfParameters = MupfP
                           f"{int(0.8 * avail // BYTES_PER_RECOGNITION_POINT)} (the thesis uses about 170)",
                           parameter="recognition_points")
     if trials:
-        check_run_time(_recognition_params(params, n_points), n_points, len(shapes.RECOGNITION_NAMES))
+        _check_time(_recognition_params(params, n_points), n_points, len(shapes.RECOGNITION_NAMES),
+                    "particles/recognition_points")
+
+
+def _check_time(params: MupfParameters, n_points: int, n_models: int, parameter: str) -> None:
+    """localize's time bound (check_run_time), naming this evaluation's own parameters (the points and windows
+    are the protocol's or recognition_points, not localize's max_points / window)."""
+    try:
+        check_run_time(params, n_points, n_models)
+    except ConfigError as exc:
+        raise ConfigError(exc.detail, parameter=parameter) from None
 
 
 def evaluate_recognition(*, trials: int = 1, n_points: int = 170, noise: float = 0.0,

@@ -82,3 +82,10 @@ def test_leading_empty_frame_ids_take_the_first_frame(tmp_path):
                   lambda k: ("", "link3") if k < 3 else (("link3", "link3") if k < 10 else ("world", "world")))
     traj = load_hand_trajectory(path)
     np.testing.assert_allclose(traj.positions, np.tile(HAND, (N, 1)), atol=1e-9)
+
+
+def test_samples_without_frame_id_are_counted_in_a_warning(tmp_path):
+    """Which frame an empty frame_id meant is a guess: the number of samples it was made for is said."""
+    traj = load_hand_trajectory(_write(tmp_path / "count.mcap", _with_empty))
+    said = [p for p in traj.meta["recording_problems"] if "without frame_id" in p]
+    assert len(said) == 1 and f"{sum(1 for k in range(N) if k % 3 == 0)} samples without frame_id" in said[0]

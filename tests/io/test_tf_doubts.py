@@ -344,3 +344,13 @@ def test_frequent_picks_at_a_low_tf_rate_are_not_two_publishers():
     assert tf.parent_warnings() == []
     np.testing.assert_allclose(tf.lookup("world", "obj", 7 * S // 10)[:3, 3], [0, 0, 0])  # in the gripper
     np.testing.assert_allclose(tf.lookup("world", "obj", 12 * S // 10)[:3, 3], [9, 0, 0])
+
+
+def test_a_moving_link_later_sent_on_tf_static_keeps_its_samples():
+    """The static message threw the link's /tf samples away: every lookup then read the static value."""
+    tf = TfBuffer()
+    for k in range(10):
+        tf.add("world", "c", k * S, _T([k / 10, 0, 0]))
+    tf.add("world", "c", 10 * S, _T([7, 0, 0]), static=True)
+    np.testing.assert_allclose(tf.lookup("world", "c", 2 * S)[:3, 3], [0.2, 0, 0])
+    np.testing.assert_allclose(tf.lookup("world", "c", 10 * S)[:3, 3], [7, 0, 0])

@@ -36,6 +36,13 @@ def test_recognition_over_the_bound_is_refused_before_the_localization_part():
 def test_library_checks_alike():
     with pytest.raises(ConfigError) as err:
         evaluate_localization(["box"], trials=1, methods=["mupf"], params=MupfParameters(particles=80000))
-    assert err.value.parameter == "particles/max_points/window"
+    assert err.value.parameter == "particles"  # the protocol fixes the points and windows: max_points is not its
     check_recognition(0, 170, MupfParameters(particles=40000))  # no recognition trial: nothing to bound
     check_recognition(1, 170)
+
+
+def test_the_recognition_bound_names_its_own_options():
+    """The error named max_points, localize's option; eval localize's is recognition_points."""
+    with pytest.raises(ConfigError) as err:
+        check_recognition(1, 170, MupfParameters(particles=80000))
+    assert err.value.parameter == "particles/recognition_points"
