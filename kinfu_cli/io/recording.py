@@ -28,7 +28,7 @@ from kinfu_cli.core.errors import RecordingError
 from kinfu_cli.io.mcap_truncated import TruncatedMcap, is_truncated_mcap
 from kinfu_cli.io.messages import normalize_msgtype
 from kinfu_cli.io.realsense_bag import sdk_image
-from kinfu_cli.io.tf_buffer import TF_TYPES
+from kinfu_cli.io.tf_buffer import TF_TYPES, is_static_tf_topic
 
 _ROS1_MAGIC = b"#ROSBAG V2.0"
 _MCAP_MAGIC = b"\x89MCAP0\r\n"
@@ -39,12 +39,6 @@ _KINDS = "a ROS 1 .bag, an MCAP file or a ROS 2 bag folder (metadata.yaml)"
 # more than this share corrupt is refused
 SKIPPABLE_TYPES = TF_TYPES
 MAX_CORRUPT_SHARE = 0.5
-
-
-def is_static_tf_topic(topic: str) -> bool:
-    """A static TF topic (/tf_static, /robot/tf_static): its few messages each carry links sent once and given
-    by no other message, so a corrupt one is never skipped."""
-    return topic.rstrip("/").endswith("tf_static")
 
 
 @dataclass
@@ -155,7 +149,7 @@ class Recording:
                 self._backend = _McapBackend(self.path, self._stack)
             else:
                 self._backend = _RosbagsBackend(self.path, self.format, self._stack)
-                self.problems += self._backend.count_problems
+                self.problems += self._backend.storage_problems
         except BaseException:
             self._stack.close()
             raise
@@ -373,7 +367,7 @@ class _RosbagsBackend(_Backend):
         stack.callback(self._close)
         self.storage_counts = self._storage_counts() if fmt == "ros2" else None
         self.storage_span = self._storage_span() if fmt == "ros2" else None
-        self.count_problems = self._count_disagreements() + self._span_disagreement()
+        self.storage_problems = self._count_disagreements() + self._span_disagreement()
 
     def _storage_counts(self) -> dict[str, int] | None:
         """Messages per topic as a ROS 2 bag's storage files hold them (rosbags reads the sqlite3 database's

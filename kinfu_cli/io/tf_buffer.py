@@ -180,6 +180,12 @@ class _Runs:
     links: list[_Link]
 
 
+def is_static_tf_topic(topic: str) -> bool:
+    """A static TF topic (/tf_static, /robot/tf_static): its transforms hold for ever, and its few messages each
+    carry links sent once and given by no other message (so a corrupt one is never skipped)."""
+    return topic.rstrip("/").endswith("tf_static")
+
+
 class TfBuffer:
     """Static + dynamic TF links; `lookup(target, source, stamp_ns) -> T_target_source`."""
 
@@ -371,7 +377,7 @@ class TfBuffer:
         for topic, msgtype, _, msg in rec.typed_messages(topics):
             if msgtype not in TF_TYPES:
                 continue
-            buf.add_message(msg, static=topic.rstrip("/").endswith("tf_static"))
+            buf.add_message(msg, static=is_static_tf_topic(topic))
         problems = getattr(rec, "problems", None)
         for warning in buf.parent_warnings():  # said once, however often the recording's TF is read
             line = f"{rec.path}: {warning}"

@@ -9,7 +9,8 @@ from click.testing import CliRunner
 
 from kinfu_cli.cli import cli
 from kinfu_cli.core.errors import RecordingError
-from kinfu_cli.io.recording import is_static_tf_topic, open_recording
+from kinfu_cli.io.recording import open_recording
+from kinfu_cli.io.tf_buffer import is_static_tf_topic
 from kinfu_cli.io.writers import RecordingWriter
 from tests.conftest import one_line_error
 from tests.recordings import T0, S
