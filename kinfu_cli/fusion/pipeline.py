@@ -38,8 +38,8 @@ from kinfu_cli.fusion.placement import default_origin
 from kinfu_cli.fusion.tracking import LOSS_CHECKS, POSE_MODES, FrameToModelTracker, TrackResult, predict_pose
 from kinfu_cli.fusion.up import choose_up
 from kinfu_cli.fusion.volume import DEFAULT_TRUNCATION_M, TernaryVolume, load_volume
-from kinfu_cli.io.frames import (DROP_NO_POSE, DROP_NO_POSE_TOPIC, FrameStats, RGBDFrame, check_window, iter_frames,
-                                  window_depth_count)
+from kinfu_cli.io.frames import (DROP_CHAIN_BROKEN, DROP_NO_POSE, DROP_NO_POSE_TOPIC, FrameStats, RGBDFrame,
+                                  check_window, iter_frames, window_depth_count)
 from kinfu_cli.io.messages import header_frame
 from kinfu_cli.io.recording import Recording, open_recording
 from kinfu_cli.io.roles import Roles, detect_roles
@@ -404,7 +404,7 @@ def _frames_warnings(stats: FrameStats, integrator: "_Integrator", max_lost: flo
 def _pose_drop_warnings(stats: FrameStats, recording: str) -> list[str]:
     """A warning when more than NO_POSE_WARN of the depth frames were not fused for want of a camera pose (they
     were counted in the report only, and the volume lacked what they saw)."""
-    counts = {r: stats.dropped.get(r, 0) for r in (DROP_NO_POSE, DROP_NO_POSE_TOPIC) if stats.dropped.get(r, 0)}
+    counts = {r: stats.dropped.get(r, 0) for r in (DROP_NO_POSE, DROP_CHAIN_BROKEN, DROP_NO_POSE_TOPIC) if stats.dropped.get(r, 0)}
     n = sum(counts.values())
     if n <= NO_POSE_WARN * max(stats.depth_messages, 1):
         return []

@@ -31,6 +31,7 @@ POSE_SOURCES = ("tf", "topic", "none")
 MAX_SECONDS = 1e7  # bound of times and tolerances (116 days): stamps in ns stay far inside int64
 
 DROP_NO_POSE = "no camera pose within the TF range"
+DROP_CHAIN_BROKEN = "no TF chain to the camera at that time"  # inside the TF's time, no chain with transforms there
 DROP_NO_POSE_TOPIC = "no pose message within tolerance"
 DROP_EMPTY = "depth image has no valid pixel"
 DROP_NO_COLOR = "no colour image within tolerance"
@@ -209,11 +210,11 @@ def iter_frames(rec, roles: Roles | None = None, pose_source: str = "tf", pose_t
                              parameter="pose_source")
     if pose_source == "tf":
         tf = tf if tf is not None else TfBuffer.from_recording(rec)
-        pose_fn = _tf_poses(rec, roles, depth_topic, tf, tol_ns, stats)
+        pose_fn, gap_warnings = _tf_poses(rec, roles, depth_topic, tf, tol_ns, stats), tf.gap_warnings
     elif pose_source == "topic":
-        pose_fn = _topic_poses(rec, pose_topic, tol_ns, stats)
+        pose_fn, gap_warnings = _topic_poses(rec, pose_topic, tol_ns, stats)
     else:
-        pose_fn = None
+        pose_fn, gap_warnings = None, None
     start_ns, end_ns = _time_window(rec, start_s, end_s)
     reg = None
     if sdk:
@@ -233,10 +234,8 @@ def iter_frames(rec, roles: Roles | None = None, pose_source: str = "tf", pose_t
     pairer = _FramePairer(rec, roles, depth_topic, K, width, height, pose_fn, tol_ns, stats, require_color, reg,
                           lens, cloud, stats.depth_units)
     yield from pairer.stream(start_ns, end_ns, every)
-    if pose_source == "tf":  # poses interpolated across a long gap in a TF link: known once the frames are read
-        stats.notes += [w for w in tf.gap_warnings() if w not in stats.notes]
-    elif pose_source == "topic":  # or across a long gap of the pose topic
-        stats.notes += [w for w in pose_fn.gap_warnings() if w not in stats.notes]
+    if gap_warnings is not None:  # poses interpolated across a long gap of a TF link or the pose topic: known once
+        stats.notes += [w for w in gap_warnings() if w not in stats.notes]  # the frames are read
 
 
 def check_seconds(value: float, parameter: str, minimum: float = -MAX_SECONDS) -> float:
@@ -395,18 +394,23 @@ def _tf_poses(rec, roles: Roles, depth_topic: str, tf: TfBuffer | None, tol_ns: 
     except TransformError as exc:
         raise TransformError(f"{rec.path}: {exc}", parameter="camera_frame/world_frame") from None
 
+    span = tf.dynamic_span()
+
     def pose(stamp_ns: int) -> np.ndarray | None:
         try:
             return tf.lookup(world, camera, stamp_ns, tolerance_ns=tol_ns)
         except TransformError:
-            stats.drop(DROP_NO_POSE)
+            inside = span is not None and span[0] <= stamp_ns <= span[1]
+            stats.drop(DROP_CHAIN_BROKEN if inside else DROP_NO_POSE)
             return None
 
     return pose
 
 
-def _topic_poses(rec, pose_topic: str | None, tol_ns: int, stats: FrameStats) -> PoseLookup:
-    """Camera pose at a stamp from a pose topic, interpolated; None (counted) beyond its messages."""
+def _topic_poses(rec, pose_topic: str | None, tol_ns: int,
+                 stats: FrameStats) -> tuple[PoseLookup, Callable[[], list[str]]]:
+    """Camera pose at a stamp from a pose topic, interpolated, None (counted) beyond its messages; and the gap
+    warnings of the lookups made so far."""
     if pose_topic is None:
         raise ConfigError("needed with pose source 'topic' (a PoseStamped/Odometry/... topic)",
                           parameter="pose_topic")
@@ -419,8 +423,7 @@ def _topic_poses(rec, pose_topic: str | None, tol_ns: int, stats: FrameStats) ->
             stats.drop(DROP_NO_POSE_TOPIC)
             return None
 
-    pose.gap_warnings = path.gap_warnings  # type: ignore[attr-defined]  # read once the frames are
-    return pose
+    return pose, path.gap_warnings
 
 
 def window_depth_count(rec, depth_topic: str, start_s: float | None = None, end_s: float | None = None,

@@ -426,6 +426,13 @@ class TfBuffer:
         lo, hi = min(a for a, _ in spans), max(b for _, b in spans)
         return None if (lo, hi) == (-FOREVER_NS, FOREVER_NS) else (lo, hi)
 
+    def dynamic_span(self) -> tuple[int, int] | None:
+        """[first, last] stamps (ns) of all moving links' transforms (any frames), None without any: when the TF
+        recording ran, which tells a stamp outside it from one where a chain was broken (`covers` false inside)."""
+        ends = [(int(st[0]), int(st[-1])) for links in self._parents.values() for link in links.values()
+                if not link.static and (st := link.arrays()[0]).size]
+        return (min(a for a, _ in ends), max(b for _, b in ends)) if ends else None
+
     def intervals(self, target: str, source: str) -> list[tuple[int, int]]:
         """The stamp intervals [lo, hi] (ns) where a chain connects the two frames and its moving links have
         transforms, one per stretch between the runs of re-parented frames (+-FOREVER_NS where static links

@@ -354,3 +354,29 @@ def test_a_moving_link_later_sent_on_tf_static_keeps_its_samples():
     tf.add("world", "c", 10 * S, _T([7, 0, 0]), static=True)
     np.testing.assert_allclose(tf.lookup("world", "c", 2 * S)[:3, 3], [0.2, 0, 0])
     np.testing.assert_allclose(tf.lookup("world", "c", 10 * S)[:3, 3], [7, 0, 0])
+
+
+def test_frames_where_the_chain_is_broken_are_told_from_frames_outside_the_tf_time(tmp_path):
+    """Frames after the camera moved onto a tripod linked to nothing were counted as 'no camera pose within the TF
+    range', though TF ran all along: the chain was broken there, which the drop reason now says."""
+    from kinfu_cli.io.frames import DROP_CHAIN_BROKEN, DROP_NO_POSE
+    path = tmp_path / "moved.mcap"
+    with RecordingWriter(path) as w:
+        w.write_tf(T0, [("world", "base_link", T_WORLD_BASE)], static=True)
+        events = [(T0 + 200 * MS + k * 10 * MS, "tf", k) for k in range(60)]  # TF from 0.2 s to 0.79 s
+        events += [(T0 + i * 100 * MS + 50 * MS, "depth", i) for i in range(10)]  # 0.05 .. 0.95 s
+        for stamp, kind, i in sorted(events):
+            if kind == "tf":
+                on_tripod = stamp >= T0 + 500 * MS
+                w.write_tf(stamp, [("base_link", "wrist", T_base_wrist((stamp - T0) / S)),
+                                   ("tripod" if on_tripod else "wrist", "camera_optical", T_WRIST_CAM)])
+            else:
+                w.write_image("/camera/depth/image_raw", stamp, "camera_optical", depth_mm(i), "16UC1")
+                w.write_camera_info("/camera/depth/camera_info", stamp, "camera_optical", K, W, H)
+    with open_recording(path) as rec:
+        stats = FrameStats()
+        frames = list(iter_frames(rec, stats=stats, tolerance_s=0.0))
+    # 0.05, 0.15 s: before TF; 0.25 .. 0.45 s: on the wrist; 0.55 .. 0.75 s: on the unlinked tripod (the last run's
+    # transforms end at 0.79 s); 0.85, 0.95 s: after TF
+    assert [f.index for f in frames] == [2, 3, 4]
+    assert stats.dropped == {DROP_NO_POSE: 4, DROP_CHAIN_BROKEN: 3}
