@@ -27,6 +27,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from kinfu_cli.core.errors import ConfigError, VolumeError
+from kinfu_cli.core.point_pairs import bounded_pairs
 
 _N6 = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=np.int64)
 _N26 = np.array([[i, j, k] for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1) if (i, j, k) != (0, 0, 0)],
@@ -195,7 +196,11 @@ def extract_contours(labels: np.ndarray, origin, voxel_size: float, *, weights: 
     if len(idx) == 0:
         return empty
     dth = 1.75 * vs if distance_th is None else float(distance_th)
-    pairs = cKDTree(pos).query_pairs(r=dth, output_type="ndarray")
+    if distance_th is None:  # 1.75 voxels, the 26-neighbours: at most 13 pairs a voxel, whatever the volume
+        pairs = cKDTree(pos).query_pairs(r=dth, output_type="ndarray")
+    else:
+        pairs = bounded_pairs(pos, dth, what="contour voxels", parameter="distance_th",
+                              hint=f"expected a distance of a voxel or two (default 1.75 voxels, {1.75 * vs:g} m)")
     if len(pairs):
         similar = np.einsum("ij,ij->i", nrm[pairs[:, 0]], nrm[pairs[:, 1]]) > np.cos(np.radians(angle_th_deg))
         pairs = pairs[similar]

@@ -52,6 +52,11 @@ _TILE = 16  # lattice tile side: rays are numbered tile by tile (see _mark_templ
 _LANES = 32  # accumulation lanes of the caster (see _cast_lattice)
 FINE_CAP = 4  # cap of the voxel-level distances in mixed blocks (see _fill_bricks)
 _CONE = 8  # side (lattice cells) of the ray bundles that march their free start together (see _cone_starts)
+# Views sharing rolls are cast on one lattice, the bounding box of their pixel windows turned into the first view:
+# for a window about as tall as wide it is at most twice one window. A wide and short window turned by 45 deg spans
+# its width squared (a 100000 x 2 px sensor: 26525^2 = 7e8 cells for 8 windows of 53 k px, out of memory); when the
+# lattice holds more than this many times the windows' pixels together, each view is cast on its own.
+SHARED_LATTICE_SLACK = 2
 
 
 @dataclass
@@ -1010,6 +1015,25 @@ def _template_key(lat, cb, check, Ms, win) -> tuple:
     return (lat, check, (np.round(cb, 9) + 0.0).tobytes(), (np.round(Ms, 12) + 0.0).tobytes(), win.tobytes())
 
 
+def _group(poses: np.ndarray, views: np.ndarray, win: np.ndarray, cam, center: np.ndarray, r_ext: float,
+           restrict: bool) -> _Group:
+    """The _Group of `views` (sharing a sensor position and optical axis; the first is the base view) with their
+    pixel windows `win`: its lattice is the windows' corners mapped into the base view (an affine map for a roll)."""
+    R0, t0 = poses[views[0], :3, :3], poses[views[0], :3, 3]
+    Ms = np.ascontiguousarray(np.einsum("ji,njk->nik", R0, poses[views, :3, :3]))
+    cu = np.stack([win[:, 0], win[:, 2], win[:, 0], win[:, 2]], axis=1).astype(np.float64)
+    cv = np.stack([win[:, 1], win[:, 1], win[:, 3], win[:, 3]], axis=1).astype(np.float64)
+    d = np.einsum("nij,nkj->nki", Ms, np.stack([(cu - cam.cx) / cam.fx, (cv - cam.cy) / cam.fy,
+                                                  np.ones_like(cu)], axis=-1))
+    pu = cam.fx * d[..., 0] / d[..., 2] + cam.cx
+    pv = cam.fy * d[..., 1] / d[..., 2] + cam.cy
+    lu0, lv0 = int(np.floor(pu.min())) - 1, int(np.floor(pv.min())) - 1
+    lat = (lu0, lv0, int(np.ceil(pu.max())) + 2 - lu0, int(np.ceil(pv.max())) + 2 - lv0)
+    cb = R0.T @ (center - t0)
+    check = bool(restrict and np.linalg.norm(cb) > r_ext)
+    return _Group(views, Ms, win, lat, cb, check, R0, t0, _template_key(lat, cb, check, Ms, win))
+
+
 def cast_views(vol: RayVolume, poses: np.ndarray, camera, center, radius: float, *, through: bool = False,
                optimistic: bool = False, restrict: bool = True, share_rolls: bool = True, p_unknown: float = 0.5,
                march: bool = True, batch_cells: int = 12_000_000, progress_cb=None,
@@ -1036,8 +1060,6 @@ def cast_views(vol: RayVolume, poses: np.ndarray, camera, center, radius: float,
     cache: dict = {}
     used = 0
     for g in groups:
-        R0, t0 = poses[g[0], :3, :3], poses[g[0], :3, 3]
-        Ms = np.einsum("ji,njk->nik", R0, poses[g, :3, :3])
         win = np.array([_pixel_window(poses[i, :3, :3], poses[i, :3, 3], cam, center, r_ext, restrict) for i in g],
                        dtype=np.int64).reshape(-1, 4)
         ok = (win[:, 2] >= win[:, 0]) & (win[:, 3] >= win[:, 1])
@@ -1045,20 +1067,16 @@ def cast_views(vol: RayVolume, poses: np.ndarray, camera, center, radius: float,
             progress_cb(int((~ok).sum()))
         if not ok.any():
             continue
-        Ms, win = np.ascontiguousarray(Ms[ok]), np.ascontiguousarray(win[ok])
-        # lattice window: the pixel windows' corners mapped into the base view (an affine map for a roll)
-        cu = np.stack([win[:, 0], win[:, 2], win[:, 0], win[:, 2]], axis=1).astype(np.float64)
-        cv = np.stack([win[:, 1], win[:, 1], win[:, 3], win[:, 3]], axis=1).astype(np.float64)
-        d = np.einsum("nij,nkj->nki", Ms, np.stack([(cu - cam.cx) / cam.fx, (cv - cam.cy) / cam.fy,
-                                                      np.ones_like(cu)], axis=-1))
-        pu = cam.fx * d[..., 0] / d[..., 2] + cam.cx
-        pv = cam.fy * d[..., 1] / d[..., 2] + cam.cy
-        lu0, lv0 = int(np.floor(pu.min())) - 1, int(np.floor(pv.min())) - 1
-        lat = (lu0, lv0, int(np.ceil(pu.max())) + 2 - lu0, int(np.ceil(pv.max())) + 2 - lv0)
-        cb = R0.T @ (center - t0)
-        check = bool(restrict and np.linalg.norm(cb) > r_ext)
-        batch.append(_Group(g[ok], Ms, win, lat, cb, check, R0, t0, _template_key(lat, cb, check, Ms, win)))
-        used += lat[2] * lat[3]
+        entry = _group(poses, g[ok], np.ascontiguousarray(win[ok]), cam, center, r_ext, restrict)
+        pixels = int(np.sum((win[ok, 2] - win[ok, 0] + 1) * (win[ok, 3] - win[ok, 1] + 1)))
+        if len(entry.views) > 1 and entry.lat[2] * entry.lat[3] > SHARED_LATTICE_SLACK * pixels:
+            # each view on its own lattice, as without sharing (see SHARED_LATTICE_SLACK)
+            entries = [_group(poses, g[ok][k:k + 1], win[ok][k:k + 1], cam, center, r_ext, restrict)
+                       for k in range(len(entry.views))]
+        else:
+            entries = [entry]
+        batch += entries
+        used += sum(e.lat[2] * e.lat[3] for e in entries)
         if used >= batch_cells:
             tick("setup")
             _cast_batch(vol, cam, center, radius, r_ext, (through, optimistic, march), p_unknown, batch, cache, out,

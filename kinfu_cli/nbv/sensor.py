@@ -14,6 +14,12 @@ from kinfu_cli.io.camera_info import intrinsics_from_recording
 # camera's. Casting grows with the pixels: 16 x the Kinect's took ~12 s more per POI at the paper's sphere (peak
 # memory 0.45 -> 0.65 GB), so this bound is ~45 s a POI; a 1e9 px wide image ran out of memory.
 MAX_IMAGE_PIXELS = 4096 * 4096
+# Most pixels the image the rays are cast from may hold: the sensor image grown by vfov_extra_deg above and below
+# (CameraModel.widened) adds fy tan(vfov_extra_deg) rows on either side, whatever the height: a 100000 x 2 px image
+# at fy = 50000 becomes 100000 x 8752 px (875 M) and ran out of memory. Twice MAX_IMAGE_PIXELS lets a 4096 x 4096
+# sensor widen at any vertical field of view over about twice vfov_extra_deg (cast whole, ~80 B a pixel: 4096 x 4952
+# px took 1.6 GB).
+MAX_CAST_PIXELS = 2 * MAX_IMAGE_PIXELS
 # How far outside the image the principal point may lie, as a share of the image's width (height): a calibrated
 # camera has it near the centre, a cropped image or a shifted lens off it, even past an edge, so half an image of
 # margin on either side; farther out the optical axis misses the image and the views look past the POI they aim at
@@ -32,9 +38,9 @@ def camera_from_options(fx: float | None = None, fy: float | None = None, cx: fl
     sensor_msgs/CameraInfo topic), or none of them: then `recorded` (fx, fy, cx, cy, width, height: the
     camera the volume was fused with, `fusion.volume.volume_intrinsics`; `recorded_from` names that volume in
     errors), else the Kinect v1 calibration the paper used (`camera_source` says which). An image over
-    MAX_IMAGE_PIXELS, focal lengths that cannot be in pixels, a field of view that `vfov_extra_deg` widens to
-    180 degrees or a principal point over PRINCIPAL_POINT_MARGIN images outside the image is a ConfigError naming
-    where the intrinsics came from.
+    MAX_IMAGE_PIXELS (or over MAX_CAST_PIXELS once widened), focal lengths that cannot be in pixels, a field of
+    view that `vfov_extra_deg` widens to 180 degrees or a principal point over PRINCIPAL_POINT_MARGIN images
+    outside the image is a ConfigError naming where the intrinsics came from.
     """
     given = {k: v for k, v in dict(fx=fx, fy=fy, cx=cx, cy=cy).items() if v is not None}
     if camera_info is not None:
@@ -72,7 +78,8 @@ def _check_sensor(cam: CameraModel, source: str, parameter: str | None) -> None:
     """Refuse a sensor image too large to cast, with an impossible field of view or with its principal point far
     outside it, naming `source` (where the intrinsics came from; `parameter` the option that gave them, None:
     fx/fy/cx/cy/width/height themselves): otherwise a huge image runs out of memory, its widening blames
-    vfov_extra_deg, which was not wrong, or the views see nothing and only a generic warning follows."""
+    vfov_extra_deg, which was not wrong, or the views see nothing and only a generic warning follows. The widened
+    image (MAX_CAST_PIXELS) grows with fy, not the height: a few rows at a long focal length become thousands."""
     if cam.width * cam.height > MAX_IMAGE_PIXELS:
         side = math.isqrt(MAX_IMAGE_PIXELS)
         raise ConfigError(f"{source} image size {cam.width}x{cam.height} px holds {cam.width * cam.height:,} "
@@ -89,6 +96,14 @@ def _check_sensor(cam: CameraModel, source: str, parameter: str | None) -> None:
                               f"on each side (vfov_extra_deg) reach 180 degrees: expected a principal point inside "
                               f"the image and a depth camera's focal length in pixels",
                               parameter=parameter or "fy/cy/height")
+    cast = cam.widened()
+    if cast.width * cast.height > MAX_CAST_PIXELS:
+        raise ConfigError(f"{source} {cam.width}x{cam.height} px image at fy={cam.fy:g}, widened by "
+                          f"{cam.vfov_extra_deg:g} deg above and below (vfov_extra_deg), is cast as {cast.width}x"
+                          f"{cast.height} px: {cast.width * cast.height:,} pixels, more than the {MAX_CAST_PIXELS:,} "
+                          f"an NBV sensor may cast; expected a depth camera's image (tens of degrees tall, not a "
+                          f"few rows) or a smaller vfov_extra_deg",
+                          parameter=parameter or "fy/height/vfov_extra_deg")
     outside = [f"{name}={value:g} is outside [{-PRINCIPAL_POINT_MARGIN * size:g}, "
                f"{(1 + PRINCIPAL_POINT_MARGIN) * size:g}] for a {side} of {size} px"
                for name, value, size, side in (("cx", cam.cx, cam.width, "width"), ("cy", cam.cy, cam.height, "height"))

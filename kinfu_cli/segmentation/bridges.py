@@ -29,7 +29,9 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from kinfu_cli.core.errors import VolumeError
 from kinfu_cli.core.grid import EMPTY, UNKNOWN, TernaryGrid
+from kinfu_cli.core.point_pairs import bounded_pairs, check_pair_count
 
 PAIRS_PER_SEGMENT_PAIR = 5
 END_MARGIN = 1.5  # voxels: samples this close to either end lie in the measured surface's own band
@@ -63,7 +65,9 @@ def _nearest_pairs(points: np.ndarray, normals: np.ndarray, seg: np.ndarray, max
     PAIRS_PER_SEGMENT_PAIR nearest per segment pair, only for segment pairs with no points closer than touch;
     and the segment pair key of each."""
     idx = np.flatnonzero(seg >= 0)
-    pairs = cKDTree(points[idx]).query_pairs(r=max_gap, output_type="ndarray")
+    # max_gap is SegmentationParams.bridge_gap, the name its callers set
+    pairs = bounded_pairs(points[idx], max_gap, what="segmented points", parameter="bridge_gap",
+                          hint=f"expected a gap of a few centimetres (default {BridgeParams.max_gap:g} m)")
     if len(pairs) == 0:
         return np.zeros((0, 2), np.int64), np.zeros(0, np.int64)
     pairs = idx[pairs]
@@ -90,6 +94,10 @@ def _local_means(points: np.ndarray, values: np.ndarray, seg: np.ndarray, at: np
     """Mean of values (colours) over the points of the same segment within NEIGHBOURHOOD of each point index in
     at: one speck of shading or print does not decide."""
     tree = cKDTree(points)
+    # NEIGHBOURHOOD is fixed: only a cloud far denser than a voxel's spacing holds that many points within it
+    check_pair_count(tree, NEIGHBOURHOOD, queries=points[at], what="surface points", error=VolumeError,
+                     hint=f"expected about one surface point per voxel, not a cloud this dense "
+                          f"(its points within {NEIGHBOURHOOD:g} m of the bridge ends are averaged)")
     near = tree.query_ball_point(points[at], r=NEIGHBOURHOOD)
     lens = np.array([len(n) for n in near])
     rows = np.repeat(np.arange(len(at)), lens)

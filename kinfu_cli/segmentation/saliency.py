@@ -12,9 +12,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.core.point_pairs import bounded_pairs
 
 
 @dataclass
@@ -48,7 +48,9 @@ def isolation(points: np.ndarray, labels: np.ndarray, b_th: float = 0.02) -> dic
         raise ConfigError(f"must be > 0 m, got {b_th}", parameter="b_th")
     pts = np.asarray(points, dtype=np.float64)
     lab = np.asarray(labels)
-    pairs = cKDTree(pts).query_pairs(r=b_th, output_type="ndarray")
+    # B_th is SegmentOptions.isolation_threshold, the name its callers set
+    pairs = bounded_pairs(pts, b_th, what="surface points", parameter="isolation_threshold",
+                          hint="expected B_th about the gap that sets objects apart (default 0.02 m)")
     touching = np.zeros(len(pts), dtype=bool)
     if len(pairs):
         cross = lab[pairs[:, 0]] != lab[pairs[:, 1]]

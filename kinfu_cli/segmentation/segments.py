@@ -87,6 +87,7 @@ from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError, VolumeError
 from kinfu_cli.core.grid import check_up
 from kinfu_cli.core.neighbours import grid_cells
+from kinfu_cli.core.point_pairs import MAX_POINT_PAIRS, bounded_pairs
 from kinfu_cli.core.poses import plane_axes
 from kinfu_cli.segmentation.bridges import BridgeParams, join_across_unknown
 from kinfu_cli.segmentation.group_stats import group_percentile
@@ -135,12 +136,7 @@ FOOT_BAND = 0.015  # feet (step 7): object points higher than this over the supp
 
 
 MAX_DISTANCE_M = 10.0  # the largest seed_resolution, adjacency_radius, plane_distance: beyond any scene
-# The adjacency pairs' memory: ~115 B a pair at the peak (scipy's pair vector, the (E, 2) array, LCCP's per-pair
-# arrays and graphs; the sample fused at 6.9 mm, adjacency_radius 0.16 m: 24 M pairs, 3.0 GB). 20 M pairs (~2.3 GB)
-# is 70x the sample's 0.29 M at the default radius; a radius spanning the cloud makes N^2 / 2 pairs (the same
-# cloud at 10 m: 2.3e9 pairs, 17 GB and out of memory after a minute). The count is estimated on a sample first.
-MAX_ADJACENCY_PAIRS = 20_000_000
-PAIR_SAMPLE = 1000  # points whose neighbours within the radius are counted for that estimate
+MAX_ADJACENCY_PAIRS = MAX_POINT_PAIRS  # the adjacency search's bound (core.point_pairs: its memory, its estimate)
 
 
 @dataclass
@@ -458,21 +454,11 @@ def supervoxels(points: np.ndarray, normals: np.ndarray, params: SegmentationPar
 
 def adjacency_pairs(points: np.ndarray, radius: float) -> np.ndarray:
     """The point pairs (E, 2) closer than `radius` (adjacency_radius). ConfigError first when they would be more
-    than MAX_ADJACENCY_PAIRS (estimated from PAIR_SAMPLE points' neighbour counts): a radius spanning the cloud
-    makes N^2 / 2 pairs and the search runs out of memory instead of answering."""
-    n = len(points)
-    tree = cKDTree(points)
-    if n > 1:
-        m = min(n, PAIR_SAMPLE)
-        pick = np.random.default_rng(0).choice(n, m, replace=False) if m < n else np.arange(n)
-        within = int(cKDTree(points[pick]).count_neighbors(tree, radius))  # (sample, any) pairs, itself included
-        expected = (within - m) * n / m / 2
-        if expected > MAX_ADJACENCY_PAIRS:
-            raise ConfigError(f"{radius:g} m joins about {expected:.3g} point pairs among the {n} surface points "
-                              f"(at most {MAX_ADJACENCY_PAIRS:.3g}, beyond which the search runs out of memory); "
-                              f"expected a radius near the points' spacing "
-                              f"(default {SegmentationParams.adjacency_radius:g} m)", parameter="adjacency_radius")
-    return tree.query_pairs(r=radius, output_type="ndarray")
+    than MAX_ADJACENCY_PAIRS (core.point_pairs): a radius spanning the cloud makes N^2 / 2 pairs and the search
+    runs out of memory instead of answering."""
+    return bounded_pairs(points, radius, what="surface points", parameter="adjacency_radius",
+                         hint=f"expected a radius near the points' spacing "
+                              f"(default {SegmentationParams.adjacency_radius:g} m)")
 
 
 def _components(n: int, edges: np.ndarray) -> np.ndarray:

@@ -33,6 +33,7 @@ from scipy.spatial import cKDTree
 from scipy.special import beta
 
 from kinfu_cli.core.errors import ConfigError, KinfuError
+from kinfu_cli.core.point_pairs import check_pair_count
 
 E_MIN = 0.1
 E_MAX = 1.9
@@ -275,14 +276,23 @@ def _solve(pts_p: np.ndarray, x0: np.ndarray, lb: np.ndarray, ub: np.ndarray, co
 
 
 def remove_outliers(points: np.ndarray, eps: float | None = None, min_points: int = 4) -> np.ndarray:
-    """Keep the largest DBSCAN cluster (thesis pre-filter). `eps` defaults to 3x the median NN spacing."""
+    """Keep the largest DBSCAN cluster (thesis pre-filter). `eps` defaults to 3x the median NN spacing. Its
+    neighbour searches are bounded (core.point_pairs): SegmentError when the default eps would join too many
+    pairs (only a segment of piled-up duplicate points does), ConfigError for a given eps."""
     pts = np.asarray(points, dtype=np.float64)
     if len(pts) < 3 * min_points:
         return np.ones(len(pts), dtype=bool)
     tree = cKDTree(pts)
     if eps is None:
         d, _ = tree.query(pts, k=2)
-        eps = 3.0 * float(np.median(d[:, 1])) + 1e-9
+        spacing = float(np.median(d[:, 1]))
+        eps = 3.0 * spacing + 1e-9
+        check_pair_count(tree, eps, what="points of the segment", error=SegmentError,
+                         hint=f"the superquadric fit's outlier filter searches within 3x their median spacing "
+                              f"({spacing:.3g} m): a segment of piled-up duplicate points?")
+    else:
+        check_pair_count(tree, eps, what="points of the segment", parameter="eps",
+                         hint="expected a radius near the points' spacing (default 3x their median spacing)")
     # DBSCAN via core points + connected components (same clusters as sklearn's DBSCAN on core points)
     nb = tree.query_ball_point(pts, r=eps, return_length=True)
     core = nb >= min_points
