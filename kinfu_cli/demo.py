@@ -102,6 +102,11 @@ def main(argv: list[str] | None = None) -> int:
     return 1 if failed else 0
 
 
+def _percent(share: float | None) -> str:
+    """A ratio as a percentage; 'undefined' for null (changes.json: no POI or no change to divide by)."""
+    return "undefined" if share is None else f"{100 * share:.0f} %"
+
+
 def _summary(out: Path) -> list[str]:
     lines = []
     for name in ("scan", "fuse"):
@@ -124,8 +129,8 @@ def _summary(out: Path) -> list[str]:
         n = d["counts"]["regions"]
         text = f"changes: {n['removed']} removed, {n['added']} added regions"
         if d.get("pois"):
-            text += (f"; POIs vs changes precision {100 * d['pois']['precision']:.0f} %, recall "
-                     f"{100 * d['pois']['recall']:.0f} %")
+            text += f"; POIs vs changes precision {_percent(d['pois']['precision'])}, recall " \
+                    f"{_percent(d['pois']['recall'])}"
         lines.append(text + f"; {out / 'diff' / 'changes.ply'}")
     if (out / "segment" / "segments.json").exists():
         s = json.loads((out / "segment" / "segments.json").read_text())["segments"]

@@ -29,6 +29,11 @@ Detector = GmmActivitySaliency | ZeroVelocityCrossing
 # 3.1 m); a trajectory whose bulk (1st..99th percentile box) spans more is a robot's or a vehicle's path, or not in
 # metres, and the detectors' metre constants (POI radius, spatial floors, ZVC radii) do not fit it
 HAND_SPAN_WARN_M = 5.0
+# a task whose hand stays within this (same box diagonal) never moved: ZVC's inner radius r1 (0.10 m) holds all of it
+# and GMM-AS sees only the tracker's jitter; the smallest of the 130 Polhemus tasks spans 0.36 m
+HAND_STILL_M = 0.10
+# a GMM-AS POI is a Gaussian with a neighbour on each side (the first and last are skipped)
+MIN_POI_GAUSSIANS = 3
 
 
 def make_detector(algorithm: str, params: dict | None = None) -> Detector:
@@ -103,15 +108,59 @@ def _recording_times(pois: list[Poi], span: tuple | None) -> None:
             p.extra["recording_time_s"] = round((stamp - span[0]) * 1e-9, 6)
 
 
+def _span(positions: np.ndarray) -> float:
+    """Diagonal of the 1st..99th percentile box of the positions (m): how far the hand's bulk moved."""
+    lo, hi = np.percentile(positions, [1, 99], axis=0)
+    return float(np.linalg.norm(hi - lo))
+
+
 def span_warnings(traj: Trajectory) -> list[str]:
     """A warning when the trajectory spans far more than a person's reach (HAND_SPAN_WARN_M)."""
-    lo, hi = np.percentile(traj.positions, [1, 99], axis=0)
-    span = float(np.linalg.norm(hi - lo))
+    span = _span(traj.positions)
     if span <= HAND_SPAN_WARN_M:
         return []
     return [f"the hand trajectory spans {span:.1f} m (diagonal of its 1st..99th percentile box), far more than a "
             f"person's reach at a table (under {HAND_SPAN_WARN_M:g} m): is it a hand, and in metres? A robot's or "
             f"vehicle's path gives POIs where it slowed down, not where a person acted"]
+
+
+def empty_result_warnings(tasks: TaskList, detectors: list[Detector], whole: bool) -> list[str]:
+    """Warnings for POIs missing, or made of noise, for a structural reason, per task: the hand never moved
+    (HAND_STILL_M: whatever a detector finds there is tracker jitter), or GMM-AS fitted fewer than
+    MIN_POI_GAUSSIANS Gaussians (none has a neighbour on each side). When no POI was found at all for no such
+    reason, one warning says how close the detector came: an empty pois.json is refused downstream (kinfu nbv)."""
+    out = []
+    for task, det in zip(tasks, detectors):
+        name = "" if whole else f"task {task.index}: "
+        span = _span(task.trajectory.positions)
+        if span < HAND_STILL_M:
+            n = len(det.pois_)
+            found = f"its {n} POI(s) come from tracker jitter, not from actions" if n else "no POI can be found"
+            out.append(f"{name}the hand stays within {100 * span:.1f} cm (diagonal of its 1st..99th percentile box) "
+                       f"over {task.duration:.1f} s: it never moved (a still or lost tracker?), so {found}")
+        elif getattr(det, "n_components_", MIN_POI_GAUSSIANS) < MIN_POI_GAUSSIANS:
+            out.append(f"{name}GMM-AS fitted K = {det.n_components_} Gaussian(s), and a POI is a Gaussian between "
+                       f"two others (the first and last are skipped), so it cannot give one: the path holds no "
+                       f"dwell between an approach and a departure (a single move, or too few samples)")
+    if not out and not any(det.pois_ for det in detectors):
+        out.append(f"no POI found: {_closest_miss(detectors)}")
+    return out
+
+
+def _closest_miss(detectors: list[Detector]) -> str:
+    """How near the fitted detectors (all of one algorithm) came to a POI, in words."""
+    if isinstance(detectors[0], ZeroVelocityCrossing):
+        with np.errstate(divide="ignore", invalid="ignore"):  # a zero limit where the hand stood still
+            ratios = [d.speed_r1_ / d.slow_limit_ for d in detectors if np.any(d.slow_limit_ > 0)]
+        slowest = min(float(np.min(r[np.isfinite(r)])) for r in ratios) if ratios else float("nan")
+        d = detectors[0]
+        return (f"the hand's mean speed within r1 = {d.r1:g} m never fell below ZVC's slow limit ({d.rule_} rule); at "
+                f"its slowest it was {slowest:.2f} x that limit, so it never dwelt anywhere (zvc_relative or "
+                f"zvc_threshold set the limit)")
+    with np.errstate(divide="ignore", invalid="ignore"):  # NaN thresholds of the first and last Gaussian
+        closest = max(float(np.nanmax(d.saliency_ / d.thresholds_)) for d in detectors)
+    return (f"no GMM-AS Gaussian is more salient than POITh = {detectors[0].poi_threshold:g} x its neighbours' mean; "
+            f"the closest reached {closest:.2f} x that threshold (poi_threshold sets it)")
 
 
 def check_detection(algorithm: str = "gmm-as", params: dict | None = None, *,
@@ -152,7 +201,9 @@ def detect_pois(source: str | os.PathLike | Trajectory, algorithm: str = "gmm-as
         recorded["n_components"] = int(sum(d.n_components_ for d in detectors))  # per task in "tasks"
     document = pois_document(pois, algorithm, recorded, frame=traj.frame, source=source_name)
     document["tasks"] = task_entries(tasks, detectors)
-    document["warnings"] = list(traj.meta.get("recording_problems", [])) + span_warnings(traj)
+    whole = len(tasks) == 1 and tasks[0].samples == len(traj)
+    document["warnings"] = (list(traj.meta.get("recording_problems", [])) + span_warnings(traj)
+                            + empty_result_warnings(tasks, detectors, whole))
     document["tasks_dropped"] = tasks.dropped
     document["task_split"] = {"workspace": list(box) if box else None,
                               "split_gap": None if split_gap is None else float(split_gap),

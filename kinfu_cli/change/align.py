@@ -25,7 +25,8 @@ class AlignedPair:
 
     origin: world position of the common box's minimum corner; offset: where the box starts in the before
     grid (voxel index); observed_*: voxels known (occupied or empty) in each whole grid; observed_both: voxels
-    of the common box known in both.
+    of the common box known in both; in_box_*: voxels of the common box known in each (the rest of a volume's
+    observed voxels lie outside the other's grid, where nothing of it is compared).
     """
 
     before: np.ndarray
@@ -36,6 +37,8 @@ class AlignedPair:
     observed_before: int
     observed_after: int
     observed_both: int
+    in_box_before: int
+    in_box_after: int
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -46,6 +49,22 @@ class AlignedPair:
         """Voxels known in both over the known voxels of the volume that knows fewer (1 = one holds the other)."""
         least = min(self.observed_before, self.observed_after)
         return self.observed_both / least if least else 0.0
+
+    def in_box_fraction(self, which: str) -> float:
+        """Share of the `which` ("before" | "after") volume's observed voxels that lie in the common box."""
+        observed = getattr(self, f"observed_{which}")
+        return getattr(self, f"in_box_{which}") / observed if observed else 0.0
+
+    def compared_fraction(self, which: str) -> float:
+        """Share of the `which` volume's observed voxels that are known in both (the voxels compared)."""
+        observed = getattr(self, f"observed_{which}")
+        return self.observed_both / observed if observed else 0.0
+
+    def contains(self, points: np.ndarray, tolerance: float = 0.0) -> np.ndarray:
+        """(N,) bool: world points (N, 3) inside the common box grown by `tolerance` metres."""
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        hi = self.origin + np.array(self.shape) * self.voxel_size
+        return np.all((p >= self.origin - tolerance) & (p <= hi + tolerance), axis=1)
 
     def centers(self, idx: np.ndarray) -> np.ndarray:
         """World centres (N, 3) of voxel indices of the common box."""
@@ -83,4 +102,6 @@ def align(before: TernaryGrid, after: TernaryGrid, before_name: str = "before",
     return AlignedPair(before=b, after=a, origin=before.origin + offset * vs, voxel_size=vs, offset=offset,
                        observed_before=int(np.count_nonzero(before.labels != UNKNOWN)),
                        observed_after=int(np.count_nonzero(after.labels != UNKNOWN)),
-                       observed_both=int(np.count_nonzero((b != UNKNOWN) & (a != UNKNOWN))))
+                       observed_both=int(np.count_nonzero((b != UNKNOWN) & (a != UNKNOWN))),
+                       in_box_before=int(np.count_nonzero(b != UNKNOWN)),
+                       in_box_after=int(np.count_nonzero(a != UNKNOWN)))

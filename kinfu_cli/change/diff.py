@@ -29,6 +29,11 @@ from kinfu_cli.fusion.volume import load_volume
 DEFAULT_MIN_VOXELS = 27
 #: Below this overlap (voxels known in both over the known voxels of the smaller volume) the diff warns.
 MIN_OVERLAP = 0.5
+#: Above this share of a volume's observed voxels outside the common box (the other grid is smaller or shifted)
+#: the diff warns: nothing there is compared. Two auto-sized fusions of one place from different views leave up
+#: to ~15 % out (sample pick-and-place pair: 14 % of the scan's observed voxels lie outside the later fusion's
+#: grid); a quarter is well past that, and a moved object in it would be missed without a word.
+MAX_OUTSIDE_BOX = 0.25
 
 
 @dataclass
@@ -92,9 +97,10 @@ class ChangeResult:
     params: ChangeParams
     min_voxels: int
     warnings: list[str] = field(default_factory=list)
-    pois: dict | None = None  # filled by evaluation.changes.score_change_pois
+    pois: dict | None = None  # filled by evaluation.change_pois.score_pois_in_comparison
     cameras: dict[str, int] | None = None  # camera positions used for the depth-noise margin, per volume
     sensors: dict[str, dict] | None = None  # per volume, whether its camera looks like the noise model's (noise.py)
+    grid_boxes: dict[str, tuple[np.ndarray, np.ndarray]] | None = None  # per volume, its whole grid's min / max corner
 
     def count(self, kind: str) -> int:
         return sum(1 for r in self.regions if r.kind == kind)
@@ -107,7 +113,10 @@ class ChangeResult:
                            "max": [float(v) for v in p.origin + np.array(p.shape) * p.voxel_size],
                            "shape": list(p.shape)},
             "overlap": {"fraction": round(p.overlap, 4), "observed_before": p.observed_before,
-                        "observed_after": p.observed_after, "observed_both": p.observed_both},
+                        "observed_after": p.observed_after, "observed_both": p.observed_both,
+                        **{k: {"in_common_box": getattr(p, f"in_box_{k}"),
+                               "in_common_box_fraction": round(p.in_box_fraction(k), 4),
+                               "compared_fraction": round(p.compared_fraction(k), 4)} for k in ("before", "after")}},
             "parameters": {"margin_voxels": self.params.margin, "min_volume_m3": self.min_voxels * p.voxel_size ** 3,
                            "min_voxels": self.min_voxels, "connectivity": 26,
                            "depth_noise": None if self.cameras is None else {
@@ -149,6 +158,16 @@ def _warnings(before: TernaryGrid, after: TernaryGrid, names: tuple[str, str], p
     elif pair.overlap < MIN_OVERLAP:
         out.append(f"the volumes overlap little: {100 * pair.overlap:.0f} % of the smaller one's observed voxels "
                    f"are observed in both (below {100 * MIN_OVERLAP:.0f} %); changes elsewhere cannot be seen")
+    for key, name, other, other_name in (("before", names[0], after, names[1]), ("after", names[1], before, names[0])):
+        observed = getattr(pair, f"observed_{key}")
+        outside = observed - getattr(pair, f"in_box_{key}")
+        if observed and outside > MAX_OUTSIDE_BOX * observed:
+            lo, hi = other.origin, other.origin + np.array(other.shape) * other.voxel_size
+            out.append(f"{name}: {outside} of its {observed} observed voxels ({100 * outside / observed:.0f} %, more "
+                       f"than {100 * MAX_OUTSIDE_BOX:.0f} %) lie outside {other_name}'s grid "
+                       f"{np.round(lo, 3).tolist()}..{np.round(hi, 3).tolist()} m and were not compared (only "
+                       f"{100 * pair.compared_fraction(key):.0f} % of its observed voxels are observed in both); "
+                       f"changes there cannot be seen (fuse both over one grid: the same origin and size)")
     if n_regions == 0 and sum(masks.hidden.values()):
         u = masks.hidden
         out.append(f"no change found, but {u['occupied_before_unknown_after']} voxels occupied before lie in space "
@@ -184,8 +203,10 @@ def diff_grids(before: TernaryGrid, after: TernaryGrid, params: ChangeParams | N
         sensors = {k: sensor_evidence(g.intrinsics, rep) for k, g, rep in zip(("before", "after"), (before, after),
                                                                                reports)}
         warnings += _noise_warnings(pair, masks, (cam_b, cam_a), names, sensors)
+    boxes = {k: (g.origin.copy(), g.origin + np.array(g.shape) * g.voxel_size)
+             for k, g in (("before", before), ("after", after))}
     return ChangeResult(names[0], names[1], before.frame or after.frame, pair, masks, regions, params, min_voxels,
-                        warnings, cameras=used, sensors=sensors)
+                        warnings, cameras=used, sensors=sensors, grid_boxes=boxes)
 
 
 def _noise_warnings(pair: AlignedPair, masks: ChangeMasks, cameras: tuple[np.ndarray, np.ndarray],

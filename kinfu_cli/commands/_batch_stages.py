@@ -351,13 +351,17 @@ def run_eval_poi(rec, options: dict, force: bool) -> StageRun:
     pois = read_pois(rec.output / "pois.json")
     changes = np.asarray(load_ground_truth(rec.links["ground_truth"]).change_positions, dtype=float).reshape(-1, 3)
     tp, fp, fn = score_pois(np.array([p.position for p in pois]).reshape(-1, 3), changes, radius)
+    # a ratio with nothing to divide by is undefined (null), not 0.0, which would read as all wrong
     doc = {"pois": len(pois), "changes": len(changes), "radius": radius, "tp": tp, "fp": fp, "fn": fn,
-           "precision": tp / (tp + fp) if tp + fp else 0.0,
-           "recall": (len(changes) - fn) / len(changes) if len(changes) else 0.0,
+           "precision": tp / (tp + fp) if tp + fp else None,
+           "recall": (len(changes) - fn) / len(changes) if len(changes) else None,
            "ground_truth": str(rec.links["ground_truth"]), "pois_file": str(rec.output / "pois.json")}
+    warnings = [f"{rec.output / 'pois.json'}: {what} is undefined (null): {why}" for what, why in
+                (("precision", "no POI was found"), ("recall", "the ground truth holds no change"))
+                if doc[what] is None]
     out = rec.output / EVAL_POI_FILE
-    write_json(out, doc)  # atomic, recorded as kinfu's
-    return StageRun(numbers={k: doc[k] for k in ("precision", "recall", "tp", "fp", "fn")})
+    write_json(out, doc | {"warnings": warnings})  # atomic, recorded as kinfu's
+    return StageRun(numbers={k: doc[k] for k in ("precision", "recall", "tp", "fp", "fn")}, warnings=warnings)
 
 
 def _viz_parts(rec) -> tuple[str, ...]:

@@ -10,6 +10,9 @@ import click
 
 from kinfu_cli.core.atomic import write_json
 
+#: --quiet of the eval commands, as fuse, segment and poi have it
+QUIET_HELP = "Only warnings and errors: no progress bar, no tables (--json still prints the JSON)."
+
 
 def print_warnings(doc: dict) -> None:
     """Each entry of doc["warnings"] as one `kinfu: warning: ...` line on stderr (also with --quiet / --json)."""
@@ -17,14 +20,15 @@ def print_warnings(doc: dict) -> None:
         click.echo(f"kinfu: warning: {w}", err=True)
 
 
-def emit(doc: dict, output, as_json: bool, lines_of: Callable[[dict], Iterable[str]]) -> None:
-    """Write `doc` atomically to `output` when given; print it as JSON or as the lines `lines_of` makes."""
+def emit(doc: dict, output, as_json: bool, lines_of: Callable[[dict], Iterable[str]], quiet: bool = False) -> None:
+    """Write `doc` atomically to `output` when given; print it as JSON or as the lines `lines_of` makes (quiet:
+    only its warnings, as QUIET_HELP says)."""
     print_warnings(doc)
     if output is not None:
         write_json(output, doc)
     if as_json:
         click.echo(json.dumps(doc, indent=2, default=float))
-    else:
+    elif not quiet:
         for line in lines_of(doc):
             click.echo(line)
         if output is not None:

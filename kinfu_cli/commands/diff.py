@@ -10,20 +10,31 @@ import click
 from kinfu_cli.change.diff import DEFAULT_MIN_VOXELS, ChangeParams, diff_volumes
 from kinfu_cli.change.noise import NOISE_SIGMAS
 from kinfu_cli.change.outputs import CHANGE_ENTRIES, write_change_outputs
+from kinfu_cli.evaluation.change_pois import score_pois_in_comparison
 from kinfu_cli.commands._options import claim_outputs, force_option, volume_file
 from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.core.atomic import atomic_dir
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.pois import poi_frame_warnings, read_pois
 from kinfu_cli.core.progress import progress
-from kinfu_cli.evaluation.changes import score_change_pois
 from kinfu_cli.evaluation.poi import MATCH_RADIUS
+
+
+def _percent(ratio: float | None) -> str:
+    return "undefined" if ratio is None else f"{100 * ratio:.1f} %"
+
+
+def _compared(overlap: dict) -> str:
+    """How much of each volume's observed space was compared: the overlap alone hides a grid that crops one."""
+    return (f"{100 * overlap['before']['compared_fraction']:.0f} % of before's and "
+            f"{100 * overlap['after']['compared_fraction']:.0f} % of after's observed voxels")
 
 
 def _lines(doc: dict, outdir: Path) -> list[str]:
     c = doc["counts"]
     lines = [f"{c['regions']['removed']} removed and {c['regions']['added']} added regions "
-             f"(overlap {100 * doc['overlap']['fraction']:.0f} %, {sum(c['unknown_ignored'].values())} voxels "
+             f"(overlap {100 * doc['overlap']['fraction']:.0f} %, compared {_compared(doc['overlap'])}, "
+             f"{sum(c['unknown_ignored'].values())} voxels "
              f"unknown in one volume ignored, {c['dropped_small_regions']} small regions dropped) "
              f"-> {outdir}/changes.json"]
     for r in doc["regions"][:15]:
@@ -33,9 +44,10 @@ def _lines(doc: dict, outdir: Path) -> list[str]:
         lines.append(f"  ... {len(doc['regions']) - 15} more in changes.json")
     p = doc["pois"]
     if p is not None:
-        lines.append(f"POIs vs changes (within {p['radius']:.2f} m): precision {100 * p['precision']:.1f} %, "
-                     f"recall {100 * p['recall']:.1f} %, F1 {100 * p['f1']:.1f} % "
-                     f"(tp {p['tp']}, fp {p['fp']}, fn {p['fn']}; {p['pois']} POIs, {p['changes']} regions)")
+        scored = "" if p["pois_scored"] == p["pois"] else f" ({p['pois_scored']} scored)"
+        lines.append(f"POIs vs changes (within {p['radius']:.2f} m): precision {_percent(p['precision'])}, "
+                     f"recall {_percent(p['recall'])}, F1 {_percent(p['f1'])} "
+                     f"(tp {p['tp']}, fp {p['fp']}, fn {p['fn']}; {p['pois']} POIs{scored}, {p['changes']} regions)")
     return lines
 
 
@@ -87,7 +99,9 @@ def command(before: Path, after: Path, outdir: Path, pois_path, match_radius, ma
     Writes OUTDIR/changes.json (per region: id, kind, centroid, box_min/box_max, volume_m3, voxels, ply; counts,
     overlap, warnings), OUTDIR/regions/<id>.ply (the region's voxel centres) and OUTDIR/changes.ply (removed
     red, added green). With --pois, each POI within --match-radius of a region's nearest voxel is a true
-    positive; regions with no POI near are false negatives; precision, recall and F1 go to changes.json "pois".
+    positive; regions with no POI near are false negatives; precision, recall and F1 go to changes.json "pois"
+    (null when undefined: no POI scored, no region). A POI outside the common box and near no region is not
+    scored (counted and warned); one farther than --match-radius outside both grids is an error.
 
     \b
     Example:
@@ -103,7 +117,7 @@ def command(before: Path, after: Path, outdir: Path, pois_path, match_radius, ma
         if step == "diff":
             result = diff_volumes(before, after, params)
             if pois is not None:
-                score_change_pois(result, pois, radius=match_radius, source=str(pois_path))
+                score_pois_in_comparison(result, pois, radius=match_radius, source=str(pois_path))
                 result.warnings += poi_frame_warnings(pois_path, result.frame, "--pois")
         else:
             with atomic_dir(outdir, own=CHANGE_ENTRIES, force=force) as tmp:  # the folder appears whole or not at all

@@ -2,14 +2,12 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import click
 
 from kinfu_cli.commands._options import claim_outputs, result_options
-from kinfu_cli.commands._output import print_warnings
-from kinfu_cli.core.atomic import write_json
+from kinfu_cli.commands._output import QUIET_HELP, emit
 from kinfu_cli.evaluation.reconstruction import (DEFAULT_SPACING, DEFAULT_THRESHOLD, check_fusion_evaluation,
                                                  evaluate_fusion)
 from kinfu_cli.evaluation.tables import format_fusion_tables
@@ -46,7 +44,7 @@ def check_options(params: dict) -> None:
 @click.option("--error-mesh", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Also write the reconstruction coloured by its error (blue 0 .. red 2 x threshold; grey: not "
                    "evaluated) as this .ply.")
-@result_options(json="Print the results JSON to stdout instead of tables.")
+@result_options(json="Print the results JSON to stdout instead of tables.", quiet=QUIET_HELP)
 def command(reconstruction: Path, ground_truth: Path, state: str, threshold: float, spacing: float, margin: float,
             min_height: float, footprint: str, no_volume: bool, error_mesh: Path | None, output: Path | None,
             as_json: bool, quiet: bool, force: bool) -> None:
@@ -71,17 +69,8 @@ def command(reconstruction: Path, ground_truth: Path, state: str, threshold: flo
                              margin=margin, min_height=min_height, footprint=footprint, use_volume=not no_volume,
                              quiet=quiet)
     doc = result.document
-    print_warnings(doc)
     if error_mesh is not None:
         write_error_mesh(error_mesh, result.reconstruction, result.score.vertex_distances, 2.0 * threshold)
         doc["input"]["error_mesh"] = str(error_mesh)
-    if output is not None:
-        write_json(output, doc)
-    if as_json:
-        click.echo(json.dumps(doc, indent=2, default=float))
-    else:
-        click.echo(format_fusion_tables(doc))
-        if output is not None:
-            click.echo(f"\nresults -> {output}")
-        if error_mesh is not None:
-            click.echo(f"error-coloured mesh -> {error_mesh}")
+    emit(doc, output, as_json, lambda d: [format_fusion_tables(d)] + (
+        [f"error-coloured mesh -> {error_mesh}"] if error_mesh is not None else []), quiet)

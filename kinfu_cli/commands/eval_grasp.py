@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from kinfu_cli.commands._options import claim_outputs, force_option
-from kinfu_cli.commands._output import emit
+from kinfu_cli.commands._output import QUIET_HELP, emit
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.progress import progress
 from kinfu_cli.grasp.evaluate import evaluate_grasping, format_grasp_table
@@ -29,7 +29,7 @@ group = "eval"
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write the results as JSON here.")
 @click.option("--json", "as_json", is_flag=True, help="Print the results JSON to stdout instead of the table.")
-@click.option("--quiet", is_flag=True, help="No progress output.")
+@click.option("--quiet", is_flag=True, help=QUIET_HELP)
 @force_option
 def command(hand: str, conditions: str, yaws: int, scenes: str, seed: int, output: Path | None, as_json: bool,
             quiet: bool, force: bool) -> None:
@@ -57,4 +57,4 @@ def command(hand: str, conditions: str, yaws: int, scenes: str, seed: int, outpu
     claim_outputs({"output": output}, [], force)
     doc = evaluate_grasping(GraspOptions(hand=hand), conditions=conds, yaws=yaws, scenes=seeds, seed=seed,
                             progress=lambda xs: progress(xs, total=len(xs), desc="eval grasp", quiet=quiet))
-    emit(doc, output, as_json, lambda d: format_grasp_table(d).splitlines())
+    emit(doc, output, as_json, lambda d: format_grasp_table(d).splitlines(), quiet)

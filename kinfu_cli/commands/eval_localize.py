@@ -9,7 +9,7 @@ import click
 
 from kinfu_cli.commands._mupf_options import mupf_filter_options
 from kinfu_cli.commands._options import claim_outputs, force_option
-from kinfu_cli.commands._output import emit
+from kinfu_cli.commands._output import QUIET_HELP, emit
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.localization.evaluate import METHODS, check_recognition, evaluate_localization, \
     evaluate_recognition, format_localization_table
@@ -42,7 +42,7 @@ def _names(text: str, allowed, option: str) -> list[str]:
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write the results as JSON here.")
 @click.option("--json", "as_json", is_flag=True, help="Print the results JSON to stdout instead of the table.")
-@click.option("--quiet", is_flag=True, help="No progress output.")
+@click.option("--quiet", is_flag=True, help=QUIET_HELP)
 @force_option
 def command(shapes: str, trials: int, methods: str, noise: float, particles: int, recognition_trials: int,
             recognition_points: int, beta: float, rotation: str, paper_weights: bool, no_refine: bool, seed: int, output: Path | None, as_json: bool, quiet: bool,
@@ -73,4 +73,4 @@ def command(shapes: str, trials: int, methods: str, noise: float, particles: int
         doc["recognition"] = evaluate_recognition(trials=recognition_trials, n_points=recognition_points,
                                                   params=params, seed=seed, quiet=quiet)
     doc["warnings"] = []
-    emit(doc, output, as_json, lambda d: format_localization_table(d).splitlines())
+    emit(doc, output, as_json, lambda d: format_localization_table(d).splitlines(), quiet)

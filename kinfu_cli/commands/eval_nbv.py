@@ -8,8 +8,7 @@ import click
 
 from kinfu_cli.commands._engine import scheduler_option, trial_engine
 from kinfu_cli.commands._options import claim_outputs, result_options
-from kinfu_cli.commands._output import emit, print_warnings
-from kinfu_cli.core.atomic import write_json
+from kinfu_cli.commands._output import QUIET_HELP, emit
 from kinfu_cli.core.pois import DEFAULT_RADIUS
 from kinfu_cli.evaluation.nbv_loop import EXPLORE, LoopConfig, run_loop
 from kinfu_cli.evaluation.tables import nbv_loop_table
@@ -90,7 +89,7 @@ def check_options(params: dict) -> None:
               help="Run the strategy trials on a local Dask cluster of this many processes [in this process].")
 @scheduler_option
 @result_options(output="Write the result JSON here.", json="Print the result JSON on stdout.",
-                quiet="Only warnings and errors: no progress bar, no tables (--json still prints the JSON).",
+                quiet=QUIET_HELP,
                 plot="PNG: unknown voxels in each POI sphere vs views (the paper's Fig. 20).", dir_okay=True)
 def command(scene, strategies, views, mode, voxel_size, gain, inc_th, poi_radius, pois_from, poi, optimistic,
             oscillation, width, height, scan_every, lon_step, lat_step, roll_step, scan_frames, near_margin,
@@ -126,9 +125,4 @@ def command(scene, strategies, views, mode, voxel_size, gain, inc_th, poi_radius
     if plot is not None:
         plot_nbv_loop(plot, doc)
         doc["plot"] = str(plot)
-    if quiet and not as_json:  # only warnings and errors, as segment, fuse and poi do
-        print_warnings(doc)
-        if output is not None:
-            write_json(output, doc)
-    else:
-        emit(doc, output, as_json, nbv_loop_table)
+    emit(doc, output, as_json, nbv_loop_table, quiet)

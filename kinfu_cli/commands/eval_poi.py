@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from pathlib import Path
@@ -12,6 +11,7 @@ import click
 from kinfu_cli.commands._engine import scheduler_option, trial_engine
 from kinfu_cli.commands._options import result_options
 from kinfu_cli.commands._detector_options import detector_options, detector_params_from
+from kinfu_cli.commands._output import QUIET_HELP, emit
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.evaluation.poi import evaluate_dataset, format_sample, format_tables, sample_statement
 
@@ -44,7 +44,7 @@ def _floats(option: str, value: str | None) -> list[float]:
 @click.option("--loo", is_flag=True,
               help="Leave-one-user-out instead: choose each default constant on one user, score it on another "
                    "(kinfu_cli/evaluation/poi_loo.py); detector options are ignored.")
-@result_options(output=None, json="Print machine-readable results on stdout.", quiet="No progress bar.", force=False)
+@result_options(output=None, json="Print machine-readable results on stdout.", quiet=QUIET_HELP, force=False)
 @detector_options
 def command(dataset_dir, algorithm, speed, noise, seed, workers, scheduler, loo, as_json, quiet, **kw):
     """Run GMM-AS and/or ZVC on every *.traj with a *.traj.res beside it and score them.
@@ -93,15 +93,11 @@ def command(dataset_dir, algorithm, speed, noise, seed, workers, scheduler, loo,
         if loo:
             from kinfu_cli.evaluation.poi_loo import format_loo, leave_one_user_out
             doc = leave_one_user_out(dataset_dir, algorithms, workers=workers, quiet=quiet, map_trials=tmap)
-            click.echo(json.dumps(doc, indent=2) if as_json else format_loo(doc))
+            emit(doc, None, as_json, lambda d: [format_loo(d)], quiet)
             return
         results, rows = evaluate_dataset(dataset_dir, algorithms, speeds, noises, workers=workers, params=params,
                                           seed=seed, quiet=quiet, map_trials=tmap)
     sample = sample_statement(rows)
-    if as_json:
-        doc = dict(results[0]) if len(results) == 1 else {"results": results}
-        doc["sample"] = sample
-        click.echo(json.dumps(doc, indent=2))
-    else:
-        click.echo(format_tables(results))
-        click.echo(format_sample(sample))
+    doc = dict(results[0]) if len(results) == 1 else {"results": results}
+    doc["sample"] = sample
+    emit(doc, None, as_json, lambda d: [format_tables(results), format_sample(sample)], quiet)

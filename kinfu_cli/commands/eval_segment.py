@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from kinfu_cli.commands._options import SWEEP_ONLY_OPTIONS, claim_outputs, force_option, given_options
-from kinfu_cli.commands._output import emit
+from kinfu_cli.commands._output import QUIET_HELP, emit
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.evaluation.segment_eval import (RGB_T_LCCP_VALUES, SWEEP_DEFAULT, SWEEP_VALUES, check_eval_numbers,
                                                default_sweep_values, evaluate_segments, label_names,
@@ -88,7 +88,7 @@ def check_options(params: dict) -> None:
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write the results as JSON here.")
 @click.option("--json", "as_json", is_flag=True, help="Print the results JSON to stdout instead of the table.")
-@click.option("--quiet", is_flag=True, help="No progress output.")
+@click.option("--quiet", is_flag=True, help=QUIET_HELP)
 @force_option
 def command(segments: Path | None, ground_truth: Path | None, t_eval: float, matching: str, max_distance: float,
             cover: float, share: float, sweep: bool, sweep_parameter: str, sweep_values: str | None,
@@ -135,7 +135,7 @@ def command(segments: Path | None, ground_truth: Path | None, t_eval: float, mat
             from kinfu_cli.report.segment_eval_plot import plot_sweep_pr
 
             doc["plot"] = str(plot_sweep_pr(doc, plot))
-        emit(doc, output, as_json, lambda d: format_sweep_table(d).splitlines())
+        emit(doc, output, as_json, lambda d: format_sweep_table(d).splitlines(), quiet)
         return
     sweep_only = given_options(click.get_current_context(), SWEEP_ONLY_OPTIONS)
     if sweep_only:
@@ -155,4 +155,4 @@ def command(segments: Path | None, ground_truth: Path | None, t_eval: float, mat
         doc["plot"] = str(plot_segment_errors(result.points, result.point_errors, result.gt_labels, names, result.up,
                                               plot, title=f"{segments.name}: per-point consistency error "
                                                           f"(BCE {doc['bce']:.3f})"))
-    emit(doc, output, as_json, lambda d: format_segment_table(d).splitlines())
+    emit(doc, output, as_json, lambda d: format_segment_table(d).splitlines(), quiet)

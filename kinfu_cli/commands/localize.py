@@ -124,4 +124,4 @@ def command(model: Path | None, points: Path | None, models: str | None, segment
     doc = result.to_json()
     doc["input"] = {"models": [str(p) for p in model_paths],
                     "points": str(points) if points is not None else f"{segments} segment {segment}"}
-    emit(doc, output, as_json, _lines)
+    emit(doc, output, as_json, _lines, quiet)

@@ -225,7 +225,7 @@ def command(volume, pois_path, mode, clear, gain, top, output, plot, candidates,
         doc["seconds"] = round(time.perf_counter() - t0, 3)
         if viz is not None:
             write_viewer(viz, views=planned, grid=planned.grid)
-        emit(doc, output, as_json, objects_summary_lines)
+        emit(doc, output, as_json, objects_summary_lines, quiet)
         return
     if pois_path is None:
         raise ConfigError("--pois: required with --mode poi (a pois.json from `kinfu poi`)")
@@ -239,4 +239,4 @@ def command(volume, pois_path, mode, clear, gain, top, output, plot, candidates,
     if viz is not None:
         write_viewer(viz, views=ranked, grid=ranked.grid)
     doc["seconds"] = round(time.perf_counter() - t0, 3)
-    emit(doc, output, as_json, summary_lines)
+    emit(doc, output, as_json, summary_lines, quiet)

@@ -319,6 +319,34 @@ def clean_depth(depth, min_depth, max_depth):
     return out
 
 
+@njit(cache=True, parallel=True)
+def readings_in_box(depth, T_wc, fx, fy, cx, cy, lo, hi):
+    """(valid readings, readings whose point lies in the world box [lo, hi)) of a depth image seen from T_wc:
+    how much of what a frame measured lands in the grid (a wrong pose puts all of it elsewhere)."""
+    h, w = depth.shape
+    valid = np.zeros(h, dtype=np.int64)
+    inside = np.zeros(h, dtype=np.int64)
+    for v in prange(h):
+        yn = (v - cy) / fy
+        nv = 0
+        ni = 0
+        for u in range(w):
+            d = depth[v, u]
+            if not d > 0.0:
+                continue
+            nv += 1
+            x = (u - cx) / fx * d
+            y = yn * d
+            px = T_wc[0, 0] * x + T_wc[0, 1] * y + T_wc[0, 2] * d + T_wc[0, 3]
+            py = T_wc[1, 0] * x + T_wc[1, 1] * y + T_wc[1, 2] * d + T_wc[1, 3]
+            pz = T_wc[2, 0] * x + T_wc[2, 1] * y + T_wc[2, 2] * d + T_wc[2, 3]
+            if lo[0] <= px < hi[0] and lo[1] <= py < hi[1] and lo[2] <= pz < hi[2]:
+                ni += 1
+        valid[v] = nv
+        inside[v] = ni
+    return valid.sum(), inside.sum()
+
+
 def allocate_blocks(cls, block_idx_flat, block_w_flat, pool_v, pool_w, pool_c, n_used):
     """Give per-voxel storage to VOXEL blocks that lack it (see allocate_new); returns the new row count."""
     new_b = np.flatnonzero((cls == VOXEL) & (block_idx_flat < 0))

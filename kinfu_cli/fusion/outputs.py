@@ -87,6 +87,7 @@ def fusion_report(result: FusionResult, extra_outputs: Iterable[str] = ()) -> di
         "frames": {"depth_messages": stats.depth_messages, "used": result.frames_used,
                    "skipped_every": stats.skipped, "without_color": stats.without_color,
                    "dropped": result.dropped, "dropped_total": int(sum(result.dropped.values())),
+                   "outside_grid": list(result.frames_outside_grid),
                    "every": result.every, "start_s": result.start_s, "end_s": result.end_s,
                    **({"color_registration": stats.color_registration} if stats.color_registration else {}),
                    **({"depth_units_m": stats.depth_units} if stats.depth_units is not None else {})},

@@ -66,6 +66,11 @@ MAX_CONDITION = 2.5e3
 MIN_ICP_WIDTH = 320
 # ... and the narrowest model map (160 px, from 320 px frames, lost the sample recording's hint-mode track: 4 cm off)
 MIN_MODEL_WIDTH = 320
+# ICP tracking of depth frames narrower than this (px) is said to be doubtful (fusion.pipeline warns): their few
+# pixels pin the pose down poorly in ways no loss check sees. Tracked in place on identical noise-free frames of the
+# simulator's box scene (1 / 2 cm voxels, 8 frames), the camera drifted 1.5 / 3.1 cm at 64 px, 1.1 / 1.4 at 96,
+# 1.8 / 2.3 at 128, 1.7 / 1.2 at 160, 0.9 / 0.4 at 240 and 0.2 / 0.5 at 320 px; a 64x48 table scene 46 cm
+MIN_TRACKING_WIDTH = 160
 # projective ICP re-casts the model map from the pose it found, and runs again from there, when that pose is further
 # than this from the one the map was cast from (a large move, as between sub-sampled frames: the first map sees the
 # scene from the wrong place, its occlusions and edges bias the association), at most RECASTS times

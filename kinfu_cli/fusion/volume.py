@@ -242,7 +242,8 @@ class TernaryVolume:
 
         color: uint8 RGB (H, W, 3) registered to the depth image, or None; color_mask: bool (H, W), False where
         `color` has no sample (None: it has one everywhere; an exactly black pixel never has one). Returns counts of
-        blocks carved in bulk and updated voxel by voxel.
+        blocks carved in bulk and updated voxel by voxel, and of the valid readings and those whose point lies in
+        the grid (readings_in_grid: none means the frame added no surface, a wrong pose or grid).
         """
         K = np.asarray(K, dtype=np.float64)
         if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
@@ -305,8 +306,10 @@ class TernaryVolume:
                             guided, float(gdf.GATE_VOXELS))
         self._winners_stale = self._winners_stale or (self.color_mode == "mode" and col.shape[0] > 0)
         self.frames_integrated += 1
+        lo, hi = self.bounds()
+        readings, in_grid = kn.readings_in_box(d, T, fx, fy, cx, cy, lo, hi)
         return {"blocks_carved": int(n_carve), "blocks_voxelwise": int(n_voxel),
-                "blocks_allocated": int(self.n_used)}
+                "blocks_allocated": int(self.n_used), "readings": int(readings), "readings_in_grid": int(in_grid)}
 
     def _hypotheses(self) -> tuple:
         """The mode filter's pools for the kernels; (None, None) for the mean, whose kernel then lacks the mode

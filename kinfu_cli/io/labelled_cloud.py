@@ -11,7 +11,6 @@ and normals may be present and are ignored. A `.npz` with `points` (N, 3) and `l
 from __future__ import annotations
 
 import os
-import re
 import zipfile
 import zlib
 from dataclasses import dataclass
@@ -122,6 +121,8 @@ def read_labelled_cloud(path: str | os.PathLike) -> LabelledCloud:
 # whitespace after a binary PLY's last row that is taken as a trailing line end, not as bytes of rows the header
 # does not count
 MAX_TRAILING_WHITESPACE = 64
+# what bytes.strip() takes as blank: a line of only these after an ascii PLY's rows is no row
+BLANK = " \t\n\r\x0b\x0c"
 
 
 def read_ply_vertices(path: Path) -> np.ndarray:
@@ -129,16 +130,14 @@ def read_ply_vertices(path: Path) -> np.ndarray:
     from plyfile import PlyData, PlyElementParseError, PlyParseError  # only labels files need it
 
     try:
-        with open(path, "rb") as fh:
-            if fh.read(3) != b"ply":
-                raise LabelsFileError(f"{path}: not a PLY file")
-            fh.seek(0)
-            ply = PlyData.read(fh)
-            # binary: plyfile stops right after the declared rows; ascii rows are counted below (its text
-            # reader reads ahead and closes fh)
-            bytes_after = None if ply.text else os.fstat(fh.fileno()).st_size - fh.tell()
-            if bytes_after and bytes_after <= MAX_TRAILING_WHITESPACE and not fh.read().strip(b" \t\r\n"):
-                bytes_after = 0  # a line end written after the data (by hand or a text tool): no row
+        ply, rows_after = _read_ascii_ply(path, PlyData)
+        bytes_after = None
+        if ply is None:  # binary: plyfile stops right after the declared rows (and memory-maps them)
+            with open(path, "rb") as fh:
+                ply = PlyData.read(fh)
+                bytes_after = os.fstat(fh.fileno()).st_size - fh.tell()
+                if bytes_after and bytes_after <= MAX_TRAILING_WHITESPACE and not fh.read().strip(b" \t\r\n"):
+                    bytes_after = 0  # a line end written after the data (by hand or a text tool): no row
         vertex = ply["vertex"].data
     except LabelsFileError:
         raise
@@ -155,18 +154,32 @@ def read_ply_vertices(path: Path) -> np.ndarray:
                               f"count?)") from None
     except (PlyParseError, ValueError, EOFError, OSError, IndexError, TypeError) as e:
         raise LabelsFileError(f"{path}: unreadable PLY (truncated or malformed: {_first_line(e)})") from None
-    _check_no_extra_rows(path, ply, bytes_after)
+    _check_no_extra_rows(path, ply, bytes_after, rows_after)
     return vertex
 
 
-def _check_no_extra_rows(path: Path, ply, bytes_after: int | None) -> None:
+def _read_ascii_ply(path: Path, PlyData) -> tuple:
+    """An ascii PLY and the non-blank lines after its declared rows, from one read: plyfile reads the rows of a
+    text stream line by line and leaves it right after them (from a binary stream it reads ahead in a text
+    wrapper of its own and closes the file). (None, 0) for a binary PLY, which plyfile refuses from text."""
+    with open(path, encoding="ascii", errors="surrogateescape", newline="") as text:
+        if text.read(3) != "ply":
+            raise LabelsFileError(f"{path}: not a PLY file")
+        text.seek(0)
+        try:
+            ply = PlyData.read(text)
+        except ValueError:  # a binary format (or header text beyond ASCII: the binary read refuses that as before)
+            return None, 0
+        return ply, sum(1 for line in text if line.strip(BLANK))
+
+
+def _check_no_extra_rows(path: Path, ply, bytes_after: int | None, rows_after: int) -> None:
     """Rows past the header's counts mean the counts are wrong: plyfile stops at them and would hand back a
-    partial cloud (a truncated file fails in plyfile already)."""
+    partial cloud (a truncated file fails in plyfile already). bytes_after: what follows a binary PLY's rows;
+    rows_after: the non-blank lines after an ascii PLY's."""
     declared = ", ".join(f"element {el.name} {el.count}" for el in ply.elements)
     last = ply.elements[-1] if ply.elements else None
-    if bytes_after is not None:
-        if bytes_after == 0:
-            return
+    if bytes_after:
         row_size = last.data.dtype.itemsize if last is not None and last.data.dtype.fields else 0
         if row_size and not any(t.kind == "O" for t, *_ in last.data.dtype.fields.values()) \
                 and bytes_after % row_size == 0:
@@ -176,14 +189,9 @@ def _check_no_extra_rows(path: Path, ply, bytes_after: int | None) -> None:
             extra = f"{bytes_after} more bytes"
         raise LabelsFileError(f"{path}: the header declares {declared} but the file holds {extra}: a wrong count "
                               f"in the header (or a damaged file)")
-    data = path.read_bytes()
-    end = re.search(rb"^[ \t]*end_header[^\r\n]*(\r\n|\r|\n)", data, re.MULTILINE)
-    if end is None:
-        return
-    rows = sum(1 for line in data[end.end():].splitlines() if line.strip()) - sum(el.count for el in ply.elements)
-    if rows > 0:
-        raise LabelsFileError(f"{path}: the header declares {declared} but the file holds {rows} more "
-                              f"row{'s' * (rows != 1)}: a wrong count in the header")
+    if rows_after:
+        raise LabelsFileError(f"{path}: the header declares {declared} but the file holds {rows_after} more "
+                              f"row{'s' * (rows_after != 1)}: a wrong count in the header")
 
 
 def ply_points(vertex: np.ndarray, path: Path) -> np.ndarray:

@@ -19,7 +19,7 @@ import numpy as np
 
 from kinfu_cli.core.camera import CameraModel
 from kinfu_cli.core.checks import check_number
-from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.core.errors import ConfigError, VolumeError
 from kinfu_cli.core.grid import OCCUPIED, TernaryGrid, check_up
 from kinfu_cli.core.poses import matrix_to_quaternion
 from kinfu_cli.core.progress import progress_bar
@@ -27,7 +27,8 @@ from kinfu_cli.fusion.volume import load_grid
 from kinfu_cli.nbv.gains import get_gain
 from kinfu_cli.nbv.objects import W_TH, ObjectPlan, known_grid, nbv_scorer, plan_object_views_for_volume
 from kinfu_cli.nbv.ranking import (PoiRanking, check_region_inside, estimate_table_z, forget_around,
-                                   least_blocked_share, load_pois, rank_poi, unknown_in_sphere)
+                                   least_blocked_share, load_pois, rank_poi, score_views, sphere_outside_share,
+                                   unknown_in_sphere, voxels_in_sphere)
 from kinfu_cli.nbv.raycast import RayVolume
 from kinfu_cli.nbv.viewpoints import MAX_RUN_VIEWS, PAPER_SPHERE, SphereSpec, read_candidates
 from kinfu_cli.segmentation.pipeline import load_segment_input
@@ -36,6 +37,8 @@ from kinfu_cli.segmentation.pipeline import load_segment_input
 UNREACHABLE_SHARE = 0.5
 # ... and S(POI) still holds this share of unknown voxels (a region known all but a few voxels is reconstructed)
 UNREACHABLE_UNKNOWN = 0.01
+# warn when at least this share of S(POI) lies outside the grid: its gains and the IncTh verdict only see the rest
+OUTSIDE_WARN_SHARE = 0.2
 TableZ = str | float | None  # "auto" (found in the volume), "none" / None (no table), or a height in metres
 
 
@@ -191,6 +194,9 @@ def rank_poi_views(volume_path: str | os.PathLike, pois_path: str | os.PathLike,
     grid = load_grid(volume_path)
     for p in pois:
         check_region_inside(grid, p.position, f"{pois_path}: POI {p.id}")
+        _check_region_voxels(grid, p, pois_path, opts.poi_radius is not None)
+    outside = [sphere_outside_share(grid, p.position, p.radius) for p in pois]
+    s_voxels = [voxels_in_sphere(grid, p.position, p.radius) for p in pois]
     cleared = {p.id: forget_around(grid, p.position, p.radius) for p in pois} if opts.clear else {}
     up, up_source = resolve_up(grid, opts.up)
     table_z = resolve_table_z(grid, opts.table_z, up)
@@ -199,26 +205,86 @@ def rank_poi_views(volume_path: str | os.PathLike, pois_path: str | os.PathLike,
     bar = _view_bar(sum(len(c) for c in per_poi), quiet)
     rankings = []
     try:
-        for p, poses in zip(pois, per_poi):
+        for p, poses, out_share, n_voxels in zip(pois, per_poi, outside, s_voxels):
             r = rank_poi(vol, p.position, camera, poi_id=p.id, radius=p.radius, gain=opts.gain, candidates=poses,
                          inc_th=opts.inc_th, table_z=table_z, clearance=opts.clearance,
                          share_rolls=opts.share_rolls, optimistic=opts.optimistic,
                          progress_cb=bar.update if bar is not None else None, up=up)
+            r.extra.update(sphere_voxels=n_voxels, outside_share=round(out_share, 3))
             if opts.clear:
                 r.extra["cleared_voxels"] = cleared[p.id]
             rankings.append(r)
     finally:
         if bar is not None:
             bar.close()
-    warnings = [rejection_warning(f"POI {r.poi_id}", r.scores.rejected(), len(r.scores.reasons), table_z, up,
+    warnings = [_outside_warning(r, grid) for r in rankings if r.extra["outside_share"] >= OUTSIDE_WARN_SHARE]
+    warnings += [rejection_warning(f"POI {r.poi_id}", r.scores.rejected(), len(r.scores.reasons), table_z, up,
                                   up_source) for r in rankings if len(r.scores.reasons) and not r.scores.valid.any()]
-    warnings += [w for r in rankings if (w := _unreachable(r, grid, opts.optimistic))]
+    warnings += [w for r in rankings if (w := _unreachable(r, grid, opts.optimistic)
+                                         or _seen_only_from_rejected(r, grid, vol, camera, opts))]
     warnings += [f"POI {r.poi_id}: every valid view scores 0 on the {opts.gain} gain though S(POI) is not "
                  f"reconstructed (best unknown gain {r.scores.gains['unknown'][r.scores.valid].max():.0f} rays): the "
                  f"order of its views says nothing; rank with the unknown gain"
                  for r in rankings if not r.reconstructed and not r.extra.get("unreachable")
                  and r.scores.valid.any() and r.best_gain <= 0]
     return PoiViews(str(volume_path), str(pois_path), opts, camera, grid, table_z, rankings, up, up_source, warnings)
+
+
+def _check_region_voxels(grid: TernaryGrid, poi, pois_path, radius_given: bool) -> None:
+    """Refuse a POI whose S(POI) holds no voxel centre: nothing in it can be seen, so its IncTh verdict would
+    read "reconstructed" on no evidence. A radius of half a voxel's diagonal always holds one."""
+    if voxels_in_sphere(grid, poi.position, poi.radius):
+        return
+    need = grid.voxel_size * np.sqrt(3) / 2
+    msg = (f"S(POI) of radius {poi.radius:g} m around POI {poi.id} holds no voxel centre of the volume (voxel size "
+           f"{grid.voxel_size:g} m): nothing in it to rank views for or to call reconstructed; expected a radius of "
+           f"at least {need:.3f} m")
+    if radius_given:
+        raise ConfigError(msg, parameter="poi_radius")
+    raise VolumeError(f"{pois_path}: {msg} (or replace the file's radii with poi_radius)")
+
+
+def _outside_warning(r: PoiRanking, grid: TernaryGrid) -> str:
+    """The warning of a POI whose S(POI) lies partly outside the grid (share in r.extra["outside_share"])."""
+    lo = grid.origin
+    hi = grid.origin + np.array(grid.shape) * grid.voxel_size
+    box = " x ".join(f"[{a:.3f}..{b:.3f}]" for a, b in zip(lo, hi))
+    return (f"POI {r.poi_id}: {100 * r.extra['outside_share']:.0f} % of S(POI) (radius {r.radius:g} m) lies outside "
+            f"the volume {box} m: that part was never mapped, so the gains and the IncTh verdict only cover the "
+            f"{r.extra['sphere_voxels']} voxels inside (a smaller radius, or a volume fused with a larger grid)")
+
+
+def _seen_only_from_rejected(r: PoiRanking, grid: TernaryGrid, vol: RayVolume, camera: CameraModel,
+                             opts: NbvOptions) -> str:
+    """Mark a POI called reconstructed (no valid view's gain reaches IncTh) while views rejected for standing in
+    unobserved space would, were that space free, see unknown voxels of S(POI) on at least IncTh rays: the
+    paper's IncTh test only says the reachable views are useless, not that S(POI) is complete. Such a POI is
+    `unreachable` and not reconstructed; returns its warning ("" otherwise)."""
+    if not r.reconstructed:
+        return ""
+    rejected = np.array([why == "inside_unknown" for why in r.scores.reasons], dtype=bool)
+    unknown = unknown_in_sphere(grid, r.center, r.radius) if rejected.any() else 0
+    if not unknown:  # nothing left to see: the verdict stands without casting
+        return ""
+    judged = r.extra.get("inc_th_gain", r.scores.gain_name)
+    seen = score_views(vol, r.scores.poses[rejected], camera, r.center, r.radius, judged, reject_unknown=False,
+                       optimistic=True, share_rolls=opts.share_rolls)
+    gain = seen.gain[seen.valid]
+    seeing = int(np.count_nonzero(gain >= r.inc_th)) if gain.size else 0
+    if not seeing:
+        return ""
+    r.extra["unreachable"] = True
+    r.extra["rejected_views_seeing"] = seeing
+    r.reconstructed = False
+    total = r.extra.get("sphere_voxels") or voxels_in_sphere(grid, r.center, r.radius)
+    n_valid = int(r.scores.valid.sum())
+    best_valid = float(r.scores.gains[judged][r.scores.valid].max()) if n_valid else 0.0
+    return (f"POI {r.poi_id}: S(POI) still holds {unknown} unknown of {total} voxels ({100 * unknown / total:.0f} %) "
+            f"and none of the {n_valid} valid views of {len(r.scores.reasons)} sees them (best {judged} gain "
+            f"{best_valid:.1f} < IncTh {r.inc_th:.1f}), but {seeing} of the "
+            f"{int(rejected.sum())} views rejected as inside_unknown would (best {judged} gain {gain.max():.1f}) "
+            f"were the space they stand in observed free: not reconstructed but unreachable with this volume (the "
+            f"scan never observed the space those views stand in; frames from around the POI would tell)")
 
 
 def _unreachable(r: PoiRanking, grid: TernaryGrid, optimistic: bool) -> str:
@@ -228,7 +294,7 @@ def _unreachable(r: PoiRanking, grid: TernaryGrid, optimistic: bool) -> str:
     `unreachable` and not reconstructed; returns its warning ("" otherwise)."""
     share = None if optimistic else least_blocked_share(r.scores)
     unknown = unknown_in_sphere(grid, r.center, r.radius)
-    s_voxels = 4.0 / 3.0 * np.pi * (r.radius / grid.voxel_size) ** 3
+    s_voxels = r.extra.get("sphere_voxels") or 4.0 / 3.0 * np.pi * (r.radius / grid.voxel_size) ** 3
     r.extra["unreachable"] = bool(share is not None and share >= UNREACHABLE_SHARE
                                   and unknown >= UNREACHABLE_UNKNOWN * s_voxels and r.reconstructed)
     if not r.extra["unreachable"]:

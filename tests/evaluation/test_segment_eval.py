@@ -147,9 +147,9 @@ def test_eval_segment_end_to_end(small_scene, tmp_path):
     root, res, scene = small_scene
     out = tmp_path / "ev.json"
     r = CliRunner().invoke(cli, ["eval", "segment", str(root / "seg"), "--ground-truth", str(root / "labels.ply"),
-                                 "-o", str(out), "--plot", str(tmp_path / "top.png"), "--quiet"])
+                                 "-o", str(out), "--plot", str(tmp_path / "top.png")])
     assert r.exit_code == 0, r.output
-    assert "bnd P" in r.output and "BCE" in r.output
+    assert "bnd P" in r.stdout and "BCE" in r.stdout
     doc = json.loads(out.read_text())
     assert doc["input"]["labels_from"] == "label property" and not doc["warnings"]
     # segments.ply's labels are the segmentation's: same scores as from memory
@@ -220,7 +220,7 @@ def test_cli_sweep_over_t_ff_with_mean_and_mode(tmp_path):
     out = tmp_path / "sweep.json"
     r = CliRunner().invoke(cli, ["eval", "segment", "--sweep", "--sweep-parameter", "t_ff", "--sweep-values",
                                  "0.15,1.0", "--scenes", "1", "--resolution", "64", "-o", str(out), "--plot",
-                                 str(tmp_path / "pr.png"), "--quiet"])
+                                 str(tmp_path / "pr.png")])
     assert r.exit_code == 0, r.output
     doc = json.loads(out.read_text())
     assert doc["method"] == "flood-fill" and doc["colors"] == ["mean", "mode"] and doc["photometric"]
@@ -231,7 +231,7 @@ def test_cli_sweep_over_t_ff_with_mean_and_mode(tmp_path):
         assert s["rows"][0]["segments"] >= s["rows"][1]["segments"]
         assert all(0 <= row["boundary_precision"] <= 1 and 0 <= row["bce"] <= 1 for row in s["rows"])
     assert set(doc["means"]) == {"mean", "mode"} and len(doc["means"]["mode"]["boundary_f"]) == 2
-    assert "objects 1 mode" in r.output and "mean over scenes" in r.output
+    assert "objects 1 mode" in r.stdout and "mean over scenes" in r.stdout
     assert (tmp_path / "pr.png").stat().st_size > 10_000
 
 
@@ -269,11 +269,10 @@ def test_cli_t_lccp_sweep_in_the_thesis_rgb_distance(tmp_path):
 
     out = tmp_path / "sweep.json"
     r = CliRunner().invoke(cli, ["eval", "segment", "--sweep", "--sweep-parameter", "t_lccp", "--color-distance",
-                                 "rgb", "--color", "mode", "--scenes", "1", "--resolution", "64", "-o", str(out),
-                                 "--quiet"])
+                                 "rgb", "--color", "mode", "--scenes", "1", "--resolution", "64", "-o", str(out)])
     assert r.exit_code == 0, r.output
     doc = json.loads(out.read_text())
     assert doc["color_distance"] == "rgb" and doc["values"] == list(RGB_T_LCCP_VALUES)
     segs = [row["segments"] for row in doc["scenes"][0]["rows"]]
     assert segs[0] >= segs[-1] and segs[0] > 1
-    assert "colour distance: rgb" in r.output
+    assert "colour distance: rgb" in r.stdout

@@ -170,3 +170,15 @@ def test_many_points_are_thinned_in_order_and_said(files):
     assert any("used 30 of the 400 points" in w for w in doc["warnings"])
     res = CliRunner().invoke(cli, ["localize", str(mesh), str(txt), "-o", str(out), *FAST, "--max-points", "-1"])
     assert res.exit_code == 2 and "--max-points" in res.output
+
+
+def test_quiet_prints_no_summary(files):
+    """--quiet printed the pose summary all the same: like fuse, segment, poi and the eval commands, it prints only
+    warnings and errors now (the file is still written; --json still prints the JSON)."""
+    tmp, mesh, txt = files
+    fast = [a for a in FAST if a != "--quiet"]
+    loud = CliRunner().invoke(cli, ["localize", str(mesh), str(txt), "-o", str(tmp / "a.json"), *fast])
+    quiet = CliRunner().invoke(cli, ["localize", str(mesh), str(txt), "-o", str(tmp / "b.json"), *fast, "--quiet"])
+    assert loud.exit_code == quiet.exit_code == 0, loud.output + quiet.output
+    assert loud.stdout.strip() and quiet.stdout == ""
+    assert json.loads((tmp / "b.json").read_text())["status"] == "converged"

@@ -59,3 +59,22 @@ def test_a_visible_poi_keeps_the_papers_verdicts(tmp_path):
     (tmp_path / "b").mkdir()
     res, known = _rank(tmp_path / "b", OCCUPIED, shell=False)
     assert known["unreachable"] is False and known["reconstructed"] is True and res.warnings == []
+
+
+def test_quiet_prints_only_warnings(tmp_path):
+    """`kinfu nbv --quiet` printed its ranking summary all the same; like fuse, segment and poi it prints only
+    warnings and errors now (the views file is still written)."""
+    from click.testing import CliRunner
+
+    from kinfu_cli.cli import cli
+
+    vol, pois = _files(tmp_path, UNKNOWN, shell=True)
+    cam = ["--fx", "60", "--fy", "60", "--cx", "39.5", "--cy", "29.5", "--width", "80", "--height", "60",
+           "--lon-step", "90", "--lat-step", "45", "--roll-step", "180"]
+    loud = CliRunner().invoke(cli, ["nbv", str(vol), "--pois", str(pois), "-o", str(tmp_path / "a.json"), *cam])
+    quiet = CliRunner().invoke(cli, ["nbv", str(vol), "--pois", str(pois), "-o", str(tmp_path / "b.json"), *cam,
+                                     "--quiet"])
+    assert loud.exit_code == quiet.exit_code == 0, loud.output + quiet.output
+    assert "POI 0" in loud.stdout and quiet.stdout == ""
+    assert "kinfu: warning: POI 0: no candidate view sees S(POI)" in quiet.stderr
+    assert json.loads((tmp_path / "b.json").read_text())["pois"][0]["unreachable"] is True
