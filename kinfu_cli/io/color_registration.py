@@ -18,7 +18,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from kinfu_cli.core.errors import RecordingError, TransformError
-from kinfu_cli.io.messages import camera_info_distortion, camera_info_K, decode_color, header_frame, is_compressed
+from kinfu_cli.io.camera_info import image_camera
+from kinfu_cli.io.messages import decode_color, header_frame, is_compressed
 from kinfu_cli.io.roles import CAMERA_INFO
 from kinfu_cli.io.tf_buffer import TfBuffer
 from kinfu_cli.io.undistort import Undistorter
@@ -71,7 +72,7 @@ def color_registration(rec, depth_topic: str, color_topic: str, depth_info_topic
         return ColorRegistration("none", d_frame, c_frame, reason=f"the colour images are in frame {c_frame!r}, "
                                  f"the depth images in {d_frame!r}, and no camera info topic is in {c_frame!r}")
     try:
-        lens, (w, h) = colour_camera(rec, info_topic)
+        lens, (w, h) = colour_camera(rec, info_topic, image_topic=color_topic)
     except RecordingError as exc:  # a broken colour calibration costs the colour, not the run
         return ColorRegistration("none", d_frame, c_frame, info_topic, reason=str(exc))
     tf = tf if tf is not None else TfBuffer.from_recording(rec)
@@ -135,15 +136,20 @@ def color_size_reason(color_topic: str, size: tuple[int, int], reg: ColorRegistr
             f"{reg.color_size[0]}x{reg.color_size[1]} (another aspect ratio: not that camera resized)")
 
 
-def colour_camera(rec, info_topic: str, distortion=camera_info_distortion) -> tuple[Undistorter, tuple[int, int]]:
-    """The colour camera of `info_topic`'s first message: its lens (K and distortion, read by `distortion`) and
-    image size; RecordingError naming the topic when it cannot be read."""
+def colour_camera(rec, info_topic: str, distortion=None,
+                  image_topic: str | None = None) -> tuple[Undistorter, tuple[int, int]]:
+    """The colour camera of `info_topic`'s first message for the images on `image_topic`: its lens (K and
+    distortion, read by `distortion` when given) and image size, after the roi and binning (io.camera_info
+    .image_camera; P and no distortion for a rectified topic); RecordingError naming the topic when it cannot be
+    read."""
     info = rec.first_message(info_topic)
-    K, w, h = camera_info_K(info, f"{rec.path}: {info_topic}")
+    where = f"{rec.path}: {info_topic}"
+    cam = image_camera(info, where, image_topic, **({"distortion": distortion} if distortion else {}))
+    w, h = cam.width, cam.height
     if w < 1 or h < 1:  # the colour pixels are scaled by the image's size over this one
         raise RecordingError(f"{rec.path}: {info_topic}: CameraInfo says the colour image is {w}x{h}; expected "
                              f"its width and height in pixels")
-    return Undistorter(K, *distortion(info, f"{rec.path}: {info_topic}")), (w, h)
+    return Undistorter(cam.K, cam.model, cam.D), (w, h)
 
 
 def register_color(reg: ColorRegistration, depth: np.ndarray, K_depth: np.ndarray, color: np.ndarray,

@@ -16,10 +16,11 @@ import numpy as np
 
 from kinfu_cli.core.camera import field_of_view_problem, intrinsics_matrix, scaled_intrinsics
 from kinfu_cli.core.errors import ConfigError, RecordingError, TransformError
+from kinfu_cli.io.camera_info import image_camera
 from kinfu_cli.io.color_registration import (ColorRegistration, ColorSizeError, check_color_size, color_registration,
                                              color_size_reason, register_color)
-from kinfu_cli.io.messages import (POSE_TYPES, camera_info_distortion, camera_info_K, decode_color, decode_depth,
-                                   header_frame, header_stamp_ns, normalize_msgtype, pose_message_to_tq)
+from kinfu_cli.io.messages import (POSE_TYPES, decode_color, decode_depth, header_frame, header_stamp_ns,
+                                   normalize_msgtype, pose_message_to_tq)
 from kinfu_cli.io.pointcloud2 import (MAX_PINHOLE_RMS_PX, POINTCLOUD2, decode_cloud, fit_intrinsics, has_color,
                                       is_cloud, organized_problem, pinhole_rms)
 from kinfu_cli.io.realsense_bag import depth_units, is_sdk_stream, sdk_color_registration
@@ -34,6 +35,7 @@ DROP_NO_POSE = "no camera pose within the TF range"
 DROP_CHAIN_BROKEN = "no TF chain to the camera at that time"  # inside the TF's time, no chain with transforms there
 DROP_NO_POSE_TOPIC = "no pose message within tolerance"
 DROP_EMPTY = "depth image has no valid pixel"
+DROP_NO_PIXELS = "depth image is empty (0 pixels wide or high)"
 DROP_NO_COLOR = "no colour image within tolerance"
 
 
@@ -54,6 +56,9 @@ class RGBDFrame:
 # the share of a run's frames that may lack a colour image within the tolerance before a warning (the first and
 # last frames often do: the colour stream starts and stops at other times)
 UNPAIRED_COLOR_WARN = 0.10
+# how long (log time) colour images are kept for depth messages still to come: a depth driver's processing and
+# the recorder's queue log depth images after the colour images of the same instant (some 30-300 ms)
+COLOR_LOOKAHEAD_NS = 1_000_000_000
 MAX_16BIT_MM = 65535  # the largest depth a 16-bit millimetre image holds (65535 itself reads as no measurement)
 
 
@@ -80,6 +85,8 @@ class FrameStats:
     # 32FC1 depth pixels beyond what a 16-bit millimetre image holds (65.535 m: millimetres stored as metres?)
     pixels_over_16bit_mm: int = 0
     frames_over_16bit_mm: int = 0
+    # depth frames logged so long after their stamp that colour images near it were no longer kept
+    color_cut_short: int = 0
 
     def drop(self, reason: str) -> None:
         self.dropped[reason] = self.dropped.get(reason, 0) + 1
@@ -103,6 +110,14 @@ class FrameStats:
                     f"the {self.tolerance_ns / 1e6:.0f} ms tolerance")
             out.append(f"{recording}: {self.color_unpaired} of {self.used} frames have no colour ({near}); their "
                        f"surfaces stay uncoloured (a larger tolerance pairs images further apart in time)")
+        if self.color_cut_short:
+            out.append(f"{recording}: {self.color_cut_short} depth frames were logged more than "
+                       f"{COLOR_LOOKAHEAD_NS / 1e9:g} s after colour images within the tolerance of their stamp, "
+                       f"which were no longer kept: these frames may carry a colour image farther in time than the "
+                       f"nearest, or none")
+        if self.dropped.get(DROP_NO_PIXELS):
+            out.append(f"{recording}: {self.dropped[DROP_NO_PIXELS]} of {self.depth_messages} depth images are empty "
+                       f"(0 pixels wide or high: a driver fault?); they were left out")
         if self.stamps_not_increasing:
             out.append(f"{recording}: {self.stamps_not_increasing} of {self.depth_messages} depth images have a "
                        f"stamp equal to or earlier than the one before (the first at {self.first_not_increasing_ns} "
@@ -123,6 +138,7 @@ class FrameStats:
                 **({"notes": list(self.notes)} if self.notes else {}),
                 **({"depth_units_m": self.depth_units} if self.depth_units is not None else {}),
                 **({"stamps_not_increasing": self.stamps_not_increasing} if self.stamps_not_increasing else {}),
+                **({"color_cut_short": self.color_cut_short} if self.color_cut_short else {}),
                 **({"pixels_over_16bit_mm": self.pixels_over_16bit_mm} if self.pixels_over_16bit_mm else {})}
 
 
@@ -196,13 +212,15 @@ def iter_frames(rec, roles: Roles | None = None, pose_source: str = "tf", pose_t
             tf = TfBuffer.from_recording(rec)
         roles = detect_roles(rec, tf=tf)
     depth_topic = _require_topics(rec, roles)
+    stats.notes += [n for n in roles.notes if n not in stats.notes]  # which of several topics was taken
     tol_ns = int(round(tolerance_s * 1e9))
     stats.tolerance_ns = tol_ns
     cloud = POINTCLOUD2 in rec.topics[depth_topic].msgtypes
+    reduction = ""
     if cloud:
         K, width, height, lens, _ = _cloud_camera(rec, roles, depth_topic, stats)
     else:
-        K, width, height, lens = _depth_camera(rec, roles, depth_topic, stats.notes)
+        K, width, height, lens, reduction = _depth_camera(rec, roles, depth_topic, stats.notes)
     sdk = is_sdk_stream(rec, depth_topic)  # a RealSense SDK recording: depth units, colour through its extrinsics
     if pose_source == "tf" and sdk and not roles.camera_frame:
         raise RecordingError(f"{rec.path}: a RealSense SDK recording has no TF camera poses (its depth frames name "
@@ -232,7 +250,7 @@ def iter_frames(rec, roles: Roles | None = None, pose_source: str = "tf", pose_t
     if cloud:  # the cloud's own camera, fixed: later camera infos are not read
         roles = replace(roles, info_topic=None)
     pairer = _FramePairer(rec, roles, depth_topic, K, width, height, pose_fn, tol_ns, stats, require_color, reg,
-                          lens, cloud, stats.depth_units)
+                          lens, cloud, stats.depth_units, reduction)
     yield from pairer.stream(start_ns, end_ns, every)
     if gap_warnings is not None:  # poses interpolated across a long gap of a TF link or the pose topic: known once
         stats.notes += [w for w in gap_warnings() if w not in stats.notes]  # the frames are read
@@ -251,30 +269,34 @@ def check_seconds(value: float, parameter: str, minimum: float = -MAX_SECONDS) -
     return v
 
 
-def _depth_camera(rec, roles: Roles, depth_topic: str, notes: list[str]) -> tuple[np.ndarray, int, int, Undistorter]:
-    """(K, width, height, lens) of the depth camera: its first camera info, or the given intrinsics (the size of
-    the first depth image; no distortion); a camera info in another frame than the depth images is said in notes."""
+def _depth_camera(rec, roles: Roles, depth_topic: str,
+                  notes: list[str]) -> tuple[np.ndarray, int, int, Undistorter, str]:
+    """(K, width, height, lens, reduction) of the depth camera: its first camera info's (io.camera_info.image_camera:
+    roi, binning, P for a rectified topic), or the given intrinsics (the size of the first depth image; no
+    distortion); a camera info in another frame than the depth images, or P taken for K, is said in notes."""
     if roles.intrinsics is not None:
         K = intrinsics_matrix(*roles.intrinsics)
         first = rec.first_message(depth_topic)
         h, w = decode_depth(first, f"{rec.path}: {depth_topic}").shape if first is not None else (0, 0)
         if (problem := field_of_view_problem(K, w, h)) is not None:
             raise ConfigError(f"{rec.path}: {depth_topic}: {problem}", parameter="intrinsics")
-        return K, w, h, Undistorter.pinhole(K)
+        return K, w, h, Undistorter.pinhole(K), ""
     first_info = rec.first_message(roles.info_topic)
     if first_info is None:
         count = rec.topics[roles.info_topic].count
         raise RecordingError(f"{rec.path}: camera info topic {roles.info_topic} has no messages" if not count else
                              f"{rec.path}: camera info topic {roles.info_topic} lists {count} messages but none "
                              f"could be read")
-    K, width, height = camera_info_K(first_info, f"{rec.path}: {roles.info_topic}")
+    cam = image_camera(first_info, f"{rec.path}: {roles.info_topic}", depth_topic)
+    K, width, height = cam.K, cam.width, cam.height
+    notes += [n for n in cam.notes if n not in notes]
     first = rec.first_message(depth_topic)
     info_frame, depth_frame = (header_frame(m).lstrip("/") if m is not None else "" for m in (first_info, first))
     if info_frame and depth_frame and info_frame != depth_frame:  # no info in the depth frame: roles took this one
         notes.append(f"camera info {roles.info_topic} is in frame {info_frame!r}, the depth images in "
                      f"{depth_frame!r}: its intrinsics (fx={K[0, 0]:.4g}) may be another camera's (give the "
                      f"depth camera's intrinsics if they are)")
-    return K, width, height, Undistorter(K, *camera_info_distortion(first_info, f"{rec.path}: {roles.info_topic}"))
+    return K, width, height, Undistorter(K, cam.model, cam.D), cam.reduction
 
 
 def _cloud_camera(rec, roles: Roles, topic: str, stats: FrameStats
@@ -298,7 +320,7 @@ def _cloud_camera(rec, roles: Roles, topic: str, stats: FrameStats
     disagree = ""
     info = rec.first_message(roles.info_topic) if roles.info_topic is not None else None
     if info is not None:
-        K, iw, ih = camera_info_K(info, f"{rec.path}: {roles.info_topic}")
+        K, iw, ih, *_ = image_camera(info, f"{rec.path}: {roles.info_topic}")
         if (iw, ih) != (w, h) and iw and ih:
             K = scaled_intrinsics(K, (w / iw, h / ih))
         rms = pinhole_rms(first, K, where)
@@ -467,12 +489,13 @@ class _FramePairer:
     """Streams the depth, colour and camera-info topics once, in log order, pairing each depth image with the
     nearest colour image within the tolerance and its camera pose. Only the messages still waiting for a
     partner are kept: depth frames until no closer colour image can arrive, colour images (undecoded) until
-    no depth frame can use them."""
+    no depth frame can use them, or for COLOR_LOOKAHEAD_NS of log time (depth is often logged later than the
+    colour of the same instant); frames that lost a partner to that bound are counted (color_cut_short)."""
 
     def __init__(self, rec, roles: Roles, depth_topic: str, K: np.ndarray, width: int, height: int,
                  pose_fn: PoseLookup | None, tol_ns: int, stats: FrameStats, require_color: bool,
                  registration: ColorRegistration | None = None, lens: Undistorter | None = None,
-                 cloud: bool = False, depth_units: float | None = None) -> None:
+                 cloud: bool = False, depth_units: float | None = None, reduction: str = "") -> None:
         self.rec = rec
         # 16-bit depth in these units (m) instead of mm: a factor on decode_depth's mm reading
         self.unit_factor = None if depth_units is None else np.float32(depth_units / 0.001)
@@ -484,42 +507,52 @@ class _FramePairer:
         self.info_topic = roles.info_topic
         self.color_topic = roles.color_topic
         self.K, self.width, self.height = K, width, height  # of the latest camera info
+        self.reduction = reduction  # its roi / binning of the calibrated sensor ("" when none: image_camera)
         self.pose_fn = pose_fn
         self.tol_ns = tol_ns
         self.stats = stats
         self.require_color = require_color
         self.pending: deque[tuple[int, int, object]] = deque()  # (index, stamp, depth msg)
-        self.colors: deque[tuple[int, object]] = deque()  # (stamp, colour msg), decoded only when paired
+        self.colors: deque[tuple[int, int, object]] = deque()  # (stamp, log ns, colour msg), decoded when paired
+        self.depth_stamp: int | None = None  # of the latest depth message read: later ones should not be earlier
+        # stamps of the colour images dropped by the look-ahead, as [first, last] runs without a gap over twice the
+        # tolerance: a depth stamp within the tolerance of a run had a colour image that near
+        self.dropped_colors: deque[list[int]] = deque()
 
     def stream(self, start_ns: int | None, end_ns: int | None, every: int) -> Iterator[RGBDFrame]:
         """Frames of depth messages recorded (log time) in [start_ns, end_ns] (either None: open), every n-th;
         messages within the tolerance outside the window are read too, as partners."""
         tol_ns, stats, pending = self.tol_ns, self.stats, self.pending
         read_start = None if start_ns is None else max(0, start_ns - tol_ns)
+        # colour logged up to the look-ahead earlier may be the partner of a depth message logged late
+        color_start = None if start_ns is None else max(0, start_ns - tol_ns - COLOR_LOOKAHEAD_NS)
         read_end = None if end_ns is None else end_ns + tol_ns
         topics = [self.depth_topic] + [t for t in (self.info_topic, self.color_topic) if t]
         index = 0  # position of the depth message on its topic among those read
         kept = 0  # depth messages inside the window so far
         last_stamp = None  # of the previous depth message inside the window
-        for topic, log_ns, msg in self.rec.messages(topics, start_ns=read_start, end_ns=read_end):
+        for topic, log_ns, msg in self.rec.messages(topics, start_ns=color_start if self.color_topic else read_start,
+                                                    end_ns=read_end):
             if topic == self.info_topic:
                 where = f"{self.rec.path}: {self.info_topic}"
-                self.K, self.width, self.height = camera_info_K(msg, where)
-                model, D = camera_info_distortion(msg, where)
-                if not (self.lens.model == model and np.array_equal(self.lens.D, D)
+                cam = image_camera(msg, where, self.depth_topic)
+                self.K, self.width, self.height, self.reduction = cam.K, cam.width, cam.height, cam.reduction
+                if not (self.lens.model == cam.model and np.array_equal(self.lens.D, cam.D)
                         and np.array_equal(self.lens.K, self.K)):
-                    self.lens = Undistorter(self.K, model, D)
+                    self.lens = Undistorter(self.K, cam.model, cam.D)
                 continue
             stamp = _stamp(msg, log_ns)
             if topic == self.color_topic:
-                self.colors.append((stamp, msg))
+                self.colors.append((stamp, log_ns, msg))
                 yield from self._flush(stamp)
-                if not pending:
-                    self._prune(stamp)
+                self._forget_colors(log_ns)
                 continue
+            if read_start is not None and log_ns < read_start:
+                continue  # before the tolerance margin: read for the colour look-ahead only
             # a depth message: the window is in the recording's time (log time, as `rosbag play --start` and the
             # recording's start use), not the header's, whose clock may be another (a device's, simulated time)
             index += 1
+            self.depth_stamp = stamp
             if (start_ns is not None and log_ns < start_ns) or (end_ns is not None and log_ns > end_ns):
                 continue  # read only for the tolerance margin of the time window
             stats.depth_messages += 1
@@ -549,6 +582,9 @@ class _FramePairer:
             depth, cloud_color = decode_cloud(msg, f"{self.rec.path}: depth topic {self.depth_topic}")
         else:
             depth = decode_depth(msg, f"{self.rec.path}: {self.depth_topic}")
+            if depth.size == 0:  # no image at all, not one without readings: its size would scale K to zeros
+                self.stats.drop(DROP_NO_PIXELS)
+                return None
             if self.unit_factor is not None and str(getattr(msg, "encoding", "")) in ("16UC1", "mono16"):
                 depth *= self.unit_factor
         over = int(np.count_nonzero(depth >= np.float32((MAX_16BIT_MM - 0.5) / 1000)))
@@ -573,7 +609,9 @@ class _FramePairer:
         if self.color_topic is None and cloud_color is not None:
             color = cloud_color  # registered: the same pixels
         elif self.color_topic is not None and self.registration_mode() != "none":
-            best_stamp, best = min(self.colors, key=lambda c: abs(c[0] - stamp)) if self.colors else (None, None)
+            if any(first - self.tol_ns <= stamp <= last + self.tol_ns for first, last in self.dropped_colors):
+                self.stats.color_cut_short += 1  # a colour image within the tolerance was dropped
+            best_stamp, _, best = min(self.colors, key=lambda c: abs(c[0] - stamp)) if self.colors else (None,) * 3
             if best_stamp is not None and abs(best_stamp - stamp) > self.tol_ns:
                 gap, seen = abs(best_stamp - stamp), self.stats.color_nearest_ns
                 self.stats.color_nearest_ns = gap if seen is None else min(seen, gap)
@@ -612,12 +650,14 @@ class _FramePairer:
 
     def _scaled_K(self, w: int, h: int) -> np.ndarray:
         """K for depth images of w x h whose camera info is for another size with the same aspect ratio (a
-        decimation filter, image_proc's resize), said once in stats.notes; RecordingError otherwise."""
+        decimation filter, image_proc's resize), said once in stats.notes; RecordingError otherwise, and when the
+        camera info's roi / binning say which part of the sensor the images are."""
         sx, sy = w / self.width, h / self.height
         said = f"camera info {self.info_topic}" if self.info_topic else "the first depth image"
-        if abs(sx - sy) > 0.01 * max(sx, sy) or not self.info_topic or self.lens:
+        if abs(sx - sy) > 0.01 * max(sx, sy) or not self.info_topic or self.lens or self.reduction:
+            reduced = f" ({self.reduction})" if self.reduction else ""
             raise RecordingError(f"{self.rec.path}: depth image on {self.depth_topic} is {w}x{h} but {said} "
-                                 f"says {self.width}x{self.height}")
+                                 f"says {self.width}x{self.height}{reduced}")
         K = scaled_intrinsics(self.K, (sx, sy))
         note = (f"depth images on {self.depth_topic} are {w}x{h} but {said} says {self.width}x{self.height}: "
                 f"its intrinsics were scaled by {sx:.4g}")
@@ -629,6 +669,25 @@ class _FramePairer:
         """Forget colour images too old for any depth frame from `before` on."""
         while self.colors and self.colors[0][0] < before - self.tol_ns:
             self.colors.popleft()
+
+    def _forget_colors(self, log_ns: int) -> None:
+        """Forget colour images too old for the depth frames to come: those before the waiting frames' and the
+        latest depth stamp, and, while no frame waits, those logged over COLOR_LOOKAHEAD_NS ago (a depth
+        message that still wants one comes too late: counted when it does)."""
+        bounds = [s for s in (self.pending[0][1] if self.pending else None, self.depth_stamp) if s is not None]
+        runs, gap = self.dropped_colors, 2 * self.tol_ns
+        if bounds:
+            self._prune(min(bounds))
+            while runs and runs[0][1] < min(bounds) - self.tol_ns:
+                runs.popleft()
+        if self.pending:
+            return
+        while self.colors and self.colors[0][1] < log_ns - COLOR_LOOKAHEAD_NS:
+            stamp = self.colors.popleft()[0]
+            if runs and runs[-1][0] - gap <= stamp <= runs[-1][1] + gap:
+                runs[-1] = [min(runs[-1][0], stamp), max(runs[-1][1], stamp)]
+            else:
+                runs.append([stamp, stamp])
 
     def _flush(self, up_to: int | None) -> Iterator[RGBDFrame]:
         """Emit pending depth frames whose colour partner can no longer arrive (all when up_to is None)."""

@@ -194,6 +194,9 @@ def _raw_image(msg: object, dtype: np.dtype, channels: int, topic: str) -> np.nd
     if step < row or buf.size < step * h:
         raise RecordingError(f"{topic}: image data has {buf.size} bytes, expected {h} rows of {row} "
                              f"(step {step}) for {w}x{h} {msg.encoding}")
+    if buf.size > step * h:  # another image's size or encoding, or two images: not its first rows (cv_bridge refuses)
+        raise RecordingError(f"{topic}: image data has {buf.size} bytes, more than the {step * h} of {h} rows of "
+                             f"step {step} for {w}x{h} {msg.encoding} (a wrong size or encoding?)")
     rows = buf[: step * h].reshape(h, step)[:, :row]
     arr = np.ascontiguousarray(rows).view(dtype.newbyteorder(">" if msg.is_bigendian else "<"))
     arr = arr.astype(dtype, copy=False)
@@ -279,7 +282,8 @@ def decode_color(msg: object, topic: str = "color") -> np.ndarray:
         fmt = str(msg.format)
         if "compresseddepth" in fmt.lower():
             raise RecordingError(f"{topic}: compressed format {fmt!r} is depth, expected a jpeg/png colour image")
-        img = imdecode_quiet(_bytes(msg.data), cv2.IMREAD_COLOR)
+        # the pixels as stored, as image_transport decodes them: an EXIF orientation would turn them off the depth
+        img = imdecode_quiet(_bytes(msg.data), cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
         if img is None:
             raise RecordingError(f"{topic}: compressed image (format {fmt!r}) could not be decoded as jpeg/png")
         return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)

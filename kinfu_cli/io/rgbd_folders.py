@@ -463,6 +463,18 @@ def dropped_frames_warning(source: str, stats: dict, lacking: str) -> str | None
             f"stamps")
 
 
+def _camera_change(recording, first, frame) -> str:
+    """Why frames of two cameras (another K or image size: the camera info changed, or the depth images' size)
+    cannot share a frame folder's one camera-intrinsics.txt."""
+
+    def camera(f) -> str:
+        fx, fy, cx, cy = f.K[0, 0], f.K[1, 1], f.K[0, 2], f.K[1, 2]
+        return f"{f.depth.shape[1]}x{f.depth.shape[0]} fx={fx:.6g} fy={fy:.6g} cx={cx:.6g} cy={cy:.6g}"
+    return (f"{recording}: the depth camera changes at depth frame {frame.index} (stamp {frame.stamp_ns} ns): "
+            f"{camera(frame)}, against {camera(first)} at frame {first.index}; a frame folder has one "
+            f"camera-intrinsics.txt for all its frames: export the frames before and after apart (a start and end time each)")
+
+
 def export_frames(recording: str | os.PathLike, out: str | os.PathLike, roles_kw: dict | None = None,
                   pose_source: str = "tf", pose_topic: str | None = None, tolerance_s: float = 0.05,
                   start_s: float | None = None, end_s: float | None = None, every: int = 1,
@@ -470,9 +482,9 @@ def export_frames(recording: str | os.PathLike, out: str | os.PathLike, roles_kw
     """Write the assembled frames of a recording as a 7-Scenes-layout folder (the inverse of import_folder).
 
     frame-N.depth.png (uint16 mm, 0 = invalid), frame-N.color.png (when paired), frame-N.pose.txt
-    (T_world_camera, when posed), camera-intrinsics.txt (K of the first frame), frames.json (stamps, stats,
-    roles, warnings: what was lost or assumed reading the recording). N is the depth message index. The folder
-    appears only when every frame was written.
+    (T_world_camera, when posed), camera-intrinsics.txt (the K of every frame: a camera whose K or image size
+    changes is a RecordingError), frames.json (stamps, stats, roles, warnings: what was lost or assumed reading the
+    recording). N is the depth message index. The folder appears only when every frame was written.
     """
     stats = FrameStats()
     listing = []
@@ -493,8 +505,10 @@ def export_frames(recording: str | os.PathLike, out: str | os.PathLike, roles_kw
                 if f.T_world_camera is not None:
                     np.savetxt(f"{stem}.pose.txt", f.T_world_camera, fmt="%.17g")
                 if K0 is None:
-                    K0 = f.K
+                    K0, first = f.K, f
                     np.savetxt(tmp / "camera-intrinsics.txt", K0, fmt="%.17g")
+                elif f.depth.shape != first.depth.shape or not np.allclose(f.K, K0, rtol=1e-9, atol=1e-9):
+                    raise RecordingError(_camera_change(rec.path, first, f))
                 listing.append({"index": f.index, "stamp_ns": f.stamp_ns, "color": f.color is not None,
                                 "pose": f.T_world_camera is not None})
             if not listing:

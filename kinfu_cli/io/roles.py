@@ -8,11 +8,12 @@ it and listing the available topics.
 from __future__ import annotations
 
 import re
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 
 from kinfu_cli.core.camera import parse_intrinsics
 from kinfu_cli.core.errors import ConfigError, RecordingError, TransformError
-from kinfu_cli.io.messages import DEPTH_ENCODINGS, POSE_TYPES, camera_info_K, header_frame
+from kinfu_cli.io.camera_info import image_camera
+from kinfu_cli.io.messages import DEPTH_ENCODINGS, POSE_TYPES, header_frame
 from kinfu_cli.io.pointcloud2 import POINTCLOUD2, has_color, is_cloud, organized_problem
 from kinfu_cli.io.realsense_bag import is_sdk_recording, sdk_topic_roles
 from kinfu_cli.io.tf_buffer import TfBuffer
@@ -41,9 +42,12 @@ class Roles:
     hand_topic: str | None = None
     hand_frame: str | None = None
     intrinsics: tuple[float, float, float, float] | None = None  # fx, fy, cx, cy given instead of a camera info
+    # what detection chose among equals (several depth topics), a warning each for the commands that read frames
+    notes: list[str] = field(default_factory=list, compare=False)
 
     def as_dict(self) -> dict:
         d = asdict(self)
+        del d["notes"]
         d["intrinsics"] = None if self.intrinsics is None else list(self.intrinsics)
         return d
 
@@ -170,7 +174,7 @@ def _pick_cloud_info(rec, cloud_topic: str) -> str | None:
         if msg is None or header_frame(msg).lstrip("/") != frame:
             continue
         try:
-            _, iw, ih = camera_info_K(msg, name)
+            _, iw, ih, *_ = image_camera(msg, name)
         except RecordingError:
             continue
         if iw and ih and abs(iw * h - ih * w) <= 0.01 * iw * h:
@@ -268,9 +272,16 @@ def detect_roles(rec, depth_topic: str | None = None, color_topic: str | None = 
         color_topic = color_topic if color_topic is not None else found["color_topic"]
         if info_topic is None and intrinsics is None:
             info_topic = found["info_topic"]
+    notes = []
     if depth_topic is None:
         cands = _depth_candidates(rec) or _cloud_candidates(rec)  # a depth image wins over a cloud
         depth_topic = cands[0] if cands else None
+        # two depth streams (a RealSense's depth and aligned_depth_to_color) are two cameras: say which was taken;
+        # the same stream through image_transport (.../compressedDepth) is no other
+        others = [c for c in cands[1:] if not c.startswith(f"{depth_topic}/")]
+        if others:
+            notes.append(f"{len(others) + 1} depth topics: {depth_topic} was taken (by name), not "
+                         f"{', '.join(others)}; name the one to take as the depth topic")
     if color_topic is not None and color_topic == depth_topic:
         raise ConfigError(f"{color_topic} is the depth topic: expected a colour image topic", parameter="color_topic")
     cloud = _first_cloud(rec, depth_topic)
@@ -314,5 +325,5 @@ def detect_roles(rec, depth_topic: str | None = None, color_topic: str | None = 
 
     return Roles(depth_topic=depth_topic, color_topic=color_topic, info_topic=info_topic,
                  camera_frame=camera_frame, world_frame=world_frame, hand_topic=hand_topic,
-                 hand_frame=hand_frame, intrinsics=intrinsics)
+                 hand_frame=hand_frame, intrinsics=intrinsics, notes=notes)
 

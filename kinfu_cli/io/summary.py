@@ -69,7 +69,7 @@ def summarize(rec: Recording, check_frames: dict | None = None, quiet: bool = Tr
                "parent_changes": [list(c) for c in tf.parent_changes], "loops": tf.loops(), "problem": problem},
         "frames": frames,
         "problems": list(rec.problems),
-        "notes": usage_notes(rec, roles, tf),
+        "notes": (roles.notes if frames is None else []) + usage_notes(rec, roles, tf),  # frames say them too
     }
 
 

@@ -1,0 +1,115 @@
+"""Depth images logged later than the colour images of the same instant are paired by stamp all the same.
+
+A depth driver's processing and the recorder's queue log depth images some 30-300 ms after their header stamp,
+while colour is logged at once. The pairer used to forget colour images by the latest colour stamp whenever no
+depth frame was waiting, so the colour of a depth frame still to come was gone: frames took a neighbouring image
+(no word said) or none (with a false "nearest colour image 100 ms away")."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from kinfu_cli.io.frames import COLOR_LOOKAHEAD_NS, FrameStats, _FramePairer, iter_frames
+from kinfu_cli.io.recording import open_recording
+from kinfu_cli.io.writers import RecordingWriter
+
+T0 = 1_700_000_000 * 10**9
+PERIOD = 33_333_333  # colour at 30 Hz
+W, H = 8, 6
+K = np.array([[10.0, 0, 3.5], [0, 10.0, 2.5], [0, 0, 1]])
+
+
+def _colour(k: int) -> np.ndarray:
+    return np.full((H, W, 3), [k % 256, 200, 7], np.uint8)
+
+
+def _recording(path, latency_ns: int, n_colour: int = 30, depth_every: int = 3, depth_until: int | None = None,
+               depth_ks=None):
+    """Colour k stamped and logged at T0 + k * PERIOD; a depth image at every `depth_every`-th colour stamp (up to
+    colour `depth_until`; or at colours `depth_ks`), logged `latency_ns` later, with its camera info."""
+    depth_until = n_colour if depth_until is None else depth_until
+    depth_ks = range(0, depth_until, depth_every) if depth_ks is None else depth_ks
+    events = [(T0 + k * PERIOD, "colour", k) for k in range(n_colour)]
+    events += [(T0 + k * PERIOD + latency_ns, "depth", k) for k in depth_ks]
+    with RecordingWriter(path) as w:
+        for log_ns, kind, k in sorted(events):
+            stamp = T0 + k * PERIOD
+            if kind == "colour":
+                w.write_image("/camera/color/image_raw", stamp, "cam", _colour(k), "rgb8")
+                continue
+            depth = np.full((H, W), 1000 + k, np.uint16)
+            msg = w._type("sensor_msgs/msg/Image")(
+                header=w._header("/camera/depth/image_raw", stamp, "cam"), height=H, width=W, encoding="16UC1",
+                is_bigendian=0, step=W * 2, data=np.frombuffer(depth.tobytes(), np.uint8))
+            w._write("/camera/depth/image_raw", "sensor_msgs/msg/Image", log_ns, msg)
+            write = w._write  # the camera info logged with its depth image
+            w._write = lambda topic, msgtype, _, m, trailer=b"": write(topic, msgtype, log_ns, m, trailer)
+            w.write_camera_info("/camera/depth/camera_info", stamp, "cam", K, W, H)
+            w._write = write
+    return path
+
+
+def _frames(path, **kw):
+    stats = FrameStats()
+    with open_recording(path) as rec:
+        frames = list(iter_frames(rec, pose_source="none", stats=stats, **kw))
+    return frames, stats
+
+
+def _colour_index(frame) -> int:
+    """Which colour image a frame carries (its depth says which one it should)."""
+    return int(frame.color[0, 0, 0])
+
+
+@pytest.mark.parametrize("latency_ms", [0, 80, 150, 400])
+def test_depth_logged_late_is_paired_with_the_colour_of_its_stamp(tmp_path, latency_ms):
+    frames, stats = _frames(_recording(tmp_path / "r.mcap", latency_ms * 1_000_000))
+    assert len(frames) == 10 and stats.without_color == 0
+    for f in frames:
+        assert f.color is not None and _colour_index(f) == round(float(f.depth[0, 0]) * 1000) - 1000
+    assert stats.color_cut_short == 0 and stats.warnings("r.mcap") == []
+
+
+def test_depth_logged_late_in_a_time_window_finds_colour_logged_before_it(tmp_path):
+    # depth logged 150 ms late: the first frame of a window starting at 0.5 s has its colour logged at ~0.35 s,
+    # before the window and its tolerance margin
+    frames, stats = _frames(_recording(tmp_path / "w.mcap", 150_000_000), start_s=0.5, end_s=0.8)
+    assert [round(float(f.depth[0, 0]) * 1000) - 1000 for f in frames] == [12, 15, 18]
+    assert [_colour_index(f) for f in frames] == [12, 15, 18] and stats.without_color == 0
+    assert frames[0].index == 0  # counted from the window's start minus the tolerance, as before
+
+
+def test_depth_logged_later_than_the_look_ahead_is_said(tmp_path):
+    # depth logged 1.5 s after its stamp while colour goes on: the colour of its stamp was no longer kept
+    latency = COLOR_LOOKAHEAD_NS + 500_000_000
+    frames, stats = _frames(_recording(tmp_path / "l.mcap", latency, n_colour=90, depth_until=30))
+    assert len(frames) == 10 and stats.color_cut_short == 10
+    assert all(f.color is None or _colour_index(f) != round(float(f.depth[0, 0]) * 1000) - 1000 for f in frames)
+    said = [w for w in stats.warnings("l.mcap") if "no longer kept" in w]
+    assert len(said) == 1 and said[0].startswith("l.mcap: 10 depth frames were logged more than 1 s after")
+    assert stats.as_dict()["color_cut_short"] == 10
+
+
+def test_a_pause_of_the_depth_stream_is_no_cut_short_pairing(tmp_path):
+    # depth (logged 100 ms late) pauses 2 s while colour goes on: colour of the pause is dropped, none is missed
+    ks = [0, 3, 6, 9, 75, 78, 81]
+    frames, stats = _frames(_recording(tmp_path / "p.mcap", 100_000_000, n_colour=90, depth_ks=ks))
+    assert [_colour_index(f) for f in frames] == ks and stats.without_color == 0
+    assert stats.color_cut_short == 0 and stats.warnings("p.mcap") == []
+
+
+def test_colour_kept_for_depth_to_come_is_bounded(tmp_path, monkeypatch):
+    # a depth stream that stops while colour goes on: colour is not hoarded beyond the look-ahead
+    path = _recording(tmp_path / "s.mcap", 0, n_colour=150, depth_until=3)
+    held = []
+    forget = _FramePairer._forget_colors
+
+    def counted(self, log_ns):
+        forget(self, log_ns)
+        held.append(len(self.colors))
+
+    monkeypatch.setattr(_FramePairer, "_forget_colors", counted)
+    frames, _ = _frames(path)
+    assert len(frames) == 1 and _colour_index(frames[0]) == 0
+    assert len(held) == 150 and max(held) <= COLOR_LOOKAHEAD_NS // PERIOD + 2
