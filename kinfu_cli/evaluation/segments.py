@@ -33,18 +33,22 @@ from scipy.sparse.csgraph import maximum_bipartite_matching
 from scipy.spatial import cKDTree
 
 from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.core.point_pairs import bounded_pairs, check_pair_count
 from kinfu_cli.fusion.volume import TernaryVolume
 from kinfu_cli.segmentation.pipeline import SegmentOptions, analyse_volume
 from kinfu_cli.sim.scenario import make_scenario
 from kinfu_cli.sim.scene import Scene
 
 
+T_EVAL_HINT = "expected the boundary tolerance T_eval of a few centimetres (default 0.02 m)"
+
+
 def boundary_set(points: np.ndarray, labels: np.ndarray, t_eval: float = 0.02) -> np.ndarray:
-    """Indices of the boundary B (eq. 4.16) of a labelling."""
+    """Indices of the boundary B (eq. 4.16) of a labelling. Its pair search is bounded (core.point_pairs): a
+    t_eval spanning the cloud is a ConfigError naming t_eval, not a search that runs out of memory."""
     pts = np.asarray(points, dtype=np.float64)
     lab = np.asarray(labels)
-    tree = cKDTree(pts)
-    pairs = tree.query_pairs(r=t_eval, output_type="ndarray")
+    pairs = bounded_pairs(pts, t_eval, what="points scored", parameter="t_eval", hint=T_EVAL_HINT)
     if len(pairs) == 0:
         return np.zeros(0, dtype=np.int64)
     diff = lab[pairs[:, 0]] != lab[pairs[:, 1]]
@@ -74,6 +78,8 @@ def match_boundaries(points: np.ndarray, b_pred: np.ndarray, b_gt: np.ndarray, t
         return 0
     A = cKDTree(points[b_pred])
     B = cKDTree(points[b_gt])
+    check_pair_count(B, t_eval, queries=points[b_pred], what="ground-truth boundary points", parameter="t_eval",
+                     hint=T_EVAL_HINT)  # the (predicted, true) boundary pairs the matrix holds
     sdm = A.sparse_distance_matrix(B, t_eval, output_type="ndarray")
     if len(sdm) == 0:
         return 0

@@ -32,7 +32,7 @@ from kinfu_cli.grasp.constraints import Cone, GraspConstraints, Workspace, check
     default_workspaces
 from kinfu_cli.grasp.hand import HANDS, HandModel
 from kinfu_cli.grasp.solve import PartGrasp, grasp_part
-from kinfu_cli.segmentation.superquadric import Superquadric
+from kinfu_cli.segmentation.superquadric import OVERSIZE_FACTOR, Superquadric, oversize
 
 
 # what a segments.json superquadric may hold (sizes and centre in m)
@@ -212,7 +212,8 @@ def _check_unique_ids(doc: dict, source: str) -> None:
 
 def _box_problem(box, parts: list[Superquadric]) -> str | None:
     """Why the superquadric parts cannot be fits of the segment's points (its 'oriented_box'): a part whose centre
-    lies outside the box grown on every side by the part's largest semi-axis; None when they fit or the segment
+    lies outside the box grown on every side by the part's largest semi-axis, or a single superquadric whose
+    largest side exceeds OVERSIZE_FACTOR x the box's (segment's 'oversized'); None when they fit or the segment
     has no (readable) box."""
     try:
         center = np.asarray(box["center"], dtype=np.float64)
@@ -232,6 +233,10 @@ def _box_problem(box, parts: list[Superquadric]) -> str | None:
             return (f"its {name}'s centre {np.round(q.center, 3).tolist()} m lies {outside:.3g} m outside the box of "
                     f"its points (centre {np.round(center, 3).tolist()} m, sides {np.round(extents, 3).tolist()} m) "
                     f"grown by its size {float(np.max(q.size)):.3g} m: not a fit of its points")
+    if len(parts) == 1 and (ratio := oversize(parts[0].size, extents)) > OVERSIZE_FACTOR:
+        return (f"its superquadric's largest side {2 * float(np.max(parts[0].size)):.3g} m is {ratio:.1f}x the largest "
+                f"side of the box of its points ({float(np.max(extents)):.3g} m; at most {OVERSIZE_FACTOR:g}x): "
+                f"oversized, not a fit of its points")
     return None
 
 
@@ -260,6 +265,53 @@ def doubtful_segments(doc: dict, parts: dict[int, list[Superquadric]]) -> dict[i
     boxes = {s.get("id"): s.get("oriented_box") for s in doc["segments"] if s.get("kind") == "object"}
     return {sid: why for sid, ps in parts.items()
             if isinstance(boxes.get(sid), dict) and (why := _box_problem(boxes[sid], ps))}
+
+
+def nothing_to_grasp(doc: dict) -> str:
+    """Why segments.json offers no superquadric: no object segment at all (a bare table: segment's warning says
+    why), superquadrics turned off, or every fit failed (the first segment's reason)."""
+    objects = [s for s in doc["segments"] if isinstance(s, dict) and s.get("kind") == "object"]
+    if not objects:
+        said = [w for w in doc.get("warnings") or [] if isinstance(w, str) and w.startswith("no objects")]
+        return ("no object segment to grasp: kinfu segment found none"
+                + (f" ({said[0].split('; ', 1)[-1]})" if said else ""))
+    options = doc.get("options") if isinstance(doc.get("options"), dict) else {}
+    failed = next(((s.get("id"), s["superquadric_error"]) for s in objects if s.get("superquadric_error")), None)
+    if options.get("superquadrics") is False:
+        why = "segmented without them: run kinfu segment with superquadrics"
+    elif failed:
+        why = f"segment {failed[0]}: {failed[1]}"
+    else:
+        why = "run kinfu segment with superquadrics"
+    return f"no object segment has a superquadric to grasp (of {len(objects)}; {why})"
+
+
+def shape_doubts(doc: dict, planned: list[int]) -> list[str]:
+    """What segments.json doubts about the shapes of the segments grasped (`planned`): a superquadric fit that
+    did not converge (its 'converged' false; a multi-superquadric's parts are fits of their own), and segments
+    the grid cuts off ('touches_grid_faces'): their grasps are planned all the same, and said."""
+    entries = {s.get("id"): s for s in doc["segments"] if isinstance(s, dict) and s.get("kind") == "object"}
+    unfinished, cut = [], []
+    for sid in planned:
+        s = entries.get(sid) or {}
+        sq = s.get("superquadric")
+        if not (s.get("multi_superquadric") or {}).get("parts") and isinstance(sq, dict) and sq.get("converged") is False:
+            residual = sq.get("residual")
+            unfinished.append(f"{sid}" + (f" (residual {residual * 1000:.0f} mm)"
+                                          if isinstance(residual, (int, float)) and np.isfinite(residual) else ""))
+        faces = s.get("touches_grid_faces")
+        if isinstance(faces, list) and faces:
+            cut.append(f"{sid} ({', '.join(str(f) for f in faces)})")
+    out = []
+    if unfinished:
+        out.append(f"segment{'s' if len(unfinished) > 1 else ''} {', '.join(unfinished)}: the superquadric fit did "
+                   f"not converge: {'their grasps rest' if len(unfinished) > 1 else 'its grasp rests'} on an "
+                   f"unfinished shape")
+    if cut:
+        out.append(f"segment{'s' if len(cut) > 1 else ''} {', '.join(cut)} touch{'' if len(cut) > 1 else 'es'} the "
+                   f"grid's faces: the grid cuts {'them' if len(cut) > 1 else 'it'} off, so "
+                   f"{'their grasps are' if len(cut) > 1 else 'its grasp is'} planned on the part inside the grid only")
+    return out
 
 
 def support_plane(doc: dict, source: str) -> np.ndarray | None:
@@ -320,8 +372,7 @@ def plan_grasps(segments: str | os.PathLike | dict, options: GraspOptions | None
                               f"{sorted(parts)})", parameter="segment_ids")
         parts = {s: parts[s] for s in options.segment_ids}
     if not parts:
-        raise GraspError(f"{source}: no object segment has a superquadric to grasp (run kinfu segment with "
-                         f"superquadrics)")
+        raise GraspError(f"{source}: {nothing_to_grasp(doc)}")
     # a grasp of a superquadric away from its object looks right and grasps air; it would also move the workspaces
     skipped = doubtful_segments(doc, parts)
     if skipped and len(skipped) == len(parts):
@@ -330,6 +381,7 @@ def plan_grasps(segments: str | os.PathLike | dict, options: GraspOptions | None
                          f"{why}); run kinfu segment again")
     warnings = [f"segment {sid}: {why}: skipped (listed in skipped_segments)" for sid, why in skipped.items()]
     parts = {sid: ps for sid, ps in parts.items() if sid not in skipped}
+    warnings += shape_doubts(doc, list(parts))
     if plane is None:
         warnings.append("segments.json has no support plane: grasps are not kept above any table")
     up = plane[:3] if plane is not None else np.array([0.0, 0.0, 1.0])

@@ -13,23 +13,28 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError, VolumeError
 from kinfu_cli.core.grid import TernaryGrid, check_up, read_ternary
+from kinfu_cli.core.point_pairs import check_pair_count
+from kinfu_cli.fusion.extent import CUT_LINE_M, CUT_MIN_VOXELS, FACES
 from kinfu_cli.fusion.volume import TernaryVolume, load_volume
 from kinfu_cli.segmentation.multi_superquadric import MultiSuperquadric, fit_multi_superquadric
-from kinfu_cli.segmentation.saliency import SegmentSaliency, oriented_box, segment_saliency
+from kinfu_cli.segmentation.saliency import ISOLATION_HINT, SegmentSaliency, oriented_box, segment_saliency
 from kinfu_cli.segmentation.shape_prior import classify_shape, exponent_bounds
 from kinfu_cli.segmentation.bridges import volume_space
 from kinfu_cli.segmentation.segments import MAX_DISTANCE_M, PLANE_LABEL, Segmentation, SegmentationParams, segment_cloud
-from kinfu_cli.segmentation.superquadric import SegmentError, SuperquadricFit, fit_superquadric
+from kinfu_cli.segmentation.superquadric import OVERSIZE_FACTOR, SegmentError, SuperquadricFit, fit_superquadric, \
+    oversize
 from kinfu_cli.segmentation.surface import SurfaceCloud, surface_from_volume
 
 # in a room (segments: structure) label 0 is floor and walls: the support entry's box and centroid are taken over
 # its points this close to the support plane (m; a far floor's band reaches 6 cm), the rest counted as structure
 ROOM_SUPPORT_SLAB = 0.1
 SUPPORT_VS_UP_DEG = 45.0  # without an up, a support plane this far from the volume's own up is said to be doubtful
+FLOOR_FACE_DEG = 45.0  # the grid face whose outward normal lies this close to "down" is the support's: not a cut
 
 
 @dataclass
@@ -102,6 +107,7 @@ class SegmentResult:
     up_source: str = ""  # where the support plane's expected normal came from (see `resolve_up`)
     warnings: list[str] = field(default_factory=list)  # an empty result's structural reason, with counts
     shape_classes: dict[int, ShapeClass] = field(default_factory=dict)  # with options.shape_prior
+    grid_faces: dict[int, list[str]] = field(default_factory=dict)  # segment id -> grid faces it touches (a cut)
 
     def to_json(self) -> dict:
         segs = []
@@ -114,7 +120,8 @@ class SegmentResult:
                 "centroid": s.centroid.tolist(), "oriented_box": s.box.to_json(),
                 "bounding_sphere": {"center": s.box.center.tolist(), "radius": s.bounding_radius},
                 "isolation": s.isolation, "roundness": s.roundness, "saliency": s.saliency,
-                "superquadric": sq.to_json() if isinstance(sq, SuperquadricFit) else None,
+                "superquadric": sq_json(sq, s) if isinstance(sq, SuperquadricFit) else None,
+                "touches_grid_faces": self.grid_faces.get(s.id, []),
                 **({"superquadric_error": sq} if isinstance(sq, str) else {}),
                 **(self.shape_classes[s.id].to_json() if s.id in self.shape_classes else {}),
                 **({"multi_superquadric": self.multi[s.id].to_json()} if s.id in self.multi else {}),
@@ -134,6 +141,70 @@ class SegmentResult:
                 "up_source": self.up_source, "warnings": list(self.warnings),
                 "points": int(len(seg.points)), "noise_points": int(np.sum(seg.labels < 0)),
                 "stats": seg.stats, "timing_s": self.timing, "options": asdict(self.options)}
+
+
+def sq_json(fit: SuperquadricFit, s: SegmentSaliency) -> dict:
+    """A segment's superquadric entry: the fit, and how its largest side compares with its points' box
+    (box_ratio; oversized above OVERSIZE_FACTOR: not a shape of its points)."""
+    ratio = oversize(fit.superquadric.size, s.box.extents)
+    return {**fit.to_json(), "box_ratio": ratio if np.isfinite(ratio) else None,
+            "oversized": bool(ratio > OVERSIZE_FACTOR)}
+
+
+def oversize_warnings(saliency: list[SegmentSaliency], fits: dict[int, SuperquadricFit | str]) -> list[str]:
+    """The segments whose superquadric's largest side exceeds OVERSIZE_FACTOR x their points' box's: a fit that
+    looks converged and describes a shape the points do not have (a 0.55 m disc on a 0.19 m plate)."""
+    said = []
+    for s in sorted(saliency, key=lambda s: s.id):
+        fit = fits.get(s.id)
+        if isinstance(fit, SuperquadricFit) and (r := oversize(fit.superquadric.size, s.box.extents)) > OVERSIZE_FACTOR:
+            said.append(f"{s.id} ({2 * float(np.max(fit.superquadric.size)):.2g} m on a "
+                        f"{float(np.max(s.box.extents)):.2g} m box, {r:.1f}x)")
+    if not said:
+        return []
+    return [f"segment{'s' if len(said) > 1 else ''} {', '.join(said)}: the superquadric's largest side exceeds "
+            f"{OVERSIZE_FACTOR:g}x the largest side of the points' box: not a shape of its points (flagged "
+            f"oversized; kinfu grasp skips such segments)"]
+
+
+def grid_face_contacts(seg: Segmentation, volume, resolution: float) -> dict[int, list[str]]:
+    """Object segment id -> the faces of the volume's grid (fusion.extent FACES) it touches: the grid cuts it
+    off there. Touching: as many of its points as a CUT_LINE_M line of surface holds (at least CUT_MIN_VOXELS,
+    as fuse counts face contacts) lie within a voxel of the face, plus half the cloud's thinning `resolution`
+    (the thinning averages points inwards). The face under the support plane (or the volume's up) is left out:
+    objects stand on it."""
+    v = float(volume.voxel_size)
+    lo = np.asarray(volume.origin, dtype=np.float64)
+    hi = lo + np.asarray(volume.shape, dtype=np.float64) * v
+    reach = v + resolution / 2
+    need = max(CUT_MIN_VOXELS, int(np.ceil(CUT_LINE_M / max(v, resolution))))
+    up = seg.plane[:3] if seg.plane is not None else getattr(volume, "up", None)
+    objects = seg.labels > 0
+    out: dict[int, list[str]] = {}
+    for k, face in enumerate(FACES):
+        axis, outward = k // 2, 1.0 if k % 2 else -1.0
+        if up is not None and -outward * float(up[axis]) / float(np.linalg.norm(up)) > np.cos(
+                np.radians(FLOOR_FACE_DEG)):
+            continue
+        gap = hi[axis] - seg.points[:, axis] if outward > 0 else seg.points[:, axis] - lo[axis]
+        ids, counts = np.unique(seg.labels[objects & (gap <= reach)], return_counts=True)
+        for sid in ids[counts >= need]:
+            out.setdefault(int(sid), []).append(face)
+    return out
+
+
+def grid_face_warnings(faces: dict[int, list[str]]) -> list[str]:
+    """The segments the grid cuts off: their box, superquadric and grasp describe only the part inside it."""
+    if not faces:
+        return []
+    if len(faces) == 1:
+        ((sid, f),) = faces.items()
+        who = f"segment {sid} touches the grid's {', '.join(f)} face{'s' if len(f) > 1 else ''}: the grid cuts it"
+    else:
+        who = ("segments " + ", ".join(f"{sid} ({', '.join(f)})" for sid, f in sorted(faces.items()))
+               + " touch the grid's faces: the grid cuts them")
+    return [f"{who} off, so box, superquadric and grasp describe only the part inside (flagged touches_grid_faces); "
+            f"fuse again with a grid holding the whole object (a larger size or another origin)"]
 
 
 PRIOR_RESIDUAL_SLACK = 0.25  # a class fit this much worse (RMS) than the free fit is contradicted by the points
@@ -285,19 +356,46 @@ def resolve_up(volume, options: SegmentOptions) -> tuple[SegmentOptions, str]:
     return replace(options, segmentation=replace(options.segmentation, up=up)), "volume"
 
 
-def support_plane_warnings(seg: Segmentation, up_source: str) -> list[str]:
-    """Why there is no support plane, with the counts of the search; or that the plane took every point (no
-    object: a flipped up, stored in the volume, did that silently); [] otherwise."""
+def no_object_cause(seg: Segmentation, params: SegmentationParams, facing: str) -> str:
+    """Why a support plane left no object, from where the points lie along its normal: many below it (a
+    flipped up: objects standing on the table lie under a plane facing down), some above it yet no segment
+    (too few or too thin: absorbed or dropped), or none rising past the support's band (nothing stands on it,
+    or nothing higher than 2 x plane_distance). In a room the support's segment holds the walls too: only dropped
+    points count as rising above it. facing: ' facing up [..] (whose)' or ''."""
+    height = seg.points @ seg.plane[:3] + seg.plane[3]
+    band = 2 * params.plane_distance  # segments never rising above this belong to the support (segments.py)
+    room = bool((seg.stats.get("structure") or {}).get("room"))
+    below, above = height < -band, (height > band) & ((seg.labels < 0) | (not room))
+    if facing and int(below.sum()) >= params.min_segment_points:
+        return (f"{int(below.sum())} points lie up to {float(-height.min()):.2g} m below the plane{facing}: if "
+                f"they stand on it, that up direction is wrong (flipped?): give the up")
+    if above.any():
+        return (f"{int(above.sum())} points rise up to {float(height[above].max()):.2g} m above the plane{facing} but "
+                f"form no segment of min_segment_points {params.min_segment_points}: an object that small or thin "
+                f"is taken into the support or dropped")
+    return (f"no point rises more than {band:g} m (2 x plane_distance) above the plane{facing}: nothing stands "
+            f"on it, or nothing higher than that")
+
+
+def support_plane_warnings(seg: Segmentation, up_source: str, params: SegmentationParams | None = None
+                           ) -> list[str]:
+    """Why there is no support plane, with the counts of the search; or that the plane took every point and
+    why (`no_object_cause`: a flipped up, stored in the volume, did that silently, and so do a bare table and
+    objects too small to segment); [] otherwise. params: the segmentation's (its defaults when None)."""
     if len(seg.points) == 0:
         return []
+    params = params or SegmentationParams()
     if seg.plane is not None:
         if np.any(seg.labels > 0):
             return []
         up = seg.stats.get("support_plane_search", {}).get("up")
-        whose = {"assumed-z": "assumed", "volume": "the volume's"}.get(up_source, up_source or "given")
-        return [f"no objects: the support plane's segment holds all {int(np.sum(seg.labels == 0))} surface points"
-                + ("" if up is None else f"; if nothing stands on a surface facing up {[round(v, 3) for v in up]} "
-                                         f"({whose}), that up direction is wrong (flipped?): give the up")]
+        whose = {"assumed-z": "assumed", "volume": "the volume's", "option": "given"}.get(up_source,
+                                                                                          up_source or "given")
+        facing = "" if up is None else f" facing up {[round(v, 3) for v in up]} ({whose})"
+        held, dropped = int(np.sum(seg.labels == PLANE_LABEL)), int(np.sum(seg.labels < 0))
+        share = f"all {held}" if not dropped else f"{held} of {len(seg.labels)}"
+        return [f"no objects: the support plane's segment holds {share} surface points"
+                + (f" ({dropped} dropped as specks)" if dropped else "") + f"; {no_object_cause(seg, params, facing)}"]
     s = seg.stats.get("support_plane_search", {})
     up = s.get("up")
     params_up = "any direction" if up is None else (
@@ -337,10 +435,16 @@ def analyse_cloud(points: np.ndarray, normals: np.ndarray, options: SegmentOptio
     up_source = up_source or ("none" if up is None else "assumed-z" if isinstance(up, str) else "option")
     timing = dict(timing or {})
     t = time.perf_counter()
+    # saliency's pair search within isolation_threshold runs last: a radius spanning the cloud is refused now,
+    # not after the segmentation's seconds (the same estimate, on the same points and tree)
+    tree = cKDTree(np.asarray(points, dtype=np.float64))
+    check_pair_count(tree, options.isolation_threshold, what="surface points", parameter="isolation_threshold",
+                     hint=ISOLATION_HINT)
     seg = segment_cloud(points, normals, options.segmentation, colors if options.color else None, space)
     timing["segmentation"] = time.perf_counter() - t
     t = time.perf_counter()
-    sal = segment_saliency(seg.points, seg.labels, b_th=options.isolation_threshold, exclude=(-1, PLANE_LABEL))
+    sal = segment_saliency(seg.points, seg.labels, b_th=options.isolation_threshold, exclude=(-1, PLANE_LABEL),
+                           tree=tree)
     timing["saliency"] = time.perf_counter() - t
     t = time.perf_counter()
     fits, classes = _fit_superquadrics(seg, sal, options) if options.superquadrics else ({}, {})
@@ -351,7 +455,8 @@ def analyse_cloud(points: np.ndarray, normals: np.ndarray, options: SegmentOptio
         multi = _fit_multi_superquadrics(seg, fits, options)
         timing["multi_superquadrics"] = time.perf_counter() - t
     return SegmentResult(SurfaceCloud(seg.points, seg.normals, seg.colors), seg, sal, fits, timing, options, multi,
-                         up_source, support_plane_warnings(seg, up_source) + color_warnings(seg, options), classes)
+                         up_source, support_plane_warnings(seg, up_source, options.segmentation)
+                         + color_warnings(seg, options) + oversize_warnings(sal, fits), classes)
 
 
 def analyse_volume(volume: TernaryVolume | TernaryGrid, options: SegmentOptions | None = None) -> SegmentResult:
@@ -368,6 +473,8 @@ def analyse_volume(volume: TernaryVolume | TernaryGrid, options: SegmentOptions 
     result = analyse_cloud(cloud.points, cloud.normals, options, {"surface": t_surface}, up_source, cloud.colors,
                            space)
     result.segmentation.stats["scaled_for_voxel"] = {"voxel_size": float(volume.voxel_size), **scaled}
+    result.grid_faces = grid_face_contacts(result.segmentation, volume, options.resolution)
+    result.warnings += grid_face_warnings(result.grid_faces)
     result.warnings += support_against_volume_up(result.segmentation, up_source, getattr(volume, "up", None),
                                                  getattr(volume, "up_source", ""))
     result.warnings += given_up_against_volume_up(options.segmentation.up, up_source, getattr(volume, "up", None),

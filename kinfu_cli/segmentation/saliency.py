@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.point_pairs import bounded_pairs
@@ -42,15 +43,20 @@ def oriented_box(points: np.ndarray) -> OrientedBox:
     return OrientedBox(mu + vecs @ ((lo + hi) / 2), vecs, hi - lo)
 
 
-def isolation(points: np.ndarray, labels: np.ndarray, b_th: float = 0.02) -> dict[int, float]:
-    """F(S) per label (eq. 3.11). Points labelled -1 count as "other" points for every segment."""
+ISOLATION_HINT = "expected B_th about the gap that sets objects apart (default 0.02 m)"  # its pair bound's error
+
+
+def isolation(points: np.ndarray, labels: np.ndarray, b_th: float = 0.02, tree: cKDTree | None = None
+              ) -> dict[int, float]:
+    """F(S) per label (eq. 3.11). Points labelled -1 count as "other" points for every segment. tree: a k-d
+    tree already built on `points` (the pipeline's, which checked b_th on it before segmenting)."""
     if not b_th > 0:
         raise ConfigError(f"must be > 0 m, got {b_th}", parameter="b_th")
     pts = np.asarray(points, dtype=np.float64)
     lab = np.asarray(labels)
     # B_th is SegmentOptions.isolation_threshold, the name its callers set
-    pairs = bounded_pairs(pts, b_th, what="surface points", parameter="isolation_threshold",
-                          hint="expected B_th about the gap that sets objects apart (default 0.02 m)")
+    pairs = bounded_pairs(pts if tree is None else tree, b_th, what="surface points", parameter="isolation_threshold",
+                          hint=ISOLATION_HINT)
     touching = np.zeros(len(pts), dtype=bool)
     if len(pairs):
         cross = lab[pairs[:, 0]] != lab[pairs[:, 1]]
@@ -78,11 +84,11 @@ class SegmentSaliency:
 
 
 def segment_saliency(points: np.ndarray, labels: np.ndarray, *, b_th: float = 0.02,
-                     exclude: tuple[int, ...] = (-1,)) -> list[SegmentSaliency]:
-    """Saliency of every segment (labels not in `exclude`), sorted by decreasing saliency."""
+                     exclude: tuple[int, ...] = (-1,), tree: cKDTree | None = None) -> list[SegmentSaliency]:
+    """Saliency of every segment (labels not in `exclude`), sorted by decreasing saliency; tree: as `isolation`."""
     pts = np.asarray(points, dtype=np.float64)
     lab = np.asarray(labels)
-    iso = isolation(pts, lab, b_th)
+    iso = isolation(pts, lab, b_th, tree)
     out = []
     for s, f in iso.items():
         if s in exclude:

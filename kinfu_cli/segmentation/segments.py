@@ -334,6 +334,8 @@ def detect_support_plane(points: np.ndarray, normals: np.ndarray, params: Segmen
         model, inl_idx = ransac_plane(points[remaining], float(params.plane_distance), int(params.plane_iterations),
                                       rng)
         plane = np.asarray(model, dtype=np.float64)
+        if not np.linalg.norm(plane[:3]) > 0:
+            break  # the points left are collinear (a 1-voxel rod): no plane passes through them, nor will
         plane /= np.linalg.norm(plane[:3])
         if up is not None:
             if plane[:3] @ up < 0:
