@@ -485,6 +485,17 @@ def check_window(start_s: float | None, end_s: float | None) -> tuple[float | No
     return start_s, end_s
 
 
+@dataclass(frozen=True)
+class _Camera:
+    """A depth camera as one camera info gives it: intrinsics, image size, roi / binning note, lens."""
+
+    K: np.ndarray
+    width: int
+    height: int
+    reduction: str
+    lens: Undistorter
+
+
 class _FramePairer:
     """Streams the depth, colour and camera-info topics once, in log order, pairing each depth image with the
     nearest colour image within the tolerance and its camera pose. Only the messages still waiting for a
@@ -512,7 +523,7 @@ class _FramePairer:
         self.tol_ns = tol_ns
         self.stats = stats
         self.require_color = require_color
-        self.pending: deque[tuple[int, int, object]] = deque()  # (index, stamp, depth msg)
+        self.pending: deque[tuple[int, int, object, _Camera]] = deque()  # (index, stamp, depth msg, its camera)
         self.colors: deque[tuple[int, int, object]] = deque()  # (stamp, log ns, colour msg), decoded when paired
         self.depth_stamp: int | None = None  # of the latest depth message read: later ones should not be earlier
         # stamps of the colour images dropped by the look-ahead, as [first, last] runs without a gap over twice the
@@ -565,7 +576,7 @@ class _FramePairer:
             if (kept - 1) % every:
                 stats.skipped += 1
                 continue
-            pending.append((index - 1, stamp, msg))
+            pending.append((index - 1, stamp, msg, self._camera()))  # the camera info of its time, not its emission's
             if self.color_topic is None:
                 yield from self._flush(None)
             elif len(pending) > 64:  # colour stream stalled: do not hold depth frames forever
@@ -574,9 +585,14 @@ class _FramePairer:
                     yield frame
         yield from self._flush(None)
 
-    def _emit(self, index: int, stamp: int, msg: object) -> RGBDFrame | None:
-        """The frame of one depth message, or None (counted in stats) when it has no pose, no valid pixel, or
-        no colour while colour is required."""
+    def _camera(self) -> _Camera:
+        """The depth camera as the latest camera info read says."""
+        return _Camera(self.K, self.width, self.height, self.reduction, self.lens)
+
+    def _emit(self, index: int, stamp: int, msg: object, cam: _Camera) -> RGBDFrame | None:
+        """The frame of one depth message seen by `cam` (the camera info when it was read: a frame waits for its
+        colour partner, and a later camera info may come meanwhile), or None (counted in stats) when it has no
+        pose, no valid pixel, or no colour while colour is required."""
         cloud_color = None
         if self.cloud:
             depth, cloud_color = decode_cloud(msg, f"{self.rec.path}: depth topic {self.depth_topic}")
@@ -592,10 +608,10 @@ class _FramePairer:
             self.stats.pixels_over_16bit_mm += over
             self.stats.frames_over_16bit_mm += 1
         h, w = depth.shape
-        K = self.K
-        if self.width and self.height and (w, h) != (self.width, self.height):
-            K = self._scaled_K(w, h)
-        depth = self.lens.image(depth)
+        K = cam.K
+        if cam.width and cam.height and (w, h) != (cam.width, cam.height):
+            K = self._scaled_K(w, h, cam)
+        depth = cam.lens.image(depth)
         T = None
         if self.pose_fn is not None:
             T = self.pose_fn(stamp)
@@ -626,7 +642,7 @@ class _FramePairer:
                         self._lose_color(color.shape[1::-1], index)
                         color = color_mask = None
                 else:  # the depth camera's own pixels: its lens too
-                    color = self.lens.image(color, size_of_K=(self.width, self.height))
+                    color = cam.lens.image(color, size_of_K=(cam.width, cam.height))
         if color is None:
             if self.require_color:
                 self.stats.drop(DROP_NO_COLOR)
@@ -648,18 +664,18 @@ class _FramePairer:
         self.registration = replace(self.registration, mode="none", reason=reason)
         self.stats.color_registration = self.registration.as_dict()
 
-    def _scaled_K(self, w: int, h: int) -> np.ndarray:
+    def _scaled_K(self, w: int, h: int, cam: _Camera) -> np.ndarray:
         """K for depth images of w x h whose camera info is for another size with the same aspect ratio (a
         decimation filter, image_proc's resize), said once in stats.notes; RecordingError otherwise, and when the
         camera info's roi / binning say which part of the sensor the images are."""
-        sx, sy = w / self.width, h / self.height
+        sx, sy = w / cam.width, h / cam.height
         said = f"camera info {self.info_topic}" if self.info_topic else "the first depth image"
-        if abs(sx - sy) > 0.01 * max(sx, sy) or not self.info_topic or self.lens or self.reduction:
-            reduced = f" ({self.reduction})" if self.reduction else ""
+        if abs(sx - sy) > 0.01 * max(sx, sy) or not self.info_topic or cam.lens or cam.reduction:
+            reduced = f" ({cam.reduction})" if cam.reduction else ""
             raise RecordingError(f"{self.rec.path}: depth image on {self.depth_topic} is {w}x{h} but {said} "
-                                 f"says {self.width}x{self.height}{reduced}")
-        K = scaled_intrinsics(self.K, (sx, sy))
-        note = (f"depth images on {self.depth_topic} are {w}x{h} but {said} says {self.width}x{self.height}: "
+                                 f"says {cam.width}x{cam.height}{reduced}")
+        K = scaled_intrinsics(cam.K, (sx, sy))
+        note = (f"depth images on {self.depth_topic} are {w}x{h} but {said} says {cam.width}x{cam.height}: "
                 f"its intrinsics were scaled by {sx:.4g}")
         if note not in self.stats.notes:
             self.stats.notes.append(note)
@@ -693,8 +709,8 @@ class _FramePairer:
         """Emit pending depth frames whose colour partner can no longer arrive (all when up_to is None)."""
         pending = self.pending
         while pending and (up_to is None or pending[0][1] + self.tol_ns < up_to):
-            index, stamp, msg = pending.popleft()
-            frame = self._emit(index, stamp, msg)
+            index, stamp, msg, cam = pending.popleft()
+            frame = self._emit(index, stamp, msg, cam)
             if frame is not None:
                 yield frame
             self._prune(pending[0][1] if pending else stamp)

@@ -113,3 +113,29 @@ def test_colour_kept_for_depth_to_come_is_bounded(tmp_path, monkeypatch):
     frames, _ = _frames(path)
     assert len(frames) == 1 and _colour_index(frames[0]) == 0
     assert len(held) == 150 and max(held) <= COLOR_LOOKAHEAD_NS // PERIOD + 2
+
+
+def test_a_frame_waiting_for_its_colour_keeps_the_camera_info_of_its_time(tmp_path):
+    """A depth frame waits for the colour image after it before it is emitted; the camera info logged in between
+    (the next frame's, the camera re-calibrated) was taken for it: frame 2 got frame 3's focal length."""
+    from recordings import K, W, H, color, depth_mm
+
+    from kinfu_cli.io.writers import RecordingWriter
+
+    path = tmp_path / "recal.mcap"
+    t0 = 1_600_000_000 * 10**9
+    with RecordingWriter(path) as w:
+        for i in range(6):
+            t = t0 + i * 100_000_000  # 10 Hz: a frame's colour partner beyond the tolerance comes after the next info
+            Ki = K.copy()
+            Ki[0, 0] = Ki[1, 1] = 30.0 if i < 3 else 36.0
+            w.write_camera_info("/camera/depth/camera_info", t, "cam", Ki, W, H)
+            w.write_image("/camera/depth/image_raw", t, "cam", depth_mm(i), "16UC1")
+            w.write_image("/camera/color/image_raw", t, "cam", color(i), "rgb8")
+    from kinfu_cli.io.frames import iter_frames
+    from kinfu_cli.io.recording import open_recording
+
+    with open_recording(path) as rec:
+        frames = list(iter_frames(rec, pose_source="none"))
+    assert [f.K[0, 0] for f in frames] == [30.0, 30.0, 30.0, 36.0, 36.0, 36.0]
+    assert all(f.color is not None and f.color[0, 0, 0] == f.index for f in frames)
