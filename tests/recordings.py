@@ -79,3 +79,14 @@ def make_recording(path, n=12, fps=30.0, color_offset_ns=4_000_000, tf_from=0.0,
 
 def expected_pose(stamp_ns: int) -> np.ndarray:
     return T_WORLD_BASE @ T_base_wrist((stamp_ns - T0) / S) @ T_WRIST_CAM
+
+
+def read_frames(path, **kw) -> tuple[list, "FrameStats"]:
+    """iter_frames of a recording without camera poses (its keywords passed on): the frames and their FrameStats."""
+    from kinfu_cli.io.frames import FrameStats, iter_frames
+    from kinfu_cli.io.recording import open_recording
+
+    stats = FrameStats()
+    with open_recording(path) as rec:
+        frames = list(iter_frames(rec, pose_source="none", stats=stats, **kw))
+    return frames, stats

@@ -17,6 +17,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from kinfu_cli.core.camera import field_of_view_problem
 from kinfu_cli.core.errors import RecordingError
 from kinfu_cli.io.messages import camera_info_distortion, camera_info_K
 from kinfu_cli.io.recording import open_recording
@@ -98,27 +99,29 @@ def image_camera(msg: object, where: str, image_topic: str | None = None,
     image_geometry's PinholeCameraModel does: K (P for a rectified topic, is_rectified_topic, with no distortion)
     moved by the roi offset and divided by the binning; width x height the roi's size over the binning.
     distortion: reads (model, D) from the message. RecordingError naming `where` for a K that is not a pinhole
-    camera matrix (camera_matrix_problem)."""
-    K, width, height = camera_info_K(msg, where)
-    if (problem := camera_matrix_problem(K)) is not None:
-        raise RecordingError(f"{where}: CameraInfo {problem}")
-    model, D = distortion(msg, where)
-    notes = []
-    if is_rectified_topic(image_topic):
-        p = _field(msg, "p")
-        P = np.asarray(list(p) if p is not None else [0.0] * 12, dtype=np.float64).reshape(-1)
-        P = P.reshape(3, 4)[:, :3] if P.size == 12 else np.zeros((3, 3))
-        if not (P[0, 0] > 0 and P[1, 1] > 0 and np.all(np.isfinite(P))):
-            raise RecordingError(f"{where}: CameraInfo P has no valid focal lengths (fx={P[0, 0]}, fy={P[1, 1]}), "
-                                 f"and {image_topic} is rectified (its name): its images are P's pinhole camera")
-        if (problem := camera_matrix_problem(P)) is not None:
-            raise RecordingError(f"{where}: CameraInfo P: {problem.replace('K is', 'P[:, :3] is', 1)}")
-        if model or not np.allclose(P, K, rtol=1e-9, atol=1e-9):
+    camera matrix (camera_matrix_problem). A rectified topic's images are P's alone: its K need not be valid."""
+    if not is_rectified_topic(image_topic):
+        K, width, height = camera_info_K(msg, where)
+        if (problem := camera_matrix_problem(K)) is not None:
+            raise RecordingError(f"{where}: CameraInfo {problem}")
+        model, D = distortion(msg, where)
+        notes = []
+    else:
+        P, width, height = _rectified_P(msg, where, image_topic)
+        try:  # K is not what its images are read with: a K of zeros (some drivers') is said, not refused
+            K, _, _ = camera_info_K(msg, where)
+            unused = "" if camera_matrix_problem(K) is None else ", not a pinhole camera matrix"
+        except RecordingError as exc:
+            K, unused = None, exc.detail.removeprefix(f"{where}: ")
+        model, D = distortion(msg, where)
+        notes = []
+        if K is None or unused or model or not np.allclose(P, K, rtol=1e-9, atol=1e-9):
+            with_k = (f"not with K ({unused})" if K is None else f"not with K (fx={K[0, 0]:.6g}, cx={K[0, 2]:.6g}"
+                      f"{unused})") + (f" and its {model} D" if model else "")
             notes.append(f"the images on {image_topic} are rectified (by the topic's name): read with their "
                          f"camera info's projection matrix P (fx={P[0, 0]:.6g}, fy={P[1, 1]:.6g}, cx={P[0, 2]:.6g}, "
-                         f"cy={P[1, 2]:.6g}) and no lens distortion, as image_geometry does, not with K "
-                         f"(fx={K[0, 0]:.6g}, cx={K[0, 2]:.6g}){' and its ' + model + ' D' if model else ''}")
-        K, model, D = P.copy(), "", np.zeros(0)
+                         f"cy={P[1, 2]:.6g}) and no lens distortion, as image_geometry does, {with_k}")
+        K, model, D = P, "", np.zeros(0)
     if (off := principal_point_note(K, width, height, image_topic)) is not None:
         notes.append(off)
     x, y, rw, rh, bx, by = _roi_binning(msg, width, height, where)
@@ -133,10 +136,32 @@ def image_camera(msg: object, where: str, image_topic: str | None = None,
     return ImageCamera(K, rw // bx if parts else width, rh // by if parts else height, model, D, reduction, notes)
 
 
+def _rectified_P(msg: object, where: str, image_topic: str) -> tuple[np.ndarray, int, int]:
+    """(P[:, :3], width, height) of a CameraInfo whose images are rectified; RecordingError naming `where` when P
+    is not a pinhole camera of positive focal lengths and a plausible field of view."""
+    p = _field(msg, "p")
+    P = np.asarray(list(p) if p is not None else [0.0] * 12, dtype=np.float64).reshape(-1)
+    P = P.reshape(3, 4)[:, :3].copy() if P.size == 12 else np.zeros((3, 3))
+    if not (P[0, 0] > 0 and P[1, 1] > 0 and np.all(np.isfinite(P))):
+        raise RecordingError(f"{where}: CameraInfo P has no valid focal lengths (fx={P[0, 0]}, fy={P[1, 1]}), "
+                             f"and {image_topic} is rectified (its name): its images are P's pinhole camera")
+    if (problem := camera_matrix_problem(P)) is not None:
+        raise RecordingError(f"{where}: CameraInfo P: {problem.replace('K is', 'P[:, :3] is', 1)}")
+    width, height = int(getattr(msg, "width", 0) or 0), int(getattr(msg, "height", 0) or 0)
+    if (problem := field_of_view_problem(P, width, height)) is not None:
+        raise RecordingError(f"{where}: CameraInfo P: {problem}")
+    return P, width, height
+
+
 def intrinsics_from_recording(path: str | os.PathLike) -> dict:
     """fx, fy, cx, cy, width, height from the first sensor_msgs/CameraInfo of a recording (MCAP, ROS 1
-    .bag or ROS 2 bag folder, read with the project's recording reader); the depth camera's if several.
-    roi and binning are applied (image_camera): the size and intrinsics are those of the published images."""
+    .bag or ROS 2 bag folder, read with the project's recording reader): the depth camera's camera info that
+    detect_roles finds, read as fuse reads it (image_camera: roi, binning, P for a rectified depth topic); the
+    only or first depth-named one when no depth topic has one. The size and intrinsics are those of the published
+    images."""
+    from kinfu_cli.io.pointcloud2 import POINTCLOUD2
+    from kinfu_cli.io.roles import detect_roles  # roles reads camera infos with image_camera
+
     path = Path(path)
     if not path.exists():
         raise RecordingError(f"{path}: no such recording")
@@ -145,9 +170,14 @@ def intrinsics_from_recording(path: str | os.PathLike) -> dict:
         if not topics:
             raise RecordingError(f"{path}: no sensor_msgs/CameraInfo topic; intrinsics missing "
                                  "(give fx, fy, cx, cy)")
-        topic = ([t for t in topics if "depth" in t] or topics)[0]
+        roles = detect_roles(rec, world_frame="")  # no world frame: only the camera's topics are wanted
+        topic, image_topic = roles.info_topic, roles.depth_topic
+        if topic is None:
+            topic, image_topic = ([t for t in topics if "depth" in t] or topics)[0], None
+        elif image_topic in rec.topics and POINTCLOUD2 in rec.topics[image_topic].msgtypes:
+            image_topic = None  # a cloud's camera info is read with K, as fuse reads it
         msg = rec.first_message(topic)
         if msg is None:
             raise RecordingError(f"{path}: topic {topic} has no messages; intrinsics missing")
-        K, w, h, *_ = image_camera(msg, f"{path}: {topic}")
+        K, w, h, *_ = image_camera(msg, f"{path}: {topic}", image_topic)
     return dict(fx=float(K[0, 0]), fy=float(K[1, 1]), cx=float(K[0, 2]), cy=float(K[1, 2]), width=w, height=h)

@@ -538,12 +538,19 @@ class _FramePairer:
         # colour logged up to the look-ahead earlier may be the partner of a depth message logged late
         color_start = None if start_ns is None else max(0, start_ns - tol_ns - COLOR_LOOKAHEAD_NS)
         read_end = None if end_ns is None else end_ns + tol_ns
+        # and colour logged up to the look-ahead later may be the partner of the last depth messages
+        color_end = None if end_ns is None else read_end + COLOR_LOOKAHEAD_NS
         topics = [self.depth_topic] + [t for t in (self.info_topic, self.color_topic) if t]
         index = 0  # position of the depth message on its topic among those read
         kept = 0  # depth messages inside the window so far
         last_stamp = None  # of the previous depth message inside the window
         for topic, log_ns, msg in self.rec.messages(topics, start_ns=color_start if self.color_topic else read_start,
-                                                    end_ns=read_end):
+                                                    end_ns=color_end if self.color_topic else read_end):
+            if read_end is not None and log_ns > read_end:  # read for the colour look-ahead only
+                if not pending:
+                    break  # no frame waits for colour
+                if topic != self.color_topic:
+                    continue  # depth and camera infos after the window are not the window's
             if topic == self.info_topic:
                 where = f"{self.rec.path}: {self.info_topic}"
                 cam = image_camera(msg, where, self.depth_topic)
@@ -625,9 +632,9 @@ class _FramePairer:
         if self.color_topic is None and cloud_color is not None:
             color = cloud_color  # registered: the same pixels
         elif self.color_topic is not None and self.registration_mode() != "none":
-            if any(first - self.tol_ns <= stamp <= last + self.tol_ns for first, last in self.dropped_colors):
-                self.stats.color_cut_short += 1  # a colour image within the tolerance was dropped
             best_stamp, _, best = min(self.colors, key=lambda c: abs(c[0] - stamp)) if self.colors else (None,) * 3
+            if self._lost_nearer_color(stamp, best_stamp):
+                self.stats.color_cut_short += 1
             if best_stamp is not None and abs(best_stamp - stamp) > self.tol_ns:
                 gap, seen = abs(best_stamp - stamp), self.stats.color_nearest_ns
                 self.stats.color_nearest_ns = gap if seen is None else min(seen, gap)
@@ -652,6 +659,13 @@ class _FramePairer:
         self.stats.used += 1
         return RGBDFrame(index=index, stamp_ns=stamp, depth=depth, color=color, K=K.copy(), T_world_camera=T,
                          color_mask=color_mask)
+
+    def _lost_nearer_color(self, stamp: int, best_stamp: int | None) -> bool:
+        """Whether a colour image dropped by the look-ahead was within the tolerance of `stamp` and nearer than
+        `best_stamp` (the nearest kept one, None for none): a farther neighbour lost costs the frame nothing. A run's
+        ends are dropped stamps; inside a run, where its images lie is not kept, so a nearer one is assumed."""
+        reach = self.tol_ns if best_stamp is None else min(self.tol_ns, abs(best_stamp - stamp) - 1)
+        return reach >= 0 and any(first - reach <= stamp <= last + reach for first, last in self.dropped_colors)
 
     def registration_mode(self) -> str:
         """How colour images map onto the depth: "same-frame", "project" or "none" (left out)."""

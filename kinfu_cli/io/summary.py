@@ -29,8 +29,8 @@ def recording_summary(path: str | os.PathLike, check_frames: dict | None = None,
     """Summary of a recording as a JSON-able dict.
 
     check_frames: iter_frames keyword arguments; when given, every frame is assembled and the summary gets
-    "frames": FrameStats (used, skipped, without colour, dropped by reason). role_overrides: detect_roles
-    arguments.
+    "frames": FrameStats (used, skipped, without colour, dropped by reason) and "warnings": what reading them
+    found doubtful (FrameStats.warnings, as fuse and export say it). role_overrides: detect_roles arguments.
     """
     with open_recording(path) as rec:
         return summarize(rec, check_frames=check_frames, quiet=quiet, **role_overrides)
@@ -49,7 +49,7 @@ def summarize(rec: Recording, check_frames: dict | None = None, quiet: bool = Tr
         problem = str(exc)
         roles = detect_roles(rec, tf=tf, **{**role_overrides, "world_frame": ""})
         roles.world_frame = None
-    frames = None if check_frames is None else _frame_stats(rec, roles, tf, check_frames, quiet)
+    frames, warnings = (None, []) if check_frames is None else _frame_stats(rec, roles, tf, check_frames, quiet)
     return {
         "path": str(rec.path),
         "format": rec.format,
@@ -69,6 +69,7 @@ def summarize(rec: Recording, check_frames: dict | None = None, quiet: bool = Tr
                "parent_changes": [list(c) for c in tf.parent_changes], "loops": tf.loops(), "problem": problem},
         "frames": frames,
         "problems": list(rec.problems),
+        "warnings": warnings,
         "notes": (roles.notes if frames is None else []) + usage_notes(rec, roles, tf),  # frames say them too
     }
 
@@ -93,14 +94,16 @@ def usage_notes(rec: Recording, roles: Roles, tf: TfBuffer) -> list[str]:
     return notes
 
 
-def _frame_stats(rec: Recording, roles: Roles, tf: TfBuffer, frame_kwargs: dict, quiet: bool) -> dict:
-    """Assemble every frame (decoding all images) and count the usable and the dropped ones."""
+def _frame_stats(rec: Recording, roles: Roles, tf: TfBuffer, frame_kwargs: dict,
+                 quiet: bool) -> tuple[dict, list[str]]:
+    """Assemble every frame (decoding all images) and count the usable and the dropped ones; with the warnings of
+    what was doubtful (colour cut short or missing, assumptions)."""
     stats = FrameStats()
     total = rec.topics[roles.depth_topic].count if roles.depth_topic in rec.topics else None
     for _ in progress(iter_frames(rec, roles, tf=tf, stats=stats, **frame_kwargs), total=total,
                       desc="frames", quiet=quiet, unit="frame"):
         pass
-    return stats.as_dict()
+    return stats.as_dict(), stats.warnings(str(rec.path))
 
 
 def _tf_links(tf: TfBuffer) -> list[dict]:

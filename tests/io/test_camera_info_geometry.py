@@ -19,10 +19,10 @@ from click.testing import CliRunner
 from kinfu_cli.cli import cli
 from kinfu_cli.io.camera_info import image_camera, is_rectified_topic
 from kinfu_cli.io.color_registration import colour_camera
-from kinfu_cli.io.frames import FrameStats, iter_frames
 from kinfu_cli.io.recording import open_recording
 from kinfu_cli.io.roles import detect_roles
 from kinfu_cli.io.writers import RecordingWriter
+from recordings import read_frames
 
 S = 1_000_000_000
 W, H = 20, 16
@@ -58,13 +58,6 @@ def _recording(path, n=3, crop=lambda d: d, depth_topic=DEPTH, info=lambda i: {}
     return path
 
 
-def _frames(path, **kw):
-    stats = FrameStats()
-    with open_recording(path) as rec:
-        frames = list(iter_frames(rec, pose_source="none", stats=stats, **kw))
-    return frames, stats
-
-
 def _export(path, out, *args):
     return CliRunner().invoke(cli, ["export", str(path), "-o", str(out), "-q", "--pose-source", "none", *args])
 
@@ -89,7 +82,7 @@ def test_roi_moves_the_principal_point_and_binning_divides_the_intrinsics():
 
 def test_an_roi_crop_is_read_with_its_offset_not_scaled_as_a_resize(tmp_path):
     path = _recording(tmp_path / "roi.mcap", crop=lambda d: d[3:11, 4:14], info=lambda i: {"roi": (4, 3, 10, 8)})
-    frames, stats = _frames(path)
+    frames, stats = read_frames(path)
     assert len(frames) == 3 and frames[0].depth.shape == (8, 10)
     np.testing.assert_allclose(frames[0].K, [[30, 0, 5.5], [0, 30, 4.5], [0, 0, 1]])  # before: fx 15, cx 4.5
     assert not [n for n in stats.notes if "scaled" in n], stats.notes
@@ -98,7 +91,7 @@ def test_an_roi_crop_is_read_with_its_offset_not_scaled_as_a_resize(tmp_path):
 def test_binned_images_with_lens_distortion_are_read(tmp_path):
     path = _recording(tmp_path / "bin.mcap", crop=lambda d: d[::2, ::2],
                       info=lambda i: {"binning": (2, 2), "D": [0.05, 0, 0, 0, 0]})
-    frames, stats = _frames(path)  # before: "depth image ... is 10x8 but camera info ... says 20x16"
+    frames, stats = read_frames(path)  # before: "depth image ... is 10x8 but camera info ... says 20x16"
     assert len(frames) == 3
     np.testing.assert_allclose(frames[0].K, [[15, 0, 4.75], [0, 15, 3.75], [0, 0, 1]])
 
@@ -135,7 +128,7 @@ def test_an_image_rect_topic_is_read_with_P_and_not_undistorted_again(tmp_path):
     P = np.array([[28.0, 0, 10.0, 0], [0, 28.0, 8.0, 0], [0, 0, 1, 0]])
     path = _recording(tmp_path / "rect.mcap", depth_topic="/camera/depth/image_rect",
                       info=lambda i: {"D": [0.1, -0.2, 0, 0, 0.05], "P": P})
-    frames, stats = _frames(path)
+    frames, stats = read_frames(path)
     assert len(frames) == 3
     np.testing.assert_allclose(frames[0].K, P[:, :3])  # before: K
     np.testing.assert_array_equal(np.rint(frames[0].depth * 1000), _depth(0))  # before: remapped through D
@@ -145,7 +138,7 @@ def test_an_image_rect_topic_is_read_with_P_and_not_undistorted_again(tmp_path):
 
 def test_a_rectified_topic_with_P_equal_to_K_and_no_distortion_says_nothing(tmp_path):
     path = _recording(tmp_path / "rect_plain.mcap", depth_topic="/camera/depth/image_rect_raw")
-    frames, stats = _frames(path)
+    frames, stats = read_frames(path)
     assert len(frames) == 3 and not stats.notes
     np.testing.assert_allclose(frames[0].K, K)
 

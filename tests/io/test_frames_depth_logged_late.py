@@ -10,9 +10,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kinfu_cli.io.frames import COLOR_LOOKAHEAD_NS, FrameStats, _FramePairer, iter_frames
+from kinfu_cli.io.frames import COLOR_LOOKAHEAD_NS, _FramePairer, iter_frames
 from kinfu_cli.io.recording import open_recording
 from kinfu_cli.io.writers import RecordingWriter
+from recordings import read_frames
 
 T0 = 1_700_000_000 * 10**9
 PERIOD = 33_333_333  # colour at 30 Hz
@@ -50,13 +51,6 @@ def _recording(path, latency_ns: int, n_colour: int = 30, depth_every: int = 3, 
     return path
 
 
-def _frames(path, **kw):
-    stats = FrameStats()
-    with open_recording(path) as rec:
-        frames = list(iter_frames(rec, pose_source="none", stats=stats, **kw))
-    return frames, stats
-
-
 def _colour_index(frame) -> int:
     """Which colour image a frame carries (its depth says which one it should)."""
     return int(frame.color[0, 0, 0])
@@ -64,7 +58,7 @@ def _colour_index(frame) -> int:
 
 @pytest.mark.parametrize("latency_ms", [0, 80, 150, 400])
 def test_depth_logged_late_is_paired_with_the_colour_of_its_stamp(tmp_path, latency_ms):
-    frames, stats = _frames(_recording(tmp_path / "r.mcap", latency_ms * 1_000_000))
+    frames, stats = read_frames(_recording(tmp_path / "r.mcap", latency_ms * 1_000_000))
     assert len(frames) == 10 and stats.without_color == 0
     for f in frames:
         assert f.color is not None and _colour_index(f) == round(float(f.depth[0, 0]) * 1000) - 1000
@@ -74,7 +68,7 @@ def test_depth_logged_late_is_paired_with_the_colour_of_its_stamp(tmp_path, late
 def test_depth_logged_late_in_a_time_window_finds_colour_logged_before_it(tmp_path):
     # depth logged 150 ms late: the first frame of a window starting at 0.5 s has its colour logged at ~0.35 s,
     # before the window and its tolerance margin
-    frames, stats = _frames(_recording(tmp_path / "w.mcap", 150_000_000), start_s=0.5, end_s=0.8)
+    frames, stats = read_frames(_recording(tmp_path / "w.mcap", 150_000_000), start_s=0.5, end_s=0.8)
     assert [round(float(f.depth[0, 0]) * 1000) - 1000 for f in frames] == [12, 15, 18]
     assert [_colour_index(f) for f in frames] == [12, 15, 18] and stats.without_color == 0
     assert frames[0].index == 0  # counted from the window's start minus the tolerance, as before
@@ -83,7 +77,7 @@ def test_depth_logged_late_in_a_time_window_finds_colour_logged_before_it(tmp_pa
 def test_depth_logged_later_than_the_look_ahead_is_said(tmp_path):
     # depth logged 1.5 s after its stamp while colour goes on: the colour of its stamp was no longer kept
     latency = COLOR_LOOKAHEAD_NS + 500_000_000
-    frames, stats = _frames(_recording(tmp_path / "l.mcap", latency, n_colour=90, depth_until=30))
+    frames, stats = read_frames(_recording(tmp_path / "l.mcap", latency, n_colour=90, depth_until=30))
     assert len(frames) == 10 and stats.color_cut_short == 10
     assert all(f.color is None or _colour_index(f) != round(float(f.depth[0, 0]) * 1000) - 1000 for f in frames)
     said = [w for w in stats.warnings("l.mcap") if "no longer kept" in w]
@@ -94,7 +88,7 @@ def test_depth_logged_later_than_the_look_ahead_is_said(tmp_path):
 def test_a_pause_of_the_depth_stream_is_no_cut_short_pairing(tmp_path):
     # depth (logged 100 ms late) pauses 2 s while colour goes on: colour of the pause is dropped, none is missed
     ks = [0, 3, 6, 9, 75, 78, 81]
-    frames, stats = _frames(_recording(tmp_path / "p.mcap", 100_000_000, n_colour=90, depth_ks=ks))
+    frames, stats = read_frames(_recording(tmp_path / "p.mcap", 100_000_000, n_colour=90, depth_ks=ks))
     assert [_colour_index(f) for f in frames] == ks and stats.without_color == 0
     assert stats.color_cut_short == 0 and stats.warnings("p.mcap") == []
 
@@ -110,7 +104,7 @@ def test_colour_kept_for_depth_to_come_is_bounded(tmp_path, monkeypatch):
         held.append(len(self.colors))
 
     monkeypatch.setattr(_FramePairer, "_forget_colors", counted)
-    frames, _ = _frames(path)
+    frames, _ = read_frames(path)
     assert len(frames) == 1 and _colour_index(frames[0]) == 0
     assert len(held) == 150 and max(held) <= COLOR_LOOKAHEAD_NS // PERIOD + 2
 
@@ -118,9 +112,7 @@ def test_colour_kept_for_depth_to_come_is_bounded(tmp_path, monkeypatch):
 def test_a_frame_waiting_for_its_colour_keeps_the_camera_info_of_its_time(tmp_path):
     """A depth frame waits for the colour image after it before it is emitted; the camera info logged in between
     (the next frame's, the camera re-calibrated) was taken for it: frame 2 got frame 3's focal length."""
-    from recordings import K, W, H, color, depth_mm
-
-    from kinfu_cli.io.writers import RecordingWriter
+    from recordings import H, K, W, color, depth_mm
 
     path = tmp_path / "recal.mcap"
     t0 = 1_600_000_000 * 10**9
@@ -132,9 +124,6 @@ def test_a_frame_waiting_for_its_colour_keeps_the_camera_info_of_its_time(tmp_pa
             w.write_camera_info("/camera/depth/camera_info", t, "cam", Ki, W, H)
             w.write_image("/camera/depth/image_raw", t, "cam", depth_mm(i), "16UC1")
             w.write_image("/camera/color/image_raw", t, "cam", color(i), "rgb8")
-    from kinfu_cli.io.frames import iter_frames
-    from kinfu_cli.io.recording import open_recording
-
     with open_recording(path) as rec:
         frames = list(iter_frames(rec, pose_source="none"))
     assert [f.K[0, 0] for f in frames] == [30.0, 30.0, 30.0, 36.0, 36.0, 36.0]
