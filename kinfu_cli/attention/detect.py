@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kinfu_cli.attention.gmm_as import GmmActivitySaliency
+from kinfu_cli.attention.gmm_as import MIN_POI_GAUSSIANS, GmmActivitySaliency
 from kinfu_cli.attention.tasks import (MIN_TASK_S, SPLIT_GAP_S, TaskList, check_min_task, check_split_gap,
                                        check_workspace, detect_by_task, parse_workspace, task_entries)
 from kinfu_cli.attention.zvc import PAPER_THRESHOLD, ZeroVelocityCrossing
@@ -32,8 +32,6 @@ HAND_SPAN_WARN_M = 5.0
 # a task whose hand stays within this (same box diagonal) never moved: ZVC's inner radius r1 (0.10 m) holds all of it
 # and GMM-AS sees only the tracker's jitter; the smallest of the 130 Polhemus tasks spans 0.36 m
 HAND_STILL_M = 0.10
-# a GMM-AS POI is a Gaussian with a neighbour on each side (the first and last are skipped)
-MIN_POI_GAUSSIANS = 3
 
 
 def make_detector(algorithm: str, params: dict | None = None) -> Detector:

@@ -89,6 +89,9 @@ GAP_FACTOR = 5.0
 RESAMPLE_GAUSSIANS = 4
 
 
+# the fewest Gaussians a fit needs for a POI: one with a neighbour on each side (the first and last are skipped)
+MIN_POI_GAUSSIANS = 3
+
 class GmmActivitySaliency:
     """GMM-AS POI detector (sklearn-style: parameters here, work in `fit`, results in `*_`).
 
@@ -182,6 +185,10 @@ class GmmActivitySaliency:
         # finite and of a sensible size: NaN slips through comparisons, 1e300 overflows a variance
         check_number(self.neighbours, "neighbours", 1, 1000, integer=True)
         check_number(self.max_components, "max_components", 1, 1000, integer=True)
+        if self.max_components < MIN_POI_GAUSSIANS:
+            raise ConfigError(f"expected at least {MIN_POI_GAUSSIANS}: a POI is a Gaussian between two others (the "
+                              f"first and last of a fit never are), so a fit of {self.max_components} can never give "
+                              f"one", parameter="max_components")
         check_number(self.poi_threshold, "poi_threshold", 0, 1e6, low_open=True)
         check_number(self.radius, "radius", 0, 100, low_open=True, unit="m")
         check_number(self.bic_threshold, "bic_threshold", -1e12, 1e12)

@@ -28,7 +28,7 @@ from kinfu_cli.io.tum import fused_trajectory, recording_trajectory, write_tum
                    "`kinfu fuse` output folder, the poses it fused. For evo_ape tum gt.tum est.tum.")
 @frame_options
 @click.option("--json", "as_json", is_flag=True, help="Print the summary (stats, roles, frame list) as JSON.")
-@click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
+@click.option("-q", "--quiet", is_flag=True, help="Only warnings and errors: no progress bar, no summary (--json still prints the JSON).")
 @role_options
 @force_option
 def command(recording: str, out: str, trajectory: str | None, as_json: bool, quiet: bool, force: bool,
@@ -62,6 +62,8 @@ def command(recording: str, out: str, trajectory: str | None, as_json: bool, qui
     if as_json:
         click.echo(json.dumps(summary, indent=2))
         return
+    if quiet:
+        return
     st = summary["stats"]
     dropped = ", ".join(f"{n} {r}" for r, n in st["dropped"].items()) or "none"
     click.echo(f"wrote {summary['output']}: {summary['frames']} frames of {st['depth_messages']} depth messages "
@@ -90,7 +92,7 @@ def _export_trajectory(source: str, out: str, fk: dict, roles_kw: dict, as_json:
         summary["t_start_s"], summary["t_end_s"] = float(stamps[0]) * 1e-9, float(stamps[-1]) * 1e-9
     if as_json:
         click.echo(json.dumps(summary, indent=2))
-    else:
+    elif not quiet:
         click.echo(f"wrote {out}: {len(stamps)} camera poses ({summary['kind']}) as TUM")
 
 

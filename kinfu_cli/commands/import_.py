@@ -32,7 +32,7 @@ from kinfu_cli.io.rgbd_folders import import_folder
                    "estimates it].")
 @click.option("--no-compress", is_flag=True, help="Do not compress chunks (zstd for MCAP, lz4 for .bag).")
 @click.option("--json", "as_json", is_flag=True, help="Print the import summary as JSON on stdout.")
-@click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
+@click.option("-q", "--quiet", is_flag=True, help="Only warnings and errors: no progress bar, no summary (--json still prints the JSON).")
 @force_option
 def command(folder: str, out: str, rate: float, frames: str | None, color: str, intrinsics: str | None,
             up: str | None, no_compress: bool, as_json: bool, quiet: bool, force: bool) -> None:
@@ -62,6 +62,8 @@ def command(folder: str, out: str, rate: float, frames: str | None, color: str, 
     print_warnings(summary)
     if as_json:
         click.echo(json.dumps(summary, indent=2))
+        return
+    if quiet:
         return
     left_out = f", {summary['frames_left_out']} left out without a pose" if summary["frames_left_out"] else ""
     click.echo(f"wrote {summary['output']} ({summary['format']}): {summary['frames']} of "

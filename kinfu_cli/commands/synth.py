@@ -54,7 +54,7 @@ def parse_formats(text: str) -> list[str]:
               help="Also write the true camera pose (PoseStamped, frame world, the depth optical frame) on TOPIC "
                    "at every depth frame stamp, for `kinfu fuse --pose topic` [none].")
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON summary on stdout.")
-@click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
+@click.option("-q", "--quiet", is_flag=True, help="Only warnings and errors: no progress bar, no summary (--json still prints the JSON).")
 @force_option
 def command(out, scene, world, seed, width, height, frames, formats, scenario, n_objects, hand_rate, frame_rate, noise,
             depth_format, color_format, jpeg_quality, camera_pose_topic, as_json, quiet, force):
@@ -96,6 +96,8 @@ def command(out, scene, world, seed, width, height, frames, formats, scenario, n
     summary = result.to_json()
     if as_json:
         click.echo(json.dumps(summary, indent=2))
+    elif quiet:
+        return
     elif room:
         for p in summary["recordings"]:
             click.echo(f"wrote {p}")

@@ -385,9 +385,11 @@ class ObservedSurface:
 
 def observed_surface(gt: GroundTruth, state: str, bounds: tuple, spacing: float = DEFAULT_SPACING,
                      visibility_tolerance: float = 0.005, seed: int = 0, scene=None,
-                     frames: np.ndarray | None = None) -> ObservedSurface:
+                     frames: np.ndarray | None = None, depth_range: tuple | None = None) -> ObservedSurface:
     """Sample the true `state` mesh uniformly and keep what the state's camera poses (or the given pose indices)
-    saw (module docstring) inside the box bounds = (lo, hi)."""
+    saw (module docstring) inside the box bounds = (lo, hi). depth_range: the fused volume's (min, max) depth; the
+    visible surface left outside the bounds counts only what lies within it (a fusion limited to 1.2 m left the far
+    surface out on purpose, not for want of grid)."""
     mesh = gt.mesh(state)
     tv = np.asarray(mesh.vertices, dtype=np.float64)
     tf = np.asarray(mesh.triangles, dtype=np.int64)
@@ -401,10 +403,17 @@ def observed_surface(gt: GroundTruth, state: str, bounds: tuple, spacing: float 
     lo, hi = (np.asarray(b, dtype=np.float64) for b in bounds)
     keep = _in_box(samples, lo, hi)
     # every sample, not only those in bounds: how much visible surface the bounds leave out is worth knowing
-    seen = visible_mask(samples, normals, scene, gt.poses[frames], gt.K, gt.width, gt.height,
-                        float(cam.get("min_range", 0.3)), float(cam.get("max_range", 4.0)), visibility_tolerance)
+    near, far = float(cam.get("min_range", 0.3)), float(cam.get("max_range", 4.0))
+    seen = visible_mask(samples, normals, scene, gt.poses[frames], gt.K, gt.width, gt.height, near, far,
+                        visibility_tolerance)
+    seen_outside = int(np.count_nonzero(seen & ~keep))
+    if seen_outside and depth_range is not None and (depth_range[0] > near or depth_range[1] < far):
+        out = ~keep
+        seen_outside = int(np.count_nonzero(visible_mask(
+            samples[out], normals[out], scene, gt.poses[frames], gt.K, gt.width, gt.height,
+            max(near, float(depth_range[0])), min(far, float(depth_range[1])), visibility_tolerance)))
     return ObservedSurface(samples[keep], seen[keep], int(len(samples)), int(len(frames)), used, (lo, hi), warnings,
-                           int(np.count_nonzero(seen & ~keep)))
+                           seen_outside)
 
 
 def _sampled_spacing(area: float, count: int, spacing: float, state: str) -> tuple[float, list[str]]:
@@ -441,6 +450,12 @@ def reconstruction_bounds(rec: Reconstruction, margin: float = 0.05) -> tuple[np
     return rec.vertices.min(axis=0) - margin, rec.vertices.max(axis=0) + margin
 
 
+def _depth_range(rec: Reconstruction) -> tuple[float, float] | None:
+    """The (min, max) depth the reconstruction's volume fused readings within; None without a volume."""
+    vol = rec.volume
+    return None if vol is None else (float(vol.min_depth), float(vol.max_depth))
+
+
 def score_reconstruction(rec: Reconstruction, gt: GroundTruth, state: str = "after", threshold: float = DEFAULT_THRESHOLD,
                          spacing: float = DEFAULT_SPACING, region_margin: float = 0.05,
                          visibility_tolerance: float = 0.005, seed: int = 0,
@@ -458,7 +473,7 @@ def score_reconstruction(rec: Reconstruction, gt: GroundTruth, state: str = "aft
     scene = mesh_scene(tv, tf)
     if surface is None:
         surface = observed_surface(gt, state, reconstruction_bounds(rec, region_margin), spacing,
-                                   visibility_tolerance, seed, scene)
+                                   visibility_tolerance, seed, scene, depth_range=_depth_range(rec))
     observed = surface.observed
     notes = []
     if len(observed) == 0:
@@ -536,7 +551,8 @@ def evaluate_fusion(path: str | os.PathLike, ground_truth: str | os.PathLike, st
         elif step == "reconstruction":
             rec = load_reconstruction(path, use_volume=use_volume)
         elif step == "distances":
-            surface = observed_surface(gt, state, reconstruction_bounds(rec), spacing, seed=seed, frames=frames)
+            surface = observed_surface(gt, state, reconstruction_bounds(rec), spacing, seed=seed, frames=frames,
+                                       depth_range=_depth_range(rec))
             score = score_reconstruction(rec, gt, state, threshold=threshold, spacing=spacing, seed=seed,
                                          surface=surface)
         else:

@@ -35,8 +35,8 @@ from kinfu_cli.fusion.extent import (SURVEY_FRAMES, AutoGrid, auto_grid, budget_
                                     survey)
 from kinfu_cli.fusion.mesh import mesh_cloud
 from kinfu_cli.fusion.placement import default_origin
-from kinfu_cli.fusion.tracking import (LOSS_CHECKS, MIN_TRACKING_WIDTH, POSE_MODES, FrameToModelTracker, TrackResult,
-                                       predict_pose)
+from kinfu_cli.fusion.tracking import (LOSS_CHECKS, MAX_SPEED_M_S, MIN_TRACKING_WIDTH, POSE_MODES, FrameToModelTracker,
+                                       TrackResult, predict_pose)
 from kinfu_cli.fusion.up import choose_up
 from kinfu_cli.fusion.volume import DEFAULT_TRUNCATION_M, TernaryVolume, load_volume
 from kinfu_cli.io.frames import (DROP_CHAIN_BROKEN, DROP_EMPTY, DROP_NO_POSE, DROP_NO_POSE_TOPIC, FrameStats,
@@ -411,7 +411,7 @@ def _frames_warnings(stats: FrameStats, integrator: "_Integrator", max_lost: flo
             + _empty_depth_warnings(stats, depth_filter, recording)
             + _tracking_verdict(integrator, max_lost, recording) + _tracking_doubts(integrator.track_log)
             + _fallback_warnings(integrator.track_log, max_lost) + _outside_grid_warnings(integrator, recording)
-            + _narrow_frame_warnings(integrator, recording))
+            + _narrow_frame_warnings(integrator, recording) + _pose_jump_warnings(integrator, recording))
 
 
 def _pose_drop_warnings(stats: FrameStats, recording: str) -> list[str]:
@@ -451,6 +451,34 @@ def _outside_grid_warnings(integrator: "_Integrator", recording: str) -> list[st
             f"of their depth readings inside the grid, so they added next to no surface to it (frames {shown}; "
             f"report.json frames.outside_grid): a wrong camera pose (a TF that jumps) or a grid that leaves out what "
             f"they saw"]
+
+
+# given camera poses (TF, a pose topic) moving faster than this between two fused frames jump (a TF glitch, a
+# re-localised map -> odom, wrong stamps): the scene is fused twice, displaced, and an auto-sized grid grows to hold
+# both copies (a 5 m jump of 3 frames: a 9.3 m grid, no other warning). KinFu's per-frame ICP limit as a speed (0.1 m
+# a frame at 30 Hz); hand-held 7-Scenes frames move up to 1.3 m/s
+JUMP_SPEED_M_S = MAX_SPEED_M_S
+JUMP_MIN_M = 0.05  # ... and farther than this (near frames with jittery stamps are no jump)
+
+
+def _pose_jump_warnings(integrator: "_Integrator", recording: str) -> list[str]:
+    """A warning naming the fused frames whose given pose moved over JUMP_SPEED_M_S (and JUMP_MIN_M) since the
+    frame fused before (poses taken as given: forced or topic mode; tracking has its own speed check)."""
+    if integrator.mode not in ("forced", "topic") or len(integrator.camera_poses) < 2:
+        return []
+    step = np.linalg.norm(np.diff([np.asarray(T)[:3, 3] for T in integrator.camera_poses], axis=0), axis=1)
+    dt = np.diff(np.asarray(integrator.camera_stamps_ns, dtype=np.int64)) * 1e-9
+    jump = (step > JUMP_MIN_M) & (step > JUMP_SPEED_M_S * np.maximum(dt, 0.0))
+    if not jump.any():
+        return []
+    at = np.flatnonzero(jump)
+    k = int(at[np.argmax(step[at])])
+    frames = [integrator.camera_frames[i + 1] for i in at]
+    shown = ", ".join(map(str, frames[:10])) + (", ..." if len(frames) > 10 else "")
+    return [f"{recording}: the given camera poses jump at {len(frames)} fused frame(s) ({shown}; the largest "
+            f"{step[k]:.2f} m in {max(dt[k], 0.0):.3f} s, faster than {JUMP_SPEED_M_S:g} m/s): a TF glitch, a "
+            f"re-localisation or wrong stamps fuse the scene twice, displaced (check the poses, or refine them by "
+            f"ICP: pose mode hint)"]
 
 
 def _narrow_frame_warnings(integrator: "_Integrator", recording: str) -> list[str]:
@@ -653,6 +681,7 @@ class _Integrator:
         self.n_place = 1 if mode == "icp" else PLACEMENT_FRAMES
         self.camera_poses: list[np.ndarray] = []  # T_world_camera of every frame integrated (fusion.up)
         self.camera_stamps_ns: list[int] = []  # and its stamp
+        self.camera_frames: list[int] = []  # and its frame index
         self.intrinsics: dict | None = None  # of the first frame integrated
         self.outside_grid: list[int] = []  # frames fused with under IN_GRID_MIN_SHARE of their readings in the grid
 
@@ -731,6 +760,7 @@ class _Integrator:
         self.used += 1
         self.camera_poses.append(self.prev_T)
         self.camera_stamps_ns.append(int(frame.stamp_ns))
+        self.camera_frames.append(frame.index)
         if self.intrinsics is None:
             K = np.asarray(frame.K, dtype=np.float64)
             self.intrinsics = {"fx": float(K[0, 0]), "fy": float(K[1, 1]), "cx": float(K[0, 2]),

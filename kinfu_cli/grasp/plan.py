@@ -90,13 +90,14 @@ class ObjectGrasp:
     poor_overlap: float
     seconds: float
     cpu_seconds: float
+    shape_flags: dict = field(default_factory=dict)  # segment_flags: the segment's grid faces, its fit's convergence
 
     def to_json(self) -> dict:
         cands = [{"hand": h, "part": p, "converged": g.converged, "score": s if g.converged else None,
                   "cost": g.cost, "overlap_rms_m": g.overlap_rms, "violation": g.violation, "message": g.message,
                   "seconds": g.seconds} for h, p, g, s in self.candidates]
         doc = {"segment": self.segment, "parts": len(self.parts), "converged": self.best is not None,
-               "seconds": self.seconds, "cpu_seconds": self.cpu_seconds, "candidates": cands}
+               "seconds": self.seconds, "cpu_seconds": self.cpu_seconds, "candidates": cands, **self.shape_flags}
         if self.best is None:
             worst = min(self.candidates, key=lambda c: c[2].violation)[2] if self.candidates else None
             doc.update({"hand": None, "pose": None, "pre_grasp": None,
@@ -286,6 +287,16 @@ def nothing_to_grasp(doc: dict) -> str:
     return f"no object segment has a superquadric to grasp (of {len(objects)}; {why})"
 
 
+def segment_flags(doc: dict, sid: int) -> dict:
+    """The segment's doubts a grasp of it inherits: 'touches_grid_faces' (the faces the grid cuts it at, [] when
+    none) and 'fit_converged' (its superquadric fit's; None when segments.json does not say)."""
+    s = next((e for e in doc["segments"] if isinstance(e, dict) and e.get("id") == sid), {})
+    sq = s.get("superquadric")
+    faces = s.get("touches_grid_faces")
+    return {"touches_grid_faces": list(faces) if isinstance(faces, list) else [],
+            "fit_converged": sq.get("converged") if isinstance(sq, dict) else None}
+
+
 def shape_doubts(doc: dict, planned: list[int]) -> list[str]:
     """What segments.json doubts about the shapes of the segments grasped (`planned`): a superquadric fit that
     did not converge (its 'converged' false; a multi-superquadric's parts are fits of their own), and segments
@@ -397,6 +408,8 @@ def plan_grasps(segments: str | os.PathLike | dict, options: GraspOptions | None
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         objs = [grasp_object(sid, parts[sid], plane, workspaces, options)
                 for sid in (progress(ids) if progress is not None else ids)]
+    for o in objs:  # what segments.json doubts about each shape, on the grasp itself (shape_doubts says it too)
+        o.shape_flags = segment_flags(doc, o.segment)
     for o in objs:
         if plane is not None and any(q.center @ plane[:3] + plane[3] < 0 for q in o.parts):
             warnings.append(f"segment {o.segment}: its superquadric's centre is below the support plane (a poor "

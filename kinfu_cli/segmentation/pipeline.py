@@ -368,7 +368,7 @@ def no_object_cause(seg: Segmentation, params: SegmentationParams, facing: str) 
     below, above = height < -band, (height > band) & ((seg.labels < 0) | (not room))
     if facing and int(below.sum()) >= params.min_segment_points:
         return (f"{int(below.sum())} points lie up to {float(-height.min()):.2g} m below the plane{facing}: if "
-                f"they stand on it, that up direction is wrong (flipped?): give the up")
+                f"they stand on it, that up direction is wrong (flipped?): give the right up direction")
     if above.any():
         return (f"{int(above.sum())} points rise up to {float(height[above].max()):.2g} m above the plane{facing} but "
                 f"form no segment of min_segment_points {params.min_segment_points}: an object that small or thin "

@@ -78,3 +78,18 @@ def test_kinfu_poi_prints_the_warning_and_writes_it(tmp_path):
     assert res.exit_code == 0, res.output
     assert "kinfu: warning: the hand stays within" in res.output and "Traceback" not in res.output
     assert any("it never moved" in w for w in json.loads(out.read_text())["warnings"])
+
+
+def test_a_kmax_under_three_is_refused_up_front():
+    """--max-components 1 or 2 ran and warned that the trajectory held no dwell: the option itself can never give a
+    POI (one is a Gaussian between two others), so it is refused naming the parameter."""
+    import pytest
+
+    from kinfu_cli.attention.gmm_as import GmmActivitySaliency
+    from kinfu_cli.core.errors import ConfigError
+
+    for k in (1, 2):
+        with pytest.raises(ConfigError, match="expected at least 3: a POI is a Gaussian between two others") as e:
+            GmmActivitySaliency(max_components=k).check_params()
+        assert e.value.parameter == "max_components"
+    GmmActivitySaliency(max_components=3).check_params()

@@ -59,3 +59,20 @@ def test_the_whole_scene_leaves_nothing_out(sample_dir, tmp_path):
     assert doc["reconstruction"]["samples_visible_outside"] == 0
     assert doc["reconstruction"]["visible_share_outside"] == 0.0 < SEEN_OUTSIDE_WARN
     assert not [w for w in doc["warnings"] if "true surface the cameras saw" in w]
+
+
+def test_surface_beyond_the_fused_depth_range_is_not_blamed_on_the_grid(sample_dir, tmp_path):
+    """A fusion limited to max_depth 1.2 m (its auto grid around what it fused) was told that 83 % of the visible
+    true surface lay outside its grid: the far surface was left out by the depth range, not the grid. The surface
+    outside the grid now counts only within the volume's depth range."""
+    gt = json.loads((sample_dir / "ground_truth" / "changes.json").read_text())
+    x, y, z = gt["table"]["center"][0], gt["table"]["center"][1], gt["table"]["top_z"]
+    lo, hi = np.array([x - 0.15, y - 0.15, z - 0.1]), np.array([x + 0.15, y + 0.15, z + 0.2])
+    corner = _truth_corner(sample_dir, tmp_path / "corner", lo, hi)
+    _, full = _eval(corner, sample_dir, tmp_path / "full.json")
+    TernaryVolume(size=tuple(np.subtract(hi, lo)), voxel_size=0.02, origin=lo, min_depth=0.3,
+                  max_depth=0.31).save(corner / "volume.npz")  # a depth range that reaches next to nothing
+    _, near = _eval(corner, sample_dir, tmp_path / "near.json")
+    assert full["reconstruction"]["samples_visible_outside"] > 0
+    assert near["reconstruction"]["samples_visible_outside"] < 0.05 * full["reconstruction"]["samples_visible_outside"]
+    assert not [w for w in near["warnings"] if "true surface the cameras saw" in w]

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from kinfu_cli.fusion.pipeline import (_fallback_warnings, _hint_falls_back, _narrow_frame_warnings, _tracking_doubts,
-                                      ate_vs_given)
+from kinfu_cli.fusion.pipeline import (_fallback_warnings, _hint_falls_back, _narrow_frame_warnings, _pose_jump_warnings,
+                                      _tracking_doubts, ate_vs_given)
 from kinfu_cli.fusion.tracking import TrackResult
 
 
@@ -137,3 +137,25 @@ def test_icp_on_narrow_frames_is_said_to_be_doubtful():
     assert "ICP tracked 64x48 px depth frames, narrower than 160 px" in w and w.startswith("r.mcap: ")
     assert _narrow_frame_warnings(run(MIN_TRACKING_WIDTH), "r.mcap") == []
     assert _narrow_frame_warnings(run(64, tracked=False), "r.mcap") == []  # poses given, not tracked
+
+
+def test_given_poses_that_jump_are_said():
+    """A pose topic that put 3 of 12 frames 5 m away was fused silently with the default auto grid (it grew to 9.3 m
+    to hold both copies of the scene): a given pose moving over 3 m/s between fused frames is now a warning."""
+    from types import SimpleNamespace
+
+    def run(xs, mode="topic", dt_s=0.2):
+        poses = []
+        for x in xs:
+            T = np.eye(4)
+            T[0, 3] = x
+            poses.append(T)
+        return SimpleNamespace(mode=mode, camera_poses=poses, camera_frames=list(range(len(xs))),
+                               camera_stamps_ns=[int(i * dt_s * 1e9) for i in range(len(xs))])
+
+    walk = [0.05 * i for i in range(12)]  # 0.25 m/s
+    assert _pose_jump_warnings(run(walk), "r.bag") == []
+    jumped = [x + (5.0 if 4 <= i <= 6 else 0.0) for i, x in enumerate(walk)]
+    (w,) = _pose_jump_warnings(run(jumped), "r.bag")
+    assert "jump at 2 fused frame(s) (4, 7; the largest 5.05 m in 0.200 s" in w and w.startswith("r.bag: ")
+    assert _pose_jump_warnings(run(jumped, mode="icp"), "r.bag") == []  # tracking checks its own speed

@@ -55,6 +55,8 @@ def test_grasps_on_an_unconverged_fit_or_a_cut_segment_are_said(tmp_path):
     assert "kinfu: warning: segment 2 (residual 19 mm): the superquadric fit did not converge" in "\n".join(warned)
     assert "kinfu: warning: segment 5 (z+, x-) touches the grid's faces" in "\n".join(warned)
     assert len(warned) == 2 and len(doc["warnings"]) == 2
+    flags = {g["segment"]: (g["touches_grid_faces"], g["fit_converged"]) for g in doc["grasps"]}
+    assert flags == {2: ([], False), 5: (["z+", "x-"], True)}  # on each grasp too, not only in a warning
 
 
 def test_a_scene_without_objects_says_so_not_run_with_superquadrics(tmp_path):

@@ -70,7 +70,7 @@ def test_import_7scenes_full_into_mcap(tmp_path, shared_data):
 def test_import_tabletop_subset(tmp_path, shared_data, name):
     folder = shared_data("rgbd-tabletop-box")
     out = tmp_path / name
-    res = run("import", folder, "-o", out, "--frames", "0:50:10" if name == "box.mcap" else "3", "-q")
+    res = run("import", folder, "-o", out, "--frames", "0:50:10" if name == "box.mcap" else "3")
     assert res.exit_code == 0, res.output
     assert "wrote" in res.output and "7scenes layout" in res.output
     numbers = [15 + 2 * i for i in (range(0, 50, 10) if name == "box.mcap" else range(3))]
@@ -184,7 +184,7 @@ def test_tum_groundtruth_without_samples_is_a_warning_not_a_traceback(tmp_path, 
 
 def test_tum_groundtruth_outside_the_depth_frames_is_a_warning(tmp_path):
     folder, _ = _tum_folder(tmp_path, gt_shift_s=100.0)
-    res = run("import", folder, "-o", tmp_path / "x.mcap", "-q")
+    res = run("import", folder, "-o", tmp_path / "x.mcap")
     assert res.exit_code == 0, res.output
     assert "0 TF samples" in res.stdout
     [w] = _warnings(res)
@@ -270,7 +270,7 @@ def test_7scenes_frames_without_pose_are_left_out(tmp_path):
         n = round(f.stamp_ns * 30e-9)
         np.testing.assert_allclose(f.T_world_camera[0, 3], 0.1 * n, atol=1e-12)  # its own pose, not interpolated
         assert f.depth[0, 0] == np.float32((1000 + n) * 0.001)
-    res = run("import", folder, "-o", tmp_path / "text.mcap", "-q")
+    res = run("import", folder, "-o", tmp_path / "text.mcap")
     assert "3 of 6 frames (7scenes layout, 3 left out without a pose)" in res.stdout
 
 
@@ -286,5 +286,5 @@ def test_7scenes_frames_all_without_pose_are_kept(tmp_path):
     [w] = _warnings(res)
     assert "none of the 3 frames has a usable pose" in w and "not finite: 3" in w
     bare = _7scenes_folder(tmp_path / "bare", n=3, poses={0: None, 1: None, 2: None})
-    res = run("import", bare, "-o", tmp_path / "y.mcap", "-q")
+    res = run("import", bare, "-o", tmp_path / "y.mcap")
     assert res.exit_code == 0 and _warnings(res) == [] and "3 of 3 frames" in res.stdout, res.output

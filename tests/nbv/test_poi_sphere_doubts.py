@@ -53,20 +53,27 @@ def _rank(tmp_path, lab, **kw):
     return res, res.to_json()["pois"][0]
 
 
-def test_unknown_seen_only_from_rejected_views_is_unreachable_not_reconstructed(tmp_path):
-    res, p = _rank(tmp_path, _room_behind_a_wall(UNKNOWN))
-    assert p["valid"] > 0 and p["rejected"]["inside_unknown"] > 0 and p["best_gain"] < p["inc_th"]
-    assert p["reconstructed"] is False and p["unreachable"] is True
-    assert 0 < p["rejected_views_seeing"] <= p["rejected"]["inside_unknown"]
+def test_a_verdict_from_few_valid_views_with_unknown_left_is_said_not_flipped(tmp_path):
+    """Most views rejected inside unobserved space, S(POI) partly unknown: the paper's IncTh verdict stands (the
+    unknown voxels might be a solid's interior: flipping it to "unreachable" was a false alarm on the synthetic
+    objects scene, whose table interior no view sees), with a warning that it rests on the few valid views."""
+    lab = _room_behind_a_wall(UNKNOWN)  # and the scan never looked beyond 0.25 m of the POI up or sideways
+    up, side = int(round((POI[2] + 0.25) / VS)), int(round(0.25 / VS))
+    lab[:, :, up:] = UNKNOWN
+    lab[:, :int(round(POI[1] / VS)) - side] = UNKNOWN
+    lab[:, int(round(POI[1] / VS)) + side:] = UNKNOWN
+    res, p = _rank(tmp_path, lab)
+    assert p["valid"] > 0 and p["rejected"]["inside_unknown"] >= 0.8 * (p["valid"] + sum(p["rejected"].values()))
+    assert p["reconstructed"] is True and p["unreachable"] is False
     (w,) = res.warnings
-    assert w.startswith("POI 0: S(POI) still holds") and "rejected as inside_unknown would" in w
-    assert f"{p['rejected_views_seeing']} of the {p['rejected']['inside_unknown']} views" in w
+    assert w.startswith(f"POI 0: reconstructed by the IncTh rule from only {p['valid']} of ")
+    assert f"({p['rejected']['inside_unknown']} were rejected standing in unobserved space)" in w
 
 
 def test_a_region_complete_behind_the_wall_stays_reconstructed(tmp_path):
     res, p = _rank(tmp_path, _room_behind_a_wall(EMPTY))
     assert p["rejected"]["inside_unknown"] > 0
-    assert p["reconstructed"] is True and p["unreachable"] is False and "rejected_views_seeing" not in p
+    assert p["reconstructed"] is True and p["unreachable"] is False
     assert res.warnings == []
 
 
