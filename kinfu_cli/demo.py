@@ -46,6 +46,34 @@ def hand_window(recording: Path) -> tuple[float, float]:
     return offset + float(traj.t[0]), offset + float(traj.t[-1])
 
 
+SHOWN = ("poi", "diff", "eval fusion", "eval nbv")  # stages whose printed results the demo shows
+
+
+def demo_stages(rec: Path, gt: Path, out: Path, t_in: float, t_out: float) -> list[tuple[str, list[str], Path]]:
+    """The pipeline's stages as (name, kinfu arguments, output): scan before the hand enters, POIs, views, the
+    scene after it left, what changed, segments, and the evaluations, whose printed tables (and those of poi and
+    diff: SHOWN) the demo shows, so those run without --quiet."""
+    scan, fused, seg, diff = out / "scan", out / "fuse", out / "segment", out / "diff"
+    pois, views = out / "pois.json", out / "views.json"
+    return [
+        ("info", ["info", str(rec), "--json"], out / "info.json"),
+        ("fuse scan", ["fuse", str(rec), "-o", str(scan), "--end", f"{t_in:.3f}", "--quiet", "--plot"], scan),
+        ("poi", ["poi", str(rec), "-o", str(pois), "--plot", str(out / "pois.png")], pois),
+        ("nbv", ["nbv", str(scan / "volume.npz"), "--pois", str(pois), "--clear", "--top", "5",
+                 "-o", str(views), "--plot", str(out / "views.png"), "--quiet"], views),
+        ("fuse after", ["fuse", str(rec), "-o", str(fused), "--init", str(scan / "volume.npz"),
+                        "--clear-pois", str(pois), "--start", f"{t_out:.3f}", "--quiet"], fused),
+        ("diff", ["diff", str(scan / "volume.npz"), str(fused / "volume.npz"), "-o", str(diff), "--pois", str(pois)],
+         diff),
+        ("segment", ["segment", str(fused / "volume.npz"), "-o", str(seg), "--plot", "--quiet"], seg),
+        ("eval fusion", ["eval", "fusion", str(fused), "--ground-truth", str(gt), "--state", "after",
+                         "-o", str(out / "eval_fusion.json")], out / "eval_fusion.json"),
+        ("eval nbv", ["eval", "nbv", str(gt), "--views", "3", "--strategy", "poi,random",
+                      "-o", str(out / "eval_nbv.json"), "--plot", str(out / "eval_nbv.png")],
+         out / "eval_nbv.json"),
+    ]
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", default="sample_data", help="folder holding tabletop/recording.mcap")
@@ -59,25 +87,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"demo: {rec} not found (make it with `kinfu synth -o {data}/tabletop`)", file=sys.stderr)
         return 2
     t_in, t_out = hand_window(rec)
-    scan, fused, seg, diff = out / "scan", out / "fuse", out / "segment", out / "diff"
-    pois, views = out / "pois.json", out / "views.json"
-    stages = [
-        ("info", ["info", str(rec), "--json"], out / "info.json"),
-        ("fuse scan", ["fuse", str(rec), "-o", str(scan), "--end", f"{t_in:.3f}", "--quiet", "--plot"], scan),
-        ("poi", ["poi", str(rec), "-o", str(pois), "--plot", str(out / "pois.png")], pois),
-        ("nbv", ["nbv", str(scan / "volume.npz"), "--pois", str(pois), "--clear", "--top", "5",
-                 "-o", str(views), "--plot", str(out / "views.png"), "--quiet"], views),
-        ("fuse after", ["fuse", str(rec), "-o", str(fused), "--init", str(scan / "volume.npz"),
-                        "--clear-pois", str(pois), "--start", f"{t_out:.3f}", "--quiet"], fused),
-        ("diff", ["diff", str(scan / "volume.npz"), str(fused / "volume.npz"), "-o", str(diff), "--pois", str(pois)],
-         diff),
-        ("segment", ["segment", str(fused / "volume.npz"), "-o", str(seg), "--plot", "--quiet"], seg),
-        ("eval fusion", ["eval", "fusion", str(fused), "--ground-truth", str(gt), "--state", "after",
-                         "-o", str(out / "eval_fusion.json"), "--quiet"], out / "eval_fusion.json"),
-        ("eval nbv", ["eval", "nbv", str(gt), "--views", "3", "--strategy", "poi,random",
-                      "-o", str(out / "eval_nbv.json"), "--plot", str(out / "eval_nbv.png"), "--quiet"],
-         out / "eval_nbv.json"),
-    ]
+    stages = demo_stages(rec, gt, out, t_in, t_out)
     print(f"kinfu demo on {rec} (hand in the workspace {t_in:.2f}-{t_out:.2f} s)")
     failed = 0
     tables: list[str] = []
@@ -91,7 +101,7 @@ def main(argv: list[str] | None = None) -> int:
         if code != 0:
             failed += 1
             print("    " + text.strip().replace("\n", "\n    "))
-        elif name.startswith("eval") or name in ("poi", "diff"):
+        elif name in SHOWN:
             tables.append(f"--- {name}\n{text.strip()}")
     summary = _summary(out)
     if summary:

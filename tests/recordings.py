@@ -90,3 +90,30 @@ def read_frames(path, **kw) -> tuple[list, "FrameStats"]:
     with open_recording(path) as rec:
         frames = list(iter_frames(rec, pose_source="none", stats=stats, **kw))
     return frames, stats
+
+
+# 30 Hz colour and late-logged depth on an 8x6 camera (the pairing tests of io/frames' colour look-ahead)
+LATE_T0 = 1_700_000_000 * S
+LATE_PERIOD = 33_333_333
+LATE_W, LATE_H = 8, 6
+LATE_K = np.array([[10.0, 0, 3.5], [0, 10.0, 2.5], [0, 0, 1]])
+
+
+def late_colour(k: int) -> np.ndarray:
+    """Colour image k of write_logged: red k % 256."""
+    return np.full((LATE_H, LATE_W, 3), [k % 256, 200, 7], np.uint8)
+
+
+def write_logged(path, events):
+    """A recording of `events` (log ns, "colour" | "depth", k): image k stamped LATE_T0 + k * LATE_PERIOD and logged
+    at its log ns; colour k is late_colour(k), depth k reads 1000 + k mm, with its camera info logged with it."""
+    with RecordingWriter(path) as w:
+        for log_ns, kind, k in sorted(events):
+            stamp = LATE_T0 + k * LATE_PERIOD
+            if kind == "colour":
+                w.write_image("/camera/color/image_raw", stamp, "cam", late_colour(k), "rgb8", log_ns=log_ns)
+                continue
+            w.write_image("/camera/depth/image_raw", stamp, "cam", np.full((LATE_H, LATE_W), 1000 + k, np.uint16),
+                          "16UC1", log_ns=log_ns)
+            w.write_camera_info("/camera/depth/camera_info", stamp, "cam", LATE_K, LATE_W, LATE_H, log_ns=log_ns)
+    return path

@@ -210,9 +210,10 @@ class RecordingWriter:
 
     # ----------------------------------------------------------------------------------- messages
     def write_image(self, topic: str, stamp_ns: int, frame_id: str, array: np.ndarray, encoding: str,
-                    trailer: bytes = b"") -> None:
+                    trailer: bytes = b"", log_ns: int | None = None) -> None:
         """sensor_msgs/Image; `array` must match `encoding` (16UC1 uint16 mm, 32FC1 float32 m, rgb8 ...).
-        trailer: bytes after the message (recent librealsense versions append a float32 depth_units)."""
+        trailer: bytes after the message (recent librealsense versions append a float32 depth_units); log_ns:
+        when the recorder logged it (default its stamp; a driver's latency logs it later)."""
         if encoding not in _IMAGE_ENCODINGS:
             raise ConfigError(f"image encoding {encoding!r}: expected one of {', '.join(_IMAGE_ENCODINGS)}")
         dtype, channels = _IMAGE_ENCODINGS[encoding]
@@ -231,7 +232,7 @@ class RecordingWriter:
             header=self._header(topic, stamp_ns, frame_id), height=h, width=w, encoding=encoding,
             is_bigendian=0, step=w * channels * arr.dtype.itemsize,
             data=np.frombuffer(arr.tobytes(), dtype=np.uint8))
-        self._write(topic, "sensor_msgs/msg/Image", stamp_ns, msg, trailer)
+        self._write(topic, "sensor_msgs/msg/Image", stamp_ns if log_ns is None else log_ns, msg, trailer)
 
     def write_compressed_image(self, topic: str, stamp_ns: int, frame_id: str, rgb_uint8: np.ndarray,
                                fmt: str = "jpeg", quality: int = 95) -> None:
@@ -305,8 +306,10 @@ class RecordingWriter:
         self._write(topic, "sensor_msgs/msg/PointCloud2", stamp_ns, msg)
 
     def write_camera_info(self, topic: str, stamp_ns: int, frame_id: str, K: np.ndarray, width: int,
-                          height: int, D: np.ndarray | None = None, model: str = "plumb_bob") -> None:
-        """sensor_msgs/CameraInfo with `model` distortion D (zeros when None), R = I, P = [K | 0]."""
+                          height: int, D: np.ndarray | None = None, model: str = "plumb_bob",
+                          log_ns: int | None = None) -> None:
+        """sensor_msgs/CameraInfo with `model` distortion D (zeros when None), R = I, P = [K | 0]; log_ns as
+        write_image's."""
         K = np.asarray(K, dtype=np.float64).reshape(3, 3)
         D = np.zeros(5) if D is None else np.asarray(D, dtype=np.float64).reshape(-1)
         P = np.zeros((3, 4))
@@ -318,7 +321,7 @@ class RecordingWriter:
         msg = self._type("sensor_msgs/msg/CameraInfo")(
             header=self._header(topic, stamp_ns, frame_id), height=int(height), width=int(width),
             distortion_model=model, binning_x=0, binning_y=0, roi=roi, **fields)
-        self._write(topic, "sensor_msgs/msg/CameraInfo", stamp_ns, msg)
+        self._write(topic, "sensor_msgs/msg/CameraInfo", stamp_ns if log_ns is None else log_ns, msg)
 
     def write_tf(self, stamp_ns: int, transforms: list[tuple[str, str, np.ndarray]], static: bool = False) -> None:
         """tf2_msgs/TFMessage on /tf (or /tf_static): each (parent, child, T_parent_child)."""

@@ -7,22 +7,15 @@ depth frame was waiting, so the colour of a depth frame still to come was gone: 
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
 from kinfu_cli.io.frames import COLOR_LOOKAHEAD_NS, _FramePairer, iter_frames
 from kinfu_cli.io.recording import open_recording
 from kinfu_cli.io.writers import RecordingWriter
-from recordings import read_frames
+from recordings import LATE_H, LATE_K, LATE_PERIOD, LATE_T0, LATE_W, read_frames, write_logged
 
-T0 = 1_700_000_000 * 10**9
-PERIOD = 33_333_333  # colour at 30 Hz
-W, H = 8, 6
-K = np.array([[10.0, 0, 3.5], [0, 10.0, 2.5], [0, 0, 1]])
-
-
-def _colour(k: int) -> np.ndarray:
-    return np.full((H, W, 3), [k % 256, 200, 7], np.uint8)
+T0, PERIOD = LATE_T0, LATE_PERIOD  # colour at 30 Hz
+W, H, K = LATE_W, LATE_H, LATE_K
 
 
 def _recording(path, latency_ns: int, n_colour: int = 30, depth_every: int = 3, depth_until: int | None = None,
@@ -33,22 +26,7 @@ def _recording(path, latency_ns: int, n_colour: int = 30, depth_every: int = 3, 
     depth_ks = range(0, depth_until, depth_every) if depth_ks is None else depth_ks
     events = [(T0 + k * PERIOD, "colour", k) for k in range(n_colour)]
     events += [(T0 + k * PERIOD + latency_ns, "depth", k) for k in depth_ks]
-    with RecordingWriter(path) as w:
-        for log_ns, kind, k in sorted(events):
-            stamp = T0 + k * PERIOD
-            if kind == "colour":
-                w.write_image("/camera/color/image_raw", stamp, "cam", _colour(k), "rgb8")
-                continue
-            depth = np.full((H, W), 1000 + k, np.uint16)
-            msg = w._type("sensor_msgs/msg/Image")(
-                header=w._header("/camera/depth/image_raw", stamp, "cam"), height=H, width=W, encoding="16UC1",
-                is_bigendian=0, step=W * 2, data=np.frombuffer(depth.tobytes(), np.uint8))
-            w._write("/camera/depth/image_raw", "sensor_msgs/msg/Image", log_ns, msg)
-            write = w._write  # the camera info logged with its depth image
-            w._write = lambda topic, msgtype, _, m, trailer=b"": write(topic, msgtype, log_ns, m, trailer)
-            w.write_camera_info("/camera/depth/camera_info", stamp, "cam", K, W, H)
-            w._write = write
-    return path
+    return write_logged(path, events)
 
 
 def _colour_index(frame) -> int:
