@@ -415,14 +415,14 @@ def _frames_warnings(stats: FrameStats, integrator: "_Integrator", max_lost: flo
 
 
 def _pose_drop_warnings(stats: FrameStats, recording: str) -> list[str]:
-    """A warning when more than NO_POSE_WARN of the depth frames were not fused for want of a camera pose (they
-    were counted in the report only, and the volume lacked what they saw)."""
-    counts = {r: stats.dropped.get(r, 0) for r in (DROP_NO_POSE, DROP_CHAIN_BROKEN, DROP_NO_POSE_TOPIC) if stats.dropped.get(r, 0)}
-    n = sum(counts.values())
-    if n <= NO_POSE_WARN * max(stats.depth_messages, 1):
+    """A warning when more than NO_POSE_WARN of the selected depth frames (those `every` kept) were not fused for
+    want of a camera pose (they were counted in the report only, and the volume lacked what they saw)."""
+    counts = {r: c for r in (DROP_NO_POSE, DROP_CHAIN_BROKEN, DROP_NO_POSE_TOPIC) if (c := stats.dropped.get(r, 0))}
+    n, selected = sum(counts.values()), stats.depth_messages - stats.skipped
+    if n <= NO_POSE_WARN * max(selected, 1):
         return []
     why = "; ".join(f"{r}: {c}" for r, c in counts.items())
-    return [f"{recording}: {n} of the {stats.depth_messages} depth frames have no camera pose ({why}) and were not "
+    return [f"{recording}: {n} of the {selected} depth frames selected have no camera pose ({why}) and were not "
             f"fused: the volume lacks what they saw"]
 
 

@@ -265,9 +265,7 @@ def _frames_lines(fr: dict) -> list[str]:
              f"(skipped {fr['skipped']}, without colour {fr['without_color']})"]
     for reason, n in fr["dropped"].items():
         lines.append(f"  dropped {n}: {reason}")
-    for note in fr.get("notes", []):
-        lines.append(f"  note: {note}")
-    reg = fr.get("color_registration")
+    reg = fr.get("color_registration")  # its notes are warnings (stderr), as fuse and export say them
     if reg and reg["mode"] == "project":
         lines.append(f"  colour: projected from the colour camera ({reg['color_frame']}, {reg['color_info_topic']}) "
                      f"onto the depth camera ({reg['depth_frame']})")

@@ -119,7 +119,13 @@ def test_many_frames_without_a_camera_pose_are_a_warning():
     assert _pose_drop_warnings(stats, "rec.mcap") == []
     stats.dropped[DROP_NO_POSE] = 12
     (warning,) = _pose_drop_warnings(stats, "rec.mcap")
-    assert warning.startswith("rec.mcap: 12 of the 30 depth frames have no camera pose") and "not fused" in warning
+    assert warning.startswith("rec.mcap: 12 of the 30 depth frames selected have no camera pose")
+    assert "not fused" in warning
+    # with --every 5 only 6 of the 30 were selected: 2 of them without a pose is a third, not 2 in 30
+    every = FrameStats(depth_messages=30, skipped=24)
+    every.dropped[DROP_NO_POSE] = 2
+    (warning,) = _pose_drop_warnings(every, "rec.mcap")
+    assert warning.startswith("rec.mcap: 2 of the 6 depth frames selected have no camera pose")
 
 
 def test_icp_on_narrow_frames_is_said_to_be_doubtful():
