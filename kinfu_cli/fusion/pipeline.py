@@ -417,27 +417,32 @@ def _frames_warnings(stats: FrameStats, integrator: "_Integrator", max_lost: flo
 def _pose_drop_warnings(stats: FrameStats, recording: str) -> list[str]:
     """A warning when more than NO_POSE_WARN of the selected depth frames (those `every` kept) were not fused for
     want of a camera pose (they were counted in the report only, and the volume lacked what they saw)."""
-    counts = {r: c for r in (DROP_NO_POSE, DROP_CHAIN_BROKEN, DROP_NO_POSE_TOPIC) if (c := stats.dropped.get(r, 0))}
-    n, selected = sum(counts.values()), stats.depth_messages - stats.skipped
-    if n <= NO_POSE_WARN * max(selected, 1):
-        return []
-    why = "; ".join(f"{r}: {c}" for r, c in counts.items())
-    return [f"{recording}: {n} of the {selected} depth frames selected have no camera pose ({why}) and were not "
-            f"fused: the volume lacks what they saw"]
+    counts = {r: stats.dropped.get(r, 0) for r in (DROP_NO_POSE, DROP_CHAIN_BROKEN, DROP_NO_POSE_TOPIC)}
+    return _drop_share_warnings(counts, stats, NO_POSE_WARN, recording, "have no camera pose",
+                                "the volume lacks what they saw")
 
 
 def _empty_depth_warnings(stats: FrameStats, depth_filter: DepthFilter, recording: str) -> list[str]:
     """A warning when more than NO_DEPTH_WARN of the selected depth frames were not fused for want of a valid depth
     reading (an empty image, or none left by the range and filters): as for missing poses, the volume lacks what
     they should have seen, and a sensor that sends empty images half the time is worth knowing about."""
-    counts = {r: c for r, c in {DROP_EMPTY: stats.dropped.get(DROP_EMPTY, 0), **depth_filter.drops}.items() if c}
+    counts = {DROP_EMPTY: stats.dropped.get(DROP_EMPTY, 0), **depth_filter.drops}
+    return _drop_share_warnings(counts, stats, NO_DEPTH_WARN, recording, "have no valid depth reading",
+                                "the volume lacks what they should have seen (check the sensor, the depth units, "
+                                "min_depth/max_depth)")
+
+
+def _drop_share_warnings(counts: dict[str, int], stats: FrameStats, share: float, recording: str, lack: str,
+                         consequence: str) -> list[str]:
+    """One warning when the frames dropped for the reasons counted are more than `share` of the depth frames
+    selected (those `every` kept), naming each reason's count."""
+    counts = {r: c for r, c in counts.items() if c}
     n, selected = sum(counts.values()), stats.depth_messages - stats.skipped
-    if n <= NO_DEPTH_WARN * max(selected, 1):
+    if n <= share * max(selected, 1):
         return []
     why = "; ".join(f"{r}: {c}" for r, c in counts.items())
-    return [f"{recording}: {n} of the {selected} depth frames selected have no valid depth reading ({why}) and were "
-            f"not fused: the volume lacks what they should have seen (check the sensor, the depth units, "
-            f"min_depth/max_depth)"]
+    return [f"{recording}: {n} of the {selected} depth frames selected {lack} ({why}) and were not fused: "
+            f"{consequence}"]
 
 
 def _outside_grid_warnings(integrator: "_Integrator", recording: str) -> list[str]:

@@ -17,7 +17,6 @@ from typing import NamedTuple
 
 import numpy as np
 
-from kinfu_cli.core.camera import field_of_view_problem
 from kinfu_cli.core.errors import RecordingError
 from kinfu_cli.io.messages import camera_info_distortion, camera_info_K
 from kinfu_cli.io.recording import open_recording
@@ -71,11 +70,6 @@ def principal_point_note(K: np.ndarray, width: int, height: int, image_topic: st
     images = f"the images on {image_topic}" if image_topic else "the images"
     return (f"the camera info of {images} has its principal point cx={cx:g}, cy={cy:g} outside its {width}x{height} "
             f"image (K for another resolution?); they are read with it all the same")
-
-
-def _field(msg: object, name: str):
-    value = getattr(msg, name.lower(), None)
-    return getattr(msg, name.upper(), None) if value is None else value
 
 
 def _roi_binning(msg: object, width: int, height: int, where: str) -> tuple[int, int, int, int, int, int]:
@@ -138,18 +132,14 @@ def image_camera(msg: object, where: str, image_topic: str | None = None,
 
 def _rectified_P(msg: object, where: str, image_topic: str) -> tuple[np.ndarray, int, int]:
     """(P[:, :3], width, height) of a CameraInfo whose images are rectified; RecordingError naming `where` when P
-    is not a pinhole camera of positive focal lengths and a plausible field of view."""
-    p = _field(msg, "p")
-    P = np.asarray(list(p) if p is not None else [0.0] * 12, dtype=np.float64).reshape(-1)
-    P = P.reshape(3, 4)[:, :3].copy() if P.size == 12 else np.zeros((3, 3))
-    if not (P[0, 0] > 0 and P[1, 1] > 0 and np.all(np.isfinite(P))):
-        raise RecordingError(f"{where}: CameraInfo P has no valid focal lengths (fx={P[0, 0]}, fy={P[1, 1]}), "
-                             f"and {image_topic} is rectified (its name): its images are P's pinhole camera")
+    is not a pinhole camera of positive focal lengths and a plausible field of view (camera_info_K's checks)."""
+    try:
+        P, width, height = camera_info_K(msg, where, matrix="P")
+    except RecordingError as exc:
+        raise RecordingError(f"{exc.detail}, and {image_topic} is rectified (its name): its images are P's pinhole "
+                             f"camera") from None
     if (problem := camera_matrix_problem(P)) is not None:
         raise RecordingError(f"{where}: CameraInfo P: {problem.replace('K is', 'P[:, :3] is', 1)}")
-    width, height = int(getattr(msg, "width", 0) or 0), int(getattr(msg, "height", 0) or 0)
-    if (problem := field_of_view_problem(P, width, height)) is not None:
-        raise RecordingError(f"{where}: CameraInfo P: {problem}")
     return P, width, height
 
 

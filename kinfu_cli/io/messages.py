@@ -318,16 +318,22 @@ def camera_info_distortion(msg: object, topic: str = "camera_info") -> tuple[str
     return check_distortion(str(getattr(msg, "distortion_model", "") or ""), d, topic)
 
 
-def camera_info_K(msg: object, topic: str = "camera_info") -> tuple[np.ndarray, int, int]:
-    """sensor_msgs/CameraInfo -> (K 3x3 float64, width, height)."""
-    k = getattr(msg, "k", None)
+def camera_info_K(msg: object, topic: str = "camera_info", matrix: str = "K") -> tuple[np.ndarray, int, int]:
+    """sensor_msgs/CameraInfo -> (K 3x3 float64, width, height); matrix "P": the projection matrix's left 3x3
+    instead (a rectified image's camera), with the same checks: positive finite focal lengths, a plausible field
+    of view."""
+    k = getattr(msg, matrix.lower(), None)
     if k is None:
-        k = getattr(msg, "K", None)
+        k = getattr(msg, matrix, None)
     if k is None:
-        raise RecordingError(f"{topic}: message has no K matrix (expected sensor_msgs/CameraInfo)")
-    K = np.asarray(list(k) if not isinstance(k, np.ndarray) else k, dtype=np.float64).reshape(3, 3)
+        raise RecordingError(f"{topic}: message has no {matrix} matrix (expected sensor_msgs/CameraInfo)")
+    K = np.asarray(list(k) if not isinstance(k, np.ndarray) else k, dtype=np.float64).reshape(-1)
+    if K.size != (12 if matrix == "P" else 9):
+        raise RecordingError(f"{topic}: CameraInfo {matrix} has {K.size} entries, expected "
+                             f"{'3x4' if matrix == 'P' else '3x3'}")
+    K = K.reshape(3, 4)[:, :3].copy() if matrix == "P" else K.reshape(3, 3)
     if K[0, 0] <= 0 or K[1, 1] <= 0 or not np.all(np.isfinite(K)):
-        raise RecordingError(f"{topic}: CameraInfo K has no valid focal lengths (fx={K[0, 0]}, fy={K[1, 1]})")
+        raise RecordingError(f"{topic}: CameraInfo {matrix} has no valid focal lengths (fx={K[0, 0]}, fy={K[1, 1]})")
     if (problem := field_of_view_problem(K, int(msg.width), int(msg.height))) is not None:
-        raise RecordingError(f"{topic}: CameraInfo K: {problem}")
+        raise RecordingError(f"{topic}: CameraInfo {matrix}: {problem}")
     return K, int(msg.width), int(msg.height)

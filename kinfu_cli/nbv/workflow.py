@@ -196,11 +196,12 @@ def rank_poi_views(volume_path: str | os.PathLike, pois_path: str | os.PathLike,
     check_run_size(pois_path, len(pois), opts, None if candidates is None else len(candidates),
                    camera.width * camera.height)
     grid = load_grid(volume_path)
+    s_voxels = []
     for p in pois:
         check_region_inside(grid, p.position, f"{pois_path}: POI {p.id}")
-        _check_region_voxels(grid, p, pois_path, opts.poi_radius is not None)
+        s_voxels.append(voxels_in_sphere(grid, p.position, p.radius))
+        _check_region_voxels(grid, p, s_voxels[-1], pois_path, opts.poi_radius is not None)
     outside = [sphere_outside_share(grid, p.position, p.radius) for p in pois]
-    s_voxels = [voxels_in_sphere(grid, p.position, p.radius) for p in pois]
     cleared = {p.id: forget_around(grid, p.position, p.radius) for p in pois} if opts.clear else {}
     up, up_source = resolve_up(grid, opts.up)
     table_z = resolve_table_z(grid, opts.table_z, up)
@@ -233,10 +234,10 @@ def rank_poi_views(volume_path: str | os.PathLike, pois_path: str | os.PathLike,
     return PoiViews(str(volume_path), str(pois_path), opts, camera, grid, table_z, rankings, up, up_source, warnings)
 
 
-def _check_region_voxels(grid: TernaryGrid, poi, pois_path, radius_given: bool) -> None:
+def _check_region_voxels(grid: TernaryGrid, poi, voxels: int, pois_path, radius_given: bool) -> None:
     """Refuse a POI whose S(POI) holds no voxel centre: nothing in it can be seen, so its IncTh verdict would
     read "reconstructed" on no evidence. A radius of half a voxel's diagonal always holds one."""
-    if voxels_in_sphere(grid, poi.position, poi.radius):
+    if voxels:  # voxel centres in S(POI)
         return
     need = grid.voxel_size * np.sqrt(3) / 2
     msg = (f"S(POI) of radius {poi.radius:g} m around POI {poi.id} holds no voxel centre of the volume (voxel size "
