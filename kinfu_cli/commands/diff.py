@@ -100,8 +100,9 @@ def command(before: Path, after: Path, outdir: Path, pois_path, match_radius, ma
     overlap, warnings), OUTDIR/regions/<id>.ply (the region's voxel centres) and OUTDIR/changes.ply (removed
     red, added green). With --pois, each POI within --match-radius of a region's nearest voxel is a true
     positive; regions with no POI near are false negatives; precision, recall and F1 go to changes.json "pois"
-    (null when undefined: no POI scored, no region). A POI outside the common box and near no region is not
-    scored (counted and warned); one farther than --match-radius outside both grids is an error.
+    (null when undefined: no POI scored, no region). A POI near no region is not scored (counted and warned)
+    when it lies outside the common box, or where under 10 % of the space within --match-radius is known in
+    both volumes (one never observed it); one farther than --match-radius outside both grids is an error.
 
     \b
     Example:

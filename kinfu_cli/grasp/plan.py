@@ -18,6 +18,7 @@ grown by the superquadric's largest semi-axis is not a fit of them: it is skippe
 from __future__ import annotations
 
 import json
+import math
 import os
 import time
 from dataclasses import dataclass, field
@@ -260,10 +261,16 @@ def segment_parts(doc: dict, source: str) -> dict[int, list[Superquadric]]:
     return out
 
 
-def doubtful_segments(doc: dict, parts: dict[int, list[Superquadric]]) -> dict[int, str]:
+def object_entries(doc: dict) -> dict[int, dict]:
+    """segments.json's object segments by id, looked up once for everything asked about them (ids are unique:
+    `_check_unique_ids`)."""
+    return {s.get("id"): s for s in doc["segments"] if isinstance(s, dict) and s.get("kind") == "object"}
+
+
+def doubtful_segments(entries: dict[int, dict], parts: dict[int, list[Superquadric]]) -> dict[int, str]:
     """Segment id -> why its superquadric(s) lie far from its points (`_box_problem`), for the segments of `parts`
-    whose segments.json entry carries an oriented_box."""
-    boxes = {s.get("id"): s.get("oriented_box") for s in doc["segments"] if s.get("kind") == "object"}
+    whose segments.json entry (`object_entries`) carries an oriented_box."""
+    boxes = {sid: s.get("oriented_box") for sid, s in entries.items()}
     return {sid: why for sid, ps in parts.items()
             if isinstance(boxes.get(sid), dict) and (why := _box_problem(boxes[sid], ps))}
 
@@ -287,29 +294,47 @@ def nothing_to_grasp(doc: dict) -> str:
     return f"no object segment has a superquadric to grasp (of {len(objects)}; {why})"
 
 
-def segment_flags(doc: dict, sid: int) -> dict:
-    """The segment's doubts a grasp of it inherits: 'touches_grid_faces' (the faces the grid cuts it at, [] when
-    none) and 'fit_converged' (its superquadric fit's; None when segments.json does not say)."""
-    s = next((e for e in doc["segments"] if isinstance(e, dict) and e.get("id") == sid), {})
-    sq = s.get("superquadric")
+def fit_convergence(s: dict) -> tuple[bool | None, list[str]]:
+    """Whether the fits a grasp of the segment (its segments.json entry `s`) rests on converged: its
+    multi-superquadric's parts when it has them, else its superquadric (None when segments.json does not say), and
+    the ones that did not, each named with its residual ('residual 19 mm', 'part 1, residual 3 mm')."""
+    multi = s.get("multi_superquadric")
+    parts = multi.get("parts") if isinstance(multi, dict) else None
+    fits = list(enumerate(parts)) if isinstance(parts, list) and parts else [(None, s.get("superquadric"))]
+    said = [(k, f) for k, f in fits if isinstance(f, dict) and isinstance(f.get("converged"), bool)]
+    unfinished = []
+    for k, f in said:
+        if f["converged"]:
+            continue
+        residual = f.get("residual")
+        try:
+            mm = 1000 * float(residual) if isinstance(residual, (int, float)) and not isinstance(residual, bool) \
+                else math.nan
+        except OverflowError:  # an integer of hundreds of digits
+            mm = math.nan
+        unfinished.append(", ".join(([f"part {k}"] if k is not None else [])
+                                    + ([f"residual {mm:.0f} mm"] if math.isfinite(mm) else [])))
+    return (False if unfinished else True if said and len(said) == len(fits) else None), unfinished
+
+
+def segment_flags(s: dict) -> dict:
+    """The doubts a grasp of the segment (its segments.json entry `s`) inherits: 'touches_grid_faces' (the faces the
+    grid cuts it at, [] when none) and 'fit_converged' (`fit_convergence`)."""
     faces = s.get("touches_grid_faces")
     return {"touches_grid_faces": list(faces) if isinstance(faces, list) else [],
-            "fit_converged": sq.get("converged") if isinstance(sq, dict) else None}
+            "fit_converged": fit_convergence(s)[0]}
 
 
-def shape_doubts(doc: dict, planned: list[int]) -> list[str]:
-    """What segments.json doubts about the shapes of the segments grasped (`planned`): a superquadric fit that
-    did not converge (its 'converged' false; a multi-superquadric's parts are fits of their own), and segments
-    the grid cuts off ('touches_grid_faces'): their grasps are planned all the same, and said."""
-    entries = {s.get("id"): s for s in doc["segments"] if isinstance(s, dict) and s.get("kind") == "object"}
+def shape_doubts(entries: dict[int, dict], planned: list[int]) -> list[str]:
+    """What segments.json (`object_entries`) doubts about the shapes of the segments grasped (`planned`): a
+    superquadric fit that did not converge (its 'converged' false; for a multi-superquadric, its parts' fits), and
+    segments the grid cuts off ('touches_grid_faces'): their grasps are planned all the same, and said."""
     unfinished, cut = [], []
     for sid in planned:
         s = entries.get(sid) or {}
-        sq = s.get("superquadric")
-        if not (s.get("multi_superquadric") or {}).get("parts") and isinstance(sq, dict) and sq.get("converged") is False:
-            residual = sq.get("residual")
-            unfinished.append(f"{sid}" + (f" (residual {residual * 1000:.0f} mm)"
-                                          if isinstance(residual, (int, float)) and np.isfinite(residual) else ""))
+        fits = fit_convergence(s)[1]
+        if fits:
+            unfinished.append(f"{sid}" + (f" ({'; '.join(fits)})" if any(fits) else ""))
         faces = s.get("touches_grid_faces")
         if isinstance(faces, list) and faces:
             cut.append(f"{sid} ({', '.join(str(f) for f in faces)})")
@@ -385,14 +410,15 @@ def plan_grasps(segments: str | os.PathLike | dict, options: GraspOptions | None
     if not parts:
         raise GraspError(f"{source}: {nothing_to_grasp(doc)}")
     # a grasp of a superquadric away from its object looks right and grasps air; it would also move the workspaces
-    skipped = doubtful_segments(doc, parts)
+    entries = object_entries(doc)
+    skipped = doubtful_segments(entries, parts)
     if skipped and len(skipped) == len(parts):
         sid, why = next(iter(skipped.items()))
         raise GraspError(f"{source}: no object segment has a superquadric that fits its points (segment {sid}: "
                          f"{why}); run kinfu segment again")
     warnings = [f"segment {sid}: {why}: skipped (listed in skipped_segments)" for sid, why in skipped.items()]
     parts = {sid: ps for sid, ps in parts.items() if sid not in skipped}
-    warnings += shape_doubts(doc, list(parts))
+    warnings += shape_doubts(entries, list(parts))
     if plane is None:
         warnings.append("segments.json has no support plane: grasps are not kept above any table")
     up = plane[:3] if plane is not None else np.array([0.0, 0.0, 1.0])
@@ -409,7 +435,7 @@ def plan_grasps(segments: str | os.PathLike | dict, options: GraspOptions | None
         objs = [grasp_object(sid, parts[sid], plane, workspaces, options)
                 for sid in (progress(ids) if progress is not None else ids)]
     for o in objs:  # what segments.json doubts about each shape, on the grasp itself (shape_doubts says it too)
-        o.shape_flags = segment_flags(doc, o.segment)
+        o.shape_flags = segment_flags(entries.get(o.segment) or {})
     for o in objs:
         if plane is not None and any(q.center @ plane[:3] + plane[3] < 0 for q in o.parts):
             warnings.append(f"segment {o.segment}: its superquadric's centre is below the support plane (a poor "

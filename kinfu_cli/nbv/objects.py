@@ -110,6 +110,9 @@ def find_near(contour_points: np.ndarray, surface_points: np.ndarray, surface_la
 
 @dataclass
 class SegmentAttempt:
+    """One segment the planner tried, most salient first. touches_grid_faces: the grid's faces that cut the segment
+    (segmentation's grid_faces); rejected: its candidates rejected per reason, when the scorer says (`nbv_scorer`)."""
+
     segment_id: int
     saliency: float
     center: list
@@ -118,6 +121,13 @@ class SegmentAttempt:
     candidates: int
     best_score: float
     accepted: bool
+    touches_grid_faces: list = field(default_factory=list)
+    rejected: dict | None = None
+
+    @property
+    def valid(self) -> int | None:
+        """Candidates whose sensor position passed the scorer's checks (None when the scorer does not say)."""
+        return None if self.rejected is None else self.candidates - sum(self.rejected.values())
 
 
 @dataclass
@@ -158,12 +168,14 @@ def nbv_scorer(grid: TernaryGrid | RayVolume, camera: CameraModel, gain: str = "
     reject_unknown: a sensor position in unknown space scores 0 (the paper; a simulated arm without a motion
     planner may pass False); optimistic: unknown voxels outside the region do not stop rays; table_z: the
     table's height along `up` (default z); tally: when given, counts the views scored ("views", "valid") and
-    rejected (by reason)."""
+    rejected (by reason). The scorer's `last_rejected` holds the last call's rejections per reason
+    (`plan_object_views` records them per segment)."""
     vol = as_ray_volume(grid)
 
     def score(poses: np.ndarray, center: np.ndarray, radius: float) -> np.ndarray:
         s = score_views(vol, poses, camera, center, radius, gain, table_z=table_z, reject_unknown=reject_unknown,
                         optimistic=optimistic, up=up)
+        score.last_rejected = s.rejected()
         if tally is not None:
             tally["views"] = tally.get("views", 0) + len(s.reasons)
             tally["valid"] = tally.get("valid", 0) + int(s.valid.sum())
@@ -171,6 +183,7 @@ def nbv_scorer(grid: TernaryGrid | RayVolume, camera: CameraModel, gain: str = "
                 tally[reason] = tally.get(reason, 0) + n
         return np.asarray(s.gain, dtype=float)
 
+    score.last_rejected = None
     return score
 
 
@@ -206,6 +219,7 @@ def plan_object_views(segments: SegmentResult, contours: Contours, scorer: Score
                                       cone_deg=cone_deg, n_directions=n_directions, n_rolls=n_rolls, up=up)
     free = not_attempted(poses, exclude, shift=exclude_shift, turn_deg=exclude_turn_deg)
     seg = segments.segmentation
+    cut = getattr(segments, "grid_faces", {})
     near = find_near(contours.positions, seg.points, seg.labels)
     plan = ObjectPlan(None, 0.0, None, None, None, int(len(poses)), 0)
     plan.timing["views_generation"] = time.perf_counter() - t0
@@ -216,13 +230,14 @@ def plan_object_views(segments: SegmentResult, contours: Contours, scorer: Score
         cp = np.flatnonzero(near == s.id)
         center = np.asarray(s.box.center, dtype=np.float64)
         radius = float(s.bounding_radius + margin)
+        faces = list(cut.get(s.id, []))
         if len(cp) == 0:
-            plan.attempts.append(SegmentAttempt(s.id, s.saliency, center.tolist(), radius, 0, 0, 0.0, False))
+            plan.attempts.append(SegmentAttempt(s.id, s.saliency, center.tolist(), radius, 0, 0, 0.0, False, faces))
             continue
         sel = np.flatnonzero(np.isin(owner, cp) & free)
         if len(sel) == 0:
             plan.attempts.append(SegmentAttempt(s.id, s.saliency, center.tolist(), radius, int(len(cp)), 0, 0.0,
-                                                False))
+                                                False, faces))
             continue
         t = time.perf_counter()
         scores = np.asarray(scorer(poses[sel], center, radius), dtype=float)
@@ -231,8 +246,9 @@ def plan_object_views(segments: SegmentResult, contours: Contours, scorer: Score
         order = np.argsort(-scores, kind="stable")
         best = float(scores[order[0]])
         ok = best > score_threshold
+        rejected = getattr(scorer, "last_rejected", None)
         plan.attempts.append(SegmentAttempt(s.id, s.saliency, center.tolist(), radius, int(len(cp)), int(len(sel)),
-                                            best, ok))
+                                            best, ok, faces, None if rejected is None else dict(rejected)))
         if ok:
             plan.pose = poses[sel[order[0]]]
             plan.score = best

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from numba import njit
 from scipy.ndimage import binary_erosion
 from scipy.spatial import cKDTree
 
@@ -279,43 +280,112 @@ def rank_poi(volume: TernaryGrid | RayVolume, center, camera: CameraModel, *, po
 # Volume helpers
 
 
-def _sphere_block(grid: TernaryGrid, center, radius: float):
-    """The labels sub-array around a sphere (a view) and the mask of its voxels whose centre is inside,
-    or (None, None) when the sphere misses the volume."""
+@njit(cache=True, inline="always")
+def _sq(x):
+    return x * x
+
+
+@njit(cache=True, inline="always")
+def _run(s, r2, o, vs, c, lo, hi):
+    """The voxels k in [lo, hi) of one grid row, at squared distance `s` from the sphere's centre across the row,
+    whose centre is within the sphere: the run [a, b] (empty when b < a). The run is solved for, then its ends
+    settled with the test a dense distance array makes, in the same float operations (s + dz * dz <= r2);
+    d2 falls then rises along a row, so the voxels passing it are one run."""
+    h = math.sqrt(r2 - s)
+    a = int(max(float(lo), min(float(hi), math.ceil((c - h - o) / vs - 0.5))))
+    b = int(min(float(hi - 1), max(float(lo - 1), math.floor((c + h - o) / vs - 0.5))))
+    while a > lo and s + _sq(o + (a - 1 + 0.5) * vs - c) <= r2:
+        a -= 1
+    while a <= b and not s + _sq(o + (a + 0.5) * vs - c) <= r2:
+        a += 1
+    while b < hi - 1 and s + _sq(o + (b + 1 + 0.5) * vs - c) <= r2:
+        b += 1
+    while b >= a and not s + _sq(o + (b + 0.5) * vs - c) <= r2:
+        b -= 1
+    return a, b
+
+
+@njit(cache=True)
+def _sphere_counts(labels, lo, hi, origin, vs, c, radius):
+    """(unknown, all) voxels of labels[lo:hi] whose centre is within `radius` of `c`, visiting only those."""
+    r2 = radius * radius
+    unknown = 0
+    total = 0
+    for i in range(lo[0], hi[0]):
+        dx = origin[0] + (i + 0.5) * vs - c[0]
+        for j in range(lo[1], hi[1]):
+            dy = origin[1] + (j + 0.5) * vs - c[1]
+            s = dx * dx + dy * dy
+            if not s <= r2:
+                continue
+            a, b = _run(s, r2, origin[2], vs, c[2], lo[2], hi[2])
+            for k in range(a, b + 1):
+                if labels[i, j, k] == UNKNOWN:
+                    unknown += 1
+            total += max(b - a + 1, 0)
+    return unknown, total
+
+
+@njit(cache=True)
+def _sphere_forget(labels, lo, hi, origin, vs, c, radius):
+    """Set the voxels of labels[lo:hi] whose centre is within `radius` of `c` to UNKNOWN; the number changed."""
+    r2 = radius * radius
+    changed = 0
+    for i in range(lo[0], hi[0]):
+        dx = origin[0] + (i + 0.5) * vs - c[0]
+        for j in range(lo[1], hi[1]):
+            dy = origin[1] + (j + 0.5) * vs - c[1]
+            s = dx * dx + dy * dy
+            if not s <= r2:
+                continue
+            a, b = _run(s, r2, origin[2], vs, c[2], lo[2], hi[2])
+            for k in range(a, b + 1):  # branch-free: a random mix of labels mispredicts a test per voxel
+                changed += labels[i, j, k] != UNKNOWN
+                labels[i, j, k] = UNKNOWN
+    return changed
+
+
+def _sphere_box(grid: TernaryGrid, center, radius: float):
+    """The sphere's centre and the voxel index box [lo, hi) that holds it, clipped to the grid, or None when the
+    sphere misses the grid. The counts walk only the voxels inside the sphere, one row run at a time: memory does
+    not grow with it (a dense float64 distance array over the box took ~1 GB at 512^3)."""
     c = np.asarray(center, dtype=np.float64).reshape(3)
     vs = grid.voxel_size
-    lo = np.maximum(np.floor((c - radius - grid.origin) / vs).astype(int), 0)
-    hi = np.minimum(np.ceil((c + radius - grid.origin) / vs).astype(int) + 1, np.array(grid.shape))
+    lo = np.maximum(np.floor((c - radius - grid.origin) / vs).astype(np.int64), 0)
+    hi = np.minimum(np.ceil((c + radius - grid.origin) / vs).astype(np.int64) + 1, np.array(grid.shape))
     if np.any(hi <= lo):
-        return None, None
-    ax = [grid.origin[a] + (np.arange(lo[a], hi[a]) + 0.5) * vs - c[a] for a in range(3)]
-    d2 = ax[0][:, None, None] ** 2 + ax[1][None, :, None] ** 2 + ax[2][None, None, :] ** 2
-    return grid.labels[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]], d2 <= radius * radius
+        return None
+    return c, lo, hi
 
 
 def forget_around(grid: TernaryGrid, center, radius: float) -> int:
     """ForgetAround: set every voxel whose centre is within `radius` of `center` to UNKNOWN, in place.
     Returns the number of voxels that changed."""
-    sub, inside = _sphere_block(grid, center, radius)
-    if sub is None:
+    box = _sphere_box(grid, center, radius)
+    if box is None:
         return 0
-    mask = inside & (sub != UNKNOWN)
-    sub[mask] = UNKNOWN
-    return int(mask.sum())
+    c, lo, hi = box
+    return int(_sphere_forget(grid.labels, lo, hi, grid.origin, grid.voxel_size, c, float(radius)))
+
+
+def sphere_counts(grid: TernaryGrid, center, radius: float) -> tuple[int, int]:
+    """(unknown voxels, all voxels) of the grid whose centre is within `radius` of `center`, in one pass."""
+    box = _sphere_box(grid, center, radius)
+    if box is None:
+        return 0, 0
+    c, lo, hi = box
+    unknown, total = _sphere_counts(grid.labels, lo, hi, grid.origin, grid.voxel_size, c, float(radius))
+    return int(unknown), int(total)
 
 
 def unknown_in_sphere(grid: TernaryGrid, center, radius: float) -> int:
     """Number of unknown voxels whose centre is within `radius` of `center` (inside the volume)."""
-    sub, inside = _sphere_block(grid, center, radius)
-    if sub is None:
-        return 0
-    return int(np.count_nonzero(inside & (sub == UNKNOWN)))
+    return sphere_counts(grid, center, radius)[0]
 
 
 def voxels_in_sphere(grid: TernaryGrid, center, radius: float) -> int:
     """Number of voxels of the grid whose centre is within `radius` of `center`."""
-    _, inside = _sphere_block(grid, center, radius)
-    return 0 if inside is None else int(np.count_nonzero(inside))
+    return sphere_counts(grid, center, radius)[1]
 
 
 def sphere_outside_share(grid: TernaryGrid, center, radius: float, samples: int = 40) -> float:

@@ -27,8 +27,7 @@ from kinfu_cli.fusion.volume import load_grid
 from kinfu_cli.nbv.gains import get_gain
 from kinfu_cli.nbv.objects import W_TH, ObjectPlan, known_grid, nbv_scorer, plan_object_views_for_volume
 from kinfu_cli.nbv.ranking import (PoiRanking, check_region_inside, estimate_table_z, forget_around,
-                                   least_blocked_share, load_pois, rank_poi, sphere_outside_share,
-                                   unknown_in_sphere, voxels_in_sphere)
+                                   least_blocked_share, load_pois, rank_poi, sphere_counts, sphere_outside_share)
 from kinfu_cli.nbv.raycast import RayVolume
 from kinfu_cli.nbv.viewpoints import MAX_RUN_VIEWS, PAPER_SPHERE, SphereSpec, read_candidates
 from kinfu_cli.segmentation.pipeline import load_segment_input
@@ -196,13 +195,17 @@ def rank_poi_views(volume_path: str | os.PathLike, pois_path: str | os.PathLike,
     check_run_size(pois_path, len(pois), opts, None if candidates is None else len(candidates),
                    camera.width * camera.height)
     grid = load_grid(volume_path)
-    s_voxels = []
+    s_voxels, s_unknown = [], []
     for p in pois:
         check_region_inside(grid, p.position, f"{pois_path}: POI {p.id}")
-        s_voxels.append(voxels_in_sphere(grid, p.position, p.radius))
-        _check_region_voxels(grid, p, s_voxels[-1], pois_path, opts.poi_radius is not None)
+        unknown, total = sphere_counts(grid, p.position, p.radius)
+        s_voxels.append(total)
+        s_unknown.append(unknown)
+        _check_region_voxels(grid, p, total, pois_path, opts.poi_radius is not None)
     outside = [sphere_outside_share(grid, p.position, p.radius) for p in pois]
     cleared = {p.id: forget_around(grid, p.position, p.radius) for p in pois} if opts.clear else {}
+    if opts.clear:  # ForgetAround left every voxel of every S(POI) unknown
+        s_unknown = list(s_voxels)
     up, up_source = resolve_up(grid, opts.up)
     table_z = resolve_table_z(grid, opts.table_z, up)
     vol = RayVolume.from_grid(grid)
@@ -225,7 +228,8 @@ def rank_poi_views(volume_path: str | os.PathLike, pois_path: str | os.PathLike,
     warnings = [_outside_warning(r, grid) for r in rankings if r.extra["outside_share"] >= OUTSIDE_WARN_SHARE]
     warnings += [rejection_warning(f"POI {r.poi_id}", r.scores.rejected(), len(r.scores.reasons), table_z, up,
                                   up_source) for r in rankings if len(r.scores.reasons) and not r.scores.valid.any()]
-    warnings += [w for r in rankings if (w := _unreachable(r, grid, opts.optimistic) or _few_valid_views(r, grid))]
+    warnings += [w for r, unknown in zip(rankings, s_unknown)
+                 if (w := _unreachable(r, opts.optimistic, unknown) or _few_valid_views(r, unknown))]
     warnings += [f"POI {r.poi_id}: every valid view scores 0 on the {opts.gain} gain though S(POI) is not "
                  f"reconstructed (best unknown gain {r.scores.gains['unknown'][r.scores.valid].max():.0f} rays): the "
                  f"order of its views says nothing; rank with the unknown gain"
@@ -258,20 +262,19 @@ def _outside_warning(r: PoiRanking, grid: TernaryGrid) -> str:
             f"{r.extra['sphere_voxels']} voxels inside (a smaller radius, or a volume fused with a larger grid)")
 
 
-def _few_valid_views(r: PoiRanking, grid: TernaryGrid) -> str:
+def _few_valid_views(r: PoiRanking, unknown: int) -> str:
     """A warning when a POI is called reconstructed (no valid view's gain reaches IncTh) while S(POI) still holds
     UNREACHABLE_UNKNOWN of unknown voxels and most candidates (FEW_VALID_REJECTED) were rejected for standing in
     unobserved space: the paper's verdict covers only what the few valid views see. Not turned into "unreachable":
     the unknown voxels may lie inside solid objects (a table's interior), which no view sees, and the rejected
     views, cast as if their space were free, would see through unobserved faces into them (a false alarm on the
-    synthetic objects scene); "" otherwise."""
+    synthetic objects scene); "" otherwise. unknown: the unknown voxels of S(POI) (of r.extra["sphere_voxels"])."""
     if not r.reconstructed or not len(r.scores.reasons):
         return ""
     inside = sum(why == "inside_unknown" for why in r.scores.reasons)
     if inside < FEW_VALID_REJECTED * len(r.scores.reasons):
         return ""
-    unknown = unknown_in_sphere(grid, r.center, r.radius)
-    total = r.extra.get("sphere_voxels") or voxels_in_sphere(grid, r.center, r.radius)
+    total = r.extra["sphere_voxels"]
     if unknown < UNREACHABLE_UNKNOWN * total:
         return ""
     n_valid = int(r.scores.valid.sum())
@@ -281,14 +284,13 @@ def _few_valid_views(r: PoiRanking, grid: TernaryGrid) -> str:
             f"the verdict covers only what those views see")
 
 
-def _unreachable(r: PoiRanking, grid: TernaryGrid, optimistic: bool) -> str:
+def _unreachable(r: PoiRanking, optimistic: bool, unknown: int) -> str:
     """Mark a POI whose region no valid view can see (every view's rays mostly stop on unobserved space before
     S(POI)) while S(POI) still holds unknown voxels (UNREACHABLE_UNKNOWN of it): the paper's IncTh test would
     call it reconstructed, but its small gain only says the way there was never observed. Such a POI is
-    `unreachable` and not reconstructed; returns its warning ("" otherwise)."""
+    `unreachable` and not reconstructed; returns its warning ("" otherwise). unknown: the unknown voxels of S(POI)."""
     share = None if optimistic else least_blocked_share(r.scores)
-    unknown = unknown_in_sphere(grid, r.center, r.radius)
-    s_voxels = r.extra.get("sphere_voxels") or 4.0 / 3.0 * np.pi * (r.radius / grid.voxel_size) ** 3
+    s_voxels = r.extra["sphere_voxels"]
     r.extra["unreachable"] = bool(share is not None and share >= UNREACHABLE_SHARE
                                   and unknown >= UNREACHABLE_UNKNOWN * s_voxels and r.reconstructed)
     if not r.extra["unreachable"]:
@@ -364,10 +366,78 @@ def rank_object_views(volume_path: str | os.PathLike, camera: CameraModel, *, ga
                      f"{len(plan.attempts)} segments tried, none with a contour point")
         elif tally.get("views", 0) and not tally.get("valid", 0):
             empty = rejection_warning("objects", rejected, tally["views"], tz, up, up_source)
-    warnings = [empty] if empty else []
+    warnings = ([empty] if empty else []) + object_plan_doubts(plan, grid, score_threshold, empty is not None)
     weighted = hasattr(volume, "weights")
     if not weighted:
         warnings.append(f"{volume_path} has no fusion weights (a ternary grid): W_th = {W_TH:g} is not applied, "
                         "every observed voxel counts as known; give the fused volume.npz to apply it")
     return ObjectViews(str(volume_path), gain, camera, grid, tz, score_threshold, plan, top, up, up_source,
                        warnings, empty, rejected, W_TH if weighted else None)
+
+
+def object_plan_doubts(plan: ObjectPlan, grid: TernaryGrid, score_threshold: float, empty: bool) -> list[str]:
+    """The object-driven plan's results that look right but rest on part of the evidence (the POI mode's
+    OUTSIDE_WARN_SHARE and FEW_VALID_REJECTED checks, per segment): the segment planned for cut by a grid face,
+    or its scored region mostly outside the grid; segments passed over as reconstructed that the grid cuts (beyond
+    the face there is no voxel, so no contour point and no score says that side is unseen; contours take the
+    outside as no evidence); segments passed over because every candidate of theirs was rejected; a
+    "reconstructed" verdict from few valid views. `empty`: the plan is empty for a structural reason already said
+    (every candidate rejected, no contour point)."""
+    out = []
+    chosen = plan.attempts[-1] if plan.pose is not None and plan.attempts else None
+    passed = plan.attempts[:-1] if chosen is not None else plan.attempts
+    if chosen is not None:
+        share = sphere_outside_share(grid, plan.region_center, plan.region_radius)
+        why = []
+        if chosen.touches_grid_faces:
+            why.append(f"the grid cuts it at its {_faces(chosen.touches_grid_faces)}, so its side beyond was never "
+                       f"mapped and no contour point or score stands for it")
+        if share >= OUTSIDE_WARN_SHARE:
+            why.append(f"{100 * share:.0f} % of the region its views are scored on (radius {plan.region_radius:.2f} m) "
+                       f"lies outside the volume, where no unknown voxel is counted")
+        if why:
+            out.append(f"segment {chosen.segment_id}, the one planned for: {'; '.join(why)}: its views cover only the "
+                       f"part inside the grid (fuse again with a grid holding the whole object)")
+    scored = [a for a in passed if a.candidates and a.rejected is not None]
+    blind = [a for a in scored if a.valid == 0]
+    cut = [a for a in passed if a.touches_grid_faces and a.valid != 0]
+    if cut:
+        them = "them" if len(cut) > 1 else "it"
+        out.append(f"segment{_s(cut)} {', '.join(f'{a.segment_id} ({_faces(a.touches_grid_faces)})' for a in cut)} "
+                   f"passed over as reconstructed though the grid cuts {them} there: beyond a face there is no voxel, "
+                   f"so no contour point or score says that side is unseen (fuse again with a grid holding the whole "
+                   f"object)")
+    if empty:  # every candidate rejected, or none at all: said by the empty reason
+        return out
+    if blind and chosen is not None:
+        out.append(f"segment{_s(blind)} {', '.join(f'{a.segment_id} ({a.candidates} candidates)' for a in blind)} "
+                   f"passed over with every candidate view rejected ({_reasons(blind)}): no view of "
+                   f"{'them' if len(blind) > 1 else 'it'} was scored, and the plan is for the less salient segment "
+                   f"{chosen.segment_id}")
+    if chosen is None and scored:
+        total = sum(a.candidates for a in scored)
+        valid = sum(a.valid for a in scored)
+        unobserved = sum(a.rejected.get("inside_unknown", 0) for a in scored)
+        if unobserved >= FEW_VALID_REJECTED * total or blind:
+            none = f"; segment{_s(blind)} {', '.join(str(a.segment_id) for a in blind)} had none" if blind else ""
+            out.append(f"no view scores above {score_threshold:g}, judged from only {valid} valid of {total} "
+                       f"candidate views of the segments tried (rejected: {_reasons(scored)}{none}): the verdict that "
+                       f"the objects are reconstructed covers only what those views see")
+    return out
+
+
+def _s(items) -> str:
+    return "s" if len(items) > 1 else ""
+
+
+def _faces(faces: list[str]) -> str:
+    return f"{', '.join(faces)} face{_s(faces)}"
+
+
+def _reasons(attempts: list) -> str:
+    """The attempts' rejected candidates summed per reason: "inside_unknown 40, below_table 3"."""
+    sums: dict[str, int] = {}
+    for a in attempts:
+        for k, v in a.rejected.items():
+            sums[k] = sums.get(k, 0) + v
+    return ", ".join(f"{k} {v}" for k, v in sums.items() if v) or "none"
