@@ -142,13 +142,18 @@ def colour_camera(rec, info_topic: str, distortion=None,
     distortion, read by `distortion` when given) and image size, after the roi and binning (io.camera_info
     .image_camera; P and no distortion for a rectified topic); RecordingError naming the topic when it cannot be
     read."""
-    info = rec.first_message(info_topic)
-    where = f"{rec.path}: {info_topic}"
+    return colour_camera_of(rec.first_message(info_topic), f"{rec.path}: {info_topic}", distortion, image_topic)
+
+
+def colour_camera_of(info: object, where: str, distortion=None,
+                     image_topic: str | None = None) -> tuple[Undistorter, tuple[int, int]]:
+    """The colour camera of one camera info message `info` (colour_camera's reading); RecordingError naming
+    `where` when it cannot be read."""
     cam = image_camera(info, where, image_topic, **({"distortion": distortion} if distortion else {}))
     w, h = cam.width, cam.height
     if w < 1 or h < 1:  # the colour pixels are scaled by the image's size over this one
-        raise RecordingError(f"{rec.path}: {info_topic}: CameraInfo says the colour image is {w}x{h}; expected "
-                             f"its width and height in pixels")
+        raise RecordingError(f"{where}: CameraInfo says the colour image is {w}x{h}; expected its width and "
+                             f"height in pixels")
     return Undistorter(cam.K, cam.model, cam.D), (w, h)
 
 

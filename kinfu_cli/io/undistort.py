@@ -86,3 +86,16 @@ class Undistorter:
         else:
             uv, _ = cv2.projectPoints(pts, zero, zero, self.K, self.D)
         return uv.reshape(-1, 2)
+
+
+def reproject_pinhole(img: np.ndarray, K_from: np.ndarray, K_to: np.ndarray, size_of_K: tuple[int, int]) -> np.ndarray:
+    """`img`, an image of pinhole camera K_from, as pinhole camera K_to of the same optical frame sees it (nearest
+    pixel): a rectified image (on its camera info's P) placed on an undistorted one (on K). size_of_K: the (width,
+    height) both K belong to, scaled to `img`'s size. Unchanged when the two are the same camera."""
+    if np.allclose(K_from, K_to, rtol=1e-9, atol=1e-9):
+        return img
+    h, w = img.shape[:2]
+    scale = np.array([[w / size_of_K[0]], [h / size_of_K[1]], [1.0]])
+    src, dst = np.asarray(K_from, np.float64) * scale, np.asarray(K_to, np.float64) * scale
+    m1, m2 = cv2.initUndistortRectifyMap(src, np.zeros(5), np.eye(3), dst, (w, h), cv2.CV_32FC1)
+    return cv2.remap(img, m1, m2, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
