@@ -13,6 +13,7 @@ so that they load the kernels instead of each compiling them. It writes nothing 
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import subprocess
 import sys
@@ -89,13 +90,23 @@ def run_job(commands: list[list[str]]) -> list[str]:
     return failed
 
 
+def cache_folder(src: Path) -> Path:
+    """Where numba caches the kernels of a source file: its __pycache__, or under NUMBA_CACHE_DIR (kinfu_cli/__init__
+    sets it when the install folder cannot be written), in numba's sub-folder for the source's folder."""
+    if not os.environ.get("NUMBA_CACHE_DIR"):
+        return src.parent / "__pycache__"
+    from numba.core.caching import _CacheLocator
+
+    return Path(os.environ["NUMBA_CACHE_DIR"], _CacheLocator.get_suitable_cache_subpath(str(src)))
+
+
 def cache_is_warm() -> bool:
     """True when every source file with a numba kernel has cache entries newer than itself (a rough test: a
     kernel never run before is still compiled by its first caller)."""
     for src in (REPO / "kinfu_cli").rglob("*.py"):
         if src.relative_to(REPO / "kinfu_cli") in NOT_WARMED or not KERNEL.search(src.read_text(errors="ignore")):
             continue
-        index = list(src.parent.glob(f"__pycache__/{src.stem}.*.nbi"))
+        index = list(cache_folder(src).glob(f"{src.stem}.*.nbi"))
         if not index or max(p.stat().st_mtime for p in index) < src.stat().st_mtime:
             return False
     return True

@@ -13,6 +13,7 @@ import contextlib
 import logging
 import os
 import re
+import shutil
 import signal
 import threading
 import time
@@ -29,7 +30,8 @@ from kinfu_cli.batch.manifest import DONE, MANIFEST_NAME, build_manifest, read_p
 from kinfu_cli.batch.plan import Plan
 from kinfu_cli.batch.stages import StageSpec
 from kinfu_cli.core.errors import ConfigError, KinfuError
-from kinfu_cli.core.ownership import changed_since_written, claim_output
+from kinfu_cli.core.ownership import (changed_since_written, claim_output, holds_only_kinfu_entries,
+                                      mark_folder_output, written_by_kinfu)
 from kinfu_cli.core.progress import progress
 
 CONNECT_TIMEOUT_S = 5
@@ -211,7 +213,7 @@ def run_task(spec: StageSpec, rec, options: Mapping, previous: dict | None, forc
     if bad := [u["stage"] if u.get("folder") in (None, str(rec.output)) else f"{u['stage']} of {u['folder']}"
                for u in upstream if u.get("status") not in DONE]:
         return {**entry, "status": "blocked", "error": f"needs {', '.join(bad)}, which did not finish",
-                "stage": spec.name, "folder": str(rec.output)}
+                "stage": spec.name, "folder": str(rec.output), "warnings": _drop_stale(spec, rec)}
     try:
         outdir, outputs = rec.output, spec.outputs_of(rec)
         if not force and (edited := [c for rel in spec.claims_of(rec) for c in changed_since_written(outdir / rel)]):
@@ -236,9 +238,31 @@ def run_task(spec: StageSpec, rec, options: Mapping, previous: dict | None, forc
         entry.update(status="ok", fingerprint=fp, outputs=stats, numbers=done.numbers, warnings=done.warnings)
     except Exception as exc:  # recorded in the manifest; the other recordings go on
         entry["error"] = _one_line(exc)
+        entry["warnings"] = _drop_stale(spec, rec)
     entry["seconds"] = round(time.perf_counter() - t0, 3)
     entry["stage"], entry["folder"] = spec.name, str(rec.output)
     return entry
+
+
+def _drop_stale(spec: StageSpec, rec) -> list[str]:
+    """Remove the outputs an earlier run of a stage that failed or was blocked left (kinfu's, unchanged since): they
+    would sit, complete-looking, beside the other stages' new results (a segment of the old fuse beside the new
+    one). Returns the warning that says so ([] when there were none)."""
+    gone = []
+    for rel in spec.claims_of(rec):
+        path = rec.output / rel
+        if not written_by_kinfu(path) or changed_since_written(path):
+            continue
+        if path.is_dir() and not path.is_symlink():
+            if not holds_only_kinfu_entries(path):
+                continue  # a user's file inside: the folder stays (with the user's note of what is in it)
+            shutil.rmtree(path, ignore_errors=True)
+        else:
+            with contextlib.suppress(OSError):
+                path.unlink()
+        gone.append(rel)
+    return [f"the {spec.name} outputs of an earlier run ({', '.join(gone)}) were removed: they would not match this "
+            f"run's other results"] if gone else []
 
 
 # what a killed kinfu run leaves beside an output (core.atomic's temporaries): not a user's file
@@ -289,12 +313,21 @@ def check_before_work(plan: Plan, table: Mapping[str, StageSpec], force: bool) -
     check_output_folders(plan, force)  # after the paths: a user's file where a stage writes is named itself
 
 
+def _mark_folders(plan: Plan) -> None:
+    """Mark the existing output folders as kinfu's (claimed by this run, forced too; core.ownership): a later run
+    takes them back, the user's files in them kept, without being forced."""
+    for folder in (plan.output, *(rec.output for rec in plan.recordings)):
+        if folder.is_dir():
+            mark_folder_output(folder)
+
+
 def run_plan(plan: Plan, table: Mapping[str, StageSpec], engine: Engine, *, force: bool = False,
              quiet: bool = False, on_entry: Callable[[dict], None] | None = None, redo: bool = False) -> dict:
     """Submit the plan's task graph, write manifest.json after each finished task; returns the manifest.
     force: redo every stage and write over outputs kinfu did not write; redo: only redo every stage."""
     manifest_path = plan.output / MANIFEST_NAME
     previous = {} if force or redo else read_previous(manifest_path)
+    _mark_folders(plan)
     run_id = uuid.uuid4().hex[:8]
     futures: dict = {}
     where: dict = {}
@@ -337,4 +370,6 @@ def run_plan(plan: Plan, table: Mapping[str, StageSpec], engine: Engine, *, forc
         with contextlib.suppress(Exception):
             engine.client.cancel(pending)
         raise
+    finally:
+        _mark_folders(plan)  # the folders the stages created
     return doc

@@ -67,6 +67,28 @@ def volume_file(path: Path) -> Path:
                       f"output folder")
 
 
+def bag_folder(recording: str | os.PathLike | None) -> Path | None:
+    """The ROS 2 bag folder a recording named by one of its files belongs to (a metadata.yaml beside it): the
+    reader reads the whole bag, so the folder is an input too (its files never written over); else None."""
+    if recording is None:
+        return None
+    path = Path(recording)
+    return path.parent if path.is_file() and (path.parent / "metadata.yaml").is_file() else None
+
+
+class OutputPath(click.Path):
+    """click.Path for an output option (a pathlib.Path by default): an empty value is refused as claim_output
+    refuses it; click would otherwise make '' into Path('.'), and the error would speak of the current folder."""
+
+    def __init__(self, *args, path_type=Path, **kwargs) -> None:
+        super().__init__(*args, path_type=path_type, **kwargs)
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, (str, bytes)) and not value.strip():
+            self.fail("expected a path, got an empty one", param, ctx)
+        return super().convert(value, param, ctx)
+
+
 def force_option(func):
     """`--force`: write over an existing output that kinfu did not write (never over an input)."""
     return click.option("--force", is_flag=True,
@@ -109,7 +131,7 @@ def result_options(*, output: str | None = "Write the results as JSON here.", pl
         func = click.option("--json", "as_json", is_flag=True, help=json)(func)
         for name, flags, text in (("output", ("-o", "--output"), output), ("plot", ("--plot",), plot)):
             if text is not None:
-                func = click.option(*flags, name, type=click.Path(dir_okay=dir_okay, path_type=Path), default=None,
+                func = click.option(*flags, name, type=OutputPath(dir_okay=dir_okay), default=None,
                                     help=text)(func)
         return func
 

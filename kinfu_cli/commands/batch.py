@@ -12,12 +12,13 @@ from kinfu_cli.batch.lock import batch_lock
 from kinfu_cli.batch.manifest import MANIFEST_NAME
 from kinfu_cli.batch.plan import load_plan
 from kinfu_cli.commands._batch_stages import batch_stages
+from kinfu_cli.commands._options import OutputPath
 from kinfu_cli.core.errors import ConfigError
 
 
 @click.command("batch", short_help="Run the stages of a plan over many recordings on Dask (resumable).")
 @click.argument("plan", type=click.Path(dir_okay=False, path_type=Path))
-@click.option("-o", "--output", type=click.Path(file_okay=False, path_type=Path), default=None,
+@click.option("-o", "--output", type=OutputPath(file_okay=False), default=None,
               help="Output folder: one sub-folder per recording and manifest.json [the plan's 'output'].")
 @click.option("--workers", type=click.IntRange(min=1), default=None,
               help="Worker processes of the local cluster, one thread each [one per core].")

@@ -11,7 +11,7 @@ from kinfu_cli.change.diff import DEFAULT_MIN_VOXELS, ChangeParams, diff_volumes
 from kinfu_cli.change.noise import NOISE_SIGMAS
 from kinfu_cli.change.outputs import CHANGE_ENTRIES, write_change_outputs
 from kinfu_cli.evaluation.change_pois import score_pois_in_comparison
-from kinfu_cli.commands._options import claim_outputs, force_option, volume_file
+from kinfu_cli.commands._options import OutputPath, claim_outputs, force_option, volume_file
 from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.core.atomic import atomic_dir
 from kinfu_cli.core.errors import ConfigError
@@ -70,7 +70,7 @@ def check_options(params: dict) -> None:
 @click.command("diff", short_help="Removed / added regions between two volumes of one place; POIs scored on them.")
 @click.argument("before", type=click.Path(path_type=Path))
 @click.argument("after", type=click.Path(path_type=Path))
-@click.option("-o", "--output", "outdir", type=click.Path(file_okay=False, path_type=Path), default=Path("diff"),
+@click.option("-o", "--output", "outdir", type=OutputPath(file_okay=False), default=Path("diff"),
               show_default=True, help="Output folder.")
 @click.option("--pois", "pois_path", default=None, type=click.Path(dir_okay=False, path_type=Path),
               help="pois.json from `kinfu poi`: score each POI against the changes found.")

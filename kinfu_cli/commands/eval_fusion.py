@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from kinfu_cli.commands._options import claim_outputs, result_options
+from kinfu_cli.commands._options import OutputPath, claim_outputs, result_options
 from kinfu_cli.commands._output import QUIET_HELP, emit
 from kinfu_cli.evaluation.reconstruction import (DEFAULT_SPACING, DEFAULT_THRESHOLD, check_fusion_evaluation,
                                                  evaluate_fusion)
@@ -41,7 +41,7 @@ def check_options(params: dict) -> None:
 @click.option("--footprint", type=click.Choice(["rect", "pca"]), default="rect", show_default=True,
               help="Footprint axes: minimum-area rectangle or principal-axis extents.")
 @click.option("--no-volume", is_flag=True, help="Ignore OUTDIR/volume.npz (no voxel counts).")
-@click.option("--error-mesh", type=click.Path(dir_okay=False, path_type=Path), default=None,
+@click.option("--error-mesh", type=OutputPath(dir_okay=False), default=None,
               help="Also write the reconstruction coloured by its error (blue 0 .. red 2 x threshold; grey: not "
                    "evaluated) as this .ply.")
 @result_options(json="Print the results JSON to stdout instead of tables.", quiet=QUIET_HELP)
@@ -64,7 +64,9 @@ def command(reconstruction: Path, ground_truth: Path, state: str, threshold: flo
       kinfu eval fusion out/all/mesh.ply --ground-truth sample_data/tabletop --json -o fusion_eval.json
       kinfu eval fusion out/scan --ground-truth sample_data/tabletop --error-mesh out/scan_error.ply
     """
-    claim_outputs({"output": output, "error_mesh": error_mesh}, [reconstruction, ground_truth], force)
+    # a mesh file's fused time window is read from the report.json beside it: an input too, never written over
+    beside = [] if reconstruction.is_dir() else [reconstruction.parent / "report.json"]
+    claim_outputs({"output": output, "error_mesh": error_mesh}, [reconstruction, ground_truth, *beside], force)
     result = evaluate_fusion(reconstruction, ground_truth, state=state, threshold=threshold, spacing=spacing,
                              margin=margin, min_height=min_height, footprint=footprint, use_volume=not no_volume,
                              quiet=quiet)

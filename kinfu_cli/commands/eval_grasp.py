@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from kinfu_cli.commands._options import claim_outputs, force_option
+from kinfu_cli.commands._options import OutputPath, claim_outputs, force_option
 from kinfu_cli.commands._output import QUIET_HELP, emit
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.progress import progress
@@ -26,7 +26,7 @@ group = "eval"
 @click.option("--scenes", default="0,1", show_default=True,
               help="Seeds of the segmented synthetic tabletop scenes ('' for none).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the generated object poses.")
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=None,
+@click.option("-o", "--output", type=OutputPath(dir_okay=False), default=None,
               help="Write the results as JSON here.")
 @click.option("--json", "as_json", is_flag=True, help="Print the results JSON to stdout instead of the table.")
 @click.option("--quiet", is_flag=True, help=QUIET_HELP)

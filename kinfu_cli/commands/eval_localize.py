@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from kinfu_cli.commands._mupf_options import mupf_filter_options
-from kinfu_cli.commands._options import claim_outputs, force_option
+from kinfu_cli.commands._options import OutputPath, claim_outputs, force_option
 from kinfu_cli.commands._output import QUIET_HELP, emit
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.localization.evaluate import METHODS, check_recognition, evaluate_localization, \
@@ -39,7 +39,7 @@ def _names(text: str, allowed, option: str) -> list[str]:
               help="Points per recognition trial (thesis: about 170).")
 @mupf_filter_options
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed.")
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=None,
+@click.option("-o", "--output", type=OutputPath(dir_okay=False), default=None,
               help="Write the results as JSON here.")
 @click.option("--json", "as_json", is_flag=True, help="Print the results JSON to stdout instead of the table.")
 @click.option("--quiet", is_flag=True, help=QUIET_HELP)

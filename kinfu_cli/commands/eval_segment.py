@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from kinfu_cli.commands._options import SWEEP_ONLY_OPTIONS, claim_outputs, force_option, given_options
+from kinfu_cli.commands._options import OutputPath, SWEEP_ONLY_OPTIONS, claim_outputs, force_option, given_options
 from kinfu_cli.commands._output import QUIET_HELP, emit
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.evaluation.segment_eval import (RGB_T_LCCP_VALUES, SWEEP_DEFAULT, SWEEP_VALUES, check_eval_numbers,
@@ -32,6 +32,17 @@ def _numbers(text: str, option: str, kind=float) -> list:
     if not vals:
         raise ConfigError(f"{option} {text!r}: expected at least one number")
     return vals
+
+
+def read_beside(segments: Path, ground_truth: Path) -> list[Path]:
+    """The files scoring reads beside the named ones (inputs too, never written over): a segment output's
+    segments.json and segments.ply go together, a labels file's object names are in the changes.json beside it."""
+    beside = []
+    if segments.name in ("segments.json", "segments.ply"):
+        beside += [segments.parent / "segments.json", segments.parent / "segments.ply"]
+    if not ground_truth.is_dir():
+        beside.append(ground_truth.parent / "changes.json")
+    return beside
 
 
 def check_options(params: dict) -> None:
@@ -83,9 +94,9 @@ def check_options(params: dict) -> None:
 @click.option("--scenes", default="0,1,2", show_default=True, help="Seeds of the generated scenes (--sweep).")
 @click.option("--resolution", type=int, default=160, show_default=True,
               help="Sweep: voxels per 1.1 m (the objects scene's cube; tabletop scenes fuse 1.6 m at that voxel).")
-@click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), default=None,
+@click.option("--plot", type=OutputPath(dir_okay=False), default=None,
               help="PNG: top view of the scored points coloured by consistency error; with --sweep the PR curves.")
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=None,
+@click.option("-o", "--output", type=OutputPath(dir_okay=False), default=None,
               help="Write the results as JSON here.")
 @click.option("--json", "as_json", is_flag=True, help="Print the results JSON to stdout instead of the table.")
 @click.option("--quiet", is_flag=True, help=QUIET_HELP)
@@ -144,7 +155,8 @@ def command(segments: Path | None, ground_truth: Path | None, t_eval: float, mat
         raise ConfigError("expected SEGMENTS (a kinfu segment output folder or labelled cloud), or --sweep")
     if ground_truth is None:
         raise ConfigError("--ground-truth: a labels file is needed to score SEGMENTS")
-    claim_outputs({"output": output, "plot": plot}, [segments, ground_truth], force)
+    claim_outputs({"output": output, "plot": plot}, [segments, ground_truth, *read_beside(segments, ground_truth)],
+                  force)
     result = evaluate_segments(segments, ground_truth, t_eval=t_eval, matching=matching, max_distance=max_distance,
                                cover=cover, share=share)
     doc = result.document

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import click
 
-from kinfu_cli.commands._options import claim_outputs, force_option
+from kinfu_cli.commands._options import bag_folder, claim_outputs, force_option
 from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.commands._frames import frame_kwargs, frame_options
 from kinfu_cli.commands._roles import role_kwargs, role_options
@@ -48,7 +48,7 @@ def command(recording: str, out: str, trajectory: str | None, as_json: bool, qui
       kinfu export run.mcap --trajectory tum -o gt.tum
       kinfu export out/fuse_icp --trajectory tum -o est.tum   # then: evo_ape tum gt.tum est.tum -a
     """
-    claim_outputs({"out": out}, [recording], force)
+    claim_outputs({"out": out}, [recording, bag_folder(recording)], force)
     src = Path(recording).resolve()
     # inside a ROS 2 bag folder it would join the recording; inside a fuse output, the next fuse run replaces it
     if src.is_dir() and src in Path(out).resolve().parents:

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import click
 
-from kinfu_cli.commands._options import claim_outputs, force_option
+from kinfu_cli.commands._options import OutputPath, bag_folder, claim_outputs, force_option
 from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.commands._roles import role_kwargs, role_options
 from kinfu_cli.commands._up import parse_up
@@ -89,7 +89,7 @@ def check_options(params: dict) -> None:
 
 @click.command("fuse", short_help="Fuse depth frames into a ternary TSDF volume, mesh and cloud.")
 @click.argument("recording", type=click.Path(path_type=Path))
-@click.option("-o", "--output", "outdir", type=click.Path(file_okay=False, path_type=Path), required=True,
+@click.option("-o", "--output", "outdir", type=OutputPath(file_okay=False), required=True,
               help="Output folder (mesh.ply, cloud.ply, volume.npz, ternary.npz, report.json).")
 @click.option("--voxel-size", type=float, default=None,
               help="Voxel edge in metres (instead of --resolution) [size/512; with --size auto 3/512 m, coarser "
@@ -149,7 +149,7 @@ def check_options(params: dict) -> None:
                    "wins: sharp colour edges under auto-gain and colour/depth misregistration; thesis ch. 4) "
                    "[mean; with --init the volume's].")
 @click.option("--plot", is_flag=True, help="Also write PNG slices of the ternary volume.")
-@click.option("--viz", type=click.Path(dir_okay=False, path_type=Path), default=None,
+@click.option("--viz", type=OutputPath(dir_okay=False), default=None,
               help="Also write a viewer file: an MCAP of Foxglove messages (mesh, cloud, camera trajectory and intrinsics); open it in Foxglove.")
 @force_option
 @click.option("--json", "as_json", is_flag=True, help="Print report.json to stdout.")
@@ -183,7 +183,7 @@ def command(recording: Path, outdir: Path, voxel_size, resolution, size, origin,
       kinfu fuse rec.mcap -o out/icp --pose icp --every 5 --max-lost 5%
       kinfu fuse rec2.mcap -o out/fuse2 --init out/fuse/volume.npz --clear-pois out/poi/pois.json
     """
-    claim_outputs({"outdir": outdir, "viz": viz}, [recording, init, clear_pois], force)
+    claim_outputs({"outdir": outdir, "viz": viz}, [recording, bag_folder(recording), init, clear_pois], force)
     result = fuse_recording(recording, **fuse_arguments(click.get_current_context().params))
     if not quiet:
         for note in result.notes:

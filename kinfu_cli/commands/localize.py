@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from kinfu_cli.commands._mupf_options import mupf_filter_options
-from kinfu_cli.commands._options import claim_outputs, force_option
+from kinfu_cli.commands._options import OutputPath, claim_outputs, force_option
 from kinfu_cli.commands._output import emit
 from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError
@@ -52,7 +52,7 @@ def _lines(doc: dict) -> list[str]:
 @click.option("--segments", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Points from a kinfu segment output: its segments.json (segments.ply beside it); with --segment.")
 @click.option("--segment", type=int, default=None, help="Segment id in --segments.")
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=None,
+@click.option("-o", "--output", type=OutputPath(dir_okay=False), default=None,
               help="Write pose.json here.")
 @click.option("--particles", type=int, default=700, show_default=True,
               help="N particles (thesis Table 4.1); about 2 kB of memory each.")
@@ -110,7 +110,8 @@ def command(model: Path | None, points: Path | None, models: str | None, segment
         raise ConfigError("give POINTS or --segments/--segment, not both")
     if segments is None and points is None:
         raise ConfigError("expected POINTS (a PLY or text file) or --segments/--segment")
-    inputs = [*model_paths, points, segments]
+    # the points of --segments come from the segments.ply beside it: an input too, never written over
+    inputs = [*model_paths, points, segments, segments.parent / "segments.ply" if segments is not None else None]
     claim_outputs({"output": output}, inputs, force)
     check_number(sigma_p, "sigma_p", 0, low_open=True, unit="m")
     params = MupfParameters(particles=particles, window=window, sigma_p2=sigma_p ** 2, max_index=max_index,

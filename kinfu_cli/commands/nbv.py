@@ -8,7 +8,7 @@ from pathlib import Path
 
 import click
 
-from kinfu_cli.commands._options import claim_outputs, force_option, given_options, volume_file
+from kinfu_cli.commands._options import OutputPath, claim_outputs, force_option, given_options, volume_file
 from kinfu_cli.commands._output import emit
 from kinfu_cli.commands._up import parse_up
 from kinfu_cli.core.camera import CameraModel
@@ -133,10 +133,10 @@ def objects_summary_lines(doc: dict) -> list[str]:
               type=click.Choice(gain_names()), help="Gain function.")
 @click.option("--top", default=10, show_default=True, type=click.IntRange(min=0),
               help="Views listed per POI (0 = all valid views).")
-@click.option("-o", "--output", type=click.Path(path_type=Path), default=None, help="Write views.json here.")
-@click.option("--plot", type=click.Path(path_type=Path), default=None,
+@click.option("-o", "--output", type=OutputPath(), default=None, help="Write views.json here.")
+@click.option("--plot", type=OutputPath(), default=None,
               help="PNG: volume slices with each POI sphere and its top views as arrows.")
-@click.option("--viz", type=click.Path(dir_okay=False, path_type=Path), default=None,
+@click.option("--viz", type=OutputPath(dir_okay=False), default=None,
               help="Also write a viewer file: an MCAP of Foxglove messages (occupied voxels and each ranked view as a camera frustum); open it in Foxglove.")
 @click.option("--candidates", type=click.Path(path_type=Path), default=None,
               help="JSON list of 4x4 camera-to-world poses to score instead of the viewing sphere.")

@@ -10,7 +10,7 @@ import click
 from kinfu_cli.attention.detect import PoiDetection, check_detection, detect_pois
 from kinfu_cli.attention.tasks import MIN_TASK_S, SPLIT_GAP_S
 from kinfu_cli.commands._detector_options import detector_options, detector_params_from
-from kinfu_cli.commands._options import claim_outputs, force_option
+from kinfu_cli.commands._options import OutputPath, bag_folder, claim_outputs, force_option
 from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.core.atomic import write_json
 from kinfu_cli.report.poi_plot import plot_pois, plot_task_pois
@@ -44,12 +44,12 @@ def check_options(params: dict) -> None:
               help="Also start a new task after a pause in the samples longer than this (0 = never).")
 @click.option("--min-task", default=MIN_TASK_S, show_default=True, type=float, metavar="SECONDS",
               help="Drop runs shorter than this (hand crossing a corner of the box, tracker glitches).")
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=Path("pois.json"),
+@click.option("-o", "--output", type=OutputPath(dir_okay=False), default=Path("pois.json"),
               show_default=True, help="pois.json to write (read by kinfu nbv --pois and kinfu fuse --clear-pois).")
-@click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), default=None,
+@click.option("--plot", type=OutputPath(dir_okay=False), default=None,
               help="PNG: trajectory, Gaussians coloured by saliency (or ZVC slow segments) and the POIs; "
                    "with several tasks, the tasks in colour and their time spans.")
-@click.option("--viz", type=click.Path(dir_okay=False, path_type=Path), default=None,
+@click.option("--viz", type=OutputPath(dir_okay=False), default=None,
               help="Also write a viewer file: an MCAP of Foxglove messages (hand trajectory and POIs); open it in Foxglove.")
 @click.option("--json", "as_json", is_flag=True, help="Print the pois.json object on stdout.")
 @click.option("--quiet", is_flag=True, help="No progress output.")
@@ -79,7 +79,7 @@ def command(source, algorithm, hand_topic, hand_frame, world_frame, workspace, s
       kinfu poi session.mcap --workspace -0.5,-0.8,0.7,0.6,0.4,1.3 --split-gap 1
       kinfu poi user1_cup0.traj --literal --plot literal.png
     """
-    claim_outputs({"output": output, "plot": plot, "viz": viz}, [source], force)
+    claim_outputs({"output": output, "plot": plot, "viz": viz}, [source, bag_folder(source)], force)
     found = detect_pois(source, **detection_arguments(click.get_current_context().params), hand_topic=hand_topic,
                         hand_frame=hand_frame, world_frame=world_frame, quiet=quiet)
     write_json(output, found.document)

@@ -13,7 +13,7 @@ from pathlib import Path
 import click
 from click.core import ParameterSource
 
-from kinfu_cli.commands._options import claim_outputs, force_option, given_options, volume_file
+from kinfu_cli.commands._options import OutputPath, claim_outputs, force_option, given_options, volume_file
 from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.commands._up import parse_up
 from kinfu_cli.core.atomic import atomic_dir, write_json
@@ -107,7 +107,7 @@ def check_options(params: dict) -> None:
 
 @click.command("segment", short_help="Segments, saliency and superquadrics of a fused volume.")
 @click.argument("volume", type=click.Path(path_type=Path))
-@click.option("-o", "--output", "outdir", type=click.Path(file_okay=False, path_type=Path), default=Path("segments"),
+@click.option("-o", "--output", "outdir", type=OutputPath(file_okay=False), default=Path("segments"),
               show_default=True, help="Output folder.")
 @click.option("--resolution", type=float, default=0.01, show_default=True, help="Surface cloud spacing (m).")
 @click.option("--min-weight", type=float, default=1.0, show_default=True, help="TSDF weight of an observed voxel.")
@@ -177,7 +177,7 @@ def check_options(params: dict) -> None:
               help="With --grasp: optimiser starts per candidate, as kinfu grasp --starts.")
 @click.option("--seed", type=int, default=0, show_default=True, help="RANSAC / subsampling seed.")
 @click.option("--plot", is_flag=True, help="Also write segments.png and saliency.png.")
-@click.option("--viz", type=click.Path(dir_okay=False, path_type=Path), default=None,
+@click.option("--viz", type=OutputPath(dir_okay=False), default=None,
               help="Also write a viewer file: an MCAP of Foxglove messages (segments, superquadrics and support plane); open it in Foxglove.")
 @force_option
 @click.option("--json", "as_json", is_flag=True, help="Print segments.json to stdout.")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import fnmatch
 import glob
 import json
@@ -16,7 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from kinfu_cli.core.errors import KinfuError
-from kinfu_cli.core.ownership import MANIFEST, owned_entries, record_tree, record_written
+from kinfu_cli.core.ownership import (MANIFEST, manifest_files, mark_folder_output, owned_entries, record_tree,
+                                      record_written, write_manifest_files)
 
 
 def _ensure_parent(final: Path) -> Path:
@@ -44,9 +46,40 @@ def _writable(folder: Path) -> Iterator[None]:
 _RANDOM = "[a-z0-9_]" * 8
 
 
+@contextlib.contextmanager
+def _locked_dir(path: Path) -> Iterator[Path]:
+    """Hold an exclusive lock on kinfu's temporary `path` while it is in use: another run's debris clearing leaves
+    it alone (a run writing the same output at the same time deleted the other's half-written folder, which then
+    swapped in without its meshes). The lock goes with the process, so a killed run's debris is cleared."""
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield path
+    finally:
+        os.close(fd)
+
+
+def _in_use(path: Path) -> bool:
+    """Whether a running kinfu holds `path` (see _locked_dir)."""
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        return True
+    finally:
+        os.close(fd)  # closing releases a lock taken here
+    return False
+
+
 def _clear_debris(parent: Path, *patterns: str) -> None:
-    """Remove what a killed earlier run left beside an output: kinfu's own temporary `.part` names only."""
+    """Remove what a killed earlier run left beside an output: kinfu's own temporary `.part` names only, and not
+    while a running kinfu holds them."""
     for stale in (p for pattern in patterns for p in parent.glob(pattern)):
+        if _in_use(stale):
+            continue
         if stale.is_dir() and not stale.is_symlink():
             shutil.rmtree(stale, ignore_errors=True)
         else:
@@ -67,7 +100,7 @@ def atomic_path(final: str | os.PathLike, suffix: str | None = None) -> Iterator
     _clear_debris(parent, f".{glob.escape(final.stem)}.{_RANDOM}.part{glob.escape(suffix)}")
     with _writable(parent):
         fd, tmp = tempfile.mkstemp(prefix=f".{final.stem}.", suffix=f".part{suffix}", dir=parent)
-    os.close(fd)
+    fcntl.flock(fd, fcntl.LOCK_EX)  # held until the end (see _locked_dir)
     tmp_path = Path(tmp)
     os.chmod(tmp_path, 0o666 & ~_umask())  # mkstemp makes 0600; outputs get the usual mode
     try:
@@ -84,6 +117,8 @@ def atomic_path(final: str | os.PathLike, suffix: str | None = None) -> Iterator
             with contextlib.suppress(FileNotFoundError):
                 tmp_path.unlink()
         raise
+    finally:
+        os.close(fd)
     record_written(final)
 
 
@@ -91,9 +126,10 @@ def atomic_path(final: str | os.PathLike, suffix: str | None = None) -> Iterator
 def atomic_dir(final: str | os.PathLike, own: Iterable[str] | None = None, force: bool = False) -> Iterator[Path]:
     """Yield a temporary folder beside `final`; it replaces `final` only if the block succeeds.
 
-    For outputs that are folders (ROS 2 bags, result folders with several files): the whole folder appears
-    at once, so a killed run leaves no folder that looks complete or mixes old and new files. Entries of an
-    existing `final` that kinfu did not write are carried over, never removed. own: glob patterns of every
+    For outputs that are folders (ROS 2 bags, result folders with several files): a new folder appears at once,
+    and one replacing kinfu's earlier output leaves no result that looks complete while its entries move (see
+    _replace_folder). Entries of an existing `final` that kinfu did not write stay where they are, never moved
+    or removed. own: glob patterns of every
     entry the caller writes there (a result folder that other commands may share): kinfu entries matching
     none of them and not written anew (another command's outputs) are carried over too; None: the folder is
     the caller's whole (a bag, a data set). force: a foreign entry with the name of a new output (a user's file,
@@ -106,13 +142,15 @@ def atomic_dir(final: str | os.PathLike, own: Iterable[str] | None = None, force
         tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".part", dir=parent))
     os.chmod(tmp, 0o777 & ~_umask())
     try:
-        yield tmp
-        record_tree(tmp)  # everything in it is kinfu's now; foreign entries are carried over only below
-        with _writable(parent):
-            if final.exists():
-                _replace_folder(tmp, final, own, force)
-            else:
-                os.replace(tmp, final)
+        with _locked_dir(tmp):
+            yield tmp
+            record_tree(tmp)  # everything in it is kinfu's now; foreign entries keep their place below
+            mark_folder_output(tmp)
+            with _writable(parent):
+                if final.exists() or final.is_symlink():
+                    _replace_folder(tmp, final, own, force)
+                else:
+                    os.replace(tmp, final)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
@@ -128,57 +166,104 @@ def _other_outputs(old: Path, new: Path, own: Iterable[str]) -> list[Path]:
 
 
 def _replace_folder(new: Path, final: Path, own: Iterable[str] | None = None, force: bool = False) -> None:
-    """Swap the finished folder `new` in for `final`, keeping the entries of `final` kinfu did not write.
+    """Put the finished folder `new` in place of the kinfu entries of `final`, which keeps the entries kinfu did
+    not write where they are.
 
-    A file `final` (a kinfu output, or one the caller was told to overwrite) is replaced. Foreign entries are
-    carried over at any depth: a user's file inside a kinfu-written subfolder (one with its own manifest)
-    survives too. A foreign entry with the name of a new output stops the swap (the new outputs stay in `new`
-    and the error says so), unless `force`: then it is replaced."""
-    if not final.is_dir():
+    A file `final` (a kinfu output, or one the caller was told to overwrite), or a symlink (only the link is
+    replaced, never the folder it points to), is replaced. The user's entries never move, at any depth (a user's
+    file inside a kinfu-written subfolder too): kinfu's old entries are moved out to a `.old.part` folder beside
+    `final` and the new ones moved in, so a run stopped half-way (an error, Ctrl-C, kill -9) can lose only kinfu's
+    files; before, the user's entries were moved into the new folder for a single swap, and a run stopped during
+    those moves deleted the ones already moved with it. The folder's manifest is written before the new entries
+    arrive and the JSON results last, so a run stopped between the moves leaves no result that looks complete. A
+    foreign entry with the name of a new output stops the swap before anything moves, unless `force`: then it is
+    replaced."""
+    if final.is_symlink() or not final.is_dir():
         final.unlink()
         os.replace(new, final)
         return
-    others = _other_outputs(final, new, own) if own is not None else []
-    moves, clash = _foreign_moves(final, new, skip={p.name for p in others})
-    if clash and not force:
-        raise KinfuError(f"{final}: {', '.join(sorted(clash))} there was not written by kinfu and would be replaced")
-    for src, dst in moves:
-        dst.parent.mkdir(parents=True, exist_ok=True)
-        os.replace(src, dst)
-    for src in others:  # still kinfu's: recorded in the new folder's manifest
-        os.replace(src, new / src.name)
-        record_written(new / src.name)
-    old = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".old.part", dir=final.parent))
-    os.replace(final, old / final.name)
-    os.replace(new, final)
-    shutil.rmtree(old, ignore_errors=True)
+    others = {p.name for p in _other_outputs(final, new, own)} if own is not None else set()
+    plan = _SwapPlan()
+    plan.scan(final, new, "", others)
+    if plan.clash and not force:
+        raise KinfuError(f"{final}: {', '.join(sorted(plan.clash))} there was not written by kinfu and would be "
+                         f"replaced")
+    kept = {n: e for n, e in manifest_files(final).items() if n in others}
+    with _locked_dir(Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".old.part", dir=final.parent))) as old:
+        try:
+            for i, path in enumerate(plan.out):
+                os.replace(path, old / str(i))
+            for folder, source in plan.folders:  # top first: each manifest names what is about to arrive
+                if source is not None:
+                    write_manifest_files(folder, {**manifest_files(source), **(kept if folder == final else {})})
+            for folder, source in reversed(plan.folders):
+                if source is None:
+                    _forget_folder(folder)
+            for folder, source in reversed(plan.folders):  # the top folder, with its JSON results, last
+                for entry in sorted(source.iterdir() if source is not None else (),
+                                    key=lambda e: (e.suffix == ".json", e.name)):
+                    if entry.name != MANIFEST and not entry.name.startswith(f"{MANIFEST}.") and (
+                            folder / entry.name) not in plan.merged:
+                        os.replace(entry, folder / entry.name)
+        finally:
+            shutil.rmtree(old, ignore_errors=True)
+    shutil.rmtree(new, ignore_errors=True)
 
 
-def _foreign_moves(old: Path, new: Path, rel: str = "", skip: set[str] | frozenset = frozenset()
-                   ) -> tuple[list[tuple[Path, Path]], list[str]]:
-    """(source, destination) of every entry under `old` kinfu did not write, and the names that clash with
-    new outputs. A kinfu-written subfolder is searched only when it records its own entries (a manifest);
-    one without (written before per-folder records) is kinfu's whole, as it always was. `skip`: top-level
-    names moved whole elsewhere."""
-    mine = owned_entries(old)
-    moves: list[tuple[Path, Path]] = []
-    clash: list[str] = []
-    for entry in old.iterdir():
-        if entry.name in skip:
-            continue
-        target = new / entry.name
-        if entry.name not in mine:
-            if target.exists() or target.is_symlink():
-                clash.append(rel + entry.name)
+class _SwapPlan:
+    """What _replace_folder moves: `out`, kinfu's old entries (and foreign ones a new output replaces); `folders`,
+    (old folder, new folder or None) of every kinfu folder merged, top first (None: kinfu's subfolder that the new
+    output lacks, kept only for the user's entries in it); `merged`, those folders' paths below the top; `clash`,
+    foreign entries a new output would replace."""
+
+    def __init__(self) -> None:
+        self.out: list[Path] = []
+        self.folders: list[tuple[Path, Path | None]] = []
+        self.merged: set[Path] = set()
+        self.clash: list[str] = []
+
+    def scan(self, old: Path, new: Path | None, rel: str, skip: set[str] | frozenset = frozenset()) -> bool:
+        """Plan `old` against `new`; True when a foreign entry stays in it (at any depth)."""
+        self.folders.append((old, new))
+        mine = owned_entries(old)
+        foreign = False
+        for entry in sorted(old.iterdir()):
+            name = entry.name
+            if name in skip or name == MANIFEST or name.startswith(f"{MANIFEST}."):
+                continue
+            target = None if new is None else new / name
+            taken = target is not None and (target.exists() or target.is_symlink())
+            if name not in mine:
+                if taken:
+                    self.clash.append(rel + name)
+                    self.out.append(entry)
+                else:
+                    foreign = True
+                continue
+            if not (entry.is_dir() and not entry.is_symlink() and (entry / MANIFEST).is_file()):
+                self.out.append(entry)  # kinfu's file, or its folder without records of its own: kinfu's whole
+                continue
+            into = target if taken and target.is_dir() and not target.is_symlink() else None
+            marks = len(self.out), len(self.folders), len(self.clash)
+            inner_foreign = self.scan(entry, into, rel + name + "/")
+            if taken and into is None:  # a new file in place of kinfu's folder: the folder goes whole
+                del self.out[marks[0]:], self.folders[marks[1]:], self.clash[marks[2]:]
+                if inner_foreign:
+                    self.clash.append(rel + name)
+                self.out.append(entry)
             else:
-                moves.append((entry, target))
-        elif entry.is_dir() and not entry.is_symlink() and (entry / MANIFEST).is_file():
-            if target.exists() and not target.is_dir():
-                continue  # a kinfu folder replaced by a kinfu file: nothing of the user's can be inside a file
-            sub_moves, sub_clash = _foreign_moves(entry, target, rel + entry.name + "/")
-            moves += sub_moves
-            clash += sub_clash
-    return moves, clash
+                self.merged.add(entry)
+                foreign = foreign or inner_foreign
+        return foreign
+
+
+def _forget_folder(folder: Path) -> None:
+    """A kinfu subfolder the new output lacks, its kinfu entries moved out: removed when nothing is left, else it
+    holds only the user's entries and is theirs (its manifest goes)."""
+    with contextlib.suppress(OSError):
+        (folder / MANIFEST).unlink()
+    with contextlib.suppress(OSError):
+        folder.rmdir()
 
 
 def _umask() -> int:

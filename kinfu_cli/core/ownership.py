@@ -26,13 +26,34 @@ class ForeignOutputError(KinfuError):
     """The output path exists and kinfu did not write it; `force` would write over it."""
 
 
-def _read_manifest(folder: Path) -> dict[str, dict]:
+def _read_doc(folder: Path) -> dict:
     try:
         doc = json.loads((folder / MANIFEST).read_text())
     except (OSError, ValueError, RecursionError):  # unreadable or damaged: nothing is recorded as kinfu's
         return {}
-    files = doc.get("files") if isinstance(doc, dict) else None
+    return doc if isinstance(doc, dict) else {}
+
+
+def _read_manifest(folder: Path) -> dict[str, dict]:
+    files = _read_doc(folder).get("files")
     return files if isinstance(files, dict) else {}
+
+
+def manifest_files(folder: str | os.PathLike) -> dict[str, dict]:
+    """The entries `folder`'s manifest records (name -> size, time, kind); {} when it has none."""
+    return _read_manifest(Path(folder))
+
+
+def write_manifest_files(folder: str | os.PathLike, files: dict[str, dict]) -> None:
+    """Replace the entries `folder`'s manifest records (whether kinfu wrote the folder whole is kept)."""
+    _write_manifest(Path(folder), files)
+
+
+def mark_folder_output(folder: str | os.PathLike) -> None:
+    """Record in `folder`'s manifest that kinfu wrote the folder whole (an output folder): it is kinfu's wherever
+    it is moved. A folder that only holds some kinfu file (a user's folder given as `-o folder/pois.json`) has a
+    manifest too, but is not kinfu's."""
+    _write_manifest(Path(folder), _read_manifest(Path(folder)), whole=True)
 
 
 def _stat_entry(path: Path) -> dict:
@@ -53,16 +74,20 @@ def record_written(path: str | os.PathLike) -> None:
         _write_manifest(folder, files)
 
 
-def _write_manifest(folder: Path, files: dict[str, dict]) -> None:
-    """Replace `folder`'s manifest atomically; best effort (an unwritable folder only loses the record)."""
+def _write_manifest(folder: Path, files: dict[str, dict], whole: bool | None = None) -> None:
+    """Replace `folder`'s manifest atomically; best effort (an unwritable folder only loses the record). whole:
+    kinfu wrote the folder whole (None: as the manifest said)."""
     tmp = None
+    if whole is None:
+        whole = _read_doc(folder).get("folder_output") is True
     try:
         fd, tmp = tempfile.mkstemp(prefix=f"{MANIFEST}.", suffix=".part", dir=folder)
         mask = os.umask(0)
         os.umask(mask)
         os.chmod(tmp, 0o666 & ~mask)  # mkstemp makes 0600: a colleague's run could not tell kinfu's files apart
         with os.fdopen(fd, "w") as fh:
-            json.dump({"written_by": "kinfu", "files": files}, fh, indent=1, sort_keys=True)
+            json.dump({"written_by": "kinfu", **({"folder_output": True} if whole else {}), "files": files}, fh,
+                      indent=1, sort_keys=True)
         os.replace(tmp, folder / MANIFEST)
     except OSError:
         if tmp is not None:
@@ -79,8 +104,8 @@ def record_tree(folder: str | os.PathLike) -> None:
     for sub in [p for p in folder.rglob("*") if p.is_dir() and not p.is_symlink()] + [folder]:
         files = _read_manifest(sub)
         entries = [e for e in sub.iterdir() if e.name != MANIFEST and not e.name.startswith(f"{MANIFEST}.")]
-        if all(e.name in files for e in entries):
-            continue
+        if (sub / MANIFEST).is_file() and all(e.name in files for e in entries):
+            continue  # (an empty folder gets a manifest too: it is kinfu's, not a user's)
         with contextlib.suppress(OSError):
             for e in entries:
                 files.setdefault(e.name, _stat_entry(e))
@@ -90,14 +115,39 @@ def record_tree(folder: str | os.PathLike) -> None:
 def written_by_kinfu(path: str | os.PathLike) -> bool:
     """True when kinfu wrote `path` and nobody changed it since (see the module docstring)."""
     path = Path(path)
-    if path.is_dir() and (path / MANIFEST).is_file():
-        return True
     entry = _read_manifest(path.parent if str(path.parent) else Path(".")).get(path.name)
+    if path.is_dir() and not path.is_symlink():
+        # kinfu's folder holds kinfu's records and was written whole (its own mark, or its parent's record of
+        # it), or holds nothing but kinfu's entries: a user's folder that received a kinfu file beside the user's
+        # own, or that a user put where kinfu's subfolder was, is not
+        if not (path / MANIFEST).is_file():
+            return False
+        if _read_doc(path).get("folder_output") is True or (isinstance(entry, dict)
+                                                            and entry.get("kind") == "folder"):
+            return True
+        return holds_only_kinfu_entries(path)
     if not isinstance(entry, dict) or not path.exists():
         return False
     now = _stat_entry(path)
     return entry.get("kind") == now["kind"] and (now["kind"] == "folder" or (
         entry.get("size") == now["size"] and entry.get("mtime_ns") == now["mtime_ns"]))
+
+
+def holds_only_kinfu_entries(folder: Path) -> bool:
+    """Whether every entry of `folder` (kinfu's temporaries and manifests aside) is one its manifest records
+    unchanged, at any depth."""
+    files = _read_manifest(folder)
+    for e in folder.iterdir():
+        if e.name.startswith(f"{MANIFEST}") or (e.name.startswith(".") and ".part" in e.name):
+            continue
+        if e.name not in files:
+            return False
+        if e.is_dir() and not e.is_symlink():
+            if not ((e / MANIFEST).is_file() and holds_only_kinfu_entries(e)):
+                return False
+        elif not written_by_kinfu(e):
+            return False
+    return True
 
 
 def changed_since_written(path: str | os.PathLike) -> list[str]:
@@ -158,9 +208,16 @@ def claim_output(output: str | os.PathLike | None, inputs: Iterable[str | os.Pat
         if src.is_dir() and _inside(real, src) and real.is_file():  # e.g. eval fusion out/fuse -o out/fuse/mesh.ply
             raise KinfuError(f"{out} is a file of the input folder {inp}; writing it would replace the input; "
                              f"choose another output path", parameter=parameter)
+    _check_writable_path(out, parameter)
     if out.exists() and not force and not written_by_kinfu(out):
         what = "folder" if out.is_dir() else "file"
         raise ForeignOutputError(f"{out}: an existing {what} that kinfu did not write; choose another path",
+                                 parameter=parameter)
+    changed = changed_since_written(out) if out.is_dir() and not out.is_symlink() and not force else []
+    if changed:  # a copy (cp -r), or files edited since: found here, not after the work when the swap stops
+        more = f" and {len(changed) - 3} more" if len(changed) > 3 else ""
+        raise ForeignOutputError(f"{out}: {', '.join(changed[:3])}{more} there changed since kinfu wrote them (a "
+                                 f"copy, or edited: the user's now) and would be replaced; choose another path",
                                  parameter=parameter)
     if out.is_file() and not force and _part_of_folder_output(real):  # grasp --plot seg/segments.ply
         raise ForeignOutputError(f"{out} is a file of the kinfu output folder {out.parent}, written with it as one "
@@ -173,3 +230,32 @@ def _part_of_folder_output(path: Path) -> bool:
     """Whether the file `path` lies in a folder that kinfu wrote whole (its parent's manifest lists the folder)."""
     entry = _read_manifest(path.parent.parent).get(path.parent.name)
     return isinstance(entry, dict) and entry.get("kind") == "folder"
+
+
+# kinfu writes an output as a temporary `.NAME.xxxxxxxx.old.part` beside it first: a name this much shorter than
+# the file system's limit (255 bytes) fits
+NAME_MARGIN = 24
+
+
+def _check_writable_path(out: Path, parameter: str) -> None:
+    """KinfuError, before any work, for an output kinfu could not write after it: its name reserved for kinfu's
+    own records, a name too long for its temporary, a file where a folder of its path must be, or a nearest
+    existing folder that cannot be written."""
+    if out.name in ("", ".", ".."):
+        raise KinfuError(f"{out}: expected a path ending in a file or folder name", parameter=parameter)
+    if out.name == MANIFEST or out.name.startswith(".kinfu-"):
+        raise KinfuError(f"{out}: the name is kinfu's own record of what it wrote; choose another name",
+                         parameter=parameter)
+    limit = 255 - NAME_MARGIN
+    if len(os.fsencode(out.name)) > limit:
+        raise KinfuError(f"{out.name[:40]}...: a name of {len(os.fsencode(out.name))} bytes; expected at most "
+                         f"{limit} (kinfu writes it under a longer temporary name first)", parameter=parameter)
+    folder = out.parent if str(out.parent) else Path(".")
+    while not folder.exists() and folder != folder.parent:
+        if folder.is_symlink():
+            break  # a broken link: said when the folder is made
+        folder = folder.parent
+    if folder.exists() and not folder.is_dir():
+        raise KinfuError(f"{out}: {folder} is a file, not a folder", parameter=parameter)
+    if folder.is_dir() and not os.access(folder, os.W_OK | os.X_OK):
+        raise KinfuError(f"{out}: cannot write into the folder {folder} (permission denied)", parameter=parameter)

@@ -21,6 +21,7 @@ from conftest import one_line_error
 from kinfu_cli.cli import cli
 from kinfu_cli.commands._batch_stages import _COMMANDS
 from kinfu_cli.core.atomic import write_json
+from kinfu_cli.core.ownership import mark_folder_output
 
 # stage -> (the stages its plan lists, an option line out of the library's range, what the error line names)
 BAD = {
@@ -122,7 +123,8 @@ def test_foreign_output_folder_is_refused_unless_force(workspace, connects):
 def test_foreign_recording_folder_is_refused_unless_force(workspace, connects):
     plan = _plan(workspace, ["fuse"], "fuse", "voxel-size = 0.04")
     out = workspace / "out"
-    write_json(out / "manifest.json", {})  # batch's own output folder (its ownership record)
+    write_json(out / "manifest.json", {})  # batch's own output folder (its ownership record and mark)
+    mark_folder_output(out)
     (out / "recs" / "a").mkdir(parents=True)
     (out / "recs" / "a" / "notes.txt").write_text("mine")
     before = _listing(out)
@@ -144,6 +146,7 @@ def test_empty_or_debris_only_folder_is_taken(workspace, connects):
     (out / "recs" / "a").mkdir(parents=True)
     (out / "recs" / "a" / ".fuse.k3j_9a0z.part").mkdir()
     write_json(out / "manifest.json", {})
+    mark_folder_output(out)  # as a batch run leaves it
     one_line_error(_batch(plan), "connected to a cluster")
     assert len(connects) == 1
 
