@@ -306,8 +306,9 @@ def _run(s, r2, o, vs, c, lo, hi):
 
 
 @njit(cache=True)
-def _sphere_counts(labels, lo, hi, origin, vs, c, radius):
-    """(unknown, all) voxels of labels[lo:hi] whose centre is within `radius` of `c`, visiting only those."""
+def _sphere_walk(labels, lo, hi, origin, vs, c, radius, forget):
+    """One walk over the voxels of labels[lo:hi] whose centre is within `radius` of `c`, visiting only those:
+    (unknown before, all, changed); `forget` sets them to UNKNOWN on the way (ForgetAround)."""
     r2 = radius * radius
     unknown = 0
     total = 0
@@ -319,30 +320,23 @@ def _sphere_counts(labels, lo, hi, origin, vs, c, radius):
             if not s <= r2:
                 continue
             a, b = _run(s, r2, origin[2], vs, c[2], lo[2], hi[2])
-            for k in range(a, b + 1):
-                if labels[i, j, k] == UNKNOWN:
-                    unknown += 1
+            for k in range(a, b + 1):  # branch-free: a random mix of labels mispredicts a test per voxel
+                unknown += labels[i, j, k] == UNKNOWN
+                if forget:
+                    labels[i, j, k] = UNKNOWN
             total += max(b - a + 1, 0)
+    return unknown, total, total - unknown
+
+
+def _sphere_counts(labels, lo, hi, origin, vs, c, radius):
+    """(unknown, all) voxels of labels[lo:hi] whose centre is within `radius` of `c`."""
+    unknown, total, _ = _sphere_walk(labels, lo, hi, origin, vs, c, radius, False)
     return unknown, total
 
 
-@njit(cache=True)
 def _sphere_forget(labels, lo, hi, origin, vs, c, radius):
     """Set the voxels of labels[lo:hi] whose centre is within `radius` of `c` to UNKNOWN; the number changed."""
-    r2 = radius * radius
-    changed = 0
-    for i in range(lo[0], hi[0]):
-        dx = origin[0] + (i + 0.5) * vs - c[0]
-        for j in range(lo[1], hi[1]):
-            dy = origin[1] + (j + 0.5) * vs - c[1]
-            s = dx * dx + dy * dy
-            if not s <= r2:
-                continue
-            a, b = _run(s, r2, origin[2], vs, c[2], lo[2], hi[2])
-            for k in range(a, b + 1):  # branch-free: a random mix of labels mispredicts a test per voxel
-                changed += labels[i, j, k] != UNKNOWN
-                labels[i, j, k] = UNKNOWN
-    return changed
+    return _sphere_walk(labels, lo, hi, origin, vs, c, radius, True)[2]
 
 
 def _sphere_box(grid: TernaryGrid, center, radius: float):
