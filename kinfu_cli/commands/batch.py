@@ -11,7 +11,7 @@ from kinfu_cli.batch.engine import check_before_work, connect, run_plan
 from kinfu_cli.batch.lock import batch_lock
 from kinfu_cli.batch.manifest import MANIFEST_NAME
 from kinfu_cli.batch.plan import load_plan
-from kinfu_cli.commands._batch_stages import batch_stages
+from kinfu_cli.commands._batch_stages import VIEWER_FILES, batch_stages
 from kinfu_cli.commands._options import OutputPath
 from kinfu_cli.core.errors import ConfigError
 
@@ -86,6 +86,10 @@ def command(plan: Path, output: Path | None, workers: int | None, scheduler: str
         raise ConfigError("--workers: sizes the local cluster; with --scheduler the cluster has its own workers")
     table = batch_stages()
     loaded = load_plan(plan, table, output, viz)
+    if loaded.viz in VIEWER_FILES.values():  # the combined file would replace a stage's part and merge into itself
+        where = "--viz" if viz is not None else f"{plan}: viz"
+        raise ConfigError(f"{where}: {loaded.viz} is the name of a stage's own viewer file ("
+                          f"{', '.join(sorted(VIEWER_FILES.values()))}); name the combined file otherwise")
     check_before_work(loaded, table, force)  # before the lock file goes into a user's folder
     with batch_lock(loaded.output):  # a second run on this folder fails here, before any work
         engine = connect(scheduler, workers)

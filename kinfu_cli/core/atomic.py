@@ -195,7 +195,8 @@ def _replace_folder(new: Path, final: Path, own: Iterable[str] | None = None, fo
                 os.replace(path, old / str(i))
             for folder, source in plan.folders:  # top first: each manifest names what is about to arrive
                 if source is not None:
-                    write_manifest_files(folder, {**manifest_files(source), **(kept if folder == final else {})})
+                    write_manifest_files(folder, {**manifest_files(source), **(kept if folder == final else {})},
+                                         True if folder == final else None)
             for folder, source in reversed(plan.folders):
                 if source is None:
                     _forget_folder(folder)

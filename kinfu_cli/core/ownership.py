@@ -44,9 +44,9 @@ def manifest_files(folder: str | os.PathLike) -> dict[str, dict]:
     return _read_manifest(Path(folder))
 
 
-def write_manifest_files(folder: str | os.PathLike, files: dict[str, dict]) -> None:
-    """Replace the entries `folder`'s manifest records (whether kinfu wrote the folder whole is kept)."""
-    _write_manifest(Path(folder), files)
+def write_manifest_files(folder: str | os.PathLike, files: dict[str, dict], whole: bool | None = None) -> None:
+    """Replace the entries `folder`'s manifest records; whole: kinfu wrote the folder whole (None: as it said)."""
+    _write_manifest(Path(folder), files, whole)
 
 
 def mark_folder_output(folder: str | os.PathLike) -> None:

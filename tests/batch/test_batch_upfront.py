@@ -257,3 +257,16 @@ def test_redo_runs_every_stage_again_but_keeps_the_ownership_rule(recording, sch
     (rec_out / "pois.json").write_text("mine")  # a user's file where poi writes
     one_line_error(_batch(plan, "--scheduler", scheduler, "--redo"), "pois.json", "--force")
     assert (rec_out / "pois.json").read_text() == "mine"
+
+
+@pytest.mark.parametrize("where", ["plan", "option"])
+def test_a_combined_viewer_named_as_a_stages_own_is_refused(workspace, connects, where):
+    """batch --viz fuse.mcap replaced the fuse stage's viewer file with the combination, merging it into itself
+    on every run (its segments counted 1, 2, 3)."""
+    plan = _plan(workspace, ["fuse", "segment"], "fuse", "voxel-size = 0.04")
+    if where == "plan":
+        plan.write_text('viz = "segment.mcap"\n' + plan.read_text())
+        one_line_error(_batch(plan), f"{plan}: viz: segment.mcap is the name of a stage's own viewer file")
+    else:
+        one_line_error(_batch(plan, "--viz", "fuse.mcap"), "--viz: fuse.mcap is the name of a stage's own viewer")
+    assert connects == []
