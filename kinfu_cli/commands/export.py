@@ -57,7 +57,7 @@ def command(recording: str, out: str, trajectory: str | None, as_json: bool, qui
     if trajectory is not None:
         _export_trajectory(recording, out, fk, role_kwargs(kwargs), as_json, quiet)
         return
-    summary = export_frames(recording, out, roles_kw=role_kwargs(kwargs), quiet=quiet, **fk)
+    summary = export_frames(recording, out, roles_kw=role_kwargs(kwargs), quiet=quiet, force=force, **fk)
     print_warnings(summary)
     if as_json:
         click.echo(json.dumps(summary, indent=2))

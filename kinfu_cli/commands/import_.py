@@ -58,7 +58,7 @@ def command(folder: str, out: str, rate: float, frames: str | None, color: str, 
         raise ConfigError(f"{out} is inside the input folder {folder}; write the recording elsewhere", parameter="out")
     summary = import_folder(folder, out, rate=rate, frames=frames, color=color, intrinsics=intrinsics,
                             compress=not no_compress, quiet=quiet, intrinsics_source="--intrinsics",
-                            up=parse_up(up))
+                            up=parse_up(up), force=force)
     print_warnings(summary)
     if as_json:
         click.echo(json.dumps(summary, indent=2))

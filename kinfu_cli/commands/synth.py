@@ -92,7 +92,7 @@ def command(out, scene, world, seed, width, height, frames, formats, scenario, n
                         scenario=scenario, n_objects=n_objects, hand_rate=hand_rate, frame_rate=frame_rate,
                         noise=noise, depth_format=depth_format, color_format=color_format,
                         jpeg_quality=jpeg_quality, quiet=quiet, camera_pose_topic=camera_pose_topic, scene=scene,
-                        world=world)
+                        world=world, force=force)
     summary = result.to_json()
     if as_json:
         click.echo(json.dumps(summary, indent=2))

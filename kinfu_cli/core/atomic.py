@@ -184,14 +184,19 @@ def _replace_folder(new: Path, final: Path, own: Iterable[str] | None = None, fo
         return
     others = {p.name for p in _other_outputs(final, new, own)} if own is not None else set()
     plan = _SwapPlan()
-    plan.scan(final, new, "", others)
+    foreign = plan.scan(final, new, "", others)
     if plan.clash and not force:
         raise KinfuError(f"{final}: {', '.join(sorted(plan.clash))} there was not written by kinfu and would be "
                          f"replaced")
     kept = {n: e for n, e in manifest_files(final).items() if n in others}
     with _locked_dir(Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".old.part", dir=final.parent))) as old:
         try:
-            for i, path in enumerate(plan.out):
+            if not (foreign or others or plan.clash):  # all kinfu's: two renames, never a partial folder
+                os.replace(final, old / final.name)
+                os.replace(new, final)
+                return
+            # the JSON results (what marks a result complete) go out first and come in last
+            for i, path in enumerate(sorted(plan.out, key=lambda p: p.suffix != ".json")):
                 os.replace(path, old / str(i))
             for folder, source in plan.folders:  # top first: each manifest names what is about to arrive
                 if source is not None:

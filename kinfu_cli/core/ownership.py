@@ -14,6 +14,7 @@ import contextlib
 import json
 import os
 import tempfile
+import time
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -80,6 +81,7 @@ def _write_manifest(folder: Path, files: dict[str, dict], whole: bool | None = N
     tmp = None
     if whole is None:
         whole = _read_doc(folder).get("folder_output") is True
+    _clear_stale_temporaries(folder)
     try:
         fd, tmp = tempfile.mkstemp(prefix=f"{MANIFEST}.", suffix=".part", dir=folder)
         mask = os.umask(0)
@@ -89,10 +91,25 @@ def _write_manifest(folder: Path, files: dict[str, dict], whole: bool | None = N
             json.dump({"written_by": "kinfu", **({"folder_output": True} if whole else {}), "files": files}, fh,
                       indent=1, sort_keys=True)
         os.replace(tmp, folder / MANIFEST)
-    except OSError:
+    except BaseException as exc:  # Ctrl-C too: no temporary is left
         if tmp is not None:
             with contextlib.suppress(OSError):
                 os.unlink(tmp)
+        if not isinstance(exc, OSError):
+            raise
+
+
+# a manifest's temporary older than this was left by a killed run (a manifest is written in milliseconds)
+STALE_TEMPORARY_S = 60.0
+
+
+def _clear_stale_temporaries(folder: Path) -> None:
+    """Remove the manifest temporaries a killed run left in `folder` (not a running one's: they are fresh)."""
+    now = time.time()
+    for stale in folder.glob(f"{MANIFEST}.{'[a-z0-9_]' * 8}.part"):
+        with contextlib.suppress(OSError):
+            if now - stale.stat().st_mtime > STALE_TEMPORARY_S:
+                stale.unlink()
 
 
 def record_tree(folder: str | os.PathLike) -> None:
@@ -115,8 +132,10 @@ def record_tree(folder: str | os.PathLike) -> None:
 def written_by_kinfu(path: str | os.PathLike) -> bool:
     """True when kinfu wrote `path` and nobody changed it since (see the module docstring)."""
     path = Path(path)
+    if path.is_symlink():  # kinfu writes no links: one at a kinfu name is the user's (stat would follow it)
+        return False
     entry = _read_manifest(path.parent if str(path.parent) else Path(".")).get(path.name)
-    if path.is_dir() and not path.is_symlink():
+    if path.is_dir():
         # kinfu's folder holds kinfu's records and was written whole (its own mark, or its parent's record of
         # it), or holds nothing but kinfu's entries: a user's folder that received a kinfu file beside the user's
         # own, or that a user put where kinfu's subfolder was, is not

@@ -359,14 +359,15 @@ def _check_assumed_K(folder: RGBDFolder, width: int, height: int, warnings_: lis
 def import_folder(src: str | os.PathLike, out: str | os.PathLike, rate: float = 30.0, frames: str | None = None,
                   color: str = "compressed", intrinsics: str | None = None, fmt: str | None = None,
                   compress: bool = True, quiet: bool = True, intrinsics_source: str = "intrinsics argument",
-                  up=None) -> dict:
+                  up=None, force: bool = False) -> dict:
     """Convert an RGB-D folder into a recording at `out` (.mcap, .bag, or a ROS 2 bag folder); return a summary.
 
     intrinsics: "fx,fy,cx,cy" when the folder has no intrinsics file; intrinsics_source: how the summary's
     K_source names them. up: the direction against gravity (x, y, z) in the folder's pose frame, when known;
     declared on /kinfu/world_up (the zero vector when not given: the frame is not taken for REP-103 z-up).
     The summary's warnings say what was doubtful (frames left out for want of a pose, an assumed K, ground
-    truth that gives no pose).
+    truth that gives no pose). force: an entry of an earlier ROS 2 bag folder at `out` with a new file's name,
+    edited since kinfu wrote it, is replaced.
     """
     up = None if up is None else check_up(up, "up")
     if color not in ("compressed", "raw", "none"):
@@ -414,7 +415,7 @@ def import_folder(src: str | os.PathLike, out: str | os.PathLike, rate: float = 
     events.sort(key=lambda e: (e[0], e[1]))
     color_topic = {"compressed": COLOR_TOPIC_COMPRESSED, "raw": COLOR_TOPIC_RAW, "none": None}[color]
     n_color = 0
-    with RecordingWriter(out, fmt=kind, compression=compression) as w:
+    with RecordingWriter(out, fmt=kind, compression=compression, force=force) as w:
         w.write_vector(WORLD_UP_TOPIC, events[0][0], WORLD_FRAME, np.zeros(3) if up is None else up)
         for stamp, kind_i, item in progress(events, total=len(events), desc="import", quiet=quiet):
             if kind_i == 0:
@@ -483,20 +484,21 @@ def _camera_change(recording, first, frame) -> str:
 def export_frames(recording: str | os.PathLike, out: str | os.PathLike, roles_kw: dict | None = None,
                   pose_source: str = "tf", pose_topic: str | None = None, tolerance_s: float = 0.05,
                   start_s: float | None = None, end_s: float | None = None, every: int = 1,
-                  quiet: bool = True) -> dict:
+                  quiet: bool = True, force: bool = False) -> dict:
     """Write the assembled frames of a recording as a 7-Scenes-layout folder (the inverse of import_folder).
 
     frame-N.depth.png (uint16 mm, 0 = invalid), frame-N.color.png (when paired), frame-N.pose.txt
     (T_world_camera, when posed), camera-intrinsics.txt (the K of every frame: a camera whose K or image size
     changes is a RecordingError), frames.json (stamps, stats, roles, warnings: what was lost or assumed reading the
-    recording). N is the depth message index. The folder appears only when every frame was written.
+    recording). N is the depth message index. The folder appears only when every frame was written. force: an
+    entry of an earlier folder at `out` with a new file's name, edited since kinfu wrote it, is replaced.
     """
     stats = FrameStats()
     listing = []
     with open_recording(recording) as rec:
         roles = detect_roles(rec, **(roles_kw or {}))
         total = rec.topics[roles.depth_topic].count if roles.depth_topic in rec.topics else None
-        with atomic_dir(out, own=("frame-*", "camera-intrinsics.txt", "frames.json")) as tmp:
+        with atomic_dir(out, own=("frame-*", "camera-intrinsics.txt", "frames.json"), force=force) as tmp:
             K0 = None
             frames = iter_frames(rec, roles, pose_source=pose_source, pose_topic=pose_topic,
                                  tolerance_s=tolerance_s, start_s=start_s, end_s=end_s, every=every, stats=stats)

@@ -65,8 +65,10 @@ class RecordingWriter:
     compression: None, or "zstd" (MCAP chunks / ROS 2 storage), "lz4"/"bz2" (ROS 1 chunks).
     """
 
-    def __init__(self, path: str | os.PathLike, fmt: str | None = None, compression: str | None = None):
+    def __init__(self, path: str | os.PathLike, fmt: str | None = None, compression: str | None = None,
+                 force: bool = False):
         self.path = Path(path)
+        self.force = force  # a ROS 2 bag folder replacing one: a user's entry with a new file's name is replaced
         self.fmt = format_for(self.path, fmt)
         self.compression = compression
         self._stack: contextlib.ExitStack | None = None
@@ -119,7 +121,7 @@ class RecordingWriter:
                     writer = Writer2(self._bag_dir, version=9, storage_plugin=StoragePlugin.MCAP)
                 else:
                     # rosbags names the storage file after its folder: write tmp/<name>/, move it up at close
-                    self._target = stack.enter_context(atomic_dir(self.path))
+                    self._target = stack.enter_context(atomic_dir(self.path, force=self.force))
                     self._bag_dir = self._target / self.path.name
                     plugin = StoragePlugin.MCAP if self.fmt == "ros2-mcap" else StoragePlugin.SQLITE3
                     writer = Writer2(self._bag_dir, version=9, storage_plugin=plugin)

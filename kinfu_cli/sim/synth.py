@@ -52,8 +52,10 @@ def synthesize(out: str | os.PathLike, seed: int = 0, width: int = 320, height: 
                formats: tuple[str, ...] = ("mcap", "bag", "ros2"), scenario: str = "pick-and-place",
                n_objects: int = 4, hand_rate: float = 100.0, frame_rate: float = 5.0, noise: bool = True,
                depth_format: str = "png", color_format: str = "jpeg", jpeg_quality: int = 75, quiet: bool = True,
-               camera_pose_topic: str | None = None, scene: str = "tabletop", world: str = "z-up") -> SynthResult:
+               camera_pose_topic: str | None = None, scene: str = "tabletop", world: str = "z-up",
+               force: bool = False) -> SynthResult:
     """Build the scenario and write the containers named in `formats` (FORMAT_NAMES) and OUT/ground_truth/.
+    force: an entry of an earlier result at `out` with a new file's name, edited since kinfu wrote it, is replaced.
     camera_pose_topic: also write the true camera poses (PoseStamped in `world`) on this topic; quiet: no
     progress bar. scene: "tabletop" (the arm scenario) or "room" (`sim.room`: a handheld camera walking through a
     furnished room; `scenario`, `n_objects` and `hand_rate` do not apply) or "objects" (the tabletop scenario on the
@@ -83,7 +85,7 @@ def synthesize(out: str | os.PathLike, seed: int = 0, width: int = 320, height: 
     # one transaction: a failed or interrupted run leaves no folder (nor an empty one that blocks the rerun), and
     # a rerun replaces the whole earlier result instead of mixing old and new files (what other commands wrote
     # there, such as pois.json or a fuse/ folder beside the recording, stays)
-    with atomic_dir(out, own=(*FORMAT_NAMES.values(), "ground_truth")) as tmp:
+    with atomic_dir(out, own=(*FORMAT_NAMES.values(), "ground_truth"), force=force) as tmp:
         result = _write(tmp, seed=seed, width=width, height=height, frames=frames, formats=formats,
                         scenario=scenario, n_objects=n_objects, hand_rate=hand_rate, frame_rate=frame_rate,
                         noise=noise, depth_format=depth_format, color_format=color_format, jpeg_quality=jpeg_quality,

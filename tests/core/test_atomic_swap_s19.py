@@ -12,7 +12,7 @@ import pytest
 from kinfu_cli.core import atomic
 from kinfu_cli.core.atomic import atomic_dir, write_json
 from kinfu_cli.core.errors import KinfuError
-from kinfu_cli.core.ownership import claim_output, written_by_kinfu
+from kinfu_cli.core.ownership import MANIFEST, claim_output, written_by_kinfu
 
 
 def _result(final: Path, value: int, sub: bool = True) -> None:
@@ -137,3 +137,71 @@ def test_a_copy_of_a_kinfu_folder_is_refused_before_the_work_not_at_the_swap(tmp
         claim_output(copy)
     claim_output(copy, force=True)
     claim_output(final)  # kinfu's own, unchanged
+
+
+@pytest.mark.parametrize("stop_at", [1, 2, 3, 4])
+def test_a_swap_stopped_early_leaves_no_old_result_json_beside_missing_files(tmp_path, monkeypatch, stop_at):
+    """kinfu's old entries go out JSON first (alphabetical order left report.json beside a deleted mesh.ply)."""
+    final = tmp_path / "out"
+    _result(final, 1, sub=False)
+    (final / "notes.txt").write_text("mine")  # a user's file: the swap is done in place
+    real_replace, calls = os.replace, []
+
+    def failing(src, dst):
+        if final in Path(src).parents or final in Path(dst).parents:
+            calls.append(src)
+            if len(calls) == stop_at:
+                raise KeyboardInterrupt
+        return real_replace(src, dst)
+
+    monkeypatch.setattr(atomic.os, "replace", failing)
+    with pytest.raises(KeyboardInterrupt):
+        _result(final, 2, sub=False)
+    monkeypatch.undo()
+    report = final / "report.json"
+    assert not report.exists() or (final / "mesh.ply").read_text() == report.read_text().replace(
+        '{"run": ', "mesh ").rstrip("}")
+    assert (final / "notes.txt").read_text() == "mine"
+
+
+def test_an_all_kinfu_folder_is_swapped_whole(tmp_path, monkeypatch):
+    final = tmp_path / "out"
+    _result(final, 1)
+    moved = []
+    real_replace = os.replace
+    monkeypatch.setattr(atomic.os, "replace", lambda s, d: (moved.append((Path(s), Path(d))), real_replace(s, d)))
+    _result(final, 2)
+    monkeypatch.undo()
+    into_final = [d for _, d in moved if d == final or final in d.parents and MANIFEST not in d.name]
+    assert into_final == [final]  # one rename of the whole new folder, no entry by entry
+    assert (final / "regions" / "0.ply").read_text() == "region 2"
+
+
+def test_a_users_symlink_at_a_kinfu_subfolders_name_is_not_replaced_without_force(tmp_path):
+    final = tmp_path / "out"
+    _result(final, 1)
+    shutil.rmtree(final / "regions")
+    users = tmp_path / "users"
+    users.mkdir()
+    (users / "keep.txt").write_text("mine")
+    (final / "regions").symlink_to(users)
+    with pytest.raises(KinfuError, match="regions there was not written by kinfu"):
+        _result(final, 2)
+    assert (final / "regions").is_symlink() and (users / "keep.txt").read_text() == "mine"
+
+
+def test_no_manifest_temporary_is_left_by_ctrl_c_and_a_killed_runs_is_cleared(tmp_path, monkeypatch):
+    import json as json_module
+
+    from kinfu_cli.core import ownership
+
+    folder = tmp_path / "f"
+    folder.mkdir()
+    stale = folder / f"{MANIFEST}.abcd1234.part"
+    stale.write_text("{")
+    os.utime(stale, (1, 1))  # a killed run's, long ago
+    monkeypatch.setattr(ownership.json, "dump", lambda *a, **k: (_ for _ in ()).throw(KeyboardInterrupt))
+    with pytest.raises(KeyboardInterrupt):
+        write_json(folder / "a.json", {})
+    monkeypatch.setattr(ownership.json, "dump", json_module.dump)
+    assert sorted(p.name for p in folder.iterdir()) == ["a.json"]
