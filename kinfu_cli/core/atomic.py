@@ -88,6 +88,23 @@ def _clear_debris(parent: Path, *patterns: str) -> None:
 
 
 @contextlib.contextmanager
+def scratch_dir(beside: str | os.PathLike) -> Iterator[Path]:
+    """A temporary working folder `.NAME.xxxxxxxx.part` beside the output `beside`, removed at the end: what a
+    library writes on its way to a single output file (rosbags' bag folder around an .mcap). Locked while in use,
+    and a killed run's is cleared by the next one, like atomic_path's temporaries."""
+    beside = Path(beside)
+    parent = _ensure_parent(beside)
+    _clear_debris(parent, f".{glob.escape(beside.stem)}.{_RANDOM}.part")
+    with _writable(parent):
+        tmp = Path(tempfile.mkdtemp(prefix=f".{beside.stem}.", suffix=".part", dir=parent))
+    try:
+        with _locked_dir(tmp):
+            yield tmp
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+@contextlib.contextmanager
 def atomic_path(final: str | os.PathLike, suffix: str | None = None) -> Iterator[Path]:
     """Yield a temporary path beside `final`; rename it to `final` only if the block succeeds.
 

@@ -11,9 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import os
-import shutil
 import struct
-import tempfile
 from pathlib import Path
 from types import TracebackType
 
@@ -21,7 +19,7 @@ import cv2
 import numpy as np
 
 from kinfu_cli.core.errors import ConfigError, RecordingError
-from kinfu_cli.core.atomic import atomic_dir, atomic_path
+from kinfu_cli.core.atomic import atomic_dir, atomic_path, scratch_dir
 from kinfu_cli.core.poses import matrix_to_quaternion
 
 FORMATS = ("mcap", "bag", "ros2", "ros2-mcap")  # ros2-mcap: a ROS 2 bag folder with mcap storage
@@ -114,9 +112,7 @@ class RecordingWriter:
                 if self.fmt == "mcap":
                     # rosbags writes a bag folder holding <name>.mcap; the file alone is a complete MCAP.
                     self._target = stack.enter_context(atomic_path(self.path))
-                    parent = self.path.parent if str(self.path.parent) else Path(".")
-                    tmp_dir = Path(tempfile.mkdtemp(prefix=f".{self.path.stem}.", suffix=".part", dir=parent))
-                    stack.callback(shutil.rmtree, tmp_dir, True)
+                    tmp_dir = stack.enter_context(scratch_dir(self.path))  # a killed run's is cleared next time
                     self._bag_dir = tmp_dir / self.path.stem
                     writer = Writer2(self._bag_dir, version=9, storage_plugin=StoragePlugin.MCAP)
                 else:

@@ -7,6 +7,7 @@ import os
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from kinfu_cli.core import atomic
@@ -205,3 +206,15 @@ def test_no_manifest_temporary_is_left_by_ctrl_c_and_a_killed_runs_is_cleared(tm
         write_json(folder / "a.json", {})
     monkeypatch.setattr(ownership.json, "dump", json_module.dump)
     assert sorted(p.name for p in folder.iterdir()) == ["a.json"]
+
+
+def test_a_killed_mcap_writers_scratch_folder_is_cleared_by_the_next_run(tmp_path):
+    """rosbags writes an .mcap inside a bag folder: a killed import left `.NAME.xxxxxxxx.part/` for good."""
+    from kinfu_cli.io.writers import RecordingWriter
+
+    debris = tmp_path / ".rec.abcd1234.part"
+    (debris / "rec").mkdir(parents=True)
+    (debris / "rec" / "rec.mcap").write_bytes(b"partial")
+    with RecordingWriter(tmp_path / "rec.mcap") as w:
+        w.write_tf(1, [("world", "camera", np.eye(4))])
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name != MANIFEST) == ["rec.mcap"]
