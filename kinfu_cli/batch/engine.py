@@ -12,7 +12,6 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
-import re
 import shutil
 import signal
 import threading
@@ -30,8 +29,8 @@ from kinfu_cli.batch.manifest import DONE, MANIFEST_NAME, build_manifest, read_p
 from kinfu_cli.batch.plan import Plan
 from kinfu_cli.batch.stages import StageSpec
 from kinfu_cli.core.errors import ConfigError, KinfuError
-from kinfu_cli.core.ownership import (changed_since_written, claim_output, holds_only_kinfu_entries,
-                                      mark_folder_output, written_by_kinfu)
+from kinfu_cli.core.ownership import (TEMPORARY_NAME, changed_since_written, claim_output,
+                                      holds_only_kinfu_entries, mark_folder_output, written_by_kinfu)
 from kinfu_cli.core.progress import progress
 
 CONNECT_TIMEOUT_S = 5
@@ -265,13 +264,11 @@ def _drop_stale(spec: StageSpec, rec) -> list[str]:
             f"run's other results"] if gone else []
 
 
-# what a killed kinfu run leaves beside an output (core.atomic's temporaries): not a user's file
-_DEBRIS = re.compile(r"^\..+\.[a-z0-9_]{8}(\.old)?\.part(\..*)?$")
 
 
 def _user_entries(folder: Path) -> list[str]:
     """Names in `folder` other than batch's lock file and kinfu's temporaries."""
-    return sorted(e.name for e in folder.iterdir() if e.name != LOCK_NAME and not _DEBRIS.match(e.name))
+    return sorted(e.name for e in folder.iterdir() if e.name != LOCK_NAME and not TEMPORARY_NAME.match(e.name))
 
 
 def claim_folder(folder: Path, inputs, force: bool, where: str = "") -> None:

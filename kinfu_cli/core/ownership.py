@@ -13,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import re
 import tempfile
 import time
 from collections.abc import Iterable
@@ -152,19 +153,25 @@ def written_by_kinfu(path: str | os.PathLike) -> bool:
         entry.get("size") == now["size"] and entry.get("mtime_ns") == now["mtime_ns"]))
 
 
+#: the names of kinfu's temporaries (core.atomic's `.NAME.xxxxxxxx[.old].part[.ext]`, a manifest's
+#: `.kinfu-manifest.json.xxxxxxxx.part`): never a user's file
+TEMPORARY_NAME = re.compile(r"^\..+\.[a-z0-9_]{8}(\.old)?\.part(\..*)?$")
+
+
 def holds_only_kinfu_entries(folder: Path) -> bool:
-    """Whether every entry of `folder` (kinfu's temporaries and manifests aside) is one its manifest records
-    unchanged, at any depth."""
+    """Whether every entry of `folder` (its manifest and kinfu's temporaries aside) is one its manifest records
+    unchanged, at any depth: what may be removed whole."""
     files = _read_manifest(folder)
     for e in folder.iterdir():
-        if e.name.startswith(f"{MANIFEST}") or (e.name.startswith(".") and ".part" in e.name):
+        if e.name == MANIFEST or TEMPORARY_NAME.match(e.name):
             continue
-        if e.name not in files:
+        entry = files.get(e.name)
+        if not isinstance(entry, dict) or e.is_symlink():
             return False
-        if e.is_dir() and not e.is_symlink():
+        if e.is_dir():
             if not ((e / MANIFEST).is_file() and holds_only_kinfu_entries(e)):
                 return False
-        elif not written_by_kinfu(e):
+        elif {k: entry.get(k) for k in ("size", "mtime_ns", "kind")} != _stat_entry(e):
             return False
     return True
 

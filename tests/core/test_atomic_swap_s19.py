@@ -218,3 +218,19 @@ def test_a_killed_mcap_writers_scratch_folder_is_cleared_by_the_next_run(tmp_pat
     with RecordingWriter(tmp_path / "rec.mcap") as w:
         w.write_tf(1, [("world", "camera", np.eye(4))])
     assert sorted(p.name for p in tmp_path.iterdir() if p.name != MANIFEST) == ["rec.mcap"]
+
+
+def test_only_kinfus_exact_temporary_names_are_taken_for_its_own(tmp_path):
+    """A folder removed whole (batch's earlier outputs of a failed stage) must hold only kinfu's entries: a user's
+    `.notes.part.txt` or `.kinfu-manifest.json.bak` was skipped by the check as kinfu's debris, then removed."""
+    from kinfu_cli.core.ownership import holds_only_kinfu_entries
+
+    final = tmp_path / "out"
+    _result(final, 1)
+    assert holds_only_kinfu_entries(final)
+    (final / ".out.abcd1234.part").mkdir()  # a killed run's temporary: kinfu's
+    assert holds_only_kinfu_entries(final)
+    for name in (".notes.part.txt", f"{MANIFEST}.bak"):
+        (final / "regions" / name).write_text("mine")
+        assert not holds_only_kinfu_entries(final)
+        (final / "regions" / name).unlink()
