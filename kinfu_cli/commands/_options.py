@@ -16,6 +16,7 @@ from click.core import ParameterSource
 
 from kinfu_cli.core.errors import KinfuError, VolumeError
 from kinfu_cli.core.ownership import claim_output
+from kinfu_cli.commands._output_path import OutputPath, output_kind_of, output_kind_problem
 
 PARAMETER_FLAGS: dict[str, str] = {
     "vfov_extra_deg": "--vfov-extra",
@@ -76,19 +77,6 @@ def bag_folder(recording: str | os.PathLike | None) -> Path | None:
     return path.parent if path.is_file() and (path.parent / "metadata.yaml").is_file() else None
 
 
-class OutputPath(click.Path):
-    """click.Path for an output option (a pathlib.Path by default): an empty value is refused as claim_output
-    refuses it; click would otherwise make '' into Path('.'), and the error would speak of the current folder."""
-
-    def __init__(self, *args, path_type=Path, **kwargs) -> None:
-        super().__init__(*args, path_type=path_type, **kwargs)
-
-    def convert(self, value, param, ctx):
-        if isinstance(value, (str, bytes)) and not value.strip():
-            self.fail("expected a path, got an empty one", param, ctx)
-        return super().convert(value, param, ctx)
-
-
 def force_option(func):
     """`--force`: write over an existing output that kinfu did not write (never over an input)."""
     return click.option("--force", is_flag=True,
@@ -115,6 +103,11 @@ def claim_outputs(outputs: dict[str, str | os.PathLike | None], inputs: Iterable
                     raise KinfuError(f"{inner} lies inside the output folder {outer}; name a path outside it",
                                      parameter=f"{other_name}/{name}")
             seen[real] = name
+    for name, path in outputs.items():  # after the checks above, whose errors say more (an input, one path twice)
+        kind = None if path is None else output_kind_of(name)
+        problem = None if kind is None else output_kind_problem(path, kind)
+        if problem is not None:
+            raise KinfuError(problem, parameter=name)
 
 
 def result_options(*, output: str | None = "Write the results as JSON here.", plot: str | None = None,
@@ -129,9 +122,10 @@ def result_options(*, output: str | None = "Write the results as JSON here.", pl
             func = force_option(func)
         func = click.option("--quiet", is_flag=True, help=quiet)(func)
         func = click.option("--json", "as_json", is_flag=True, help=json)(func)
-        for name, flags, text in (("output", ("-o", "--output"), output), ("plot", ("--plot",), plot)):
+        for name, flags, text, kind in (("output", ("-o", "--output"), output, "json"),
+                                        ("plot", ("--plot",), plot, "image")):
             if text is not None:
-                func = click.option(*flags, name, type=OutputPath(dir_okay=dir_okay), default=None,
+                func = click.option(*flags, name, type=OutputPath(dir_okay=dir_okay, kind=kind), default=None,
                                     help=text)(func)
         return func
 

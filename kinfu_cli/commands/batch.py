@@ -13,12 +13,13 @@ from kinfu_cli.batch.manifest import MANIFEST_NAME
 from kinfu_cli.batch.plan import load_plan
 from kinfu_cli.commands._batch_stages import VIEWER_FILES, batch_stages
 from kinfu_cli.commands._options import OutputPath
+from kinfu_cli.commands._output_path import output_kind_problem
 from kinfu_cli.core.errors import ConfigError
 
 
 @click.command("batch", short_help="Run the stages of a plan over many recordings on Dask (resumable).")
 @click.argument("plan", type=click.Path(dir_okay=False, path_type=Path))
-@click.option("-o", "--output", type=OutputPath(file_okay=False), default=None,
+@click.option("-o", "--output", type=OutputPath(file_okay=False, kind="folder"), default=None,
               help="Output folder: one sub-folder per recording and manifest.json [the plan's 'output'].")
 @click.option("--workers", type=click.IntRange(min=1), default=None,
               help="Worker processes of the local cluster, one thread each [one per core].")
@@ -86,6 +87,9 @@ def command(plan: Path, output: Path | None, workers: int | None, scheduler: str
         raise ConfigError("--workers: sizes the local cluster; with --scheduler the cluster has its own workers")
     table = batch_stages()
     loaded = load_plan(plan, table, output, viz)
+    problem = output_kind_problem(loaded.output, "folder")  # -o runs.json (the plan checks viz's name)
+    if problem is not None:
+        raise ConfigError(f"{'--output' if output is not None else f'{plan}: output'}: {problem}")
     if loaded.viz in VIEWER_FILES.values():  # the combined file would replace a stage's part and merge into itself
         where = "--viz" if viz is not None else f"{plan}: viz"
         raise ConfigError(f"{where}: {loaded.viz} is the name of a stage's own viewer file ("

@@ -70,7 +70,7 @@ def check_options(params: dict) -> None:
 @click.command("diff", short_help="Removed / added regions between two volumes of one place; POIs scored on them.")
 @click.argument("before", type=click.Path(path_type=Path))
 @click.argument("after", type=click.Path(path_type=Path))
-@click.option("-o", "--output", "outdir", type=OutputPath(file_okay=False), default=Path("diff"),
+@click.option("-o", "--output", "outdir", type=OutputPath(file_okay=False, kind="folder"), default=Path("diff"),
               show_default=True, help="Output folder.")
 @click.option("--pois", "pois_path", default=None, type=click.Path(dir_okay=False, path_type=Path),
               help="pois.json from `kinfu poi`: score each POI against the changes found.")

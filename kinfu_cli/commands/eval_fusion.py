@@ -41,7 +41,7 @@ def check_options(params: dict) -> None:
 @click.option("--footprint", type=click.Choice(["rect", "pca"]), default="rect", show_default=True,
               help="Footprint axes: minimum-area rectangle or principal-axis extents.")
 @click.option("--no-volume", is_flag=True, help="Ignore OUTDIR/volume.npz (no voxel counts).")
-@click.option("--error-mesh", type=OutputPath(dir_okay=False), default=None,
+@click.option("--error-mesh", type=OutputPath(dir_okay=False, kind="geometry"), default=None,
               help="Also write the reconstruction coloured by its error (blue 0 .. red 2 x threshold; grey: not "
                    "evaluated) as this .ply.")
 @result_options(json="Print the results JSON to stdout instead of tables.", quiet=QUIET_HELP)

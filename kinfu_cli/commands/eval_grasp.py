@@ -26,7 +26,7 @@ group = "eval"
 @click.option("--scenes", default="0,1", show_default=True,
               help="Seeds of the segmented synthetic tabletop scenes ('' for none).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the generated object poses.")
-@click.option("-o", "--output", type=OutputPath(dir_okay=False), default=None,
+@click.option("-o", "--output", type=OutputPath(dir_okay=False, kind="json"), default=None,
               help="Write the results as JSON here.")
 @click.option("--json", "as_json", is_flag=True, help="Print the results JSON to stdout instead of the table.")
 @click.option("--quiet", is_flag=True, help=QUIET_HELP)

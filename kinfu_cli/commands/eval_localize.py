@@ -39,7 +39,7 @@ def _names(text: str, allowed, option: str) -> list[str]:
               help="Points per recognition trial (thesis: about 170).")
 @mupf_filter_options
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed.")
-@click.option("-o", "--output", type=OutputPath(dir_okay=False), default=None,
+@click.option("-o", "--output", type=OutputPath(dir_okay=False, kind="json"), default=None,
               help="Write the results as JSON here.")
 @click.option("--json", "as_json", is_flag=True, help="Print the results JSON to stdout instead of the table.")
 @click.option("--quiet", is_flag=True, help=QUIET_HELP)

@@ -94,9 +94,9 @@ def check_options(params: dict) -> None:
 @click.option("--scenes", default="0,1,2", show_default=True, help="Seeds of the generated scenes (--sweep).")
 @click.option("--resolution", type=int, default=160, show_default=True,
               help="Sweep: voxels per 1.1 m (the objects scene's cube; tabletop scenes fuse 1.6 m at that voxel).")
-@click.option("--plot", type=OutputPath(dir_okay=False), default=None,
+@click.option("--plot", type=OutputPath(dir_okay=False, kind="image"), default=None,
               help="PNG: top view of the scored points coloured by consistency error; with --sweep the PR curves.")
-@click.option("-o", "--output", type=OutputPath(dir_okay=False), default=None,
+@click.option("-o", "--output", type=OutputPath(dir_okay=False, kind="json"), default=None,
               help="Write the results as JSON here.")
 @click.option("--json", "as_json", is_flag=True, help="Print the results JSON to stdout instead of the table.")
 @click.option("--quiet", is_flag=True, help=QUIET_HELP)

@@ -8,7 +8,8 @@ from pathlib import Path
 
 import click
 
-from kinfu_cli.commands._options import bag_folder, claim_outputs, force_option
+from kinfu_cli.commands._options import OutputPath, bag_folder, claim_outputs, force_option
+from kinfu_cli.commands._output_path import output_kind_problem
 from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.commands._frames import frame_kwargs, frame_options
 from kinfu_cli.commands._roles import role_kwargs, role_options
@@ -19,7 +20,7 @@ from kinfu_cli.io.tum import fused_trajectory, recording_trajectory, write_tum
 
 @click.command("export", short_help="Write a recording's RGB-D frames as a frame folder, or a TUM trajectory.")
 @click.argument("recording", metavar="RECORDING_OR_FUSE_DIR", type=click.Path(exists=False))
-@click.option("-o", "--out", "out", required=True, type=click.Path(),
+@click.option("-o", "--out", "out", required=True, type=OutputPath(path_type=str),
               help="Output folder (7-Scenes layout: frame-N.depth.png, .color.png, .pose.txt, camera-intrinsics.txt); "
                    "with --trajectory the trajectory file.")
 @click.option("--trajectory", type=click.Choice(["tum"]), default=None,
@@ -49,6 +50,9 @@ def command(recording: str, out: str, trajectory: str | None, as_json: bool, qui
       kinfu export out/fuse_icp --trajectory tum -o est.tum   # then: evo_ape tum gt.tum est.tum -a
     """
     claim_outputs({"out": out}, [recording, bag_folder(recording)], force)
+    problem = None if trajectory else output_kind_problem(out, "folder")
+    if problem is not None:  # the frame folder named like a file (-o frames.json, -o traj.tum without --trajectory)
+        raise ConfigError(problem, parameter="out")
     src = Path(recording).resolve()
     # inside a ROS 2 bag folder it would join the recording; inside a fuse output, the next fuse run replaces it
     if src.is_dir() and src in Path(out).resolve().parents:

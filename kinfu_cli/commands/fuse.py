@@ -89,7 +89,7 @@ def check_options(params: dict) -> None:
 
 @click.command("fuse", short_help="Fuse depth frames into a ternary TSDF volume, mesh and cloud.")
 @click.argument("recording", type=click.Path(path_type=Path))
-@click.option("-o", "--output", "outdir", type=OutputPath(file_okay=False), required=True,
+@click.option("-o", "--output", "outdir", type=OutputPath(file_okay=False, kind="folder"), required=True,
               help="Output folder (mesh.ply, cloud.ply, volume.npz, ternary.npz, report.json).")
 @click.option("--voxel-size", type=float, default=None,
               help="Voxel edge in metres (instead of --resolution) [size/512; with --size auto 3/512 m, coarser "
@@ -149,7 +149,7 @@ def check_options(params: dict) -> None:
                    "wins: sharp colour edges under auto-gain and colour/depth misregistration; thesis ch. 4) "
                    "[mean; with --init the volume's].")
 @click.option("--plot", is_flag=True, help="Also write PNG slices of the ternary volume.")
-@click.option("--viz", type=OutputPath(dir_okay=False), default=None,
+@click.option("--viz", type=OutputPath(dir_okay=False, kind="viewer"), default=None,
               help="Also write a viewer file: an MCAP of Foxglove messages (mesh, cloud, camera trajectory and intrinsics); open it in Foxglove.")
 @force_option
 @click.option("--json", "as_json", is_flag=True, help="Print report.json to stdout.")

@@ -38,7 +38,7 @@ def _workspace(text: str | None, parameter: str) -> Workspace | None:
 
 @click.command("grasp", short_help="Grasp poses for segmented objects from their superquadrics.")
 @click.argument("segments", type=click.Path(path_type=Path))
-@click.option("-o", "--output", type=OutputPath(dir_okay=False), default=Path("grasps.json"),
+@click.option("-o", "--output", type=OutputPath(dir_okay=False, kind="json"), default=Path("grasps.json"),
               show_default=True, help="Output JSON.")
 @click.option("--hand", type=click.Choice(["right", "left", "both"]), default="both", show_default=True,
               help="Which hand; 'both' keeps the better by overlap plus reachability.")
@@ -67,7 +67,7 @@ def _workspace(text: str | None, parameter: str) -> Workspace | None:
 @click.option("--obstacle-weight", type=float, default=1e-3, show_default=True,
               help="w4 of eq. 8.7: keeps multi-part grasps away from the other parts.")
 @click.option("--starts", "n_starts", type=int, default=4, show_default=True, help="Optimiser starts per candidate.")
-@click.option("--plot", type=OutputPath(dir_okay=False), default=None,
+@click.option("--plot", type=OutputPath(dir_okay=False, kind="image"), default=None,
               help="PNG of the superquadrics, the support plane and the chosen hand ellipsoids.")
 @force_option
 @click.option("--json", "as_json", is_flag=True, help="Print the grasps JSON to stdout.")

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import click
 
-from kinfu_cli.commands._options import claim_outputs, force_option
+from kinfu_cli.commands._options import OutputPath, claim_outputs, force_option
 from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.commands._up import parse_up
 from kinfu_cli.core.errors import ConfigError
@@ -17,7 +17,7 @@ from kinfu_cli.io.rgbd_folders import import_folder
 
 @click.command("import", short_help="Convert an RGB-D frame folder (7-Scenes/3DMatch, TUM) into MCAP/bag/ROS 2.")
 @click.argument("folder", type=click.Path(exists=False, file_okay=False))
-@click.option("-o", "--out", "out", required=True, type=click.Path(),
+@click.option("-o", "--out", "out", required=True, type=OutputPath(kind="recording", path_type=str),
               help="Output recording: NAME.mcap, NAME.bag, or a folder name for a ROS 2 bag (sqlite3).")
 @click.option("--rate", default=30.0, show_default=True, type=float,
               help="Frame rate (Hz) giving stamps t = N / rate for folders without stamps (7-Scenes).")

@@ -52,7 +52,7 @@ def _lines(doc: dict) -> list[str]:
 @click.option("--segments", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Points from a kinfu segment output: its segments.json (segments.ply beside it); with --segment.")
 @click.option("--segment", type=int, default=None, help="Segment id in --segments.")
-@click.option("-o", "--output", type=OutputPath(dir_okay=False), default=None,
+@click.option("-o", "--output", type=OutputPath(dir_okay=False, kind="json"), default=None,
               help="Write pose.json here.")
 @click.option("--particles", type=int, default=700, show_default=True,
               help="N particles (thesis Table 4.1); about 2 kB of memory each.")

@@ -133,10 +133,10 @@ def objects_summary_lines(doc: dict) -> list[str]:
               type=click.Choice(gain_names()), help="Gain function.")
 @click.option("--top", default=10, show_default=True, type=click.IntRange(min=0),
               help="Views listed per POI (0 = all valid views).")
-@click.option("-o", "--output", type=OutputPath(), default=None, help="Write views.json here.")
-@click.option("--plot", type=OutputPath(), default=None,
+@click.option("-o", "--output", type=OutputPath(kind="json"), default=None, help="Write views.json here.")
+@click.option("--plot", type=OutputPath(kind="image"), default=None,
               help="PNG: volume slices with each POI sphere and its top views as arrows.")
-@click.option("--viz", type=OutputPath(dir_okay=False), default=None,
+@click.option("--viz", type=OutputPath(dir_okay=False, kind="viewer"), default=None,
               help="Also write a viewer file: an MCAP of Foxglove messages (occupied voxels and each ranked view as a camera frustum); open it in Foxglove.")
 @click.option("--candidates", type=click.Path(path_type=Path), default=None,
               help="JSON list of 4x4 camera-to-world poses to score instead of the viewing sphere.")

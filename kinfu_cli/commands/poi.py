@@ -44,12 +44,12 @@ def check_options(params: dict) -> None:
               help="Also start a new task after a pause in the samples longer than this (0 = never).")
 @click.option("--min-task", default=MIN_TASK_S, show_default=True, type=float, metavar="SECONDS",
               help="Drop runs shorter than this (hand crossing a corner of the box, tracker glitches).")
-@click.option("-o", "--output", type=OutputPath(dir_okay=False), default=Path("pois.json"),
+@click.option("-o", "--output", type=OutputPath(dir_okay=False, kind="json"), default=Path("pois.json"),
               show_default=True, help="pois.json to write (read by kinfu nbv --pois and kinfu fuse --clear-pois).")
-@click.option("--plot", type=OutputPath(dir_okay=False), default=None,
+@click.option("--plot", type=OutputPath(dir_okay=False, kind="image"), default=None,
               help="PNG: trajectory, Gaussians coloured by saliency (or ZVC slow segments) and the POIs; "
                    "with several tasks, the tasks in colour and their time spans.")
-@click.option("--viz", type=OutputPath(dir_okay=False), default=None,
+@click.option("--viz", type=OutputPath(dir_okay=False, kind="viewer"), default=None,
               help="Also write a viewer file: an MCAP of Foxglove messages (hand trajectory and POIs); open it in Foxglove.")
 @click.option("--json", "as_json", is_flag=True, help="Print the pois.json object on stdout.")
 @click.option("--quiet", is_flag=True, help="No progress output.")

@@ -107,7 +107,7 @@ def check_options(params: dict) -> None:
 
 @click.command("segment", short_help="Segments, saliency and superquadrics of a fused volume.")
 @click.argument("volume", type=click.Path(path_type=Path))
-@click.option("-o", "--output", "outdir", type=OutputPath(file_okay=False), default=Path("segments"),
+@click.option("-o", "--output", "outdir", type=OutputPath(file_okay=False, kind="folder"), default=Path("segments"),
               show_default=True, help="Output folder.")
 @click.option("--resolution", type=float, default=0.01, show_default=True, help="Surface cloud spacing (m).")
 @click.option("--min-weight", type=float, default=1.0, show_default=True, help="TSDF weight of an observed voxel.")
@@ -177,7 +177,7 @@ def check_options(params: dict) -> None:
               help="With --grasp: optimiser starts per candidate, as kinfu grasp --starts.")
 @click.option("--seed", type=int, default=0, show_default=True, help="RANSAC / subsampling seed.")
 @click.option("--plot", is_flag=True, help="Also write segments.png and saliency.png.")
-@click.option("--viz", type=OutputPath(dir_okay=False), default=None,
+@click.option("--viz", type=OutputPath(dir_okay=False, kind="viewer"), default=None,
               help="Also write a viewer file: an MCAP of Foxglove messages (segments, superquadrics and support plane); open it in Foxglove.")
 @force_option
 @click.option("--json", "as_json", is_flag=True, help="Print segments.json to stdout.")

@@ -6,7 +6,7 @@ import json
 
 import click
 
-from kinfu_cli.commands._options import claim_outputs, force_option
+from kinfu_cli.commands._options import OutputPath, claim_outputs, force_option
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.sim.synth import FORMAT_NAMES, synthesize
 
@@ -21,7 +21,7 @@ def parse_formats(text: str) -> list[str]:
 
 
 @click.command("synth", short_help="Write a synthetic tabletop or room recording (MCAP, bag, ROS 2) with ground truth.")
-@click.option("-o", "--out", "out", required=True, type=click.Path(file_okay=False),
+@click.option("-o", "--out", "out", required=True, type=OutputPath(file_okay=False, kind="folder", path_type=str),
               help="Output folder (gets recording.mcap, recording.bag, recording_ros2/, ground_truth/).")
 @click.option("--seed", default=0, show_default=True, type=int, help="Seed of the scene, camera path, hand and noise.")
 @click.option("--scene", type=click.Choice(["tabletop", "room", "objects", "household"]), default="tabletop", show_default=True,

@@ -260,13 +260,14 @@ def test_redo_runs_every_stage_again_but_keeps_the_ownership_rule(recording, sch
 
 
 @pytest.mark.parametrize("where", ["plan", "option"])
-def test_a_combined_viewer_named_as_a_stages_own_is_refused(workspace, connects, where):
-    """batch --viz fuse.mcap replaced the fuse stage's viewer file with the combination, merging it into itself
-    on every run (its segments counted 1, 2, 3)."""
-    plan = _plan(workspace, ["fuse", "segment"], "fuse", "voxel-size = 0.04")
+def test_a_batch_folder_named_like_a_file_is_refused(where, workspace, connects):
+    """output = "runs.json" (or -o runs.json) before any work, as every command's folder outputs
+    (output_path.output_kind_problem); the plan already checks its viewer file's name."""
+    plan = _plan(workspace, ["poi"], "poi", "max-components = 3")
     if where == "plan":
-        plan.write_text('viz = "segment.mcap"\n' + plan.read_text())
-        one_line_error(_batch(plan), f"{plan}: viz: segment.mcap is the name of a stage's own viewer file")
+        plan.write_text(plan.read_text().replace('output = "out"', 'output = "runs.json"'))
+        one_line_error(_batch(plan), f"{plan}: output: {workspace / 'runs.json'} names a .json file; this output "
+                                     f"is a folder")
     else:
-        one_line_error(_batch(plan, "--viz", "fuse.mcap"), "--viz: fuse.mcap is the name of a stage's own viewer")
-    assert connects == []
+        one_line_error(_batch(plan, "-o", workspace / "runs.json"), "--output:", "names a .json file")
+    assert connects == [] and not (workspace / "out").exists() and not (workspace / "runs.json").exists()
