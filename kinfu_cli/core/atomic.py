@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from kinfu_cli.core.errors import KinfuError
-from kinfu_cli.core.ownership import (MANIFEST, manifest_files, mark_folder_output, owned_entries, record_tree,
-                                      record_written, write_manifest_files)
+from kinfu_cli.core.ownership import (MANIFEST, lock_folder, manifest_files, mark_folder_output, owned_entries,
+                                      record_tree, record_written, write_manifest_files)
 
 
 def _ensure_parent(final: Path) -> Path:
@@ -51,12 +51,8 @@ def _locked_dir(path: Path) -> Iterator[Path]:
     """Hold an exclusive lock on kinfu's temporary `path` while it is in use: another run's debris clearing leaves
     it alone (a run writing the same output at the same time deleted the other's half-written folder, which then
     swapped in without its meshes). The lock goes with the process, so a killed run's debris is cleared."""
-    fd = os.open(path, os.O_RDONLY)
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX)
+    with lock_folder(path):  # ownership's: the manifest written into it while the block runs takes it again
         yield path
-    finally:
-        os.close(fd)
 
 
 def _in_use(path: Path) -> bool:
