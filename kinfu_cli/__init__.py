@@ -64,7 +64,12 @@ def _numba_cache_dir(package_dir: str) -> str | None:
         st = _os.stat(folder)
         if (uid is None or st.st_uid == uid) and not st.st_mode & 0o022 and _writable(folder):
             return folder
-        return tempfile.mkdtemp(prefix=f"kinfu-numba-{user}-")  # this run's own; compiled again by the next
+        own = tempfile.mkdtemp(prefix=f"kinfu-numba-{user}-")  # this run's own; compiled again by the next
+        import atexit
+        import shutil
+
+        atexit.register(shutil.rmtree, own, True)  # one per run: left behind, they piled up in the temporary folder
+        return own
     except OSError:  # no writable temporary folder either: numba says so itself
         return None
 

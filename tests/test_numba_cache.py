@@ -103,3 +103,24 @@ def test_the_cache_stays_beside_the_sources_when_it_can_or_the_user_chose(tmp_pa
     (tmp_path / "ro" / "__pycache__").touch()
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "chosen"))
     assert kinfu_cli._numba_cache_dir(str(tmp_path / "ro")) is None
+
+
+def test_a_runs_own_temporary_cache_is_removed_when_it_ends(read_only_install, tmp_path):
+    """Someone else's folder at the user's name: the run compiles into a folder of its own, which it removes at
+    exit (one was left behind per run before)."""
+    import getpass
+
+    home = tmp_path / "not-a-folder"
+    home.touch()
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "XDG_CACHE_HOME")}
+    tmp = tmp_path / "tmp"
+    squatted = tmp / f"kinfu-numba-{getpass.getuser()}"
+    squatted.mkdir(parents=True)
+    squatted.chmod(0o777)
+    env.update(PYTHONPATH=str(read_only_install), HOME=str(home), TMPDIR=str(tmp))
+    res = subprocess.run([sys.executable, "-m", "kinfu_cli", "poi", str(SAMPLE / "tabletop" / "recording.mcap"),
+                          "--algorithm", "zvc", "-o", "pois.json"], cwd=tmp_path, env=env, capture_output=True,
+                         text=True, timeout=120)
+    assert res.returncode == 0 and "Traceback" not in res.stderr, res.stderr
+    assert (tmp_path / "pois.json").is_file()
+    assert sorted(p.name for p in tmp.iterdir()) == [squatted.name]
