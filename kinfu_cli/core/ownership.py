@@ -16,6 +16,7 @@ import json
 import os
 import re
 import tempfile
+import threading
 import time
 from collections.abc import Iterable
 from pathlib import Path
@@ -29,8 +30,9 @@ class ForeignOutputError(KinfuError):
     """The output path exists and kinfu did not write it; `force` would write over it."""
 
 
-# folders this process holds a lock on (lock_folder): flock conflicts between two opens in one process too
-_LOCKED_HERE: set[str] = set()
+# folders this thread holds a lock on (lock_folder): flock conflicts between two opens in one process too, so a
+# thread takes a lock it holds again without waiting; another thread (a Dask worker's) waits for it
+_HELD = threading.local()
 
 
 @contextlib.contextmanager
@@ -38,16 +40,17 @@ def lock_folder(folder: str | os.PathLike):
     """Hold an exclusive flock on the folder itself (no lock file among a user's files) until the block ends; the
     kernel drops it when the process dies. Taking it again inside the block, in this process, does not wait."""
     key = os.path.realpath(folder)
-    if key in _LOCKED_HERE:
+    held = _HELD.__dict__.setdefault("folders", set())
+    if key in held:
         yield
         return
     fd = os.open(folder, os.O_RDONLY)
     try:
         fcntl.flock(fd, fcntl.LOCK_EX)
-        _LOCKED_HERE.add(key)
+        held.add(key)
         yield
     finally:
-        _LOCKED_HERE.discard(key)
+        held.discard(key)
         os.close(fd)
 
 

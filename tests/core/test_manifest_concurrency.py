@@ -45,3 +45,15 @@ def test_a_folder_output_with_files_written_inside_does_not_wait_on_its_own_lock
                          cwd=Path(__file__).resolve().parents[2])
     assert res.returncode == 0, res.stderr
     assert written_by_kinfu(tmp_path / "out") and written_by_kinfu(tmp_path / "out" / "a.json")
+
+
+def test_threads_of_one_process_keep_every_entry(tmp_path):
+    """Dask's threads in one worker process: the lock is re-entrant per thread, not per process."""
+    import threading
+
+    threads = [threading.Thread(target=_write_files, args=(str(tmp_path), tag)) for tag in "abcd"]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(60)
+    assert len(manifest_files(tmp_path)) == 4 * N_FILES
