@@ -26,7 +26,7 @@ OTHER_FILE_SUFFIXES = (IMAGE_SUFFIXES | GEOMETRY_SUFFIXES | RECORDING_SUFFIXES
 #: Suffixes a folder (or a ROS 2 bag folder) is not named with: results, text, and every other file kinfu knows.
 FILE_SUFFIXES = OTHER_FILE_SUFFIXES | {".json", ".txt", ".log", ".md", ".html"}
 
-KINDS = ("json", "image", "viewer", "geometry", "folder", "recording")
+KINDS = ("json", "image", "viewer", "geometry", "folder", "recording", "trajectory")
 
 
 def output_kind_problem(path: str | os.PathLike, kind: str) -> str | None:
@@ -49,6 +49,8 @@ def output_kind_problem(path: str | os.PathLike, kind: str) -> str | None:
         return f"{text}: expected a mesh or point cloud file, FILE.ply (or .obj, .stl, .pcd)"
     if kind == "json" and suffix in OTHER_FILE_SUFFIXES:
         return f"{text} names a {suffix} file; the results are JSON: expected FILE.json"
+    if kind == "trajectory" and suffix in OTHER_FILE_SUFFIXES - {".tum", ".csv"} | {".json"}:
+        return f"{text} names a {suffix} file; the trajectory is TUM text: expected FILE.tum (or .txt)"
     if kind == "folder" and suffix in FILE_SUFFIXES:
         return f"{text} names a {suffix} file; this output is a folder: name it without that suffix"
     if kind == "recording" and suffix not in RECORDING_SUFFIXES and suffix in FILE_SUFFIXES:

@@ -50,7 +50,7 @@ def command(recording: str, out: str, trajectory: str | None, as_json: bool, qui
       kinfu export out/fuse_icp --trajectory tum -o est.tum   # then: evo_ape tum gt.tum est.tum -a
     """
     claim_outputs({"out": out}, [recording, bag_folder(recording)], force)
-    problem = None if trajectory else output_kind_problem(out, "folder")
+    problem = output_kind_problem(out, "trajectory" if trajectory else "folder")
     if problem is not None:  # the frame folder named like a file (-o frames.json, -o traj.tum without --trajectory)
         raise ConfigError(problem, parameter="out")
     src = Path(recording).resolve()

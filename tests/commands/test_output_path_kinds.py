@@ -60,6 +60,7 @@ def test_the_dash_error_points_to_json_where_the_command_has_it(tmp_path, monkey
     ("json", "results.json"), ("json", "results.txt"), ("json", "results"), ("image", "p.png"), ("image", "p.PDF"),
     ("image", "plot"), ("viewer", "v.mcap"), ("geometry", "e.ply"), ("geometry", "e.obj"), ("folder", "out"),
     ("folder", "run.2024-01"), ("recording", "r.mcap"), ("recording", "r.bag"), ("recording", "rosbag2_run"),
+    ("trajectory", "gt.tum"), ("trajectory", "gt.txt"), ("trajectory", "gt"),
 ])
 def test_names_of_the_right_kind_pass(kind, path):
     assert output_kind_problem(path, kind) is None
@@ -76,3 +77,11 @@ def test_every_image_suffix_is_a_format_matplotlib_writes():
     from matplotlib.figure import Figure
     supported = {f".{s}" for s in Figure().canvas.get_supported_filetypes()}
     assert IMAGE_SUFFIXES <= supported
+
+
+def test_export_trajectory_refuses_a_name_of_another_kind_of_file(tmp_path, monkeypatch):
+    """export --trajectory tum -o gt.png wrote TUM text into a .png."""
+    monkeypatch.chdir(tmp_path)
+    res = CliRunner().invoke(cli, ["export", REC, "--trajectory", "tum", "-o", "gt.png"])
+    one_line_error(res, "--out: gt.png names a .png file; the trajectory is TUM text")
+    assert list(tmp_path.iterdir()) == []
