@@ -13,18 +13,8 @@ from pathlib import Path
 
 import click
 
-#: Figure formats matplotlib's Agg backend writes by suffix (save_figure writes PNG for a path without one).
-IMAGE_SUFFIXES = frozenset({".png", ".pdf", ".svg", ".svgz", ".eps", ".ps", ".jpg", ".jpeg", ".tif", ".tiff",
-                            ".webp", ".pgf", ".raw", ".rgba"})
-#: Geometry files open3d writes by suffix (an error mesh, or a cloud when the reconstruction is one).
-GEOMETRY_SUFFIXES = frozenset({".ply", ".obj", ".stl", ".off", ".gltf", ".glb", ".pcd", ".xyz", ".xyzn", ".pts"})
-RECORDING_SUFFIXES = frozenset({".mcap", ".bag"})
-#: Suffixes of files kinfu reads or writes that are not JSON: a JSON result or a folder named so is a mistake.
-OTHER_FILE_SUFFIXES = (IMAGE_SUFFIXES | GEOMETRY_SUFFIXES | RECORDING_SUFFIXES
-                       | {".npz", ".npy", ".db3", ".tum", ".traj", ".res", ".csv", ".yaml", ".yml", ".zip", ".gz"})
-
-#: Suffixes a folder (or a ROS 2 bag folder) is not named with: results, text, and every other file kinfu knows.
-FILE_SUFFIXES = OTHER_FILE_SUFFIXES | {".json", ".txt", ".log", ".md", ".html"}
+from kinfu_cli.core.file_kinds import (FILE_SUFFIXES, GEOMETRY_SUFFIXES, IMAGE_SUFFIXES,  # noqa: F401
+                                       OTHER_FILE_SUFFIXES, RECORDING_SUFFIXES)
 
 KINDS = ("json", "image", "viewer", "geometry", "folder", "recording", "trajectory")
 

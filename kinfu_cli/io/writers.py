@@ -20,6 +20,7 @@ import numpy as np
 
 from kinfu_cli.core.errors import ConfigError, RecordingError
 from kinfu_cli.core.atomic import atomic_dir, atomic_path, scratch_dir
+from kinfu_cli.core.file_kinds import FILE_SUFFIXES
 from kinfu_cli.core.poses import matrix_to_quaternion
 
 FORMATS = ("mcap", "bag", "ros2", "ros2-mcap")  # ros2-mcap: a ROS 2 bag folder with mcap storage
@@ -41,17 +42,17 @@ _TFMESSAGE_ROS1 = "geometry_msgs/TransformStamped[] transforms\n"
 
 def format_for(path: str | os.PathLike, fmt: str | None = None) -> str:
     """Container for `path`: 'mcap', 'bag' or 'ros2' (sqlite3 folder); `fmt` overrides the suffix (and is the
-    only way to ask for 'ros2-mcap', a ROS 2 bag folder with mcap storage)."""
-    if fmt is not None:
-        if fmt not in FORMATS:
-            raise ConfigError(f"recording format {fmt!r}: expected one of {', '.join(FORMATS)}")
-        return fmt
+    only way to ask for 'ros2-mcap', a ROS 2 bag folder with mcap storage). A ROS 2 bag is a folder: a path named
+    like a file (results.json, depth.png, x.mcap asked for as 'ros2') is refused rather than made a folder of that
+    name."""
+    if fmt is not None and fmt not in FORMATS:
+        raise ConfigError(f"recording format {fmt!r}: expected one of {', '.join(FORMATS)}", parameter="fmt")
     suffix = Path(path).suffix.lower()
-    if suffix == ".mcap":
-        return "mcap"
-    if suffix == ".bag":
-        return "bag"
-    return "ros2"
+    kind = fmt or {".mcap": "mcap", ".bag": "bag"}.get(suffix, "ros2")
+    if kind.startswith("ros2") and suffix in FILE_SUFFIXES:
+        raise ConfigError(f"{os.fspath(path)} names a {suffix} file, but a ROS 2 bag is a folder; expected NAME.mcap, "
+                          f"NAME.bag or a folder name without that suffix", parameter="path")
+    return kind
 
 
 class RecordingWriter:

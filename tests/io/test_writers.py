@@ -117,3 +117,13 @@ def test_bad_arguments_raise_config_errors(tmp_path):
         with RecordingWriter(tmp_path / "c.bag") as w:
             w.write_pose("/p", 1, "world", np.eye(3))
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("name, fmt", [("results.json", None), ("depth.png", None), ("x.mcap", "ros2"),
+                                       ("x.bag", "ros2-mcap"), ("notes.txt", None)])
+def test_ros2_folder_named_like_a_file_is_refused(tmp_path, name, fmt):
+    # the library, not only the commands: a ROS 2 bag folder called results.json is a mistake nobody asked for
+    with pytest.raises(ConfigError, match="a ROS 2 bag is a folder"):
+        RecordingWriter(tmp_path / name, fmt=fmt)
+    assert list(tmp_path.iterdir()) == []
+    assert format_for("run.2026-11-29") == "ros2" and format_for("x.db3.d") == "ros2"
