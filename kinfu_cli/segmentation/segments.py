@@ -966,13 +966,18 @@ def _join_necks(seg: np.ndarray, points: np.ndarray, pairs: np.ndarray, h: np.nd
     target = np.arange(n_seg)
     joins = 0
     for b in np.flatnonzero(np.isfinite(low) & ~grounded):
-        mine = np.r_[pa[sb == b], pb[sa == b]]  # b's points touching another segment, and which
+        mine = np.r_[pa[sb == b], pb[sa == b]]  # the points of other segments touching b, and which
         other = np.r_[sa[sb == b], sb[sa == b]]
         ok = grounded[other] & (h[mine] <= low[b] + CONTACT_BAND)
         if not ok.any():
             continue
         a = int(np.bincount(other[ok]).argmax())
-        contact = np.unique(mine[ok & (other == a)])
+        # the contact: a's points next to b up to CONTACT_BAND above b's lowest point, or above the lowest of them
+        # when b hangs lower elsewhere (a box on a box, cut from it by colour along a seam below its edge, kept two
+        # points of its contact and joined it)
+        touch = other == a
+        floor = max(low[b], h[mine[touch]].min())
+        contact = np.unique(mine[touch & (h[mine] <= floor + CONTACT_BAND)])
         own = seg == b
         ratio = _extent(flat[contact]) / max(_extent(flat[own]), 1e-9)
         if ratio < NECK_RATIO and _over(flat[own].mean(axis=0), flat[seg == a], up):

@@ -96,3 +96,30 @@ def test_a_fused_drill_view_is_one_object(seed, frame):
     assert seg.stats["necks_joined"] >= 1
     visible = [o for o in np.unique(truth) if o > 0 and np.sum(truth == o) >= 30]
     assert sorted(v for v in set(main.values()) if v > 0) == sorted(visible)  # every visible object found
+
+
+def test_a_box_on_a_box_hanging_lower_elsewhere_is_no_neck():
+    """The neck rule's contact starts at the lowest point of the lower segment next to the upper one, not at the
+    upper one's own lowest point: a few of its points lying lower elsewhere (a colour seam off the edge) put the
+    band under the fused crease, which rounds upward, so it caught two of the base's points, and a box resting on
+    a box joined it (objects scene 1 at T_lccp 0.16)."""
+    from kinfu_cli.segmentation.segments import SegmentationParams, _join_necks, adjacency_pairs
+
+    base = ((-0.07, -0.05, 0.0), (0.07, 0.05, 0.08))
+    top = ((-0.045, -0.035, 0.08), (0.045, 0.035, 0.15))
+    pb, _ = box_faces(*base, STEP)
+    pb = pb[~((pb[:, 2] == 0.08) & (np.abs(pb[:, 0]) < 0.045) & (np.abs(pb[:, 1]) < 0.035))]
+    crease = (pb[:, 2] == 0.08) & (np.abs(pb[:, 0]) < 0.065) & (np.abs(pb[:, 1]) < 0.05)
+    crease[np.flatnonzero(crease)[:2]] = False  # two points of the crease left at the edge's height
+    pb[crease, 2] += 0.006
+    pt, _ = box_faces(*top, STEP)
+    x, z = np.meshgrid(np.arange(-0.01, 0.011, STEP), np.arange(0.066, 0.071, STEP))
+    seam = np.c_[x.ravel(), np.full(x.size, -0.09), z.ravel()]  # the upper segment's, 4 cm off the base's side
+    up = np.array([0.0, 0.0, 1.0])
+    params = SegmentationParams(up=tuple(up))
+    n = len(pb) + len(pt)
+    for points in (np.concatenate([pb, pt]), np.concatenate([pb, pt, seam])):
+        seg = np.r_[np.zeros(len(pb), int), np.ones(len(points) - len(pb), int)]
+        out, joins = _join_necks(seg, points, adjacency_pairs(points, params.adjacency_radius), points @ up, up,
+                                 params)
+        assert joins == 0 and set(out[len(pb):]) == {1}, len(points) > n
