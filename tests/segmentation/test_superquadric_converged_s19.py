@@ -32,11 +32,14 @@ def _fit(points: np.ndarray, monkeypatch, max_nfev: int):
     return fit, runs[0]
 
 
-def _moved(fit, long) -> tuple[float, float, float, float]:
-    """How far a long run moved the fit: semi-axes (m), exponents, centre (m), cost (relative)."""
+def _moved(fit, long) -> tuple[float, float, float, float, float]:
+    """How far a long run moved the fit: semi-axes (m), exponents, centre (m), cost (relative), and the largest
+    angle (deg) between matching axes (a superquadric is symmetric under each axis' flip, so up to sign)."""
     a, b = fit.superquadric, long.superquadric
+    cosines = np.clip(np.abs(np.sum(a.rotation * b.rotation, axis=0)), 0.0, 1.0)
     return (float(np.max(np.abs(a.size - b.size))), float(np.max(np.abs(a.exponents - b.exponents))),
-            float(np.linalg.norm(a.center - b.center)), (fit.cost - long.cost) / long.cost)
+            float(np.linalg.norm(a.center - b.center)), (fit.cost - long.cost) / long.cost,
+            float(np.degrees(np.arccos(cosines.min()))))
 
 
 def test_a_fit_stopped_at_max_nfev_but_settled_reads_converged(monkeypatch):
@@ -44,8 +47,9 @@ def test_a_fit_stopped_at_max_nfev_but_settled_reads_converged(monkeypatch):
     fit, run = _fit(points, monkeypatch, max_nfev=15)
     assert run.status == 0 and not run.success and run.nfev == 15  # scipy: stopped at max_nfev, "not converged"
     long = sqm.fit_superquadric(points, max_nfev=2000, axis_candidates=1)
-    size, exponent, centre, cost = _moved(fit, long)
+    size, exponent, centre, cost, turn = _moved(fit, long)
     assert long.success and size < 1e-3 and exponent < 0.05 and centre < 1e-3 and cost < 0.01  # it had settled
+    assert turn < 2.0  # 1.2 deg: 1.4 mm at the 6.7 cm semi-axis, two nearly equal axes leave that turn loose
     assert fit.success and fit.to_json()["converged"] is True and "not_converged_reason" not in fit.to_json()
 
 
@@ -54,7 +58,7 @@ def test_a_fit_stopped_early_while_still_moving_is_not_converged_and_says_why(mo
     fit, run = _fit(points, monkeypatch, max_nfev=15)
     assert run.status == 0
     long = sqm.fit_superquadric(points, max_nfev=2000, axis_candidates=1)
-    size, _, centre, cost = _moved(fit, long)
+    size, _, centre, cost, _ = _moved(fit, long)
     assert size > 0.05 and centre > 0.05 and cost > 0.05  # 9 cm and 6 % of its cost away from its optimum
     doc = fit.to_json()
     assert doc["converged"] is False and not fit.success
@@ -63,8 +67,14 @@ def test_a_fit_stopped_early_while_still_moving_is_not_converged_and_says_why(mo
 
 
 def test_the_settle_check_leaves_the_fitted_shape_as_it_was(monkeypatch):
-    """The check restarts the optimiser from the fit but keeps the fit: same parameters as without it."""
+    """The check restarts the optimiser from the fit but keeps the fit: the same shape, pose and cost as a fit
+    whose check is skipped."""
     points = _cloud(14)
     fit, run = _fit(points, monkeypatch, max_nfev=15)
     assert np.array_equal(fit.superquadric.size, run.x[0:3]) and np.array_equal(fit.superquadric.exponents, run.x[3:5])
     assert fit.cost == float(run.cost)
+    monkeypatch.setattr(sqm, "_settled", lambda *args, **kwargs: (True, ""))
+    unchecked = sqm.fit_superquadric(points, max_nfev=15, axis_candidates=1)
+    for name in ("size", "exponents", "center", "rotation"):
+        assert np.array_equal(getattr(fit.superquadric, name), getattr(unchecked.superquadric, name)), name
+    assert fit.cost == unchecked.cost and fit.residual == unchecked.residual
