@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import time
 from pathlib import Path
 
@@ -42,9 +43,9 @@ def _floats(value: str, name: str, n: tuple[int, ...]) -> tuple[float, ...]:
         v = tuple(float(x) for x in value.replace(" ", "").split(","))
     except ValueError:
         v = ()
-    if len(v) not in n:
+    if len(v) not in n or not all(math.isfinite(x) for x in v):  # nan / inf: int() of them was a traceback
         want = " or ".join(str(k) for k in n)
-        raise ConfigError(f"{name}: expected {want} comma-separated numbers, got {value!r}")
+        raise ConfigError(f"{name}: expected {want} comma-separated finite numbers, got {value!r}")
     return v
 
 

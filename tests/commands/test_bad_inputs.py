@@ -178,6 +178,10 @@ def test_a_topic_of_the_wrong_type_is_named_with_its_type(sample_dir, tmp_path):
     (["info", "{rec}", "--frames", "--start", "inf"], "--start"),
     (["info", "{rec}", "--frames", "--end", "1e300"], "--end"),
     (["fuse", "{rec}", "-o", "{out}", "--start", "inf"], "--start"),
+    (["fuse", "{rec}", "-o", "{out}", "--resolution", "nan"], "--resolution"),  # int(nan): a traceback
+    (["fuse", "{rec}", "-o", "{out}", "--resolution", "64,inf,64"], "--resolution"),
+    (["fuse", "{rec}", "-o", "{out}", "--size", "inf"], "--size"),
+    (["fuse", "{rec}", "-o", "{out}", "--origin", "0,nan,0"], "--origin"),
     (["export", "{rec}", "-o", "{out}", "--tolerance", "nan"], "--tolerance"),
     (["poi", "{rec}", "-o", "{out}", "--reg-space", "1e300"], "--reg-space"),
     (["poi", "{rec}", "-o", "{out}", "--bic-threshold", "nan"], "--bic-threshold"),
