@@ -91,8 +91,9 @@ RESAMPLE_GAUSSIANS = 4
 
 # the fewest Gaussians a fit needs for a POI: one with a neighbour on each side (the first and last are skipped)
 MIN_POI_GAUSSIANS = 3
-#: the largest numeric time_scale (units per second): microseconds; more only risks overflow in the variances
-MAX_TIME_SCALE = 1e6
+#: the numeric time_scale range (units per second): megaseconds to microseconds; beyond it the variances
+#: overflow (1e-300 and inf printed numpy warnings)
+MIN_TIME_SCALE, MAX_TIME_SCALE = 1e-6, 1e6
 
 class GmmActivitySaliency:
     """GMM-AS POI detector (sklearn-style: parameters here, work in `fit`, results in `*_`).
@@ -177,13 +178,13 @@ class GmmActivitySaliency:
             raise ConfigError(f"expected one of {', '.join(SELECTION_MODES)}, got {self.selection!r}",
                               parameter="selection")
         if self.time_scale != "duration":
-            try:  # finite and at most MAX_TIME_SCALE: inf made NaN times (a numpy warning, then an empty fit)
-                ok = 0 < float(self.time_scale) <= MAX_TIME_SCALE
+            try:  # finite and in range: inf made NaN times (a numpy warning, then an empty fit)
+                ok = MIN_TIME_SCALE <= float(self.time_scale) <= MAX_TIME_SCALE
             except (TypeError, ValueError, OverflowError):
                 ok = False
             if not ok:
-                raise ConfigError(f"expected 'duration' or a number > 0 and <= {MAX_TIME_SCALE:g} (units per "
-                                  f"second), got {self.time_scale!r}", parameter="time_scale")
+                raise ConfigError(f"expected 'duration' or a number from {MIN_TIME_SCALE:g} to {MAX_TIME_SCALE:g} "
+                                  f"(units per second), got {self.time_scale!r}", parameter="time_scale")
         # finite and of a sensible size: NaN slips through comparisons, 1e300 overflows a variance
         check_number(self.neighbours, "neighbours", 1, 1000, integer=True)
         check_number(self.max_components, "max_components", 1, 1000, integer=True)

@@ -36,6 +36,23 @@ def option_flags(cmd: click.Command | None, parameter: str) -> str:
     options = {p.name: max(p.opts, key=len) for p in (cmd.params if cmd else []) if isinstance(p, click.Option)}
     return "/".join(PARAMETER_FLAGS.get(n) or options.get(n) or n for n in parameter.split("/"))
 
+def not_empty(ctx: click.Context, param: click.Parameter, value):
+    """click callback: an option given as '' (a shell variable left unset) is refused, not read as its default
+    (--origin '' fused at the automatic origin, --camera-frame '' read the images' own frame)."""
+    if isinstance(value, str) and not value.strip():
+        raise click.BadParameter("expected a value, got an empty one", ctx=ctx, param=param)
+    return value
+
+
+def comma_items(text: str, option: str) -> list[str]:
+    """The items of a comma-separated option value, stripped; an empty item ('1,,2', a trailing comma) is an
+    error naming the option (it was skipped, and the rest taken as what was meant)."""
+    items = [t.strip() for t in text.split(",")]
+    if any(not t for t in items):
+        raise KinfuError(f"{option} {text!r}: an empty item; expected comma-separated values without gaps")
+    return items
+
+
 #: `kinfu eval segment` options that mean something only with --sweep (long flags without the dashes): the
 #: command refuses them without --sweep, batch's eval-segment stage (one recording, never a sweep) refuses them
 SWEEP_ONLY_OPTIONS = frozenset({"sweep-parameter", "sweep-values", "color-distance", "method", "color", "photometric",

@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 
 from kinfu_cli.commands._engine import scheduler_option, trial_engine
-from kinfu_cli.commands._options import result_options
+from kinfu_cli.commands._options import comma_items, result_options
 from kinfu_cli.commands._detector_options import detector_options, detector_params_from
 from kinfu_cli.commands._output import QUIET_HELP, emit
 from kinfu_cli.core.errors import ConfigError
@@ -22,7 +22,7 @@ def _floats(option: str, value: str | None) -> list[float]:
     if value is None or not value.strip():
         return []
     try:
-        values = [float(v) for v in value.split(",") if v.strip()]
+        values = [float(v) for v in comma_items(value, option)]
     except ValueError:
         values = [math.nan]
     if not all(math.isfinite(v) for v in values):  # nan / inf were taken as a setting and scored

@@ -7,7 +7,8 @@ from pathlib import Path
 
 import click
 
-from kinfu_cli.commands._options import OutputPath, SWEEP_ONLY_OPTIONS, claim_outputs, force_option, given_options
+from kinfu_cli.commands._options import (OutputPath, SWEEP_ONLY_OPTIONS, claim_outputs, comma_items, force_option,
+                                         given_options)
 from kinfu_cli.commands._output import QUIET_HELP, emit
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.evaluation.segment_eval import (RGB_T_LCCP_VALUES, SWEEP_DEFAULT, SWEEP_VALUES, check_eval_numbers,
@@ -26,7 +27,7 @@ def _listed(values) -> str:
 
 def _numbers(text: str, option: str, kind=float) -> list:
     try:
-        vals = [kind(v) for v in text.split(",") if v.strip()]
+        vals = [kind(v) for v in comma_items(text, option)] if text.strip() else []
     except ValueError:
         raise ConfigError(f"{option} {text!r}: expected comma-separated numbers") from None
     if not vals:

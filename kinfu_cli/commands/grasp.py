@@ -93,9 +93,7 @@ def command(segments: Path, output: Path, hand, segment_ids, cones, cone_apertur
     """
     segments = segments / "segments.json" if segments.is_dir() else segments  # errors name the file
     claim_outputs({"output": output, "plot": plot}, [segments], force)
-    doc = read_segments(segments)
-    plane = support_plane(doc, str(segments))
-    up = plane[:3] if plane is not None else np.array([0.0, 0.0, 1.0])
+    # the options first, before the input is read: a bad one is named, not the input's problem
     hand_model = HandModel(_numbers(hand_size, 3, "hand_size"), n_points, palm_width, thumb_length, finger_length)
     workspaces = {h: w for h, w in (("right", _workspace(workspace_right, "workspace_right")),
                                     ("left", _workspace(workspace_left, "workspace_left"))) if w is not None}
@@ -103,10 +101,14 @@ def command(segments: Path, output: Path, hand, segment_ids, cones, cone_apertur
     if aperture_given and not any(str(c).strip().lower() in ("top", "side") for c in cones):
         raise ConfigError("sets the aperture of the 'top' / 'side' presets: give --cone top or --cone side "
                           "(an 'AXIS:dx,dy,dz:deg' cone carries its own)", parameter="cone_aperture")
-    opts = GraspOptions(hand=hand, hand_model=hand_model, cones=[parse_cone(c, up, cone_aperture) for c in cones],
-                        workspaces=workspaces or None, lifting=not no_lifting, pregrasp_distance=pregrasp_distance,
-                        reach_weight=reach_weight, obstacle_weight=obstacle_weight, n_starts=n_starts,
-                        segment_ids=list(segment_ids) or None)
+    opts = GraspOptions(hand=hand, hand_model=hand_model, cones=[], workspaces=workspaces or None,
+                        lifting=not no_lifting, pregrasp_distance=pregrasp_distance, reach_weight=reach_weight,
+                        obstacle_weight=obstacle_weight, n_starts=n_starts, segment_ids=list(segment_ids) or None)
+    opts.validate()  # all but the cones, which need the support plane's up from the input
+    doc = read_segments(segments)
+    plane = support_plane(doc, str(segments))
+    up = plane[:3] if plane is not None else np.array([0.0, 0.0, 1.0])
+    opts.cones = [parse_cone(c, up, cone_aperture) for c in cones]
     result: GraspResult = plan_grasps(doc, opts, progress=lambda ids: progress(ids, total=len(ids), desc="grasp",
                                                                                quiet=quiet),
                                       source=str(segments))

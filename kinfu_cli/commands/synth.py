@@ -6,14 +6,14 @@ import json
 
 import click
 
-from kinfu_cli.commands._options import OutputPath, claim_outputs, force_option
+from kinfu_cli.commands._options import OutputPath, claim_outputs, comma_items, force_option
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.sim.synth import FORMAT_NAMES, synthesize
 
 
 def parse_formats(text: str) -> list[str]:
     """'mcap,bag,ros2' -> ['mcap', 'bag', 'ros2'] (ConfigError naming --formats for anything else)."""
-    items = [t.strip().lower() for t in text.split(",") if t.strip()]
+    items = [t.lower() for t in comma_items(text, "--formats")] if text.strip() else []
     bad = [t for t in items if t not in FORMAT_NAMES]
     if not items or bad:
         raise ConfigError(f"--formats {text!r}: expected a comma-separated subset of mcap,bag,ros2")

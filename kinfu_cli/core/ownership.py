@@ -326,3 +326,29 @@ def _check_writable_path(out: Path, parameter: str) -> None:
         raise KinfuError(f"{out}: {folder} is a file, not a folder", parameter=parameter)
     if folder.is_dir() and not os.access(folder, os.W_OK | os.X_OK):
         raise KinfuError(f"{out}: cannot write into the folder {folder} (permission denied)", parameter=parameter)
+    if folder.is_dir():
+        _probe_folder(out, folder, parameter)
+
+
+def _probe_folder(out: Path, folder: Path, parameter: str) -> None:
+    """Make and remove what the output's path needs in its nearest existing folder (the first missing folder,
+    or a temporary file): os.access answers yes to root where nothing can be made (/proc, a read-only mount),
+    and the run then failed only after its work, its warnings already printed."""
+    missing = out.parent if str(out.parent) else Path(".")
+    while missing != folder and missing.parent != folder and missing != missing.parent:
+        missing = missing.parent
+    try:
+        if missing != folder and not missing.exists():
+            try:
+                missing.mkdir()
+            except FileExistsError:  # made meanwhile (another run): it can be made
+                return
+            with contextlib.suppress(OSError):
+                missing.rmdir()
+        else:
+            fd, probe = tempfile.mkstemp(prefix=".kinfu-probe-", dir=folder)
+            os.close(fd)
+            os.unlink(probe)
+    except OSError as exc:
+        raise KinfuError(f"{out}: cannot write into the folder {folder} ({exc.strerror or exc})",
+                         parameter=parameter) from None

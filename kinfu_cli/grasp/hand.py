@@ -43,9 +43,9 @@ class HandModel:
         for s in self.size:
             check_number(s, "hand_size", 0.005, 0.5, unit="m")
         check_number(self.n_points, "n_points", 8, 2000, integer=True)
-        check_number(self.palm_width, "palm_width", 0.0, 0.5, unit="m")
-        check_number(self.thumb_length, "thumb_length", 0.0, 0.5, unit="m")
-        check_number(self.finger_length, "finger_length", 0.0, 0.5, unit="m")
+        check_number(self.palm_width, "palm_width", 0.005, 0.5, unit="m")  # 0 was a hand of no size
+        check_number(self.thumb_length, "thumb_length", 0.005, 0.5, unit="m")
+        check_number(self.finger_length, "finger_length", 0.005, 0.5, unit="m")
 
     def lifted(self, object_size: np.ndarray, object_axes: np.ndarray | None = None,
                cones: tuple = ()) -> "HandModel":

@@ -30,6 +30,7 @@ import numpy as np
 import open3d as o3d
 
 from kinfu_cli.core.atomic import atomic_dir, write_json
+from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError, RecordingError
 from kinfu_cli.core.poses import look_at
 from kinfu_cli.core.progress import progress
@@ -57,6 +58,11 @@ COLOR_TOPIC = "/camera/color/image_raw"
 INFO_TOPIC = "/camera/depth/camera_info"
 HAND_TOPIC = "/hand/pose"
 TF_RATE_HZ = 10.0
+
+#: rates a generated recording may have: inf made an infinite number of samples (a traceback), and a hand tracker
+#: faster than 10 kHz or a camera faster than 1 kHz is no recording anyone replays
+MAX_HAND_RATE_HZ = 1e4
+MAX_FRAME_RATE_HZ = 1e3
 
 
 @dataclass
@@ -127,9 +133,8 @@ def make_scenario(seed: int = 0, kind: str = "pick-and-place", width: int = 320,
         raise ConfigError(f"expected at least 2 (scan and after the change), got {frames}", parameter="frames")
     if width < 8 or height < 6 or width > 4096 or height > 4096:
         raise ConfigError(f"expected 8x6 to 4096x4096 pixels, got {width}x{height}", parameter="width/height")
-    if not hand_rate_hz > 0 or not frame_rate_hz > 0:
-        raise ConfigError(f"expected positive rates in Hz, got {hand_rate_hz} and {frame_rate_hz}",
-                          parameter="hand_rate_hz/frame_rate_hz")
+    check_number(hand_rate_hz, "hand_rate_hz", 0, MAX_HAND_RATE_HZ, low_open=True, unit="Hz")
+    check_number(frame_rate_hz, "frame_rate_hz", 0, MAX_FRAME_RATE_HZ, low_open=True, unit="Hz")
     if kind in ("remove", "pick-and-place") and n_objects < 1:
         raise ConfigError(f"the {kind} scenario needs at least one object, got {n_objects}", parameter="n_objects")
     rng = np.random.default_rng([seed, 7])

@@ -182,6 +182,18 @@ def test_a_topic_of_the_wrong_type_is_named_with_its_type(sample_dir, tmp_path):
     (["fuse", "{rec}", "-o", "{out}", "--resolution", "64,inf,64"], "--resolution"),
     (["fuse", "{rec}", "-o", "{out}", "--size", "inf"], "--size"),
     (["fuse", "{rec}", "-o", "{out}", "--origin", "0,nan,0"], "--origin"),
+    # an empty value or list item was read as the default or skipped (a fuzz pass, 2026-11-29)
+    (["fuse", "{rec}", "-o", "{out}", "--origin", ""], "--origin"),
+    (["fuse", "{rec}", "-o", "{out}", "--camera-frame", ""], "--camera-frame"),
+    (["poi", "{rec}", "-o", "{out}", "--workspace", ""], "--workspace"),
+    (["eval", "poi", "{gt}", "--speed", "1,,2"], "--speed"),
+    (["eval", "segment", "--sweep", "--sweep-values", "1,,2", "--scenes", "0"], "--sweep-values"),
+    (["synth", "-o", "{out}", "--frames", "3", "--width", "32", "--height", "24", "--formats", "mcap,,bag"],
+     "--formats"),
+    (["synth", "-o", "{out}", "--frames", "3", "--width", "32", "--height", "24", "--hand-rate", "inf"],
+     "--hand-rate"),  # a traceback
+    (["synth", "-o", "{out}", "--scene", "room", "--frames", "3", "--frame-rate", "1e309"], "--frame-rate"),
+    (["grasp", "{vol}", "-o", "{out}", "--palm-width", "0"], "--palm-width"),  # a hand of no size grasped
     (["export", "{rec}", "-o", "{out}", "--tolerance", "nan"], "--tolerance"),
     (["poi", "{rec}", "-o", "{out}", "--reg-space", "1e300"], "--reg-space"),
     (["poi", "{rec}", "-o", "{out}", "--bic-threshold", "nan"], "--bic-threshold"),
@@ -415,3 +427,12 @@ def test_pose_topics_with_bad_quaternions_name_topic_and_sample(tmp_path, bad):
     with open_recording(path) as rec, pytest.raises(RecordingError, match=r"poses.mcap: pose topic /hand/pose: "
                                                                           r"the pose at stamp 1300000000 ns"):
         _PosePath(rec, "/hand/pose", 0)
+
+
+def test_eval_fusion_into_a_folder_nothing_can_be_made_in_fails_before_its_warnings(sample_dir, fused, tmp_path):
+    # the run used to score first, print its warning, then fail to write: now one line, before the work
+    if not Path("/proc/self").is_dir():
+        pytest.skip("needs Linux /proc, where nothing can be made")
+    res = run("eval", "fusion", fused, "--ground-truth", sample_dir / "ground_truth", "--quiet", "-o",
+              "/proc/x/a.json", limit=60)
+    one_line_error(res, "--output", "cannot write into the folder /proc")

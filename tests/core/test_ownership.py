@@ -4,6 +4,7 @@ appears whole or not at all."""
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 import pytest
 
@@ -148,3 +149,17 @@ def test_a_file_of_a_folder_output_is_not_replaced_alone_and_outputs_do_not_nest
         claim_outputs({"outdir": tmp_path / "new", "viz": tmp_path / "new" / "segments.json"}, [], False)
     assert err.value.parameter == "outdir/viz"
     claim_outputs({"outdir": tmp_path / "new", "viz": tmp_path / "new.mcap"}, [], False)
+
+
+@pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs Linux /proc, where nothing can be made")
+def test_an_output_nothing_can_be_made_for_is_refused_before_the_work():
+    # root passes os.access on /proc; the run failed only after its work (eval fusion printed its warnings first)
+    for path in ("/proc/x/y/a.json", "/proc/a.json"):
+        with pytest.raises(KinfuError, match="cannot write into the folder /proc"):
+            claim_output(path)
+
+
+def test_the_writability_probe_leaves_nothing_behind(tmp_path):
+    claim_output(tmp_path / "a" / "b" / "c.json")
+    claim_output(tmp_path / "d.json")
+    assert list(tmp_path.iterdir()) == []
