@@ -13,7 +13,7 @@ import sys
 import click
 
 from kinfu_cli import __version__
-from kinfu_cli.commands._options import option_flags
+from kinfu_cli.commands._options import option_flags, refuse_empty_values
 from kinfu_cli.core.errors import KinfuError
 from kinfu_cli.core.ownership import ForeignOutputError
 
@@ -94,7 +94,7 @@ class _LazyGroup(click.Group):
                                             help=f"Score against ground truth: {', '.join(sorted(target))}.",
                                             short_help="Score results against ground truth, tables like the papers'.")
         else:
-            cmd = importlib.import_module(f"kinfu_cli.commands.{target}").command
+            cmd = refuse_empty_values(importlib.import_module(f"kinfu_cli.commands.{target}").command)
         self.commands[name] = self.last_resolved = cmd
         return cmd
 

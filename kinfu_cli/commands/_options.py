@@ -36,7 +36,7 @@ def option_flags(cmd: click.Command | None, parameter: str) -> str:
     options = {p.name: max(p.opts, key=len) for p in (cmd.params if cmd else []) if isinstance(p, click.Option)}
     return "/".join(PARAMETER_FLAGS.get(n) or options.get(n) or n for n in parameter.split("/"))
 
-def not_empty(ctx: click.Context, param: click.Parameter, value):
+def _not_empty(ctx: click.Context, param: click.Parameter, value):
     """click callback: an option given as '' (a shell variable left unset) is refused, not read as its default
     (--origin '' fused at the automatic origin, --camera-frame '' read the images' own frame)."""
     if isinstance(value, str) and not value.strip():
@@ -44,9 +44,22 @@ def not_empty(ctx: click.Context, param: click.Parameter, value):
     return value
 
 
+def refuse_empty_values(cmd: click.Command) -> click.Command:
+    """Give every text option of `cmd` that defaults to None (a topic, a frame, a list of numbers) the check that
+    an empty value is an error: the commands' own parsers read '' as "not given". Options with a default of their
+    own ('' meaning none, as eval poi's --noise) and those with a callback of their own are left as they are."""
+    for p in cmd.params:
+        if (isinstance(p, click.Option) and not p.is_flag and p.default is None and p.callback is None
+                and isinstance(p.type, click.types.StringParamType)):
+            p.callback = _not_empty
+    return cmd
+
+
 def comma_items(text: str, option: str) -> list[str]:
-    """The items of a comma-separated option value, stripped; an empty item ('1,,2', a trailing comma) is an
-    error naming the option (it was skipped, and the rest taken as what was meant)."""
+    """The items of a comma-separated option value, stripped ([] for a blank value); an empty item ('1,,2', a
+    trailing comma) is an error naming the option (it was skipped, and the rest taken as what was meant)."""
+    if not text.strip():
+        return []
     items = [t.strip() for t in text.split(",")]
     if any(not t for t in items):
         raise KinfuError(f"{option} {text!r}: an empty item; expected comma-separated values without gaps")

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import click
 
-from kinfu_cli.core.file_kinds import (FILE_SUFFIXES, GEOMETRY_SUFFIXES, IMAGE_SUFFIXES,  # noqa: F401
-                                       OTHER_FILE_SUFFIXES, RECORDING_SUFFIXES)
+from kinfu_cli.core.file_kinds import (FILE_SUFFIXES, GEOMETRY_SUFFIXES, IMAGE_SUFFIXES, OTHER_FILE_SUFFIXES,
+                                       RECORDING_SUFFIXES)
 
 KINDS = ("json", "image", "viewer", "geometry", "folder", "recording", "trajectory")
 

@@ -9,8 +9,6 @@ from collections.abc import Callable
 
 import click
 
-from kinfu_cli.commands._options import not_empty
-
 ROLE_HELP = {
     "depth_topic": "Depth topic (sensor_msgs/Image 16UC1/32FC1, compressedDepth, or an organized PointCloud2) [auto].",
     "color_topic": "Colour image topic (Image or jpeg/png CompressedImage) [auto].",
@@ -26,11 +24,11 @@ def role_options(func: Callable) -> Callable:
     """click decorator adding --depth-topic, --color-topic, --info-topic, --camera-frame, --world-frame,
     --hand-topic, --hand-frame (each default None = auto-detect) and --intrinsics. Pass the values to
     `detect_roles(rec, **kw)` with `role_kwargs(kwargs)`."""
-    func = click.option("--intrinsics", "intrinsics", default=None, metavar="FX,FY,CX,CY", callback=not_empty,
+    func = click.option("--intrinsics", "intrinsics", default=None, metavar="FX,FY,CX,CY",
                         help="Depth camera intrinsics in pixels, for a recording without its CameraInfo (or to "
                              "override it; not with --info-topic).")(func)
     for name in reversed(ROLE_HELP):
-        func = click.option(f"--{name.replace('_', '-')}", name, default=None, metavar="NAME", callback=not_empty,
+        func = click.option(f"--{name.replace('_', '-')}", name, default=None, metavar="NAME",
                             help=ROLE_HELP[name])(func)
     return func
 

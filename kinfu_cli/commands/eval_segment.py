@@ -27,7 +27,7 @@ def _listed(values) -> str:
 
 def _numbers(text: str, option: str, kind=float) -> list:
     try:
-        vals = [kind(v) for v in comma_items(text, option)] if text.strip() else []
+        vals = [kind(v) for v in comma_items(text, option)]
     except ValueError:
         raise ConfigError(f"{option} {text!r}: expected comma-separated numbers") from None
     if not vals:

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import click
 
-from kinfu_cli.commands._options import OutputPath, bag_folder, claim_outputs, force_option, not_empty
+from kinfu_cli.commands._options import OutputPath, bag_folder, claim_outputs, force_option
 from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.commands._roles import role_kwargs, role_options
 from kinfu_cli.commands._up import parse_up
@@ -103,7 +103,7 @@ def check_options(params: dict) -> None:
 @click.option("--max-memory", type=float, default=None, metavar="GIB",
               help="Memory budget of --size auto (worst case of the grid) in GiB [half the available memory, at "
                    "most 2]; above it the default voxel grows, a given --voxel-size crops the box.")
-@click.option("--origin", default=None, callback=not_empty, help="World position x,y,z of the grid's minimum corner [with --size "
+@click.option("--origin", default=None, help="World position x,y,z of the grid's minimum corner [with --size "
                                              "auto the observed box's; else centred on what the first frames "
                                              "observe].")
 @click.option("--truncation", type=float, default=None,

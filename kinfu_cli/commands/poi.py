@@ -10,7 +10,7 @@ import click
 from kinfu_cli.attention.detect import PoiDetection, check_detection, detect_pois
 from kinfu_cli.attention.tasks import MIN_TASK_S, SPLIT_GAP_S
 from kinfu_cli.commands._detector_options import detector_options, detector_params_from
-from kinfu_cli.commands._options import OutputPath, bag_folder, claim_outputs, force_option, not_empty
+from kinfu_cli.commands._options import OutputPath, bag_folder, claim_outputs, force_option
 from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.core.atomic import write_json
 from kinfu_cli.report.poi_plot import plot_pois, plot_task_pois
@@ -37,7 +37,7 @@ def check_options(params: dict) -> None:
 @click.option("--hand-topic", default=None, help="Pose topic of the hand [default: detected by name].")
 @click.option("--hand-frame", default=None, help="TF frame of the hand (instead of a topic).")
 @click.option("--world-frame", default=None, help="Frame to express the trajectory and POIs in.")
-@click.option("--workspace", default=None, metavar="X0,Y0,Z0,X1,Y1,Z1", callback=not_empty,
+@click.option("--workspace", default=None, metavar="X0,Y0,Z0,X1,Y1,Z1",
               help="Workspace box (metres, trajectory frame): a task is a run of samples inside it; each task "
                    "is analysed on its own, as the paper's recorder does [default: everywhere].")
 @click.option("--split-gap", default=SPLIT_GAP_S, show_default=True, type=float, metavar="SECONDS",

@@ -13,7 +13,7 @@ from kinfu_cli.sim.synth import FORMAT_NAMES, synthesize
 
 def parse_formats(text: str) -> list[str]:
     """'mcap,bag,ros2' -> ['mcap', 'bag', 'ros2'] (ConfigError naming --formats for anything else)."""
-    items = [t.lower() for t in comma_items(text, "--formats")] if text.strip() else []
+    items = [t.lower() for t in comma_items(text, "--formats")]
     bad = [t for t in items if t not in FORMAT_NAMES]
     if not items or bad:
         raise ConfigError(f"--formats {text!r}: expected a comma-separated subset of mcap,bag,ros2")

@@ -317,28 +317,25 @@ def _check_writable_path(out: Path, parameter: str) -> None:
     if len(os.fsencode(out.name)) > limit:
         raise KinfuError(f"{out.name[:40]}...: a name of {len(os.fsencode(out.name))} bytes; expected at most "
                          f"{limit} (kinfu writes it under a longer temporary name first)", parameter=parameter)
-    folder = out.parent if str(out.parent) else Path(".")
+    folder, missing = out.parent if str(out.parent) else Path("."), None
     while not folder.exists() and folder != folder.parent:
         if folder.is_symlink():
             break  # a broken link: said when the folder is made
-        folder = folder.parent
+        folder, missing = folder.parent, folder
     if folder.exists() and not folder.is_dir():
         raise KinfuError(f"{out}: {folder} is a file, not a folder", parameter=parameter)
     if folder.is_dir() and not os.access(folder, os.W_OK | os.X_OK):
         raise KinfuError(f"{out}: cannot write into the folder {folder} (permission denied)", parameter=parameter)
     if folder.is_dir():
-        _probe_folder(out, folder, parameter)
+        _probe_folder(out, folder, missing, parameter)
 
 
-def _probe_folder(out: Path, folder: Path, parameter: str) -> None:
-    """Make and remove what the output's path needs in its nearest existing folder (the first missing folder,
-    or a temporary file): os.access answers yes to root where nothing can be made (/proc, a read-only mount),
-    and the run then failed only after its work, its warnings already printed."""
-    missing = out.parent if str(out.parent) else Path(".")
-    while missing != folder and missing.parent != folder and missing != missing.parent:
-        missing = missing.parent
+def _probe_folder(out: Path, folder: Path, missing: Path | None, parameter: str) -> None:
+    """Make and remove what the output's path needs in its nearest existing folder: `missing`, the first folder
+    of its path not there yet, or (None) a temporary file. os.access answers yes to root where nothing can be made
+    (/proc, a read-only mount), and the run then failed only after its work, its warnings already printed."""
     try:
-        if missing != folder and not missing.exists():
+        if missing is not None:
             try:
                 missing.mkdir()
             except FileExistsError:  # made meanwhile (another run): it can be made

@@ -9,7 +9,8 @@ from click.testing import CliRunner
 from conftest import one_line_error
 
 from kinfu_cli.cli import cli
-from kinfu_cli.commands._output_path import IMAGE_SUFFIXES, output_kind_problem
+from kinfu_cli.commands._output_path import output_kind_problem
+from kinfu_cli.core.file_kinds import IMAGE_SUFFIXES
 
 REC = "recording.mcap"  # never read: the option is refused first
 FOLDER, RECORDING, IMAGE, VIEWER, GEOMETRY, JSON = "out.json", "rec.txt", "plot.json", "viz.txt", "err.json", "r.png"
