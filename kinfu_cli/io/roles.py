@@ -313,6 +313,11 @@ def detect_roles(rec, depth_topic: str | None = None, color_topic: str | None = 
         tf = TfBuffer.from_recording(rec)
     if given_camera:
         _require_frame(rec, tf, camera_frame, "camera frame", "camera_frame", header_frames)
+        own = [f for f in header_frames if f != given_camera and tf is not None and f in tf.frames()]
+        if own:  # `--camera-frame link3` on an arm fused a 7.5 m grid of a scene displaced, with no word
+            notes.append(f"camera frame {given_camera!r} was given, but the depth images are stamped in "
+                         f"{own[0]!r}, a frame of the TF tree too: the images are placed by the poses of "
+                         f"{given_camera!r}; right only when their own frame_id is wrong")
     if world_frame:
         _require_frame(rec, tf, world_frame, "world frame", "world_frame")
     if hand_frame:

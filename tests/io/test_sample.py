@@ -47,3 +47,15 @@ def test_hand_topic_matches_ground_truth_traj(sample_dir):
         assert len(traj) == len(truth)
         np.testing.assert_allclose(traj.positions, truth.positions, atol=1e-5)  # .traj keeps 6 decimals
         np.testing.assert_allclose(np.diff(traj.t), 0.01, atol=1e-6)  # 100 Hz
+
+
+def test_a_camera_frame_other_than_the_images_own_is_said(sample_dir):
+    """`--camera-frame link3` on the arm recording placed the images by an arm link's poses with no word (a 7.5 m
+    grid of a displaced scene); now a note, a warning for every command that reads the frames. Naming the images'
+    own frame says nothing."""
+    with open_recording(sample_dir / "recording.mcap") as rec:
+        wrong = detect_roles(rec, camera_frame="link3")
+        own = detect_roles(rec, camera_frame="camera_optical")
+    assert wrong.camera_frame == "link3"
+    assert [n for n in wrong.notes if "'link3' was given, but the depth images are stamped in 'camera_optical'" in n]
+    assert not [n for n in own.notes if "was given" in n]
