@@ -418,6 +418,20 @@ class TernaryVolume:
             mode_winners(self.pool_hc, self.pool_hn, self.pool_c, self.n_used)
             self._winners_stale = False
 
+    def voxel_colors(self, idx: np.ndarray) -> np.ndarray:
+        """uint8 (N, 3) colours of the voxels at grid indices idx (N, 3), as `tsdf_weights(color=True)` gives them
+        (black: never coloured, or no voxel stored there), read from the blocks: a caller that needs colour at a
+        few surface points need not copy a dense colour box (3 bytes a voxel) to read them."""
+        self.sync_colors()
+        g = np.asarray(idx, dtype=np.int64).reshape(-1, 3)
+        if len(self.pool_c) == 0 or len(g) == 0:
+            return np.zeros((len(g), 3), dtype=np.uint8)
+        blk, loc = g // kn.B, g % kn.B
+        i = self.block_idx[blk[:, 0], blk[:, 1], blk[:, 2]]
+        out = self.pool_c[np.maximum(i, 0), loc[:, 0] * kn.B * kn.B + loc[:, 1] * kn.B + loc[:, 2]]
+        out[i < 0] = 0
+        return out
+
     def tsdf(self, lo=None, hi=None) -> np.ndarray:
         """Dense v (float32 in [-1, 1]; 0 where unknown) over [lo, hi)."""
         return self.tsdf_weights(lo, hi)[0]

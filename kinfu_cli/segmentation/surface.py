@@ -12,6 +12,7 @@ mode-filtered colour when fusion keeps that instead), averaged again by the thin
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -61,13 +62,16 @@ def _active_box(mask: np.ndarray, pad: int) -> tuple[slice, slice, slice] | None
 
 def surface_from_tsdf(tsdf: np.ndarray, weight: np.ndarray, origin, voxel_size: float, *,
                       min_weight: float = 1.0, resolution: float | None = 0.01,
-                      color: np.ndarray | None = None, index_offset=(0, 0, 0)) -> SurfaceCloud:
+                      color: np.ndarray | None = None, index_offset=(0, 0, 0),
+                      color_at: Callable[[np.ndarray], np.ndarray] | None = None) -> SurfaceCloud:
     """Zero crossing of the TSDF among known voxels (w >= min_weight), world coordinates.
 
     tsdf, weight: (X, Y, Z) arrays indexed [x, y, z], voxel centre at origin + (i + index_offset + 0.5) *
     voxel_size (index_offset: where the arrays start in the grid `origin` belongs to, so that a sub-box gives
     the same coordinates to the last bit).
-    color: (X, Y, Z, 3) uint8 RGB of the same voxels, or None (the cloud then has no colours).
+    color: (X, Y, Z, 3) uint8 RGB of the same voxels, or None (the cloud then has no colours); or instead
+    color_at: a function from voxel indices (N, 3) into these arrays to their (N, 3) uint8 RGB (a block volume
+    reads just the voxels next to the vertices, `TernaryVolume.voxel_colors`, instead of a dense colour box).
     resolution: thin the cloud on this voxel size (m); None keeps every marching-cubes vertex.
     Raises VolumeError when the volume has no observed surface.
     """
@@ -102,11 +106,15 @@ def surface_from_tsdf(tsdf: np.ndarray, weight: np.ndarray, origin, voxel_size: 
     pts = np.asarray(origin, dtype=np.float64) + (verts + offset + 0.5) * float(voxel_size)
     nrm = normals.astype(np.float64)
     cols = None
-    if color is not None:
-        c = np.asarray(color)[box]
+    if color is not None or color_at is not None:
         lo, hi = lo[ok], hi[ok]
-        ca = c[lo[:, 0], lo[:, 1], lo[:, 2]].astype(np.float64)
-        cb = c[hi[:, 0], hi[:, 1], hi[:, 2]].astype(np.float64)
+        if color_at is not None:
+            start = np.array([s.start for s in box], dtype=np.int64)
+            ca, cb = (np.asarray(color_at(e + start)).astype(np.float64) for e in (lo, hi))
+        else:
+            c = np.asarray(color)[box]
+            ca = c[lo[:, 0], lo[:, 1], lo[:, 2]].astype(np.float64)
+            cb = c[hi[:, 0], hi[:, 1], hi[:, 2]].astype(np.float64)
         wa, wb = ca.any(axis=1, keepdims=True), cb.any(axis=1, keepdims=True)  # black = never coloured
         cols = (ca * wa + cb * wb) / (255.0 * np.maximum(wa.astype(np.float64) + wb, 1.0))
     cloud = SurfaceCloud(pts, nrm / np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-12), cols)
@@ -188,12 +196,13 @@ def _surface_from_blocks(volume, min_weight: float, resolution: float | None, ch
                         ib = np.argwhere(sub)
                         c0 = np.maximum((ib.min(axis=0) + b0 - 1) * bsize, c0)
                         c1 = np.minimum((ib.max(axis=0) + b0 + 2) * bsize, c1)
-                v, w, *c = volume.tsdf_weights(c0, c1, color=with_color)
+                v, w = volume.tsdf_weights(c0, c1)
                 if min(v.shape) < 2:
                     continue
+                color_at = (lambda idx, c0=c0: volume.voxel_colors(idx + c0)) if with_color else None
                 try:
                     part = surface_from_tsdf(v, w, origin + start * vs, vs, min_weight=min_weight, resolution=None,
-                                             color=c[0] if c else None, index_offset=c0 - start)
+                                             index_offset=c0 - start, color_at=color_at)
                 except VolumeError:
                     continue
                 pts.append(part.points)

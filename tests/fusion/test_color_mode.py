@@ -132,6 +132,22 @@ def test_mode_volume_round_trips_and_continues_like_one_run(small, tmp_path):
     assert mean.pool_hc.size == 0 and mean.meta()["color_mode"] == "mean"
 
 
+@pytest.mark.parametrize("mode", ["mean", "mode"])
+def test_voxel_colors_read_what_the_dense_box_holds(small, mode):
+    """voxel_colors (segmentation reads colour at its vertices only) = the dense colour box at the same voxels,
+    the mode's winners included (read without an explicit sync) and black where no block is stored."""
+    _, frames, _ = small
+    vol = _fuse(_volume(mode, 0.008), frames)
+    rng = np.random.default_rng(0)
+    idx = rng.integers(0, np.array(vol.shape), (20000, 3))
+    got = vol.voxel_colors(idx)  # first: it must bring the mode's winners into the pool itself
+    dense = vol.tsdf_weights(color=True)[2]
+    assert got.dtype == np.uint8 and np.array_equal(got, dense[idx[:, 0], idx[:, 1], idx[:, 2]])
+    stored = vol.block_idx[tuple((idx // 8).T)] >= 0
+    assert stored.any() and (~stored).any() and not got[~stored].any() and got[stored].any()
+    assert vol.voxel_colors(np.zeros((0, 3), np.int64)).shape == (0, 3)
+
+
 def test_mode_keeps_surface_colours_where_there_is_no_edge():
     """Without photometric effects the mode filter's colours are as close to the truth as the mean's."""
     scene, frames, vp = _sequence(12, 6, effects=False)
