@@ -8,15 +8,21 @@ difference in precision (mode minus mean; mean over scenes with a 95 % bootstrap
 each side wins), and the minimum over the thresholds of the mean BCE per colour mode (Table 4.3; thesis: the
 enhanced volume lower by 5 % with Flood Fill and 1 % with LCCP) with the paired difference of the per-scene minima.
 Tuning seeds 0, 1, 8-19 and held-out seeds 2-7 are reported apart; nothing here chooses a constant.
+--false-boundaries: instead, per object, the predicted boundary points (LCCP) with no true boundary within 2 cm,
+mode against mean, at T_lccp 0.16, 0.2 and unpruned: where the mode filter's precision goes there.
 
 Run: .venv/bin/python benchmarks/bench_mode_vs_mean.py [--seeds 0,1,8,...] [--held-out] [--cache DIR]
+     [--false-boundaries]
      (fusing takes ~20 s a scene the first time; segmenting all thresholds ~3 s a scene after that)
 """
 
 from __future__ import annotations
 
 import argparse
+import re
 import sys
+from collections import Counter
+from dataclasses import replace
 import tempfile
 from pathlib import Path
 
@@ -26,6 +32,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import bench_segment as bs  # noqa: E402
+from scipy.spatial import cKDTree  # noqa: E402
+
+from kinfu_cli.evaluation.segment_eval import transfer_labels  # noqa: E402
+from kinfu_cli.evaluation.segments import boundary_set  # noqa: E402
+from kinfu_cli.segmentation.pipeline import SegmentOptions, analyse_cloud  # noqa: E402
 
 SWEEPS = {"lccp": ("t_lccp", (0.02, 0.04, 0.08, 0.12, 0.16, 0.2, 0.25, None)),
           "flood-fill": ("t_ff", (0.05, 0.1, 0.2, 0.3, 0.5, 0.7, 1.0))}
@@ -79,6 +90,34 @@ def report(rows: list[dict], seeds, group: str) -> None:
               f"[{lo:+.4f}, {hi:+.4f}]")
 
 
+def false_boundaries(seeds, cache: Path, values=(0.16, 0.2, None)) -> None:
+    """Per object kind (the name without its number), predicted boundary points with no true boundary within
+    2 cm, summed over the scenes, mode against mean."""
+    base = SegmentOptions(superquadrics=False, color=True)
+    for t in values:
+        counts, totals = {}, {}
+        for colour in COLOURS:
+            counts[colour], totals[colour] = Counter(), 0
+            for s in seeds:
+                d = bs._objects_clouds(s, cache)
+                opts = replace(base, segmentation=replace(base.segmentation, up=(0.0, 0.0, 1.0),
+                                                          color_distance="chroma", t_lccp=t))
+                seg = analyse_cloud(d[f"{colour}_points"], d[f"{colour}_normals"], opts, up_source="option",
+                                    colors=d[f"{colour}_colors"]).segmentation
+                g, _ = transfer_labels(d["gt_points"], d["gt_labels"], seg.points, 0.015)
+                pts, lab, g = seg.points[g >= 0], seg.labels[g >= 0], g[g >= 0]
+                pred, true = boundary_set(pts, lab), boundary_set(pts, g)
+                far = pred[cKDTree(pts[true]).query(pts[pred])[0] > 0.02]
+                names = dict(n.split(":", 1) for n in d["names"])
+                counts[colour].update(re.sub(r"_?\d+$", "", names.get(str(o), "table")) for o in g[far])
+                totals[colour] += len(pred)
+        kinds = sorted(set(counts["mode"]) | set(counts["mean"]), key=lambda k: counts["mean"][k] - counts["mode"][k])
+        print(f"T_lccp {'off' if t is None else t}: predicted boundary points mode {totals['mode']}, mean "
+              f"{totals['mean']}; far from a true boundary mode {sum(counts['mode'].values())}, mean "
+              f"{sum(counts['mean'].values())}: " + ", ".join(f"{k} {counts['mode'][k]} / {counts['mean'][k]}"
+                                                               for k in kinds))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", default=",".join(map(str, bs.OBJECTS_TUNING)), help="tuning seeds")
@@ -86,11 +125,17 @@ def main() -> None:
                     help="also the held-out seeds " + ",".join(map(str, bs.OBJECTS_HELD_OUT)))
     ap.add_argument("--cache", default=str(Path(tempfile.gettempdir()) / "kinfu_bench_mode_vs_mean"),
                     help="folder for the fused scenes' clouds")
+    ap.add_argument("--false-boundaries", action="store_true",
+                    help="where the mode filter's precision goes at T_lccp 0.16 / 0.2 (per object)")
     args = ap.parse_args()
     groups = {"tuning": [int(v) for v in args.seeds.split(",") if v]}
     if args.held_out:
         groups["held out"] = list(bs.OBJECTS_HELD_OUT)
     for group, seeds in groups.items():
+        if args.false_boundaries:
+            print(group)
+            false_boundaries(seeds, Path(args.cache))
+            continue
         report(score_scenes(seeds, Path(args.cache)), seeds, group)
 
 
