@@ -32,19 +32,25 @@ KINECT_V1 = SENSOR_PRESETS["kinect_v1"]
 # the widest field of view taken for a depth camera's pinhole intrinsics (depth cameras see 55-90 degrees, wide
 # ones up to ~120): wider means focal lengths in other units than pixels (normalised by the image size, or mm)
 MAX_FIELD_OF_VIEW_DEG = 170.0
+# the narrowest: a depth camera sees tens of degrees even cropped to a small region; under half a degree the focal
+# lengths are not in pixels either (or a placeholder such as 1e9)
+MIN_FIELD_OF_VIEW_DEG = 0.5
 
 
 def field_of_view_problem(K: np.ndarray, width: int, height: int) -> str | None:
     """Why K cannot hold a depth camera's focal lengths in pixels for width x height images (a field of view over
-    MAX_FIELD_OF_VIEW_DEG), or None (also when the size is unknown)."""
+    MAX_FIELD_OF_VIEW_DEG or under MIN_FIELD_OF_VIEW_DEG), or None (also when the size is unknown)."""
     if width <= 0 or height <= 0:
         return None
     fx, fy = float(K[0, 0]), float(K[1, 1])
     fov = max(2 * math.degrees(math.atan2(width / 2, fx)), 2 * math.degrees(math.atan2(height / 2, fy)))
-    if fov <= MAX_FIELD_OF_VIEW_DEG:
-        return None
-    return (f"fx={fx:.3g}, fy={fy:.3g} give a {fov:.1f} deg field of view over {width}x{height} px images (over "
-            f"{MAX_FIELD_OF_VIEW_DEG:.0f}: expected focal lengths in pixels)")
+    if fov > MAX_FIELD_OF_VIEW_DEG:
+        return (f"fx={fx:.3g}, fy={fy:.3g} give a {fov:.1f} deg field of view over {width}x{height} px images (over "
+                f"{MAX_FIELD_OF_VIEW_DEG:.0f}: expected focal lengths in pixels)")
+    if fov < MIN_FIELD_OF_VIEW_DEG:  # both ways: a sensor of a few rows may be narrow across them
+        return (f"fx={fx:.3g}, fy={fy:.3g} give a {fov:.2g} deg field of view over {width}x{height} px images "
+                f"(under {MIN_FIELD_OF_VIEW_DEG:g}: expected focal lengths in pixels)")
+    return None
 
 
 def intrinsics_matrix(fx: float, fy: float, cx: float, cy: float) -> np.ndarray:

@@ -368,33 +368,52 @@ def _auto_grid(rec: Recording, roles: Roles, plan: _PosePlan, grid_spec: _GridSp
     count = rec.topics[roles.depth_topic].count if roles.depth_topic in rec.topics else 0
     step = max(1, -(-count // (selection["every"] * SURVEY_FRAMES)))
     read = [0]  # frames iter_frames gave, with a pose or not
+    stats = FrameStats()  # why frames were dropped, for the error when none is left
 
     def frames_read():
-        for f in iter_frames(rec, replace(roles, color_topic=None), pose_source=plan.source,
+        for f in iter_frames(rec, replace(roles, color_topic=None), pose_source=plan.source, stats=stats,
                              **{**selection, "every": selection["every"] * step}):
             read[0] += 1
             yield f
     frames = frames_read()
     lo, hi = grid_spec.min_depth, grid_spec.max_depth
+    readings = [np.inf, 0.0]  # the nearest and farthest reading of the frames surveyed (0 = none)
+
+    def in_range(depth: np.ndarray) -> np.ndarray:
+        valid = depth[depth > 0]
+        if valid.size:
+            readings[0], readings[1] = min(readings[0], float(valid.min())), max(readings[1], float(valid.max()))
+        return filters.range_filter(depth, lo, hi)
     if plan.source == "none":
         first = next(iter(frames), None)
-        views = [] if first is None else [(filters.range_filter(first.depth, lo, hi), first.K, np.eye(4))]
+        views = [] if first is None else [(in_range(first.depth), first.K, np.eye(4))]
         grow = ICP_GROW
     else:
-        views = ((filters.range_filter(f.depth, lo, hi), f.K, f.T_world_camera) for f in frames
+        views = ((in_range(f.depth), f.K, f.T_world_camera) for f in frames
                  if f.T_world_camera is not None and np.all(np.isfinite(f.T_world_camera)))
         grow = 0.0
     seen = survey(views, lo, hi)
     if seen.frames == 0:  # not "no valid depth": there was no frame to look at, or none had a pose
         if not read[0]:
-            raise RecordingError(f"{rec.path}: no usable depth frames (no depth frames in the selection)")
+            why = "; ".join(f"{k}: {v}" for k, v in stats.dropped.items()) or "no depth frames in the selection"
+            looked = f", of every {step}th selected frame looked at to size the grid" if step > 1 and stats.dropped else ""
+            raise RecordingError(f"{rec.path}: no usable depth frames ({why}{looked})")
         raise RecordingError(f"{rec.path}: no selected depth frame has a camera pose in {plan.world or 'the world'}"
                              f" frame, so the grid cannot be sized around them")
+    if len(seen.points) == 0 and readings[1] > 0:  # readings, none in range: say which, not "give the size"
+        units = ("; 32FC1 depth is in metres: millimetres stored as metres?" if readings[0] > MM_AS_M_MIN_READING
+                 else "")
+        raise RecordingError(f"{rec.path}: no depth reading of the {seen.frames} frames looked at to size the grid "
+                             f"lies in the depth range [{lo:g}, {hi:g}] m (readings from {readings[0]:.3g} to "
+                             f"{readings[1]:.3g} m{units})")
     return auto_grid(seen, voxel_size=voxel_size, resolution=resolution,
                      truncation=grid_spec.truncation or DEFAULT_TRUNCATION_M, budget=budget, origin=origin, grow=grow,
                      color="mode" if grid_spec.color and grid_spec.color_mode == "mode" else grid_spec.color)
 
 
+# m: depth readings all beyond this are millimetres read as metres (a 32FC1 image holds metres; 65 m is beyond
+# every depth camera's range and below the 65.535 m of a 16-bit millimetre image)
+MM_AS_M_MIN_READING = 65.0
 # more than this share of the depth frames without a camera pose (outside the TF or pose topic's time, a chain that
 # breaks) is a warning: a few at the ends are usual (TF starts after the camera), a share of the scene is not
 NO_POSE_WARN = 0.10

@@ -95,6 +95,8 @@ class FrameStats:
     first_color_backwards_ns: int | None = None
     color_backwards_ns: int = 0
     color_topic: str | None = None
+    # colour images paired with a depth frame that hold no pixel (0 wide or high): the frame goes without colour
+    color_empty: int = 0
 
     def drop(self, reason: str) -> None:
         self.dropped[reason] = self.dropped.get(reason, 0) + 1
@@ -131,6 +133,9 @@ class FrameStats:
                        f"{COLOR_LOOKAHEAD_NS / 1e9:g} s after colour images within the tolerance of their stamp, "
                        f"which were no longer kept: these frames may carry a colour image farther in time than the "
                        f"nearest, or none")
+        if self.color_empty:
+            out.append(f"{recording}: {self.color_empty} colour images on {self.color_topic} paired with depth frames "
+                       f"are empty (0 pixels wide or high: a driver fault?); those frames carry no colour")
         if self.dropped.get(DROP_NO_PIXELS):
             out.append(f"{recording}: {self.dropped[DROP_NO_PIXELS]} of {self.depth_messages} depth images are empty "
                        f"(0 pixels wide or high: a driver fault?); they were left out")
@@ -156,7 +161,8 @@ class FrameStats:
                 **({"stamps_not_increasing": self.stamps_not_increasing} if self.stamps_not_increasing else {}),
                 **({"color_cut_short": self.color_cut_short} if self.color_cut_short else {}),
                 **({"color_stamps_backwards": self.color_stamps_backwards} if self.color_stamps_backwards else {}),
-                **({"pixels_over_16bit_mm": self.pixels_over_16bit_mm} if self.pixels_over_16bit_mm else {})}
+                **({"pixels_over_16bit_mm": self.pixels_over_16bit_mm} if self.pixels_over_16bit_mm else {}),
+                **({"color_empty": self.color_empty} if self.color_empty else {})}
 
 
 def _stamp(msg: object, log_ns: int) -> int:
@@ -784,7 +790,11 @@ class _FramePairer:
             if not unpaired:
                 where = f"{self.rec.path}: {self.color_topic}"
                 color = decode_color(best, where)
-                if self.registration_mode() == "project":
+                if color.size == 0:  # no image at all: as if unpaired, said in a warning
+                    self.stats.color_empty += 1
+                    self.stats.color_topic = self.color_topic
+                    color = None
+                elif self.registration_mode() == "project":
                     try:
                         reg = self._color_camera(best_stamp, read_with)
                         color, color_mask = register_color(reg, depth, K, color, where)

@@ -318,6 +318,9 @@ def camera_info_distortion(msg: object, topic: str = "camera_info") -> tuple[str
     return check_distortion(str(getattr(msg, "distortion_model", "") or ""), d, topic)
 
 
+_K_NAMES = {(0, 0): "fx", (1, 1): "fy", (0, 2): "cx", (1, 2): "cy", (0, 1): "skew"}
+
+
 def camera_info_K(msg: object, topic: str = "camera_info", matrix: str = "K") -> tuple[np.ndarray, int, int]:
     """sensor_msgs/CameraInfo -> (K 3x3 float64, width, height); matrix "P": the projection matrix's left 3x3
     instead (a rectified image's camera), with the same checks: positive finite focal lengths, a plausible field
@@ -332,7 +335,11 @@ def camera_info_K(msg: object, topic: str = "camera_info", matrix: str = "K") ->
         raise RecordingError(f"{topic}: CameraInfo {matrix} has {K.size} entries, expected "
                              f"{'3x4' if matrix == 'P' else '3x3'}")
     K = K.reshape(3, 4)[:, :3].copy() if matrix == "P" else K.reshape(3, 3)
-    if K[0, 0] <= 0 or K[1, 1] <= 0 or not np.all(np.isfinite(K)):
+    if not np.all(np.isfinite(K)):
+        bad = ", ".join(f"{_K_NAMES.get((i, j), f'{matrix}[{i}][{j}]')}={K[i, j]}"
+                        for i, j in zip(*np.nonzero(~np.isfinite(K))))
+        raise RecordingError(f"{topic}: CameraInfo {matrix} has non-finite entries ({bad})")
+    if K[0, 0] <= 0 or K[1, 1] <= 0:
         raise RecordingError(f"{topic}: CameraInfo {matrix} has no valid focal lengths (fx={K[0, 0]}, fy={K[1, 1]})")
     if (problem := field_of_view_problem(K, int(msg.width), int(msg.height))) is not None:
         raise RecordingError(f"{topic}: CameraInfo {matrix}: {problem}")

@@ -204,6 +204,10 @@ def _pick_world(rec, tf: TfBuffer | None, camera_frame: str | None) -> str | Non
         if world is not None:
             raise TransformError(f"{rec.path}: {tf.broken_chain(camera_frame, world)}; name the world frame to "
                                  f"use {chain[-1]!r}")
+        cut = next((p for (p, c) in tf.rejected_links if c == chain[-1]), None)  # the root's own parent, rejected
+        if cut is not None:
+            raise TransformError(f"{rec.path}: {tf.broken_chain(camera_frame, cut)}; name the world frame to use "
+                                 f"{chain[-1]!r}")
         return chain[-1]
     if camera_frame:
         bad = [(p, c, r) for (p, c), r in tf.rejected_links.items() if camera_frame in (p, c)]
@@ -226,6 +230,12 @@ def _require_frame(rec, tf: TfBuffer | None, frame: str, what: str, parameter: s
     if frame in header_frames or (tf is not None and frame in tf.frames()):
         return
     known = tf.frames() if tf is not None else []
+    bad = [(p, c, r) for (p, c), r in (tf.rejected_links.items() if tf is not None else ()) if frame in (p, c)]
+    if bad:
+        p, c, reasons = bad[0]
+        why = "; ".join(f"{n} x {r}" for r, n in reasons.items())
+        raise TransformError(f"{rec.path}: {what} {frame!r} has no TF link: every transform {p!r} -> {c!r} was "
+                             f"rejected ({why})", parameter=parameter)
     avail = ", ".join(known[:30]) + (", ..." if len(known) > 30 else "") if known else "none: no TF data"
     raise TransformError(f"{rec.path}: {what} {frame!r} is not in the TF tree (frames: {avail})",
                          parameter=parameter)

@@ -32,8 +32,8 @@ def check_distortion(model: str, D, topic: str) -> tuple[str, np.ndarray]:
             raise RecordingError(f"{topic}: {model} distortion with {d.size} coefficients (expected 5 or 8)")
         return model, d
     if model in FISHEYE_MODELS:
-        if d.size < 4:
-            raise RecordingError(f"{topic}: {model} distortion with {d.size} coefficients (expected 4)")
+        if d.size < 4 or np.any(d[4:]):  # zeros padded to 5 (some drivers) drop; a fifth value is another model's
+            raise RecordingError(f"{topic}: {model} distortion with {d.size} coefficients {d.tolist()} (expected 4)")
         return "equidistant", d[:4]
     raise RecordingError(f"{topic}: distortion model {model!r} is not supported (expected plumb_bob, "
                          f"rational_polynomial or equidistant; its images cannot be read as pinhole)")
