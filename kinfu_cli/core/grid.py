@@ -19,7 +19,8 @@ import numpy as np
 
 from kinfu_cli.core.atomic import write_npz
 from kinfu_cli.core.errors import ConfigError, VolumeError
-from kinfu_cli.core.volume_file import INTRINSICS_KEYS, MAX_COORDINATE_M, READ_ERRORS, check_intrinsics
+from kinfu_cli.core.volume_file import (INTRINSICS_KEYS, MAX_COORDINATE_M, MIN_VOXEL_M, READ_ERRORS, check_intrinsics,
+                                        check_npz)
 
 OCCUPIED = np.int8(1)
 UNKNOWN = np.int8(0)
@@ -85,6 +86,11 @@ def check_up(up, parameter: str = "up") -> np.ndarray:
     return v / float(np.linalg.norm(v))
 
 
+# the coarsest voxel of a ternary file read (segment then names a voxel too coarse to segment; a volume.npz's
+# limit is a depth sensor's range, 100 m)
+MAX_GRID_VOXEL_M = 1e3
+
+
 def save_ternary(path: str | os.PathLike, grid: TernaryGrid) -> None:
     """Write `ternary.npz` atomically (compressed: mostly-constant labels shrink a lot)."""
     arrays = {"ternary": grid.labels, "origin": grid.origin, "voxel_size": np.float64(grid.voxel_size),
@@ -104,6 +110,7 @@ def read_ternary(path: str | os.PathLike) -> TernaryGrid | None:
     path = Path(path)
     if not path.exists():
         raise VolumeError(f"{path}: no such file")
+    check_npz(path)
     try:
         with np.load(path, allow_pickle=False) as data:
             keys = set(data.files)
@@ -129,8 +136,10 @@ def read_ternary(path: str | os.PathLike) -> TernaryGrid | None:
             np.all(np.isfinite(origin)) and np.abs(origin).max() <= MAX_COORDINATE_M):
         raise VolumeError(f"{path}: 'origin' is {origin.tolist()!r}, expected three finite coordinates within "
                           f"{MAX_COORDINATE_M:g} m")
-    if voxel_size.size != 1 or voxel_size.dtype.kind not in "iuf" or not (0 < float(voxel_size) <= 1e3):
-        raise VolumeError(f"{path}: 'voxel_size' is {voxel_size.tolist()!r}, expected a positive length in metres")
+    if voxel_size.size != 1 or voxel_size.dtype.kind not in "iuf" or not (
+            MIN_VOXEL_M <= float(voxel_size) <= MAX_GRID_VOXEL_M):
+        raise VolumeError(f"{path}: 'voxel_size' is {voxel_size.tolist()!r}, expected a voxel edge of "
+                          f"{MIN_VOXEL_M:g} to {MAX_GRID_VOXEL_M:g} m")
     if frame.shape != () or frame.dtype.kind != "U":
         raise VolumeError(f"{path}: 'frame' is not a frame name")
     intrinsics = check_intrinsics(intrinsics, path)

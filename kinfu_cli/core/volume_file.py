@@ -59,7 +59,7 @@ def read_volume_file(path: str | os.PathLike, optional: bool = True) -> tuple[di
     path = Path(path)
     if not path.exists():
         raise VolumeError(f"{path}: no such volume file")
-    _check_npz(path)
+    check_npz(path)
     try:
         with np.load(path, allow_pickle=False) as data:
             if "meta" not in data.files:
@@ -90,7 +90,7 @@ def read_volume_meta(path: str | os.PathLike) -> dict | None:
     path = Path(path)
     if not path.exists():
         raise VolumeError(f"{path}: no such volume file")
-    _check_npz(path)
+    check_npz(path)
     try:
         with np.load(path, allow_pickle=False) as data:
             meta = json.loads(str(data["meta"])) if "meta" in data.files else None
@@ -102,7 +102,7 @@ def read_volume_meta(path: str | os.PathLike) -> dict | None:
     return meta
 
 
-def _check_npz(path: Path) -> None:
+def check_npz(path: Path) -> None:
     """An .npz is a zip archive: anything else (a JSON, a PLY) is named as such, before numpy's loader falls back
     to pickles and reports that instead."""
     with contextlib.suppress(OSError), open(path, "rb") as f:

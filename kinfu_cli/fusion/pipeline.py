@@ -38,7 +38,7 @@ from kinfu_cli.fusion.placement import default_origin
 from kinfu_cli.fusion.tracking import (LOSS_CHECKS, MAX_SPEED_M_S, MIN_TRACKING_WIDTH, POSE_MODES, FrameToModelTracker,
                                        TrackResult, predict_pose)
 from kinfu_cli.fusion.up import choose_up
-from kinfu_cli.fusion.volume import DEFAULT_TRUNCATION_M, TernaryVolume, load_volume
+from kinfu_cli.fusion.volume import DEFAULT_TRUNCATION_M, MIN_TRUNCATION_VOXELS, TernaryVolume, load_volume
 from kinfu_cli.io.frames import (DROP_CHAIN_BROKEN, DROP_EMPTY, DROP_NO_POSE, DROP_NO_POSE_TOPIC, FrameStats,
                                   RGBDFrame, check_window, iter_frames, window_depth_count)
 from kinfu_cli.io.messages import header_frame
@@ -303,6 +303,10 @@ def _load_init(init, wanted_mode: str | None) -> TernaryVolume:
     """The volume to continue; it goes on in the colour mode it was fused with: asking for the other one is an
     error."""
     vol = load_volume(init)
+    if vol.truncation < MIN_TRUNCATION_VOXELS * vol.voxel_size:  # read back as fused; fusing on would lose surfaces
+        raise VolumeError(f"{init}: its truncation {vol.truncation:g} m is under half its {vol.voxel_size:g} m voxel: "
+                          f"fused into, surfaces would fall between voxel centres and vanish (not a volume kinfu "
+                          f"fused)")
     if wanted_mode is not None and vol.color and wanted_mode != vol.color_mode:
         raise ConfigError(f"{init}: the volume was fused with colour mode {vol.color_mode!r}, not "
                           f"{wanted_mode!r}; continue it with its own", parameter="color_mode")

@@ -544,10 +544,13 @@ def load_volume(path: str | os.PathLike, hypotheses: bool = True) -> TernaryVolu
     if meta.get("block", kn.B) != kn.B:  # the pools' rows are blocks of B^3 voxels: another B reads as garbage
         raise VolumeError(f"{path}: volume stored in blocks of {meta['block']!r} voxels a side; this kinfu reads "
                           f"blocks of {kn.B}")
-    vol = TernaryVolume(size=[s * meta["voxel_size"] for s in meta["shape"]], voxel_size=meta["voxel_size"],
-                        origin=meta["origin"], truncation=meta["truncation"], max_weight=meta["max_weight"],
-                        min_depth=meta["min_depth"], max_depth=meta["max_depth"], color=meta["color"],
-                        color_mode=meta.get("color_mode", "mean"), _allocate=False)
+    try:
+        vol = TernaryVolume(size=[s * meta["voxel_size"] for s in meta["shape"]], voxel_size=meta["voxel_size"],
+                            origin=meta["origin"], truncation=meta["truncation"], max_weight=meta["max_weight"],
+                            min_depth=meta["min_depth"], max_depth=meta["max_depth"], color=meta["color"],
+                            color_mode=meta.get("color_mode", "mean"), _allocate=False)
+    except (ConfigError, VolumeError) as exc:  # the file's grid, not options: name the file (a memory check, ...)
+        raise VolumeError(f"{path}: {exc.detail}") from None
     if vol.color_mode == "mode":
         vol.mode_hypotheses = int(meta.get("color_hypotheses", MAX_HYPOTHESES))
         vol.mode_threshold = float(meta.get("color_threshold", MODE_THRESHOLD))

@@ -192,7 +192,8 @@ def read_segments(path: str | os.PathLike) -> dict:
 
 def _segment_id(s: dict, i: int, source: str) -> int:
     sid = s.get("id")
-    if isinstance(sid, bool) or not isinstance(sid, (int, float)) or sid != sid or int(sid) != sid:
+    if (isinstance(sid, bool) or not isinstance(sid, (int, float)) or not math.isfinite(sid)
+            or int(sid) != sid):
         raise GraspError(f"{source}: segments[{i}].id is {sid!r}, expected an integer")
     return int(sid)
 

@@ -199,6 +199,8 @@ def ply_points(vertex: np.ndarray, path: Path) -> np.ndarray:
     names = vertex.dtype.names or ()
     if not {"x", "y", "z"} <= set(names):
         raise LabelsFileError(f"{path}: vertices lack x, y, z (found {', '.join(names)})")
+    if any(vertex.dtype[k].kind not in "fiu" or vertex.dtype[k].shape for k in "xyz"):
+        raise LabelsFileError(f"{path}: vertex x, y, z are not numbers (a list property?)")
     return np.stack([vertex["x"], vertex["y"], vertex["z"]], axis=1).astype(np.float64)
 
 

@@ -73,6 +73,9 @@ def read_tum(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
         if len(vals) != 8 or not np.all(np.isfinite(vals)) or not np.linalg.norm(vals[4:]) > 1e-9:
             raise TrajectoryError(f"{path}:{n}: expected 8 finite numbers 'timestamp tx ty tz qx qy qz qw' (a "
                                   f"non-zero quaternion), got {line[:60]!r}")
+        if not -(2**63) <= stamp < 2**63:  # int64 nanoseconds: +-292 years around 1970
+            raise TrajectoryError(f"{path}:{n}: timestamp {tokens[0]} s is beyond the +-{2**63 // 10**9} s "
+                                  f"(years 1678-2262) that nanosecond stamps hold")
         stamps.append(stamp)
         rows.append(vals)
     data = np.array(rows, dtype=np.float64).reshape(-1, 8)

@@ -163,6 +163,9 @@ def check_mesh(vertices: np.ndarray, triangles: np.ndarray, source: str) -> None
         raise LocalizationError(f"{source}: empty mesh (expected a closed triangle mesh)")
     if not np.all(np.isfinite(vertices)):
         raise LocalizationError(f"{source}: mesh vertices are not finite")
+    if np.min(triangles) < 0 or np.max(triangles) >= len(vertices):
+        raise LocalizationError(f"{source}: mesh faces index vertices {int(np.min(triangles))} to "
+                                f"{int(np.max(triangles))}, but it has {len(vertices)} (a damaged file?)")
     tri = np.sort(np.asarray(triangles), axis=1)
     edges = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [0, 2]]])
     _, counts = np.unique(edges, axis=0, return_counts=True)

@@ -5,6 +5,7 @@ order (x y z per line, spaces or commas, '#' comments), or one segment of a `kin
 from __future__ import annotations
 
 import json
+import math
 import os
 from pathlib import Path
 
@@ -58,11 +59,17 @@ def read_segment_points(segments_json: str | os.PathLike, segment: int) -> np.nd
         segs = {int(s["id"]): s for s in doc["segments"] if s.get("kind") == "object"}
     except FileNotFoundError:
         raise LocalizationError(f"{meta}: no such segments file") from None
-    except (OSError, ValueError, KeyError, TypeError, AttributeError, RecursionError):  # a segment not an object,
+    except (OSError, ValueError, KeyError, TypeError, AttributeError, RecursionError,  # a segment not an object,
+            OverflowError):  # an id of Infinity
         raise LocalizationError(f"{meta}: not a kinfu segment segments.json") from None  # JSON nested too deep
     if segment not in segs:
         raise LocalizationError(f"{meta}: no object segment with id {segment} (ids: "
                                 f"{', '.join(map(str, sorted(segs))) or 'none'})", parameter="segment")
+    count = segs[segment].get("point_count")
+    if isinstance(count, bool) or not isinstance(count, (int, float)) or not math.isfinite(count) or count < 0 \
+            or count != int(count):
+        raise LocalizationError(f"{meta}: segment {segment}'s point_count is {count!r}, expected a number of points")
+    count = int(count)
     ply = meta.parent / "segments.ply"
     try:
         vertex = read_ply_vertices(ply)
@@ -75,7 +82,6 @@ def read_segment_points(segments_json: str | os.PathLike, segment: int) -> np.nd
         raise LocalizationError(f"{ply}: segment colours unreadable ({e})") from None
     want = np.round(segment_colors(np.array([segment]))[0] * 255).astype(np.int64)
     mask = np.all(np.abs(rgb - want) <= 1, axis=1)
-    count = int(segs[segment]["point_count"])
     if int(mask.sum()) != count:
         raise LocalizationError(f"{ply}: {int(mask.sum())} points carry segment {segment}'s colour, segments.json "
                                 f"says {count} (another segment may share it)")

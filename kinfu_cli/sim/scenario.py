@@ -567,7 +567,41 @@ def _check_info(info: object) -> tuple[np.ndarray, int, int]:
             ok = False
         if not ok:
             raise ValueError(f"table {key} is {table[key]!r}, expected {n} number(s)")
+    _check_numbers(info, table)
     return K, width, height
+
+
+def _is_int(v: object) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _check_numbers(info: dict, table: dict) -> None:
+    """The numbers the evaluations take from changes.json without a default of their own: frame counts, t0_ns,
+    the hand's start time, the table plane, the objects' centres (a string or NaN there was a traceback or a
+    numpy warning, or an object reported as not reconstructed)."""
+    for key, v in info.get("frames", {}).items():
+        if key == "rate_hz":
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v <= 0:
+                raise ValueError(f"frames rate_hz is {v!r}, expected a positive rate")
+        elif v is not None and (not _is_int(v) or v < 0):  # count, scan, after, first_after (null: not split)
+            raise ValueError(f"frames {key} is {v!r}, expected a count of frames")
+    if "t0_ns" in info and not _is_int(info["t0_ns"]):
+        raise ValueError(f"t0_ns is {info['t0_ns']!r}, expected integer nanoseconds")
+    hand = info.get("hand", {})
+    start = hand.get("start_time", 0.0) if isinstance(hand, dict) else None
+    if isinstance(start, bool) or not isinstance(start, (int, float)) or not np.isfinite(start):
+        raise ValueError(f"hand start_time is {start!r}, expected seconds" if isinstance(hand, dict)
+                         else "'hand' is not an object")
+    if "plane" in table:
+        plane = np.asarray(table["plane"], dtype=float).reshape(-1)
+        if plane.shape != (4,) or not np.all(np.isfinite(plane)) or not np.linalg.norm(plane[:3]) > 0:
+            raise ValueError(f"table plane is {table['plane']!r}, expected a, b, c, d with a non-zero normal")
+    for o in info.get("objects", []):
+        for key in ("center", "center_before"):
+            if key in o:
+                c = np.asarray(o[key], dtype=float).reshape(-1)
+                if c.shape != (3,) or not np.all(np.isfinite(c)):
+                    raise ValueError(f"object {o['id']!r} {key} is {o[key]!r}, expected three finite numbers")
 
 
 def _read_mesh(path: Path) -> o3d.geometry.TriangleMesh:

@@ -30,6 +30,9 @@ def _gt(tmp_path, poses=POSE, **change):
 def test_a_good_folder_reads(tmp_path):
     gt = load_ground_truth(_gt(tmp_path))
     assert gt.width == 20 and gt.poses.shape == (1, 4, 4)
+    frames = {"count": 36, "scan": None, "after": 12, "rate_hz": 5.0}  # null: a scene without a change
+    assert load_ground_truth(_gt(tmp_path, frames=frames, t0_ns=10**18, hand={"start_time": 6.1},
+                                 table={"plane": [0, 0, 1, -0.7]})).info["frames"] == frames
 
 
 @pytest.mark.parametrize("change, needle", [
@@ -41,6 +44,15 @@ def test_a_good_folder_reads(tmp_path):
     ({"objects": "abc"}, "'objects'"),
     ({"table": {"center": "middle"}}, "table"),
     ({"poses": "0.0 nan 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1\n"}, "not finite"),
+    # the numbers the evaluations read without a default (2026-11-29: ValueError tracebacks, a numpy warning, an
+    # object reported as not reconstructed)
+    ({"frames": {"count": 36, "scan": "x"}}, "frames scan is 'x'"),
+    ({"frames": {"rate_hz": -5.0}}, "frames rate_hz"),
+    ({"t0_ns": "t"}, "t0_ns is 't'"),
+    ({"t0_ns": float("nan")}, "t0_ns is nan"),
+    ({"hand": {"start_time": "s"}}, "hand start_time is 's'"),
+    ({"table": {"plane": [0, 0, 0, 0]}}, "table plane"),
+    ({"objects": [{"id": "obj1", "center": [float("nan"), 0, 0]}]}, "object 'obj1' center"),
 ])
 def test_a_damaged_ground_truth_is_a_recording_error(tmp_path, change, needle):
     poses = change.pop("poses", POSE)
