@@ -272,6 +272,7 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
     if not init:
         for s in spheres:
             vol.clear_sphere(s["center"], s["radius"])
+    warnings += _sphere_warnings(vol, spheres, clear_pois)
     t0 = time.perf_counter()
     grid, counts, bounding_box, mesh, cloud = _read_out(vol)
     _add(timing, "extract", time.perf_counter() - t0)
@@ -631,6 +632,20 @@ def _spheres(clear_spheres: Iterable[tuple], clear_pois: str | os.PathLike | Non
                 raise ConfigError(f"{clear_pois}: POI {p.id} has radius {p.radius}, expected > 0")
             out.append({"center": [float(v) for v in p.position], "radius": float(p.radius),
                         "source": f"{clear_pois}#{p.id}"})
+    return out
+
+
+def _sphere_warnings(vol: TernaryVolume, spheres: list[dict], clear_pois) -> list[str]:
+    """A sphere to forget that misses the grid forgot nothing (POIs of another scene, or in another frame's
+    coordinates), and a POI file without POIs asks for nothing: said, not passed over."""
+    lo, hi = vol.bounds()
+    out = [f"{s['source']}: the sphere to forget at ({', '.join(f'{v:.3g}' for v in s['center'])}) m, radius "
+           f"{s['radius']:.3g} m, lies outside the grid [{', '.join(f'{v:.3g}' for v in lo)}] - "
+           f"[{', '.join(f'{v:.3g}' for v in hi)}] m: nothing was forgotten there"
+           for s in spheres
+           if np.linalg.norm(np.clip(s["center"], lo, hi) - np.asarray(s["center"])) >= s["radius"]]
+    if clear_pois and not any(s["source"].startswith(f"{clear_pois}#") for s in spheres):
+        out.append(f"{clear_pois}: holds no POI, so nothing was forgotten")
     return out
 
 

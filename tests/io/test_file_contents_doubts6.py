@@ -101,3 +101,20 @@ def test_init_refuses_a_volume_whose_truncation_holds_no_surface(tmp_path):
                                    str(tmp_path / "out"), "--quiet"])
     one_line_error(res, "volume.npz: its truncation 1e-09 m is under half its 0.02 m voxel")
     assert not (tmp_path / "out").exists()
+
+
+def test_spheres_to_forget_outside_the_grid_are_said(tmp_path):
+    # POIs 100 km away (another scene's, another frame's) forgot nothing with exit 0 and no word
+    rec = make_recording(tmp_path / "rec.mcap")
+    (tmp_path / "far.json").write_text(json.dumps({"pois": [{"id": 0, "position": [1e5, 1e5, 1e5]}]}))
+    (tmp_path / "none.json").write_text(json.dumps({"pois": []}))
+    res = CliRunner().invoke(cli, ["fuse", str(rec), "-o", str(tmp_path / "a"), "--quiet", "--clear-pois",
+                                   str(tmp_path / "far.json"), "--clear-sphere", "0.3,0,1,0.05"])
+    assert res.exit_code == 0, res.output
+    said = [line for line in res.output.splitlines() if "nothing was forgotten" in line]
+    assert len(said) == 1 and "far.json#0: the sphere to forget at (1e+05, 1e+05, 1e+05) m" in said[0]
+    report = json.loads((tmp_path / "a" / "report.json").read_text())
+    assert any("far.json#0" in w for w in report["warnings"])
+    res = CliRunner().invoke(cli, ["fuse", str(rec), "-o", str(tmp_path / "b"), "--quiet", "--clear-pois",
+                                   str(tmp_path / "none.json")])
+    assert res.exit_code == 0 and "none.json: holds no POI, so nothing was forgotten" in res.output
