@@ -557,6 +557,9 @@ def _check_info(info: object) -> tuple[np.ndarray, int, int]:
     objects = info.get("objects", [])
     if not isinstance(objects, list) or not all(isinstance(o, dict) and "id" in o for o in objects):
         raise ValueError("'objects' is not a list of objects with an 'id'")
+    ids = [json.dumps(o["id"]) for o in objects]
+    if len(set(ids)) != len(ids):  # each would be measured and counted twice
+        raise ValueError(f"object ids repeat ({', '.join(sorted({i for i in ids if ids.count(i) > 1}))})")
     table = info.get("table", {})
     if not isinstance(table, dict) or not isinstance(info.get("frames", {}), dict):
         raise ValueError("'table' or 'frames' is not an object")

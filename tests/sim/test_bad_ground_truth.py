@@ -53,6 +53,7 @@ def test_a_good_folder_reads(tmp_path):
     ({"hand": {"start_time": "s"}}, "hand start_time is 's'"),
     ({"table": {"plane": [0, 0, 0, 0]}}, "table plane"),
     ({"objects": [{"id": "obj1", "center": [float("nan"), 0, 0]}]}, "object 'obj1' center"),
+    ({"objects": [{"id": "obj1"}, {"id": "obj2"}, {"id": "obj1"}]}, 'object ids repeat ("obj1")'),
 ])
 def test_a_damaged_ground_truth_is_a_recording_error(tmp_path, change, needle):
     poses = change.pop("poses", POSE)
