@@ -39,8 +39,8 @@ from kinfu_cli.fusion.tracking import (LOSS_CHECKS, MAX_SPEED_M_S, MIN_TRACKING_
                                        TrackResult, predict_pose)
 from kinfu_cli.fusion.up import choose_up
 from kinfu_cli.fusion.volume import DEFAULT_TRUNCATION_M, MIN_TRUNCATION_VOXELS, TernaryVolume, load_volume
-from kinfu_cli.io.frames import (DROP_CHAIN_BROKEN, DROP_EMPTY, DROP_NO_POSE, DROP_NO_POSE_TOPIC, FrameStats,
-                                  RGBDFrame, check_window, iter_frames, window_depth_count)
+from kinfu_cli.io.frames import (DROP_CHAIN_BROKEN, DROP_EMPTY, DROP_NO_POSE, DROP_NO_POSE_TOPIC, MAX_16BIT_MM,
+                                  FrameStats, RGBDFrame, check_window, iter_frames, window_depth_count)
 from kinfu_cli.io.messages import header_frame
 from kinfu_cli.io.recording import Recording, open_recording
 from kinfu_cli.io.roles import Roles, detect_roles
@@ -406,8 +406,8 @@ def _auto_grid(rec: Recording, roles: Roles, plan: _PosePlan, grid_spec: _GridSp
         raise RecordingError(f"{rec.path}: no selected depth frame has a camera pose in {plan.world or 'the world'}"
                              f" frame, so the grid cannot be sized around them")
     if len(seen.points) == 0 and readings[1] > 0:  # readings, none in range: say which, not "give the size"
-        units = ("; 32FC1 depth is in metres: millimetres stored as metres?" if readings[0] > MM_AS_M_MIN_READING
-                 else "")
+        units = ("; 32FC1 depth is in metres: millimetres stored as metres?"
+                 if readings[0] >= MAX_16BIT_MM / 1000 else "")  # as FrameStats' warning reads them
         raise RecordingError(f"{rec.path}: no depth reading of the {seen.frames} frames looked at to size the grid "
                              f"lies in the depth range [{lo:g}, {hi:g}] m (readings from {readings[0]:.3g} to "
                              f"{readings[1]:.3g} m{units})")
@@ -416,9 +416,6 @@ def _auto_grid(rec: Recording, roles: Roles, plan: _PosePlan, grid_spec: _GridSp
                      color="mode" if grid_spec.color and grid_spec.color_mode == "mode" else grid_spec.color)
 
 
-# m: depth readings all beyond this are millimetres read as metres (a 32FC1 image holds metres; 65 m is beyond
-# every depth camera's range and below the 65.535 m of a 16-bit millimetre image)
-MM_AS_M_MIN_READING = 65.0
 # more than this share of the depth frames without a camera pose (outside the TF or pose topic's time, a chain that
 # breaks) is a warning: a few at the ends are usual (TF starts after the camera), a share of the scene is not
 NO_POSE_WARN = 0.10

@@ -209,13 +209,9 @@ def _pick_world(rec, tf: TfBuffer | None, camera_frame: str | None) -> str | Non
             raise TransformError(f"{rec.path}: {tf.broken_chain(camera_frame, cut)}; name the world frame to use "
                                  f"{chain[-1]!r}")
         return chain[-1]
-    if camera_frame:
-        bad = [(p, c, r) for (p, c), r in tf.rejected_links.items() if camera_frame in (p, c)]
-        if bad:
-            p, c, reasons = bad[0]
-            why = "; ".join(f"{n} x {r}" for r, n in reasons.items())
-            raise TransformError(f"{rec.path}: camera frame {camera_frame!r} has no TF link: every transform "
-                                 f"{p!r} -> {c!r} was rejected ({why})")
+    if camera_frame and (bad := tf.rejected_link(camera_frame)) is not None:
+        raise TransformError(f"{rec.path}: camera frame {camera_frame!r} has no TF link: every transform {bad[0]} "
+                             f"was rejected ({bad[1]})")
     for name in _WORLD_NAMES:
         if name in frames:
             return name
@@ -230,12 +226,9 @@ def _require_frame(rec, tf: TfBuffer | None, frame: str, what: str, parameter: s
     if frame in header_frames or (tf is not None and frame in tf.frames()):
         return
     known = tf.frames() if tf is not None else []
-    bad = [(p, c, r) for (p, c), r in (tf.rejected_links.items() if tf is not None else ()) if frame in (p, c)]
-    if bad:
-        p, c, reasons = bad[0]
-        why = "; ".join(f"{n} x {r}" for r, n in reasons.items())
-        raise TransformError(f"{rec.path}: {what} {frame!r} has no TF link: every transform {p!r} -> {c!r} was "
-                             f"rejected ({why})", parameter=parameter)
+    if tf is not None and (bad := tf.rejected_link(frame)) is not None:
+        raise TransformError(f"{rec.path}: {what} {frame!r} has no TF link: every transform {bad[0]} was rejected "
+                             f"({bad[1]})", parameter=parameter)
     avail = ", ".join(known[:30]) + (", ..." if len(known) > 30 else "") if known else "none: no TF data"
     raise TransformError(f"{rec.path}: {what} {frame!r} is not in the TF tree (frames: {avail})",
                          parameter=parameter)

@@ -622,12 +622,17 @@ class TfBuffer:
         top = chain[-1]
         text = (f"the TF chain of {frame!r} ({' -> '.join(chain)}) stops at {top!r}, which has no parent link, "
                 f"so it does not reach {world!r}")
-        bad = [(p, c, reasons) for (p, c), reasons in self.rejected_links.items() if top in (p, c)]
-        if bad:
-            p, c, reasons = bad[0]
-            why = "; ".join(f"{n} x {r}" for r, n in reasons.items())
-            text += f"; transforms {p!r} -> {c!r} were rejected ({why})"
+        if (bad := self.rejected_link(top)) is not None:
+            text += f"; transforms {bad[0]} were rejected ({bad[1]})"
         return text
+
+    def rejected_link(self, frame: str) -> tuple[str, str] | None:
+        """The first link naming `frame` that had transforms rejected, for error messages: ("'parent' ->
+        'child'", "count x reason; ..."), or None."""
+        for (p, c), reasons in self.rejected_links.items():
+            if frame in (p, c):
+                return f"{p!r} -> {c!r}", "; ".join(f"{n} x {r}" for r, n in reasons.items())
+        return None
 
     def _split_path(self, target: str, source: str, links: dict[str, "_Link"] | None = None
                     ) -> tuple[list[str], list[str]]:

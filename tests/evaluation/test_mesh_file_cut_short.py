@@ -10,7 +10,8 @@ from pathlib import Path
 import pytest
 
 from kinfu_cli.core.errors import VolumeError
-from kinfu_cli.evaluation.reconstruction import ply_cut_short, read_mesh_arrays
+from kinfu_cli.evaluation.reconstruction import read_mesh_arrays
+from kinfu_cli.io.ply_size import ply_cut_short
 
 MESH = Path(__file__).resolve().parents[2] / "sample_data" / "tabletop" / "ground_truth" / "objects" / "obj4.ply"
 
