@@ -100,8 +100,8 @@ def compare(name, frames, res, size, trunc, max_depth, placement="scene", with_m
     d, c, K, T = frames[0]
     # JIT warm-up (cached on disk after the first run) on a tiny grid
     for cm in ("mean", "mode"):
-        TernaryVolume(size=size, resolution=16, origin=origin, min_depth=0.0, max_depth=max_depth,
-                      color_mode=cm).integrate(d, K, T, c)
+        TernaryVolume(size=size, resolution=16, origin=origin, truncation=size / 16, min_depth=0.0,
+                      max_depth=max_depth, color_mode=cm).integrate(d, K, T, c)
     ref = o3d.pipelines.integration.UniformTSDFVolume(
         length=size, resolution=res, sdf_trunc=trunc,
         color_type=o3d.pipelines.integration.TSDFVolumeColorType.RGB8, origin=np.asarray(origin, float).reshape(3, 1))

@@ -58,18 +58,6 @@ def _half_widths(radius):
     return hw
 
 
-@njit(cache=True, parallel=True)
-def _row_prefix(ch):
-    """Prefix sums along each row: out[v, u + 1, c] = sum of ch[v, :u + 1, c] (float64)."""
-    h, w, n = ch.shape
-    out = np.zeros((h, w + 1, n), dtype=np.float64)
-    for v in prange(h):
-        for u in range(w):
-            for c in range(n):
-                out[v, u + 1, c] = out[v, u, c] + ch[v, u, c]
-    return out
-
-
 @njit(cache=True, inline="always")
 def _disk_sum(pre, v, u, hw, radius, out):
     """Sums of every channel of pre's rows over the circular window around (v, u), clipped to the image."""
@@ -113,97 +101,119 @@ def _solve4(m, r, x):
 
 
 @njit(cache=True, parallel=True)
-def _moments(depth, color, color_ok):
-    """Per pixel: valid flag, (r, g, b, d) and their products, 0 where there is no reading or colour sample."""
+def _moment_prefix(depth, color, color_ok, pre, valid):
+    """Row prefix sums of the per-pixel moments (count, (r, g, b, d) in unit RGB and metres, their 10 products),
+    each pixel's moments 0 where it has no reading or no colour sample: pre[v, u + 1] = sum over pixels 0..u of
+    row v (float64, (H, W + 1, NCH)); valid[v, u] 1 where the pixel has both. One pass: no per-pixel moment
+    image is stored (it was as large as `pre`, and writing then re-reading it cost more than the sums)."""
     h, w = depth.shape
-    ch = np.zeros((h, w, NCH), dtype=np.float64)
-    g = np.empty((h, w, 4), dtype=np.float64)
     inv = 1.0 / 255.0
     for v in prange(h):
+        acc = np.zeros(NCH, dtype=np.float64)
+        gv = np.empty(4, dtype=np.float64)
+        pre[v, 0, :] = 0.0
         for u in range(w):
             p = v * w + u
-            g[v, u, 0] = color[p, 0] * inv
-            g[v, u, 1] = color[p, 1] * inv
-            g[v, u, 2] = color[p, 2] * inv
-            g[v, u, 3] = depth[v, u]
-            if not (depth[v, u] > 0.0) or (color_ok.shape[0] > 0 and color_ok[p] == 0):
-                continue
-            ch[v, u, 0] = 1.0
-            c = 5
-            for i in range(4):
-                ch[v, u, 1 + i] = g[v, u, i]
-                for k in range(i, 4):
-                    ch[v, u, c] = g[v, u, i] * g[v, u, k]
-                    c += 1
-    return ch, g
+            ok = depth[v, u] > 0.0 and (color_ok.shape[0] == 0 or color_ok[p] != 0)
+            valid[v, u] = ok
+            if ok:
+                gv[0] = color[p, 0] * inv
+                gv[1] = color[p, 1] * inv
+                gv[2] = color[p, 2] * inv
+                gv[3] = depth[v, u]
+                acc[0] += 1.0
+                c = 5
+                for i in range(4):
+                    acc[1 + i] += gv[i]
+                    for k in range(i, 4):
+                        acc[c] += gv[i] * gv[k]
+                        c += 1
+            for c in range(NCH):
+                pre[v, u + 1, c] = acc[c]
 
 
 @njit(cache=True, parallel=True)
-def _coefficients(pre, ch, hw, radius, sc2, sd2):
-    """(a, b) of the windowed ridge fit per valid pixel (Alg. 7 lines 1-8), with a count channel first: (H, W, 6)."""
-    h, w = ch.shape[0], ch.shape[1]
-    ab = np.zeros((h, w, 6), dtype=np.float64)
+def _coefficient_prefix(pre, valid, hw, radius, sc2, sd2, pre_ab):
+    """Row prefix sums (as _moment_prefix's) of (1, a, b) of the windowed ridge fit per valid pixel (Alg. 7 lines
+    1-8), 0 at the others: pre_ab (H, W + 1, 6), what _apply's window means of (a, b) need."""
+    h, w = valid.shape
     for v in prange(h):
         s = np.empty(NCH, dtype=np.float64)
         m = np.empty((4, 4), dtype=np.float64)
         r = np.empty(4, dtype=np.float64)
         x = np.empty(4, dtype=np.float64)
+        acc = np.zeros(6, dtype=np.float64)
+        pre_ab[v, 0, :] = 0.0
         for u in range(w):
-            if ch[v, u, 0] == 0.0:
-                continue
-            _disk_sum(pre, v, u, hw, radius, s)
-            n = s[0]
-            c = 5
-            for i in range(4):
-                for k in range(i, 4):
-                    cov = s[c] / n - (s[1 + i] / n) * (s[1 + k] / n)
-                    m[i, k] = cov
-                    m[k, i] = cov
-                    c += 1
-            for i in range(4):
-                r[i] = m[i, 3]  # cov(gamma, d): the input is the guide's depth channel
-            for i in range(3):
-                m[i, i] += sc2
-            m[3, 3] += sd2
-            _solve4(m, r, x)
-            b = s[4] / n
-            for i in range(4):
-                b -= x[i] * s[1 + i] / n
-                ab[v, u, 1 + i] = x[i]
-            ab[v, u, 0] = 1.0
-            ab[v, u, 5] = b
-    return ab
+            if valid[v, u]:
+                _disk_sum(pre, v, u, hw, radius, s)
+                n = s[0]
+                c = 5
+                for i in range(4):
+                    for k in range(i, 4):
+                        cov = s[c] / n - (s[1 + i] / n) * (s[1 + k] / n)
+                        m[i, k] = cov
+                        m[k, i] = cov
+                        c += 1
+                for i in range(4):
+                    r[i] = m[i, 3]  # cov(gamma, d): the input is the guide's depth channel
+                for i in range(3):
+                    m[i, i] += sc2
+                m[3, 3] += sd2
+                _solve4(m, r, x)
+                b = s[4] / n
+                for i in range(4):
+                    b -= x[i] * s[1 + i] / n
+                    acc[1 + i] += x[i]
+                acc[0] += 1.0
+                acc[5] += b
+            for c in range(6):
+                pre_ab[v, u + 1, c] = acc[c]
 
 
 @njit(cache=True, parallel=True)
-def _apply(pre_ab, g, valid, hw, radius):
-    """d_e = F_m(a)^T gamma + F_m(b) at valid pixels (Alg. 7 lines 9-11), 0 elsewhere."""
-    h, w = valid.shape[0], valid.shape[1]
-    out = np.zeros((h, w), dtype=np.float32)
+def _apply(pre_ab, depth, color, valid, hw, radius, out):
+    """d_e = F_m(a)^T gamma + F_m(b) at valid pixels (Alg. 7 lines 9-11), 0 elsewhere, into out (H, W) float32."""
+    h, w = valid.shape
+    inv = 1.0 / 255.0
     for v in prange(h):
         s = np.empty(6, dtype=np.float64)
         for u in range(w):
-            if valid[v, u, 0] == 0.0:
+            if not valid[v, u]:
+                out[v, u] = 0.0
                 continue
+            p = v * w + u
             _disk_sum(pre_ab, v, u, hw, radius, s)
             d = s[5]
-            for i in range(4):
-                d += s[1 + i] * g[v, u, i]
+            d += s[1] * (color[p, 0] * inv)
+            d += s[2] * (color[p, 1] * inv)
+            d += s[3] * (color[p, 2] * inv)
+            d += s[4] * np.float64(depth[v, u])
             out[v, u] = d / s[0]
-    return out
 
 
 def guided_depth(depth: np.ndarray, color: np.ndarray, color_ok: np.ndarray | None = None,
-                 radius: int | None = None, sigma_c: float | None = None, sigma_d: float | None = None) -> np.ndarray:
+                 radius: int | None = None, sigma_c: float | None = None, sigma_d: float | None = None,
+                 buffers: dict | None = None) -> np.ndarray:
     """Enhanced depth (float32 (H, W), 0 where there is no reading) of depth (H, W) metres, guided by color
-    (uint8 (H * W, 3) or (H, W, 3)); color_ok: uint8 (H * W,) 1 where the colour has a sample (empty: everywhere)."""
+    (uint8 (H * W, 3) or (H, W, 3)); color_ok: uint8 (H * W,) 1 where the colour has a sample (empty: everywhere).
+    buffers: a dict the caller keeps between frames of one size, for the work arrays (~50 MB at 640x480, which
+    fresh cost more to page in than to fill) and the result, which the next call then overwrites."""
     d = np.ascontiguousarray(depth, dtype=np.float32)
     col = np.ascontiguousarray(color, dtype=np.uint8).reshape(-1, 3)
     ok = np.zeros(0, np.uint8) if color_ok is None else np.ascontiguousarray(color_ok, dtype=np.uint8).reshape(-1)
     radius = RADIUS if radius is None else radius
     sigma_c = SIGMA_C if sigma_c is None else sigma_c
     sigma_d = SIGMA_D if sigma_d is None else sigma_d
+    h, w = d.shape
+    buf = {} if buffers is None else buffers
+    if buf.get("shape") != (h, w):
+        buf.clear()
+        buf.update(shape=(h, w), pre=np.empty((h, w + 1, NCH)), valid=np.empty((h, w), dtype=np.bool_),
+                   pre_ab=np.empty((h, w + 1, 6)), out=np.empty((h, w), dtype=np.float32))
     hw = _half_widths(int(radius))
-    ch, g = _moments(d, col, ok)
-    ab = _coefficients(_row_prefix(ch), ch, hw, int(radius), float(sigma_c) ** 2, float(sigma_d) ** 2)
-    return _apply(_row_prefix(ab), g, ch, hw, int(radius))
+    _moment_prefix(d, col, ok, buf["pre"], buf["valid"])
+    _coefficient_prefix(buf["pre"], buf["valid"], hw, int(radius), float(sigma_c) ** 2, float(sigma_d) ** 2,
+                        buf["pre_ab"])
+    _apply(buf["pre_ab"], d, col, buf["valid"], hw, int(radius), buf["out"])
+    return buf["out"]

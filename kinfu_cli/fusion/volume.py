@@ -298,7 +298,9 @@ class TernaryVolume:
             self.n_used = kn.allocate_new(new_b, bidx, bw, self.pool_v, self.pool_w, self.pool_c, self.n_used)
         guided = np.zeros(0, dtype=np.float32)
         if self.color_mode == "mode" and self.mode_guided and col.shape[0] > 0:
-            guided = gdf.guided_depth(d, col, ok).reshape(-1)
+            if getattr(self, "_guided_buffers", None) is None:
+                self._guided_buffers = {}  # the guided filter's work arrays, kept between frames (its docstring)
+            guided = gdf.guided_depth(d, col, ok, buffers=self._guided_buffers).reshape(-1)
         kn.integrate_blocks(cls, self.nb, np.array(self.shape, dtype=np.int64), bidx, bw, self.pool_v,
                             self.pool_w, self.pool_c, *self._hypotheses(), self.origin, self.voxel_size,
                             T_cw, fx, fy, cx, cy, w, h, kn.depth_and_raylen(d, self._raylen(K, w, h)),
@@ -525,6 +527,7 @@ class TernaryVolume:
         other = TernaryVolume.__new__(TernaryVolume)
         other.__dict__.update({k: (v.copy() if isinstance(v, np.ndarray) else v) for k, v in self.__dict__.items()})
         other._raylen_cache = {}
+        other._guided_buffers = None  # work arrays: each volume its own
         return other
 
     def __repr__(self) -> str:

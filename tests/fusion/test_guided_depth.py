@@ -90,3 +90,44 @@ def test_gated_samples_still_colour_a_voxel():
     hyp = vol.pool_hn[:n].sum(axis=-1) > 0
     win = np.take_along_axis(vol.pool_hc[:n], vol.pool_hn[:n].argmax(axis=-1)[..., None, None], axis=2)[..., 0, :]
     assert np.array_equal(vol.pool_c[:n][hyp], win[hyp])
+
+
+def _reference(depth, color, ok, radius, sc, sd):
+    """Alg. 7 pixel by pixel in numpy: the ridge fit over each valid pixel's circular window, then the window means of
+    (a, b) applied to the pixel's own guide (the kernels' prefix sums must give the same)."""
+    h, w = depth.shape
+    g = np.concatenate([color.reshape(h, w, 3) / 255.0, depth[..., None].astype(np.float64)], axis=2)
+    valid = (depth > 0) & ok.reshape(h, w)
+    yy, xx = np.mgrid[-radius:radius + 1, -radius:radius + 1]
+    disk = [(dy, dx) for dy, dx in zip(yy.ravel(), xx.ravel()) if dx * dx + dy * dy <= radius * radius]
+
+    def window(v, u):
+        return [(v + dy, u + dx) for dy, dx in disk if 0 <= v + dy < h and 0 <= u + dx < w and valid[v + dy, u + dx]]
+
+    ab = np.zeros((h, w, 5))
+    for v, u in zip(*np.nonzero(valid)):
+        x = np.array([g[p] for p in window(v, u)])
+        cov = np.cov(x.T, bias=True)
+        reg = cov + np.diag([sc * sc] * 3 + [sd * sd])
+        a = np.linalg.solve(reg, cov[:, 3])
+        ab[v, u] = np.append(a, x[:, 3].mean() - a @ x.mean(axis=0))
+    out = np.zeros((h, w))
+    for v, u in zip(*np.nonzero(valid)):
+        m = np.mean([ab[p] for p in window(v, u)], axis=0)
+        out[v, u] = m[:4] @ g[v, u] + m[4]
+    return out
+
+
+def test_guided_depth_equals_the_per_pixel_fit_and_its_reused_buffers_keep_nothing_between_frames():
+    rng = np.random.default_rng(3)
+    buffers = {}
+    for seed, radius in ((0, 3), (1, 2)):
+        depth, color = _images(seed)
+        depth, color = depth[:14, 30:52].copy(), color[:14, 30:52].copy()
+        depth[rng.random(depth.shape) < 0.1] = 0.0  # holes
+        ok = rng.random(depth.shape) > 0.1  # colour samples missing
+        e = guided_depth(depth, color, ok.astype(np.uint8), radius=radius, buffers=buffers)
+        ref = _reference(depth, color, ok, radius, 0.02, 0.05)
+        assert np.count_nonzero(e) == np.count_nonzero((depth > 0) & ok) > 200
+        assert np.abs(e - ref).max() < 1e-5  # float32 output of a float64 fit
+        assert np.array_equal(e, guided_depth(depth, color, ok.astype(np.uint8), radius=radius))
