@@ -11,6 +11,7 @@ known), so `kinfu nbv` on a ternary.npz plans with the camera that made it.
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,8 +20,9 @@ import numpy as np
 
 from kinfu_cli.core.atomic import write_npz
 from kinfu_cli.core.errors import ConfigError, VolumeError
+from kinfu_cli.core.memory import check_grid_memory
 from kinfu_cli.core.volume_file import (INTRINSICS_KEYS, MAX_COORDINATE_M, MIN_VOXEL_M, READ_ERRORS, check_intrinsics,
-                                        check_npz)
+                                        check_npz, npz_member_header)
 
 OCCUPIED = np.int8(1)
 UNKNOWN = np.int8(0)
@@ -119,6 +121,7 @@ def read_ternary(path: str | os.PathLike) -> TernaryGrid | None:
             missing = [k for k in ("origin", "voxel_size") if k not in keys]
             if missing:
                 raise VolumeError(f"{path}: ternary.npz lacks the arrays {', '.join(missing)}")
+            _check_labels_memory(path, *npz_member_header(data, "ternary"))
             labels, origin, voxel_size = data["ternary"], data["origin"], data["voxel_size"]
             frame = data["frame"] if "frame" in keys else np.array("")
             up = data["up"] if "up" in keys else None
@@ -147,6 +150,22 @@ def read_ternary(path: str | os.PathLike) -> TernaryGrid | None:
         return TernaryGrid(labels, origin, float(voxel_size), str(frame), up, intrinsics)
     except ConfigError as exc:  # the up direction
         raise VolumeError(f"{path}: 'up' {exc.detail}") from None
+
+
+# what a stage holds per voxel besides the labels: one voxel-sized mask (of the occupied, empty or unknown voxels);
+# segment on a 2048^3 grid (8 GiB of labels) peaked at 16.9 GB
+WORK_BYTES_PER_VOXEL = 1
+
+
+def _check_labels_memory(path: Path, shape: tuple[int, ...], dtype: np.dtype) -> None:
+    """VolumeError naming the file, its grid and the memory needed when the labels array as stored, its int8 copy
+    (for another integer type) and a voxel-sized mask would not fit, as for a volume.npz's grid (TernaryVolume):
+    checked on the .npy header, before anything is decompressed (a 2048^3 grid of 8 MB compressed was read for a
+    minute, then held 9 GB in nbv and 17 GB in segment)."""
+    voxels = math.prod(shape)
+    need = voxels * (dtype.itemsize + (0 if dtype == np.int8 else 1) + WORK_BYTES_PER_VOXEL)
+    check_grid_memory(need, f"{path}: ternary grid of {'x'.join(map(str, shape))} voxels",
+                      "expected a grid that fits in memory (fuse with a coarser voxel size or a smaller size)")
 
 
 def load_ternary(path: str | os.PathLike) -> TernaryGrid:

@@ -102,6 +102,18 @@ def read_volume_meta(path: str | os.PathLike) -> dict | None:
     return meta
 
 
+def npz_member_header(data: np.lib.npyio.NpzFile, key: str) -> tuple[tuple[int, ...], np.dtype]:
+    """Shape and dtype of array `key` of an open .npz, from its .npy header alone: what reading the array would
+    allocate, known before it is decompressed. The errors of a damaged member are READ_ERRORS."""
+    name = f"{key}.npy" if f"{key}.npy" in data.zip.namelist() else key
+    with data.zip.open(name) as fh:
+        version = np.lib.format.read_magic(fh)
+        # 3.0 differs from 2.0 only in allowing a UTF-8 header, which a plain integer array does not use
+        read = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+        shape, _, dtype = read(fh)
+    return tuple(int(n) for n in shape), dtype
+
+
 def check_npz(path: Path) -> None:
     """An .npz is a zip archive: anything else (a JSON, a PLY) is named as such, before numpy's loader falls back
     to pickles and reports that instead."""

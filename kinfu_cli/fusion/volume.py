@@ -20,7 +20,7 @@ from scipy.ndimage import binary_dilation
 from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError, VolumeError
 from kinfu_cli.core.grid import EMPTY, OCCUPIED, UNKNOWN, TernaryGrid, check_up, read_ternary
-from kinfu_cli.core.memory import available_bytes
+from kinfu_cli.core.memory import check_grid_memory
 from kinfu_cli.core.poses import check_rigid
 from kinfu_cli.core.volume_file import (FORMAT, FORMAT_VERSION, MAX_COORDINATE_M, MAX_RANGE_M, MIN_VOXEL_M,
                                         check_intrinsics, read_volume_file, read_volume_meta, write_volume_file)
@@ -169,13 +169,9 @@ class TernaryVolume:
                                 self.mode_hypotheses)
 
     def _check_memory(self) -> None:
-        need = self.bytes_worst_case
-        avail = available_bytes()
-        if need > 0.8 * avail:
-            nx, ny, nz = self.shape
-            raise VolumeError(f"volume of {nx}x{ny}x{nz} voxels at {self.voxel_size * 1000:.2f} mm would need up to "
-                              f"{need / 1024**3:.1f} GB ({avail / 1024**3:.1f} GB available); use a coarser "
-                              f"voxel size or a smaller size", parameter="voxel_size/size")
+        nx, ny, nz = self.shape
+        check_grid_memory(self.bytes_worst_case, f"volume of {nx}x{ny}x{nz} voxels at {self.voxel_size * 1000:.2f} mm",
+                          "use a coarser voxel size or a smaller size", parameter="voxel_size/size")
 
     def _alloc_pools(self, cap: int) -> None:
         self.pool_v = np.zeros((cap, kn.B3), dtype=np.int16)

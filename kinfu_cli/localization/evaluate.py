@@ -12,7 +12,7 @@ import numpy as np
 from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.progress import progress
-from kinfu_cli.core.memory import available_bytes
+from kinfu_cli.core.memory import USABLE_FRACTION, available_bytes
 from kinfu_cli.localization import shapes
 from kinfu_cli.localization.localize import check_run_time
 from kinfu_cli.localization.baselines import localize_ransac_icp, localize_scaling_series
@@ -134,10 +134,10 @@ def check_recognition(trials: int, n_points: int, params: MupfParameters = MupfP
     check_number(trials, "recognition_trials", 0, integer=True)
     check_number(n_points, "recognition_points", 3, integer=True)
     avail = available_bytes()
-    if n_points * BYTES_PER_RECOGNITION_POINT > 0.8 * avail:
+    if n_points * BYTES_PER_RECOGNITION_POINT > USABLE_FRACTION * avail:
         raise ConfigError(f"{n_points} points would need about {n_points * BYTES_PER_RECOGNITION_POINT / 1024**3:.1f} "
                           f"GB ({avail / 1024**3:.1f} GB available): expected at most "
-                          f"{int(0.8 * avail // BYTES_PER_RECOGNITION_POINT)} (the thesis uses about 170)",
+                          f"{int(USABLE_FRACTION * avail // BYTES_PER_RECOGNITION_POINT)} (the thesis uses about 170)",
                           parameter="recognition_points")
     if trials:
         _check_time(_recognition_params(params, n_points), n_points, len(shapes.RECOGNITION_NAMES),

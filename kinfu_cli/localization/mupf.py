@@ -22,7 +22,7 @@ import numpy as np
 
 from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError
-from kinfu_cli.core.memory import available_bytes
+from kinfu_cli.core.memory import USABLE_FRACTION, available_bytes
 from kinfu_cli.core.progress import progress
 from kinfu_cli.core.volume_file import MAX_COORDINATE_M
 from kinfu_cli.localization import ukf
@@ -103,11 +103,11 @@ class MupfParameters:
     def check(self) -> None:
         check_number(self.particles, "particles", 1, integer=True)
         avail = available_bytes()
-        if self.particles * BYTES_PER_PARTICLE > 0.8 * avail:
+        if self.particles * BYTES_PER_PARTICLE > USABLE_FRACTION * avail:
             raise ConfigError(f"{self.particles} particles would need about "
                               f"{self.particles * BYTES_PER_PARTICLE / 1024**3:.1f} GB ({BYTES_PER_PARTICLE} bytes "
                               f"each; {avail / 1024**3:.1f} GB available): expected at most "
-                              f"{int(0.8 * avail // BYTES_PER_PARTICLE)} (the thesis uses 700-1200)",
+                              f"{int(USABLE_FRACTION * avail // BYTES_PER_PARTICLE)} (the thesis uses 700-1200)",
                               parameter="particles")
         if self.window is not None:
             check_number(self.window, "window", 1, integer=True)
