@@ -188,6 +188,20 @@ def _check(path: Path, meta: object, arrays: dict[str, np.ndarray]) -> None:
     if idx.size and (int(idx.min()) < -1 or int(idx.max()) >= n):
         raise VolumeError(f"{path}: block table points at pool rows {int(idx.min())}..{int(idx.max())}, but the "
                           f"pools hold {n} rows")
+    _check_pool_values(path, int(meta["max_weight"]), bw, pv, pw)
+
+
+def _check_pool_values(path: Path, max_weight: int, bw: np.ndarray, pv: np.ndarray, pw: np.ndarray) -> None:
+    """VolumeError naming the file and the array unless the distances are int16 (kinfu writes v * 32767 as int16;
+    another type was cast to it silently, wrapping values outside int16) and the weights lie in [0, max_weight]
+    (a weight above it was fused as if that many frames had been seen, and an int16 one wrapped in the uint8 cast)."""
+    if pv.dtype != np.int16:
+        raise VolumeError(f"{path}: 'pool_v' is {pv.dtype}, expected int16 (truncated distances times "
+                          f"{2**15 - 1}, as kinfu writes them)")
+    for name, w in (("block_w", bw), ("pool_w", pw)):
+        if w.size and (int(w.min()) < 0 or int(w.max()) > max_weight):
+            raise VolumeError(f"{path}: '{name}' holds weights {int(w.min())} to {int(w.max())}, expected 0 to the "
+                              f"volume's max_weight {max_weight}")
 
 
 def check_intrinsics(value, path) -> dict | None:

@@ -67,6 +67,7 @@ from kinfu_cli.core.pois import DEFAULT_RADIUS
 from kinfu_cli.core.progress import progress
 from kinfu_cli.core.trials import TrialMap, serial_trials
 from kinfu_cli.io.messages import c_stderr_silenced
+from kinfu_cli.io.mesh_faces import faces_outside_vertices
 from kinfu_cli.evaluation.reconstruction import point_to_mesh_distance
 from kinfu_cli.fusion.volume import TernaryVolume
 from kinfu_cli.nbv.gains import get_gain
@@ -219,6 +220,8 @@ def load_scene(path: str | os.PathLike, cfg: LoopConfig) -> SimScene:
         mesh = o3d.io.read_triangle_mesh(str(path))
     if len(mesh.triangles) == 0:
         raise RecordingError(f"{path}: not a triangle mesh (no triangles)")
+    if (outside := faces_outside_vertices(len(mesh.vertices), np.asarray(mesh.triangles))) is not None:
+        raise RecordingError(f"{path}: {outside}")
     if cfg.pois_from is not None:  # neither a hand trajectory nor true changes: it would read as the POIs' source
         raise ConfigError(f"{path}: a bare mesh has no hand trajectory (gmm-as) nor true changes (truth) to find "
                           f"POIs from; give the POI position instead, or a kinfu synth folder as SCENE",

@@ -44,6 +44,7 @@ from kinfu_cli.core.grid import UNKNOWN
 from kinfu_cli.core.progress import progress
 from kinfu_cli.core.volume_file import report_json_of
 from kinfu_cli.io.messages import c_stderr_silenced
+from kinfu_cli.io.mesh_faces import faces_outside_vertices
 from kinfu_cli.io.ply_size import ply_cut_short
 from kinfu_cli.evaluation.object_measures import PAPER_TABLE_1, ObjectMeasuresResult, object_measures
 from kinfu_cli.fusion.volume import TernaryVolume, load_volume
@@ -107,7 +108,7 @@ class Reconstruction:
 
 def read_mesh_arrays(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     """(vertices (N, 3) float64, triangles (M, 3) int64) of a mesh or point-cloud file; VolumeError when it is
-    missing, unreadable or has no vertices."""
+    missing, unreadable, has no vertices or faces that index past them."""
     path = Path(path)
     if not path.is_file():
         raise VolumeError(f"{path}: no such mesh file")
@@ -126,6 +127,8 @@ def read_mesh_arrays(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
         raise VolumeError(f"{path}: mesh has no vertices (empty reconstruction or not a mesh file)")
     if not np.all(np.isfinite(v)):
         raise VolumeError(f"{path}: mesh has non-finite vertex coordinates")
+    if (outside := faces_outside_vertices(len(v), f)) is not None:
+        raise VolumeError(f"{path}: {outside}")
     return v, f
 
 

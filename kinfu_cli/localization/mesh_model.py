@@ -16,6 +16,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from kinfu_cli.core.errors import KinfuError
+from kinfu_cli.io.mesh_faces import faces_outside_vertices
 from kinfu_cli.io.messages import c_stderr_silenced
 from kinfu_cli.localization.distance_field import sample_field
 
@@ -163,9 +164,8 @@ def check_mesh(vertices: np.ndarray, triangles: np.ndarray, source: str) -> None
         raise LocalizationError(f"{source}: empty mesh (expected a closed triangle mesh)")
     if not np.all(np.isfinite(vertices)):
         raise LocalizationError(f"{source}: mesh vertices are not finite")
-    if np.min(triangles) < 0 or np.max(triangles) >= len(vertices):
-        raise LocalizationError(f"{source}: mesh faces index vertices {int(np.min(triangles))} to "
-                                f"{int(np.max(triangles))}, but it has {len(vertices)} (a damaged file?)")
+    if (outside := faces_outside_vertices(len(vertices), triangles)) is not None:
+        raise LocalizationError(f"{source}: {outside}")
     tri = np.sort(np.asarray(triangles), axis=1)
     edges = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [0, 2]]])
     _, counts = np.unique(edges, axis=0, return_counts=True)

@@ -38,6 +38,7 @@ from kinfu_cli.io.polhemus import read_polhemus
 from kinfu_cli.io.trajectory import Trajectory
 from kinfu_cli.io.writers import RecordingWriter
 from kinfu_cli.io.messages import c_stderr_silenced
+from kinfu_cli.io.mesh_faces import faces_outside_vertices
 from kinfu_cli.sim.household import household_scene
 from kinfu_cli.sim.hand import Action, HandChange, synth_hand_trajectory, write_polhemus
 from kinfu_cli.sim.robot import CAMERA_FRAME, LINKS, WORLD_FRAME, RobotArm
@@ -615,4 +616,6 @@ def _read_mesh(path: Path) -> o3d.geometry.TriangleMesh:
         mesh = o3d.io.read_triangle_mesh(str(path))
     if len(mesh.triangles) == 0:
         raise RecordingError(f"{path}: not a triangle mesh (no triangles)")
+    if (outside := faces_outside_vertices(len(mesh.vertices), np.asarray(mesh.triangles))) is not None:
+        raise RecordingError(f"{path}: {outside}")
     return mesh
