@@ -274,7 +274,8 @@ class TernaryVolume:
             # an exactly black pixel is no colour sample: registered colour images (a RealSense's aligned colour)
             # mark their holes so, and black is the volume's "never coloured" (a black sample would only darken
             # the running mean of a coloured voxel)
-            seen = col.reshape(-1, 3).any(axis=1)
+            flat = col.reshape(-1, 3)
+            seen = (flat[:, 0] | flat[:, 1] | flat[:, 2]) != 0  # ndarray.any(axis=1) is 8x slower on 3 bytes a row
             if not seen.all():
                 ok = np.ascontiguousarray(seen if ok.size == 0 else seen & ok.astype(bool), dtype=np.uint8)
         T_cw = np.linalg.inv(T)
