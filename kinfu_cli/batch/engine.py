@@ -202,10 +202,14 @@ def _folder_lock(outdir: Path):
     return Lock(f"kinfu-batch:{os.path.abspath(outdir)}")
 
 
-def run_task(spec: StageSpec, rec, options: Mapping, previous: dict | None, force: bool, *upstream: dict) -> dict:
+def run_task(spec: StageSpec, rec, options: Mapping, previous: dict | None, force: bool, *upstream: dict,
+             downstream: tuple = ()) -> dict:
     """One (recording, stage) on a worker: blocked when a needed stage did not finish, skipped when its
     outputs are current (same input fingerprint, outputs unchanged since recorded), else run. Never raises:
-    a failure is the entry's one-line `error`. `rec` is the plan's PlanRecording."""
+    a failure is the entry's one-line `error`. `rec` is the plan's PlanRecording. downstream: (spec, recording) of
+    the plan's tasks that read this one's outputs, directly or not: when the stage is redone, their outputs of an
+    earlier run are removed first (kinfu's, unchanged since), so that a run stopped before they are redone (Ctrl-C,
+    a killed worker) leaves them missing rather than complete-looking beside outputs they were not made from."""
     t0 = time.perf_counter()
     entry = {"status": "failed", "seconds": 0.0, "error": None, "fingerprint": None, "outputs": None,
              "numbers": {}, "warnings": []}
@@ -229,6 +233,8 @@ def run_task(spec: StageSpec, rec, options: Mapping, previous: dict | None, forc
             import numba
 
             numba.set_num_threads(1)
+        for later_spec, later_rec in downstream:  # redone in this run, after this stage (they wait for it)
+            _remove_outputs(later_spec, later_rec)
         with _folder_lock(outdir):
             done = spec.run(rec, options, force)
         stats = output_stats(outdir, outputs)
@@ -247,6 +253,14 @@ def _drop_stale(spec: StageSpec, rec) -> list[str]:
     """Remove the outputs an earlier run of a stage that failed or was blocked left (kinfu's, unchanged since): they
     would sit, complete-looking, beside the other stages' new results (a segment of the old fuse beside the new
     one). Returns the warning that says so ([] when there were none)."""
+    gone = _remove_outputs(spec, rec)
+    return [f"the {spec.name} outputs of an earlier run ({', '.join(gone)}) were removed: they would not match this "
+            f"run's other results"] if gone else []
+
+
+def _remove_outputs(spec: StageSpec, rec) -> list[str]:
+    """Remove the stage's outputs in the recording's folder that kinfu wrote and nobody changed since (a folder only
+    when it holds nothing else); returns their relative paths."""
     gone = []
     for rel in spec.claims_of(rec):
         path = rec.output / rel
@@ -260,10 +274,7 @@ def _drop_stale(spec: StageSpec, rec) -> list[str]:
             with contextlib.suppress(OSError):
                 path.unlink()
         gone.append(rel)
-    return [f"the {spec.name} outputs of an earlier run ({', '.join(gone)}) were removed: they would not match this "
-            f"run's other results"] if gone else []
-
-
+    return gone
 
 
 def _user_entries(folder: Path) -> list[str]:
@@ -318,6 +329,30 @@ def _mark_folders(plan: Plan) -> None:
             mark_folder_output(folder)
 
 
+def task_graph(plan: Plan, table: Mapping[str, StageSpec]) -> dict[tuple[int, str], list[tuple[int, str]]]:
+    """(recording index, stage) -> the tasks it runs after (its needs and wants in the recording, and the other
+    recordings' stages it reads), in pipeline order: every task after the tasks it runs after."""
+    graph: dict = {}
+    for s in plan.stages:
+        for i, rec in enumerate(plan.recordings):
+            if s in rec.stages:
+                spec = table[s]
+                graph[(i, s)] = [(i, n) for n in (*spec.needs, *spec.wants) if n in rec.stages]
+                graph[(i, s)] += [(j, n) for stage, j, n in rec.after if stage == s]
+    return graph
+
+
+def dependents(graph: Mapping) -> dict[tuple[int, str], list[tuple[int, str]]]:
+    """task -> every task that runs after it, directly or through others (task_graph's order)."""
+    out: dict = {task: [] for task in graph}
+    for task in reversed(list(graph)):  # a task's dependents are complete before the tasks it runs after
+        for before in graph[task]:
+            for t in (task, *out[task]):
+                if t not in out[before]:
+                    out[before].append(t)
+    return out
+
+
 def run_plan(plan: Plan, table: Mapping[str, StageSpec], engine: Engine, *, force: bool = False,
              quiet: bool = False, on_entry: Callable[[dict], None] | None = None, redo: bool = False) -> dict:
     """Submit the plan's task graph, write manifest.json after each finished task; returns the manifest.
@@ -328,18 +363,16 @@ def run_plan(plan: Plan, table: Mapping[str, StageSpec], engine: Engine, *, forc
     run_id = uuid.uuid4().hex[:8]
     futures: dict = {}
     where: dict = {}
-    for s in plan.stages:  # pipeline order: what a task waits for is submitted before it
-        for i, rec in enumerate(plan.recordings):
-            if s not in rec.stages:
-                continue
-            spec = table[s]
-            deps = [futures[(i, n)] for n in (*spec.needs, *spec.wants) if n in rec.stages]
-            deps += [futures[(j, n)] for stage, j, n in rec.after if stage == s]
-            fut = engine.client.submit(run_task, spec, rec, rec.stage_options(s),
-                                       previous.get((str(rec.output), s)), force, *deps,
-                                       key=f"kinfu-{s}-{i}-{run_id}", pure=False)
-            futures[(i, s)] = fut
-            where[fut.key] = (i, s)
+    needs = task_graph(plan, table)
+    later = dependents(needs)
+    for (i, s), deps in needs.items():  # pipeline order: what a task waits for is submitted before it
+        rec = plan.recordings[i]
+        downstream = tuple((table[t], plan.recordings[j]) for j, t in later[(i, s)])
+        fut = engine.client.submit(run_task, table[s], rec, rec.stage_options(s), previous.get((str(rec.output), s)),
+                                   force, *(futures[d] for d in deps), downstream=downstream,
+                                   key=f"kinfu-{s}-{i}-{run_id}", pure=False)
+        futures[(i, s)] = fut
+        where[fut.key] = (i, s)
     from dask.distributed import as_completed
 
     pending = list(futures.values())
