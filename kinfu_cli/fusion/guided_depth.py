@@ -76,28 +76,29 @@ def _disk_sum(pre, v, u, hw, radius, out):
 
 @njit(cache=True, inline="always")
 def _solve4(m, r, x):
-    """x = m^-1 r for a symmetric positive definite 4x4 m (Cholesky, in place on m)."""
+    """x = m^-1 r for a symmetric positive definite 4x4 m (Cholesky, in place on m; its diagonal ends as the
+    reciprocals of L's: one division per column instead of one per entry)."""
     for j in range(4):
         s = m[j, j]
         for k in range(j):
             s -= m[j, k] * m[j, k]
-        d = np.sqrt(max(s, 1e-30))
-        m[j, j] = d
+        inv = 1.0 / np.sqrt(max(s, 1e-30))
+        m[j, j] = inv
         for i in range(j + 1, 4):
             t = m[i, j]
             for k in range(j):
                 t -= m[i, k] * m[j, k]
-            m[i, j] = t / d
+            m[i, j] = t * inv
     for i in range(4):  # forward: L y = r
         t = r[i]
         for k in range(i):
             t -= m[i, k] * x[k]
-        x[i] = t / m[i, i]
+        x[i] = t * m[i, i]
     for i in range(3, -1, -1):  # backward: L^T x = y
         t = x[i]
         for k in range(i + 1, 4):
             t -= m[k, i] * x[k]
-        x[i] = t / m[i, i]
+        x[i] = t * m[i, i]
 
 
 @njit(cache=True, parallel=True)
@@ -142,16 +143,19 @@ def _coefficient_prefix(pre, valid, hw, radius, sc2, sd2, pre_ab):
         m = np.empty((4, 4), dtype=np.float64)
         r = np.empty(4, dtype=np.float64)
         x = np.empty(4, dtype=np.float64)
+        mu = np.empty(4, dtype=np.float64)
         acc = np.zeros(6, dtype=np.float64)
         pre_ab[v, 0, :] = 0.0
         for u in range(w):
             if valid[v, u]:
                 _disk_sum(pre, v, u, hw, radius, s)
-                n = s[0]
+                inv_n = 1.0 / s[0]
+                for i in range(4):
+                    mu[i] = s[1 + i] * inv_n
                 c = 5
                 for i in range(4):
                     for k in range(i, 4):
-                        cov = s[c] / n - (s[1 + i] / n) * (s[1 + k] / n)
+                        cov = s[c] * inv_n - mu[i] * mu[k]
                         m[i, k] = cov
                         m[k, i] = cov
                         c += 1
@@ -161,9 +165,9 @@ def _coefficient_prefix(pre, valid, hw, radius, sc2, sd2, pre_ab):
                     m[i, i] += sc2
                 m[3, 3] += sd2
                 _solve4(m, r, x)
-                b = s[4] / n
+                b = mu[3]
                 for i in range(4):
-                    b -= x[i] * s[1 + i] / n
+                    b -= x[i] * mu[i]
                     acc[1 + i] += x[i]
                 acc[0] += 1.0
                 acc[5] += b
