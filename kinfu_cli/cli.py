@@ -180,6 +180,9 @@ class _Main(_LazyGroup):
         try:
             code = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
             code = code if isinstance(code, int) else 0
+        except click.exceptions.NoArgsIsHelpError as exc:  # `kinfu`, `kinfu eval`: what the group offers, as --help
+            click.echo(exc.ctx.get_help())
+            code = 0
         except click.ClickException as exc:
             click.echo(f"kinfu: error: {_one_line(_usage_message(exc))}", err=True)
             code = exc.exit_code

@@ -115,15 +115,16 @@ def check_workspace(workspace) -> tuple[float, ...] | None:
 
 def check_split_gap(split_gap) -> None:
     """`split_gap` is None or seconds >= 0 (0 = never split on pauses)."""
-    if split_gap is not None and not (isinstance(split_gap, (int, float)) and split_gap >= 0):
-        raise ConfigError(f"expected seconds >= 0 (0 = never split on pauses), got {split_gap}",
+    # finite: inf was written to pois.json as Infinity, which is no JSON (0 already means never)
+    if split_gap is not None and not (isinstance(split_gap, (int, float)) and 0 <= split_gap < math.inf):
+        raise ConfigError(f"expected finite seconds >= 0 (0 = never split on pauses), got {split_gap}",
                           parameter="split_gap")
 
 
 def check_min_task(min_task) -> None:
     """`min_task` is seconds >= 0."""
-    if not (isinstance(min_task, (int, float)) and min_task >= 0):
-        raise ConfigError(f"expected seconds >= 0, got {min_task}", parameter="min_task")
+    if not (isinstance(min_task, (int, float)) and 0 <= min_task < math.inf):
+        raise ConfigError(f"expected finite seconds >= 0, got {min_task}", parameter="min_task")
 
 
 def _check_limits(split_gap, min_task, min_samples) -> None:

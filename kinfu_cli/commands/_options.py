@@ -27,6 +27,8 @@ PARAMETER_FLAGS: dict[str, str] = {
     "modes": "--mode",
     "up_tolerance_deg": "--up-tolerance",
     "cut_concave_fraction": "--concave-cut",
+    "frame_rate_hz": "--frame-rate",
+    "hand_rate_hz": "--hand-rate",
 }
 
 

@@ -14,7 +14,9 @@ from kinfu_cli.evaluation.change_pois import score_pois_in_comparison
 from kinfu_cli.commands._options import OutputPath, claim_outputs, force_option, volume_file
 from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.core.atomic import atomic_dir
+from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.core.volume_file import MAX_COORDINATE_M
 from kinfu_cli.core.pois import poi_frame_warnings, read_pois
 from kinfu_cli.core.progress import progress
 from kinfu_cli.evaluation.poi import MATCH_RADIUS
@@ -56,8 +58,7 @@ def change_params(p: dict) -> ChangeParams:
     one place that turns diff's options into library parameters, for the command and for `check_options`."""
     params = ChangeParams(margin=p["margin"], min_volume=p["min_volume"], noise_sigmas=p["noise_sigmas"])
     params.check()
-    if not p["match_radius"] > 0:
-        raise ConfigError(f"--match-radius: expected a positive distance in metres, got {p['match_radius']}")
+    check_number(p["match_radius"], "match_radius", 0.0, MAX_COORDINATE_M, low_open=True, unit="m")
     return params
 
 

@@ -12,8 +12,10 @@ from kinfu_cli.commands._engine import scheduler_option, trial_engine
 from kinfu_cli.commands._options import comma_items, result_options
 from kinfu_cli.commands._detector_options import detector_options, detector_params_from
 from kinfu_cli.commands._output import QUIET_HELP, emit
+from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError
-from kinfu_cli.evaluation.poi import evaluate_dataset, format_sample, format_tables, sample_statement
+from kinfu_cli.evaluation.poi import (MAX_SPEED, MIN_SPEED, evaluate_dataset, format_sample, format_tables,
+                                      sample_statement)
 
 group = "eval"
 
@@ -81,8 +83,8 @@ def command(dataset_dir, algorithm, speed, noise, seed, workers, scheduler, loo,
     """
     speeds = _floats("--speed", speed) or [1.0]
     noises = _floats("--noise", noise)
-    if any(s <= 0 for s in speeds):
-        raise ConfigError(f"--speed: expected positive multipliers, got {speed!r}")
+    for s in speeds:
+        check_number(s, "speed", MIN_SPEED, MAX_SPEED)
     if any(n < 0 for n in noises):
         raise ConfigError(f"--noise: expected standard deviations >= 0 metres, got {noise!r}")
     params = detector_params_from(kw)

@@ -11,6 +11,7 @@ from kinfu_cli.commands._mupf_options import mupf_filter_options
 from kinfu_cli.commands._options import OutputPath, claim_outputs, force_option
 from kinfu_cli.commands._output import emit
 from kinfu_cli.core.checks import check_number
+from kinfu_cli.core.volume_file import MAX_COORDINATE_M
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.localization.localize import MAX_POINTS, localize_points
 from kinfu_cli.localization.mesh_model import read_mesh
@@ -113,7 +114,7 @@ def command(model: Path | None, points: Path | None, models: str | None, segment
     # the points of --segments come from the segments.ply beside it: an input too, never written over
     inputs = [*model_paths, points, segments, segments.parent / "segments.ply" if segments is not None else None]
     claim_outputs({"output": output}, inputs, force)
-    check_number(sigma_p, "sigma_p", 0, low_open=True, unit="m")
+    check_number(sigma_p, "sigma_p", 0, MAX_COORDINATE_M, low_open=True, unit="m")
     params = MupfParameters(particles=particles, window=window, sigma_p2=sigma_p ** 2, max_index=max_index,
                             beta=beta, rotation=rotation, noise=noise, **(PAPER_WEIGHTS if paper_weights else {}),
                             **(NO_REFINE if no_refine else {}))

@@ -43,6 +43,8 @@ from kinfu_cli.io.trajectory import Trajectory
 
 #: A POI matches a labelled change within its region of interest S(POI) (RAS 2016 Sec. 6.2).
 MATCH_RADIUS = DEFAULT_RADIUS
+# speed multipliers of resample_speed (Table 3 uses 0.25-4): 1e-300 asked for 1e300 samples, 1e300 for one
+MIN_SPEED, MAX_SPEED = 0.01, 100.0
 
 #: Paper numbers (RAS 2016 Tables 2-4 = thesis Tables 2.2-2.4), percent (precision, recall).
 PAPER_TABLE2 = {
@@ -128,8 +130,7 @@ def score_matches(near: np.ndarray) -> tuple[int, int, int]:
 
 def resample_speed(traj: Trajectory, speed: float) -> Trajectory:
     """The same path performed `speed` times faster, resampled at the original sampling rate."""
-    if not speed > 0:
-        raise ConfigError(f"expected positive multipliers, got {speed}", parameter="speed")
+    check_number(speed, "speed", MIN_SPEED, MAX_SPEED)
     if speed == 1.0:
         return traj
     t = traj.t - traj.t[0]

@@ -425,7 +425,7 @@ def observed_surface(gt: GroundTruth, state: str, bounds: tuple, spacing: float 
 def _sampled_spacing(area: float, count: int, spacing: float, state: str) -> tuple[float, list[str]]:
     """The spacing `sample_surface` really sampled at and a warning when it is not `spacing`: it draws at most
     MAX_SAMPLES points and at least one, so a finer or coarser spacing is changed, depending on the mesh's area."""
-    wanted = area / spacing ** 2 if area > 0 else 0.0
+    wanted = area / spacing / spacing if area > 0 else 0.0  # 1e-300 squared is 0; this is inf, over the limit
     if count == 0 or MAX_SAMPLES >= wanted >= 0.5:  # within the sampler's limits (0.5 rounds to one sample)
         return float(spacing), []
     used = math.sqrt(area / count)

@@ -30,6 +30,10 @@ SURVEY_STRIDE = 8
 # open3d meshing needs room), at most 2 GiB (2.5 times the worst case of KinFu's 512^3 grid with colour)
 DEFAULT_BUDGET_FRACTION = 0.5
 DEFAULT_BUDGET_BYTES = 2 * 1024**3
+# a budget given in GiB: from about a MiB (less holds no grid a frame fits in: a 32^3 grid with colour needs ~0.4 MiB)
+# to about a PiB (more is no budget on any machine; 1e308 GiB overflowed the byte count)
+MIN_BUDGET_GIB = 0.001
+MAX_BUDGET_GIB = 1e6
 FACES = ("x-", "x+", "y-", "y+", "z-", "z+")
 # a face cuts the scene when its occupied voxels could form a line of surface this long (and at least
 # CUT_MIN_VOXELS): fewer are speckle, flying pixels at the far range that the survey's sparse pixels miss (real
@@ -124,8 +128,9 @@ def budget_bytes(max_memory_gib: float | None) -> int:
     at most DEFAULT_BUDGET_BYTES."""
     if max_memory_gib is None:
         return int(min(DEFAULT_BUDGET_BYTES, DEFAULT_BUDGET_FRACTION * available_bytes()))
-    if not (np.isfinite(max_memory_gib) and max_memory_gib > 0):
-        raise ConfigError(f"expected a positive number of GiB, got {max_memory_gib}", parameter="max_memory")
+    if not (MIN_BUDGET_GIB <= max_memory_gib <= MAX_BUDGET_GIB):  # NaN fails too
+        raise ConfigError(f"expected a number of GiB from {MIN_BUDGET_GIB:g} to {MAX_BUDGET_GIB:g}, got "
+                          f"{max_memory_gib:g}", parameter="max_memory")
     return int(max_memory_gib * 1024**3)
 
 

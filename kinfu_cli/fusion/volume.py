@@ -100,8 +100,9 @@ class TernaryVolume:
                  _allocate: bool = True) -> None:
         size = _triple(size, "size")
         voxel_size_given = voxel_size is not None
-        if not all(np.isfinite(s) and s > 0 for s in size):
-            raise ConfigError(f"expected positive lengths in metres, got {size}", parameter="size")
+        if not all(0 < s <= MAX_COORDINATE_M for s in size):  # NaN fails too; 1e308 overflowed the voxel check
+            raise ConfigError(f"expected positive lengths in metres up to {MAX_COORDINATE_M:g}, got {size}",
+                              parameter="size")
         if voxel_size is not None:
             voxel_size = float(voxel_size)
             if not (np.isfinite(voxel_size) and voxel_size > 0):

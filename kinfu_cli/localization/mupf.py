@@ -124,10 +124,11 @@ class MupfParameters:
         check_number(self.refine, "refine", 0, integer=True)
         check_number(self.refine_iterations, "refine_iterations", 0, integer=True)
         check_number(self.flips, "flips", 0, integer=True)
-        check_number(self.noise, "noise", 0, low_open=True, unit="m")
-        check_number(self.sigma_p2, "sigma_p2", 0, low_open=True, unit="m^2")
+        # distances no larger than the data's own bound (farther is corrupt data; 1e308 overflowed the squares)
+        check_number(self.noise, "noise", 0, MAX_COORDINATE_M, low_open=True, unit="m")
+        check_number(self.sigma_p2, "sigma_p2", 0, MAX_COORDINATE_M ** 2, low_open=True, unit="m^2")
         if self.max_index is not None:
-            check_number(self.max_index, "max_index", 0, low_open=True, unit="m")
+            check_number(self.max_index, "max_index", 0, MAX_COORDINATE_M, low_open=True, unit="m")
         for name in ("q_diag", "p0_diag"):
             vals = getattr(self, name)
             if len(vals) != N_X or not all(math.isfinite(v) and v >= 0 for v in vals):

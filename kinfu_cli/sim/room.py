@@ -31,7 +31,7 @@ from kinfu_cli.io.world_up import WORLD_UP_TOPIC
 from kinfu_cli.io.writers import RecordingWriter
 from kinfu_cli.sim.robot import CAMERA_FRAME, WORLD_FRAME
 from kinfu_cli.sim.scene import FLOOR_COLOUR, PALETTE, TABLE_COLOUR
-from kinfu_cli.sim.scenario import MAX_FRAME_RATE_HZ, depth_to_mm
+from kinfu_cli.sim.scenario import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ, depth_to_mm
 from kinfu_cli.sim.sensor import DepthSensor, SensorFrame, kinect_v1_intrinsics, mesh_target
 
 WORLDS = ("z-up", "y-down")
@@ -186,7 +186,7 @@ def make_room(seed: int = 0, world: str = "z-up", width: int = 160, height: int 
         raise ConfigError(f"expected at least 3 frames for the room loop, got {frames}", parameter="frames")
     if width < 8 or height < 6 or width > 4096 or height > 4096:
         raise ConfigError(f"expected 8x6 to 4096x4096 pixels, got {width}x{height}", parameter="width/height")
-    check_number(frame_rate_hz, "frame_rate_hz", 0, MAX_FRAME_RATE_HZ, low_open=True, unit="Hz")
+    check_number(frame_rate_hz, "frame_rate_hz", MIN_FRAME_RATE_HZ, MAX_FRAME_RATE_HZ, unit="Hz")
     rng = np.random.default_rng([seed, 23])
     k = np.arange(frames)
     a = 2 * np.pi * k / frames + rng.uniform(0, 2 * np.pi)

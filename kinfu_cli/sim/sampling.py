@@ -51,4 +51,6 @@ def sample_surface(vertices: np.ndarray, triangles: np.ndarray, spacing: float =
     total = surface_area(vertices, triangles)
     if total <= 0:
         return np.zeros((0, 3)), np.zeros((0, 3))
-    return sample_triangles(vertices, triangles, int(min(max_samples, max(1, round(total / spacing**2)))), seed)
+    # total / spacing / spacing: a spacing of 1e-300 squares to 0 (a division by zero), its quotient to inf (capped)
+    return sample_triangles(vertices, triangles, int(round(min(max_samples, max(1.0, total / spacing / spacing)))),
+                            seed)

@@ -61,9 +61,12 @@ HAND_TOPIC = "/hand/pose"
 TF_RATE_HZ = 10.0
 
 #: rates a generated recording may have: inf made an infinite number of samples (a traceback), and a hand tracker
-#: faster than 10 kHz or a camera faster than 1 kHz is no recording anyone replays
+#: faster than 10 kHz or a camera faster than 1 kHz is no recording anyone replays; slower than one frame in 100 s
+#: is none either (1e-300 Hz put the frames past any time stamp: an overflow)
 MAX_HAND_RATE_HZ = 1e4
 MAX_FRAME_RATE_HZ = 1e3
+MIN_FRAME_RATE_HZ = 0.01
+MIN_HAND_RATE_HZ = 1.0  # a hand tracker slower than this gives a motion of a few seconds a sample or two
 
 
 @dataclass
@@ -134,8 +137,8 @@ def make_scenario(seed: int = 0, kind: str = "pick-and-place", width: int = 320,
         raise ConfigError(f"expected at least 2 (scan and after the change), got {frames}", parameter="frames")
     if width < 8 or height < 6 or width > 4096 or height > 4096:
         raise ConfigError(f"expected 8x6 to 4096x4096 pixels, got {width}x{height}", parameter="width/height")
-    check_number(hand_rate_hz, "hand_rate_hz", 0, MAX_HAND_RATE_HZ, low_open=True, unit="Hz")
-    check_number(frame_rate_hz, "frame_rate_hz", 0, MAX_FRAME_RATE_HZ, low_open=True, unit="Hz")
+    check_number(hand_rate_hz, "hand_rate_hz", MIN_HAND_RATE_HZ, MAX_HAND_RATE_HZ, unit="Hz")
+    check_number(frame_rate_hz, "frame_rate_hz", MIN_FRAME_RATE_HZ, MAX_FRAME_RATE_HZ, unit="Hz")
     if kind in ("remove", "pick-and-place") and n_objects < 1:
         raise ConfigError(f"the {kind} scenario needs at least one object, got {n_objects}", parameter="n_objects")
     rng = np.random.default_rng([seed, 7])

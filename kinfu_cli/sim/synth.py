@@ -16,8 +16,9 @@ from kinfu_cli.core.atomic import atomic_dir
 from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.sim.room import WORLDS, RoomScenario, make_room, write_room_ground_truth, write_room_recordings
-from kinfu_cli.sim.scenario import (MAX_FRAME_RATE_HZ, MAX_HAND_RATE_HZ, Scenario, check_camera_pose_topic,
-                                    make_scenario, recording_topics, write_ground_truth, write_recordings)
+from kinfu_cli.sim.scenario import (MAX_FRAME_RATE_HZ, MAX_HAND_RATE_HZ, MIN_FRAME_RATE_HZ, MIN_HAND_RATE_HZ,
+                                    Scenario, check_camera_pose_topic, make_scenario, recording_topics,
+                                    write_ground_truth, write_recordings)
 
 SCENES = ("tabletop", "room", "objects", "household")  # objects / household: the tabletop scenario on
 # `sim.scene.segmentation_scene` / `sim.household.household_scene`
@@ -68,8 +69,8 @@ def synthesize(out: str | os.PathLike, seed: int = 0, width: int = 320, height: 
     if not formats or any(f not in FORMAT_NAMES for f in formats):
         raise ConfigError(f"expected some of {', '.join(FORMAT_NAMES)}, got {', '.join(formats) or 'none'}",
                           parameter="formats")
-    check_number(hand_rate, "hand_rate", 0, MAX_HAND_RATE_HZ, low_open=True, unit="Hz")
-    check_number(frame_rate, "frame_rate", 0, MAX_FRAME_RATE_HZ, low_open=True, unit="Hz")
+    check_number(hand_rate, "hand_rate", MIN_HAND_RATE_HZ, MAX_HAND_RATE_HZ, unit="Hz")
+    check_number(frame_rate, "frame_rate", MIN_FRAME_RATE_HZ, MAX_FRAME_RATE_HZ, unit="Hz")
     check_number(seed, "seed", 0, 2 ** 63 - 1, integer=True)  # numpy refuses negative seeds with a bare ValueError
     if not 1 <= jpeg_quality <= 100:
         raise ConfigError(f"expected 1..100, got {jpeg_quality}", parameter="jpeg_quality")

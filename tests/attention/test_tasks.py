@@ -170,7 +170,8 @@ def test_default_output_is_unchanged_on_a_polhemus_file(tmp_path):
     (["--workspace", "1,2,3"], "--workspace: expected six numbers"),
     (["--workspace", "0,0,0,1,1,-1"], "--workspace: expected x0 < x1"),
     (["--workspace", "5,5,5,6,6,6"], "--workspace: box 5,5,5,6,6,6 contains no sample"),
-    (["--split-gap", "-1"], "--split-gap: expected seconds >= 0"),
+    (["--split-gap", "-1"], "--split-gap: expected finite seconds >= 0"),
+    (["--split-gap", "inf"], "--split-gap: expected finite seconds >= 0"),  # was written as Infinity (no JSON)
     (["--min-task", "nan"], "--min-task"),
     (["--min-task", "100"], "no task left"),
 ])
@@ -211,10 +212,12 @@ def test_cli_detector_errors_name_the_flag_before_reading(tmp_path, args, expect
 
 def test_detect_pois_checks_every_argument_before_reading(tmp_path):
     missing = tmp_path / "none.traj"
-    with pytest.raises(ConfigError, match="^split_gap: expected seconds >= 0"):
+    with pytest.raises(ConfigError, match="^split_gap: expected finite seconds >= 0"):
         detect_pois(missing, split_gap=-1.0)
-    with pytest.raises(ConfigError, match="^min_task: expected seconds >= 0"):
+    with pytest.raises(ConfigError, match="^min_task: expected finite seconds >= 0"):
         detect_pois(missing, min_task=float("nan"))
+    with pytest.raises(ConfigError, match="^min_task: expected finite seconds >= 0"):
+        detect_pois(missing, min_task=float("inf"))
     with pytest.raises(ConfigError, match="^workspace: expected six numbers"):
         detect_pois(missing, workspace="1,2,3")
     with pytest.raises(ConfigError, match="^zvc_r1/zvc_r2: "):

@@ -47,7 +47,7 @@ MORE = [
     ("nbv", "clearance = -1", "nbv: clearance: expected a finite number >= 0"),
     ("nbv", "min-range = 9", "nbv: min-range/max-range: expected 0 <= min < max"),
     ("segment", 'sq-exponent-bounds = "3,1"', "segment: sq-exponent-bounds: expected 0 < lo < hi <= 2"),
-    ("diff", "match-radius = 0", "diff: match-radius: expected a positive distance"),
+    ("diff", "match-radius = 0", "diff: match-radius: expected a finite number > 0"),
     ("eval-nbv", "lon-step = 0", "eval-nbv: lon-step: expected a step in (0, 360]"),
     ("eval-segment", "t-eval = 0", "eval-segment: t-eval: expected a number in (0, 1]"),
 ]

@@ -89,7 +89,7 @@ def test_a_trial_error_reaches_the_caller_with_its_parameter(hand_dataset, sched
         with pytest.raises(ConfigError) as err:
             engine.map_trials(_job_trial, [(task, 1.0, 0.0, 0, ["zvc"], {}), (task, -1.0, 0.0, 0, ["zvc"], {})],
                               quiet=True)
-        assert err.value.parameter == "speed" and "positive" in str(err.value)
+        assert err.value.parameter == "speed" and ">= 0.01" in str(err.value)
     finally:
         engine.close()
 
