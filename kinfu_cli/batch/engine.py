@@ -29,8 +29,9 @@ from kinfu_cli.batch.manifest import DONE, MANIFEST_NAME, build_manifest, read_p
 from kinfu_cli.batch.plan import Plan
 from kinfu_cli.batch.stages import StageSpec
 from kinfu_cli.core.errors import ConfigError, KinfuError
-from kinfu_cli.core.ownership import (TEMPORARY_NAME, changed_since_written, claim_output,
-                                      holds_only_kinfu_entries, mark_folder_output, written_by_kinfu)
+from kinfu_cli.core.ownership import (TEMPORARY_NAME, changed_since_written, claim_output, holds_only_kinfu_entries,
+                                      mark_folder_output, recording_folders, refuse_inside_folders,
+                                      written_by_kinfu)
 from kinfu_cli.core.progress import progress
 
 CONNECT_TIMEOUT_S = 5
@@ -306,6 +307,9 @@ def check_before_work(plan: Plan, table: Mapping[str, StageSpec], force: bool) -
     written (the command checks before it takes the lock, whose file would go into a user's folder)."""
     inputs = [r.path for r in plan.recordings]
     claim_output(plan.output / MANIFEST_NAME, inputs, force=force, parameter="output")
+    # a recording that is a folder (a ROS 2 bag) is one input: the outputs written inside it would join it
+    refuse_inside_folders(plan.output, [f for r in plan.recordings for f in recording_folders(r.path)],
+                          parameter="output")
     for rec in plan.recordings:
         for s in rec.stages:
             spec = table[s]

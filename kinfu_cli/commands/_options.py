@@ -15,7 +15,7 @@ import click
 from click.core import ParameterSource
 
 from kinfu_cli.core.errors import KinfuError, VolumeError
-from kinfu_cli.core.ownership import claim_output
+from kinfu_cli.core.ownership import claim_output, recording_folders, refuse_inside_folders
 from kinfu_cli.commands._output_path import OutputPath, output_kind_of, output_kind_problem
 
 PARAMETER_FLAGS: dict[str, str] = {
@@ -117,14 +117,17 @@ def force_option(func):
 
 
 def claim_outputs(outputs: dict[str, str | os.PathLike | None], inputs: Iterable[str | os.PathLike | None],
-                  force: bool) -> None:
+                  force: bool, *, recordings: Iterable[str | os.PathLike | None] = ()) -> None:
     """Refuse, before any work, outputs that are inputs, hold an input, are empty, or exist without being
-    kinfu's (unless force); keys are the commands' option names, so the error shows the flag."""
+    kinfu's (unless force); keys are the commands' option names, so the error shows the flag. recordings: the
+    recording inputs, whose folder (a ROS 2 bag, core.ownership.recording_folders) no output may lie inside."""
     inputs = list(inputs)
+    whole = [f for r in recordings for f in recording_folders(r)]
     seen: dict[str, str] = {}
     for name, path in outputs.items():
         if path is not None:
             claim_output(path, inputs, force=force, parameter=name)
+            refuse_inside_folders(path, whole, parameter=name)
             real = os.path.realpath(path)
             if real in seen:  # the second write would replace the first (poi -o p.json --plot p.json)
                 raise KinfuError(f"{path} is given for both; name two different paths",

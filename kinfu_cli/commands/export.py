@@ -49,14 +49,11 @@ def command(recording: str, out: str, trajectory: str | None, as_json: bool, qui
       kinfu export run.mcap --trajectory tum -o gt.tum
       kinfu export out/fuse_icp --trajectory tum -o est.tum   # then: evo_ape tum gt.tum est.tum -a
     """
-    claim_outputs({"out": out}, [recording, bag_folder(recording)], force)
+    # inside a ROS 2 bag folder it would join the recording; inside a fuse output, the next fuse run replaces it
+    claim_outputs({"out": out}, [recording, bag_folder(recording)], force, recordings=[recording])
     problem = output_kind_problem(out, "trajectory" if trajectory else "folder")
     if problem is not None:  # the frame folder named like a file (-o frames.json, -o traj.tum without --trajectory)
         raise ConfigError(problem, parameter="out")
-    src = Path(recording).resolve()
-    # inside a ROS 2 bag folder it would join the recording; inside a fuse output, the next fuse run replaces it
-    if src.is_dir() and src in Path(out).resolve().parents:
-        raise ConfigError(f"{out} is inside the input folder {recording}; write it elsewhere", parameter="out")
     fk = frame_kwargs(kwargs)
     if trajectory is not None:
         _export_trajectory(recording, out, fk, role_kwargs(kwargs), as_json, quiet)

@@ -184,7 +184,8 @@ def command(recording: Path, outdir: Path, voxel_size, resolution, size, origin,
       kinfu fuse rec.mcap -o out/icp --pose icp --every 5 --max-lost 5%
       kinfu fuse rec2.mcap -o out/fuse2 --init out/fuse/volume.npz --clear-pois out/poi/pois.json
     """
-    claim_outputs({"outdir": outdir, "viz": viz}, [recording, bag_folder(recording), init, clear_pois], force)
+    claim_outputs({"outdir": outdir, "viz": viz}, [recording, bag_folder(recording), init, clear_pois], force,
+                  recordings=[recording])
     result = fuse_recording(recording, **fuse_arguments(click.get_current_context().params))
     if not quiet:
         for note in result.notes:

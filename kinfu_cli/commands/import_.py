@@ -3,15 +3,12 @@
 from __future__ import annotations
 
 import json
-import os
-from pathlib import Path
 
 import click
 
 from kinfu_cli.commands._options import OutputPath, claim_outputs, force_option
 from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.commands._up import parse_up
-from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.io.rgbd_folders import import_folder
 
 
@@ -52,10 +49,8 @@ def command(folder: str, out: str, rate: float, frames: str | None, color: str, 
       kinfu import tum_fr1_desk/ -o fr1_desk.bag --frames 0:300:2
       kinfu import scans/ -o scans.mcap --up 0,-1,0
     """
-    claim_outputs({"out": out}, [folder], force)
-    src, dst = Path(os.path.realpath(folder)), Path(os.path.realpath(out))
-    if src in dst.parents:  # the recording would join the data set it was made from (and be read by the next import)
-        raise ConfigError(f"{out} is inside the input folder {folder}; write the recording elsewhere", parameter="out")
+    # inside, the recording would join the data set it was made from (and be read by the next import)
+    claim_outputs({"out": out}, [folder], force, recordings=[folder])
     summary = import_folder(folder, out, rate=rate, frames=frames, color=color, intrinsics=intrinsics,
                             compress=not no_compress, quiet=quiet, intrinsics_source="--intrinsics",
                             up=parse_up(up), force=force)

@@ -208,7 +208,8 @@ def command(volume, pois_path, mode, clear, gain, top, output, plot, candidates,
                           f"objects places its own views: 5 directions x 8 rolls at 0.8 m around each contour "
                           f"point, no viewing sphere around a POI)")
     volume = volume_file(volume)
-    claim_outputs({"output": output, "plot": plot, "viz": viz}, [volume, pois_path, candidates, camera_info], force)
+    claim_outputs({"output": output, "plot": plot, "viz": viz}, [volume, pois_path, candidates, camera_info], force,
+                  recordings=[camera_info])
     t0 = time.perf_counter()
     recorded = volume_intrinsics(volume) if Path(volume).is_file() else None
     params = click.get_current_context().params

@@ -79,7 +79,8 @@ def command(source, algorithm, hand_topic, hand_frame, world_frame, workspace, s
       kinfu poi session.mcap --workspace -0.5,-0.8,0.7,0.6,0.4,1.3 --split-gap 1
       kinfu poi user1_cup0.traj --literal --plot literal.png
     """
-    claim_outputs({"output": output, "plot": plot, "viz": viz}, [source, bag_folder(source)], force)
+    claim_outputs({"output": output, "plot": plot, "viz": viz}, [source, bag_folder(source)], force,
+                  recordings=[source])
     found = detect_pois(source, **detection_arguments(click.get_current_context().params), hand_topic=hand_topic,
                         hand_frame=hand_frame, world_frame=world_frame, quiet=quiet)
     write_json(output, found.document)

@@ -293,6 +293,32 @@ def claim_output(output: str | os.PathLike | None, inputs: Iterable[str | os.Pat
     return out
 
 
+def recording_folders(recording: str | os.PathLike | None) -> list[Path]:
+    """The folders a recording input is read from whole: the recording itself when it is a folder (a ROS 2 bag),
+    else the ROS 2 bag folder one of its files lies in (a metadata.yaml beside it); [] for a recording file in a
+    plain folder. Anything written inside one joins the recording (the next run reads it with it), unlike a new
+    file beside an input in a plain folder, which claim_output allows."""
+    if recording is None or str(recording) == "":
+        return []
+    path = Path(recording)
+    if path.is_dir():
+        return [path]
+    return [path.parent] if path.is_file() and (path.parent / "metadata.yaml").is_file() else []
+
+
+def refuse_inside_folders(output: str | os.PathLike, folders: Iterable[str | os.PathLike | None], *,
+                          parameter: str = "output") -> None:
+    """KinfuError when `output` lies inside one of `folders`, inputs read whole (recording_folders): writing there
+    would change the input."""
+    real = Path(os.path.realpath(output))
+    for folder in folders:
+        if folder is None or str(folder) == "":
+            continue
+        src = Path(os.path.realpath(folder))
+        if src.is_dir() and src in real.parents:
+            raise KinfuError(f"{output} is inside the input folder {folder}; write it elsewhere", parameter=parameter)
+
+
 def _part_of_folder_output(path: Path) -> bool:
     """Whether the file `path` lies in a folder that kinfu wrote whole (its parent's manifest lists the folder)."""
     entry = _read_manifest(path.parent.parent).get(path.parent.name)
