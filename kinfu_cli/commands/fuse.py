@@ -23,7 +23,8 @@ from kinfu_cli.report.volume_plot import plot_slices
 
 # how report.json names the arguments that placed the grid or cleared spheres: by their options
 ARGUMENT_FLAGS = {"init": "--init", "origin": "--origin", "clear_spheres": "--clear-sphere",
-                  "clear_pois": "--clear-pois", "up": "--up"}
+                  "clear_pois": "--clear-pois", "up": "--up", "voxel_size": "--voxel-size", "size": "--size",
+                  "resolution": "--resolution"}
 
 
 def _share(value: str) -> float:

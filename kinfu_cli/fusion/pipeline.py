@@ -195,8 +195,8 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
     a volume.npz to continue. clear_spheres (x, y, z, r) and the POIs of clear_pois are forgotten (before fusing
     with init, else after). start_s / end_s (seconds from the recording start), every, tolerance_s: frame selection
     as io.frames.iter_frames. fill_gaps, bilateral, shadow_filter, shadow_baseline: depth filters. roles:
-    detect_roles overrides. argument_names: how the report names the init, origin, clear_spheres, clear_pois and up
-    arguments (default these names; a command line passes its options). up: the world's direction against gravity
+    detect_roles overrides. argument_names: how the report names the init, origin, clear_spheres, clear_pois, up and
+    grid (GRID_ARGUMENTS) arguments (default these names; a command line passes its options). up: the world's direction against gravity
     (x, y, z); None decides it as fusion.up.choose_up says (the volume's up, stored in volume.npz, ternary.npz and
     the report with its source). max_lost: the largest share of tracked frames (icp, hint) that may be lost (not
     fused) before the run fails. color_mode: "mean" or "mode" (fusion/color_mode.py); None: the init volume's, else
@@ -204,7 +204,7 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
     the arguments as a run would, then return None without opening the recording (kinfu batch checks plans so)."""
     started = time.perf_counter()
     timing: dict[str, float] = {}
-    names = {**{n: n for n in ("init", "origin", "clear_spheres", "clear_pois", "up")}, **(argument_names or {})}
+    names = {**{n: n for n in NAMED_ARGUMENTS}, **(argument_names or {})}
     up = None if up is None else check_up(up, "up")
     _check_arguments(pose, pose_topic, every, max_lost, size, start_s, end_s)
     auto = isinstance(size, str)
@@ -214,14 +214,15 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
     grid_spec = _GridSpec(1.0 if auto else size, resolution, voxel_size, truncation, max_weight, min_depth,
                           max_depth, color, wanted_mode or "mean")
     depth_filter = DepthFilter(min_depth, max_depth, fill_gaps, bilateral, shadow_filter, shadow_baseline)
-    vol, placement = None, ""
+    vol, placement, grid_warnings = None, "", []
     if init:
         t0 = time.perf_counter()
         vol = _load_init(init, wanted_mode)
         timing["load_init"] = time.perf_counter() - t0
         placement = f"{names['init']} {init}"
-        for s in spheres:
-            vol.clear_sphere(s["center"], s["radius"])
+        grid_warnings = _init_grid_warnings(vol, dict(voxel_size=voxel_size, size=None if auto else size,
+                                                      resolution=resolution, origin=origin), names, init)
+        _clear_spheres(vol, spheres)
     else:
         grid_spec.volume(origin=origin or (0.0, 0.0, 0.0))  # refuse impossible grid settings before reading anything
     if check_only:
@@ -235,8 +236,8 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
         if vol is not None and vol.frame and plan.world and vol.frame != plan.world:
             raise RecordingError(f"{init}: the volume was fused in frame {vol.frame!r}, but {rec.path} gives "
                                  f"camera poses in {plan.world!r}", parameter="init")
-        warnings = rec.problems + ([plan.warning] if plan.warning else []) + poi_frame_warnings(clear_pois, plan.world or (vol.frame if vol is not None
-                                                                               else ""), names["clear_pois"])
+        warnings = rec.problems + ([plan.warning] if plan.warning else []) + grid_warnings + poi_frame_warnings(
+            clear_pois, plan.world or (vol.frame if vol is not None else ""), names["clear_pois"])
         sizing, notes = ({"mode": "init", "init": str(init)} if init else {"mode": "given"}), []
         if auto and vol is None:
             t0 = time.perf_counter()
@@ -270,8 +271,7 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
         vol.frame = vol.frame or plan.world
 
     if not init:
-        for s in spheres:
-            vol.clear_sphere(s["center"], s["radius"])
+        _clear_spheres(vol, spheres)
     warnings += _sphere_warnings(vol, spheres, clear_pois)
     t0 = time.perf_counter()
     grid, counts, bounding_box, mesh, cloud = _read_out(vol)
@@ -291,6 +291,39 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
         warnings=warnings, grid=grid, counts=counts, bounding_box=bounding_box, mesh=mesh, cloud=cloud,
         timing=timing, started=started, up=up_choice.to_json(), grid_sizing=sizing, face_contacts=faces,
         notes=notes, camera_stamps_ns=integrator.camera_stamps_ns, camera_poses=integrator.camera_poses)
+
+
+def _clear_spheres(vol: TernaryVolume, spheres: list[dict]) -> None:
+    for s in spheres:
+        vol.clear_sphere(s["center"], s["radius"])
+
+
+#: the grid arguments an init volume's own grid overrides, and what each is of that grid
+GRID_ARGUMENTS = {"voxel_size": ("voxel size", " m"), "size": ("size", " m"), "resolution": ("resolution", " voxels"),
+                  "origin": ("origin", " m")}
+#: the arguments messages name as argument_names says (a command line: by its options)
+NAMED_ARGUMENTS = ("init", "clear_spheres", "clear_pois", "up", *GRID_ARGUMENTS)
+
+
+def _init_grid_warnings(vol: TernaryVolume, given: Mapping, names: Mapping[str, str], init) -> list[str]:
+    """The grid arguments given with init (not None) that differ from the init volume's grid: its grid wins, and
+    the run says so rather than fusing on another grid than the one asked for without a word."""
+    voxel, shape = vol.voxel_size, vol.shape
+    # the same grid: a voxel size and origin as printed (6 digits), a size within a voxel (sizes are rounded up)
+    grid = {"voxel_size": (voxel, voxel * 1e-5), "size": (tuple(n * voxel for n in shape), voxel),
+            "resolution": (shape, 0.5), "origin": (tuple(float(v) for v in vol.origin), voxel * 1e-3)}
+    out = []
+    for name, value in given.items():
+        actual, tolerance = grid[name]
+        if value is not None and np.any(np.abs(np.asarray(value, dtype=float) - np.asarray(actual)) > tolerance):
+            what, unit = GRID_ARGUMENTS[name]
+            out.append(f"{names[name]} {_values(value)} differs from the {what} of the {names['init']} volume {init} "
+                       f"({_values(actual)}{unit}); its grid wins: {names[name]} is ignored")
+    return out
+
+
+def _values(value) -> str:
+    return ",".join(f"{float(v):.6g}" for v in np.atleast_1d(np.asarray(value, dtype=float)))
 
 
 def _wanted_color_mode(color_mode: str | None, color: bool) -> str | None:
