@@ -136,6 +136,12 @@ def empty_result_warnings(tasks: TaskList, detectors: list[Detector], whole: boo
             found = f"its {n} POI(s) come from tracker jitter, not from actions" if n else "no POI can be found"
             out.append(f"{name}the hand stays within {100 * span:.1f} cm (diagonal of its 1st..99th percentile box) "
                        f"over {task.duration:.1f} s: it never moved (a still or lost tracker?), so {found}")
+        elif isinstance(det, ZeroVelocityCrossing) and 2 * det.half_width + 1 > task.samples:
+            n = len(det.pois_)
+            found = f"its {n} POI(s) come from a path averaged flat" if n else "no POI can be found"
+            out.append(f"{name}ZVC's mean filter spans 2B+1 = {2 * det.half_width + 1} samples (zvc_half_width B = "
+                       f"{det.half_width}), more than the task's {task.samples} samples: it averages the task's "
+                       f"path flat, so {found}")
         elif getattr(det, "n_components_", MIN_POI_GAUSSIANS) < MIN_POI_GAUSSIANS:
             out.append(f"{name}GMM-AS fitted K = {det.n_components_} Gaussian(s), and a POI is a Gaussian between "
                        f"two others (the first and last are skipped), so it cannot give one: the path holds no "
@@ -150,8 +156,13 @@ def _closest_miss(detectors: list[Detector]) -> str:
     if isinstance(detectors[0], ZeroVelocityCrossing):
         with np.errstate(divide="ignore", invalid="ignore"):  # a zero limit where the hand stood still
             ratios = [d.speed_r1_ / d.slow_limit_ for d in detectors if np.any(d.slow_limit_ > 0)]
-        slowest = min(float(np.min(r[np.isfinite(r)])) for r in ratios) if ratios else float("nan")
+        finite = [float(np.min(r[np.isfinite(r)])) for r in ratios if np.any(np.isfinite(r))]
         d = detectors[0]
+        if not finite:  # a zero limit throughout: a ratio to it says nothing (it read "nan x that limit")
+            return (f"ZVC's slow limit ({d.rule_} rule) is zero throughout: the hand's mean-filtered path never "
+                    f"moved, so no sample is slower than it (zvc_half_width B = {d.half_width} averages "
+                    f"2B+1 samples)")
+        slowest = min(finite)
         return (f"the hand's mean speed within r1 = {d.r1:g} m never fell below ZVC's slow limit ({d.rule_} rule); at "
                 f"its slowest it was {slowest:.2f} x that limit, so it never dwelt anywhere (zvc_relative or "
                 f"zvc_threshold set the limit)")
@@ -159,6 +170,15 @@ def _closest_miss(detectors: list[Detector]) -> str:
         closest = max(float(np.nanmax(d.saliency_ / d.thresholds_)) for d in detectors)
     return (f"no GMM-AS Gaussian is more salient than POITh = {detectors[0].poi_threshold:g} x its neighbours' mean; "
             f"the closest reached {closest:.2f} x that threshold (poi_threshold sets it)")
+
+
+def check_window(detector: Detector, samples: int) -> None:
+    """ConfigError naming zvc_half_width when ZVC's mean filter (2B+1 samples) is longer than the whole trajectory
+    of `samples` samples: it averages the path flat (no speed anywhere, no POI, the slow limit zero)."""
+    if isinstance(detector, ZeroVelocityCrossing) and 2 * int(detector.half_width) + 1 > samples:
+        raise ConfigError(f"a mean filter of 2B+1 = {2 * int(detector.half_width) + 1} samples is longer than the "
+                          f"trajectory's {samples} samples; expected B at most {max(0, (samples - 1) // 2)}",
+                          parameter="zvc_half_width")
 
 
 def check_detection(algorithm: str = "gmm-as", params: dict | None = None, *,
@@ -191,6 +211,7 @@ def detect_pois(source: str | os.PathLike | Trajectory, algorithm: str = "gmm-as
     else:
         traj = load_hand_trajectory(source, hand_topic=hand_topic, hand_frame=hand_frame, world_frame=world_frame)
         source_name = str(source)
+    check_window(make_detector(algorithm, params), len(traj))
     tasks, detectors, pois = detect_by_task(traj, lambda: make_detector(algorithm, params), box, split_gap,
                                             min_task, quiet=quiet)
     _recording_times(pois, traj.meta.get("recording_span_ns"))
