@@ -68,6 +68,14 @@ def comma_items(text: str, option: str) -> list[str]:
     return items
 
 
+def comma_values(text: str, option: str) -> list[str]:
+    """comma_items of an option whose blank value means nothing (no "none" to choose): '' is an error naming the
+    option, as refuse_empty_values says it, where it was read as an empty list (eval poi --speed '' ran speed 1)."""
+    if not text.strip():
+        raise KinfuError(f"{option}: expected a value, got an empty one")
+    return comma_items(text, option)
+
+
 #: `kinfu eval segment` options that mean something only with --sweep (long flags without the dashes): the
 #: command refuses them without --sweep, batch's eval-segment stage (one recording, never a sweep) refuses them
 SWEEP_ONLY_OPTIONS = frozenset({"sweep-parameter", "sweep-values", "color-distance", "method", "color", "photometric",

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from kinfu_cli.commands._options import OutputPath, claim_outputs, force_option
+from kinfu_cli.commands._options import OutputPath, claim_outputs, comma_items, comma_values, force_option
 from kinfu_cli.commands._output import QUIET_HELP, emit
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.progress import progress
@@ -44,12 +44,12 @@ def command(hand: str, conditions: str, yaws: int, scenes: str, seed: int, outpu
       kinfu eval grasp --scenes 0 -o grasp_eval.json
       kinfu eval grasp --conditions none --yaws 1 --scenes '' --json
     """
-    conds = tuple(c.strip() for c in conditions.split(",") if c.strip())
+    conds = tuple(comma_values(conditions, "--conditions"))
     bad = [c for c in conds if c not in ("none", "top", "side")]
     if bad or not conds:
         raise ConfigError(f"--conditions: expected none, top or side, got {conditions!r}")
     try:
-        seeds = tuple(int(s) for s in scenes.split(",") if s.strip())
+        seeds = tuple(int(s) for s in comma_items(scenes, "--scenes"))  # '' for none, as the help says
     except ValueError:
         raise ConfigError(f"--scenes: expected comma-separated integers, got {scenes!r}") from None
     if not 1 <= yaws <= 20:

@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from kinfu_cli.commands._mupf_options import mupf_filter_options
-from kinfu_cli.commands._options import OutputPath, claim_outputs, force_option
+from kinfu_cli.commands._options import OutputPath, claim_outputs, comma_values, force_option
 from kinfu_cli.commands._output import QUIET_HELP, emit
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.localization.evaluate import METHODS, check_recognition, evaluate_localization, \
@@ -20,7 +20,7 @@ group = "eval"
 
 
 def _names(text: str, allowed, option: str) -> list[str]:
-    vals = [v.strip() for v in text.split(",") if v.strip()]
+    vals = comma_values(text, option)
     bad = [v for v in vals if v not in allowed]
     if bad or not vals:
         raise ConfigError(f"{option} {text!r}: expected some of {', '.join(allowed)}")

@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from kinfu_cli.commands._engine import scheduler_option, trial_engine
-from kinfu_cli.commands._options import claim_outputs, result_options
+from kinfu_cli.commands._options import claim_outputs, comma_values, result_options
 from kinfu_cli.commands._output import QUIET_HELP, emit
 from kinfu_cli.core.pois import DEFAULT_RADIUS
 from kinfu_cli.evaluation.nbv_loop import EXPLORE, LoopConfig, run_loop
@@ -23,7 +23,7 @@ def loop_config(p: dict) -> LoopConfig:
     """The checked LoopConfig from the command's parsed options (click's parameter dict): the one place that turns
     eval nbv's options into it, for the command and for `check_options`."""
     modes = ("kfovp", "kfom") if p["mode"] == "both" else (p["mode"],)
-    cfg = LoopConfig(strategies=tuple(s.strip() for s in p["strategies"].split(",") if s.strip()), modes=modes,
+    cfg = LoopConfig(strategies=tuple(comma_values(p["strategies"], "--strategy")), modes=modes,
                      views=p["views"], voxel_size=p["voxel_size"], gain=p["gain"], inc_th=p["inc_th"],
                      poi_radius=p["poi_radius"], pois_from=p["pois_from"], oscillation_deg=p["oscillation"],
                      scan_every=p["scan_every"], width=p["width"], height=p["height"], noise=not p["no_noise"],

@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 
 from kinfu_cli.commands._engine import scheduler_option, trial_engine
-from kinfu_cli.commands._options import comma_items, result_options
+from kinfu_cli.commands._options import comma_values, result_options
 from kinfu_cli.commands._detector_options import detector_options, detector_params_from
 from kinfu_cli.commands._output import QUIET_HELP, emit
 from kinfu_cli.core.checks import check_number
@@ -20,11 +20,12 @@ from kinfu_cli.evaluation.poi import (MAX_SPEED, MIN_SPEED, evaluate_dataset, fo
 group = "eval"
 
 
-def _floats(option: str, value: str | None) -> list[float]:
-    if value is None or not value.strip():
+def _floats(option: str, value: str | None, blank_ok: bool = True) -> list[float]:
+    """The numbers of a comma-separated option; blank: [] (--noise '': none) unless not blank_ok (--speed)."""
+    if value is None or (blank_ok and not value.strip()):
         return []
     try:
-        values = [float(v) for v in comma_items(value, option)]
+        values = [float(v) for v in comma_values(value, option)]
     except ValueError:
         values = [math.nan]
     if not all(math.isfinite(v) for v in values):  # nan / inf were taken as a setting and scored
@@ -81,7 +82,7 @@ def command(dataset_dir, algorithm, speed, noise, seed, workers, scheduler, loo,
       kinfu eval poi DATA --loo --workers 2
       kinfu eval poi DATA --speed 0.25,0.5,1,2,4 --scheduler tcp://10.0.0.5:8786
     """
-    speeds = _floats("--speed", speed) or [1.0]
+    speeds = _floats("--speed", speed, blank_ok=False)
     noises = _floats("--noise", noise)
     for s in speeds:
         check_number(s, "speed", MIN_SPEED, MAX_SPEED)

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import click
 
-from kinfu_cli.commands._options import (OutputPath, SWEEP_ONLY_OPTIONS, claim_outputs, comma_items, force_option,
-                                         given_options)
+from kinfu_cli.commands._options import (OutputPath, SWEEP_ONLY_OPTIONS, claim_outputs, comma_items, comma_values,
+                                         force_option, given_options)
 from kinfu_cli.commands._output import QUIET_HELP, emit
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.evaluation.segment_eval import (RGB_T_LCCP_VALUES, SWEEP_DEFAULT, SWEEP_VALUES, check_eval_numbers,
@@ -133,8 +133,7 @@ def command(segments: Path | None, ground_truth: Path | None, t_eval: float, mat
         values = (_numbers(sweep_values, "--sweep-values") if sweep_values is not None
                   else default_sweep_values(sweep_parameter, color_distance))
         seeds = _numbers(scenes, "--scenes", int)
-        colors = [c.strip() for c in color.split(",") if c.strip()]
-        scene_layouts = [c.strip() for c in layouts.split(",") if c.strip()]
+        colors, scene_layouts = comma_values(color, "--color"), comma_values(layouts, "--scene")
         if not 32 <= resolution <= 512:
             raise ConfigError(f"--resolution: expected 32..512 voxels, got {resolution}")
         claim_outputs({"output": output, "plot": plot}, [], force)

@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from kinfu_cli.commands._mupf_options import mupf_filter_options
-from kinfu_cli.commands._options import OutputPath, claim_outputs, force_option
+from kinfu_cli.commands._options import OutputPath, claim_outputs, comma_values, force_option
 from kinfu_cli.commands._output import emit
 from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.volume_file import MAX_COORDINATE_M
@@ -98,7 +98,7 @@ def command(model: Path | None, points: Path | None, models: str | None, segment
     if models is not None:
         if points is not None:
             raise ConfigError("--models replaces MODEL: give --models and POINTS only")
-        points, model_paths = model, [Path(p) for p in models.split(",") if p.strip()]
+        points, model_paths = model, [Path(p) for p in comma_values(models, "--models")]
         if not model_paths:
             raise ConfigError("--models: expected comma-separated mesh files")
     else:
