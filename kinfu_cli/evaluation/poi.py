@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from kinfu_cli.attention.detect import make_detector
+from kinfu_cli.attention.detect import check_window, make_detector
 from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError, TrajectoryError
 from kinfu_cli.core.pois import DEFAULT_RADIUS
@@ -162,6 +162,10 @@ def _run_job(job: tuple) -> list[dict]:
     out = []
     for alg in algorithms:
         det = make_detector(alg, params.get(alg))
+        try:  # a ZVC window longer than the (resampled) path averages it flat: no POI, scored 0/0 without a word
+            check_window(det, len(traj))
+        except ConfigError as exc:
+            raise ConfigError(f"{exc.detail} ({task.traj_path}, speed {speed:g})", parameter=exc.parameter) from None
         t0, c0 = time.perf_counter(), time.process_time()
         det.fit(traj)
         secs, cpu = time.perf_counter() - t0, time.process_time() - c0

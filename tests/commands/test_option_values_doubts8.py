@@ -96,3 +96,15 @@ def test_every_json_number_written_by_poi_is_finite(sample_dir, tmp_path):
     res = _run("poi", sample_dir / "recording.mcap", "-o", out, "--quiet", "--split-gap", "0")
     assert res.exit_code == 0, res.output
     json.loads(out.read_text(), parse_constant=lambda c: pytest.fail(f"{c} in pois.json"))
+
+
+def test_eval_poi_zvc_window_longer_than_a_path_is_one_line_not_a_silent_zero(tmp_path):
+    from conftest import write_hand_dataset
+
+    data = write_hand_dataset(tmp_path / "hands", seeds=[0])
+    res = _run("eval", "poi", data, "--algorithm", "zvc", "--zvc-half-width", 100000, "--workers", 1, "--quiet")
+    line = one_line_error(res, "--zvc-half-width: a mean filter of 2B+1 = 200001 samples is longer than the "
+                               "trajectory's")
+    assert "user9_obj0.traj, speed 1)" in line
+    ok = _run("eval", "poi", data, "--algorithm", "zvc", "--workers", 1, "--quiet", "--json")
+    assert ok.exit_code == 0, ok.output
