@@ -196,12 +196,12 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
     with init, else after). start_s / end_s (seconds from the recording start), every, tolerance_s: frame selection
     as io.frames.iter_frames. fill_gaps, bilateral, shadow_filter, shadow_baseline: depth filters. roles:
     detect_roles overrides. argument_names: how the report names the init, origin, clear_spheres, clear_pois, up and
-    grid (GRID_ARGUMENTS) arguments (default these names; a command line passes its options). up: the world's direction against gravity
-    (x, y, z); None decides it as fusion.up.choose_up says (the volume's up, stored in volume.npz, ternary.npz and
-    the report with its source). max_lost: the largest share of tracked frames (icp, hint) that may be lost (not
-    fused) before the run fails. color_mode: "mean" or "mode" (fusion/color_mode.py); None: the init volume's, else
-    "mean". icp: the tracker's ICP, "projective" (fusion.icp) or "open3d" (tracking.ICP_METHODS). check_only: check
-    the arguments as a run would, then return None without opening the recording (kinfu batch checks plans so)."""
+    grid (GRID_ARGUMENTS) arguments (default these names; a command line passes its options). up: the world's
+    direction against gravity (x, y, z); None decides it as fusion.up.choose_up says (the volume's up, stored in
+    volume.npz, ternary.npz and the report with its source). max_lost: the largest share of tracked frames (icp,
+    hint) that may be lost (not fused) before the run fails. color_mode: "mean" or "mode" (fusion/color_mode.py);
+    None: the init volume's, else "mean". icp: the tracker's ICP, "projective" (fusion.icp) or "open3d"
+    (tracking.ICP_METHODS). check_only: check the arguments as a run would, return None (kinfu batch's plan check)."""
     started = time.perf_counter()
     timing: dict[str, float] = {}
     names = {**{n: n for n in NAMED_ARGUMENTS}, **(argument_names or {})}
