@@ -234,9 +234,9 @@ def run_task(spec: StageSpec, rec, options: Mapping, previous: dict | None, forc
             import numba
 
             numba.set_num_threads(1)
-        for later_spec, later_rec in downstream:  # redone in this run, after this stage (they wait for it)
-            _remove_outputs(later_spec, later_rec)
-        with _folder_lock(outdir):
+        with _folder_lock(outdir):  # another run writing this folder sees the removal and the new outputs together
+            for later_spec, later_rec in downstream:  # redone in this run, after this stage (they wait for it)
+                _remove_outputs(later_spec, later_rec)
             done = spec.run(rec, options, force)
         stats = output_stats(outdir, outputs)
         if stats is None:
