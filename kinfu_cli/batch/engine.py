@@ -297,7 +297,10 @@ def claim_folder(folder: Path, inputs, force: bool, where: str = "") -> None:
 def check_output_folders(plan: Plan, force: bool) -> None:
     """The batch output folder and every recording's output folder (`claim_folder`), before anything is written."""
     inputs = [r.path for r in plan.recordings]
-    claim_folder(plan.output, inputs, force)
+    try:
+        claim_folder(plan.output, inputs, force)
+    except KinfuError as exc:
+        raise plan.output_error(exc) from None
     for rec in plan.recordings:
         claim_folder(rec.output, inputs, force, f"{plan.source}: {rec.entry}: ")
 
@@ -306,10 +309,12 @@ def check_before_work(plan: Plan, table: Mapping[str, StageSpec], force: bool) -
     """Options of every (recording, stage), every output path, then every output folder, before anything is
     written (the command checks before it takes the lock, whose file would go into a user's folder)."""
     inputs = [r.path for r in plan.recordings]
-    claim_output(plan.output / MANIFEST_NAME, inputs, force=force, parameter="output")
-    # a recording that is a folder (a ROS 2 bag) is one input: the outputs written inside it would join it
-    refuse_inside_folders(plan.output, [f for r in plan.recordings for f in recording_folders(r.path)],
-                          parameter="output")
+    try:
+        claim_output(plan.output / MANIFEST_NAME, inputs, force=force)
+        # a recording that is a folder (a ROS 2 bag) is one input: the outputs written inside it would join it
+        refuse_inside_folders(plan.output, [f for r in plan.recordings for f in recording_folders(r.path)])
+    except KinfuError as exc:  # named as the plan file or the caller gave the folder
+        raise plan.output_error(exc) from None
     for rec in plan.recordings:
         for s in rec.stages:
             spec = table[s]

@@ -12,19 +12,21 @@ from __future__ import annotations
 
 import contextlib
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
-from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.core.errors import ConfigError, KinfuError
 
 LOCK_NAME = ".kinfu-batch.lock"
 _MARK = "kinfu batch lock"
 
 
 @contextlib.contextmanager
-def batch_lock(output: str | os.PathLike) -> Iterator[Path]:
+def batch_lock(output: str | os.PathLike, named: Callable[[KinfuError], KinfuError] | None = None) -> Iterator[Path]:
     """Hold the output folder's batch lock (created with the folder when missing); ConfigError naming the lock
-    file and its holder when another run holds it, or when a file of that name is not kinfu's."""
+    file and its holder when another run holds it, or when a file of that name is not kinfu's. An error about the
+    folder itself names the `output` parameter, or goes through `named` (Plan.output_error: the plan's key)."""
+    named = named or (lambda exc: exc)
     try:
         import fcntl
     except ImportError:  # not POSIX: no lock
@@ -32,7 +34,7 @@ def batch_lock(output: str | os.PathLike) -> Iterator[Path]:
         return
     folder = Path(output)
     if folder.exists() and not folder.is_dir():
-        raise ConfigError(f"{folder}: exists and is not a folder", parameter="output")
+        raise named(ConfigError(f"{folder}: exists and is not a folder", parameter="output"))
     created = not folder.exists()
     try:
         folder.mkdir(parents=True, exist_ok=True)
@@ -40,7 +42,8 @@ def batch_lock(output: str | os.PathLike) -> Iterator[Path]:
         lock_existed = path.exists()
         fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
     except OSError as exc:
-        raise ConfigError(f"{folder}: cannot create the batch lock ({exc.strerror})", parameter="output") from None
+        raise named(ConfigError(f"{folder}: cannot create the batch lock ({exc.strerror})",
+                                parameter="output")) from None
     failed, locked = True, False
     try:
         try:

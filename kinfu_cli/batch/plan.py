@@ -28,7 +28,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from kinfu_cli.core.errors import ConfigError
+from kinfu_cli.core.errors import ConfigError, KinfuError
 from kinfu_cli.batch.stages import StageSpec
 
 _TOP_KEYS = {"output", "stages", "options", "recordings", "viz"}
@@ -59,6 +59,14 @@ class Plan:
     stages: list[str]  # every stage some recording has, in pipeline order
     recordings: list[PlanRecording] = field(default_factory=list)
     viz: str | None = None
+    output_from_plan: bool = False  # `output` is the plan's key (else the caller's `output` parameter)
+
+    def output_error(self, exc: KinfuError) -> KinfuError:
+        """`exc`, about the output folder, naming where the folder came from: the plan file's `output` key, or the
+        caller's `output` parameter."""
+        if self.output_from_plan:
+            return type(exc)(f"{self.source}: output: {exc.detail}")
+        return type(exc)(exc.detail, parameter="output")
 
 
 def _fail(source: Path, where: str, what: str) -> ConfigError:
@@ -334,4 +342,5 @@ def load_plan(source: str | os.PathLike, table: Mapping[str, StageSpec], output:
                     opts[s]["viz"] = True
         merged.append(PlanRecording(r.path, r.output, opts, r.entry, r.stages, r.links, r.after))
     every = {s for r in merged for s in r.stages}
-    return Plan(source=source, output=out, stages=[s for s in table if s in every], recordings=merged, viz=viz)
+    return Plan(source=source, output=out, stages=[s for s in table if s in every], recordings=merged, viz=viz,
+                output_from_plan=output is None)

@@ -89,13 +89,13 @@ def command(plan: Path, output: Path | None, workers: int | None, scheduler: str
     loaded = load_plan(plan, table, output, viz)
     problem = output_kind_problem(loaded.output, "folder")  # -o runs.json (the plan checks viz's name)
     if problem is not None:
-        raise ConfigError(f"{'--output' if output is not None else f'{plan}: output'}: {problem}")
+        raise loaded.output_error(ConfigError(problem))
     if loaded.viz in VIEWER_FILES.values():  # the combined file would replace a stage's part and merge into itself
         where = "--viz" if viz is not None else f"{plan}: viz"
         raise ConfigError(f"{where}: {loaded.viz} is the name of a stage's own viewer file ("
                           f"{', '.join(sorted(VIEWER_FILES.values()))}); name the combined file otherwise")
     check_before_work(loaded, table, force)  # before the lock file goes into a user's folder
-    with batch_lock(loaded.output):  # a second run on this folder fails here, before any work
+    with batch_lock(loaded.output, loaded.output_error):  # a second run on this folder fails here, before any work
         engine = connect(scheduler, workers)
         try:
             doc = run_plan(loaded, table, engine, force=force, quiet=quiet, redo=redo)
