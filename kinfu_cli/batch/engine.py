@@ -12,7 +12,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
-import shutil
+import re
 import signal
 import threading
 import time
@@ -27,11 +27,10 @@ from kinfu_cli.batch.fingerprint import input_fingerprint, output_stats
 from kinfu_cli.batch.lock import LOCK_NAME
 from kinfu_cli.batch.manifest import DONE, MANIFEST_NAME, build_manifest, read_previous, write_manifest
 from kinfu_cli.batch.plan import Plan
-from kinfu_cli.batch.stages import StageSpec
+from kinfu_cli.batch.stages import StageSpec, stage_dependents
 from kinfu_cli.core.errors import ConfigError, KinfuError
-from kinfu_cli.core.ownership import (TEMPORARY_NAME, changed_since_written, claim_output, holds_only_kinfu_entries,
-                                      mark_folder_output, recording_folders, refuse_inside_folders,
-                                      written_by_kinfu)
+from kinfu_cli.core.ownership import (TEMPORARY_NAME, changed_since_written, claim_output, mark_folder_output,
+                                      recording_folders, refuse_inside_folders, remove_written)
 from kinfu_cli.core.progress import progress
 
 CONNECT_TIMEOUT_S = 5
@@ -204,20 +203,24 @@ def _folder_lock(outdir: Path):
 
 
 def run_task(spec: StageSpec, rec, options: Mapping, previous: dict | None, force: bool, *upstream: dict,
-             downstream: tuple = ()) -> dict:
+             downstream: tuple = (), stale: tuple = ()) -> dict:
     """One (recording, stage) on a worker: blocked when a needed stage did not finish, skipped when its
     outputs are current (same input fingerprint, outputs unchanged since recorded), else run. Never raises:
     a failure is the entry's one-line `error`. `rec` is the plan's PlanRecording. downstream: (spec, recording) of
     the plan's tasks that read this one's outputs, directly or not: when the stage is redone, their outputs of an
     earlier run are removed first (kinfu's, unchanged since), so that a run stopped before they are redone (Ctrl-C,
-    a killed worker) leaves them missing rather than complete-looking beside outputs they were not made from."""
+    a killed worker) leaves them missing rather than complete-looking beside outputs they were not made from.
+    stale: the specs of the stages that read this one's outputs but that the recording does not run (an earlier
+    plan ran them): their outputs in its folder are removed too when the stage is redone (or fails, or is blocked),
+    each said in a warning (they would never be redone, and sat beside the new outputs they were not made from)."""
     t0 = time.perf_counter()
     entry = {"status": "failed", "seconds": 0.0, "error": None, "fingerprint": None, "outputs": None,
              "numbers": {}, "warnings": []}
     if bad := [u["stage"] if u.get("folder") in (None, str(rec.output)) else f"{u['stage']} of {u['folder']}"
                for u in upstream if u.get("status") not in DONE]:
         return {**entry, "status": "blocked", "error": f"needs {', '.join(bad)}, which did not finish",
-                "stage": spec.name, "folder": str(rec.output), "warnings": _drop_stale(spec, rec)}
+                "stage": spec.name, "folder": str(rec.output), "warnings": _drop_stale(spec, rec, stale)}
+    later_removed = None  # the warnings of the stale stages' removal, once done
     try:
         outdir, outputs = rec.output, spec.outputs_of(rec)
         if not force and (edited := [c for rel in spec.claims_of(rec) for c in changed_since_written(outdir / rel)]):
@@ -227,9 +230,9 @@ def run_task(spec: StageSpec, rec, options: Mapping, previous: dict | None, forc
         fp = input_fingerprint(spec.name, spec.input_paths(rec), options)
         if (not force and previous and previous.get("status") in DONE and previous.get("fingerprint") == fp
                 and output_stats(outdir, outputs) == previous.get("outputs")):
-            return {**entry, **{k: previous.get(k) for k in ("numbers", "warnings")}, "status": "skipped",
-                    "fingerprint": fp, "outputs": previous["outputs"], "stage": spec.name,
-                    "folder": str(rec.output)}
+            return {**entry, "numbers": previous.get("numbers"), "status": "skipped", "fingerprint": fp,
+                    "outputs": previous["outputs"], "stage": spec.name, "folder": str(rec.output),
+                    "warnings": [w for w in previous.get("warnings") or () if not _REMOVAL.match(w)]}
         with contextlib.suppress(Exception):  # one numba thread per worker thread: no oversubscription
             import numba
 
@@ -237,45 +240,70 @@ def run_task(spec: StageSpec, rec, options: Mapping, previous: dict | None, forc
         with _folder_lock(outdir):  # another run writing this folder sees the removal and the new outputs together
             for later_spec, later_rec in downstream:  # redone in this run, after this stage (they wait for it)
                 _remove_outputs(later_spec, later_rec)
+            later_removed = _drop_later(spec, rec, stale)
             done = spec.run(rec, options, force)
         stats = output_stats(outdir, outputs)
         if stats is None:
             raise KinfuError(f"{spec.name} finished without writing {', '.join(outputs)}")
-        entry.update(status="ok", fingerprint=fp, outputs=stats, numbers=done.numbers, warnings=done.warnings)
+        entry.update(status="ok", fingerprint=fp, outputs=stats, numbers=done.numbers,
+                     warnings=[*done.warnings, *later_removed])
     except Exception as exc:  # recorded in the manifest; the other recordings go on
         entry["error"] = _one_line(exc)
-        entry["warnings"] = _drop_stale(spec, rec)
+        entry["warnings"] = _drop_stale(spec, rec, () if later_removed is not None else stale) + (later_removed or [])
     entry["seconds"] = round(time.perf_counter() - t0, 3)
     entry["stage"], entry["folder"] = spec.name, str(rec.output)
     return entry
 
 
-def _drop_stale(spec: StageSpec, rec) -> list[str]:
-    """Remove the outputs an earlier run of a stage that failed or was blocked left (kinfu's, unchanged since): they
-    would sit, complete-looking, beside the other stages' new results (a segment of the old fuse beside the new
-    one). Returns the warning that says so ([] when there were none)."""
-    gone = _remove_outputs(spec, rec)
-    return [f"the {spec.name} outputs of an earlier run ({', '.join(gone)}) were removed: they would not match this "
-            f"run's other results"] if gone else []
+def _drop_stale(spec: StageSpec, rec, stale: tuple = ()) -> list[str]:
+    """Remove the outputs an earlier run of a stage that failed or was blocked left (kinfu's, unchanged since), and
+    those of the `stale` stages made from them (run_task): they would sit, complete-looking, beside the other
+    stages' new results (a segment of the old fuse beside the new one). Returns the warnings that say so ([] when
+    there were none)."""
+    with _folder_lock(rec.output):
+        own = _removal_warning(spec, rec, *_remove_outputs(spec, rec), "they would not match this run's other results")
+        return own + _drop_later(spec, rec, stale)
 
 
-def _remove_outputs(spec: StageSpec, rec) -> list[str]:
-    """Remove the stage's outputs in the recording's folder that kinfu wrote and nobody changed since (a folder only
-    when it holds nothing else); returns their relative paths."""
-    gone = []
-    for rel in spec.claims_of(rec):
+def _drop_later(spec: StageSpec, rec, stale: tuple) -> list[str]:
+    """Remove the outputs of the `stale` stages (read `spec`'s outputs, not run for this recording: run_task) in the
+    recording's folder; returns the warnings that say so."""
+    return [w for later in stale for w in _removal_warning(
+        later, rec, *_remove_outputs(later, rec),
+        f"{later.name} is not in this plan, and they were made from an earlier run's {spec.name} outputs")]
+
+
+#: how a warning about an earlier run's outputs removed begins (a skipped stage does not repeat it: nothing was removed)
+_REMOVAL = re.compile(r"the \S+ outputs of an earlier run: ")
+
+
+def _removal_warning(spec: StageSpec, rec, gone: list[Path], kept: list[Path], why: str) -> list[str]:
+    """The warning saying which of the stage's outputs of an earlier run were removed and which were kept, and why
+    they were removed ([] when nothing was there)."""
+    def names(paths):
+        return ", ".join(sorted({os.path.relpath(p, rec.output) for p in paths}))
+
+    done = ([f"removed {names(gone)}"] if gone else []) + ([
+        f"kept {names(kept)} (not written by kinfu, or changed since it was)"] if kept else [])
+    return [f"the {spec.name} outputs of an earlier run: {', '.join(done)}: {why}"] if done else []
+
+
+def _remove_outputs(spec: StageSpec, rec) -> tuple[list[Path], list[Path]]:
+    """Remove the stage's outputs (its claims, and the plots and viewer files it writes when asked) in the recording's
+    folder that kinfu wrote and nobody changed since: an output holding a file edited since stays whole (the user's
+    now); a user's file in a kinfu folder stays where it is, kinfu's files beside it go (core.ownership.remove_written).
+    Returns (removed, kept) paths."""
+    gone: list[Path] = []
+    kept: list[Path] = []
+    for rel in (*spec.claims_of(rec), *spec.extras):
         path = rec.output / rel
-        if not written_by_kinfu(path) or changed_since_written(path):
+        if edited := changed_since_written(path):  # a user's edit: the output stays whole, neither used nor removed
+            kept += [path.parent / e for e in edited]
             continue
-        if path.is_dir() and not path.is_symlink():
-            if not holds_only_kinfu_entries(path):
-                continue  # a user's file inside: the folder stays (with the user's note of what is in it)
-            shutil.rmtree(path, ignore_errors=True)
-        else:
-            with contextlib.suppress(OSError):
-                path.unlink()
-        gone.append(rel)
-    return gone
+        removed, left = remove_written(path)
+        gone += removed
+        kept += left
+    return gone, kept
 
 
 def _user_entries(folder: Path) -> list[str]:
@@ -362,6 +390,15 @@ def dependents(graph: Mapping) -> dict[tuple[int, str], list[tuple[int, str]]]:
     return out
 
 
+def stale_stages(table: Mapping[str, StageSpec], rec, stage: str) -> tuple[StageSpec, ...]:
+    """The stages of the table that read `stage`'s outputs, directly or not, and that the recording does not run: an
+    earlier plan's, whose outputs in its folder were made from the outputs `stage` replaces. The batch layout fixes
+    where each writes; a stage whose paths the plan names (the combined viewer file) has none to find, and is left
+    out."""
+    return tuple(table[t] for t in stage_dependents(table)[stage]
+                 if t not in rec.stages and not callable(table[t].claims))
+
+
 def run_plan(plan: Plan, table: Mapping[str, StageSpec], engine: Engine, *, force: bool = False,
              quiet: bool = False, on_entry: Callable[[dict], None] | None = None, redo: bool = False) -> dict:
     """Submit the plan's task graph, write manifest.json after each finished task; returns the manifest.
@@ -379,7 +416,7 @@ def run_plan(plan: Plan, table: Mapping[str, StageSpec], engine: Engine, *, forc
         downstream = tuple((table[t], plan.recordings[j]) for j, t in later[(i, s)])
         fut = engine.client.submit(run_task, table[s], rec, rec.stage_options(s), previous.get((str(rec.output), s)),
                                    force, *(futures[d] for d in deps), downstream=downstream,
-                                   key=f"kinfu-{s}-{i}-{run_id}", pure=False)
+                                   stale=stale_stages(table, rec, s), key=f"kinfu-{s}-{i}-{run_id}", pure=False)
         futures[(i, s)] = fut
         where[fut.key] = (i, s)
     from dask.distributed import as_completed

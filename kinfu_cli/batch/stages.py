@@ -39,7 +39,8 @@ class StageSpec:
     fingerprint covers; `needs`: stages of the same recording it runs after (the plan must list them);
     `wants`: stages it runs after when the recording has them (it reads their outputs if present);
     `links`: the plan recording links it needs (the plan checks they resolve); `file_options`: its options whose
-    value is an input file (relative to the plan's folder, part of the fingerprint)."""
+    value is an input file (relative to the plan's folder, part of the fingerprint); `extras`: files it writes
+    only when an option asks for them (plots, viewer files), removed with its outputs but not claimed up front."""
 
     name: str
     needs: tuple[str, ...]
@@ -51,6 +52,7 @@ class StageSpec:
     wants: tuple[str, ...] = ()
     links: tuple[str, ...] = ()
     file_options: tuple[str, ...] = ()  # options naming an input file (the plan resolves them against its folder)
+    extras: tuple[str, ...] = ()  # files written only when an option asks (views.png, segment.mcap)
 
     def input_paths(self, rec) -> list[tuple[str, Path]]:
         """(label, path) of each input: RECORDING is the recording, "<link>" a link of the plan recording, the
@@ -71,6 +73,17 @@ class StageSpec:
 
     def claims_of(self, rec) -> tuple[str, ...]:
         return _per(self.claims, rec)
+
+
+def stage_dependents(table: Mapping[str, StageSpec]) -> dict[str, list[str]]:
+    """stage -> the stages of the table that read its outputs (they need or want it), directly or through others,
+    in the table's order."""
+    out: dict[str, list[str]] = {name: [] for name in table}
+    for name in reversed(list(table)):  # a stage's dependents are complete before the stages it reads
+        for before in (*table[name].needs, *table[name].wants):
+            if before in out:
+                out[before] += [s for s in (name, *out[name]) if s not in out[before]]
+    return {name: [s for s in table if s in later] for name, later in out.items()}
 
 
 def stage_order(table: Mapping[str, StageSpec], wanted: list[str]) -> list[str]:

@@ -219,12 +219,17 @@ def _file_options(stage: str) -> tuple[str, ...]:
     return tuple(n for n in names if n not in reserved and n not in files)
 
 
+def _extras(stage: str) -> tuple[str, ...]:
+    """The files the stage writes into the recording's folder only when an option asks (plots, viewer files)."""
+    return tuple(_COMMANDS[stage][2].values()) if stage in _COMMANDS else ()
+
+
 def batch_stages() -> dict[str, StageSpec]:
     """The stage table in pipeline order (a stage comes after the stages it needs)."""
     def spec(name, needs, inputs, outputs, claims, **kw):
         return StageSpec(name=name, needs=needs, inputs=inputs, outputs=outputs, claims=claims,
                          check=kw.pop("check", partial(check_stage, name)), run=kw.pop("run", partial(run_stage, name)),
-                         file_options=_file_options(name), **kw)
+                         file_options=_file_options(name), extras=_extras(name), **kw)
 
     volume = "fuse/volume.npz"
     return {

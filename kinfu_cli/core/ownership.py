@@ -15,6 +15,7 @@ import fcntl
 import json
 import os
 import re
+import shutil
 import tempfile
 import threading
 import time
@@ -215,6 +216,59 @@ def holds_only_kinfu_entries(folder: Path) -> bool:
         elif {k: entry.get(k) for k in ("size", "mtime_ns", "kind")} != _stat_entry(e):
             return False
     return True
+
+
+def remove_written(path: str | os.PathLike) -> tuple[list[Path], list[Path]]:
+    """Remove what kinfu wrote at `path` and nobody changed since: a file, or a folder (whole when it holds nothing
+    else). What is not kinfu's stays where it is: a user's entry in a kinfu folder (at any depth), and a file kinfu
+    wrote that was changed since. The kinfu folder holding one keeps its record (the next kinfu output there still
+    keeps the user's entries without being forced), and its JSON results go first, so a removal stopped half-way
+    leaves no result that looks complete. Returns (removed, kept): the paths removed, and those kept that lie in a
+    kinfu folder or that kinfu wrote; a path kinfu never wrote is left alone and in neither list."""
+    path = Path(path)
+    if not written_by_kinfu(path):
+        return [], ([path] if path.is_file() and changed_since_written(path) else [])
+    if path.is_dir() and holds_only_kinfu_entries(path):
+        shutil.rmtree(path, ignore_errors=True)
+    elif path.is_dir():
+        return _remove_written_entries(path)
+    else:
+        with contextlib.suppress(OSError):
+            path.unlink()
+    return [path], []
+
+
+def _remove_written_entries(folder: Path) -> tuple[list[Path], list[Path]]:
+    """remove_written for the entries of a kinfu folder holding a user's entry somewhere; its manifest then lists
+    what stays."""
+    removed: list[Path] = []
+    kept: list[Path] = []
+    with _manifest_lock(folder):
+        files = _read_manifest(folder)
+        entries = [e for e in folder.iterdir() if e.name != MANIFEST and not TEMPORARY_NAME.match(e.name)]
+        for e in sorted(entries, key=lambda e: (e.suffix != ".json", e.name)):  # the results first
+            if e.name not in files or e.is_symlink():
+                kept.append(e)
+            elif e.is_dir():
+                if not (e / MANIFEST).is_file():
+                    kept.append(e)  # no record of what is inside: not known to be kinfu's
+                elif holds_only_kinfu_entries(e):
+                    shutil.rmtree(e, ignore_errors=True)
+                    removed.append(e)
+                else:
+                    inner_removed, inner_kept = _remove_written_entries(e)
+                    removed += inner_removed
+                    kept += inner_kept
+            elif written_by_kinfu(e):
+                with contextlib.suppress(OSError):
+                    e.unlink()
+                removed.append(e)
+            else:
+                kept.append(e)  # changed since kinfu wrote it: the user's now
+        gone = {e.name for e in removed if e.parent == folder and not e.exists()}
+        if gone:
+            _write_manifest(folder, {n: entry for n, entry in files.items() if n not in gone})
+    return removed, kept
 
 
 def changed_since_written(path: str | os.PathLike) -> list[str]:
