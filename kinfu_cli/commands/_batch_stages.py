@@ -20,7 +20,7 @@ from pathlib import Path
 import click
 
 from kinfu_cli.batch.stages import RECORDING, StageRun, StageSpec
-from kinfu_cli.commands._options import SWEEP_ONLY_OPTIONS, option_flags
+from kinfu_cli.commands._options import SWEEP_ONLY_OPTIONS, check_inapplicable, option_flags
 from kinfu_cli.core.errors import ConfigError, KinfuError
 
 # eval segment --sweep makes its own scenes: not a stage of a recording
@@ -127,13 +127,16 @@ def _prog(stage: str) -> str:
 def check_stage(stage: str, rec, options: dict) -> None:
     """Parse the stage's arguments with its command (types, choices) and build the parameter objects the command
     would build from them, with the library's own range checks (the command module's `check_options`), without
-    reading any input: a bad value is a ConfigError naming the option as the plan spells it."""
+    reading any input: a bad value is a ConfigError naming the option as the plan spells it. Options the command
+    refuses in the mode the plan gives it (its INAPPLICABLE rules) are refused here too; those it only warns
+    about are warnings of the stage when it runs."""
     cmd = _command(stage)
     try:
         ctx = cmd.make_context(_prog(stage), _args(stage, rec, options, False))
     except click.ClickException as exc:
         raise ConfigError(" ".join(exc.format_message().split())) from None
     try:
+        check_inapplicable(ctx, getattr(_module(stage), "INAPPLICABLE", ()), warn=False)
         _module(stage).check_options(ctx.params)
     except KinfuError as exc:
         raise ConfigError(_plan_spelling(_flag_message(cmd, exc), cmd)) from None

@@ -9,6 +9,7 @@ from __future__ import annotations
 import click
 
 from kinfu_cli.attention.detect import detector_params
+from kinfu_cli.commands._options import Inapplicable
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.pois import DEFAULT_RADIUS
 
@@ -18,6 +19,38 @@ DETECTOR_OPTIONS = ("poi_threshold", "neighbours", "bic_threshold", "max_compone
                     "merge_distance", "literal",
                     "zvc_half_width", "zvc_threshold", "zvc_r1", "zvc_r2", "zvc_rule", "zvc_relative",
                     "radius")
+
+#: the options only GMM-AS reads, and only ZVC (long flags without the dashes); --literal and --radius are both's
+GMM_AS_OPTIONS = ("poi-threshold", "neighbours", "bic-threshold", "max-components", "selection", "time-scale",
+                  "reg-space", "reg-time", "saliency", "threshold-mode", "resample", "noise-floor", "merge-distance")
+ZVC_OPTIONS = ("zvc-half-width", "zvc-rule", "zvc-relative", "zvc-threshold", "zvc-r1", "zvc-r2")
+#: what --literal sets to the paper's values (GmmActivitySaliency.LITERAL; ZVC's ratio rule with ZVCTh 1.72)
+LITERAL_OPTIONS = ("poi-threshold", "time-scale", "reg-space", "reg-time", "saliency", "threshold-mode", "resample",
+                   "noise-floor", "merge-distance", "zvc-rule", "zvc-threshold", "zvc-relative")
+
+
+def _ratio_rule(p: dict) -> str | None:
+    """How ZVC's ratio rule was chosen, when it was (--zvc-relative is the relative rule's)."""
+    if p["zvc_rule"] == "ratio":
+        return "with --zvc-rule ratio"
+    return "with --zvc-threshold (ZVC's ratio rule)" if p["zvc_rule"] is None and p["zvc_threshold"] is not None \
+        else None
+
+
+def detector_inapplicable(algorithms) -> tuple[Inapplicable, ...]:
+    """The detector options' rules for commands._options.check_inapplicable; algorithms(params): the detectors
+    that run ({"gmm-as"}, {"zvc"} or both)."""
+    return (
+        Inapplicable(GMM_AS_OPTIONS, lambda p: None if "gmm-as" in algorithms(p) else "with --algorithm zvc",
+                     "to GMM-AS (--algorithm gmm-as)"),
+        Inapplicable(ZVC_OPTIONS, lambda p: None if "zvc" in algorithms(p) else "with --algorithm gmm-as",
+                     "to ZVC (--algorithm zvc)"),
+        Inapplicable(LITERAL_OPTIONS, lambda p: "with --literal" if p["literal"] else None,
+                     "without --literal (it sets the paper's values)"),
+        Inapplicable(("zvc-relative",), _ratio_rule, "to ZVC's relative rule (--zvc-rule relative, the default)"),
+        Inapplicable(("zvc-threshold",), lambda p: "with --zvc-rule relative" if p["zvc_rule"] == "relative"
+                     else None, "to ZVC's ratio rule (--zvc-rule ratio)"),
+    )
 
 
 def _time_scale(value: str) -> str | float:

@@ -7,14 +7,16 @@ writing command shares: `--force`, and the check of its outputs before any work.
 
 from __future__ import annotations
 
+import math
 import os
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
 from pathlib import Path
 
 import click
 from click.core import ParameterSource
 
-from kinfu_cli.core.errors import KinfuError, VolumeError
+from kinfu_cli.core.errors import ConfigError, KinfuError, VolumeError
 from kinfu_cli.core.ownership import claim_output, recording_folders, refuse_inside_folders
 from kinfu_cli.commands._output_path import OutputPath, output_kind_of, output_kind_problem
 
@@ -68,6 +70,17 @@ def comma_items(text: str, option: str) -> list[str]:
     return items
 
 
+def comma_numbers(text: str, option: str) -> list[float] | None:
+    """The numbers of a fixed-count option ('x,y,z', 'lo,hi', ...), each a finite float, or None when an item is
+    not one (the caller says what was expected, with the count); an empty item ('1,,2', a trailing comma) is
+    comma_items's error, in the words of the list options."""
+    try:
+        values = [float(t) for t in comma_items(text, option)]
+    except ValueError:
+        return None
+    return values if all(math.isfinite(v) for v in values) else None
+
+
 def comma_values(text: str, option: str) -> list[str]:
     """comma_items of an option whose blank value means nothing (no "none" to choose): '' is an error naming the
     option, as refuse_empty_values says it, where it was read as an empty list (eval poi --speed '' ran speed 1)."""
@@ -93,6 +106,59 @@ def given_options(ctx: click.Context, flags: Iterable[str]) -> list[str]:
                 and ctx.get_parameter_source(p.name) not in (None, ParameterSource.DEFAULT)):
             given.append("/".join(long + list(p.secondary_opts)))
     return given
+
+
+@dataclass(frozen=True)
+class Inapplicable:
+    """Options (long flags without the dashes) that have no effect at all in some mode of their command.
+
+    mode: from the command's parsed options (click's parameter dict), the mode in which they have none, as the
+    message says it ("with --pose forced", "without --multi-sq"), else None (they apply). target: where they
+    apply ("to --pose icp or hint"), for the error. warn: a warning instead of the error (see
+    check_inapplicable). message: the error's own wording instead ("{flags}" is replaced by the options given).
+    """
+
+    options: tuple[str, ...]
+    mode: Callable[[dict], str | None]
+    target: str = ""
+    warn: bool = False
+    message: str | None = None
+
+
+def check_inapplicable(ctx: click.Context, rules: Iterable[Inapplicable], *, warn: bool = True) -> None:
+    """Refuse, or warn about, options given on the command line in a mode of the command where they have no
+    effect (they were ignored without a word). An option counts as given by click's parameter source: one given
+    at its default value is given, one left out is not. Called first by each command with its INAPPLICABLE
+    rules, and by kinfu batch's check of a plan (warn=False: only the refusals, before any work; the warnings
+    come when the stage runs, into manifest.json).
+
+    The rule: refuse (ConfigError, one `kinfu: error: --x: has no effect with --y z; it applies to ...` line,
+    exit 2), as `nbv --mode objects` refuses the POI mode's options: the user asked for something the run would
+    not do. Warn instead (`kinfu: warning: --x has no effect with --y z (ignored)`, exit 0) only for an option
+    commonly set once for every run of a script or every recording of a batch plan while the mode varies with
+    the recording: the mode is chosen per recording by batch itself (diff's --pois, given only to recordings
+    that run poi) or by what the recording holds (fuse --pose forced where TF has the camera, icp/hint where it
+    has not: the tracking options --max-lost and --icp), or the option is a property of the machine (fuse
+    --max-memory). A plan's common options then never fail the recordings whose mode does not use them.
+    """
+    refused, warnings = [], []
+    for rule in rules:
+        mode = rule.mode(ctx.params)
+        given = given_options(ctx, rule.options) if mode is not None else []
+        if not given:
+            continue
+        flags, one = ", ".join(given), len(given) == 1
+        if rule.warn:
+            warnings.append(f"{flags} {'has' if one else 'have'} no effect {mode} (ignored)")
+        elif rule.message is not None:
+            refused.append(rule.message.replace("{flags}", flags))
+        else:
+            refused.append(f"{flags}: {'has' if one else 'have'} no effect {mode}; "
+                           f"{'it applies' if one else 'they apply'} {rule.target}")
+    if refused:  # the first: one line, and no warning printed before it
+        raise ConfigError(refused[0])
+    for w in warnings if warn else ():
+        click.echo(f"kinfu: warning: {w}", err=True)
 
 
 def volume_file(path: Path) -> Path:

@@ -9,6 +9,8 @@ from collections.abc import Callable
 
 import click
 
+from kinfu_cli.commands._options import comma_items
+
 ROLE_HELP = {
     "depth_topic": "Depth topic (sensor_msgs/Image 16UC1/32FC1, compressedDepth, or an organized PointCloud2) [auto].",
     "color_topic": "Colour image topic (Image or jpeg/png CompressedImage) [auto].",
@@ -34,5 +36,9 @@ def role_options(func: Callable) -> Callable:
 
 
 def role_kwargs(kwargs: dict) -> dict:
-    """Pop the role options out of a command's kwargs (for detect_roles)."""
-    return {name: kwargs.pop(name, None) for name in (*ROLE_HELP, "intrinsics")}
+    """Pop the role options out of a command's kwargs (for detect_roles); an empty item of --intrinsics
+    ('525,,319.5,239.5') is the list options' error."""
+    out = {name: kwargs.pop(name, None) for name in (*ROLE_HELP, "intrinsics")}
+    if out["intrinsics"]:
+        comma_items(out["intrinsics"], "--intrinsics")
+    return out

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from kinfu_cli.commands._options import comma_items
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.grid import check_up
 
@@ -17,7 +18,7 @@ def parse_up(value: str | None, keywords: tuple[str, ...] = ()) -> np.ndarray | 
     if v in keywords:
         return v
     try:
-        xyz = [float(x) for x in v.split(",")]
+        xyz = [float(x) for x in comma_items(v, "--up")]  # an empty item ('0,,1'): the list options' error
     except ValueError:
         xyz = []
     if len(xyz) != 3:

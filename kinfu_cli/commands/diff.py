@@ -11,7 +11,8 @@ from kinfu_cli.change.diff import DEFAULT_MIN_VOXELS, ChangeParams, diff_volumes
 from kinfu_cli.change.noise import NOISE_SIGMAS
 from kinfu_cli.change.outputs import CHANGE_ENTRIES, write_change_outputs
 from kinfu_cli.evaluation.change_pois import score_pois_in_comparison
-from kinfu_cli.commands._options import OutputPath, claim_outputs, force_option, volume_file
+from kinfu_cli.commands._options import (Inapplicable, OutputPath, check_inapplicable, claim_outputs, force_option,
+                                         volume_file)
 from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.core.atomic import atomic_dir
 from kinfu_cli.core.checks import check_number
@@ -51,6 +52,12 @@ def _lines(doc: dict, outdir: Path) -> list[str]:
                      f"recall {_percent(p['recall'])}, F1 {_percent(p['f1'])} "
                      f"(tp {p['tp']}, fp {p['fp']}, fn {p['fn']}; {p['pois']} POIs{scored}, {p['changes']} regions)")
     return lines
+
+
+# --match-radius scores POIs: a warning without --pois (kinfu batch gives --pois only to the recordings that run
+# poi, and a plan's diff options are common to all; commands._options.check_inapplicable)
+INAPPLICABLE = (Inapplicable(("match-radius",), lambda p: None if p["pois_path"] else "without --pois",
+                             "with --pois", warn=True),)
 
 
 def change_params(p: dict) -> ChangeParams:
@@ -113,6 +120,7 @@ def command(before: Path, after: Path, outdir: Path, pois_path, match_radius, ma
     before, after = volume_file(before), volume_file(after)
     claim_outputs({"outdir": outdir}, [before, after, pois_path], force)
     params = change_params(click.get_current_context().params)
+    check_inapplicable(click.get_current_context(), INAPPLICABLE)  # after the values' own errors
     pois = read_pois(pois_path) if pois_path is not None else None  # a bad POI file fails before any work
     result = None
     for step in progress(["diff", "write"], total=2, desc="diff", quiet=quiet):

@@ -8,7 +8,8 @@ from pathlib import Path
 import click
 
 from kinfu_cli.commands._mupf_options import mupf_filter_options
-from kinfu_cli.commands._options import OutputPath, claim_outputs, comma_values, force_option
+from kinfu_cli.commands._options import (Inapplicable, OutputPath, check_inapplicable, claim_outputs, comma_values,
+                                         force_option)
 from kinfu_cli.commands._output import QUIET_HELP, emit
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.localization.evaluate import METHODS, check_recognition, evaluate_localization, \
@@ -25,6 +26,22 @@ def _names(text: str, allowed, option: str) -> list[str]:
     if bad or not vals:
         raise ConfigError(f"{option} {text!r}: expected some of {', '.join(allowed)}")
     return vals
+
+
+def _no_mupf(p: dict) -> str | None:
+    """When no MUPF runs: --methods without mupf and no recognition (which runs MUPF per model)."""
+    methods = {m.strip() for m in p["methods"].split(",")}
+    return None if "mupf" in methods or p["recognition_trials"] != 0 else \
+        "with --methods without mupf and --recognition-trials 0"
+
+
+# options given where they do nothing (commands._options.check_inapplicable)
+INAPPLICABLE = (
+    Inapplicable(("recognition-points",), lambda p: "with --recognition-trials 0" if p["recognition_trials"] == 0
+                 else None, "to the recognition trials (--recognition-trials 1 or more)"),
+    Inapplicable(("particles", "beta", "rotation", "paper-weights", "no-refine"), _no_mupf,
+                 "to MUPF (--methods with mupf, or the recognition trials)"),
+)
 
 
 @click.command("localize", short_help="MUPF vs Scaling Series vs RANSAC+ICP (thesis Table 4.2); recognition (ch. 5).")
@@ -59,6 +76,7 @@ def command(shapes: str, trials: int, methods: str, noise: float, particles: int
       kinfu eval localize --trials 50 -o localize.json
       kinfu eval localize --shapes robot --trials 5 --methods mupf --recognition-trials 0
     """
+    check_inapplicable(click.get_current_context(), INAPPLICABLE)
     names = _names(shapes, list(SIMULATION_SHAPES), "--shapes")
     meths = _names(methods, list(METHODS), "--methods")
     claim_outputs({"output": output}, [], force)

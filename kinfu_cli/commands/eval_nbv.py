@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from kinfu_cli.commands._engine import scheduler_option, trial_engine
-from kinfu_cli.commands._options import claim_outputs, comma_values, result_options
+from kinfu_cli.commands._options import Inapplicable, check_inapplicable, claim_outputs, comma_values, result_options
 from kinfu_cli.commands._output import QUIET_HELP, emit
 from kinfu_cli.core.pois import DEFAULT_RADIUS
 from kinfu_cli.evaluation.nbv_loop import EXPLORE, LoopConfig, run_loop
@@ -17,6 +17,26 @@ from kinfu_cli.nbv.viewpoints import PAPER_SPHERE, sphere_viewpoints
 from kinfu_cli.report.eval_nbv_plot import plot_nbv_loop
 
 group = "eval"
+
+
+def _strategies(p: dict, explore: bool) -> str | None:
+    """'with --strategy S' when every strategy given is of the exploration (explore) or of the POI loop (not
+    explore); None otherwise (a list with a gap, or mixed: their own errors)."""
+    items = [s.strip() for s in p["strategies"].split(",")]
+    if not all(items) or not all((s in EXPLORE) == explore for s in items):
+        return None
+    return f"with --strategy {','.join(items)}"
+
+
+# options given where they do nothing (commands._options.check_inapplicable); --poi and --pois-from with the
+# exploration are LoopConfig's own errors
+INAPPLICABLE = (
+    Inapplicable(("scan-frames", "near-margin", "score-width"), lambda p: _strategies(p, False),
+                 "to the POI-free exploration (--strategy objects,standard)"),
+    Inapplicable(("mode", "inc-th", "poi-radius", "lon-step", "lat-step", "roll-step"), lambda p: _strategies(p, True),
+                 "to the POI loop (--strategy poi, random, fixed; the exploration fuses at its views, plans from "
+                 "contours and stops on its own score)"),
+)
 
 
 def loop_config(p: dict) -> LoopConfig:
@@ -118,6 +138,7 @@ def command(scene, strategies, views, mode, voxel_size, gain, inc_th, poi_radius
       kinfu eval nbv sample_data/tabletop --strategy objects,standard --width 160 --height 120
       kinfu eval nbv sample_data/tabletop --strategy poi,random,fixed --mode both --workers 2
     """
+    check_inapplicable(click.get_current_context(), INAPPLICABLE)
     claim_outputs({"output": output, "plot": plot}, [scene], force)
     cfg = loop_config(click.get_current_context().params)  # bad values fail before connecting to a cluster
     with trial_engine(scheduler, workers, desc="eval nbv", quiet=quiet) as tmap:

@@ -9,8 +9,9 @@ from pathlib import Path
 import click
 
 from kinfu_cli.commands._engine import scheduler_option, trial_engine
-from kinfu_cli.commands._options import comma_values, result_options
-from kinfu_cli.commands._detector_options import detector_options, detector_params_from
+from kinfu_cli.commands._options import Inapplicable, check_inapplicable, comma_values, result_options
+from kinfu_cli.commands._detector_options import (DETECTOR_OPTIONS, detector_inapplicable, detector_options,
+                                                  detector_params_from)
 from kinfu_cli.commands._output import QUIET_HELP, emit
 from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError
@@ -33,6 +34,16 @@ def _floats(option: str, value: str | None, blank_ok: bool = True) -> list[float
     return values
 
 
+# --loo chooses the constants itself, on the recorded tasks: the detector options and the speed / noise settings
+# have no effect there; without it, those of the detector not scored
+INAPPLICABLE = (
+    Inapplicable(("speed", "noise", "seed", *(n.replace("_", "-") for n in DETECTOR_OPTIONS)),
+                 lambda p: "with --loo" if p["loo"] else None,
+                 "to the scoring of the given settings (--loo chooses each constant itself, on the recorded tasks)"),
+    *detector_inapplicable(lambda p: {"gmm-as", "zvc"} if p["algorithm"] == "both" else {p["algorithm"]}),
+)
+
+
 @click.command("poi", short_help="Score GMM-AS / ZVC POIs on a hand data set (paper Tables 2-4).")
 @click.argument("dataset_dir", type=click.Path(path_type=Path))
 @click.option("--algorithm", default="both", show_default=True, type=click.Choice(["gmm-as", "zvc", "both"]),
@@ -46,7 +57,8 @@ def _floats(option: str, value: str | None, blank_ok: bool = True) -> list[float
 @scheduler_option
 @click.option("--loo", is_flag=True,
               help="Leave-one-user-out instead: choose each default constant on one user, score it on another "
-                   "(kinfu_cli/evaluation/poi_loo.py); detector options are ignored.")
+                   "(kinfu_cli/evaluation/poi_loo.py); the detector, --speed, --noise and --seed options do not "
+                   "apply.")
 @result_options(output=None, json="Print machine-readable results on stdout.", quiet=QUIET_HELP, force=False)
 @detector_options
 def command(dataset_dir, algorithm, speed, noise, seed, workers, scheduler, loo, as_json, quiet, **kw):
@@ -82,6 +94,7 @@ def command(dataset_dir, algorithm, speed, noise, seed, workers, scheduler, loo,
       kinfu eval poi DATA --loo --workers 2
       kinfu eval poi DATA --speed 0.25,0.5,1,2,4 --scheduler tcp://10.0.0.5:8786
     """
+    check_inapplicable(click.get_current_context(), INAPPLICABLE)
     speeds = _floats("--speed", speed, blank_ok=False)
     noises = _floats("--noise", noise)
     for s in speeds:

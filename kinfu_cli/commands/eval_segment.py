@@ -7,8 +7,8 @@ from pathlib import Path
 
 import click
 
-from kinfu_cli.commands._options import (OutputPath, SWEEP_ONLY_OPTIONS, claim_outputs, comma_items, comma_values,
-                                         force_option, given_options)
+from kinfu_cli.commands._options import (Inapplicable, OutputPath, SWEEP_ONLY_OPTIONS, check_inapplicable,
+                                         claim_outputs, comma_items, comma_values, force_option)
 from kinfu_cli.commands._output import QUIET_HELP, emit
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.evaluation.segment_eval import (RGB_T_LCCP_VALUES, SWEEP_DEFAULT, SWEEP_VALUES, check_eval_numbers,
@@ -50,6 +50,11 @@ def check_options(params: dict) -> None:
     """What `kinfu eval segment` (scoring SEGMENTS) refuses with these options before it reads anything (kinfu
     batch checks a plan with it); ConfigError naming the parameter."""
     check_eval_numbers(*(params[k] for k in ("t_eval", "max_distance", "cover", "share", "matching")))
+
+
+# the sweep's options scoring SEGMENTS does not use (commands._options.check_inapplicable)
+INAPPLICABLE = (Inapplicable(tuple(SWEEP_ONLY_OPTIONS), lambda p: None if p["sweep"] else "without --sweep",
+                             message="{flags}: needs --sweep (scoring SEGMENTS does not use it)"),)
 
 
 @click.command("segment", short_help="Segmentation boundary P/R, BCE, object recall vs labels; --sweep: PR curves.")
@@ -148,9 +153,7 @@ def command(segments: Path | None, ground_truth: Path | None, t_eval: float, mat
             doc["plot"] = str(plot_sweep_pr(doc, plot))
         emit(doc, output, as_json, lambda d: format_sweep_table(d).splitlines(), quiet)
         return
-    sweep_only = given_options(click.get_current_context(), SWEEP_ONLY_OPTIONS)
-    if sweep_only:
-        raise ConfigError(f"{', '.join(sweep_only)}: needs --sweep (scoring SEGMENTS does not use it)")
+    check_inapplicable(click.get_current_context(), INAPPLICABLE)
     if segments is None:
         raise ConfigError("expected SEGMENTS (a kinfu segment output folder or labelled cloud), or --sweep")
     if ground_truth is None:

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import json
-import math
 import time
 from pathlib import Path
 
 import click
 
-from kinfu_cli.commands._options import OutputPath, bag_folder, claim_outputs, force_option
+from kinfu_cli.commands._options import (Inapplicable, OutputPath, bag_folder, check_inapplicable, claim_outputs,
+                                         comma_numbers, force_option)
 from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.commands._roles import role_kwargs, role_options
 from kinfu_cli.commands._up import parse_up
@@ -40,14 +40,22 @@ def _share(value: str) -> float:
 
 
 def _floats(value: str, name: str, n: tuple[int, ...]) -> tuple[float, ...]:
-    try:
-        v = tuple(float(x) for x in value.replace(" ", "").split(","))
-    except ValueError:
-        v = ()
-    if len(v) not in n or not all(math.isfinite(x) for x in v):  # nan / inf: int() of them was a traceback
+    v = comma_numbers(value, name) or []  # an empty item ('1,,2') is the list options' error
+    if len(v) not in n:  # nan / inf (None above): int() of them was a traceback
         want = " or ".join(str(k) for k in n)
         raise ConfigError(f"{name}: expected {want} comma-separated finite numbers, got {value!r}")
-    return v
+    return tuple(v)
+
+
+# options given in a mode where they do nothing (commands._options.check_inapplicable): warnings, as a script or a
+# batch plan sets them for recordings fused in either pose mode, and --max-memory is the machine's budget
+INAPPLICABLE = (
+    Inapplicable(("max-lost", "icp"), lambda p: f"with --pose {p['pose']}" if p["pose"] in ("forced", "topic")
+                 else None, "to --pose icp or hint", warn=True),
+    Inapplicable(("max-memory",), lambda p: "with --init" if p["init"] else (
+        f"with --size {p['size']}" if p["size"].strip().lower() != "auto" else None), "to --size auto", warn=True),
+    Inapplicable(("color",), lambda p: "with --no-color" if p["no_color"] else None, "to fusion with colour"),
+)
 
 
 def fuse_arguments(params: dict) -> dict:
@@ -187,7 +195,9 @@ def command(recording: Path, outdir: Path, voxel_size, resolution, size, origin,
     """
     claim_outputs({"outdir": outdir, "viz": viz}, [recording, bag_folder(recording), init, clear_pois], force,
                   recordings=[recording])
-    result = fuse_recording(recording, **fuse_arguments(click.get_current_context().params))
+    arguments = fuse_arguments(click.get_current_context().params)  # a malformed value: its error, no warning first
+    check_inapplicable(click.get_current_context(), INAPPLICABLE)
+    result = fuse_recording(recording, **arguments)
     if not quiet:
         for note in result.notes:
             click.echo(f"kinfu: note: {note}", err=True)

@@ -9,7 +9,8 @@ import click
 from click.core import ParameterSource
 import numpy as np
 
-from kinfu_cli.commands._options import OutputPath, claim_outputs, force_option
+from kinfu_cli.commands._options import (Inapplicable, OutputPath, check_inapplicable, claim_outputs, comma_numbers,
+                                         force_option)
 from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.core.atomic import write_json
 from kinfu_cli.core.errors import ConfigError
@@ -20,13 +21,16 @@ from kinfu_cli.grasp.plan import GraspOptions, GraspResult, plan_grasps, read_se
 
 
 def _numbers(text: str, n: int, parameter: str) -> tuple[float, ...]:
-    try:
-        vals = tuple(float(v) for v in text.split(","))
-    except ValueError:
-        vals = ()
+    vals = comma_numbers(text, f"--{parameter.replace('_', '-')}") or []  # '1,,2': the list options' error
     if len(vals) != n:
-        raise ConfigError(f"expected {n} comma-separated numbers, got {text!r}", parameter=parameter)
-    return vals
+        raise ConfigError(f"expected {n} comma-separated finite numbers, got {text!r}", parameter=parameter)
+    return tuple(vals)
+
+
+# the other hand's palm box with one --hand (commands._options.check_inapplicable)
+INAPPLICABLE = tuple(Inapplicable((f"workspace-{other}",), lambda p, hand=hand: f"with --hand {hand}"
+                                  if p["hand"] == hand else None, f"to the {other} hand (--hand {other} or both)")
+                     for hand, other in (("right", "left"), ("left", "right")))
 
 
 def _workspace(text: str | None, parameter: str) -> Workspace | None:
@@ -91,6 +95,7 @@ def command(segments: Path, output: Path, hand, segment_ids, cones, cone_apertur
       kinfu grasp out/segments/segments.json -o out/grasps.json --plot out/grasps.png
       kinfu grasp out/segments --hand right --cone top --json --quiet
     """
+    check_inapplicable(click.get_current_context(), INAPPLICABLE)
     segments = segments / "segments.json" if segments.is_dir() else segments  # errors name the file
     claim_outputs({"output": output, "plot": plot}, [segments], force)
     # the options first, before the input is read: a bad one is named, not the input's problem

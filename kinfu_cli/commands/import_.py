@@ -3,13 +3,29 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import click
 
-from kinfu_cli.commands._options import OutputPath, claim_outputs, force_option
+from kinfu_cli.commands._options import (Inapplicable, OutputPath, check_inapplicable, claim_outputs, comma_items,
+                                         force_option)
 from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.commands._up import parse_up
+from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.io.rgbd_folders import import_folder
+from kinfu_cli.io.writers import format_for
+
+
+def _ros2_out(p: dict) -> str | None:
+    """'with a ROS 2 bag folder as --out' when -o names one (a name the writer refuses is its own error)."""
+    try:
+        return "with a ROS 2 bag folder as --out" if format_for(Path(p["out"])) == "ros2" else None
+    except ConfigError:
+        return None
+
+
+# a ROS 2 bag (sqlite3) is written without chunk compression either way (commands._options.check_inapplicable)
+INAPPLICABLE = (Inapplicable(("no-compress",), _ros2_out, "to an MCAP or .bag recording (zstd / lz4 chunks)"),)
 
 
 @click.command("import", short_help="Convert an RGB-D frame folder (7-Scenes/3DMatch, TUM) into MCAP/bag/ROS 2.")
@@ -49,6 +65,9 @@ def command(folder: str, out: str, rate: float, frames: str | None, color: str, 
       kinfu import tum_fr1_desk/ -o fr1_desk.bag --frames 0:300:2
       kinfu import scans/ -o scans.mcap --up 0,-1,0
     """
+    check_inapplicable(click.get_current_context(), INAPPLICABLE)
+    if intrinsics:  # an empty item ('525,,319.5,239.5'): the list options' error
+        comma_items(intrinsics, "--intrinsics")
     # inside, the recording would join the data set it was made from (and be read by the next import)
     claim_outputs({"out": out}, [folder], force, recordings=[folder])
     summary = import_folder(folder, out, rate=rate, frames=frames, color=color, intrinsics=intrinsics,

@@ -7,11 +7,16 @@ import json
 import click
 
 from kinfu_cli.commands._frames import frame_kwargs, frame_options
+from kinfu_cli.commands._options import Inapplicable, check_inapplicable
 from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.commands._roles import role_kwargs, role_options
 from kinfu_cli.io.summary import format_summary, recording_summary
 
 ROLES_HEADING = "roles (detected; override with --depth-topic, --world-frame, ...):"
+# the frame options assemble the frames, which only --frames does (commands._options.check_inapplicable)
+INAPPLICABLE = (Inapplicable(("pose-source", "pose-topic", "tolerance", "start", "end", "every"),
+                             lambda p: None if p["check"] else "without --frames",
+                             "with --frames (only it assembles the RGB-D frames)"),)
 
 
 @click.command("info", short_help="Show topics, rates, time span, detected roles and TF tree of a recording.")
@@ -34,6 +39,7 @@ def command(recording: str, as_json: bool, check: bool, quiet: bool, **kwargs) -
       kinfu info recording_ros2/ --json > summary.json
       kinfu info run.bag --frames --tolerance 0.02
     """
+    check_inapplicable(click.get_current_context(), INAPPLICABLE)
     fk = frame_kwargs(kwargs)
     summary = recording_summary(recording, check_frames=fk if check else None, quiet=quiet, **role_kwargs(kwargs))
     print_warnings(summary)  # the frames' (--frames), as fuse and export print them

@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from kinfu_cli.commands._mupf_options import mupf_filter_options
-from kinfu_cli.commands._options import OutputPath, claim_outputs, comma_values, force_option
+from kinfu_cli.commands._options import OutputPath, claim_outputs, comma_items, comma_values, force_option
 from kinfu_cli.commands._output import emit
 from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.volume_file import MAX_COORDINATE_M
@@ -23,7 +23,7 @@ def _prior(value: str):
     if value in ("centroid", "zero"):
         return value
     try:
-        vals = [float(v) for v in value.split(",")]
+        vals = [float(v) for v in comma_items(value, "--prior")]  # an empty item: the list options' error
     except ValueError:
         raise ConfigError(f"--prior {value!r}: expected 'centroid', 'zero' or x,y,z,phi,theta,psi") from None
     if len(vals) != 6:
@@ -119,9 +119,10 @@ def command(model: Path | None, points: Path | None, models: str | None, segment
                             beta=beta, rotation=rotation, noise=noise, **(PAPER_WEIGHTS if paper_weights else {}),
                             **(NO_REFINE if no_refine else {}))
     params.check()
+    prior_mean = _prior(prior)  # the options first: a bad one is named before an input is read
     meshes = [read_mesh(p) for p in model_paths]
     pts = read_segment_points(segments, segment) if segments is not None else read_points(points)
-    result = localize_points(meshes, pts, params, prior=_prior(prior), seed=seed, quiet=quiet,
+    result = localize_points(meshes, pts, params, prior=prior_mean, seed=seed, quiet=quiet,
                              max_points=max_points)
     doc = result.to_json()
     doc["input"] = {"models": [str(p) for p in model_paths],

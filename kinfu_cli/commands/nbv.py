@@ -8,7 +8,8 @@ from pathlib import Path
 
 import click
 
-from kinfu_cli.commands._options import OutputPath, claim_outputs, force_option, given_options, volume_file
+from kinfu_cli.commands._options import (Inapplicable, OutputPath, check_inapplicable, claim_outputs, force_option,
+                                         volume_file)
 from kinfu_cli.commands._output import emit
 from kinfu_cli.commands._up import parse_up
 from kinfu_cli.core.camera import CameraModel
@@ -46,6 +47,16 @@ def _up_option(value: str) -> tuple[float, float, float] | None:
 # (a --candidates or --pois file given there would be read by nobody: a damaged or wrong one passed silently)
 POI_MODE_ONLY = ("pois", "candidates", "clear", "plot", "radius", "lon-step", "lat-min", "lat-max", "lat-step",
                  "roll-step", "poi-radius", "clearance", "optimistic", "exact-rolls")
+#: the viewing sphere's options, which --candidates replaces
+SPHERE_OPTIONS = ("radius", "lon-step", "lat-min", "lat-max", "lat-step", "roll-step")
+# options given where they do nothing (commands._options.check_inapplicable)
+INAPPLICABLE = (
+    Inapplicable(POI_MODE_ONLY, lambda p: "with --mode objects" if p["mode"] == "objects" else None,
+                 "to --mode poi (--mode objects places its own views: 5 directions x 8 rolls at 0.8 m around each "
+                 "contour point, no viewing sphere around a POI)"),
+    Inapplicable(SPHERE_OPTIONS, lambda p: "with --candidates" if p["candidates"] is not None else None,
+                 "to the viewing sphere, which the --candidates poses replace"),
+)
 
 
 def _camera(p: dict, recorded: dict | None) -> CameraModel:
@@ -203,10 +214,7 @@ def command(volume, pois_path, mode, clear, gain, top, output, plot, candidates,
       kinfu nbv volume.npz --pois pois.json --gain entropy --top 5 --json
       kinfu nbv volume.npz --mode objects -o views.json
     """
-    if mode == "objects" and (unused := given_options(click.get_current_context(), POI_MODE_ONLY)):
-        raise ConfigError(f"{', '.join(unused)}: appl{'ies' if len(unused) == 1 else 'y'} to --mode poi (--mode "
-                          f"objects places its own views: 5 directions x 8 rolls at 0.8 m around each contour "
-                          f"point, no viewing sphere around a POI)")
+    check_inapplicable(click.get_current_context(), INAPPLICABLE)
     volume = volume_file(volume)
     claim_outputs({"output": output, "plot": plot, "viz": viz}, [volume, pois_path, candidates, camera_info], force,
                   recordings=[camera_info])

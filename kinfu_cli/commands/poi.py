@@ -9,17 +9,24 @@ import click
 
 from kinfu_cli.attention.detect import PoiDetection, check_detection, detect_pois
 from kinfu_cli.attention.tasks import MIN_TASK_S, SPLIT_GAP_S
-from kinfu_cli.commands._detector_options import detector_options, detector_params_from
-from kinfu_cli.commands._options import OutputPath, bag_folder, claim_outputs, force_option
+from kinfu_cli.commands._detector_options import detector_inapplicable, detector_options, detector_params_from
+from kinfu_cli.commands._options import (OutputPath, bag_folder, check_inapplicable, claim_outputs, comma_items,
+                                         force_option)
 from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.core.atomic import write_json
 from kinfu_cli.report.poi_plot import plot_pois, plot_task_pois
 from kinfu_cli.report.viewer import write_viewer
 
 
+# options of the detector --algorithm did not choose, or that --literal / the ZVC rule in force override
+INAPPLICABLE = detector_inapplicable(lambda p: {p["algorithm"]})
+
+
 def detection_arguments(params: dict) -> dict:
     """detect_pois's detector arguments from the command's parsed options (click's parameter dict): the one
     place that turns poi's options into them, for the command and for `check_options`."""
+    if params["workspace"]:  # an empty item ('0,,0,...') is the list options' error (the reader skipped it)
+        comma_items(params["workspace"], "--workspace")
     return dict(algorithm=params["algorithm"], params=detector_params_from(dict(params))[params["algorithm"]],
                 workspace=params["workspace"], split_gap=params["split_gap"], min_task=params["min_task"])
 
@@ -79,6 +86,7 @@ def command(source, algorithm, hand_topic, hand_frame, world_frame, workspace, s
       kinfu poi session.mcap --workspace -0.5,-0.8,0.7,0.6,0.4,1.3 --split-gap 1
       kinfu poi user1_cup0.traj --literal --plot literal.png
     """
+    check_inapplicable(click.get_current_context(), INAPPLICABLE)
     claim_outputs({"output": output, "plot": plot, "viz": viz}, [source, bag_folder(source)], force,
                   recordings=[source])
     found = detect_pois(source, **detection_arguments(click.get_current_context().params), hand_topic=hand_topic,

@@ -13,7 +13,8 @@ from pathlib import Path
 import click
 from click.core import ParameterSource
 
-from kinfu_cli.commands._options import OutputPath, claim_outputs, force_option, given_options, volume_file
+from kinfu_cli.commands._options import (Inapplicable, OutputPath, check_inapplicable, claim_outputs, comma_numbers,
+                                         force_option, volume_file)
 from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.commands._up import parse_up
 from kinfu_cli.core.atomic import atomic_dir, write_json
@@ -25,11 +26,33 @@ from kinfu_cli.segmentation.segments import COLOR_DISTANCES, SegmentationParams
 
 
 def _pair(value: str, name: str) -> tuple[float, float]:
-    try:
-        lo, hi = (float(v) for v in value.split(","))
-    except ValueError:
-        raise ConfigError(f"{name}: expected two numbers 'lo,hi', got {value!r}") from None
-    return lo, hi
+    v = comma_numbers(value, name) or []  # an empty item ('0.1,') is the list options' error
+    if len(v) != 2:
+        raise ConfigError(f"{name}: expected two numbers 'lo,hi', got {value!r}")
+    return v[0], v[1]
+
+
+_MULTI_SQ = ("msq-trigger", "msq-height", "msq-mu", "msq-cut")
+# options given where they do nothing (commands._options.check_inapplicable): the first that applies is the error
+INAPPLICABLE = (
+    Inapplicable(("grasp-hand", "grasp-cone", "grasp-starts"), lambda p: None if p["grasp"] else "without --grasp",
+                 message="{flags}: needs --grasp (no grasps are planned without it)"),
+    Inapplicable(("t-lccp", "concave-cut", "concavity-tolerance", "sanity-angle", "seed-resolution",
+                  "spatial-importance"), lambda p: "with --method flood-fill" if p["method"] == "flood-fill" else None,
+                 "to --method lccp (flood fill joins points, without supervoxels or LCCP's edge tests)"),
+    Inapplicable(("t-ff",), lambda p: "with --method lccp" if p["method"] == "lccp" else None,
+                 "to --method flood-fill"),
+    Inapplicable(("color-importance", "t-lccp", "color-distance", "plane-color-margin"),
+                 lambda p: "with --no-color" if p["no_color"] else None, "to a segmentation with colour"),
+    Inapplicable(("color-distance",), lambda p: "with --method lccp without --t-lccp"
+                 if p["method"] == "lccp" and p["t_lccp"] is None else None,
+                 "to the colour tests --t-lccp and --t-ff (--method flood-fill)"),
+    Inapplicable(("sq-max-points", "sq-exponent-bounds", "sq-cost", "shape-prior", "multi-sq", *_MULTI_SQ),
+                 lambda p: "with --no-superquadrics" if p["no_superquadrics"] else None, "to the superquadric fits"),
+    Inapplicable(_MULTI_SQ, lambda p: None if p["multi_sq"] else "without --multi-sq", "with --multi-sq"),
+    Inapplicable(("up-tolerance",), lambda p: "with --up none" if p["up"].strip().lower() == "none" else None,
+                 "to a support plane searched along an up direction (--up auto or x,y,z)"),
+)
 
 
 def _up(value: str) -> tuple[float, float, float] | str | None:
@@ -202,13 +225,12 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
       kinfu segment out/fuse/ternary.npz --isolation-threshold 0.01 --json --quiet
       kinfu segment out/fuse/volume.npz -o out/segments --grasp --grasp-hand right --grasp-cone top
     """
+    ctx = click.get_current_context()
+    check_inapplicable(ctx, INAPPLICABLE)
     volume = volume_file(volume)
     claim_outputs({"outdir": outdir, "viz": viz}, [volume], force)
-    ctx = click.get_current_context()
     given = tuple(f.name for f in fields(SegmentationParams)
                   if ctx.get_parameter_source(f.name) not in (None, ParameterSource.DEFAULT))
-    if not grasp and (grasp_only := given_options(ctx, ("grasp-hand", "grasp-cone", "grasp-starts"))):
-        raise ConfigError(f"{', '.join(grasp_only)}: needs --grasp (no grasps are planned without it)")
     opts, grasp_options = segment_options(ctx.params, given)
     result: SegmentResult | None = None
     doc: dict = {}

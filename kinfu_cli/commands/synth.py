@@ -6,7 +6,8 @@ import json
 
 import click
 
-from kinfu_cli.commands._options import OutputPath, claim_outputs, comma_items, force_option
+from kinfu_cli.commands._options import (Inapplicable, OutputPath, check_inapplicable, claim_outputs, comma_items,
+                                         force_option)
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.sim.synth import FORMAT_NAMES, synthesize
 
@@ -18,6 +19,20 @@ def parse_formats(text: str) -> list[str]:
     if not items or bad:
         raise ConfigError(f"--formats {text!r}: expected a comma-separated subset of mcap,bag,ros2")
     return list(dict.fromkeys(items))
+
+
+# options given where they do nothing (commands._options.check_inapplicable): the room scene has no arm, no hand and
+# no objects to count; objects and household lay out their own objects; only the room turns its world
+INAPPLICABLE = (
+    Inapplicable(("scenario", "n-objects", "hand-rate"), lambda p: "with --scene room" if p["scene"] == "room"
+                 else None, "to the arm scenes (--scene tabletop, objects, household)"),
+    Inapplicable(("n-objects",), lambda p: f"with --scene {p['scene']}" if p["scene"] in ("objects", "household")
+                 else None, "to --scene tabletop (objects and household lay out their own)"),
+    Inapplicable(("world",), lambda p: None if p["scene"] == "room" else f"with --scene {p['scene']}",
+                 "to --scene room (the arm scenes are z-up)"),
+    Inapplicable(("jpeg-quality",), lambda p: None if p["color_format"] == "jpeg"
+                 else f"with --color-format {p['color_format']}", "to --color-format jpeg"),
+)
 
 
 @click.command("synth", short_help="Write a synthetic tabletop or room recording (MCAP, bag, ROS 2) with ground truth.")
@@ -83,6 +98,7 @@ def command(out, scene, world, seed, width, height, frames, formats, scenario, n
       kinfu synth -o /tmp/room --scene room --world y-down --formats mcap
       kinfu synth -o /tmp/objects --scene objects --formats mcap
     """
+    check_inapplicable(click.get_current_context(), INAPPLICABLE)
     room = scene == "room"
     width = width if width is not None else (160 if room else 320)
     height = height if height is not None else (120 if room else 240)

@@ -21,8 +21,9 @@ from kinfu_cli.fusion.volume import FORMAT
 from kinfu_cli.nbv.viewpoints import SphereSpec, read_candidates, sphere_viewpoints
 
 CAM = CameraModel(60.0, 60.0, 39.5, 29.5, 80, 60, min_range=0.3, max_range=3.0)
-SMALL = ["--fx", "60", "--fy", "60", "--cx", "39.5", "--cy", "29.5", "--width", "80", "--height", "60",
-         "--lon-step", "45", "--lat-step", "30", "--roll-step", "90", "--quiet"]
+# the camera, and a coarse viewing sphere (with --candidates the sphere options are refused: CAMERA alone)
+CAMERA = ["--fx", "60", "--fy", "60", "--cx", "39.5", "--cy", "29.5", "--width", "80", "--height", "60", "--quiet"]
+SMALL = CAMERA + ["--lon-step", "45", "--lat-step", "30", "--roll-step", "90"]
 
 
 def test_sphere_viewpoints_look_at_the_poi_from_the_paper_sphere():
@@ -150,7 +151,7 @@ def test_cli_ranks_views_and_writes_views_json_and_plot(scene_files):
     cand.write_text(json.dumps([pv["pose"] for pv in p["views"][:3]]))
     assert read_candidates(cand).shape == (3, 4, 4)
     res = CliRunner().invoke(cli, ["nbv", str(vol), "--pois", str(pois), "--clear", "--json",
-                                   "--candidates", str(cand), "--exact-rolls"] + SMALL)
+                                   "--candidates", str(cand), "--exact-rolls"] + CAMERA)
     assert res.exit_code == 0, res.output
     doc2 = json.loads(res.output)
     assert [w["gain"] for w in doc2["pois"][0]["views"]] == pytest.approx(gains[:3])
@@ -175,7 +176,7 @@ def test_cli_bad_input_is_a_one_line_error(scene_files, case):
         expect = "intrinsics missing"
     else:
         (tmp / "c.json").write_text(json.dumps([[[1, 0], [0, 1]]]))
-        args += ["--candidates", str(tmp / "c.json")]
+        args = ["nbv", str(vol), "--pois", str(pois), "-o", str(out), "--candidates", str(tmp / "c.json")] + CAMERA
         expect = "expected a list of 4x4 poses"
     res = CliRunner().invoke(cli, args)
     assert res.exit_code == 2, res.output
