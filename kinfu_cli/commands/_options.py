@@ -114,14 +114,14 @@ class Inapplicable:
 
     mode: from the command's parsed options (click's parameter dict), the mode in which they have none, as the
     message says it ("with --pose forced", "without --multi-sq"), else None (they apply). target: where they
-    apply ("to --pose icp or hint"), for the error. warn: a warning instead of the error (see
+    apply ("to --pose icp or hint"), for the error. warn: a warning (the default) or an error (see
     check_inapplicable). message: the error's own wording instead ("{flags}" is replaced by the options given).
     """
 
     options: tuple[str, ...]
     mode: Callable[[dict], str | None]
     target: str = ""
-    warn: bool = False
+    warn: bool = True
     message: str | None = None
 
 
@@ -132,14 +132,12 @@ def check_inapplicable(ctx: click.Context, rules: Iterable[Inapplicable], *, war
     rules, and by kinfu batch's check of a plan (warn=False: only the refusals, before any work; the warnings
     come when the stage runs, into manifest.json).
 
-    The rule: refuse (ConfigError, one `kinfu: error: --x: has no effect with --y z; it applies to ...` line,
-    exit 2), as `nbv --mode objects` refuses the POI mode's options: the user asked for something the run would
-    not do. Warn instead (`kinfu: warning: --x has no effect with --y z (ignored)`, exit 0) only for an option
-    commonly set once for every run of a script or every recording of a batch plan while the mode varies with
-    the recording: the mode is chosen per recording by batch itself (diff's --pois, given only to recordings
-    that run poi) or by what the recording holds (fuse --pose forced where TF has the camera, icp/hint where it
-    has not: the tracking options --max-lost and --icp), or the option is a property of the machine (fuse
-    --max-memory). A plan's common options then never fail the recordings whose mode does not use them.
+    The rule: warn (`kinfu: warning: --x has no effect with --y z (ignored)`, exit 0): the run computes what its
+    mode computes, as it did before these checks, and the line tells the user which of their options it did not
+    use; a script or batch plan that sets an option for runs of every mode (a seed, a hand rate, fuse's tracking
+    options for recordings with and without TF) keeps working. Refuse (ConfigError, one `kinfu: error:` line,
+    exit 2, before any work) only where kinfu refused already: nbv --mode objects with the POI mode's options,
+    segment's --grasp-* without --grasp, eval segment's sweep options without --sweep.
     """
     refused, warnings = [], []
     for rule in rules:

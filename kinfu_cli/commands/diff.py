@@ -57,7 +57,7 @@ def _lines(doc: dict, outdir: Path) -> list[str]:
 # --match-radius scores POIs: a warning without --pois (kinfu batch gives --pois only to the recordings that run
 # poi, and a plan's diff options are common to all; commands._options.check_inapplicable)
 INAPPLICABLE = (Inapplicable(("match-radius",), lambda p: None if p["pois_path"] else "without --pois",
-                             "with --pois", warn=True),)
+                             "with --pois"),)
 
 
 def change_params(p: dict) -> ChangeParams:

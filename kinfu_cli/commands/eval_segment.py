@@ -54,7 +54,7 @@ def check_options(params: dict) -> None:
 
 # the sweep's options scoring SEGMENTS does not use (commands._options.check_inapplicable)
 INAPPLICABLE = (Inapplicable(tuple(SWEEP_ONLY_OPTIONS), lambda p: None if p["sweep"] else "without --sweep",
-                             message="{flags}: needs --sweep (scoring SEGMENTS does not use it)"),)
+                             message="{flags}: needs --sweep (scoring SEGMENTS does not use it)", warn=False),)
 
 
 @click.command("segment", short_help="Segmentation boundary P/R, BCE, object recall vs labels; --sweep: PR curves.")

@@ -51,10 +51,12 @@ def _floats(value: str, name: str, n: tuple[int, ...]) -> tuple[float, ...]:
 # batch plan sets them for recordings fused in either pose mode, and --max-memory is the machine's budget
 INAPPLICABLE = (
     Inapplicable(("max-lost", "icp"), lambda p: f"with --pose {p['pose']}" if p["pose"] in ("forced", "topic")
-                 else None, "to --pose icp or hint", warn=True),
+                 else None, "to --pose icp or hint"),
     Inapplicable(("max-memory",), lambda p: "with --init" if p["init"] else (
-        f"with --size {p['size']}" if p["size"].strip().lower() != "auto" else None), "to --size auto", warn=True),
-    Inapplicable(("color",), lambda p: "with --no-color" if p["no_color"] else None, "to fusion with colour"),
+        f"with --size {p['size']}" if p["size"].strip().lower() != "auto" else None), "to --size auto"),
+    # --color mode with --no-color is a contradiction fusion refuses itself (ConfigError naming --color)
+    Inapplicable(("color",), lambda p: "with --no-color" if p["no_color"] and p["color_mode"] != "mode" else None,
+                 "to fusion with colour"),
 )
 
 

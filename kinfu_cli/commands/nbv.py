@@ -53,7 +53,7 @@ SPHERE_OPTIONS = ("radius", "lon-step", "lat-min", "lat-max", "lat-step", "roll-
 INAPPLICABLE = (
     Inapplicable(POI_MODE_ONLY, lambda p: "with --mode objects" if p["mode"] == "objects" else None,
                  "to --mode poi (--mode objects places its own views: 5 directions x 8 rolls at 0.8 m around each "
-                 "contour point, no viewing sphere around a POI)"),
+                 "contour point, no viewing sphere around a POI)", warn=False),
     Inapplicable(SPHERE_OPTIONS, lambda p: "with --candidates" if p["candidates"] is not None else None,
                  "to the viewing sphere, which the --candidates poses replace"),
 )

@@ -36,7 +36,7 @@ _MULTI_SQ = ("msq-trigger", "msq-height", "msq-mu", "msq-cut")
 # options given where they do nothing (commands._options.check_inapplicable): the first that applies is the error
 INAPPLICABLE = (
     Inapplicable(("grasp-hand", "grasp-cone", "grasp-starts"), lambda p: None if p["grasp"] else "without --grasp",
-                 message="{flags}: needs --grasp (no grasps are planned without it)"),
+                 message="{flags}: needs --grasp (no grasps are planned without it)", warn=False),
     Inapplicable(("t-lccp", "concave-cut", "concavity-tolerance", "sanity-angle", "seed-resolution",
                   "spatial-importance"), lambda p: "with --method flood-fill" if p["method"] == "flood-fill" else None,
                  "to --method lccp (flood fill joins points, without supervoxels or LCCP's edge tests)"),
