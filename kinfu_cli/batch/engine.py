@@ -10,6 +10,7 @@ sized to the machine and an existing `dask.distributed` scheduler (the workers m
 from __future__ import annotations
 
 import contextlib
+import itertools
 import logging
 import os
 import re
@@ -19,18 +20,18 @@ import time
 import uuid
 import warnings
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 from pathlib import Path
 
 from kinfu_cli.batch.fingerprint import input_fingerprint, output_stats
 from kinfu_cli.batch.lock import LOCK_NAME
-from kinfu_cli.batch.manifest import DONE, MANIFEST_NAME, build_manifest, read_previous, write_manifest
+from kinfu_cli.batch.manifest import DONE, MANIFEST_NAME, build_manifest, read_links, read_previous, write_manifest
 from kinfu_cli.batch.plan import Plan
 from kinfu_cli.batch.stages import StageSpec, stage_dependents
 from kinfu_cli.core.errors import ConfigError, KinfuError
 from kinfu_cli.core.ownership import (TEMPORARY_NAME, changed_since_written, claim_output, mark_folder_output,
-                                      recording_folders, refuse_inside_folders, remove_written)
+                                      recording_folders, refuse_inside_folders, remove_written, written_by_kinfu)
 from kinfu_cli.core.progress import progress
 
 CONNECT_TIMEOUT_S = 5
@@ -212,7 +213,10 @@ def run_task(spec: StageSpec, rec, options: Mapping, previous: dict | None, forc
     a killed worker) leaves them missing rather than complete-looking beside outputs they were not made from.
     stale: the specs of the stages that read this one's outputs but that the recording does not run (an earlier
     plan ran them): their outputs in its folder are removed too when the stage is redone (or fails, or is blocked),
-    each said in a warning (they would never be redone, and sat beside the new outputs they were not made from)."""
+    each said in a warning (they would never be redone, and sat beside the new outputs they were not made from).
+    A redone stage also removes its own outputs of an earlier run that this run does not write (a plot or viewer
+    file whose option is now off, the combined viewer file under the name the earlier plan gave: _unwritten), and
+    those of the downstream stages."""
     t0 = time.perf_counter()
     entry = {"status": "failed", "seconds": 0.0, "error": None, "fingerprint": None, "outputs": None,
              "numbers": {}, "warnings": []}
@@ -220,7 +224,7 @@ def run_task(spec: StageSpec, rec, options: Mapping, previous: dict | None, forc
                for u in upstream if u.get("status") not in DONE]:
         return {**entry, "status": "blocked", "error": f"needs {', '.join(bad)}, which did not finish",
                 "stage": spec.name, "folder": str(rec.output), "warnings": _drop_stale(spec, rec, stale)}
-    later_removed = None  # the warnings of the stale stages' removal, once done
+    removed = None  # the warnings of the removals before the stage ran, once done
     try:
         outdir, outputs = rec.output, spec.outputs_of(rec)
         if not force and (edited := [c for rel in spec.claims_of(rec) for c in changed_since_written(outdir / rel)]):
@@ -238,18 +242,21 @@ def run_task(spec: StageSpec, rec, options: Mapping, previous: dict | None, forc
 
             numba.set_num_threads(1)
         with _folder_lock(outdir):  # another run writing this folder sees the removal and the new outputs together
+            removed = _drop_unwritten(spec, rec, options, outdir)
             for later_spec, later_rec in downstream:  # redone in this run, after this stage (they wait for it)
+                removed += _drop_unwritten(later_spec, later_rec, later_rec.stage_options(later_spec.name), outdir,
+                                           say_kept=False)  # that stage says it when it runs, or fails
                 _remove_outputs(later_spec, later_rec)
-            later_removed = _drop_later(spec, rec, stale)
+            removed += _drop_later(spec, rec, stale)
             done = spec.run(rec, options, force)
         stats = output_stats(outdir, outputs)
         if stats is None:
             raise KinfuError(f"{spec.name} finished without writing {', '.join(outputs)}")
         entry.update(status="ok", fingerprint=fp, outputs=stats, numbers=done.numbers,
-                     warnings=[*done.warnings, *later_removed])
+                     warnings=[*done.warnings, *removed])
     except Exception as exc:  # recorded in the manifest; the other recordings go on
         entry["error"] = _one_line(exc)
-        entry["warnings"] = _drop_stale(spec, rec, () if later_removed is not None else stale) + (later_removed or [])
+        entry["warnings"] = _drop_stale(spec, rec, () if removed is not None else stale) + (removed or [])
     entry["seconds"] = round(time.perf_counter() - t0, 3)
     entry["stage"], entry["folder"] = spec.name, str(rec.output)
     return entry
@@ -261,7 +268,8 @@ def _drop_stale(spec: StageSpec, rec, stale: tuple = ()) -> list[str]:
     stages' new results (a segment of the old fuse beside the new one). Returns the warnings that say so ([] when
     there were none)."""
     with _folder_lock(rec.output):
-        own = _removal_warning(spec, rec, *_remove_outputs(spec, rec), "they would not match this run's other results")
+        own = _removal_warning(spec, rec.output, *_remove_outputs(spec, rec),
+                               "they would not match this run's other results")
         return own + _drop_later(spec, rec, stale)
 
 
@@ -269,33 +277,76 @@ def _drop_later(spec: StageSpec, rec, stale: tuple) -> list[str]:
     """Remove the outputs of the `stale` stages (read `spec`'s outputs, not run for this recording: run_task) in the
     recording's folder; returns the warnings that say so."""
     return [w for later in stale for w in _removal_warning(
-        later, rec, *_remove_outputs(later, rec),
+        later, rec.output, *_remove_outputs(later, rec),
         f"{later.name} is not in this plan, and they were made from an earlier run's {spec.name} outputs")]
+
+
+def _drop_unwritten(spec: StageSpec, rec, options: Mapping, base: Path, say_kept: bool = True) -> list[str]:
+    """Remove the stage's outputs of an earlier run that this run of it does not write (_unwritten): a views.png
+    beside new views.json it does not show. Returns the warning that says so (and what was kept, unless not
+    `say_kept`), its paths named from `base`."""
+    gone, kept = _remove_paths(rec, _unwritten(spec, rec, options))
+    return _removal_warning(spec, base, gone, kept if say_kept else [],
+                            f"this run of {spec.name} does not write them, and they would not match its outputs")
 
 
 #: how a warning about an earlier run's outputs removed begins (a skipped stage does not repeat it: nothing was removed)
 _REMOVAL = re.compile(r"the \S+ outputs of an earlier run: ")
 
 
-def _removal_warning(spec: StageSpec, rec, gone: list[Path], kept: list[Path], why: str) -> list[str]:
+def _removal_warning(spec: StageSpec, base: Path, gone: list[Path], kept: list[Path], why: str) -> list[str]:
     """The warning saying which of the stage's outputs of an earlier run were removed and which were kept, and why
-    they were removed ([] when nothing was there)."""
+    they were removed ([] when nothing was there); paths are named from the folder `base` (the recording's), or in
+    full when outside it (another recording's)."""
     def names(paths):
-        return ", ".join(sorted({os.path.relpath(p, rec.output) for p in paths}))
+        return ", ".join(sorted({_named_from(p, base) for p in paths}))
 
     done = ([f"removed {names(gone)}"] if gone else []) + ([
         f"kept {names(kept)} (not written by kinfu, or changed since it was)"] if kept else [])
     return [f"the {spec.name} outputs of an earlier run: {', '.join(done)}: {why}"] if done else []
 
 
+def _named_from(path: Path, base: Path) -> str:
+    rel = os.path.relpath(path, base)
+    return str(path) if rel == os.pardir or rel.startswith(os.pardir + os.sep) else rel
+
+
+def _resolves(spec: StageSpec, links: Mapping) -> bool:
+    """Whether the stage's claims are known with these links: fixed ones, or those its links name."""
+    return not callable(spec.claims) or all(link in links for link in spec.links)
+
+
+def _paths(spec: StageSpec, rec) -> tuple[str, ...]:
+    """Where the stage writes in the recording's folder: its claims under the names this plan gives (when it gives
+    them) and under those the earlier run's plan gave (rec.earlier: a combined viewer file renamed or dropped
+    since), and its extras."""
+    now = spec.claims_of(rec) if _resolves(spec, rec.links) else ()
+    before = () if not callable(spec.claims) or not _resolves(spec, rec.earlier) else tuple(
+        c for named in itertools.product(*(rec.earlier[link] for link in spec.links))
+        for c in spec.claims_of(replace(rec, links={**rec.links, **dict(zip(spec.links, named))})))
+    return tuple(dict.fromkeys((*now, *before, *spec.extra_files())))
+
+
+def _unwritten(spec: StageSpec, rec, options: Mapping) -> tuple[str, ...]:
+    """The stage's paths that a run of it with `options` does not write: its extras whose option is off, and its
+    claims under the names the earlier run's plan gave and this one does not."""
+    now = {*(spec.claims_of(rec) if _resolves(spec, rec.links) else ()), *spec.extra_files(options)}
+    return tuple(p for p in _paths(spec, rec) if p not in now)
+
+
 def _remove_outputs(spec: StageSpec, rec) -> tuple[list[Path], list[Path]]:
-    """Remove the stage's outputs (its claims, and the plots and viewer files it writes when asked) in the recording's
-    folder that kinfu wrote and nobody changed since: an output holding a file edited since stays whole (the user's
-    now); a user's file in a kinfu folder stays where it is, kinfu's files beside it go (core.ownership.remove_written).
-    Returns (removed, kept) paths."""
+    """Remove the stage's outputs (_paths: its claims, and the plots and viewer files it writes when asked) in the
+    recording's folder that kinfu wrote and nobody changed since (_remove_paths). Returns (removed, kept) paths."""
+    return _remove_paths(rec, _paths(spec, rec))
+
+
+def _remove_paths(rec, rels) -> tuple[list[Path], list[Path]]:
+    """Remove what kinfu wrote and nobody changed since at these paths of the recording's folder: an output holding a
+    file edited since stays whole (the user's now); a user's file in a kinfu folder stays where it is, kinfu's files
+    beside it go (core.ownership.remove_written). Returns (removed, kept) paths."""
     gone: list[Path] = []
     kept: list[Path] = []
-    for rel in (*spec.claims_of(rec), *spec.extras):
+    for rel in rels:
         path = rec.output / rel
         if edited := changed_since_written(path):  # a user's edit: the output stays whole, neither used nor removed
             kept += [path.parent / e for e in edited]
@@ -393,10 +444,27 @@ def dependents(graph: Mapping) -> dict[tuple[int, str], list[tuple[int, str]]]:
 def stale_stages(table: Mapping[str, StageSpec], rec, stage: str) -> tuple[StageSpec, ...]:
     """The stages of the table that read `stage`'s outputs, directly or not, and that the recording does not run: an
     earlier plan's, whose outputs in its folder were made from the outputs `stage` replaces. The batch layout fixes
-    where each writes; a stage whose paths the plan names (the combined viewer file) has none to find, and is left
-    out."""
+    where each writes; a stage whose paths the plan names (the combined viewer file) is there when the earlier run's
+    manifest named them (rec.earlier), else it has none to find, and is left out."""
     return tuple(table[t] for t in stage_dependents(table)[stage]
-                 if t not in rec.stages and not callable(table[t].claims))
+                 if t not in rec.stages and (not callable(table[t].claims) or (bool(table[t].links) and _resolves(
+                     table[t], rec.earlier))))
+
+
+def with_earlier(plan: Plan, table: Mapping[str, StageSpec], manifest_path: Path) -> Plan:
+    """The plan, each recording with the paths earlier plans named for it that the earlier run's manifest.json
+    records (PlanRecording.earlier: the combined viewer files), read only when kinfu wrote that manifest and nobody
+    changed it since. A path is taken only directly in the recording's folder, under a name no stage's fixed layout
+    uses and not hidden: a manifest names nothing else kinfu would remove."""
+    links = read_links(manifest_path) if written_by_kinfu(manifest_path) else {}
+    fixed = {Path(p).parts[0] for s in table.values() if not callable(s.claims) for p in (*s.claims, *s.extra_files())}
+    recs = []
+    for rec in plan.recordings:
+        named = {k: kept for k, paths in links.get(str(rec.output), {}).items() if (kept := tuple(
+            p for p in paths if os.path.normpath(p.parent) == os.path.normpath(rec.output) and p.name not in fixed
+            and not p.name.startswith(".")))}
+        recs.append(replace(rec, earlier=named))
+    return replace(plan, recordings=recs)
 
 
 def run_plan(plan: Plan, table: Mapping[str, StageSpec], engine: Engine, *, force: bool = False,
@@ -405,6 +473,7 @@ def run_plan(plan: Plan, table: Mapping[str, StageSpec], engine: Engine, *, forc
     force: redo every stage and write over outputs kinfu did not write; redo: only redo every stage."""
     manifest_path = plan.output / MANIFEST_NAME
     previous = {} if force or redo else read_previous(manifest_path)
+    plan = with_earlier(plan, table, manifest_path)  # what the earlier run wrote under names its plan gave
     _mark_folders(plan)
     run_id = uuid.uuid4().hex[:8]
     futures: dict = {}

@@ -31,6 +31,32 @@ def read_previous(path: Path) -> dict[tuple[str, str], dict]:
     return out
 
 
+def read_links(path: Path) -> dict[str, dict[str, tuple[Path, ...]]]:
+    """{output folder: {link: paths}} of the paths earlier plans named for each recording, as an earlier run's
+    manifest records them (the `viz` link: its `viewer`, and the `earlier_viewers` still there then); {} when
+    absent or unreadable."""
+    try:
+        doc = json.loads(Path(path).read_text())
+    except (OSError, ValueError):
+        return {}
+    out = {}
+    for rec in doc.get("recordings", []) if isinstance(doc, dict) else []:
+        if not isinstance(rec, dict):
+            continue
+        named = [rec.get("viewer"), *(rec.get("earlier_viewers") if isinstance(rec.get("earlier_viewers"), list)
+                                      else ())]
+        if paths := tuple(dict.fromkeys(Path(p) for p in named if isinstance(p, str) and p)):
+            out[str(rec.get("output"))] = {"viz": paths}
+    return out
+
+
+def _earlier_viewers(rec) -> list[str]:
+    """The combined viewer files earlier plans named for the recording (PlanRecording.earlier) that are still
+    there, this plan's aside: recorded until a run removes them (a run stopped first leaves their names known)."""
+    now = rec.links.get("viz")
+    return [str(p) for p in rec.earlier.get("viz", ()) if p != now and (p.exists() or p.is_symlink())]
+
+
 def recording_status(stages: dict[str, dict], wanted: list[str]) -> str:
     """ok when every stage is done, failed when one failed or was blocked, else pending."""
     states = [stages.get(s, {}).get("status") for s in wanted]
@@ -49,7 +75,8 @@ def build_manifest(plan, entries: dict[tuple[int, str], dict], engine: str) -> d
         status = recording_status(stages, list(rec.stages))
         error = next((f"{s}: {e['error']}" for s, e in stages.items() if e.get("status") == "failed"), None)
         recs.append({"recording": str(rec.path), "output": str(rec.output), "status": status, "error": error,
-                     "stages": stages, **({"viewer": str(rec.links["viz"])} if "viz" in rec.links else {})})
+                     "stages": stages, **({"viewer": str(rec.links["viz"])} if "viz" in rec.links else {}),
+                     **({"earlier_viewers": earlier} if (earlier := _earlier_viewers(rec)) else {})})
     done = sum(r["status"] == "ok" for r in recs)
     failed = sum(r["status"] == "failed" for r in recs)
     return {"plan": str(plan.source), "output": str(plan.output), "stages": plan.stages, "engine": engine,

@@ -47,6 +47,9 @@ class PlanRecording:
     stages: tuple[str, ...] = ()
     links: dict[str, Path] = field(default_factory=dict)
     after: tuple[tuple[str, int, str], ...] = ()  # (stage, other recording's index, its stage) it runs after
+    # link -> the paths earlier plans gave it that the previous run's manifest.json records (the combined viewer
+    # files): where earlier runs wrote under names their plans gave (batch.engine removes them when stale; run_plan)
+    earlier: dict[str, tuple[Path, ...]] = field(default_factory=dict)
 
     def stage_options(self, stage: str) -> dict:
         return self.options.get(stage, {})

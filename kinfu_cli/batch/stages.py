@@ -39,8 +39,9 @@ class StageSpec:
     fingerprint covers; `needs`: stages of the same recording it runs after (the plan must list them);
     `wants`: stages it runs after when the recording has them (it reads their outputs if present);
     `links`: the plan recording links it needs (the plan checks they resolve); `file_options`: its options whose
-    value is an input file (relative to the plan's folder, part of the fingerprint); `extras`: files it writes
-    only when an option asks for them (plots, viewer files), removed with its outputs but not claimed up front."""
+    value is an input file (relative to the plan's folder, part of the fingerprint); `extras`: (option, file) of
+    the files it writes only when that option is true (plots, viewer files), removed with its outputs but not
+    claimed up front."""
 
     name: str
     needs: tuple[str, ...]
@@ -52,7 +53,7 @@ class StageSpec:
     wants: tuple[str, ...] = ()
     links: tuple[str, ...] = ()
     file_options: tuple[str, ...] = ()  # options naming an input file (the plan resolves them against its folder)
-    extras: tuple[str, ...] = ()  # files written only when an option asks (views.png, segment.mcap)
+    extras: tuple[tuple[str, str], ...] = ()  # (option, file) written only when it is true: ("plot", "views.png")
 
     def input_paths(self, rec) -> list[tuple[str, Path]]:
         """(label, path) of each input: RECORDING is the recording, "<link>" a link of the plan recording, the
@@ -73,6 +74,10 @@ class StageSpec:
 
     def claims_of(self, rec) -> tuple[str, ...]:
         return _per(self.claims, rec)
+
+    def extra_files(self, options: Mapping | None = None) -> tuple[str, ...]:
+        """Its extras (every one; with `options`, those the options ask for: their option is true)."""
+        return tuple(f for opt, f in self.extras if options is None or options.get(opt) is True)
 
 
 def stage_dependents(table: Mapping[str, StageSpec]) -> dict[str, list[str]]:

@@ -222,9 +222,10 @@ def _file_options(stage: str) -> tuple[str, ...]:
     return tuple(n for n in names if n not in reserved and n not in files)
 
 
-def _extras(stage: str) -> tuple[str, ...]:
-    """The files the stage writes into the recording's folder only when an option asks (plots, viewer files)."""
-    return tuple(_COMMANDS[stage][2].values()) if stage in _COMMANDS else ()
+def _extras(stage: str) -> tuple[tuple[str, str], ...]:
+    """(option, file) of the files the stage writes into the recording's folder only when that option is true
+    (plots, viewer files)."""
+    return tuple(_COMMANDS[stage][2].items()) if stage in _COMMANDS else ()
 
 
 def batch_stages() -> dict[str, StageSpec]:
