@@ -204,7 +204,7 @@ def _folder_lock(outdir: Path):
 
 
 def run_task(spec: StageSpec, rec, options: Mapping, previous: dict | None, force: bool, *upstream: dict,
-             downstream: tuple = (), stale: tuple = ()) -> dict:
+             downstream: tuple = (), stale: tuple = (), elsewhere: tuple = ()) -> dict:
     """One (recording, stage) on a worker: blocked when a needed stage did not finish, skipped when its
     outputs are current (same input fingerprint, outputs unchanged since recorded), else run. Never raises:
     a failure is the entry's one-line `error`. `rec` is the plan's PlanRecording. downstream: (spec, recording) of
@@ -216,14 +216,16 @@ def run_task(spec: StageSpec, rec, options: Mapping, previous: dict | None, forc
     each said in a warning (they would never be redone, and sat beside the new outputs they were not made from).
     A redone stage also removes its own outputs of an earlier run that this run does not write (a plot or viewer
     file whose option is now off, the combined viewer file under the name the earlier plan gave: _unwritten), and
-    those of the downstream stages."""
+    those of the downstream stages. elsewhere: (spec, recording) of other recordings' stages that may have read
+    this one's outputs through a link and that they no longer run (stale_elsewhere): their outputs are named in a
+    warning, not removed (the manifest does not record which recording a link named)."""
     t0 = time.perf_counter()
     entry = {"status": "failed", "seconds": 0.0, "error": None, "fingerprint": None, "outputs": None,
              "numbers": {}, "warnings": []}
     if bad := [u["stage"] if u.get("folder") in (None, str(rec.output)) else f"{u['stage']} of {u['folder']}"
                for u in upstream if u.get("status") not in DONE]:
         return {**entry, "status": "blocked", "error": f"needs {', '.join(bad)}, which did not finish",
-                "stage": spec.name, "folder": str(rec.output), "warnings": _drop_stale(spec, rec, stale)}
+                "stage": spec.name, "folder": str(rec.output), "warnings": _drop_stale(spec, rec, stale, elsewhere)}
     removed = None  # the warnings of the removals before the stage ran, once done
     try:
         outdir, outputs = rec.output, spec.outputs_of(rec)
@@ -247,7 +249,7 @@ def run_task(spec: StageSpec, rec, options: Mapping, previous: dict | None, forc
                 removed += _drop_unwritten(later_spec, later_rec, later_rec.stage_options(later_spec.name), outdir,
                                            say_kept=False)  # that stage says it when it runs, or fails
                 _remove_outputs(later_spec, later_rec)
-            removed += _drop_later(spec, rec, stale)
+            removed += _drop_later(spec, rec, stale) + _left_elsewhere(spec, rec, elsewhere)
             done = spec.run(rec, options, force)
         stats = output_stats(outdir, outputs)
         if stats is None:
@@ -256,21 +258,23 @@ def run_task(spec: StageSpec, rec, options: Mapping, previous: dict | None, forc
                      warnings=[*done.warnings, *removed])
     except Exception as exc:  # recorded in the manifest; the other recordings go on
         entry["error"] = _one_line(exc)
-        entry["warnings"] = _drop_stale(spec, rec, () if removed is not None else stale) + (removed or [])
+        entry["warnings"] = (_drop_stale(spec, rec) if removed is not None else _drop_stale(spec, rec, stale, elsewhere)
+                             ) + (removed or [])
     entry["seconds"] = round(time.perf_counter() - t0, 3)
     entry["stage"], entry["folder"] = spec.name, str(rec.output)
     return entry
 
 
-def _drop_stale(spec: StageSpec, rec, stale: tuple = ()) -> list[str]:
+def _drop_stale(spec: StageSpec, rec, stale: tuple = (), elsewhere: tuple = ()) -> list[str]:
     """Remove the outputs an earlier run of a stage that failed or was blocked left (kinfu's, unchanged since), and
     those of the `stale` stages made from them (run_task): they would sit, complete-looking, beside the other
     stages' new results (a segment of the old fuse beside the new one). Returns the warnings that say so ([] when
-    there were none)."""
+    there were none), and, when some were removed, the one naming the outputs `elsewhere` that may have been made
+    from them."""
     with _folder_lock(rec.output):
-        own = _removal_warning(spec, rec.output, *_remove_outputs(spec, rec),
-                               "they would not match this run's other results")
-        return own + _drop_later(spec, rec, stale)
+        gone, kept = _remove_outputs(spec, rec)
+        own = _removal_warning(spec, rec.output, gone, kept, "they would not match this run's other results")
+        return own + _drop_later(spec, rec, stale) + (_left_elsewhere(spec, rec, elsewhere) if gone else [])
 
 
 def _drop_later(spec: StageSpec, rec, stale: tuple) -> list[str]:
@@ -288,6 +292,20 @@ def _drop_unwritten(spec: StageSpec, rec, options: Mapping, base: Path, say_kept
     gone, kept = _remove_paths(rec, _unwritten(spec, rec, options))
     return _removal_warning(spec, base, gone, kept if say_kept else [],
                             f"this run of {spec.name} does not write them, and they would not match its outputs")
+
+
+def _left_elsewhere(spec: StageSpec, rec, elsewhere: tuple) -> list[str]:
+    """The warnings naming the outputs of the `elsewhere` stages (other recordings' stages not run, that may have
+    read `spec`'s outputs of this recording through a link: run_task) that are there. They are left: the manifest
+    does not record which recording's outputs a link named (diff's `before`)."""
+    found: dict[str, list[str]] = {}
+    for later, other in elsewhere:
+        found.setdefault(later.name, []).extend(str(other.output / p) for p in _paths(later, other)
+                                                if (other.output / p).exists())
+    return [f"the {name} outputs of an earlier run: left {', '.join(paths)}: this plan no longer runs {name} there, "
+            f"and the manifest does not record whether they were made from this recording's earlier {spec.name} "
+            f"outputs, which this run replaced or removed; if they were, they match nothing: remove them"
+            for name, paths in found.items() if paths]
 
 
 #: how a warning about an earlier run's outputs removed begins (a skipped stage does not repeat it: nothing was removed)
@@ -451,6 +469,15 @@ def stale_stages(table: Mapping[str, StageSpec], rec, stage: str) -> tuple[Stage
                      table[t], rec.earlier))))
 
 
+def stale_elsewhere(table: Mapping[str, StageSpec], plan: Plan, i: int, stage: str) -> tuple:
+    """(spec, recording) of the stages of the plan's other recordings that may read recording i's `stage` outputs
+    through a link an earlier plan named (StageSpec.reads_others: diff's `before`, another recording's fuse) and
+    that this plan does not run for them: their outputs there may have been made from the outputs `stage`
+    replaces."""
+    return tuple((table[t], other) for j, other in enumerate(plan.recordings) if j != i
+                 for t in table if stage in table[t].reads_others and t not in other.stages)
+
+
 def with_earlier(plan: Plan, table: Mapping[str, StageSpec], manifest_path: Path) -> Plan:
     """The plan, each recording with the paths earlier plans named for it that the earlier run's manifest.json
     records (PlanRecording.earlier: the combined viewer files), read only when kinfu wrote that manifest and nobody
@@ -485,7 +512,8 @@ def run_plan(plan: Plan, table: Mapping[str, StageSpec], engine: Engine, *, forc
         downstream = tuple((table[t], plan.recordings[j]) for j, t in later[(i, s)])
         fut = engine.client.submit(run_task, table[s], rec, rec.stage_options(s), previous.get((str(rec.output), s)),
                                    force, *(futures[d] for d in deps), downstream=downstream,
-                                   stale=stale_stages(table, rec, s), key=f"kinfu-{s}-{i}-{run_id}", pure=False)
+                                   stale=stale_stages(table, rec, s), elsewhere=stale_elsewhere(table, plan, i, s),
+                                   key=f"kinfu-{s}-{i}-{run_id}", pure=False)
         futures[(i, s)] = fut
         where[fut.key] = (i, s)
     from dask.distributed import as_completed

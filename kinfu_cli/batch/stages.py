@@ -41,7 +41,8 @@ class StageSpec:
     `links`: the plan recording links it needs (the plan checks they resolve); `file_options`: its options whose
     value is an input file (relative to the plan's folder, part of the fingerprint); `extras`: (option, file) of
     the files it writes only when that option is true (plots, viewer files), removed with its outputs but not
-    claimed up front."""
+    claimed up front; `reads_others`: stages of another recording of the plan whose outputs a link of it may name
+    (diff's `before`: another recording's fuse)."""
 
     name: str
     needs: tuple[str, ...]
@@ -54,6 +55,7 @@ class StageSpec:
     links: tuple[str, ...] = ()
     file_options: tuple[str, ...] = ()  # options naming an input file (the plan resolves them against its folder)
     extras: tuple[tuple[str, str], ...] = ()  # (option, file) written only when it is true: ("plot", "views.png")
+    reads_others: tuple[str, ...] = ()  # another recording's stages a link may name (diff's before: its fuse)
 
     def input_paths(self, rec) -> list[tuple[str, Path]]:
         """(label, path) of each input: RECORDING is the recording, "<link>" a link of the plan recording, the

@@ -242,7 +242,7 @@ def batch_stages() -> dict[str, StageSpec]:
         "nbv": spec("nbv", ("fuse", "poi"), (volume, "pois.json"), ("views.json",), ("views.json",)),
         "segment": spec("segment", ("fuse",), (volume,), ("segment/segments.json",), ("segment",)),
         "diff": spec("diff", ("fuse",), _diff_inputs, ("diff/changes.json",), ("diff",), wants=("poi",),
-                     links=("before",)),
+                     links=("before",), reads_others=("fuse",)),
         "eval-fusion": spec("eval-fusion", ("fuse",), (volume, "fuse/mesh.ply", "<ground_truth>"),
                             ("eval_fusion.json",), ("eval_fusion.json",), links=("ground_truth",)),
         "eval-nbv": spec("eval-nbv", (), ("<ground_truth>",), (EVAL_NBV_FILE,), (EVAL_NBV_FILE,),

@@ -1,11 +1,13 @@
 """A redone stage leaves none of its earlier outputs that this run does not write, nor the combined viewer file of a
-dropped `viz`:
+dropped `viz`, and names what another recording's dropped diff may have read:
 
 - nbv redone with `plot` switched off left the views.png of the earlier views beside the new views.json (and fuse
   and poi redone without `viz`, their fuse.mcap / pois.mcap): now removed, kinfu's unchanged files only, a user's
   edited one kept with a warning;
 - a plan dropping `viz` (or renaming its file) left the combined FILE.mcap the earlier plan named: now its name is
-  read from the earlier run's manifest.json (`viewer`) and the file removed under the same rules."""
+  read from the earlier run's manifest.json (`viewer`) and the file removed under the same rules;
+- recording b's diff compared against a's fuse; after b dropped diff and a's fuse was redone, b/diff stayed. The
+  manifest does not record which recording a diff's `before` named, so it is left, and a's fuse entry names it."""
 
 from __future__ import annotations
 
@@ -145,6 +147,36 @@ def test_viewer_files_of_a_dropped_or_renamed_viz_go(tmp_path, scheduler):
     # a's is gone: no longer named; b's, kept, is, so it goes once it is kinfu's again (and said each time)
     recs = json.loads(manifest.read_text())["recordings"]
     assert "earlier_viewers" not in recs[0] and recs[1]["earlier_viewers"] == [str(b / "other.mcap")]
+
+
+DIFF = """output = "out"
+stages = ["fuse"]
+recordings = [{{path = "a.mcap", output = "a", options = {{fuse = {{voxel-size = {voxel}}}}}}},
+              {{path = "b.mcap", output = "b", stages = {b_stages}{before}}}]
+[options.fuse]
+voxel-size = 0.04
+"""
+
+
+def test_another_recordings_dropped_diff_is_named_when_its_before_is_redone(tmp_path, scheduler):
+    _recordings(tmp_path, "a.mcap", "b.mcap")
+    plan = tmp_path / "plan.toml"
+    plan.write_text(DIFF.format(voxel=0.04, b_stages='["fuse", "diff"]', before=', before = "a"'))
+    stages = _run(plan, scheduler)
+    b_diff = tmp_path / "out" / "b" / "diff"
+    assert stages["b"]["diff"]["status"] == "ok" and (b_diff / "changes.json").is_file()
+
+    plan.write_text(DIFF.format(voxel=0.05, b_stages='["fuse"]', before=""))  # a's fuse redone, b's diff dropped
+    stages = _run(plan, scheduler)
+    assert stages["a"]["fuse"]["status"] == "ok" and stages["b"]["fuse"]["status"] == "skipped"
+    assert (b_diff / "changes.json").is_file()  # which volume it read is not recorded: left, and named
+    (said,) = _said(stages["a"], "the diff outputs")  # by a's fuse
+    assert said.startswith(f"the diff outputs of an earlier run: left {b_diff}: this plan no longer runs diff"), said
+    assert said in stages["a"]["fuse"]["warnings"] and said.endswith("if they were, they match nothing: remove them")
+    assert not _said(stages["b"], "the diff outputs")
+
+    again = _run(plan, scheduler)  # a's fuse not redone: not said again
+    assert again["a"]["fuse"]["status"] == "skipped" and not _said(again["a"], "the diff outputs")
 
 
 def test_the_earlier_viewer_file_is_read_from_kinfus_manifest_in_the_recordings_folder_only(tmp_path):
