@@ -16,7 +16,6 @@ from kinfu_cli.commands._options import (Inapplicable, OutputPath, check_inappli
 from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.core.atomic import atomic_dir
 from kinfu_cli.core.checks import check_number
-from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.volume_file import MAX_COORDINATE_M
 from kinfu_cli.core.pois import poi_frame_warnings, read_pois
 from kinfu_cli.core.progress import progress
