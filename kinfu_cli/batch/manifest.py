@@ -16,15 +16,21 @@ MANIFEST_NAME = "manifest.json"
 DONE = ("ok", "skipped")
 
 
-def read_previous(path: Path) -> dict[tuple[str, str], dict]:
-    """{(output folder, stage): entry} of an earlier run's manifest; {} when absent or unreadable."""
+def _previous_recordings(path: Path) -> list[dict]:
+    """The recording entries of an earlier run's manifest; [] when absent or unreadable."""
     try:
         doc = json.loads(Path(path).read_text())
     except (OSError, ValueError):
-        return {}
+        return []
+    recs = doc.get("recordings", []) if isinstance(doc, dict) else []
+    return [rec for rec in recs if isinstance(rec, dict)] if isinstance(recs, list) else []
+
+
+def read_previous(path: Path) -> dict[tuple[str, str], dict]:
+    """{(output folder, stage): entry} of an earlier run's manifest; {} when absent or unreadable."""
     out = {}
-    for rec in doc.get("recordings", []) if isinstance(doc, dict) else []:
-        if isinstance(rec, dict) and isinstance(rec.get("stages"), dict):
+    for rec in _previous_recordings(path):
+        if isinstance(rec.get("stages"), dict):
             for stage, entry in rec["stages"].items():
                 if isinstance(entry, dict):
                     out[(str(rec.get("output")), stage)] = entry
@@ -35,14 +41,8 @@ def read_links(path: Path) -> dict[str, dict[str, tuple[Path, ...]]]:
     """{output folder: {link: paths}} of the paths earlier plans named for each recording, as an earlier run's
     manifest records them (the `viz` link: its `viewer`, and the `earlier_viewers` still there then); {} when
     absent or unreadable."""
-    try:
-        doc = json.loads(Path(path).read_text())
-    except (OSError, ValueError):
-        return {}
     out = {}
-    for rec in doc.get("recordings", []) if isinstance(doc, dict) else []:
-        if not isinstance(rec, dict):
-            continue
+    for rec in _previous_recordings(path):
         named = [rec.get("viewer"), *(rec.get("earlier_viewers") if isinstance(rec.get("earlier_viewers"), list)
                                       else ())]
         if paths := tuple(dict.fromkeys(Path(p) for p in named if isinstance(p, str) and p)):
