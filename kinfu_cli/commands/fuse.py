@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 
 from kinfu_cli.commands._options import (Inapplicable, OutputPath, bag_folder, check_inapplicable, claim_outputs,
-                                         comma_numbers, force_option)
+                                         comma_numbers, force_option, given_options)
 from kinfu_cli.commands._output import print_warnings
 from kinfu_cli.commands._roles import role_kwargs, role_options
 from kinfu_cli.commands._up import parse_up
@@ -58,6 +58,18 @@ INAPPLICABLE = (
     Inapplicable(("color",), lambda p: "with --no-color" if p["no_color"] and p["color_mode"] != "mode" else None,
                  "to fusion with colour"),
 )
+
+
+def unused_tracking_options(ctx: click.Context, pose_mode: str) -> list[str]:
+    """The warning for --max-lost / --icp given without --pose when the recording decided on poses without tracking
+    (its TF has the camera: forced; a pose topic): known only once the recording is read, so it goes into
+    report.json's warnings (an explicit --pose forced|topic is warned about before any work, INAPPLICABLE)."""
+    given = given_options(ctx, ("max-lost", "icp")) if ctx.params["pose"] is None else []
+    if not given or pose_mode not in ("forced", "topic"):
+        return []
+    one = len(given) == 1
+    return [f"{', '.join(given)} {'has' if one else 'have'} no effect: the recording gave the camera poses "
+            f"(--pose {pose_mode}, chosen from it), no frame was tracked (ignored)"]
 
 
 def fuse_arguments(params: dict) -> dict:
@@ -209,6 +221,8 @@ def command(recording: Path, outdir: Path, voxel_size, resolution, size, origin,
         plots = [p.name for p in plot_slices(result.grid, tmp)] if plot else []
         result.add_time("write", time.perf_counter() - t0)
         report = fusion_report(result, extra_outputs=plots)
+        report["warnings"] = [*unused_tracking_options(click.get_current_context(), result.pose_mode),
+                              *report["warnings"]]
         write_json(tmp / "report.json", report)
     if viz is not None:
         write_viewer(viz, fusion=result)

@@ -207,6 +207,22 @@ def test_fuse_tracking_options_with_forced_poses_warn_and_fuse(sample_dir, tmp_p
     assert json.loads((out / "report.json").read_text())["pose_mode"] == "forced"
 
 
+def test_fuse_tracking_options_with_poses_the_recording_gave_warn_in_the_report(sample_dir, tmp_path):
+    """No --pose, and the sample's TF has the camera: fusion chooses forced poses once it has read the recording,
+    so --max-lost was unused without a word; now report.json's warnings say it, and stderr."""
+    out = tmp_path / "f"
+    res = CliRunner().invoke(cli, ["fuse", str(sample_dir / "recording.mcap"), "-o", str(out), "--max-lost", "5%",
+                                   "--end", "1", "--resolution", "32", "--quiet"])
+    assert res.exit_code == 0, res.output
+    report = json.loads((out / "report.json").read_text())
+    assert report["pose_mode"] == "forced"
+    said = [w for w in report["warnings"] if w.startswith("--max-lost has no effect: the recording gave")]
+    assert len(said) == 1 and f"kinfu: warning: {said[0]}" in res.output.splitlines()
+    res = CliRunner().invoke(cli, ["fuse", str(sample_dir / "recording.mcap"), "-o", str(tmp_path / "g"), "--end",
+                                   "1", "--resolution", "32", "--quiet"])  # not given: nothing said
+    assert not [w for w in json.loads((tmp_path / "g" / "report.json").read_text())["warnings"] if "no effect" in w]
+
+
 def test_fuse_tracking_options_without_a_pose_mode_are_not_warned_about(sample_dir, tmp_path):
     """No --pose: the mode follows the recording (icp without TF), so --max-lost may apply."""
     module, args = _leaf(["fuse", str(sample_dir / "recording.mcap"), "-o", str(tmp_path / "f"), "--max-lost", "5%",
