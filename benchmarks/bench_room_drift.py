@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -78,23 +79,27 @@ def track(method: str, depths, K, poses) -> dict:
     """`kinfu fuse --pose icp` on the frames, as its integrator tracks (fusion.pipeline): from the constant-velocity
     prediction of the last two good poses, then the last good pose; the speed check over the time since the last
     good pose (a lost frame is not fused and the next is tracked from that pose). Estimated poses (the last good
-    one for a lost frame), lost and re-localised counts."""
+    one for a lost frame), lost and re-localised counts, and the tracker's seconds per frame by outcome (normal:
+    kept by the first attempt; re-localised; lost)."""
     vol = room_volume()
     vol.integrate(depths[0], K, poses[0])
     tracker = FrameToModelTracker(icp=method)
     est, good, lost, reloc = [poses[0]], [(poses[0], 0.0)], 0, 0
+    seconds = {"normal": [], "re-localised": [], "lost": []}
     for i, d in enumerate(depths[1:], start=1):
         (T1, s1), s = good[-1], i / 30
         T2, s2 = good[-2] if len(good) > 1 else (None, None)
         pred = predict_pose(T1, T2, None if s2 is None else s1 - s2, s - s1)
+        t0 = time.perf_counter()
         r = tracker.track(vol, d, K, [pred, T1], T_ref=T1, dt_s=s - s1)
+        seconds["lost" if r.lost else "re-localised" if r.relocalised else "normal"].append(time.perf_counter() - t0)
         lost += r.lost
         reloc += (not r.lost) and r.relocalised
         est.append(T1 if r.lost else r.T_world_camera)
         if not r.lost:
             good.append((r.T_world_camera, s))
             vol.integrate(d, K, r.T_world_camera)
-    return {"est": est, "lost": lost, "relocalised": reloc}
+    return {"est": est, "lost": lost, "relocalised": reloc, "seconds": seconds}
 
 
 def from_truth(method: str, depths, K, poses) -> np.ndarray:
@@ -141,6 +146,11 @@ def main() -> None:
         print(f"{method:>10}: ATE {100 * ate_rmse(r['est'], poses):.2f} cm, max {100 * err.max():.2f} cm, lost "
               f"{r['lost']}, re-localised {r['relocalised']}; error every 20 frames (cm): "
               f"{' '.join(f'{100 * e:.1f}' for e in err[::20])}")
+        ms = {k: 1000 * float(np.mean(v)) for k, v in r["seconds"].items() if v}
+        print(f"{'':>10}  tracking ms per frame: " + ", ".join(f"{k} {v:.0f} ({len(r['seconds'][k])})"
+                                                                for k, v in ms.items())
+              + (f"; a re-localised frame costs {ms['re-localised'] / ms['normal']:.1f} normal ones"
+                 if "normal" in ms and "re-localised" in ms else ""))
 
 
 if __name__ == "__main__":

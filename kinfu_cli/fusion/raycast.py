@@ -27,11 +27,24 @@ BAND_OCCLUDED = 2  # the band starts behind a model surface (the model sees some
 def model_cloud(volume, K: np.ndarray, width: int, height: int, T_world_camera: np.ndarray, scale: float = 0.5):
     """open3d PointCloud (world) with normals of the model surface seen from a pose, ray cast at `scale` of
     the image size: the target of frame-to-model ICP."""
-    import open3d as o3d  # heavy: only when tracking
-
     w = max(8, int(round(width * scale)))
     h = max(8, int(round(height * scale)))
     _, normals, verts = volume.raycast(scaled_intrinsics(K, w / width), w, h, T_world_camera)
+    return _cloud(verts, normals)
+
+
+def band_cloud(volume, K: np.ndarray, T_world_camera: np.ndarray, hint: np.ndarray, margin: float,
+               start: float | None = None):
+    """model_cloud cast only within +-margin (m) of hint's depths (band_raycast with TSDF normals and its `start`;
+    K: hint's intrinsics): the pixels with a reading, each ray a band instead of the whole depth range."""
+    _, verts, normals, _ = band_raycast(volume, K, T_world_camera, hint, margin, start=start)
+    return _cloud(verts, normals)
+
+
+def _cloud(verts: np.ndarray, normals: np.ndarray):
+    """open3d PointCloud of the pixels with both a vertex and a normal."""
+    import open3d as o3d  # heavy: only when tracking
+
     ok = np.isfinite(verts[..., 0]) & np.isfinite(normals[..., 0])
     pc = o3d.geometry.PointCloud()
     pc.points = o3d.utility.Vector3dVector(verts[ok].astype(np.float64))

@@ -48,7 +48,7 @@ from scipy.spatial.transform import Rotation
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.fusion.placement import backproject
 from kinfu_cli.fusion.icp import EDGE_JUMP_PER_M, data_pyramid, model_agreement, projective_icp, vertex_normals
-from kinfu_cli.fusion.raycast import BAND_HIT, BAND_OCCLUDED, band_raycast, model_cloud
+from kinfu_cli.fusion.raycast import BAND_HIT, BAND_OCCLUDED, band_cloud, band_raycast, model_cloud
 
 POSE_MODES = ("forced", "icp", "hint", "topic")
 ICP_METHODS = ("projective", "open3d")
@@ -89,6 +89,12 @@ BAND_START = 1.5
 # the agreement check looks for the model surface within this many truncation distances of each reading
 AGREEMENT_BAND = 4.0
 RELOCALISE_LEVELS = ((0.30, 15, 0.04), (0.15, 15, 0.04), (0.08, 10, 0.02), (0.04, 10, 0.01))
+# re-localisation's target is cast within this band (m) around each reading (band_raycast): wider than the coarsest
+# level's correspondence distance, so every model point a reading could pair with is in it
+RELOCALISE_MARGIN = 0.35
+# re-localisation's data cloud takes every `stride`-th pixel, the stride raised until the cloud is at most this many
+# pixels wide (every 4th of a 640 px frame, ~19k points; the finest levels' 1 cm voxel kept ~55k of every 2nd)
+RELOCALISE_WIDTH = 160
 # projective ICP from a measured pose (hint mode's TF): the finest level only, this many iterations (KinFu's count at
 # its finest level). The coarse levels are there to converge from a constant-velocity guess after a large move; from
 # a pose already within a centimetre or two they only add their own bias: on noisy depth they settle up to ~1 cm
@@ -226,22 +232,29 @@ class FrameToModelTracker:
         h, w = depth.shape
         cache: dict = {}
 
-        def source(voxel: float):  # open3d's data cloud, down-sampled to `voxel`
+        def source(voxel: float, stride: int):  # open3d's data cloud, every stride-th pixel, down-sampled to `voxel`
             import open3d as o3d  # heavy: only when tracking
 
-            if "cloud" not in cache:
-                pts = backproject(depth, K, np.eye(4), stride=self.stride, min_depth=volume.min_depth,
+            if ("cloud", stride) not in cache:
+                pts = backproject(depth, K, np.eye(4), stride=stride, min_depth=volume.min_depth,
                                   max_depth=volume.max_depth)
-                cache["cloud"] = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
-            if voxel not in cache:
-                cache[voxel] = cache["cloud"].voxel_down_sample(voxel) if voxel > 0 else cache["cloud"]
-            return cache[voxel]
+                cache[("cloud", stride)] = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
+            if (voxel, stride) not in cache:
+                cloud = cache[("cloud", stride)]
+                cache[(voxel, stride)] = cloud.voxel_down_sample(voxel) if voxel > 0 else cloud
+            return cache[(voxel, stride)]
 
-        def target(i: int):  # the model seen from candidate i, ray cast when first needed; None: too little
-            if ("target", i) not in cache:
-                t = model_cloud(volume, K, w, h, inits[i], scale=self.model_scale)
-                cache[("target", i)] = t if len(t.points) >= self.min_points else None
-            return cache[("target", i)]
+        def target(i: int, reloc: bool):  # the model seen from candidate i, cast when first needed; None: too little
+            if ("target", i, reloc) not in cache:
+                t = self._relocalise_target(volume, d, K, inits[i]) if reloc else None
+                if t is None or len(t.points) < self.min_points:
+                    # the full cast; for re-localisation when the model is nowhere near the readings (an occluder, a
+                    # view past the model), where open3d's ICP on it tells "too little overlap" from "not in view"
+                    if ("full", i) not in cache:
+                        cache[("full", i)] = model_cloud(volume, K, w, h, inits[i], scale=self.model_scale)
+                    t = cache[("full", i)]
+                cache[("target", i, reloc)] = t if len(t.points) >= self.min_points else None
+            return cache[("target", i, reloc)]
 
         # data-cloud voxel per level: `voxel`, or a quarter of the level's correspondence distance when coarser
         # (coarse levels need no dense cloud; the finest keeps `voxel`: at the model's 2 cm voxel a 2 cm cloud
@@ -260,13 +273,16 @@ class FrameToModelTracker:
             coarse = [(d_, it, max(v, level_voxel(d_))) for d_, it, v in RELOCALISE_LEVELS
                       if d_ > self.max_distances[-1]] + fine[-1:]
             plans += [(i, coarse, True) for i in range(len(inits))]
+        # re-localisation's data cloud: no wider than RELOCALISE_WIDTH pixels
+        stride = {False: self.stride, True: max(self.stride, w // RELOCALISE_WIDTH)}
         for i, levels, reloc in plans:
             if best is not None and not best.lost:
                 break
-            if target(i) is None:
+            if target(i, reloc) is None:
                 continue
             attempts += 1
-            res = self._attempt(source, target(i), inits[i], levels, volume, depth, K, T_ref, dt_s)
+            res = self._attempt(lambda v: source(v, stride[reloc]), target(i, reloc), inits[i], levels, volume,
+                                depth, K, T_ref, dt_s, coarse_target=reloc)
             res.relocalised = reloc
             if best is None or _better(res, best):
                 best = res
@@ -277,6 +293,18 @@ class FrameToModelTracker:
         if best.lost:
             best.T_world_camera = inits[0].copy()
         return best
+
+    def _relocalise_target(self, volume, depth, K, T):
+        """Re-localisation's target: the model seen from T at model_scale of the frame, cast only where the frame
+        has a reading, within RELOCALISE_MARGIN of it (the full cast, model_cloud, costs ~3x more: every ray walks
+        from min_depth)."""
+        s = max(1, int(round(1 / self.model_scale)))
+        hint = np.ascontiguousarray(depth[::s, ::s])
+        hint = np.where((hint >= volume.min_depth) & (hint <= volume.max_depth), hint, np.float32(0))
+        Ks = np.asarray(K, dtype=np.float64).copy()
+        Ks[:2] /= s  # pixel (u, v) of the hint is pixel (s u, s v) of the frame
+        return band_cloud(volume, Ks, T, hint, RELOCALISE_MARGIN,
+                          start=self.band_start * volume.truncation if self.band_start > 0 else None)
 
     def _projective_attempt(self, volume, depth, K, T_init, T_ref, dt_s) -> TrackResult | None:
         """Projective ICP (fusion.icp) against the model maps ray cast from T_init, then the checks (the
@@ -357,9 +385,12 @@ class FrameToModelTracker:
         """The pyramid level whose images are `factor` times smaller than the frame."""
         return max(0, int(round(np.log2(max(factor, 1.0)))))
 
-    def _attempt(self, source, target, T_init, levels, volume, depth, K, T_ref, dt_s) -> TrackResult:
+    def _attempt(self, source, target, T_init, levels, volume, depth, K, T_ref, dt_s,
+                 coarse_target: bool = False) -> TrackResult:
         """One open3d ICP run over `levels` ((distance, iterations, source voxel), coarse to fine), then the
-        checks."""
+        checks. coarse_target: the levels whose source voxel is coarser than `voxel` pair with the target
+        down-sampled to it too (a target denser than the data cloud only makes each level's KD-tree dearer: at
+        re-localisation's three coarse levels a quarter of its ICP time, for the same pose)."""
         import open3d as o3d  # heavy: only when tracking
 
         reg = o3d.pipelines.registration
@@ -367,7 +398,8 @@ class FrameToModelTracker:
         T = T_init.copy()
         res = None
         for dist, it, voxel in levels:
-            res = reg.registration_icp(source(voxel), target, dist, T, est,
+            tgt = target.voxel_down_sample(voxel) if coarse_target and voxel > self.voxel else target
+            res = reg.registration_icp(source(voxel), tgt, dist, T, est,
                                        reg.ICPConvergenceCriteria(max_iteration=it))
             T = np.asarray(res.transformation).copy()
         return self._checked(T, float(res.fitness), float(res.inlier_rmse), volume, depth, K, T_ref, dt_s,
