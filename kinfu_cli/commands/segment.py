@@ -110,7 +110,8 @@ def segment_options(p: dict, explicit: tuple[str, ...] = ()):
                                 concavity_tolerance_deg=p["concavity_tolerance"], sanity_angle_deg=p["sanity_angle"],
                                 min_segment_points=p["min_segment_points"], fragment_points=p["fragment_points"],
                                 plane_distance=p["plane_distance"], up=_up(p["up"]),
-                                up_tolerance_deg=p["up_tolerance"], seed=p["seed"])
+                                up_tolerance_deg=p["up_tolerance"], background_margin=p["background_margin"],
+                                seed=p["seed"])
     opts = SegmentOptions(resolution=p["resolution"], min_weight=p["min_weight"],
                           isolation_threshold=p["isolation_threshold"], superquadrics=not p["no_superquadrics"],
                           sq_max_points=p["sq_max_points"],
@@ -173,6 +174,10 @@ def check_options(params: dict) -> None:
               help="Expected support-plane normal: 'x,y,z', 'none' (any plane) or 'auto' (the volume's up, "
                    "stored by kinfu fuse; z when the volume has none).")
 @click.option("--up-tolerance", type=float, default=30.0, show_default=True, help="Allowed plane tilt from --up (deg).")
+@click.option("--background-margin", type=float, default=0.05, show_default=True,
+              help="Segments mostly below the support plane, or past its seen edge by more than this (m), are "
+                   "background (kind \"background\" in segments.json: a single view's wall, floor, furniture), "
+                   "not objects; 0 = off.")
 @click.option("--isolation-threshold", type=float, default=0.02, show_default=True, help="B_th of eq. 3.11 (m).")
 @click.option("--no-superquadrics", is_flag=True, help="Skip the superquadric fits.")
 @click.option("--sq-max-points", type=int, default=200, show_default=True, help="Points per superquadric fit.")
@@ -211,7 +216,7 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
             plane_distance, up, up_tolerance, isolation_threshold, no_superquadrics, sq_max_points,
             sq_exponent_bounds, sq_cost, multi_sq, msq_trigger, msq_height, msq_mu, seed, plot, as_json,
             quiet, force, viz=None, shape_prior=True, grasp=False, grasp_hand="both", grasp_cones=(),
-            grasp_starts=4, msq_cut="volume", color_distance="chroma") -> None:
+            grasp_starts=4, msq_cut="volume", color_distance="chroma", background_margin=0.05) -> None:
     """Segment the surface of VOLUME (a fusion volume.npz or a ternary.npz): support plane, supervoxels
     merged across convex boundaries (LCCP idea), saliency = isolation x roundness (thesis eq. 3.12) and a
     superquadric per segment (Vezzani ch. 7). Writes OUTDIR/segments.ply (coloured by segment),
@@ -263,6 +268,8 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
     elif not quiet:
         objs = [s for s in doc["segments"] if s["kind"] == "object"]
         plane = " + support plane" if doc["support_plane"] is not None else ", no support plane"
+        n_bg = sum(s["kind"] == "background" for s in doc["segments"])
+        plane += f" + {n_bg} background (below the support or beyond it)" if n_bg else ""
         click.echo(f"{len(objs)} segments{plane} from {doc['points']} surface points "
                    f"in {result.timing['total']:.2f} s -> {outdir}/segments.json")
         if grasps is not None:

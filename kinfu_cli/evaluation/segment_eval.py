@@ -109,7 +109,8 @@ def load_predicted_segments(path: str | os.PathLike) -> PredictedSegments:
                 raise LabelsFileError(f"{meta}: 'up' is {doc['up']!r}, expected a finite non-zero direction") from None
         if source == "segment colours":
             try:
-                want = sorted(int(s["point_count"]) for s in doc.get("segments", []) if s.get("kind") == "object")
+                want = sorted(int(s["point_count"]) for s in doc.get("segments", [])
+                              if s.get("kind") in ("object", "background"))  # both have a colour in segments.ply
             except (KeyError, TypeError, ValueError, AttributeError):
                 raise LabelsFileError(f"{meta}: 'segments' is not a list of segments with integer point counts") \
                     from None

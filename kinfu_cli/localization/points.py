@@ -56,7 +56,8 @@ def read_segment_points(segments_json: str | os.PathLike, segment: int) -> np.nd
     meta = Path(segments_json)
     try:
         doc = json.loads(meta.read_text())
-        segs = {int(s["id"]): s for s in doc["segments"] if s.get("kind") == "object"}
+        # a background segment (segmentation/background.py) has its colour in segments.ply too: named, it is read
+        segs = {int(s["id"]): s for s in doc["segments"] if s.get("kind") in ("object", "background")}
     except FileNotFoundError:
         raise LocalizationError(f"{meta}: no such segments file") from None
     except (OSError, ValueError, KeyError, TypeError, AttributeError, RecursionError,  # a segment not an object,

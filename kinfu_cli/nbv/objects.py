@@ -224,7 +224,7 @@ def plan_object_views(segments: SegmentResult, contours: Contours, scorer: Score
     plan = ObjectPlan(None, 0.0, None, None, None, int(len(poses)), 0)
     plan.timing["views_generation"] = time.perf_counter() - t0
     t_eval = 0.0
-    for rank, s in enumerate(segments.saliency):
+    for rank, s in enumerate(segments.objects):  # background segments (a wall) are not worth a view
         if max_segments is not None and rank >= max_segments:
             break
         cp = np.flatnonzero(near == s.id)

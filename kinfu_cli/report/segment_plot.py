@@ -119,7 +119,7 @@ def plot_segments(result: SegmentResult, outdir: str | os.PathLike) -> dict[str,
         fig.set_layout_engine("none")
         for ax, (i, j, _) in zip(panels, views):
             items = []
-            for s in result.saliency[:15]:
+            for s in result.objects[:15]:  # background segments keep their colour, not a label
                 c = basis @ s.centroid
                 items.append((c[i], c[j], f"{s.id}: {s.saliency:.2f}"))
             place_labels(ax, items)

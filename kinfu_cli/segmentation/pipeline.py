@@ -22,6 +22,7 @@ from kinfu_cli.core.point_pairs import check_pair_count
 from kinfu_cli.fusion.extent import CUT_LINE_M, CUT_MIN_VOXELS, FACES
 from kinfu_cli.fusion.volume import TernaryVolume, load_volume
 from kinfu_cli.segmentation.multi_superquadric import MultiSuperquadric, fit_multi_superquadric
+from kinfu_cli.segmentation.background import background_segments
 from kinfu_cli.segmentation.saliency import ISOLATION_HINT, SegmentSaliency, oriented_box, segment_saliency
 from kinfu_cli.segmentation.shape_prior import classify_shape, exponent_bounds
 from kinfu_cli.segmentation.bridges import volume_space
@@ -108,15 +109,25 @@ class SegmentResult:
     warnings: list[str] = field(default_factory=list)  # an empty result's structural reason, with counts
     shape_classes: dict[int, ShapeClass] = field(default_factory=dict)  # with options.shape_prior
     grid_faces: dict[int, list[str]] = field(default_factory=dict)  # segment id -> grid faces it touches (a cut)
+    # segment id -> why it is background, not an object (background.py: below the support or beyond its extent)
+    background: dict[int, str] = field(default_factory=dict)
+
+    @property
+    def objects(self) -> list[SegmentSaliency]:
+        """The segments that are objects (not background), most salient first."""
+        return [s for s in self.saliency if s.id not in self.background]
 
     def to_json(self) -> dict:
         segs = []
         seg = self.segmentation
         plane_pts = support_plane_points(seg)
-        for rank, s in enumerate(self.saliency, start=1):
+        ranks = {s.id: rank for rank, s in enumerate(self.objects, start=1)}
+        for s in self.objects + [s for s in self.saliency if s.id in self.background]:
             sq = self.superquadrics.get(s.id)
+            kind = {"kind": "background", "rank": None, "background_reason": self.background[s.id]} \
+                if s.id in self.background else {"kind": "object", "rank": ranks[s.id]}
             segs.append({
-                "id": s.id, "kind": "object", "rank": rank, "point_count": s.n_points,
+                "id": s.id, **kind, "point_count": s.n_points,
                 "centroid": s.centroid.tolist(), "oriented_box": s.box.to_json(),
                 "bounding_sphere": {"center": s.box.center.tolist(), "radius": s.bounding_radius},
                 "isolation": s.isolation, "roundness": s.roundness, "saliency": s.saliency,
@@ -441,6 +452,9 @@ def analyse_cloud(points: np.ndarray, normals: np.ndarray, options: SegmentOptio
     check_pair_count(tree, options.isolation_threshold, what="surface points", parameter="isolation_threshold",
                      hint=ISOLATION_HINT)
     seg = segment_cloud(points, normals, options.segmentation, colors if options.color else None, space)
+    background = background_segments(seg, options.segmentation, space)
+    seg.stats["background_segments"] = {reason: sum(r == reason for r in background.values())
+                                        for reason in sorted(set(background.values()))}
     timing["segmentation"] = time.perf_counter() - t
     t = time.perf_counter()
     sal = segment_saliency(seg.points, seg.labels, b_th=options.isolation_threshold, exclude=(-1, PLANE_LABEL),
@@ -456,7 +470,8 @@ def analyse_cloud(points: np.ndarray, normals: np.ndarray, options: SegmentOptio
         timing["multi_superquadrics"] = time.perf_counter() - t
     return SegmentResult(SurfaceCloud(seg.points, seg.normals, seg.colors), seg, sal, fits, timing, options, multi,
                          up_source, support_plane_warnings(seg, up_source, options.segmentation)
-                         + color_warnings(seg, options) + oversize_warnings(sal, fits), classes)
+                         + color_warnings(seg, options) + oversize_warnings(sal, fits), classes,
+                         background=background)
 
 
 def analyse_volume(volume: TernaryVolume | TernaryGrid, options: SegmentOptions | None = None) -> SegmentResult:
@@ -469,7 +484,7 @@ def analyse_volume(volume: TernaryVolume | TernaryGrid, options: SegmentOptions 
     t_surface = time.perf_counter() - t
     if len(cloud) < options.segmentation.min_segment_points:
         raise VolumeError(f"volume surface has only {len(cloud)} points: nothing to segment")
-    space = volume_space(volume) if options.segmentation.bridge_gap > 0 else None
+    space = volume_space(volume)  # bridges across unknown space and background.py read it
     result = analyse_cloud(cloud.points, cloud.normals, options, {"surface": t_surface}, up_source, cloud.colors,
                            space)
     result.segmentation.stats["scaled_for_voxel"] = {"voxel_size": float(volume.voxel_size), **scaled}

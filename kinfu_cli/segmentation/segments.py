@@ -225,6 +225,9 @@ class SegmentationParams:
     # missing depth real views show at 0.8-1.2 m (up to 4 cm); objects and household single views (tuning seeds)
     # unchanged at 0.05, a box face cut by a 6-10 px band at 320x240 is one segment again (tests/segmentation)
     bridge_gap: float = 0.05
+    # segments mostly below the support plane or beyond its extent by more than this are background, not objects
+    # (background.py; m, 0 = off): the wall, floor and furniture a single view's whole-frustum grid holds
+    background_margin: float = 0.05
     seed: int = 0
 
     def validate(self) -> None:
@@ -234,6 +237,7 @@ class SegmentationParams:
             check_number(getattr(self, name), name, 1e-4, MAX_DISTANCE_M, unit="m")
         check_number(self.plane_color_margin, "plane_color_margin", 0, 10, unit="m")
         check_number(self.bridge_gap, "bridge_gap", 0, 1, unit="m")
+        check_number(self.background_margin, "background_margin", 0, MAX_DISTANCE_M, unit="m")
         for name in ("spatial_importance", "normal_importance", "color_importance"):
             check_number(getattr(self, name), name, 0, 1e6)
         if self.method not in METHODS:

@@ -1,0 +1,118 @@
+"""Which segments are background: not standing on the support plane's seen extent.
+
+A grid sized to everything a view observes (kinfu fuse's default, up to its maximum depth) gives a single view
+of a tabletop the wall behind it, the floor, the table's front and the furniture beside it too. The thesis segments a
+workspace box around the table; here those surfaces became segments like the objects (on our simulated room, a
+wall or a cabinet added 1-2 "objects" to each view of 5-11). Not in the thesis: a segment is background when
+most of its points (each counted once) lie
+
+- below the support plane, more than `plane_distance` under it (a cabinet or chair beside the table; surfaces
+  wholly under the table's height already join the support plane, segments.py step 5), or
+- beyond the support plane's extent: outside the convex hull of the support's own points (its largest connected
+  part of up-facing points at its height) by more than `background_margin`, where the volume saw that the support
+  ends: at plane level, `background_margin` out from the hull edge towards the point, the voxel just under the
+  plane was observed empty (a ray went past the table's edge there). Needs the volume's labels (`space`).
+
+An object on the table stands inside that hull, even where it hides the table behind it (the hull is convex),
+and one overhanging an edge keeps most of its points over the table. One whose foot the image border cuts off
+(with the table under it) lies outside the hull, but the volume never saw the plane level there: unknown, so it
+stays an object. Nothing is background in a room (structure.py: floor and walls found; a table there is
+furniture), without a support plane, or when the support spans less than MIN_SUPPORT_SPAN along either axis.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import ConvexHull, QhullError
+
+from kinfu_cli.core.grid import EMPTY
+from kinfu_cli.core.point_pairs import bounded_pairs
+from kinfu_cli.segmentation.bridges import SpaceQuery
+from kinfu_cli.segmentation.segments import PLANE_LABEL, Segmentation, SegmentationParams
+
+MAJORITY = 0.5  # share of a segment's points below or beyond the support for it to be background
+MIN_SUPPORT_SPAN = 0.2  # m: a support whose points span less (either way along the plane) decides nothing
+
+BELOW = "below the support plane"
+BEYOND = "beyond the support plane's extent"
+
+
+def background_segments(seg: Segmentation, params: SegmentationParams, space: SpaceQuery | None = None
+                        ) -> dict[int, str]:
+    """Segment id -> why it is background (BELOW or BEYOND; BEYOND only with the volume's `space`); empty when
+    the rule does not apply (see the module)."""
+    if (params.background_margin <= 0 or seg.plane is None
+            or (seg.stats.get("structure") or {}).get("room")):
+        return {}
+    n, d = seg.plane[:3], float(seg.plane[3])
+    h = seg.points @ n + d
+    # the support's own surface: label 0 also takes object feet and bands of walls at its height (segments.py 5, 7)
+    flat = seg.normals @ n >= np.cos(np.radians(params.up_tolerance_deg))
+    support = _main_part(seg.points[(seg.labels == PLANE_LABEL) & (np.abs(h) <= 2 * params.plane_distance) & flat],
+                         params.adjacency_radius)
+    if len(support) < 3:
+        return {}
+    axes = _plane_axes(n)
+    uv = seg.points @ axes.T
+    sup_uv = support @ axes.T
+    if np.any(np.ptp(sup_uv, axis=0) < MIN_SUPPORT_SPAN):
+        return {}
+    try:
+        hull = ConvexHull(sup_uv)
+    except (QhullError, ValueError):  # all support points on a line
+        return {}
+    outside = _seen_beyond(uv, hull, seg.plane, axes, params.background_margin, space)
+    below = h < -params.plane_distance
+    pos = seg.labels > 0
+    lab = seg.labels[pos]
+    count = np.maximum(np.bincount(lab), 1)
+    share_below = np.bincount(lab, weights=below[pos], minlength=len(count)) / count
+    share_beyond = np.bincount(lab, weights=(outside & ~below)[pos], minlength=len(count)) / count
+    out: dict[int, str] = {}
+    for s in np.flatnonzero(share_below + share_beyond >= MAJORITY):
+        out[int(s)] = BELOW if share_below[s] >= share_beyond[s] else BEYOND
+    return out
+
+
+def _seen_beyond(uv: np.ndarray, hull: ConvexHull, plane: np.ndarray, axes: np.ndarray, margin: float,
+                 space: SpaceQuery | None) -> np.ndarray:
+    """(N,) bool: the point lies over the plane more than `margin` outside the hull, and the volume saw the plane
+    level empty `margin` out from the hull edge it is beyond (so the support ends there, not the view)."""
+    if space is None:
+        return np.zeros(len(uv), dtype=bool)
+    # qhull's 2-D facet equations have unit normals: a x + b y + c is the signed distance outside each edge
+    dist = uv @ hull.equations[:, :2].T + hull.equations[:, 2]
+    edge = np.argmax(dist, axis=1)
+    far = dist[np.arange(len(uv)), edge] > margin
+    out = np.zeros(len(uv), dtype=bool)
+    if not np.any(far):
+        return out
+    i = np.flatnonzero(far)
+    labels_at, voxel = space
+    n = plane[:3]
+    r_uv = uv[i] - (dist[i, edge[i]] - margin)[:, None] * hull.equations[edge[i], :2]
+    r = r_uv @ axes - (float(plane[3]) + voxel) * n  # on the plane, one voxel under it
+    out[i] = labels_at(r) == EMPTY
+    return out
+
+
+def _main_part(points: np.ndarray, radius: float) -> np.ndarray:
+    """The largest connected part of the support's points (pairs within `radius`): the table top, without the
+    strips of other surfaces that happen to lie at its height and face up (a single view's wall band)."""
+    if len(points) < 3:
+        return points
+    pairs = bounded_pairs(points, radius, what="support plane points", hint="a smaller adjacency_radius",
+                          parameter="adjacency_radius")
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(points), len(points)))
+    _, comp = connected_components(graph, directed=False)
+    return points[comp == np.argmax(np.bincount(comp))]
+
+
+def _plane_axes(n: np.ndarray) -> np.ndarray:
+    """(2, 3) orthonormal axes spanning the plane of unit normal n."""
+    a = np.eye(3)[int(np.argmin(np.abs(n)))]
+    u = np.cross(n, a)
+    u /= np.linalg.norm(u)
+    return np.stack([u, np.cross(n, u)])
