@@ -8,11 +8,17 @@ with the photometric effects of the segmentation benchmark, fused alone into a 5
 An object is split when two or more segments are given to it; a segment merges when a second object holds at
 least a quarter of its points.
 
+--room: the scene gets walls 1.6 m from the table's centre on all four sides and a cabinet on the floor, the
+views are taken from 1.1 m at 30 deg elevation from four sides (walls and cabinet in view), and each is fused into
+a grid around all it sees at 3/512 m, as `kinfu fuse --size auto` does. Segments of kind "background"
+(segmentation/background.py) are counted apart: the row says how many, and how many lie mostly on an object
+(`bg_on_objects`, which should be 0).
+
 Layouts: "objects" (primitives, `segmentation_scene`) and "household" (YCB-like composites,
 `sim.household.household_scene`). Seeds are fixed before looking: household tuning 0-5, held-out 6-9 (run the
 held-out ones once, at the end, with --held-out); objects 0, 1, 8-11 (the sv.py set).
 
-Usage: PYTHONPATH=. python benchmarks/bench_single_view.py [--layouts objects,household] [--held-out]
+Usage: PYTHONPATH=. python benchmarks/bench_single_view.py [--layouts objects,household] [--held-out] [--room]
        [--seeds 0,1] [--frames 0,6,12,18] [--up none|z] [--color mean|mode] [--json out.json]
        [--param NAME=VALUE] [--sensor '{"baseline": 0.05, "ir_focal": 385}']
 """
@@ -34,7 +40,7 @@ from kinfu_cli.segmentation.pipeline import SegmentOptions, analyse_volume
 from kinfu_cli.segmentation.segments import SegmentationParams
 from kinfu_cli.sim.household import object_kind
 from kinfu_cli.sim.scenario import make_scenario
-from kinfu_cli.sim.scene import scene_label_cloud
+from kinfu_cli.sim.scene import resting_object, scene_label_cloud
 from kinfu_cli.sim.sensor import DepthSensor
 
 W, H = 640, 480
@@ -45,28 +51,82 @@ NEAR = 0.015  # m: a cloud point lies on the labelled surface within this distan
 MERGE_SHARE = 0.25
 
 
-def segment_view(scene, sensor, K, T, frame_seed: int, up, color: str, overrides: dict | None = None):
-    """(points, segment labels, seconds wall, seconds CPU) of one view fused alone and segmented."""
+ROOM_SCENERY = ("wall_n", "wall_s", "wall_e", "wall_w", "cabinet")
+ROOM_AZIMUTHS = (0.0, 1.6, 3.1, 4.7)  # rad: views from +x, +y, -x, -y of the table's centre
+AUTO_VOXEL = 3 / 512  # m: kinfu fuse's default voxel with --size auto
+
+
+def with_room(scene):
+    """The scene inside four walls 1.6 m from the table's centre, with a cabinet on the floor by one corner."""
+    x, y = scene.table.center
+    wall, white = {"x": 5, "y": 0.1, "z": 2.6}, (0.85, 0.85, 0.8)
+    side = {"x": 0.1, "y": 5, "z": 2.6}
+    extra = (resting_object("wall_n", "box", wall, xy=(x, y + 1.6), colour=white),
+             resting_object("wall_s", "box", wall, xy=(x, y - 1.6), colour=white),
+             resting_object("wall_e", "box", side, xy=(x + 1.6, y), colour=(0.8, 0.82, 0.85)),
+             resting_object("wall_w", "box", side, xy=(x - 1.6, y), colour=(0.8, 0.82, 0.85)),
+             resting_object("cabinet", "box", {"x": 0.6, "y": 0.5, "z": 0.9}, xy=(x + 1.0, y + 1.0),
+                            colour=(0.5, 0.35, 0.2)))
+    return replace(scene, objects=scene.objects + extra)
+
+
+def room_view(scene, azimuth: float, distance: float = 1.1, elevation_deg: float = 30.0) -> np.ndarray:
+    """Camera pose (x right, y down, z forward) looking at the table's centre 5 cm over its top."""
+    target = np.array([scene.table.center[0], scene.table.center[1], scene.table.top_z + 0.05])
+    e = np.radians(elevation_deg)
+    p = target + distance * np.array([np.cos(azimuth) * np.cos(e), np.sin(azimuth) * np.cos(e), np.sin(e)])
+    z = (target - p) / np.linalg.norm(target - p)
+    x = np.cross(z, [0.0, 0.0, 1.0])
+    x /= np.linalg.norm(x)
+    T = np.eye(4)
+    T[:3, 0], T[:3, 1], T[:3, 2], T[:3, 3] = x, np.cross(z, x), z, p
+    return T
+
+
+def _view_grid(scene, depth, K, T, room: bool, color: str) -> TernaryVolume:
+    """The table's 1.6 m box, or (room) a grid around all the view sees at AUTO_VOXEL, as kinfu fuse's."""
+    if not room:
+        c = np.array([scene.table.center[0], scene.table.center[1], scene.table.top_z])
+        return TernaryVolume(size=1.6, resolution=320, origin=c - np.array([0.8, 0.8, 0.4]), color=True,
+                             color_mode=color)
+    v, u = np.nonzero(depth > 0)
+    z = depth[v, u].astype(np.float64)
+    pts = (T @ np.stack([(u - K[0, 2]) * z / K[0, 0], (v - K[1, 2]) * z / K[1, 1], z, np.ones_like(z)]))[:3].T
+    lo, hi = pts.min(axis=0) - 0.05, pts.max(axis=0) + 0.05
+    res = np.ceil((hi - lo) / AUTO_VOXEL).astype(int)
+    return TernaryVolume(size=tuple(res * AUTO_VOXEL), resolution=tuple(int(r) for r in res), origin=lo, color=True,
+                         color_mode=color)
+
+
+def segment_view(scene, sensor, K, T, frame_seed: int, up, color: str, overrides: dict | None = None,
+                 room: bool = False):
+    """(points, segment labels, background segment ids, seconds wall, seconds CPU) of one view fused alone and
+    segmented."""
     w0, c0 = time.perf_counter(), time.process_time()
     depth, rgb = sensor.render(scene, T, frame_seed=frame_seed)
-    c = np.array([scene.table.center[0], scene.table.center[1], scene.table.top_z])
-    vol = TernaryVolume(size=1.6, resolution=320, origin=c - np.array([0.8, 0.8, 0.4]), color=True,
-                        color_mode=color)
+    vol = _view_grid(scene, depth, K, T, room, color)
     vol.integrate(depth, K, T, rgb)
     o = SegmentOptions(superquadrics=False)
     o = replace(o, segmentation=replace(o.segmentation, up=up, **(overrides or {})))
     res = analyse_volume(vol, o)
-    return res.segmentation.points, res.segmentation.labels, time.perf_counter() - w0, time.process_time() - c0
+    return (res.segmentation.points, res.segmentation.labels, set(res.background), time.perf_counter() - w0,
+            time.process_time() - c0)
 
 
-def score_view(points, labels, gp, gl, names: dict) -> dict:
-    """Segments, visible objects, and per object the segments given to it; per segment its main object."""
+def score_view(points, labels, gp, gl, names: dict, background: set = frozenset(), scenery=()) -> dict:
+    """Segments (objects only: background ones apart), visible objects (not the room's scenery), and per object
+    the segments given to it; per segment its main object."""
     d, idx = cKDTree(gp).query(points)
     g = np.where(d < NEAR, gl[idx], -1)
-    segs = [int(s) for s in np.unique(labels) if s > 0]
-    visible = [int(o) for o in np.unique(g) if o > 0 and np.sum(g == o) >= MIN_POINTS]
+    segs = [int(s) for s in np.unique(labels) if s > 0 and int(s) not in background]
+    visible = [int(o) for o in np.unique(g) if o > 0 and names[o] not in scenery and np.sum(g == o) >= MIN_POINTS]
     given = defaultdict(list)
     merges, detail = [], []
+    bg_on_objects = 0
+    for s in background:
+        obj, cnt = np.unique(g[labels == s], return_counts=True)
+        main = int(obj[np.argmax(cnt)])
+        bg_on_objects += int(main > 0 and names[main] not in scenery)
     for s in segs:
         obj, cnt = np.unique(g[labels == s], return_counts=True)
         order = np.argsort(-cnt)
@@ -78,27 +138,30 @@ def score_view(points, labels, gp, gl, names: dict) -> dict:
         if main > 0 and second:
             merges.append([name] + [names.get(o, str(o)) for o, _ in second])
     return {"segments": len(segs), "visible": len(visible), "detail": sorted(detail),
+            "background": len(background), "bg_on_objects": bg_on_objects,
             "split": {names[o]: len(given[o]) for o in visible if len(given[o]) >= 2},
             "missed": [names[o] for o in visible if not given[o]], "merges": merges,
             "visible_ids": [names[o] for o in visible]}
 
 
-def run(layout: str, seeds, frames, up, color: str, overrides: dict | None = None, sensor_args: dict | None = None
-        ) -> list[dict]:
+def run(layout: str, seeds, frames, up, color: str, overrides: dict | None = None, sensor_args: dict | None = None,
+        room: bool = False) -> list[dict]:
     rows = []
     for seed in seeds:
         sc = make_scenario(seed, width=W, height=H, frames=24, noise=True, layout=layout)
-        scene = sc.scene_after
+        scene = with_room(sc.scene_after) if room else sc.scene_after
         sensor = DepthSensor(sc.K, W, H, noise=True, seed=seed, **(PHOTOMETRIC | (sensor_args or {})))
         gp, gl = scene_label_cloud(scene)
         names = {scene.label_of(o.id): o.id for o in scene.present_objects}
-        for k in frames:
-            pts, lab, wall, cpu = segment_view(scene, sensor, sc.K, sc.frames[k].T_world_camera, k, up, color,
-                                                 overrides)
-            r = score_view(pts, lab, gp, gl, names) | {"layout": layout, "seed": seed, "frame": k, "wall_s": wall,
-                                                      "cpu_s": cpu}
+        views = ([(k, room_view(scene, a)) for k, a in enumerate(ROOM_AZIMUTHS)] if room else
+                 [(k, sc.frames[k].T_world_camera) for k in frames])
+        for k, T in views:
+            pts, lab, bg, wall, cpu = segment_view(scene, sensor, sc.K, T, k, up, color, overrides, room)
+            r = score_view(pts, lab, gp, gl, names, bg, ROOM_SCENERY if room else ()) | {
+                "layout": layout, "seed": seed, "frame": k, "wall_s": wall, "cpu_s": cpu}
             rows.append(r)
-            print(f"{layout} seed {seed} frame {k}: segments {r['segments']} visible {r['visible']} "
+            print(f"{layout} seed {seed} {'view' if room else 'frame'} {k}: segments {r['segments']} visible "
+                  f"{r['visible']} background {r['background']} (on objects {r['bg_on_objects']}) "
                   f"({wall:.1f} s, cpu {cpu:.1f} s) split {r['split'] or '-'} merged {r['merges'] or '-'} "
                   f"missed {r['missed'] or '-'} | {' '.join(r['detail'])}", flush=True)
     return rows
@@ -116,7 +179,9 @@ def summary(rows: list[dict]) -> dict:
         for m in r["merges"]:
             for oid in m:
                 kinds[object_kind(oid)][2] += 1
-    return {"views": len(a), "mean_ratio": float(ratio.mean()), "within_30": float(np.mean(np.abs(ratio - 1) <= 0.3)),
+    return {"views": len(a), "mean_ratio": float(ratio.mean()),
+            "background": int(sum(r["background"] for r in rows)),
+            "bg_on_objects": int(sum(r["bg_on_objects"] for r in rows)), "within_30": float(np.mean(np.abs(ratio - 1) <= 0.3)),
             "within_30_count": int(np.sum(np.abs(ratio - 1) <= 0.3)),
             "wall_s_per_view": float(np.mean([r["wall_s"] for r in rows])),
             "cpu_s_per_view": float(np.mean([r["cpu_s"] for r in rows])),
@@ -132,6 +197,8 @@ def main() -> None:
     ap.add_argument("--up", default="none", help="none, z, or x,y,z")
     ap.add_argument("--color", default="mean", choices=("mean", "mode"))
     ap.add_argument("--json", default=None)
+    ap.add_argument("--room", action="store_true", help="walls and a cabinet round the table, views that see them, "
+                                                        "a grid around all each view sees (see the docstring)")
     ap.add_argument("--sensor", default="{}", help='DepthSensor keywords as JSON, e.g. {"baseline": 0.05}')
     ap.add_argument("--param", action="append", default=[],
                     help="a SegmentationParams field as name=value (none for None), repeatable")
@@ -146,12 +213,13 @@ def main() -> None:
                  SEEDS[layout]["held-out" if a.held_out else "tuning"])
         if not seeds:
             continue
-        rows = run(layout, seeds, frames, up, a.color, overrides, json.loads(a.sensor))
+        rows = run(layout, seeds, frames, up, a.color, overrides, json.loads(a.sensor), a.room)
         s = summary(rows)
         out[layout] = {"rows": rows, "summary": s}
         print(f"== {layout} seeds {seeds} frames {frames} up {a.up} colour {a.color} {a.param or ''} {a.sensor}: {s['views']} views, "
               f"mean ratio {s['mean_ratio']:.3f}, within +-30 % {s['within_30_count']}/{s['views']} "
-              f"({s['within_30']:.2f}), {s['wall_s_per_view']:.1f} s/view wall, {s['cpu_s_per_view']:.1f} s CPU")
+              f"({s['within_30']:.2f}), background segments {s['background']} (on objects {s['bg_on_objects']}), "
+              f"{s['wall_s_per_view']:.1f} s/view wall, {s['cpu_s_per_view']:.1f} s CPU")
         for k, v in s["kinds"].items():
             print(f"   {k:12s} visible {v['visible']:3d}  split {v['split']:3d}  merged {v['merged']:3d}")
     if a.json:
