@@ -10,8 +10,8 @@ most of its points (each counted once) lie
   wholly under the table's height already join the support plane, segments.py step 5), or
 - beyond the support plane's extent: outside the convex hull of the support's own points (its largest connected
   part of up-facing points at its height) by more than `background_margin`, where the volume saw that the support
-  ends: at plane level, `background_margin` out from the hull edge towards the point, the voxel just under the
-  plane was observed empty (a ray went past the table's edge there). Needs the volume's labels (`space`).
+  ends: somewhere between `background_margin` out from the hull edge and the point's foot, the plane level was
+  observed empty under the plane (a ray went past the table's edge there). Needs the volume's labels (`space`).
 
 An object on the table stands inside that hull, even where it hides the table behind it (the hull is convex),
 and one overhanging an edge keeps most of its points over the table. One whose foot the image border cuts off
@@ -34,6 +34,8 @@ from kinfu_cli.segmentation.segments import PLANE_LABEL, Segmentation, Segmentat
 
 MAJORITY = 0.5  # share of a segment's points below or beyond the support for it to be background
 MIN_SUPPORT_SPAN = 0.2  # m: a support whose points span less (either way along the plane) decides nothing
+BEYOND_SAMPLES = 8  # places between the hull's edge (+ margin) and a point's foot where the plane level is read
+TABLE_DEPTH = 3  # voxels under the plane read too: a seen table is occupied there, noise may carve its first voxel
 
 BELOW = "below the support plane"
 BEYOND = "beyond the support plane's extent"
@@ -79,7 +81,10 @@ def background_segments(seg: Segmentation, params: SegmentationParams, space: Sp
 def _seen_beyond(uv: np.ndarray, hull: ConvexHull, plane: np.ndarray, axes: np.ndarray, margin: float,
                  space: SpaceQuery | None) -> np.ndarray:
     """(N,) bool: the point lies over the plane more than `margin` outside the hull, and the volume saw the plane
-    level empty `margin` out from the hull edge it is beyond (so the support ends there, not the view)."""
+    level empty somewhere between `margin` out from the hull edge it is beyond and the point's foot (so the support
+    ends there, not the view): at one of up to BEYOND_SAMPLES places on that line, both one and TABLE_DEPTH voxels
+    under the plane were observed empty (a table seen there is occupied under its surface, one never seen unknown).
+    The first place alone missed a cabinet seen past the table's corner, where the table hides the floor."""
     if space is None:
         return np.zeros(len(uv), dtype=bool)
     # qhull's 2-D facet equations have unit normals: a x + b y + c is the signed distance outside each edge
@@ -92,9 +97,12 @@ def _seen_beyond(uv: np.ndarray, hull: ConvexHull, plane: np.ndarray, axes: np.n
     i = np.flatnonzero(far)
     labels_at, voxel = space
     n = plane[:3]
-    r_uv = uv[i] - (dist[i, edge[i]] - margin)[:, None] * hull.equations[edge[i], :2]
-    r = r_uv @ axes - (float(plane[3]) + voxel) * n  # on the plane, one voxel under it
-    out[i] = labels_at(r) == EMPTY
+    beyond = dist[i, edge[i]]
+    back = np.linspace(0.0, 1.0, BEYOND_SAMPLES)[None, :] * (beyond - margin)[:, None]  # from the foot to the edge
+    r_uv = uv[i, None, :] - back[..., None] * hull.equations[edge[i], None, :2]
+    on_plane = (r_uv @ axes).reshape(-1, 3) - float(plane[3]) * n
+    seen = (labels_at(on_plane - voxel * n) == EMPTY) & (labels_at(on_plane - TABLE_DEPTH * voxel * n) == EMPTY)
+    out[i] = seen.reshape(len(i), BEYOND_SAMPLES).any(axis=1)
     return out
 
 
