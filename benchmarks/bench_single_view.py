@@ -34,6 +34,7 @@ from dataclasses import replace
 import numpy as np
 from scipy.spatial import cKDTree
 
+from kinfu_cli.core.poses import look_at
 from kinfu_cli.evaluation.segments import PHOTOMETRIC
 from kinfu_cli.fusion.volume import TernaryVolume
 from kinfu_cli.segmentation.pipeline import SegmentOptions, analyse_volume
@@ -75,12 +76,7 @@ def room_view(scene, azimuth: float, distance: float = 1.1, elevation_deg: float
     target = np.array([scene.table.center[0], scene.table.center[1], scene.table.top_z + 0.05])
     e = np.radians(elevation_deg)
     p = target + distance * np.array([np.cos(azimuth) * np.cos(e), np.sin(azimuth) * np.cos(e), np.sin(e)])
-    z = (target - p) / np.linalg.norm(target - p)
-    x = np.cross(z, [0.0, 0.0, 1.0])
-    x /= np.linalg.norm(x)
-    T = np.eye(4)
-    T[:3, 0], T[:3, 1], T[:3, 2], T[:3, 3] = x, np.cross(z, x), z, p
-    return T
+    return look_at(p, target)
 
 
 def _view_grid(scene, depth, K, T, room: bool, color: str) -> TernaryVolume:

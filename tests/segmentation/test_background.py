@@ -12,6 +12,7 @@ from click.testing import CliRunner
 from scipy.spatial import cKDTree
 
 from kinfu_cli.cli import cli
+from kinfu_cli.core.poses import look_at
 from kinfu_cli.evaluation.segments import PHOTOMETRIC
 from kinfu_cli.fusion.volume import TernaryVolume
 from kinfu_cli.segmentation.background import BELOW, BEYOND
@@ -28,12 +29,7 @@ def _looking_at(target, azimuth: float, elevation_deg: float, distance: float) -
     """Camera pose (x right, y down, z forward) at `distance` from `target`, looking at it."""
     e = np.radians(elevation_deg)
     p = np.asarray(target) + distance * np.array([np.cos(azimuth) * np.cos(e), np.sin(azimuth) * np.cos(e), np.sin(e)])
-    z = (target - p) / np.linalg.norm(target - p)
-    x = np.cross(z, [0.0, 0.0, 1.0])
-    x /= np.linalg.norm(x)
-    T = np.eye(4)
-    T[:3, 0], T[:3, 1], T[:3, 2], T[:3, 3] = x, np.cross(z, x), z, p
-    return T
+    return look_at(p, target)
 
 
 def _room_view(seed: int, azimuth: float, walls: bool = True):
