@@ -23,14 +23,13 @@ furniture), without a support plane, or when the support spans less than MIN_SUP
 from __future__ import annotations
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import ConvexHull, QhullError
 
 from kinfu_cli.core.grid import EMPTY
 from kinfu_cli.core.point_pairs import bounded_pairs
+from kinfu_cli.core.poses import plane_axes
 from kinfu_cli.segmentation.bridges import SpaceQuery
-from kinfu_cli.segmentation.segments import PLANE_LABEL, Segmentation, SegmentationParams
+from kinfu_cli.segmentation.segments import PLANE_LABEL, Segmentation, SegmentationParams, pair_components
 
 MAJORITY = 0.5  # share of a segment's points below or beyond the support for it to be background
 MIN_SUPPORT_SPAN = 0.2  # m: a support whose points span less (either way along the plane) decides nothing
@@ -56,8 +55,7 @@ def background_segments(seg: Segmentation, params: SegmentationParams, space: Sp
                          params.adjacency_radius)
     if len(support) < 3:
         return {}
-    axes = _plane_axes(n)
-    uv = seg.points @ axes.T
+    axes = plane_axes(n)
     sup_uv = support @ axes.T
     if np.any(np.ptp(sup_uv, axis=0) < MIN_SUPPORT_SPAN):
         return {}
@@ -65,13 +63,13 @@ def background_segments(seg: Segmentation, params: SegmentationParams, space: Sp
         hull = ConvexHull(sup_uv)
     except (QhullError, ValueError):  # all support points on a line
         return {}
-    outside = _seen_beyond(uv, hull, seg.plane, axes, params.background_margin, space)
-    below = h < -params.plane_distance
-    pos = seg.labels > 0
+    pos = seg.labels > 0  # the segments' points only: the plane's and the dropped ones decide nothing
     lab = seg.labels[pos]
+    below = h[pos] < -params.plane_distance
+    outside = _seen_beyond(seg.points[pos] @ axes.T, hull, seg.plane, axes, params.background_margin, space)
     count = np.maximum(np.bincount(lab), 1)
-    share_below = np.bincount(lab, weights=below[pos], minlength=len(count)) / count
-    share_beyond = np.bincount(lab, weights=(outside & ~below)[pos], minlength=len(count)) / count
+    share_below = np.bincount(lab, weights=below, minlength=len(count)) / count
+    share_beyond = np.bincount(lab, weights=outside & ~below, minlength=len(count)) / count
     out: dict[int, str] = {}
     for s in np.flatnonzero(share_below + share_beyond >= MAJORITY):
         out[int(s)] = BELOW if share_below[s] >= share_beyond[s] else BEYOND
@@ -113,14 +111,5 @@ def _main_part(points: np.ndarray, radius: float) -> np.ndarray:
         return points
     pairs = bounded_pairs(points, radius, what="support plane points", hint="a smaller adjacency_radius",
                           parameter="adjacency_radius")
-    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(points), len(points)))
-    _, comp = connected_components(graph, directed=False)
+    comp = pair_components(len(points), pairs)
     return points[comp == np.argmax(np.bincount(comp))]
-
-
-def _plane_axes(n: np.ndarray) -> np.ndarray:
-    """(2, 3) orthonormal axes spanning the plane of unit normal n."""
-    a = np.eye(3)[int(np.argmin(np.abs(n)))]
-    u = np.cross(n, a)
-    u /= np.linalg.norm(u)
-    return np.stack([u, np.cross(n, u)])

@@ -121,8 +121,9 @@ class SegmentResult:
         segs = []
         seg = self.segmentation
         plane_pts = support_plane_points(seg)
-        ranks = {s.id: rank for rank, s in enumerate(self.objects, start=1)}
-        for s in self.objects + [s for s in self.saliency if s.id in self.background]:
+        objects = self.objects
+        ranks = {s.id: rank for rank, s in enumerate(objects, start=1)}
+        for s in objects + [s for s in self.saliency if s.id in self.background]:
             sq = self.superquadrics.get(s.id)
             kind = {"kind": "background", "rank": None, "background_reason": self.background[s.id]} \
                 if s.id in self.background else {"kind": "object", "rank": ranks[s.id]}

@@ -392,7 +392,7 @@ def _spans(points: np.ndarray, normal: np.ndarray, span: float, cell: float) -> 
         pos = np.minimum(np.searchsorted(key, key + di * width + dj), len(key) - 1)
         hit = key[pos] == key + di * width + dj
         edges.append(np.column_stack([np.flatnonzero(hit), pos[hit]]))
-    lab = _components(len(cells), np.concatenate(edges))[at.ravel()]
+    lab = pair_components(len(cells), np.concatenate(edges))[at.ravel()]
     patch = uv[lab == np.bincount(lab).argmax()]
     lo, hi = np.percentile(patch, [5, 95], axis=0)
     return bool(np.all(hi - lo >= span))
@@ -455,7 +455,7 @@ def supervoxels(points: np.ndarray, normals: np.ndarray, params: SegmentationPar
     # split into spatially connected parts
     if pairs is None:
         pairs = adjacency_pairs(points, params.adjacency_radius)
-    return _components(n, pairs[labels[pairs[:, 0]] == labels[pairs[:, 1]]])
+    return pair_components(n, pairs[labels[pairs[:, 0]] == labels[pairs[:, 1]]])
 
 
 def adjacency_pairs(points: np.ndarray, radius: float) -> np.ndarray:
@@ -467,7 +467,7 @@ def adjacency_pairs(points: np.ndarray, radius: float) -> np.ndarray:
                               f"(default {SegmentationParams.adjacency_radius:g} m)")
 
 
-def _components(n: int, edges: np.ndarray) -> np.ndarray:
+def pair_components(n: int, edges: np.ndarray) -> np.ndarray:
     """Connected-component id (0..K-1) of each of n nodes over undirected edges (E, 2)."""
     g = coo_matrix((np.ones(len(edges), dtype=np.int8), (edges[:, 0], edges[:, 1])), shape=(n, n))
     return connected_components(g, directed=False)[1].astype(np.int64)
@@ -545,7 +545,7 @@ def lccp_segments(points: np.ndarray, normals: np.ndarray, pairs: np.ndarray, pa
     keep = edges[join]
     stats = {"supervoxels": k, "adjacent_pairs": int(len(edges)), "convex_pairs": int(len(keep)),
              "color_pruned_pairs": pruned}
-    return _components(k, keep)[sv], sv, stats
+    return pair_components(k, keep)[sv], sv, stats
 
 
 def flood_fill_segments(normals: np.ndarray, pairs: np.ndarray, params: SegmentationParams,
@@ -559,7 +559,7 @@ def flood_fill_segments(normals: np.ndarray, pairs: np.ndarray, params: Segmenta
         f = _color_features(colors, params.color_distance)  # once per point, not per pair end
         cost += params.color_importance * _feature_distance(f[pairs[:, 0]], f[pairs[:, 1]], params.color_distance)
     keep = pairs[cost < params.t_ff]
-    return _components(len(normals), keep), {"adjacent_pairs": int(len(pairs)), "joined_pairs": int(len(keep))}
+    return pair_components(len(normals), keep), {"adjacent_pairs": int(len(pairs)), "joined_pairs": int(len(keep))}
 
 
 def _concave_pairs(points: np.ndarray, normals: np.ndarray, pairs: np.ndarray, min_angle_deg: float) -> np.ndarray:
@@ -669,7 +669,7 @@ def concave_plane_cuts(points: np.ndarray, normals: np.ndarray, seg: np.ndarray,
         if cuts == before:
             break
     keep = seg[pairs[:, 0]] == seg[pairs[:, 1]]
-    return _components(len(points), pairs[keep]), cuts
+    return pair_components(len(points), pairs[keep]), cuts
 
 
 def _step_plane(x: np.ndarray, nx: np.ndarray, h: np.ndarray, up: np.ndarray, params: SegmentationParams
@@ -783,7 +783,7 @@ def step_cuts(points: np.ndarray, normals: np.ndarray, seg: np.ndarray, pairs: n
         cuts += 1
     if cuts:
         keep = seg[pairs[:, 0]] == seg[pairs[:, 1]]
-        comp = _components(len(points), pairs[keep])
+        comp = pair_components(len(points), pairs[keep])
         seg = np.where(seg >= 0, comp, -1)
     return seg, cuts, stepped
 
@@ -811,7 +811,7 @@ def _absorb_small(seg: np.ndarray, pairs: np.ndarray, min_points: int) -> np.nda
     target[row[first]] = col[first]
     lonely = small & (target == np.arange(nseg))  # touching no large segment
     both = lonely[c.row] & lonely[c.col]
-    comp = _components(nseg, np.stack([c.row[both], c.col[both]], 1))
+    comp = pair_components(nseg, np.stack([c.row[both], c.col[both]], 1))
     rep = np.full(int(comp.max()) + 1, nseg)
     np.minimum.at(rep, comp, np.arange(nseg))  # a merged piece keeps its smallest member's id
     target = np.where(lonely, rep[comp], target)
