@@ -51,23 +51,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from kinfu_cli.core.poses import look_at  # noqa: E402
 from kinfu_cli.fusion.tracking import FrameToModelTracker, ate_rmse, predict_pose  # noqa: E402
 from kinfu_cli.fusion.volume import TernaryVolume  # noqa: E402
+from kinfu_cli.sim.paths import room_walk_poses  # noqa: E402
 from kinfu_cli.sim.room import make_room  # noqa: E402
 from kinfu_cli.sim.sensor import DepthSensor, kinect_v1_intrinsics, mesh_target  # noqa: E402
-
-
-def hand_held_path(n: int, seed: int) -> list[np.ndarray]:
-    """Camera poses (z-up room frame) of the walk: 0.24 m/s along x, a 150 deg pan, wobble and a random walk."""
-    rng = np.random.default_rng(seed)
-    t = np.arange(n) / 30.0
-    eye = np.stack([-1.2 + 0.24 * t, -0.6 + 0.05 * np.sin(1.3 * t), 1.45 + 0.04 * np.sin(2.1 * t)], 1)
-    eye += np.cumsum(rng.normal(0, 0.0008, (n, 3)), 0)
-    yaw = np.radians(20.0 + 150 * t / t[-1]) + 0.05 * np.sin(3.0 * t)
-    pitch = np.radians(-25 + 8 * np.sin(0.9 * t))
-    fwd = np.stack([np.cos(yaw) * np.cos(pitch), np.sin(yaw) * np.cos(pitch), np.sin(pitch)], 1)
-    return [look_at(e, e + d) for e, d in zip(eye, fwd)]
 
 
 def room_volume() -> TernaryVolume:
@@ -75,7 +63,7 @@ def room_volume() -> TernaryVolume:
                          color=False, min_depth=0.3, max_depth=4.0)
 
 
-def track(method: str, depths, K, poses) -> dict:
+def track(method: str, depths, K, poses, colors=None, photo_weight: float = 0.0) -> dict:
     """`kinfu fuse --pose icp` on the frames, as its integrator tracks (fusion.pipeline): from the constant-velocity
     prediction of the last two good poses, then the last good pose; the speed check over the time since the last
     good pose (a lost frame is not fused and the next is tracked from that pose). Estimated poses (the last good
@@ -83,7 +71,9 @@ def track(method: str, depths, K, poses) -> dict:
     kept by the first attempt; re-localised; lost)."""
     vol = room_volume()
     vol.integrate(depths[0], K, poses[0])
-    tracker = FrameToModelTracker(icp=method)
+    tracker = FrameToModelTracker(icp=method, photo_weight=photo_weight)
+    colors = colors or [None] * len(depths)
+    tracker.keep_reference(vol, depths[0], K, poses[0], colors[0])
     est, good, lost, reloc = [poses[0]], [(poses[0], 0.0)], 0, 0
     seconds = {"normal": [], "re-localised": [], "lost": []}
     for i, d in enumerate(depths[1:], start=1):
@@ -91,7 +81,7 @@ def track(method: str, depths, K, poses) -> dict:
         T2, s2 = good[-2] if len(good) > 1 else (None, None)
         pred = predict_pose(T1, T2, None if s2 is None else s1 - s2, s - s1)
         t0 = time.perf_counter()
-        r = tracker.track(vol, d, K, [pred, T1], T_ref=T1, dt_s=s - s1)
+        r = tracker.track(vol, d, K, [pred, T1], T_ref=T1, dt_s=s - s1, color=colors[i])
         seconds["lost" if r.lost else "re-localised" if r.relocalised else "normal"].append(time.perf_counter() - t0)
         lost += r.lost
         reloc += (not r.lost) and r.relocalised
@@ -99,6 +89,7 @@ def track(method: str, depths, K, poses) -> dict:
         if not r.lost:
             good.append((r.T_world_camera, s))
             vol.integrate(d, K, r.T_world_camera)
+            tracker.keep_reference(vol, d, K, r.T_world_camera, colors[i])
     return {"est": est, "lost": lost, "relocalised": reloc, "seconds": seconds}
 
 
@@ -124,16 +115,28 @@ def main() -> None:
     ap.add_argument("--methods", default="projective,open3d")
     ap.add_argument("--no-noise", action="store_true", help="noise-free depth")
     ap.add_argument("--from-truth", action="store_true", help="ICP from the true pose on a model of true poses")
+    ap.add_argument("--texture", action="store_true", help="textured walls, floor and furniture (sim.room "
+                    "textured_target) instead of one colour per part")
+    ap.add_argument("--photo-weights", default="0", help="projective ICP's photometric weights to compare")
+    ap.add_argument("--colour-faults", action="store_true", help="a real camera's colour: misregistered by "
+                    "(3, 2) px and 0.5 deg, shifted 0.7 px per frame (unsynchronised streams), auto-gain 3 %%")
     a = ap.parse_args()
     W, H = a.width, a.width * 3 // 4
     K = kinect_v1_intrinsics(W, H)
     room = make_room(seed=a.seed, width=W, height=H, frames=3)
-    sensor = DepthSensor(K, W, H, max_range=4.0, noise=not a.no_noise, seed=a.seed)
-    target = mesh_target(room.mesh())
-    poses = hand_held_path(a.frames, a.seed)
-    depths = [sensor.render_frame(target, T, frame_seed=i).depth for i, T in enumerate(poses)]
-    print(f"room walk: {a.frames} frames {W}x{H}, seed {a.seed}, noise {'off' if a.no_noise else 'on'}")
-    for method in a.methods.split(","):
+    faults = dict(misregistration=(3.0, 2.0, 0.5), misregistration_jitter=0.7, gain_jitter=0.03) \
+        if a.colour_faults else {}
+    sensor = DepthSensor(K, W, H, max_range=4.0, noise=not a.no_noise, seed=a.seed, **faults)
+    target = room.textured_target() if a.texture else mesh_target(room.mesh())
+    poses = room_walk_poses(a.frames, a.seed)
+    frames = [sensor.render_frame(target, T, frame_seed=i) for i, T in enumerate(poses)]
+    depths, colors = [f.depth for f in frames], [f.color for f in frames]
+    print(f"room walk: {a.frames} frames {W}x{H}, seed {a.seed}, noise {'off' if a.no_noise else 'on'}, "
+          f"{'textured' if a.texture else 'plain'}{', colour faults' if a.colour_faults else ''}")
+    runs = [(m, 0.0) for m in a.methods.split(",") if m != "projective"]
+    if "projective" in a.methods.split(","):
+        runs = [("projective", float(w)) for w in a.photo_weights.split(",")] + runs
+    for method, weight in runs:
         if a.from_truth:
             moved = from_truth(method, depths, K, poses)
             ok = np.isfinite(moved)
@@ -141,8 +144,10 @@ def main() -> None:
                   f"{100 * np.max(moved[ok]):.2f} cm (frame {int(np.nanargmax(moved)) + 1}), "
                   f"{int((~ok).sum())} refused")
             continue
-        r = track(method, depths, K, poses)
+        r = track(method, depths, K, poses, colors, weight)
         err = np.array([np.linalg.norm(e[:3, 3] - t[:3, 3]) for e, t in zip(r["est"], poses)])
+        if weight:
+            method = f"{method}+photometric {weight:g}"
         print(f"{method:>10}: ATE {100 * ate_rmse(r['est'], poses):.2f} cm, max {100 * err.max():.2f} cm, lost "
               f"{r['lost']}, re-localised {r['relocalised']}; error every 20 frames (cm): "
               f"{' '.join(f'{100 * e:.1f}' for e in err[::20])}")

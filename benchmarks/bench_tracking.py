@@ -41,21 +41,22 @@ DT = 1 / 30
 
 
 def kitchen(n: int):
-    """Frames 0..n-1 as (depth filtered as `kinfu fuse` does: range, fill-gaps 2; K; recorded pose)."""
-    return [(fill_gaps(range_filter(d, 0.3, 4.0), 2)[0], K, T) for d, _, K, T in seven_scenes_frames(n, color=False)]
+    """Frames 0..n-1 as (depth filtered as `kinfu fuse` does: range, fill-gaps 2; K; recorded pose; colour)."""
+    return [(fill_gaps(range_filter(d, 0.3, 4.0), 2)[0], K, T, c) for d, c, K, T in seven_scenes_frames(n)]
 
 
 class Run:
     """One method tracking the sequence: its own volume, poses and timings."""
 
     def __init__(self, method: str, frames):
-        d0, K, T0 = frames[0]
+        d0, K, T0, c0 = frames[0]
         origin = default_origin([(d0, K, T0)], 3.5)
         self.vol = TernaryVolume(size=3.5, voxel_size=3.0 / 512, origin=origin, truncation=0.03, color=False)
         self.vol.integrate(d0, K, T0)
         name, _, opts = method.partition(":")
         kw = {k: _value(v) for k, v in (o.split("=") for o in opts.split("+") if o)}
         self.tracker = FrameToModelTracker(icp=name, **kw)
+        self.tracker.keep_reference(self.vol, d0, K, T0, c0)
         self.est = [T0]
         self.seconds = 0.0  # tracking, wall
         self.cpu = 0.0  # tracking, CPU (all threads)
@@ -64,11 +65,11 @@ class Run:
         self.lost = 0
         self.conditions = []
 
-    def step(self, d, K):
+    def step(self, d, K, color=None):
         prev2 = self.est[-2] if len(self.est) > 1 else None
         pred = predict_pose(self.est[-1], prev2, DT, DT)
         t0, c0 = time.perf_counter(), time.process_time()
-        r = self.tracker.track(self.vol, d, K, [pred, self.est[-1]], T_ref=self.est[-1], dt_s=DT)
+        r = self.tracker.track(self.vol, d, K, [pred, self.est[-1]], T_ref=self.est[-1], dt_s=DT, color=color)
         self.seconds += time.perf_counter() - t0
         self.cpu += time.process_time() - c0
         self.conditions.append(r.condition)
@@ -78,6 +79,7 @@ class Run:
         else:
             self.est.append(r.T_world_camera)
             self.vol.integrate(d, K, r.T_world_camera)
+            self.tracker.keep_reference(self.vol, d, K, r.T_world_camera, color)
         self.fused += time.perf_counter() - t0
         self.fused_cpu += time.process_time() - c0
 
@@ -117,9 +119,9 @@ def main() -> None:
     last = {}
     for rep in range(args.repeat):
         runs = {m: Run(m, frames) for m in methods}
-        for d, K, _ in frames[1:]:
+        for d, K, _, c in frames[1:]:
             for m in methods:
-                runs[m].step(d, K)
+                runs[m].step(d, K, c)
         n = len(frames) - 1
         for m, r in runs.items():
             fps[m].append(n / r.seconds)

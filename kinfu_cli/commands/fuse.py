@@ -18,6 +18,7 @@ from kinfu_cli.core.camera import parse_intrinsics
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.fusion.outputs import OUTPUTS, fusion_report, write_fusion_outputs
 from kinfu_cli.fusion.pipeline import fuse_recording
+from kinfu_cli.fusion.tracking import PHOTO_WEIGHT
 from kinfu_cli.report.viewer import write_viewer
 from kinfu_cli.report.volume_plot import plot_slices
 
@@ -50,8 +51,10 @@ def _floats(value: str, name: str, n: tuple[int, ...]) -> tuple[float, ...]:
 # options given in a mode where they do nothing (commands._options.check_inapplicable): warnings, as a script or a
 # batch plan sets them for recordings fused in either pose mode, and --max-memory is the machine's budget
 INAPPLICABLE = (
-    Inapplicable(("max-lost", "icp"), lambda p: f"with --pose {p['pose']}" if p["pose"] in ("forced", "topic")
-                 else None, "to --pose icp or hint"),
+    Inapplicable(("max-lost", "icp", "photometric-weight"), lambda p: f"with --pose {p['pose']}"
+                 if p["pose"] in ("forced", "topic") else None, "to --pose icp or hint"),
+    Inapplicable(("photometric-weight",), lambda p: "with --icp open3d" if p["icp"] == "open3d" else None,
+                 "to --icp projective"),
     Inapplicable(("max-memory",), lambda p: "with --init" if p["init"] else (
         f"with --size {p['size']}" if p["size"].strip().lower() != "auto" else None), "to --size auto"),
     # --color mode with --no-color is a contradiction fusion refuses itself (ConfigError naming --color)
@@ -64,7 +67,7 @@ def unused_tracking_options(ctx: click.Context, pose_mode: str) -> list[str]:
     """The warning for --max-lost / --icp given without --pose when the recording decided on poses without tracking
     (its TF has the camera: forced; a pose topic): known only once the recording is read, so it goes into
     report.json's warnings (an explicit --pose forced|topic is warned about before any work, INAPPLICABLE)."""
-    given = given_options(ctx, ("max-lost", "icp")) if ctx.params["pose"] is None else []
+    given = given_options(ctx, ("max-lost", "icp", "photometric-weight")) if ctx.params["pose"] is None else []
     if not given or pose_mode not in ("forced", "topic"):
         return []
     one = len(given) == 1
@@ -101,6 +104,7 @@ def fuse_arguments(params: dict) -> dict:
         every=p["every"], tolerance_s=p["tolerance_s"], fill_gaps=p["fill_gaps"], bilateral=p["bilateral"],
         shadow_filter=p["shadow_filter"], roles=role_kwargs(p), quiet=p["quiet"], argument_names=ARGUMENT_FLAGS,
         max_lost=_share(p["max_lost"]), max_memory=p["max_memory"], color_mode=p["color_mode"], icp=p["icp"],
+        photometric_weight=p["photometric_weight"],
         up=None if isinstance(up_dir := parse_up(p["up"], ("auto",)), str) else up_dir)
 
 
@@ -147,6 +151,10 @@ def check_options(params: dict) -> None:
 @click.option("--icp", type=click.Choice(["projective", "open3d"]), default="projective", show_default=True,
               help="With --pose icp/hint: the tracker's ICP: projective (KinFu's projective point-to-plane on a "
                    "depth pyramid, numba, real time) or open3d (point-to-plane on clouds, ~20x slower; reference).")
+@click.option("--photometric-weight", type=float, default=PHOTO_WEIGHT, show_default=True, metavar="W",
+              help="With --pose icp/hint and --icp projective: the weight of the colour term (each frame's "
+                   "intensities against the last fused frame's) beside the point-to-plane one; it holds the pose "
+                   "where depth alone slides (a wall and the floor). 0: depth only. Needs colour.")
 @click.option("--init", "init", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Continue fusing into this volume.npz (its grid wins over the grid options).")
 @click.option("--clear-sphere", "clear_spheres", multiple=True, metavar="X,Y,Z,R",

@@ -26,6 +26,8 @@ import numpy as np
 from numba import njit, prange
 
 from kinfu_cli.core.camera import scaled_intrinsics
+from kinfu_cli.fusion.photometric import FULL_WIDTH as PHOTO_FULL_WIDTH
+from kinfu_cli.fusion.photometric import IntensityLevel, PhotometricReference, photometric_equations
 
 # KinFu's bilateral filter for tracking: range sigma 3 cm, space sigma 4.5 px
 BILATERAL_SIGMA_M = 0.03
@@ -327,11 +329,16 @@ def _rodrigues(wx, wy, wz):
 
 @njit(cache=True)
 def _icp_level(vert, norm, T, model_v, model_n, R_cw, t_cw, fx, fy, cx, cy, max_dist2, min_cos, iterations,
-               converged, min_correspondences, nchunks):
+               converged, min_correspondences, nchunks, photo_weight, photo_share, gray, ref_gray, ref_gx, ref_gy,
+               ref_depth, R_rw, t_rw, dfx, dfy, dcx, dcy):
     """Up to `iterations` Gauss-Newton steps of one pyramid level from the pose T (world <- camera, updated in
     place), in one call (no Python between the iterations). Returns (steps taken,
     whether the last one moved the pose less than `converged`, the last sums: they stand for the sums at the
-    returned pose when it converged)."""
+    returned pose when it converged). photo_weight > 0: the photometric term (fusion.photometric) against the
+    reference level (gray .. t_rw; dfx .. dcy the data level's intrinsics) is added to the system with that
+    weight, lowered so that it adds at most photo_share of the point-to-plane term's information on the
+    translation (the trace of its 3x3 block); the sums returned are the point-to-plane ones alone (fitness,
+    residual, condition)."""
     sums = np.zeros(N_SUMS)
     for it in range(iterations):
         R = np.ascontiguousarray(T[:3, :3])
@@ -341,6 +348,16 @@ def _icp_level(vert, norm, T, model_v, model_n, R_cw, t_cw, fx, fy, cx, cy, max_
         if sums[28] < min_correspondences:
             return it, False, sums
         A, b = _system(sums)
+        if photo_weight > 0.0:
+            Ap, bp = _system(photometric_equations(vert, gray, R, t, ref_gray, ref_gx, ref_gy, ref_depth, R_rw, t_rw,
+                                                   dfx, dfy, dcx, dcy, nchunks,
+                                                   1 if vert.shape[1] <= PHOTO_FULL_WIDTH else 2))
+            w = photo_weight
+            tp = Ap[3, 3] + Ap[4, 4] + Ap[5, 5]
+            if tp > 0.0:  # at most photo_share of the depth term's information on the translation
+                w = min(w, photo_share * (A[3, 3] + A[4, 4] + A[5, 5]) / tp)
+            A = A + w * Ap
+            b = b + w * bp
         xi = _solve6(A, -b)
         if not np.all(np.isfinite(xi)):
             return it, False, sums
@@ -393,14 +410,26 @@ def _condition(A: np.ndarray) -> float:
 def projective_icp(levels: list[DataLevel], model_v: np.ndarray, model_n: np.ndarray, K_model: np.ndarray,
                    T_model: np.ndarray, T_init: np.ndarray, iterations=(10, 5, 4), max_distance=(0.10, 0.10, 0.10),
                    max_angle_deg: float = 30.0, min_correspondences: int = 6, converged: float = CONVERGED,
-                   timing: dict | None = None) -> IcpResult:
+                   timing: dict | None = None, intensities: list[IntensityLevel] | None = None,
+                   reference: PhotometricReference | None = None, photo_weight: float = 0.0,
+                   photo_share: float = 1.0) -> IcpResult:
     """Pose (world <- camera) of the frame `levels` (finest first) against the model maps ray cast from T_model
     (world <- model camera) with K_model, from T_init. iterations and max_distance (m) per level, coarse to
     fine (the last entries are the finest level). A level stops early when an iteration moves the pose less than
     `converged` (rad and m). timing: seconds added per level ("icp WxH": its iterations, association, normal
-    equations, solves and pose updates, in one numba call)."""
+    equations, solves and pose updates, in one numba call). intensities (the frame's, one per level of
+    `levels`), reference (the previous frame's, the same sizes) and photo_weight > 0: the photometric term
+    (fusion.photometric) joins the point-to-plane one with that weight, or less where it would add more than
+    photo_share of the point-to-plane term's information on the translation."""
     if len(iterations) != len(max_distance) or len(iterations) > len(levels):
         raise ValueError("projective_icp: one iterations and max_distance entry per pyramid level")
+    photo = photo_weight > 0 and intensities is not None and reference is not None
+    if photo:
+        Tr_inv = np.linalg.inv(np.asarray(reference.T_world_camera, dtype=np.float64))
+        R_rw, t_rw = np.ascontiguousarray(Tr_inv[:3, :3]), np.ascontiguousarray(Tr_inv[:3, 3])
+    else:
+        R_rw, t_rw = np.eye(3), np.zeros(3)
+    nothing = np.zeros((1, 1), dtype=np.float32)
     Tm_inv = np.linalg.inv(np.asarray(T_model, dtype=np.float64))
     R_cw, t_cw = np.ascontiguousarray(Tm_inv[:3, :3]), np.ascontiguousarray(Tm_inv[:3, 3])
     cam = (float(K_model[0, 0]), float(K_model[1, 1]), float(K_model[0, 2]), float(K_model[1, 2]))
@@ -414,9 +443,18 @@ def projective_icp(levels: list[DataLevel], model_v: np.ndarray, model_n: np.nda
         level = levels[n - 1 - i]
         h, w = level.depth.shape
         t0 = time.perf_counter()
+        j = n - 1 - i
+        if photo:
+            ref = reference.levels[j]
+            photo_args = (float(photo_weight), float(photo_share), intensities[j].gray, ref.gray, ref.gx, ref.gy,
+                          reference.depths[j])
+        else:
+            photo_args = (0.0, 0.0, nothing, nothing, nothing, nothing, nothing)
         steps, done, sums = _icp_level(level.vertices, level.normals, T, model_v, model_n, R_cw, t_cw, *cam,
                                        max_distance[i] ** 2, min_cos, int(iterations[i]), float(converged),
-                                       float(min_correspondences), 4 * numba.get_num_threads())
+                                       float(min_correspondences), 4 * numba.get_num_threads(), *photo_args,
+                                       R_rw, t_rw, float(level.K[0, 0]), float(level.K[1, 1]),
+                                       float(level.K[0, 2]), float(level.K[1, 2]))
         used += steps
         _add(clock, f"icp {w}x{h}", time.perf_counter() - t0)
     # the finest level at the returned pose: how many vertices found a correspondence, how well they fit (the

@@ -117,7 +117,7 @@ def fusion_report(result: FusionResult, extra_outputs: Iterable[str] = ()) -> di
 
 def _tracking_summary(track_log: list[dict]) -> dict:
     """The report's tracking section: every tracked frame, the lost ones, those hint mode fused at their TF pose
-    because ICP failed (tf_fallback), and the error against the given poses (when the recording has them: a
+    because ICP failed (tf_fallback), how many had ICP's colour term (photometric), and the error against the given poses (when the recording has them: a
     tracked pose's camera position minus the given one, RMSE and max, over the frames ICP placed)."""
     kept = [t for t in track_log if not t["lost"]]
     fallback = [t["index"] for t in track_log if t.get("tf_fallback")]
@@ -125,5 +125,6 @@ def _tracking_summary(track_log: list[dict]) -> dict:
         "frames": track_log, "tracked": len(track_log), "lost_frames": [t["index"] for t in track_log if t["lost"]],
         "lost": len(track_log) - len(kept), "tf_fallback_frames": fallback, "tf_fallback": len(fallback),
         "relocalised": int(sum(bool(t.get("relocalised")) and not t.get("tf_fallback") for t in kept)),
+        "photometric": int(sum(bool(t.get("photometric")) for t in track_log)),
         "mean_fitness": float(np.mean([t["fitness"] for t in track_log])) if track_log else None,
         "ate_vs_given_m": ate_vs_given(track_log)}

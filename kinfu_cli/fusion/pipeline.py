@@ -35,8 +35,8 @@ from kinfu_cli.fusion.extent import (SURVEY_FRAMES, AutoGrid, auto_grid, budget_
                                     survey)
 from kinfu_cli.fusion.mesh import mesh_cloud
 from kinfu_cli.fusion.placement import default_origin
-from kinfu_cli.fusion.tracking import (LOSS_CHECKS, MAX_SPEED_M_S, MIN_TRACKING_WIDTH, POSE_MODES, FrameToModelTracker,
-                                       TrackResult, predict_pose)
+from kinfu_cli.fusion.tracking import (LOSS_CHECKS, MAX_PHOTO_WEIGHT, MAX_SPEED_M_S, MIN_TRACKING_WIDTH,
+                                       PHOTO_WEIGHT, POSE_MODES, FrameToModelTracker, TrackResult, predict_pose)
 from kinfu_cli.fusion.up import choose_up
 from kinfu_cli.fusion.volume import DEFAULT_TRUNCATION_M, MIN_TRUNCATION_VOXELS, TernaryVolume, load_volume
 from kinfu_cli.io.frames import (DROP_CHAIN_BROKEN, DROP_EMPTY, DROP_NO_POSE, DROP_NO_POSE_TOPIC, MAX_16BIT_MM,
@@ -172,8 +172,8 @@ class _PosePlan:
 
 
 def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = "auto",
-                   resolution: int | tuple | None = None,
-                   voxel_size: float | None = None, origin: tuple | None = None, truncation: float | None = None,
+                   resolution: int | tuple | None = None, voxel_size: float | None = None, origin: tuple | None = None,
+                   truncation: float | None = None,
                    max_weight: int = 128, min_depth: float = 0.3, max_depth: float = 4.0, color: bool = True,
                    pose: str | None = None, pose_topic: str | None = None, init: str | os.PathLike | None = None,
                    clear_spheres: Iterable[tuple] = (), clear_pois: str | os.PathLike | None = None,
@@ -182,31 +182,33 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
                    shadow_filter: bool = False, shadow_baseline: float = 0.08,
                    roles: Mapping[str, str | None] | None = None, quiet: bool = True,
                    argument_names: Mapping[str, str] | None = None, up=None, max_lost: float = 0.10,
-                   max_memory: float | None = None, color_mode: str | None = None,
-                   icp: str = "projective", check_only: bool = False) -> FusionResult | None:
+                   max_memory: float | None = None, color_mode: str | None = None, icp: str = "projective",
+                   photometric_weight: float = PHOTO_WEIGHT, check_only: bool = False) -> FusionResult | None:
     """Fuse the depth frames of `recording` (MCAP, ROS 1 .bag, ROS 2 bag folder) into a TernaryVolume.
 
     Grid: size (m, one or three values, or "auto": a box around what the selected frames observe from their poses,
     fusion.extent), resolution (voxels per axis: with a size 512 unless voxel_size, with "auto" over the box),
     voxel_size (m; with "auto" default 3 m / 512, coarser when the grid's worst case exceeds max_memory GiB, default
     half the available memory up to 2 GiB), origin (minimum corner; default centred on what the first frames see,
-    with "auto" the box's corner), truncation (None: 3 cm, or 0.75 voxel over 4 cm voxels), max_weight, min_depth/max_depth (m), color. pose: forced (TF), icp,
-    hint (ICP from TF) or topic (pose_topic); default forced when TF links the camera to the world, else icp. init:
-    a volume.npz to continue. clear_spheres (x, y, z, r) and the POIs of clear_pois are forgotten (before fusing
-    with init, else after). start_s / end_s (seconds from the recording start), every, tolerance_s: frame selection
-    as io.frames.iter_frames. fill_gaps, bilateral, shadow_filter, shadow_baseline: depth filters. roles:
-    detect_roles overrides. argument_names: how the report names the init, origin, clear_spheres, clear_pois, up and
-    grid (GRID_ARGUMENTS) arguments (default these names; a command line passes its options). up: the world's
-    direction against gravity (x, y, z); None decides it as fusion.up.choose_up says (the volume's up, stored in
-    volume.npz, ternary.npz and the report with its source). max_lost: the largest share of tracked frames (icp,
-    hint) that may be lost (not fused) before the run fails. color_mode: "mean" or "mode" (fusion/color_mode.py);
-    None: the init volume's, else "mean". icp: the tracker's ICP, "projective" (fusion.icp) or "open3d"
-    (tracking.ICP_METHODS). check_only: check the arguments as a run would, return None (kinfu batch's plan check)."""
+    with "auto" the box's corner), truncation (None: 3 cm, or 0.75 voxel over 4 cm voxels), max_weight,
+    min_depth/max_depth (m), color. pose: forced (TF), icp, hint (ICP from TF) or topic (pose_topic); default forced
+    when TF links the camera to the world, else icp. init: a volume.npz to continue. clear_spheres (x, y, z, r) and
+    the POIs of clear_pois are forgotten (before fusing with init, else after). start_s / end_s (seconds from the
+    recording start), every, tolerance_s: frame selection as io.frames.iter_frames. fill_gaps, bilateral,
+    shadow_filter, shadow_baseline: depth filters. roles: detect_roles overrides. argument_names: how the report
+    names the init, origin, clear_spheres, clear_pois, up and grid (GRID_ARGUMENTS) arguments (default these names;
+    a command line passes its options). up: the world's direction against gravity (x, y, z); None decides it as
+    fusion.up.choose_up says (the volume's up, stored in volume.npz, ternary.npz and the report with its source).
+    max_lost: the largest share of tracked frames (icp, hint) that may be lost (not fused) before the run fails.
+    color_mode: "mean" or "mode" (fusion/color_mode.py); None: the init volume's, else "mean". icp: the tracker's
+    ICP, "projective" (fusion.icp) or "open3d" (tracking.ICP_METHODS). photometric_weight: projective ICP's colour
+    term (fusion.photometric; 0: depth only). check_only: check the arguments as a run would, return None (kinfu
+    batch's plan check)."""
     started = time.perf_counter()
     timing: dict[str, float] = {}
     names = {**{n: n for n in NAMED_ARGUMENTS}, **(argument_names or {})}
     up = None if up is None else check_up(up, "up")
-    _check_arguments(pose, pose_topic, every, max_lost, size, start_s, end_s)
+    _check_arguments(pose, pose_topic, every, max_lost, size, start_s, end_s, photometric_weight)
     auto = isinstance(size, str)
     budget = budget_bytes(max_memory)
     spheres = _spheres(clear_spheres, clear_pois, names["clear_spheres"])
@@ -216,13 +218,8 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
     depth_filter = DepthFilter(min_depth, max_depth, fill_gaps, bilateral, shadow_filter, shadow_baseline)
     vol, placement, grid_warnings = None, "", []
     if init:
-        t0 = time.perf_counter()
-        vol = _load_init(init, wanted_mode)
-        timing["load_init"] = time.perf_counter() - t0
-        placement = f"{names['init']} {init}"
-        grid_warnings = _init_grid_warnings(vol, dict(voxel_size=voxel_size, size=None if auto else size,
-                                                      resolution=resolution, origin=origin), names, init)
-        _clear_spheres(vol, spheres)
+        vol, placement, grid_warnings = _continue_init(init, wanted_mode, names, spheres, timing, dict(
+            voxel_size=voxel_size, size=None if auto else size, resolution=resolution, origin=origin))
     else:
         grid_spec.volume(origin=origin or (0.0, 0.0, 0.0))  # refuse impossible grid settings before reading anything
     if check_only:
@@ -249,7 +246,8 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
         stats = FrameStats()
         frames = iter_frames(rec, found, pose_source=plan.source, pose_topic=pose_topic, start_s=start_s,
                              end_s=end_s, every=every, stats=stats, tf=tf, tolerance_s=tolerance_s)
-        integrator = _Integrator(vol, plan, grid_spec, origin, names["origin"], str(rec.path), timing, icp)
+        integrator = _Integrator(vol, plan, grid_spec, origin, names["origin"], str(rec.path), timing, icp,
+                                 photometric_weight)
         # past max_lost of the most frames the time window can select (counted before reading, when tracking): stop
         bound = (-(-window_depth_count(rec, found.depth_topic, start_s, end_s, tolerance_s) // every)
                  if integrator.tracker is not None else 0)
@@ -291,6 +289,18 @@ def fuse_recording(recording: str | os.PathLike, *, size: float | tuple | str = 
         warnings=warnings, grid=grid, counts=counts, bounding_box=bounding_box, mesh=mesh, cloud=cloud,
         timing=timing, started=started, up=up_choice.to_json(), grid_sizing=sizing, face_contacts=faces,
         notes=notes, camera_stamps_ns=integrator.camera_stamps_ns, camera_poses=integrator.camera_poses)
+
+
+def _continue_init(init, wanted_mode: str | None, names: dict, spheres: list[dict], timing: dict,
+                   grid_given: dict) -> tuple[TernaryVolume, str, list[str]]:
+    """The init volume to fuse on (its spheres cleared first), how the report names its placement, and the warnings
+    for grid arguments given that differ from its grid (grid_given: voxel_size, size, resolution, origin)."""
+    t0 = time.perf_counter()
+    vol = _load_init(init, wanted_mode)
+    timing["load_init"] = time.perf_counter() - t0
+    warnings = _init_grid_warnings(vol, grid_given, names, init)
+    _clear_spheres(vol, spheres)
+    return vol, f"{names['init']} {init}", warnings
 
 
 def _clear_spheres(vol: TernaryVolume, spheres: list[dict]) -> None:
@@ -348,9 +358,11 @@ def _load_init(init, wanted_mode: str | None) -> TernaryVolume:
 
 
 def _check_arguments(pose: str | None, pose_topic: str | None, every: int, max_lost: float, size,
-                     start_s: float | None = None, end_s: float | None = None) -> None:
+                     start_s: float | None = None, end_s: float | None = None,
+                     photometric_weight: float = PHOTO_WEIGHT) -> None:
     """ConfigError naming the first argument of fuse_recording out of its range, before anything is read."""
     check_window(start_s, end_s)
+    check_number(photometric_weight, "photometric_weight", 0.0, MAX_PHOTO_WEIGHT)
     if pose is not None and pose not in POSE_MODES:
         raise ConfigError(f"expected one of {', '.join(POSE_MODES)}, got {pose!r}", parameter="pose")
     if pose == "topic" and not pose_topic:
@@ -731,7 +743,8 @@ class _Integrator:
     takes each camera pose as given or tracks it (icp from the previous pose, hint from the given one)."""
 
     def __init__(self, volume: TernaryVolume | None, plan: _PosePlan, grid_spec: _GridSpec, origin: tuple | None,
-                 origin_name: str, recording: str, timing: dict[str, float], icp: str = "projective") -> None:
+                 origin_name: str, recording: str, timing: dict[str, float], icp: str = "projective",
+                 photometric_weight: float = PHOTO_WEIGHT) -> None:
         self.volume = volume
         self.mode = mode = plan.mode
         self.no_tf_link = plan.warning if plan.source != "tf" else ""  # why ICP tracks though the recording has TF
@@ -740,7 +753,8 @@ class _Integrator:
         self.origin_name = origin_name
         self.recording = recording
         self.timing = timing
-        self.tracker = FrameToModelTracker(icp=icp, init_is_hint=mode == "hint") if mode in ("icp", "hint") else None
+        self.tracker = FrameToModelTracker(icp=icp, init_is_hint=mode == "hint", photo_weight=photometric_weight) \
+            if mode in ("icp", "hint") else None
         self.track_log: list[dict] = []
         self.lost: list[int] = []  # indices of the frames tracking lost (not fused)
         self.tf_fallback: list[int] = []  # hint mode: frames ICP could not refine, fused at their TF pose
@@ -808,7 +822,8 @@ class _Integrator:
             t0 = time.perf_counter()
             dt = None if self.prev_stamp is None else (frame.stamp_ns - self.prev_stamp) * 1e-9
             candidates = self._candidates(T_given, dt)
-            res = self.tracker.track(vol, depth, frame.K, candidates, T_ref=self.prev_T, dt_s=dt)
+            res = self.tracker.track(vol, depth, frame.K, candidates, T_ref=self.prev_T, dt_s=dt, color=frame.color,
+                                     color_mask=frame.color_mask)
             _add(self.timing, "track", time.perf_counter() - t0)
             fallback = T_given if self.mode == "hint" and _hint_falls_back(res) else None
             self.track_log.append(_track_entry(frame, res, T_given, fallback))
@@ -824,6 +839,10 @@ class _Integrator:
         except VolumeError as exc:
             raise VolumeError(f"{where}: {exc}") from None
         _add(self.timing, "integrate", time.perf_counter() - t0)
+        if self.tracker is not None:  # the next frame's photometric reference (a no-op without colour)
+            t0 = time.perf_counter()
+            self.tracker.keep_reference(vol, depth, frame.K, T, frame.color, frame.color_mask)
+            _add(self.timing, "track", time.perf_counter() - t0)
         if fused["readings_in_grid"] < IN_GRID_MIN_SHARE * fused["readings"]:
             self.outside_grid.append(frame.index)
         if self.prev_T is not None and self.prev_stamp is not None:
@@ -867,7 +886,8 @@ def _hint_falls_back(res: TrackResult) -> bool:
 def _track_entry(frame: RGBDFrame, res: TrackResult, T_given: np.ndarray | None,
                  fallback: np.ndarray | None = None) -> dict:
     """One frame's tracking in the report: fitness, rmse, agreement, the condition number of its point-to-plane
-    system (how well the view pins the pose down; the tracker refuses MAX_CONDITION and above), lost and why, the pose
+    system (how well the view pins the pose down; the tracker refuses MAX_CONDITION and above), lost and why, whether
+    ICP had the colour term (photometric: colour and a reference frame), the pose
     (None when lost) and, with given poses, the distance between given and tracked camera positions. fallback: the
     pose fused instead when ICP failed in hint mode (tf_fallback; reason says why ICP failed)."""
     T = res.T_world_camera if fallback is None else np.asarray(fallback, dtype=np.float64)
@@ -879,7 +899,8 @@ def _track_entry(frame: RGBDFrame, res: TrackResult, T_given: np.ndarray | None,
          "agreement": None if not np.isfinite(res.agreement) else round(res.agreement, 4),
          "condition": None if not np.isfinite(res.condition) else float(f"{res.condition:.3g}"), "lost": lost,
          "tf_fallback": fallback is not None, "reason": reason, "check": res.check, "relocalised": res.relocalised,
-         "attempts": res.attempts, "T_world_camera": None if lost else np.round(T, 6).tolist()}
+         "attempts": res.attempts, "photometric": res.photometric,
+         "T_world_camera": None if lost else np.round(T, 6).tolist()}
     if T_given is not None and not lost:
         e["given_minus_tracked_m"] = round(float(np.linalg.norm(np.asarray(T_given)[:3, 3] - T[:3, 3])), 5)
     return e

@@ -13,6 +13,11 @@ camera frame; ICP estimates T_world_camera directly. Two ICPs (parameter icp):
   3-level pyramid of the bilateral-filtered depth; 12-30x faster than open3d's (benchmarks/bench_tracking.py).
 - "open3d": open3d's point-to-plane ICP on clouds (the reference).
 Re-localisation (below) uses open3d's ICP in both cases.
+With colour, projective ICP adds a photometric term against the last fused frame (fusion.photometric; keep_reference
+makes a fused frame the next one's reference) at PHOTO_WEIGHT, capped at PHOTO_SHARE of the depth term's
+translation information: depth alone slides along a wall-floor line (benchmarks/bench_room_drift.py: ATE 2.0-3.4
+cm, 27 of 200 frames re-localised; with the term 0.8-0.9 cm, 1 re-localised), and the cap keeps rich real texture
+from overriding depth with colour's own errors (7-Scenes kitchen 0.67 cm either way; uncapped 0.90 cm).
 
 When is a frame lost? ICP always returns some pose; it is kept only when all the checks pass:
 1. fitness (share of the frame's points with a model correspondence within the finest correspondence
@@ -48,6 +53,7 @@ from scipy.spatial.transform import Rotation
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.fusion.placement import backproject
 from kinfu_cli.fusion.icp import EDGE_JUMP_PER_M, data_pyramid, model_agreement, projective_icp, vertex_normals
+from kinfu_cli.fusion.photometric import PhotometricReference, intensity_pyramid
 from kinfu_cli.fusion.raycast import BAND_HIT, BAND_OCCLUDED, band_cloud, band_raycast, model_cloud
 
 POSE_MODES = ("forced", "icp", "hint", "topic")
@@ -107,6 +113,15 @@ HINT_ITERATIONS = 10
 # its last views, re-localisation returned a pose 18 cm from the exact TF that passed every other check
 HINT_MAX_M = 0.10
 HINT_MAX_DEG = 10.0
+# projective ICP's photometric term (fusion.photometric) weighs this much against the point-to-plane one: a grey
+# residual of 1/PHOTO_WEIGHT**0.5 counts as a metre of point-to-plane distance; chosen on the textured room walk
+PHOTO_WEIGHT = 0.03
+# ... and it adds at most this share of the point-to-plane term's information on the translation: where colour is
+# rich (a real kitchen: ~170x the depth term's), a colour term at full weight would override the depth term with
+# colour's own errors (misregistration, unsynchronised streams); where depth cannot pin a slide, it holds it
+PHOTO_SHARE = 0.1
+# ... and no more than this: a grey residual of 0.1 would outweigh a metre of depth
+MAX_PHOTO_WEIGHT = 100.0
 
 
 # why a frame was lost, in a few words, by TrackResult.check
@@ -128,6 +143,7 @@ class TrackResult:
     condition: float = float("nan")  # condition number of the point-to-plane 6x6 system at the pose
     tf_disagrees: bool = False  # lost by check 5: ICP found a pose far from the TF pose (hint mode)
     check: str = ""  # the check that lost it (LOSS_CHECKS), "" when kept
+    photometric: bool = False  # the first (projective) attempt had the colour term (fusion.photometric), kept or not
 
 
 def _angle_deg(R: np.ndarray) -> float:
@@ -152,7 +168,8 @@ class FrameToModelTracker:
     band its march starts (BAND_START, truncation distances in front of the reading); max_condition (module
     docstring, check 3); icp_converged: a pyramid level stops iterating when a step moves the pose less than
     this (rad and m); init_is_hint: the first initial pose is a measured one (hint mode's TF), and the first
-    attempt runs the finest level only (HINT_ITERATIONS). timing: seconds spent per phase (filter, pyramid,
+    attempt runs the finest level only (HINT_ITERATIONS). photo_weight / photo_share: projective ICP's colour
+    term (module docstring; 0: depth only). timing: seconds spent per phase (filter, pyramid, intensities,
     raycast, model normals, icp WxH per level: its iterations in one numba call, agreement), summed over the
     frames tracked.
     """
@@ -166,7 +183,8 @@ class FrameToModelTracker:
                  max_condition: float = MAX_CONDITION, icp_scale: float = 0.5,
                  projective_iterations=(30, 15, 6), projective_distance: float = 0.10,
                  icp_converged: float = ICP_CONVERGED, map_scale: float = MAP_SCALE,
-                 band_start: float = BAND_START, init_is_hint: bool = False):
+                 band_start: float = BAND_START, init_is_hint: bool = False, photo_weight: float = PHOTO_WEIGHT,
+                 photo_share: float = PHOTO_SHARE):
         if len(max_distances) != len(iterations):
             raise ConfigError("tracker: max_distances and iterations must have the same length")
         if icp not in ICP_METHODS:
@@ -185,6 +203,11 @@ class FrameToModelTracker:
         self.init_is_hint = bool(init_is_hint)
         self._hint: np.ndarray | None = None  # the current frame's TF pose (init_is_hint)
         self._frame_pyramid: tuple | None = None  # the current frame's data pyramid (_pyramid)
+        self._last_pyramid: tuple | None = None  # (depth image, pyramid, f, m) of the frame tracked last
+        self._color: tuple | None = None  # the current frame's (colour, colour mask), when it has colour
+        self._reference: PhotometricReference | None = None  # the last fused frame (keep_reference)
+        self.photo_weight = float(photo_weight)
+        self.photo_share = float(photo_share)
         self.timing: dict[str, float] = {}  # seconds per phase of projective tracking, summed over the frames
         self.max_distances = tuple(float(x) for x in max_distances)
         self.iterations = tuple(int(x) for x in iterations)
@@ -202,24 +225,58 @@ class FrameToModelTracker:
         self.relocalise = bool(relocalise)
 
     def track(self, volume, depth: np.ndarray, K: np.ndarray, T_init, T_ref: np.ndarray | None = None,
-              dt_s: float | None = None) -> TrackResult:
+              dt_s: float | None = None, color: np.ndarray | None = None,
+              color_mask: np.ndarray | None = None) -> TrackResult:
         """ICP of `depth` (camera frame) against the volume's surface.
 
         T_init: the initial pose, or a sequence of candidate poses (the first is tried with the normal
         pyramid; all of them with the re-localisation pyramid when that fails). T_ref: the last good pose
         and dt_s the seconds since it, for the speed check (default: the first candidate, per-frame limits).
+        color (RGB uint8, the depth image's pixels) and color_mask (False: no sample): with a reference frame
+        (keep_reference) and photo_weight > 0, projective ICP adds the photometric term.
         Lost: the first candidate pose is returned with lost=True and the reason.
         """
         inits = [np.asarray(T_init, dtype=np.float64)] if np.ndim(T_init) == 2 else \
             [np.asarray(T, dtype=np.float64) for T in T_init]
-        # this frame's state, read by the checks and the attempts, gone when the call ends: the TF pose (check 5)
-        # and the data pyramid, built once (_pyramid)
+        # this frame's state, read by the checks and the attempts, gone when the call ends: the TF pose (check 5),
+        # the data pyramid, built once (_pyramid), and the colour
         self._hint = inits[0] if self.init_is_hint else None
         self._frame_pyramid = None
+        self._color = None if color is None else (color, color_mask)
         try:
             return self._track(volume, depth, K, inits, T_ref, dt_s)
         finally:
-            self._hint = self._frame_pyramid = None
+            self._hint = self._frame_pyramid = self._color = None
+
+    def keep_reference(self, volume, depth: np.ndarray, K: np.ndarray, T_world_camera: np.ndarray,
+                       color: np.ndarray | None, color_mask: np.ndarray | None = None) -> None:
+        """The frame just fused at T_world_camera becomes the photometric reference of the next one (none without
+        colour in the depth image's pixels, or with photo_weight 0)."""
+        self._reference = None
+        if self.photo_weight <= 0 or color is None or color.shape[:2] != depth.shape:
+            return
+        last = self._last_pyramid
+        if last is not None and last[0] is depth:
+            _, pyr, f, _ = last
+        else:
+            pyr, f, _ = self._pyramid(volume, depth, K)
+            self._frame_pyramid = None
+        self._last_pyramid = None
+        shapes = [lev.depth.shape for lev in pyr[f:]]
+        self._reference = PhotometricReference(intensity_pyramid(color, color_mask, shapes, gradients=True),
+                                               [lev.depth for lev in pyr[f:]], np.asarray(T_world_camera, float))
+
+    def _intensities(self, depth: np.ndarray, pyr: list, f: int):
+        """The current frame's intensity levels for ICP's levels pyr[f:], or None when there is no photometric term
+        (no colour, no reference, another image size)."""
+        ref = self._reference
+        if self.photo_weight <= 0 or self._color is None or ref is None:
+            return None
+        color, mask = self._color
+        shapes = [lev.depth.shape for lev in pyr[f:]]
+        if color.shape[:2] != depth.shape or shapes != [d.shape for d in ref.depths]:
+            return None
+        return intensity_pyramid(color, mask, shapes)
 
     def _track(self, volume, depth, K, inits: list[np.ndarray], T_ref, dt_s) -> TrackResult:
         """track() on the candidate list."""
@@ -268,6 +325,7 @@ class FrameToModelTracker:
             best, attempts = self._projective_attempt(volume, d, K, inits[0], T_ref, dt_s), 1
             if best is None:
                 attempts = 0
+        photometric = best is not None and best.photometric
         plans = [(0, fine, False)] if self.icp == "open3d" else []
         if self.relocalise:
             coarse = [(d_, it, max(v, level_voxel(d_))) for d_, it, v in RELOCALISE_LEVELS
@@ -290,6 +348,7 @@ class FrameToModelTracker:
             return TrackResult(inits[0].copy(), 0.0, float("nan"), True, "model surface not visible", attempts=0,
                                check="model")
         best.attempts = attempts
+        best.photometric = photometric
         if best.lost:
             best.T_world_camera = inits[0].copy()
         return best
@@ -315,13 +374,19 @@ class FrameToModelTracker:
             its = (0,) * (len(its) - 1) + (HINT_ITERATIONS,)
         dists = (self.projective_distance,) * len(its)
         T_model = T_init
+        t0 = time.perf_counter()
+        gray = self._intensities(depth, pyr, f)
+        if gray is not None:
+            _add(self.timing, "intensities", time.perf_counter() - t0)
         for recast in range(1 + RECASTS):
             maps = self._model_maps(volume, pyr[m], T_model, m)
             if maps is None:
                 return None
             mz, mv, mn, state = maps
             r = projective_icp(pyr[f:], mv, mn, pyr[m].K, T_model, r.T_world_camera if recast else T_init, its, dists,
-                               self.max_angle, converged=self.icp_converged, timing=self.timing)
+                               self.max_angle, converged=self.icp_converged, timing=self.timing, intensities=gray,
+                               reference=self._reference, photo_weight=self.photo_weight if gray else 0.0,
+                               photo_share=self.photo_share)
             moved = np.linalg.inv(T_model) @ r.T_world_camera
             if np.linalg.norm(moved[:3, 3]) < RECAST_M and _angle_deg(moved[:3, :3]) < RECAST_DEG:
                 break
@@ -330,8 +395,10 @@ class FrameToModelTracker:
         agreement = model_agreement(pyr[self._level(self.agreement_stride)], r.T_world_camera, mz, state, pyr[m].K,
                                     T_model, BAND_HIT, BAND_OCCLUDED, volume.truncation)
         _add(self.timing, "agreement", time.perf_counter() - t0)
-        return self._checked(r.T_world_camera, r.fitness, r.rmse, volume, depth, K, T_ref, dt_s, r.condition,
-                             agreement)
+        out = self._checked(r.T_world_camera, r.fitness, r.rmse, volume, depth, K, T_ref, dt_s, r.condition,
+                            agreement)
+        out.photometric = gray is not None
+        return out
 
     def _pyramid(self, volume, depth, K) -> tuple[list, int, int]:
         """The frame's data pyramid, the finest level ICP uses and the level the model maps match: icp_scale /
@@ -346,6 +413,7 @@ class FrameToModelTracker:
                            first=min(f, self._level(self.agreement_stride)), timing=self.timing)
         m = min(self._level(1 / self.map_scale), self._narrowest(depth.shape[1], MIN_MODEL_WIDTH), levels - 1)
         self._frame_pyramid = (pyr, f, m)
+        self._last_pyramid = (depth, pyr, f, m)
         return self._frame_pyramid
 
     def _model_maps(self, volume, level, T_model, m: int):

@@ -113,6 +113,23 @@ class RoomScenario:
             m.transform(self.W)
         return m
 
+    def textured_target(self):
+        """The room for the sensor with texture (a RaycastTarget, z-up room frame): the floor's checker, a wallpaper
+        pattern on the walls and furniture. The plain room (`mesh`, what `render` shows) has one colour per part, so
+        a tracker that reads colour has nothing to hold on to there; real rooms have texture."""
+        from kinfu_cli.sim.scene import RaycastTarget
+
+        rc = o3d.t.geometry.RaycastingScene()
+        labels, albedo, textured = [], [], []
+        for name, ext, ctr, colour in self.parts:
+            m = o3d.geometry.TriangleMesh.create_box(*ext)
+            m.translate(np.asarray(ctr) - np.asarray(ext) / 2)
+            rc.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(m))
+            labels.append(room_label(name))
+            albedo.append(np.asarray(colour, dtype=float))
+            textured.append(2 if name == "floor" else 4)
+        return RaycastTarget(rc, np.asarray(labels, np.int32), np.asarray(albedo), np.asarray(textured, np.int32))
+
     def part_distances(self, points: np.ndarray) -> list[tuple[int, np.ndarray]]:
         """(label, signed distance) of each part box to world points (N, 3): 0 background, 1.. ROOM_OBJECTS."""
         from kinfu_cli.sim.scene import _box_sdf  # the box distance the tabletop scenes use

@@ -199,7 +199,8 @@ class RaycastTarget:
     scene: o3d.t.geometry.RaycastingScene
     labels: np.ndarray  # (G,) int32
     albedo: np.ndarray  # (G, 3) float
-    textured: np.ndarray  # (G,) int: 0 plain, 1 table wood stripes, 2 floor checker
+    textured: np.ndarray  # (G,) int: 0 plain, 1 table wood stripes, 2 floor checker, 3 vertex colours
+    # (sensor.mesh_target), 4 wallpaper (sim.room.textured_target)
     vertex_colours: list = field(default_factory=list)  # per geometry: None or (vertex colours, triangles)
 
 

@@ -361,7 +361,8 @@ class DepthSensor:
 
 @njit(cache=True, parallel=True)
 def _shade_kernel(valid, gid, t, dirs, normals, origin, albedo_tab, tex_tab, light, background):  # pragma: no cover
-    """Albedo (with the table's wood stripes / the floor's checker) x (ambient + Lambert), float32 RGB (H, W, 3)."""
+    """Albedo (with the table's wood stripes / the floor's checker / a wallpaper) x (ambient + Lambert), float32 RGB
+    (H, W, 3)."""
     H, W = valid.shape
     out = np.empty((H, W, 3), dtype=np.float32)
     for r in prange(H):
@@ -373,13 +374,17 @@ def _shade_kernel(valid, gid, t, dirs, normals, origin, albedo_tab, tex_tab, lig
             g = gid[r, c]
             scale = 1.0
             tex = tex_tab[g]
-            if tex == 1 or tex == 2:
+            if tex == 1 or tex == 2 or tex == 4:
                 px = origin[0] + dirs[r, c, 0] * t[r, c]
                 py = origin[1] + dirs[r, c, 1] * t[r, c]
                 if tex == 1:
                     scale = 0.88 + 0.12 * np.sin(px * 45.0 + 3.0 * np.sin(py * 7.0))
-                else:
+                elif tex == 2:
                     scale = 0.8 + 0.2 * ((np.floor(px / 0.5) + np.floor(py / 0.5)) % 2)
+                else:  # wallpaper: smooth blotches ~15 cm across, varying along all three axes
+                    pz = origin[2] + dirs[r, c, 2] * t[r, c]
+                    scale = 0.75 + 0.25 * (np.sin(px * 6.1 + 2.3 * np.sin(py * 4.7 + pz * 3.1))
+                                           * np.sin(py * 5.3 + pz * 7.9 + 1.7 * np.sin(px * 3.7)))
             nd = normals[r, c, 0] * dirs[r, c, 0] + normals[r, c, 1] * dirs[r, c, 1] + normals[r, c, 2] * dirs[r, c, 2]
             nl = normals[r, c, 0] * light[0] + normals[r, c, 1] * light[1] + normals[r, c, 2] * light[2]
             if nd > 0:  # the normal must face the camera

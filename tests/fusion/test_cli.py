@@ -146,6 +146,8 @@ def test_imported_7scenes_fuses_forced_and_icp(shared_data, tmp_path):
     ri = json.loads((icp / "report.json").read_text())
     track = ri["tracking"]["frames"]
     assert len(track) == 9 and ri["tracking"]["lost"] == 0
+    # the recording has colour: every frame's ICP had the colour term against the frame fused before it
+    assert ri["tracking"]["photometric"] == 9 and all(t["photometric"] for t in track)
     # each tracked frame says how well its view pinned the pose down (the kitchen reads 1e2-1e3)
     assert all(10 < t["condition"] < MAX_CONDITION for t in track)
     truth = [np.loadtxt(root / f"frame-{i:06d}.pose.txt") for i in range(6, 60, 6)]

@@ -1,0 +1,167 @@
+"""The photometric term of projective ICP: the frame's intensities against the last fused frame's.
+
+Depth alone cannot pin a camera that sees a wall, the floor and one edge: sliding along the wall-floor line
+costs the point-to-plane error nothing, and on noisy depth ICP drifts along it (benchmarks/bench_room_drift.py).
+Colour texture on those surfaces does pin it. As in hybrid RGB-D odometry (Steinbruecker et al. 2011; Whelan et
+al.'s Kintinuous / ElasticFusion, which pair a frame-to-model ICP with this term), each data vertex of the frame,
+moved by the current pose estimate into the previous frame's camera, should see there the intensity it has here;
+the residual is the previous frame's intensity (bilinear) at that pixel minus this frame's, linearised with the
+previous image's gradient. Its normal equations have the same layout as the point-to-plane ones
+(fusion.icp.N_SUMS: J = [p x g, g], g the residual's gradient in world coordinates), so ICP adds them with a
+weight. Against the previous frame, not the model: the model's colour is a running mean at voxel size, the last
+frame's image is sharp; the geometric term keeps the pose on the model, so the two together drift no more than
+the geometric one where depth holds.
+
+Correspondences are skipped where the previous frame has no reading at that pixel or one further than
+OCCLUSION_PER_M x depth from the point (occluded or off an edge), and where the residual exceeds MAX_RESIDUAL
+(a highlight, a moved object).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit, prange
+
+N_SUMS = 29  # the layout of fusion.icp.N_SUMS: 21 upper-triangle entries of J^T J, 6 of J^T r, sum r^2, count
+# a correspondence whose intensities differ by more than this (0..1 grey) is not the same surface point lit alike
+MAX_RESIDUAL = 0.2
+# the previous frame's reading at the projected pixel must lie within this share of the point's depth from it
+OCCLUSION_PER_M = 0.04
+# levels wider than this (px) take every 2nd pixel of every 2nd row: intensities are plentiful there (the term is
+# capped at a share of the depth term's information anyway), and the finest level's full term cost 1/3 more
+# tracking time on the 7-Scenes kitchen
+FULL_WIDTH = 160
+
+
+@dataclass
+class IntensityLevel:
+    """One pyramid level of a frame's intensities: grey (H, W) float32 in 0..1 (NaN: no colour sample) and,
+    for a reference frame, its gradients per pixel (gx, gy; None for the frame being tracked)."""
+    gray: np.ndarray
+    gx: np.ndarray | None = None
+    gy: np.ndarray | None = None
+
+
+@dataclass
+class PhotometricReference:
+    """The last fused frame: its intensity levels (with gradients), its depth per level (the same sizes) and its
+    pose (world <- camera)."""
+    levels: list[IntensityLevel]
+    depths: list[np.ndarray]
+    T_world_camera: np.ndarray
+
+
+def intensity_pyramid(color: np.ndarray, mask: np.ndarray | None, shapes: list[tuple[int, int]],
+                      gradients: bool = False) -> list[IntensityLevel]:
+    """Grey levels of an RGB uint8 image at each (height, width) of `shapes` (the depth pyramid's, finest first;
+    the first the image's own). mask: False where the colour has no sample (NaN there). gradients: also the
+    Sobel gradients (per pixel; NaN next to a missing sample)."""
+    import cv2  # heavy: only when tracking
+
+    g = cv2.cvtColor(np.ascontiguousarray(color), cv2.COLOR_RGB2GRAY).astype(np.float32) * np.float32(1 / 255)
+    if mask is not None:
+        g[~mask] = np.nan
+    out = []
+    for h, w in shapes:
+        if g.shape != (h, w):
+            g = cv2.resize(g, (w, h), interpolation=cv2.INTER_AREA)
+        lev = IntensityLevel(g)
+        if gradients:
+            lev.gx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
+            lev.gy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
+        out.append(lev)
+    return out
+
+
+@njit(cache=True, inline="always")
+def _bilinear(img, x, y):
+    """img at the sub-pixel position (x, y) (column, row), inside the image's last pixel centres."""
+    x0 = int(x)
+    y0 = int(y)
+    ax = x - x0
+    ay = y - y0
+    return ((1.0 - ay) * ((1.0 - ax) * img[y0, x0] + ax * img[y0, x0 + 1])
+            + ay * ((1.0 - ax) * img[y0 + 1, x0] + ax * img[y0 + 1, x0 + 1]))
+
+
+@njit(cache=True, inline="always")
+def _photometric_rows(acc, vert, gray, v0, v1, R, t, ref_gray, ref_gx, ref_gy, ref_depth, R_rw, t_rw, fx, fy, cx,
+                      cy, stride):
+    """Adds the photometric normal-equation sums of every stride-th pixel of data rows v0..v1-1 to acc (N_SUMS
+    layout)."""
+    w = vert.shape[1]
+    rh, rw = ref_gray.shape
+    J = np.empty(6)
+    for v in range(v0, v1):
+        if v % stride:
+            continue
+        for u in range(0, w, stride):
+            i0 = gray[v, u]
+            x0 = vert[v, u, 0]
+            if not (i0 == i0 and x0 == x0):
+                continue
+            x1 = vert[v, u, 1]
+            x2 = vert[v, u, 2]
+            px = R[0, 0] * x0 + R[0, 1] * x1 + R[0, 2] * x2 + t[0]
+            py = R[1, 0] * x0 + R[1, 1] * x1 + R[1, 2] * x2 + t[1]
+            pz = R[2, 0] * x0 + R[2, 1] * x1 + R[2, 2] * x2 + t[2]
+            qx = R_rw[0, 0] * px + R_rw[0, 1] * py + R_rw[0, 2] * pz + t_rw[0]
+            qy = R_rw[1, 0] * px + R_rw[1, 1] * py + R_rw[1, 2] * pz + t_rw[1]
+            qz = R_rw[2, 0] * px + R_rw[2, 1] * py + R_rw[2, 2] * pz + t_rw[2]
+            if qz <= 0.0:
+                continue
+            xf = fx * qx / qz + cx
+            yf = fy * qy / qz + cy
+            if not (xf >= 0.0 and yf >= 0.0 and xf < rw - 1.0 and yf < rh - 1.0):
+                continue
+            zr = ref_depth[int(yf + 0.5), int(xf + 0.5)]
+            if zr <= 0.0 or abs(zr - qz) > OCCLUSION_PER_M * qz:
+                continue
+            ir = _bilinear(ref_gray, xf, yf)
+            gx = _bilinear(ref_gx, xf, yf)
+            gy = _bilinear(ref_gy, xf, yf)
+            r = ir - i0
+            if not (abs(r) <= MAX_RESIDUAL and gx == gx and gy == gy):
+                continue
+            # d residual / d q (the point in the reference camera), then into the world: g = R_rw^T dq
+            dqx = gx * fx / qz
+            dqy = gy * fy / qz
+            dqz = -(gx * fx * qx + gy * fy * qy) / (qz * qz)
+            g0 = R_rw[0, 0] * dqx + R_rw[1, 0] * dqy + R_rw[2, 0] * dqz
+            g1 = R_rw[0, 1] * dqx + R_rw[1, 1] * dqy + R_rw[2, 1] * dqz
+            g2 = R_rw[0, 2] * dqx + R_rw[1, 2] * dqy + R_rw[2, 2] * dqz
+            J[0] = py * g2 - pz * g1
+            J[1] = pz * g0 - px * g2
+            J[2] = px * g1 - py * g0
+            J[3] = g0
+            J[4] = g1
+            J[5] = g2
+            k = 0
+            for i in range(6):
+                for j in range(i, 6):
+                    acc[k] += J[i] * J[j]
+                    k += 1
+            for i in range(6):
+                acc[21 + i] += J[i] * r
+            acc[27] += r * r
+            acc[28] += 1.0
+
+
+@njit(cache=True, parallel=True, fastmath=True)
+def photometric_equations(vert, gray, R, t, ref_gray, ref_gx, ref_gy, ref_depth, R_rw, t_rw, fx, fy, cx, cy,
+                          nchunks, stride=1):
+    """Sums of the photometric normal equations over the data vertices with an intensity (vert: camera frame,
+    gray: their intensities; R, t: the pose estimate, world <- camera) against the reference level (R_rw, t_rw:
+    reference camera <- world; fx .. cy: the level's intrinsics, both frames' camera), every stride-th pixel of
+    every stride-th row. Row chunks in parallel."""
+    h = vert.shape[0]
+    out = np.zeros((nchunks, N_SUMS))
+    step = (h + nchunks - 1) // nchunks
+    for c in prange(nchunks):
+        acc = np.zeros(N_SUMS)
+        _photometric_rows(acc, vert, gray, c * step, min(h, (c + 1) * step), R, t, ref_gray, ref_gx, ref_gy,
+                          ref_depth, R_rw, t_rw, fx, fy, cx, cy, stride)
+        out[c] = acc
+    return out.sum(axis=0)
