@@ -26,6 +26,7 @@ import numpy as np
 from numba import njit, prange
 
 from kinfu_cli.core.camera import scaled_intrinsics
+from kinfu_cli.fusion.normal_sums import N_SUMS, add_correspondence
 from kinfu_cli.fusion.photometric import FULL_WIDTH as PHOTO_FULL_WIDTH
 from kinfu_cli.fusion.photometric import IntensityLevel, PhotometricReference, photometric_equations
 
@@ -37,7 +38,6 @@ BILATERAL_SIGMA_PX = 4.5
 EDGE_JUMP_PER_M = 0.04
 # the pose is taken as converged when one iteration moves it less than this (rad, m)
 CONVERGED = 1e-6
-N_SUMS = 29  # 21 upper-triangle entries of J^T J, 6 of J^T r, sum r^2, inlier count
 
 
 @dataclass
@@ -256,21 +256,7 @@ def _accumulate_rows(acc, vert, norm, v0, v1, R, t, model_v, model_n, R_cw, t_cw
                                                         cx, cy, mw, mh, max_dist2, min_cos)
             if not ok:
                 continue
-            J[0] = py * nz - pz * ny
-            J[1] = pz * nx - px * nz
-            J[2] = px * ny - py * nx
-            J[3] = nx
-            J[4] = ny
-            J[5] = nz
-            k = 0
-            for i in range(6):
-                for j in range(i, 6):
-                    acc[k] += J[i] * J[j]
-                    k += 1
-            for i in range(6):
-                acc[21 + i] += J[i] * r
-            acc[27] += r * r
-            acc[28] += 1.0
+            add_correspondence(acc, J, px, py, pz, nx, ny, nz, r)
 
 
 @njit(cache=True, parallel=True, fastmath=True)

@@ -7,7 +7,7 @@ al.'s Kintinuous / ElasticFusion, which pair a frame-to-model ICP with this term
 moved by the current pose estimate into the previous frame's camera, should see there the intensity it has here;
 the residual is the previous frame's intensity (bilinear) at that pixel minus this frame's, linearised with the
 previous image's gradient. Its normal equations have the same layout as the point-to-plane ones
-(fusion.icp.N_SUMS: J = [p x g, g], g the residual's gradient in world coordinates), so ICP adds them with a
+(fusion.normal_sums: J = [p x g, g], g the residual's gradient in world coordinates), so ICP adds them with a
 weight. Against the previous frame, not the model: the model's colour is a running mean at voxel size, the last
 frame's image is sharp; the geometric term keeps the pose on the model, so the two together drift no more than
 the geometric one where depth holds.
@@ -24,7 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, prange
 
-N_SUMS = 29  # the layout of fusion.icp.N_SUMS: 21 upper-triangle entries of J^T J, 6 of J^T r, sum r^2, count
+from kinfu_cli.fusion.normal_sums import N_SUMS, add_correspondence
+
 # a correspondence whose intensities differ by more than this (0..1 grey) is not the same surface point lit alike
 MAX_RESIDUAL = 0.2
 # the previous frame's reading at the projected pixel must lie within this share of the point's depth from it
@@ -56,11 +57,12 @@ class PhotometricReference:
 def intensity_pyramid(color: np.ndarray, mask: np.ndarray | None, shapes: list[tuple[int, int]],
                       gradients: bool = False) -> list[IntensityLevel]:
     """Grey levels of an RGB uint8 image at each (height, width) of `shapes` (the depth pyramid's, finest first;
-    the first the image's own). mask: False where the colour has no sample (NaN there). gradients: also the
-    Sobel gradients (per pixel; NaN next to a missing sample)."""
+    the first the image's own). mask: False where the colour has no sample (NaN there, as at exactly black pixels).
+    gradients: also the Sobel gradients (per pixel; NaN next to a missing sample)."""
     import cv2  # heavy: only when tracking
 
     g = cv2.cvtColor(np.ascontiguousarray(color), cv2.COLOR_RGB2GRAY).astype(np.float32) * np.float32(1 / 255)
+    g[~np.any(color, axis=2)] = np.nan  # exact black: a registered image's hole, as the volume reads it
     if mask is not None:
         g[~mask] = np.nan
     out = []
@@ -132,21 +134,7 @@ def _photometric_rows(acc, vert, gray, v0, v1, R, t, ref_gray, ref_gx, ref_gy, r
             g0 = R_rw[0, 0] * dqx + R_rw[1, 0] * dqy + R_rw[2, 0] * dqz
             g1 = R_rw[0, 1] * dqx + R_rw[1, 1] * dqy + R_rw[2, 1] * dqz
             g2 = R_rw[0, 2] * dqx + R_rw[1, 2] * dqy + R_rw[2, 2] * dqz
-            J[0] = py * g2 - pz * g1
-            J[1] = pz * g0 - px * g2
-            J[2] = px * g1 - py * g0
-            J[3] = g0
-            J[4] = g1
-            J[5] = g2
-            k = 0
-            for i in range(6):
-                for j in range(i, 6):
-                    acc[k] += J[i] * J[j]
-                    k += 1
-            for i in range(6):
-                acc[21 + i] += J[i] * r
-            acc[27] += r * r
-            acc[28] += 1.0
+            add_correspondence(acc, J, px, py, pz, g0, g1, g2, r)
 
 
 @njit(cache=True, parallel=True, fastmath=True)

@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 
 from kinfu_cli.core.camera import preset_intrinsics
-from kinfu_cli.fusion import icp, photometric
 from kinfu_cli.fusion.icp import data_pyramid, projective_icp
 from kinfu_cli.fusion.photometric import PhotometricReference, intensity_pyramid
 from kinfu_cli.fusion.tracking import FrameToModelTracker
@@ -40,10 +39,6 @@ def _model_maps(K, T_model):
     normals = np.zeros_like(verts)
     normals[..., 2] = -1.0
     return verts, normals
-
-
-def test_sums_share_the_point_to_plane_layout():
-    assert photometric.N_SUMS == icp.N_SUMS
 
 
 def test_texture_pins_a_slide_along_a_flat_wall():
