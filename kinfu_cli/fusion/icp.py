@@ -28,7 +28,8 @@ from numba import njit, prange
 from kinfu_cli.core.camera import scaled_intrinsics
 from kinfu_cli.fusion.normal_sums import N_SUMS, add_correspondence
 from kinfu_cli.fusion.photometric import FULL_WIDTH as PHOTO_FULL_WIDTH
-from kinfu_cli.fusion.photometric import IntensityLevel, PhotometricReference, photometric_equations
+from kinfu_cli.fusion.photometric import MIN_WIDTH as PHOTO_MIN_WIDTH
+from kinfu_cli.fusion.photometric import IntensityLevel, PhotometricReference, photometric_rows
 
 # KinFu's bilateral filter for tracking: range sigma 3 cm, space sigma 4.5 px
 BILATERAL_SIGMA_M = 0.03
@@ -278,6 +279,27 @@ def _normal_equations(vert, norm, R, t, model_v, model_n, R_cw, t_cw, fx, fy, cx
     return out.sum(axis=0)
 
 
+@njit(cache=True, parallel=True, fastmath=True)
+def _hybrid_equations(vert, norm, R, t, model_v, model_n, R_cw, t_cw, fx, fy, cx, cy, max_dist2, min_cos, gray,
+                      ref_gray, ref_gx, ref_gy, ref_depth, R_rw, t_rw, dfx, dfy, dcx, dcy, photo_stride, nchunks):
+    """_normal_equations' sums and, after them, the photometric term's (fusion.photometric; every photo_stride-th
+    pixel and row) in one parallel pass over row chunks."""
+    h = vert.shape[0]
+    out = np.zeros((nchunks, 2 * N_SUMS))
+    step = (h + nchunks - 1) // nchunks
+    for c in prange(nchunks):
+        acc = np.zeros(N_SUMS)
+        photo = np.zeros(N_SUMS)
+        v0, v1 = c * step, min(h, (c + 1) * step)
+        _accumulate_rows(acc, vert, norm, v0, v1, R, t, model_v, model_n, R_cw, t_cw, fx, fy, cx, cy, max_dist2,
+                         min_cos)
+        photometric_rows(photo, vert, gray, v0, v1, R, t, ref_gray, ref_gx, ref_gy, ref_depth, R_rw, t_rw, dfx, dfy,
+                         dcx, dcy, photo_stride)
+        out[c, :N_SUMS] = acc
+        out[c, N_SUMS:] = photo
+    return out.sum(axis=0)
+
+
 @njit(cache=True)
 def _system(sums):
     """(A, b) of the 6x6 normal equations from the N_SUMS row."""
@@ -329,15 +351,19 @@ def _icp_level(vert, norm, T, model_v, model_n, R_cw, t_cw, fx, fy, cx, cy, max_
     for it in range(iterations):
         R = np.ascontiguousarray(T[:3, :3])
         t = np.ascontiguousarray(T[:3, 3])
-        sums = _normal_equations(vert, norm, R, t, model_v, model_n, R_cw, t_cw, fx, fy, cx, cy, max_dist2, min_cos,
-                                 nchunks)
+        if photo_weight > 0.0:  # both terms in one parallel pass (a pass each cost the coarse levels 2x)
+            both = _hybrid_equations(vert, norm, R, t, model_v, model_n, R_cw, t_cw, fx, fy, cx, cy, max_dist2,
+                                     min_cos, gray, ref_gray, ref_gx, ref_gy, ref_depth, R_rw, t_rw, dfx, dfy, dcx,
+                                     dcy, 1 if vert.shape[1] <= PHOTO_FULL_WIDTH else 2, nchunks)
+            sums = both[:N_SUMS].copy()
+        else:
+            sums = _normal_equations(vert, norm, R, t, model_v, model_n, R_cw, t_cw, fx, fy, cx, cy, max_dist2,
+                                     min_cos, nchunks)
         if sums[28] < min_correspondences:
             return it, False, sums
         A, b = _system(sums)
         if photo_weight > 0.0:
-            Ap, bp = _system(photometric_equations(vert, gray, R, t, ref_gray, ref_gx, ref_gy, ref_depth, R_rw, t_rw,
-                                                   dfx, dfy, dcx, dcy, nchunks,
-                                                   1 if vert.shape[1] <= PHOTO_FULL_WIDTH else 2))
+            Ap, bp = _system(both[N_SUMS:])
             w = photo_weight
             tp = Ap[3, 3] + Ap[4, 4] + Ap[5, 5]
             if tp > 0.0:  # at most photo_share of the depth term's information on the translation
@@ -430,7 +456,7 @@ def projective_icp(levels: list[DataLevel], model_v: np.ndarray, model_n: np.nda
         h, w = level.depth.shape
         t0 = time.perf_counter()
         j = n - 1 - i
-        if photo:
+        if photo and level.depth.shape[1] >= PHOTO_MIN_WIDTH:
             ref = reference.levels[j]
             photo_args = (float(photo_weight), float(photo_share), intensities[j].gray, ref.gray, ref.gx, ref.gy,
                           reference.depths[j])

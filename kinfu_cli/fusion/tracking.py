@@ -255,8 +255,10 @@ class FrameToModelTracker:
         self._reference = None
         if self.photo_weight <= 0 or color is None or color.shape[:2] != depth.shape:
             return
-        last = self._last_pyramid
-        if last is not None and last[0] is depth:
+        last, depth = self._last_pyramid, np.asarray(depth)
+        # the frame just tracked (np.asarray may have made a view of it, another object on the same pixels)
+        if last is not None and last[0].shape == depth.shape and last[0].ctypes.data == depth.ctypes.data \
+                and last[0].strides == depth.strides and last[0].dtype == depth.dtype:
             _, pyr, f, _ = last
         else:
             pyr, f, _ = self._pyramid(volume, depth, K)
