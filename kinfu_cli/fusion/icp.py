@@ -28,7 +28,6 @@ from numba import njit, prange
 from kinfu_cli.core.camera import scaled_intrinsics
 from kinfu_cli.fusion.normal_sums import N_SUMS, add_correspondence
 from kinfu_cli.fusion.photometric import FULL_WIDTH as PHOTO_FULL_WIDTH
-from kinfu_cli.fusion.photometric import MIN_WIDTH as PHOTO_MIN_WIDTH
 from kinfu_cli.fusion.photometric import IntensityLevel, PhotometricReference, photometric_rows
 
 # KinFu's bilateral filter for tracking: range sigma 3 cm, space sigma 4.5 px
@@ -456,7 +455,7 @@ def projective_icp(levels: list[DataLevel], model_v: np.ndarray, model_n: np.nda
         h, w = level.depth.shape
         t0 = time.perf_counter()
         j = n - 1 - i
-        if photo and level.depth.shape[1] >= PHOTO_MIN_WIDTH:
+        if photo:
             ref = reference.levels[j]
             photo_args = (float(photo_weight), float(photo_share), intensities[j].gray, ref.gray, ref.gx, ref.gy,
                           reference.depths[j])

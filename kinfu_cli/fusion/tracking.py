@@ -114,13 +114,14 @@ HINT_ITERATIONS = 10
 HINT_MAX_M = 0.10
 HINT_MAX_DEG = 10.0
 # projective ICP's photometric term (fusion.photometric) weighs this much against the point-to-plane one: a grey
-# residual of 1/PHOTO_WEIGHT**0.5 counts as a metre of point-to-plane distance; chosen on the textured room walk
+# residual r (0..1) costs as much as a point-to-plane distance of sqrt(PHOTO_WEIGHT) r metres (0.01 grey ~ 1.7 mm);
+# chosen on the textured room walk (benchmarks/bench_room_drift.py --texture, seeds 0-1, 0.001-0.3)
 PHOTO_WEIGHT = 0.03
 # ... and it adds at most this share of the point-to-plane term's information on the translation: where colour is
 # rich (a real kitchen: ~170x the depth term's), a colour term at full weight would override the depth term with
 # colour's own errors (misregistration, unsynchronised streams); where depth cannot pin a slide, it holds it
 PHOTO_SHARE = 0.1
-# ... and no more than this: a grey residual of 0.1 would outweigh a metre of depth
+# ... and no more than this (a grey residual of 0.1 would cost as much as a metre of depth)
 MAX_PHOTO_WEIGHT = 100.0
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from kinfu_cli.core.camera import preset_intrinsics
 from kinfu_cli.fusion.icp import data_pyramid, projective_icp
@@ -90,7 +91,7 @@ def test_reference_needs_colour_of_the_depth_image_size():
 def _walk(depths, colors, K, first_T, photo_weight):
     """`kinfu fuse --pose icp` on 30 Hz frames of the synthetic room: the first fused at first_T, each next one
     tracked from the constant-velocity prediction and the last good pose, fused (and made the colour reference)
-    when not lost. (estimated poses, frames lost)."""
+    when not lost. (estimated poses, frames lost, frames re-localised)."""
     from kinfu_cli.fusion.tracking import predict_pose
 
     vol = TernaryVolume(size=(6.0, 5.0, 3.0), voxel_size=6.0 / 512, origin=(-3.0, -2.5, -0.2), truncation=0.03,
@@ -98,40 +99,46 @@ def _walk(depths, colors, K, first_T, photo_weight):
     tracker = FrameToModelTracker(photo_weight=photo_weight)
     vol.integrate(depths[0], K, first_T)
     tracker.keep_reference(vol, depths[0], K, first_T, colors[0])
-    est, good, lost = [first_T], [(first_T, 0.0)], 0
+    est, good, lost, relocalised = [first_T], [(first_T, 0.0)], 0, 0
     for i in range(1, len(depths)):
         (T1, s1), s = good[-1], i / 30
         T2, s2 = good[-2] if len(good) > 1 else (None, None)
         pred = predict_pose(T1, T2, None if s2 is None else s1 - s2, s - s1)
         r = tracker.track(vol, depths[i], K, [pred, T1], T_ref=T1, dt_s=s - s1, color=colors[i])
         lost += r.lost
+        relocalised += (not r.lost) and r.relocalised
         est.append(T1 if r.lost else r.T_world_camera)
         if not r.lost:
             good.append((r.T_world_camera, s))
             vol.integrate(depths[i], K, r.T_world_camera)
             tracker.keep_reference(vol, depths[i], K, r.T_world_camera, colors[i])
-    return est, lost
+    return est, lost, relocalised
 
 
-def test_colour_holds_the_room_walk_where_depth_alone_slides():
-    """200 frames of a hand-held walk through the textured synthetic room (Kinect noise, 320x240), panning to a
-    wall and the floor: depth alone slides along the wall-floor line (6-15 cm RMS over seeds 0-2, frames lost);
-    with the colour term the walk stays within a few centimetres, nothing lost."""
+@pytest.mark.parametrize("room", ["textured", "plain"])
+def test_colour_holds_the_room_walk_where_depth_alone_slides(room):
+    """200 frames of a hand-held walk through the synthetic room (Kinect noise, 320x240), panning to a wall and
+    the floor: with the colour term the walk stays within a few centimetres, nothing lost, hardly a frame
+    re-localised. Depth alone slides along the wall-floor line there (seed 1: 2.6-77 cm RMS over 10 runs, 5-14
+    frames re-localised, some lost; re-localisation is not bit-reproducible, so it is not asserted). Papered
+    walls (textured) or one colour per part (plain: only shading and the parts' edges); the plain room is the one
+    that ran off (16 cm) when the term was left out of the coarsest pyramid level."""
     from kinfu_cli.fusion.tracking import ate_rmse
     from kinfu_cli.sim.paths import room_walk_poses
     from kinfu_cli.sim.room import make_room
-    from kinfu_cli.sim.sensor import DepthSensor, kinect_v1_intrinsics
+    from kinfu_cli.sim.sensor import DepthSensor, kinect_v1_intrinsics, mesh_target
 
     w, h, seed = 320, 240, 1
     K = kinect_v1_intrinsics(w, h)
-    target = make_room(seed=seed, width=w, height=h, frames=3).textured_target()
+    scenario = make_room(seed=seed, width=w, height=h, frames=3)
+    target = scenario.textured_target() if room == "textured" else mesh_target(scenario.mesh())
     sensor = DepthSensor(K, w, h, max_range=4.0, noise=True, seed=seed)
     poses = room_walk_poses(200, seed)
     frames = [sensor.render_frame(target, T, frame_seed=i) for i, T in enumerate(poses)]
     depths, colors = [f.depth for f in frames], [f.color for f in frames]
-    est, lost = _walk(depths, colors, K, poses[0], 0.03)
-    depth_est, _ = _walk(depths, colors, K, poses[0], 0.0)
-    ate, depth_ate = ate_rmse(est, poses), ate_rmse(depth_est, poses)
-    print(f"room walk seed {seed} 320x240: ATE {100 * ate:.2f} cm with colour, {100 * depth_ate:.2f} cm depth alone")
-    assert lost == 0 and ate < 0.035
-    assert depth_ate > 2 * ate
+    est, lost, relocalised = _walk(depths, colors, K, poses[0], 0.03)
+    ate = ate_rmse(est, poses)
+    worst = max(np.linalg.norm(e[:3, 3] - T[:3, 3]) for e, T in zip(est, poses))
+    print(f"{room} room walk seed {seed} 320x240 with colour: ATE {100 * ate:.2f} cm, max {100 * worst:.2f} cm, "
+          f"{relocalised} re-localised")
+    assert lost == 0 and ate < 0.035 and worst < 0.05 and relocalised <= 4
