@@ -232,6 +232,18 @@ def test_fuse_tracking_options_without_a_pose_mode_are_not_warned_about(sample_d
     check_inapplicable(module.command.make_context("kinfu", args), module.INAPPLICABLE)
 
 
+@pytest.mark.parametrize("extra, said", [
+    (["--pose", "forced"], "kinfu: warning: --photometric-weight has no effect with --pose forced (ignored)\n"),
+    (["--pose", "icp", "--icp", "open3d"],
+     "kinfu: warning: --photometric-weight has no effect with --icp open3d (ignored)\n"),
+    (["--pose", "icp"], "")])
+def test_fuse_photometric_weight_where_no_projective_icp_runs_is_a_warning(tmp_path, capsys, extra, said):
+    """The colour term is projective ICP's: with poses given (forced) or open3d's ICP it does nothing."""
+    module, args = _leaf(["fuse", "r.mcap", "-o", str(tmp_path / "f"), "--photometric-weight", "0.1", *extra])
+    check_inapplicable(module.command.make_context("kinfu", args), module.INAPPLICABLE)
+    assert capsys.readouterr().err == said
+
+
 @pytest.mark.parametrize("extra, mode", [(["--size", "2"], "with --size 2"), (["--init", "v.npz"], "with --init")])
 def test_fuse_max_memory_with_a_given_grid_is_a_warning(tmp_path, capsys, extra, mode):
     module, args = _leaf(["fuse", "r.mcap", "-o", str(tmp_path / "f"), "--max-memory", "2", *extra])
