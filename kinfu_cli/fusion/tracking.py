@@ -15,9 +15,10 @@ camera frame; ICP estimates T_world_camera directly. Two ICPs (parameter icp):
 Re-localisation (below) uses open3d's ICP in both cases.
 With colour, projective ICP adds a photometric term against the last fused frame (fusion.photometric; keep_reference
 makes a fused frame the next one's reference) at PHOTO_WEIGHT, capped at PHOTO_SHARE of the depth term's
-translation information: depth alone slides along a wall-floor line (benchmarks/bench_room_drift.py: ATE 2.0-3.4
-cm, 27 of 200 frames re-localised; with the term 0.8-0.9 cm, 1 re-localised), and the cap keeps rich real texture
-from overriding depth with colour's own errors (7-Scenes kitchen 0.67 cm either way; uncapped 0.90 cm).
+translation information: depth alone slides along a wall-floor line (benchmarks/bench_room_drift.py --texture
+seeds 0-3: ATE 2.1-2.5 cm, 25-29 of 200 frames re-localised; with the term 0.9-1.1 cm, 1 re-localised), and the
+cap keeps rich real texture from overriding depth with colour's own errors (7-Scenes kitchen 0.67 / 0.66 cm;
+uncapped 0.90 cm).
 
 When is a frame lost? ICP always returns some pose; it is kept only when all the checks pass:
 1. fitness (share of the frame's points with a model correspondence within the finest correspondence
