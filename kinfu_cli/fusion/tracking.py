@@ -15,7 +15,7 @@ camera frame; ICP estimates T_world_camera directly. Two ICPs (parameter icp):
 Re-localisation (below) uses open3d's ICP in both cases.
 With colour, projective ICP adds a photometric term against the last fused frame (fusion.photometric; keep_reference
 makes a fused frame the next one's reference) at PHOTO_WEIGHT, capped at PHOTO_SHARE of the depth term's
-translation information: depth alone slides along a wall-floor line (benchmarks/bench_room_drift.py --texture
+translation information: depth alone slides along a wall-floor line (benchmarks/bench_room_drift.py, textured
 seeds 0-3: ATE 2.1-2.5 cm, 25-29 of 200 frames re-localised; with the term 0.9-1.1 cm, 1 re-localised), and the
 cap keeps rich real texture from overriding depth with colour's own errors (7-Scenes kitchen 0.67 / 0.66 cm;
 uncapped 0.90 cm).
