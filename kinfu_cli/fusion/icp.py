@@ -26,7 +26,7 @@ import numpy as np
 from numba import njit, prange
 
 from kinfu_cli.core.camera import scaled_intrinsics
-from kinfu_cli.fusion.normal_sums import N_SUMS, add_correspondence
+from kinfu_cli.fusion.normal_sums import N_SUMS, add_correspondence, moved_vertex
 from kinfu_cli.fusion.photometric import FULL_WIDTH as PHOTO_FULL_WIDTH
 from kinfu_cli.fusion.photometric import IntensityLevel, PhotometricReference, photometric_rows
 
@@ -194,17 +194,9 @@ def _project_vertex(vert, v, u, R, t, R_cw, t_cw, fx, fy, cx, cy, mw, mh):
     """Data vertex (v, u) moved by the pose (R, t) into the world, and the model pixel it projects to:
     (ok, world x, y, z, depth in the model camera, pixel column, row); ok False for a missing vertex, a point
     behind the model camera or outside its image."""
-    x0 = vert[v, u, 0]
-    if not (x0 == x0):
+    ok, px, py, pz, qx, qy, qz = moved_vertex(vert, v, u, R, t, R_cw, t_cw)
+    if not ok:
         return False, 0.0, 0.0, 0.0, 0.0, -1, -1
-    x1 = vert[v, u, 1]
-    x2 = vert[v, u, 2]
-    px = R[0, 0] * x0 + R[0, 1] * x1 + R[0, 2] * x2 + t[0]
-    py = R[1, 0] * x0 + R[1, 1] * x1 + R[1, 2] * x2 + t[1]
-    pz = R[2, 0] * x0 + R[2, 1] * x1 + R[2, 2] * x2 + t[2]
-    qx = R_cw[0, 0] * px + R_cw[0, 1] * py + R_cw[0, 2] * pz + t_cw[0]
-    qy = R_cw[1, 0] * px + R_cw[1, 1] * py + R_cw[1, 2] * pz + t_cw[1]
-    qz = R_cw[2, 0] * px + R_cw[2, 1] * py + R_cw[2, 2] * pz + t_cw[2]
     if qz <= 0.0:
         return False, px, py, pz, qz, -1, -1
     mu = int(math.floor(fx * qx / qz + cx + 0.5))

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from kinfu_cli.fusion.normal_sums import add_correspondence
+from kinfu_cli.fusion.normal_sums import add_correspondence, moved_vertex
 
 # a correspondence whose intensities differ by more than this (0..1 grey) is not the same surface point lit alike
 MAX_RESIDUAL = 0.2
@@ -120,18 +120,10 @@ def photometric_rows(acc, vert, gray, v0, v1, R, t, ref_gray, ref_gx, ref_gy, re
             continue
         for u in range(0, w, stride):
             i0 = gray[v, u]
-            x0 = vert[v, u, 0]
-            if not (i0 == i0 and x0 == x0):
+            if not (i0 == i0):
                 continue
-            x1 = vert[v, u, 1]
-            x2 = vert[v, u, 2]
-            px = R[0, 0] * x0 + R[0, 1] * x1 + R[0, 2] * x2 + t[0]
-            py = R[1, 0] * x0 + R[1, 1] * x1 + R[1, 2] * x2 + t[1]
-            pz = R[2, 0] * x0 + R[2, 1] * x1 + R[2, 2] * x2 + t[2]
-            qx = R_rw[0, 0] * px + R_rw[0, 1] * py + R_rw[0, 2] * pz + t_rw[0]
-            qy = R_rw[1, 0] * px + R_rw[1, 1] * py + R_rw[1, 2] * pz + t_rw[1]
-            qz = R_rw[2, 0] * px + R_rw[2, 1] * py + R_rw[2, 2] * pz + t_rw[2]
-            if qz <= 0.0:
+            ok, px, py, pz, qx, qy, qz = moved_vertex(vert, v, u, R, t, R_rw, t_rw)
+            if not ok or qz <= 0.0:
                 continue
             xf = fx * qx / qz + cx
             yf = fy * qy / qz + cy

@@ -205,7 +205,7 @@ class FrameToModelTracker:
         self.init_is_hint = bool(init_is_hint)
         self._hint: np.ndarray | None = None  # the current frame's TF pose (init_is_hint)
         self._frame_pyramid: tuple | None = None  # the current frame's data pyramid (_pyramid)
-        self._last_pyramid: tuple | None = None  # (depth image, pyramid, f, m) of the frame tracked last
+        self._last_pyramid: tuple | None = None  # (depth image, pyramid, f) of the frame tracked last
         self._color: tuple | None = None  # the current frame's (colour, colour mask), when it has colour
         self._reference: PhotometricReference | None = None  # the last fused frame (keep_reference)
         self.photo_weight = float(photo_weight)
@@ -247,7 +247,8 @@ class FrameToModelTracker:
         self._color = None if color is None else (color, color_mask)
         try:
             return self._track(volume, depth, K, inits, T_ref, dt_s)
-        finally:
+        finally:  # the pyramid stays for keep_reference, with the image as the caller gave it
+            self._last_pyramid = None if self._frame_pyramid is None else (depth, *self._frame_pyramid[:2])
             self._hint = self._frame_pyramid = self._color = None
 
     def keep_reference(self, volume, depth: np.ndarray, K: np.ndarray, T_world_camera: np.ndarray,
@@ -257,11 +258,9 @@ class FrameToModelTracker:
         self._reference = None
         if self.photo_weight <= 0 or color is None or color.shape[:2] != depth.shape:
             return
-        last, depth = self._last_pyramid, np.asarray(depth)
-        # the frame just tracked (np.asarray may have made a view of it, another object on the same pixels)
-        if last is not None and last[0].shape == depth.shape and last[0].ctypes.data == depth.ctypes.data \
-                and last[0].strides == depth.strides and last[0].dtype == depth.dtype:
-            _, pyr, f, _ = last
+        last = self._last_pyramid
+        if last is not None and last[0] is depth:  # the frame just tracked: its pyramid
+            _, pyr, f = last
         else:
             pyr, f, _ = self._pyramid(volume, depth, K)
             self._frame_pyramid = None
@@ -417,7 +416,6 @@ class FrameToModelTracker:
                            first=min(f, self._level(self.agreement_stride)), timing=self.timing)
         m = min(self._level(1 / self.map_scale), self._narrowest(depth.shape[1], MIN_MODEL_WIDTH), levels - 1)
         self._frame_pyramid = (pyr, f, m)
-        self._last_pyramid = (depth, pyr, f, m)
         return self._frame_pyramid
 
     def _model_maps(self, volume, level, T_model, m: int):
