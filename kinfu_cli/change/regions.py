@@ -28,11 +28,10 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from kinfu_cli.core.grid import EMPTY, OCCUPIED, UNKNOWN
+from kinfu_cli.core.point_pairs import pair_components
 
 KINDS = ("removed", "added")
 
@@ -124,8 +123,8 @@ def components(idx: np.ndarray) -> list[np.ndarray]:
     if len(idx) == 0:
         return []
     pairs = cKDTree(idx).query_pairs(r=1.0, p=np.inf, output_type="ndarray")
-    graph = coo_matrix((np.ones(len(pairs), dtype=np.int8), (pairs[:, 0], pairs[:, 1])), shape=(len(idx),) * 2)
-    n, lab = connected_components(graph, directed=False)
+    lab = pair_components(len(idx), pairs)
+    n = int(lab.max()) + 1
     order = np.argsort(lab, kind="stable")
     return np.split(idx[order], np.cumsum(np.bincount(lab, minlength=n))[:-1])
 

@@ -1,4 +1,4 @@
-"""Neighbour-pair searches with a bound on their size, checked before the search.
+"""Neighbour-pair searches with a bound on their size, checked before the search, and the groups pairs link.
 
 A k-d tree's pair search within a radius holds every pair it finds at once: a radius spanning the cloud makes
 N^2 / 2 pairs (a 0.1 M point surface at 10 m: 5e9 pairs, and out of memory after 17 GB) instead of an answer. The
@@ -9,6 +9,8 @@ for a radius spanning the cloud) and a search over MAX_POINT_PAIRS is refused wi
 from __future__ import annotations
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from kinfu_cli.core.errors import ConfigError, KinfuError
@@ -62,3 +64,11 @@ def bounded_pairs(points: np.ndarray | cKDTree, radius: float, *, what: str, hin
     tree = points if isinstance(points, cKDTree) else cKDTree(np.asarray(points, dtype=np.float64))
     check_pair_count(tree, radius, what=what, hint=hint, parameter=parameter, error=error, p=p, limit=limit)
     return tree.query_pairs(r=radius, p=p, output_type="ndarray")
+
+
+def pair_components(n: int, pairs: np.ndarray) -> np.ndarray:
+    """Connected-component id (0..K-1) of each of n nodes over undirected pairs (E, 2): the groups a pair search
+    links (a node in no pair is its own component)."""
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    g = coo_matrix((np.ones(len(pairs), dtype=np.int8), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    return connected_components(g, directed=False)[1].astype(np.int64)

@@ -22,12 +22,10 @@ from dataclasses import dataclass
 
 import numba as nb
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from kinfu_cli.core.errors import ConfigError, VolumeError
-from kinfu_cli.core.point_pairs import bounded_pairs
+from kinfu_cli.core.point_pairs import bounded_pairs, pair_components
 
 _N6 = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=np.int64)
 _N26 = np.array([[i, j, k] for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1) if (i, j, k) != (0, 0, 0)],
@@ -204,9 +202,7 @@ def extract_contours(labels: np.ndarray, origin, voxel_size: float, *, weights: 
     if len(pairs):
         similar = np.einsum("ij,ij->i", nrm[pairs[:, 0]], nrm[pairs[:, 1]]) > np.cos(np.radians(angle_th_deg))
         pairs = pairs[similar]
-    n = len(pos)
-    g = coo_matrix((np.ones(len(pairs), np.int8), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
-    _, comp = connected_components(g, directed=False)
+    comp = pair_components(len(pos), pairs)
     if max_group_size and max_group_size > 0:
         cell = np.floor(pos / max_group_size).astype(np.int64)
         key = np.column_stack([comp, cell])

@@ -26,10 +26,10 @@ import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
 from kinfu_cli.core.grid import EMPTY
-from kinfu_cli.core.point_pairs import bounded_pairs
+from kinfu_cli.core.point_pairs import bounded_pairs, pair_components
 from kinfu_cli.core.poses import plane_axes
 from kinfu_cli.segmentation.bridges import SpaceQuery
-from kinfu_cli.segmentation.segments import PLANE_LABEL, Segmentation, SegmentationParams, pair_components
+from kinfu_cli.segmentation.segments import PLANE_LABEL, Segmentation, SegmentationParams
 
 MAJORITY = 0.5  # share of a segment's points below or beyond the support for it to be background
 MIN_SUPPORT_SPAN = 0.2  # m: a support whose points span less (either way along the plane) decides nothing

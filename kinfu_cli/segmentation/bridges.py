@@ -25,13 +25,12 @@ from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from kinfu_cli.core.errors import VolumeError
 from kinfu_cli.core.grid import EMPTY, UNKNOWN, TernaryGrid
-from kinfu_cli.core.point_pairs import bounded_pairs, check_pair_count
+from kinfu_cli.core.point_pairs import bounded_pairs, check_pair_count, pair_components
+from kinfu_cli.segmentation.color_distances import chromaticity
 
 PAIRS_PER_SEGMENT_PAIR = 5
 END_MARGIN = 1.5  # voxels: samples this close to either end lie in the measured surface's own band
@@ -48,8 +47,8 @@ class BridgeParams:
     max_empty_share: float = 0.2
     min_unknown_share: float = 0.5
     max_normal_deg: float = 40.0
-    max_colour: float = 0.1  # chroma distance (as segments.color_distance "chroma": blind to shading, which differs
-    # across a face's band of missing depth as much as between faces)
+    max_colour: float = 0.1  # chroma distance (color_distances' "chroma": blind to shading, which differs across a
+    # face's band of missing depth as much as between faces)
 
 
 def space_query(labels: np.ndarray, origin: np.ndarray, voxel_size: float) -> SpaceQuery:
@@ -109,13 +108,6 @@ def _local_means(points: np.ndarray, values: np.ndarray, seg: np.ndarray, at: np
     return out / np.maximum(cnt, 1.0)[:, None]
 
 
-def _chroma(c: np.ndarray) -> np.ndarray:
-    """Chromaticities rgb / (r + g + b) (as segments.color_distance "chroma"; black is grey)."""
-    c = np.maximum(c, 0.0)
-    s = c.sum(axis=1, keepdims=True)
-    return np.where(s > 1e-6, c / np.maximum(s, 1e-6), 1.0 / 3.0)
-
-
 def _gap_shares(p: np.ndarray, q: np.ndarray, space: SpaceQuery) -> tuple[np.ndarray, np.ndarray]:
     """Share of empty and of unknown samples along each segment p -> q, away from its ends."""
     query, vs = space
@@ -157,7 +149,7 @@ def join_across_unknown(seg: np.ndarray, points: np.ndarray, normals: np.ndarray
     ok &= (np.abs(np.einsum("ij,ij->i", d, ni)) <= slope) & (np.abs(np.einsum("ij,ij->i", d, nj)) <= slope)
     if colors is not None:
         col = _local_means(points, colors, seg, ends)
-        ok &= np.linalg.norm(_chroma(col[:len(i)]) - _chroma(col[len(i):]), axis=1) <= params.max_colour
+        ok &= np.linalg.norm(chromaticity(col[:len(i)]) - chromaticity(col[len(i):]), axis=1) <= params.max_colour
     empty, unknown = _gap_shares(points[i], points[j], space)
     ok &= (empty <= params.max_empty_share) & (unknown >= params.min_unknown_share)
     keys, inv = np.unique(key, return_inverse=True)
@@ -166,8 +158,7 @@ def join_across_unknown(seg: np.ndarray, points: np.ndarray, normals: np.ndarray
     if len(join) == 0:
         return seg, 0
     k = int(seg.max()) + 1
-    g = coo_matrix((np.ones(len(join)), (join // k, join % k)), shape=(k, k))
-    comp = connected_components(g, directed=False)[1]
+    comp = pair_components(k, np.stack([join // k, join % k], 1))
     return np.where(seg >= 0, comp[np.maximum(seg, 0)], -1), int(len(join))
 
 

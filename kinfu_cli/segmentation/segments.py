@@ -80,16 +80,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.errors import ConfigError, VolumeError
 from kinfu_cli.core.grid import check_up
 from kinfu_cli.core.neighbours import grid_cells
-from kinfu_cli.core.point_pairs import MAX_POINT_PAIRS, bounded_pairs
+from kinfu_cli.core.point_pairs import MAX_POINT_PAIRS, bounded_pairs, pair_components
 from kinfu_cli.core.poses import plane_axes
 from kinfu_cli.segmentation.bridges import BridgeParams, join_across_unknown
+from kinfu_cli.segmentation.color_distances import (COLOR_DISTANCES, color_distance, color_features,
+                                                     feature_distance)
 from kinfu_cli.segmentation.group_stats import group_percentile
 from kinfu_cli.segmentation.plane_ransac import ransac_plane
 from kinfu_cli.segmentation.seed_assignment import assign_to_seeds
@@ -98,8 +99,6 @@ from kinfu_cli.segmentation.structure import find_structure
 PLANE_LABEL = 0
 NOISE_LABEL = -1
 METHODS = ("lccp", "flood-fill")
-# the colour distances of T_lccp (eq. 4.15) and T_ff (eq. 4.14), see color_distance
-COLOR_DISTANCES = ("rgb", "chroma", "angle")
 # an object point near the support plane joins it when its colour is this much nearer the plane's mean colour
 # than its segment's (tuned on synth seeds 0-3: 1.0 / 0.5 / 0.3 gave boundary P 0.931 / 0.954 / 0.929)
 PLANE_COLOR_RATIO = 0.5
@@ -467,47 +466,12 @@ def adjacency_pairs(points: np.ndarray, radius: float) -> np.ndarray:
                               f"(default {SegmentationParams.adjacency_radius:g} m)")
 
 
-def pair_components(n: int, edges: np.ndarray) -> np.ndarray:
-    """Connected-component id (0..K-1) of each of n nodes over undirected edges (E, 2)."""
-    g = coo_matrix((np.ones(len(edges), dtype=np.int8), (edges[:, 0], edges[:, 1])), shape=(n, n))
-    return connected_components(g, directed=False)[1].astype(np.int64)
-
-
 def _segment_stats(points: np.ndarray, normals: np.ndarray, lab: np.ndarray, k: int):
     cnt = np.bincount(lab, minlength=k).astype(np.float64)
     cen = _mean_rows(points, lab, k)
     nrm = _mean_rows(normals, lab, k)
     nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-12)
     return cnt, cen, nrm
-
-
-def color_distance(c1: np.ndarray, c2: np.ndarray, kind: str = "rgb") -> np.ndarray:
-    """Row-wise distance (N,) of colours (N, 3) RGB in [0, 1]. "rgb": Euclidean (the thesis's eqs. 4.14-4.15).
-    Lighting scales a face's colour (Lambert shading, a camera's gain), which moves it far in RGB; the other two
-    ignore such a scale: "chroma", the Euclidean distance of the chromaticities rgb / (r + g + b) (0 to sqrt(2));
-    "angle", the angle between the colour vectors (radians, 0 to pi / 2). Black has no hue: it is grey to both."""
-    return _feature_distance(_color_features(c1, kind), _color_features(c2, kind), kind)
-
-
-def _color_features(c: np.ndarray, kind: str) -> np.ndarray:
-    """The colours in the space color_distance measures `kind` in: RGB itself, else the chromaticities
-    rgb / (r + g + b) (the colour's direction; black, sum ~ 0, is grey). Computed once per point or supervoxel,
-    then indexed by the pairs."""
-    if kind == "rgb":
-        return c
-    if kind not in COLOR_DISTANCES:
-        raise ConfigError(f"expected one of {', '.join(COLOR_DISTANCES)}, got {kind!r}", parameter="color_distance")
-    c = np.maximum(np.asarray(c, dtype=np.float64), 0.0)
-    s = c.sum(axis=1, keepdims=True)
-    return np.where(s > 1e-6, c / np.maximum(s, 1e-6), 1.0 / 3.0)
-
-
-def _feature_distance(u: np.ndarray, v: np.ndarray, kind: str) -> np.ndarray:
-    """Row-wise distance of _color_features rows: the angle between them for "angle", else Euclidean."""
-    if kind != "angle":
-        return np.linalg.norm(u - v, axis=1)
-    cos = np.einsum("ij,ij->i", u, v) / np.maximum(np.linalg.norm(u, axis=1) * np.linalg.norm(v, axis=1), 1e-12)
-    return np.arccos(np.clip(cos, -1.0, 1.0))
 
 
 def lccp_segments(points: np.ndarray, normals: np.ndarray, pairs: np.ndarray, params: SegmentationParams,
@@ -538,8 +502,8 @@ def lccp_segments(points: np.ndarray, normals: np.ndarray, pairs: np.ndarray, pa
     join = convex | smooth
     pruned = 0
     if colors is not None and params.t_lccp is not None:
-        f = _color_features(_mean_rows(colors, sv, k), params.color_distance)
-        far = _feature_distance(f[edges[:, 0]], f[edges[:, 1]], params.color_distance) > params.t_lccp
+        f = color_features(_mean_rows(colors, sv, k), params.color_distance)
+        far = feature_distance(f[edges[:, 0]], f[edges[:, 1]], params.color_distance) > params.t_lccp
         pruned = int(np.sum(join & far))
         join &= ~far
     keep = edges[join]
@@ -556,8 +520,8 @@ def flood_fill_segments(normals: np.ndarray, pairs: np.ndarray, params: Segmenta
     colour term is 0."""
     cost = params.normal_importance * (1.0 - np.einsum("ij,ij->i", normals[pairs[:, 0]], normals[pairs[:, 1]]))
     if colors is not None:
-        f = _color_features(colors, params.color_distance)  # once per point, not per pair end
-        cost += params.color_importance * _feature_distance(f[pairs[:, 0]], f[pairs[:, 1]], params.color_distance)
+        f = color_features(colors, params.color_distance)  # once per point, not per pair end
+        cost += params.color_importance * feature_distance(f[pairs[:, 0]], f[pairs[:, 1]], params.color_distance)
     keep = pairs[cost < params.t_ff]
     return pair_components(len(normals), keep), {"adjacent_pairs": int(len(pairs)), "joined_pairs": int(len(keep))}
 

@@ -27,13 +27,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import least_squares
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 from scipy.special import beta
 
 from kinfu_cli.core.errors import ConfigError, KinfuError
-from kinfu_cli.core.point_pairs import check_pair_count
+from kinfu_cli.core.point_pairs import check_pair_count, pair_components
 
 E_MIN = 0.1
 E_MAX = 1.9
@@ -363,8 +361,7 @@ def remove_outliers(points: np.ndarray, eps: float | None = None, min_points: in
     keep_pair = core[pairs[:, 0]] | core[pairs[:, 1]]
     pairs = pairs[keep_pair]
     n = len(pts)
-    g = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
-    _, lab = connected_components(g, directed=False)
+    lab = pair_components(n, pairs)
     lab = np.where(core | np.isin(np.arange(n), pairs.ravel()), lab, -1)
     counts = np.bincount(lab[lab >= 0])
     return lab == int(np.argmax(counts))

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from kinfu_cli.core.errors import ConfigError
-from kinfu_cli.segmentation.segments import SegmentationParams, color_distance, segment_cloud
+from kinfu_cli.segmentation.color_distances import color_distance
+from kinfu_cli.segmentation.segments import SegmentationParams, segment_cloud
 from tests.segmentation.test_segment_color import block_scene
 
 LIGHT = np.array([0.3, -0.4, 1.0]) / np.linalg.norm([0.3, -0.4, 1.0])  # as the simulator's light
