@@ -49,15 +49,16 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from kinfu_cli.fusion.tracking import FrameToModelTracker, ate_rmse, predict_pose  # noqa: E402
+from kinfu_cli.fusion.pipeline import track_frames  # noqa: E402
+from kinfu_cli.fusion.tracking import FrameToModelTracker, ate_rmse  # noqa: E402
 from kinfu_cli.fusion.volume import TernaryVolume  # noqa: E402
+from kinfu_cli.io.frames import RGBDFrame  # noqa: E402
 from kinfu_cli.sim.paths import room_walk_poses  # noqa: E402
 from kinfu_cli.sim.room import make_room  # noqa: E402
 from kinfu_cli.sim.sensor import DepthSensor, kinect_v1_intrinsics, mesh_target  # noqa: E402
@@ -69,33 +70,17 @@ def room_volume() -> TernaryVolume:
 
 
 def track(method: str, depths, K, poses, colors=None, photo_weight: float = 0.0) -> dict:
-    """`kinfu fuse --pose icp` on the frames, as its integrator tracks (fusion.pipeline): from the constant-velocity
-    prediction of the last two good poses, then the last good pose; the speed check over the time since the last
-    good pose (a lost frame is not fused and the next is tracked from that pose). Estimated poses (the last good
-    one for a lost frame), lost and re-localised counts, and the tracker's seconds per frame by outcome (normal:
-    kept by the first attempt; re-localised; lost)."""
-    vol = room_volume()
-    vol.integrate(depths[0], K, poses[0])
-    tracker = FrameToModelTracker(icp=method, photo_weight=photo_weight)
+    """`kinfu fuse --pose icp` on the frames (30 Hz), by its own integrator (fusion.pipeline.track_frames; the
+    true poses are only compared). Estimated poses (the last good one for a lost frame), lost and re-localised
+    counts, and the tracker's seconds per frame by outcome (normal: kept by the first attempt; re-localised;
+    lost)."""
     colors = colors or [None] * len(depths)
-    tracker.keep_reference(vol, depths[0], K, poses[0], colors[0])
-    est, good, lost, reloc = [poses[0]], [(poses[0], 0.0)], 0, 0
+    frames = [RGBDFrame(i, round(i * 1e9 / 30), d, c, K, T) for i, (d, c, T) in enumerate(zip(depths, colors, poses))]
+    r = track_frames(room_volume(), frames, icp=method, photometric_weight=photo_weight)
     seconds = {"normal": [], "re-localised": [], "lost": []}
-    for i, d in enumerate(depths[1:], start=1):
-        (T1, s1), s = good[-1], i / 30
-        T2, s2 = good[-2] if len(good) > 1 else (None, None)
-        pred = predict_pose(T1, T2, None if s2 is None else s1 - s2, s - s1)
-        t0 = time.perf_counter()
-        r = tracker.track(vol, d, K, [pred, T1], T_ref=T1, dt_s=s - s1, color=colors[i])
-        seconds["lost" if r.lost else "re-localised" if r.relocalised else "normal"].append(time.perf_counter() - t0)
-        lost += r.lost
-        reloc += (not r.lost) and r.relocalised
-        est.append(T1 if r.lost else r.T_world_camera)
-        if not r.lost:
-            good.append((r.T_world_camera, s))
-            vol.integrate(d, K, r.T_world_camera)
-            tracker.keep_reference(vol, d, K, r.T_world_camera, colors[i])
-    return {"est": est, "lost": lost, "relocalised": reloc, "seconds": seconds}
+    for e, s in zip(r.log, r.seconds):
+        seconds["lost" if e["lost"] else "re-localised" if e["relocalised"] else "normal"].append(s)
+    return {"est": r.poses, "lost": len(r.lost), "relocalised": r.relocalised, "seconds": seconds}
 
 
 def from_truth(method: str, depths, K, poses) -> np.ndarray:

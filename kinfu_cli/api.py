@@ -24,7 +24,7 @@ from kinfu_cli.core.poses import look_at, matrix_to_quaternion, quaternion_to_ma
 from kinfu_cli.evaluation.changes import score_change_pois
 from kinfu_cli.evaluation.poi_loo import leave_one_user_out
 from kinfu_cli.fusion.outputs import write_fusion_outputs
-from kinfu_cli.fusion.pipeline import FusionResult, fuse_recording
+from kinfu_cli.fusion.pipeline import FusionResult, TrackedFrames, fuse_recording, track_frames
 from kinfu_cli.fusion.volume import TernaryVolume, load_grid, load_volume
 from kinfu_cli.grasp.plan import GraspOptions, plan_grasps
 from kinfu_cli.io.frames import RGBDFrame, iter_frames
@@ -42,7 +42,8 @@ __all__ = [
     "open_recording", "Recording", "iter_frames", "RGBDFrame", "load_hand_trajectory", "Trajectory",
     # the volume
     "TernaryVolume", "load_volume", "load_grid", "TernaryGrid", "load_ternary", "save_ternary",
-    "OCCUPIED", "UNKNOWN", "EMPTY", "fuse_recording", "FusionResult", "write_fusion_outputs",
+    "OCCUPIED", "UNKNOWN", "EMPTY", "fuse_recording", "FusionResult", "write_fusion_outputs", "track_frames",
+    "TrackedFrames",
     # cameras and poses
     "CameraModel", "SENSOR_PRESETS", "preset_intrinsics", "look_at", "matrix_to_quaternion",
     "quaternion_to_matrix", "read_tum", "write_tum",

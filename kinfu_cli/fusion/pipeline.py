@@ -11,6 +11,7 @@ It writes nothing; fusion.outputs writes the files and the report. Steps, in ord
    is lost are not fused, and more of them than max_lost (a share of the tracked frames) fail the run;
 4. clear spheres (after fusing unless continuing a volume) and read out labels, mesh and cloud; warn when
    occupied voxels touch a face of the grid (the scene goes on beyond it).
+`track_frames(volume, frames)` runs step 3's tracking integrator on frames held in memory (benchmarks, tests).
 """
 
 from __future__ import annotations
@@ -870,6 +871,43 @@ class _Integrator:
             self.prev2[0], (self.prev_stamp - self.prev2[1]) * 1e-9)
         pred = predict_pose(self.prev_T, prev2_T, dt_prev, dt)
         return [pred, self.prev_T] if not np.allclose(pred, self.prev_T) else [pred]
+
+
+@dataclass
+class TrackedFrames:
+    """What track_frames did to each frame."""
+
+    poses: list[np.ndarray]  # per frame: the pose it was fused at, or for a lost frame the last good one
+    lost: list[int]  # indices of the frames tracking lost (not fused)
+    log: list[dict]  # per tracked frame (all but the first), as report.json's tracking.frames
+    seconds: list[float]  # per tracked frame, the tracker's time (its attempts and the next colour reference)
+
+    @property
+    def relocalised(self) -> int:
+        """Frames kept only by the wider re-localisation search."""
+        return sum(1 for e in self.log if e["relocalised"] and not e["lost"])
+
+
+def track_frames(volume: TernaryVolume, frames: Iterable[RGBDFrame], *, icp: str = "projective",
+                 photometric_weight: float = PHOTO_WEIGHT) -> TrackedFrames:
+    """Frame-to-model tracking of frames in memory into `volume`, by the integrator fuse_recording's pose "icp"
+    runs (so that benchmarks and tests measure what `kinfu fuse` does): the first frame is fused at its
+    T_world_camera (the identity when None); each next one is tracked from the constant-velocity prediction of
+    the last two good poses, then from the last good pose, its speed checked over the time since that pose, and
+    fused (and made the colour reference) unless lost. Depth as it is to be fused (filter it first). The given
+    poses of later frames are only compared (log's given_minus_tracked_m), never used."""
+    plan = _PosePlan(mode="icp", source="none", description="frames in memory", world="")
+    timing: dict[str, float] = {}
+    integrator = _Integrator(volume, plan, None, None, "", "frames", timing, icp=icp,
+                             photometric_weight=photometric_weight)
+    poses, seconds = [], []
+    for frame in frames:
+        tracked, before = len(integrator.track_log), timing.get("track", 0.0)
+        integrator.add(frame, frame.depth)
+        if len(integrator.track_log) > tracked:
+            seconds.append(timing["track"] - before)
+        poses.append(integrator.prev_T.copy())
+    return TrackedFrames(poses, list(integrator.lost), integrator.track_log, seconds)
 
 
 def _hint_falls_back(res: TrackResult) -> bool:

@@ -88,31 +88,17 @@ def test_reference_needs_colour_of_the_depth_image_size():
     assert on.timing.get("intensities", 0) > 0
 
 
-def _walk(depths, colors, K, first_T, photo_weight):
-    """`kinfu fuse --pose icp` on 30 Hz frames of the synthetic room: the first fused at first_T, each next one
-    tracked from the constant-velocity prediction and the last good pose, fused (and made the colour reference)
-    when not lost. (estimated poses, frames lost, frames re-localised)."""
-    from kinfu_cli.fusion.tracking import predict_pose
+def _walk(depths, colors, K, poses, photo_weight):
+    """`kinfu fuse --pose icp` (its integrator, fusion.pipeline.track_frames) on 30 Hz frames of the synthetic room,
+    the first fused at its true pose: (estimated poses, frames lost, frames re-localised)."""
+    from kinfu_cli.fusion.pipeline import track_frames
+    from kinfu_cli.io.frames import RGBDFrame
 
     vol = TernaryVolume(size=(6.0, 5.0, 3.0), voxel_size=6.0 / 512, origin=(-3.0, -2.5, -0.2), truncation=0.03,
                         color=False, min_depth=0.3, max_depth=4.0)
-    tracker = FrameToModelTracker(photo_weight=photo_weight)
-    vol.integrate(depths[0], K, first_T)
-    tracker.keep_reference(vol, depths[0], K, first_T, colors[0])
-    est, good, lost, relocalised = [first_T], [(first_T, 0.0)], 0, 0
-    for i in range(1, len(depths)):
-        (T1, s1), s = good[-1], i / 30
-        T2, s2 = good[-2] if len(good) > 1 else (None, None)
-        pred = predict_pose(T1, T2, None if s2 is None else s1 - s2, s - s1)
-        r = tracker.track(vol, depths[i], K, [pred, T1], T_ref=T1, dt_s=s - s1, color=colors[i])
-        lost += r.lost
-        relocalised += (not r.lost) and r.relocalised
-        est.append(T1 if r.lost else r.T_world_camera)
-        if not r.lost:
-            good.append((r.T_world_camera, s))
-            vol.integrate(depths[i], K, r.T_world_camera)
-            tracker.keep_reference(vol, depths[i], K, r.T_world_camera, colors[i])
-    return est, lost, relocalised
+    frames = [RGBDFrame(i, round(i * 1e9 / 30), d, c, K, T) for i, (d, c, T) in enumerate(zip(depths, colors, poses))]
+    r = track_frames(vol, frames, photometric_weight=photo_weight)
+    return r.poses, len(r.lost), r.relocalised
 
 
 @pytest.mark.parametrize("room", ["textured", "plain"])
@@ -136,7 +122,7 @@ def test_colour_holds_the_room_walk_where_depth_alone_slides(room):
     poses = room_walk_poses(200, seed)
     frames = [sensor.render_frame(target, T, frame_seed=i) for i, T in enumerate(poses)]
     depths, colors = [f.depth for f in frames], [f.color for f in frames]
-    est, lost, relocalised = _walk(depths, colors, K, poses[0], 0.03)
+    est, lost, relocalised = _walk(depths, colors, K, poses, 0.03)
     ate = ate_rmse(est, poses)
     worst = max(np.linalg.norm(e[:3, 3] - T[:3, 3]) for e, T in zip(est, poses))
     print(f"{room} room walk seed {seed} 320x240 with colour: ATE {100 * ate:.2f} cm, max {100 * worst:.2f} cm, "
