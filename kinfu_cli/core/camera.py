@@ -83,6 +83,17 @@ def scaled_intrinsics(K: np.ndarray, factor: float | tuple[float, float]) -> np.
     return Ks
 
 
+# a resized image (image_proc's resize, a decimation filter) keeps its aspect ratio to within rounding
+RESIZE_ASPECT_TOLERANCE = 0.01
+
+
+def is_resized(size: tuple[int, int], of: tuple[int, int]) -> bool:
+    """Whether an image of `size` (width, height) can be one of `of` resized: the same aspect ratio, to within
+    RESIZE_ASPECT_TOLERANCE of the scale (another aspect ratio is another camera's pixels)."""
+    sx, sy = size[0] / of[0], size[1] / of[1]
+    return abs(sx - sy) <= RESIZE_ASPECT_TOLERANCE * max(sx, sy)
+
+
 def parse_intrinsics(value) -> tuple[float, float, float, float] | None:
     """'fx,fy,cx,cy' (or 4 numbers) -> tuple, None for None; ConfigError naming the intrinsics parameter for
     anything but finite numbers with positive focal lengths."""

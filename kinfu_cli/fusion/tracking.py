@@ -51,6 +51,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from kinfu_cli.core.camera import is_resized
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.fusion.placement import backproject
 from kinfu_cli.fusion.icp import EDGE_JUMP_PER_M, data_pyramid, model_agreement, projective_icp, vertex_normals
@@ -234,7 +235,7 @@ class FrameToModelTracker:
         T_init: the initial pose, or a sequence of candidate poses (the first is tried with the normal
         pyramid; all of them with the re-localisation pyramid when that fails). T_ref: the last good pose
         and dt_s the seconds since it, for the speed check (default: the first candidate, per-frame limits).
-        color (RGB uint8, the depth image's pixels) and color_mask (False: no sample): with a reference frame
+        color (RGB uint8, the depth image's pixels, at its size or resized) and color_mask (False: no sample): with a reference frame
         (keep_reference) and photo_weight > 0, projective ICP adds the photometric term.
         Lost: the first candidate pose is returned with lost=True and the reason.
         """
@@ -254,9 +255,9 @@ class FrameToModelTracker:
     def keep_reference(self, volume, depth: np.ndarray, K: np.ndarray, T_world_camera: np.ndarray,
                        color: np.ndarray | None, color_mask: np.ndarray | None = None) -> None:
         """The frame just fused at T_world_camera becomes the photometric reference of the next one (none without
-        colour in the depth image's pixels, or with photo_weight 0)."""
+        colour in the depth image's pixels, at its size or resized, or with photo_weight 0)."""
         self._reference = None
-        if self.photo_weight <= 0 or color is None or color.shape[:2] != depth.shape:
+        if self.photo_weight <= 0 or color is None or not _depth_pixels(color, depth):
             return
         last = self._last_pyramid
         if last is not None and last[0] is depth:  # the frame just tracked: its pyramid
@@ -277,7 +278,7 @@ class FrameToModelTracker:
             return None
         color, mask = self._color
         shapes = [lev.depth.shape for lev in pyr[f:]]
-        if color.shape[:2] != depth.shape or shapes != [d.shape for d in ref.depths]:
+        if not _depth_pixels(color, depth) or shapes != [d.shape for d in ref.depths]:
             return None
         return intensity_pyramid(color, mask, shapes)
 
@@ -523,6 +524,13 @@ class FrameToModelTracker:
         if n == 0:
             return float("nan")
         return float(np.count_nonzero((state == BAND_HIT) & (np.abs(d - z) < volume.truncation)) / n)
+
+
+def _depth_pixels(color: np.ndarray, depth: np.ndarray) -> bool:
+    """Whether the colour image is the depth image's pixels: its size, or that size resized (a colour stream at
+    twice the depth's resolution, a decimated depth; fusion resizes it so too). Another aspect ratio is another
+    camera, whose pixels would need projecting."""
+    return color.shape[:2] == depth.shape or is_resized(color.shape[1::-1], depth.shape[::-1])
 
 
 def _add(clock: dict, phase: str, seconds: float) -> None:

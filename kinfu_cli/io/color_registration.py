@@ -17,6 +17,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from kinfu_cli.core.camera import is_resized
 from kinfu_cli.core.errors import RecordingError, TransformError
 from kinfu_cli.io.camera_info import image_camera
 from kinfu_cli.io.messages import decode_color, header_frame, is_compressed
@@ -96,7 +97,7 @@ def check_color_size(reg: ColorRegistration, rec, color_topic: str,
     if reg.mode == "same-frame" and depth_size is not None and all(depth_size):
         size = _first_color_size(rec, color_topic)
         w, h = depth_size
-        if size is None or abs(size[0] / w - size[1] / h) <= 0.01 * max(size[0] / w, size[1] / h):
+        if size is None or is_resized(size, (w, h)):
             return reg
         return replace(reg, mode="none", reason=(
             f"the colour images on {color_topic} are {size[0]}x{size[1]} and the depth images {w}x{h} in the same "
@@ -107,10 +108,9 @@ def check_color_size(reg: ColorRegistration, rec, color_topic: str,
     size = _first_color_size(rec, color_topic)
     if size is None:
         return reg
-    cw, ch = size
-    w, h = reg.color_size
-    if abs(cw / w - ch / h) <= 0.01 * max(cw / w, ch / h):
+    if is_resized(size, reg.color_size):
         return reg
+    cw, ch = size
     return replace(reg, mode="none", reason=color_size_reason(color_topic, (cw, ch), reg))
 
 
@@ -166,7 +166,7 @@ def register_color(reg: ColorRegistration, depth: np.ndarray, K_depth: np.ndarra
     if reg.mode != "project":
         return color, None
     sx, sy = cw / reg.color_size[0], ch / reg.color_size[1]
-    if abs(sx - sy) > 0.01 * max(sx, sy):  # a resized image (image_proc's resize) keeps its aspect ratio
+    if not is_resized((cw, ch), reg.color_size):
         raise ColorSizeError(f"{where}: colour image is {cw}x{ch} but camera info {reg.info_topic} says "
                              f"{reg.color_size[0]}x{reg.color_size[1]}")
     from kinfu_cli.io.color_kernels import colour_camera_points, pinhole_pixels, zbuffer_gather
