@@ -119,3 +119,45 @@ def test_colour_of_another_size_with_the_depth_aspect_ratio_is_resized(scale):
                           max_distance=(0.1, 0.1, 0.1), max_angle_deg=20.0,
                           intensities=intensity_pyramid(c_now, None, shapes), reference=reference, photo_weight=0.03)
     assert np.linalg.norm(both.T_world_camera[:3, 3] - T_now[:3, 3]) < 0.002
+
+
+def _walk(depths, colors, K, poses, photo_weight):
+    """`kinfu fuse --pose icp` (its integrator, fusion.pipeline.track_frames) on 30 Hz frames of the synthetic room,
+    the first fused at its true pose: (estimated poses, frames lost, frames re-localised)."""
+    from kinfu_cli.fusion.pipeline import track_frames
+    from kinfu_cli.io.frames import RGBDFrame
+
+    vol = TernaryVolume(size=(6.0, 5.0, 3.0), voxel_size=6.0 / 512, origin=(-3.0, -2.5, -0.2), truncation=0.03,
+                        color=False, min_depth=0.3, max_depth=4.0)
+    frames = [RGBDFrame(i, round(i * 1e9 / 30), d, c, K, T) for i, (d, c, T) in enumerate(zip(depths, colors, poses))]
+    r = track_frames(vol, frames, photometric_weight=photo_weight)
+    return r.poses, len(r.lost), r.relocalised
+
+
+@pytest.mark.parametrize("room", ["textured", "plain"])
+def test_colour_holds_the_room_walk_where_depth_alone_slides(room):
+    """200 frames of a hand-held walk through the synthetic room (Kinect noise, 320x240), panning to a wall and
+    the floor: with the colour term the walk stays within a few centimetres, nothing lost, hardly a frame
+    re-localised. Depth alone slides along the wall-floor line there (seed 1: 2.6-77 cm RMS over 10 runs, 5-14
+    frames re-localised, some lost; re-localisation is not bit-reproducible, so it is not asserted). Papered
+    walls (textured) or one colour per part (plain: only shading and the parts' edges); the plain room is the one
+    that ran off (16 cm) when the term was left out of the coarsest pyramid level."""
+    from kinfu_cli.fusion.tracking import ate_rmse
+    from kinfu_cli.sim.paths import room_walk_poses
+    from kinfu_cli.sim.room import make_room
+    from kinfu_cli.sim.sensor import DepthSensor, kinect_v1_intrinsics, mesh_target
+
+    w, h, seed = 320, 240, 1
+    K = kinect_v1_intrinsics(w, h)
+    scenario = make_room(seed=seed, width=w, height=h, frames=3)
+    target = scenario.textured_target() if room == "textured" else mesh_target(scenario.mesh())
+    sensor = DepthSensor(K, w, h, max_range=4.0, noise=True, seed=seed)
+    poses = room_walk_poses(200, seed)
+    frames = [sensor.render_frame(target, T, frame_seed=i) for i, T in enumerate(poses)]
+    depths, colors = [f.depth for f in frames], [f.color for f in frames]
+    est, lost, relocalised = _walk(depths, colors, K, poses, 0.03)
+    ate = ate_rmse(est, poses)
+    worst = max(np.linalg.norm(e[:3, 3] - T[:3, 3]) for e, T in zip(est, poses))
+    print(f"{room} room walk seed {seed} 320x240 with colour: ATE {100 * ate:.2f} cm, max {100 * worst:.2f} cm, "
+          f"{relocalised} re-localised")
+    assert lost == 0 and ate < 0.035 and worst < 0.05 and relocalised <= 4
