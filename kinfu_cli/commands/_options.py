@@ -18,6 +18,7 @@ from click.core import ParameterSource
 
 from kinfu_cli.core.errors import ConfigError, KinfuError, VolumeError
 from kinfu_cli.core.ownership import claim_output, recording_folders, refuse_inside_folders
+from kinfu_cli.commands._output import OPTION_WARNINGS
 from kinfu_cli.commands._output_path import OutputPath, output_kind_of, output_kind_problem
 
 PARAMETER_FLAGS: dict[str, str] = {
@@ -130,7 +131,8 @@ def check_inapplicable(ctx: click.Context, rules: Iterable[Inapplicable], *, war
     effect (they were ignored without a word). An option counts as given by click's parameter source: one given
     at its default value is given, one left out is not. Called first by each command with its INAPPLICABLE
     rules, and by kinfu batch's check of a plan (warn=False: only the refusals, before any work; the warnings
-    come when the stage runs, into manifest.json).
+    come when the stage runs, into manifest.json). The warnings also go first into the command's result
+    document (report.json, pois.json, ...: _output.with_option_warnings).
 
     The rule: warn (`kinfu: warning: --x has no effect with --y z (ignored)`, exit 0): the run computes what its
     mode computes, as it did before these checks, and the line tells the user which of their options it did not
@@ -157,6 +159,8 @@ def check_inapplicable(ctx: click.Context, rules: Iterable[Inapplicable], *, war
         raise ConfigError(refused[0])
     for w in warnings if warn else ():
         click.echo(f"kinfu: warning: {w}", err=True)
+    if warn:  # and into the command's result document (_output.with_option_warnings)
+        ctx.meta[OPTION_WARNINGS] = warnings
 
 
 def volume_file(path: Path) -> Path:

@@ -14,15 +14,40 @@ from kinfu_cli.core.atomic import write_json
 QUIET_HELP = "Only warnings and errors: no progress bar, no tables (--json still prints the JSON)."
 
 
+#: click context meta key: the command line's warnings about options without effect (_options.check_inapplicable),
+#: printed before any work
+OPTION_WARNINGS = "kinfu.option_warnings"
+
+
+def option_warnings() -> list[str]:
+    """This command's warnings about options without effect (printed already)."""
+    ctx = click.get_current_context(silent=True)
+    return list(ctx.meta.get(OPTION_WARNINGS, ())) if ctx is not None else []
+
+
+def with_option_warnings(doc: dict) -> dict:
+    """`doc` (a result document with a "warnings" list) with the command line's warnings about options without
+    effect first in it: a report read later says which options the run did not use, as its stderr did."""
+    said = option_warnings()
+    if said and isinstance(doc.get("warnings"), list):
+        doc["warnings"] = said + [w for w in doc["warnings"] if w not in said]
+    return doc
+
+
 def print_warnings(doc: dict) -> None:
-    """Each entry of doc["warnings"] as one `kinfu: warning: ...` line on stderr (also with --quiet / --json)."""
+    """Each entry of doc["warnings"] as one `kinfu: warning: ...` line on stderr (also with --quiet / --json),
+    but those about options without effect: they were printed before the work."""
+    said = set(option_warnings())
     for w in doc.get("warnings") or []:
-        click.echo(f"kinfu: warning: {w}", err=True)
+        if w not in said:
+            click.echo(f"kinfu: warning: {w}", err=True)
 
 
 def emit(doc: dict, output, as_json: bool, lines_of: Callable[[dict], Iterable[str]], quiet: bool = False) -> None:
     """Write `doc` atomically to `output` when given; print it as JSON or as the lines `lines_of` makes (quiet:
-    only its warnings, as QUIET_HELP says)."""
+    only its warnings, as QUIET_HELP says); the command line's warnings about options without effect go first
+    into its warnings."""
+    with_option_warnings(doc)
     print_warnings(doc)
     if output is not None:
         write_json(output, doc)

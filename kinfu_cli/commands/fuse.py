@@ -10,7 +10,7 @@ import click
 
 from kinfu_cli.commands._options import (Inapplicable, OutputPath, bag_folder, check_inapplicable, claim_outputs,
                                          comma_numbers, force_option, given_options)
-from kinfu_cli.commands._output import print_warnings
+from kinfu_cli.commands._output import print_warnings, with_option_warnings
 from kinfu_cli.commands._roles import role_kwargs, role_options
 from kinfu_cli.commands._up import parse_up
 from kinfu_cli.core.atomic import atomic_dir, write_json
@@ -231,6 +231,7 @@ def command(recording: Path, outdir: Path, voxel_size, resolution, size, origin,
         report = fusion_report(result, extra_outputs=plots)
         report["warnings"] = [*unused_tracking_options(click.get_current_context(), result.pose_mode),
                               *report["warnings"]]
+        with_option_warnings(report)
         write_json(tmp / "report.json", report)
     if viz is not None:
         write_viewer(viz, fusion=result)

@@ -11,7 +11,7 @@ import numpy as np
 
 from kinfu_cli.commands._options import (Inapplicable, OutputPath, check_inapplicable, claim_outputs, comma_numbers,
                                          force_option)
-from kinfu_cli.commands._output import print_warnings
+from kinfu_cli.commands._output import print_warnings, with_option_warnings
 from kinfu_cli.core.atomic import write_json
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.core.progress import progress
@@ -123,7 +123,7 @@ def command(segments: Path, output: Path, hand, segment_ids, cones, cone_apertur
         from kinfu_cli.report.grasp_plot import plot_grasps
 
         out["plot"] = str(plot_grasps(result, plot))
-    write_json(output, out)
+    write_json(output, with_option_warnings(out))
     print_warnings(out)
     if as_json:
         click.echo(json.dumps(out, indent=2, default=float))

@@ -9,7 +9,7 @@ import click
 
 from kinfu_cli.commands._options import (Inapplicable, OutputPath, check_inapplicable, claim_outputs, comma_items,
                                          force_option)
-from kinfu_cli.commands._output import print_warnings
+from kinfu_cli.commands._output import print_warnings, with_option_warnings
 from kinfu_cli.commands._up import parse_up
 from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.io.rgbd_folders import import_folder
@@ -73,7 +73,7 @@ def command(folder: str, out: str, rate: float, frames: str | None, color: str, 
     summary = import_folder(folder, out, rate=rate, frames=frames, color=color, intrinsics=intrinsics,
                             compress=not no_compress, quiet=quiet, intrinsics_source="--intrinsics",
                             up=parse_up(up), force=force)
-    print_warnings(summary)
+    print_warnings(with_option_warnings(summary))
     if as_json:
         click.echo(json.dumps(summary, indent=2))
         return

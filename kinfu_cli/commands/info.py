@@ -8,7 +8,7 @@ import click
 
 from kinfu_cli.commands._frames import frame_kwargs, frame_options
 from kinfu_cli.commands._options import Inapplicable, check_inapplicable
-from kinfu_cli.commands._output import print_warnings
+from kinfu_cli.commands._output import print_warnings, with_option_warnings
 from kinfu_cli.commands._roles import role_kwargs, role_options
 from kinfu_cli.io.summary import format_summary, recording_summary
 
@@ -42,7 +42,7 @@ def command(recording: str, as_json: bool, check: bool, quiet: bool, **kwargs) -
     check_inapplicable(click.get_current_context(), INAPPLICABLE)
     fk = frame_kwargs(kwargs)
     summary = recording_summary(recording, check_frames=fk if check else None, quiet=quiet, **role_kwargs(kwargs))
-    print_warnings(summary)  # the frames' (--frames), as fuse and export print them
+    print_warnings(with_option_warnings(summary))  # the frames' (--frames), as fuse and export print them
     if as_json:
         click.echo(json.dumps(summary, indent=2))
     else:

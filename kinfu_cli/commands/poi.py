@@ -12,7 +12,7 @@ from kinfu_cli.attention.tasks import MIN_TASK_S, SPLIT_GAP_S
 from kinfu_cli.commands._detector_options import detector_inapplicable, detector_options, detector_params_from
 from kinfu_cli.commands._options import (OutputPath, bag_folder, check_inapplicable, claim_outputs, comma_items,
                                          force_option)
-from kinfu_cli.commands._output import print_warnings
+from kinfu_cli.commands._output import print_warnings, with_option_warnings
 from kinfu_cli.core.atomic import write_json
 from kinfu_cli.report.poi_plot import plot_pois, plot_task_pois
 from kinfu_cli.report.viewer import write_viewer
@@ -91,7 +91,7 @@ def command(source, algorithm, hand_topic, hand_frame, world_frame, workspace, s
                   recordings=[source])
     found = detect_pois(source, **detection_arguments(click.get_current_context().params), hand_topic=hand_topic,
                         hand_frame=hand_frame, world_frame=world_frame, quiet=quiet)
-    write_json(output, found.document)
+    write_json(output, with_option_warnings(found.document))
     print_warnings(found.document)
     if plot is not None:
         title = f"{Path(str(source)).name} ({algorithm})"

@@ -15,7 +15,7 @@ from click.core import ParameterSource
 
 from kinfu_cli.commands._options import (Inapplicable, OutputPath, check_inapplicable, claim_outputs, comma_numbers,
                                          force_option, volume_file)
-from kinfu_cli.commands._output import print_warnings
+from kinfu_cli.commands._output import print_warnings, with_option_warnings
 from kinfu_cli.commands._up import parse_up
 from kinfu_cli.core.atomic import atomic_dir, write_json
 from kinfu_cli.core.errors import ConfigError
@@ -244,7 +244,7 @@ def command(volume: Path, outdir: Path, resolution, min_weight, seed_resolution,
     for step in progress(steps, total=len(steps), desc="segment", quiet=quiet):
         if step == "segment":
             result = segment_volume(volume, opts)
-            doc = result.to_json()
+            doc = with_option_warnings(result.to_json())
         elif step == "grasp":
             grasps = _grasps(doc, grasp_options, grasp_cones)
         else:
