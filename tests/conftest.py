@@ -12,19 +12,39 @@ SAMPLE = REPO / "sample_data"
 SHARED_DATA = REPO.parent / "shared" / "data"
 
 
+# entries of the repository's top folder when the run started: a test that writes into the working folder (a
+# command run without -o writes its default output there) fails the run at its end (pytest_sessionfinish)
+_TOP_ENTRIES: set[str] = set()
+TOP_CACHES = {".pytest_cache", "__pycache__", ".coverage"}
+
+
 @pytest.hookimpl(tryfirst=True)
 def pytest_sessionstart(session):
     """With xdist workers, compile the numba kernels once first (kinfu_cli.warmup: two processes side by side
     instead of every worker compiling the same kernels for itself); KINFU_NO_WARM=1 skips it. A failure there only
     means the workers compile as before: the tests themselves judge the code."""
     config = session.config
-    if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
+    if hasattr(config, "workerinput"):
+        return
+    _TOP_ENTRIES.update(os.listdir(REPO))
+    if not getattr(config.option, "numprocesses", None):
         return
     if os.environ.get("KINFU_NO_WARM") or os.environ.get("NUMBA_DISABLE_JIT"):
         return
     from kinfu_cli.warmup import warm
 
     warm()
+
+
+def pytest_sessionfinish(session, exitstatus):
+    """Fail the run when a test left a file or folder in the repository's top folder (the working folder of a
+    run from the repository): outputs belong in the test's tmp_path."""
+    if hasattr(session.config, "workerinput") or not _TOP_ENTRIES:
+        return
+    left = sorted(set(os.listdir(REPO)) - _TOP_ENTRIES - TOP_CACHES)
+    if left:
+        print(f"\ntests left {', '.join(left)} in {REPO}: write outputs under tmp_path")
+        session.exitstatus = pytest.ExitCode.TESTS_FAILED
 
 
 def shared_path(*parts: str) -> Path:
