@@ -131,6 +131,9 @@ def parse_cone(text: str, up: np.ndarray, aperture_deg: float = PRESET_APERTURE_
     if text in ("top", "side"):
         return preset_cone(text, up, aperture_deg)
     parts = text.split(":")
+    if len(parts) == 3 and any(not v.strip() for v in parts[1].split(",")):
+        raise ConfigError(f"{text!r}: an empty item in the cone's direction; expected comma-separated values "
+                          f"without gaps", parameter="cones")
     try:
         axis, d, ang = parts
         direction = tuple(float(v) for v in d.split(","))

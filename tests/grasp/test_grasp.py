@@ -184,6 +184,17 @@ def test_cli_grasps_a_segmented_box_scene(tmp_path):
     assert not (tmp_path / "c.json").exists()
 
 
+def test_an_empty_item_in_a_cone_direction_is_named():
+    """'z:0,,1:30' said "expected 'top', 'side' or 'AXIS:dx,dy,dz:deg'": the comma-list options' words now."""
+    from kinfu_cli.core.errors import ConfigError
+    from kinfu_cli.grasp.constraints import parse_cone
+
+    with pytest.raises(ConfigError, match="an empty item in the cone's direction") as err:
+        parse_cone("z:0,,1:30", np.array([0.0, 0.0, 1.0]))
+    assert err.value.parameter == "cones"
+    assert parse_cone("z:0,0,-1:30", np.array([0.0, 0.0, 1.0])).direction == (0.0, 0.0, -1.0)
+
+
 def test_bad_segments_file_is_one_line_error(tmp_path):
     bad = tmp_path / "segments.json"
     bad.write_text("{not json")
