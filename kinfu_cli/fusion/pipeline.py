@@ -896,12 +896,17 @@ def track_frames(volume: TernaryVolume, frames: Iterable[RGBDFrame], *, icp: str
     the last two good poses, then from the last good pose, its speed checked over the time since that pose, and
     fused (and made the colour reference) unless lost. Depth as it is to be fused (filter it first). The given
     poses of later frames are only compared (log's given_minus_tracked_m), never used."""
+    if not isinstance(volume, TernaryVolume):
+        raise ConfigError(f"expected a TernaryVolume, got {type(volume).__name__}", parameter="volume")
+    check_number(photometric_weight, "photometric_weight", 0.0, MAX_PHOTO_WEIGHT)
     plan = _PosePlan(mode="icp", source="none", description="frames in memory", world="")
     timing: dict[str, float] = {}
     integrator = _Integrator(volume, plan, None, None, "", "frames", timing, icp=icp,
                              photometric_weight=photometric_weight)
     poses, seconds = [], []
-    for frame in frames:
+    for i, frame in enumerate(frames):
+        if not isinstance(frame, RGBDFrame):
+            raise ConfigError(f"item {i}: expected an RGBDFrame, got {type(frame).__name__}", parameter="frames")
         tracked, before = len(integrator.track_log), timing.get("track", 0.0)
         integrator.add(frame, frame.depth)
         if len(integrator.track_log) > tracked:

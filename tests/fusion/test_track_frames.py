@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from kinfu_cli.core.camera import preset_intrinsics
+from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.fusion.pipeline import track_frames
 from kinfu_cli.fusion.volume import TernaryVolume
 from kinfu_cli.io.frames import RGBDFrame
@@ -43,3 +45,14 @@ def test_tracks_fuses_and_skips_a_blank_frame():
     np.testing.assert_allclose(logged, [x for x in err[1:]], atol=1e-5)
     # the frame after the gap kept by the first attempt: its speed check covered the 2-frame gap
     assert not r.log[blank]["lost"] and r.relocalised == 0
+
+
+def test_arguments_are_checked_by_name():
+    vol = TernaryVolume(size=0.5, voxel_size=0.01, origin=(0, 0, 0), color=False)
+    for kwargs, parameter in (({"volume": None, "frames": []}, "volume"),
+                              ({"volume": vol, "frames": [(np.zeros((4, 4)), None)]}, "frames"),
+                              ({"volume": vol, "frames": [], "photometric_weight": -1.0}, "photometric_weight")):
+        with pytest.raises(ConfigError) as err:
+            track_frames(**kwargs)
+        assert err.value.parameter == parameter
+    assert track_frames(vol, []).poses == []
