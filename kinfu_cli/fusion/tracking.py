@@ -22,7 +22,9 @@ uncapped 0.90 cm).
 
 When is a frame lost? ICP always returns some pose; it is kept only when all the checks pass:
 1. fitness (share of the frame's points with a model correspondence within the finest correspondence
-   distance) >= min_fitness: less overlap than that cannot pin a pose down;
+   distance; projective ICP's also within its normal angle, so noisy far normals lower it: 0.44-0.50 on good
+   Kinect v1 kitchen frames, against ~0.98 by distance alone, which kept the room walks' worse frames from the
+   re-localisation that re-anchors them) >= min_fitness: less overlap than that cannot pin a pose down;
 2. agreement >= min_agreement: where the frame and the model ray cast from the new pose both see a surface,
    the share of pixels whose depths differ by less than the volume's truncation distance (a reading within
    the truncation band updates the same surface; beyond, it would add a second one). At a right pose only
