@@ -90,6 +90,8 @@ RESIZE_ASPECT_TOLERANCE = 0.01
 def is_resized(size: tuple[int, int], of: tuple[int, int]) -> bool:
     """Whether an image of `size` (width, height) can be one of `of` resized: the same aspect ratio, to within
     RESIZE_ASPECT_TOLERANCE of the scale (another aspect ratio is another camera's pixels)."""
+    if min(of) <= 0 or min(size) <= 0:
+        return False
     sx, sy = size[0] / of[0], size[1] / of[1]
     return abs(sx - sy) <= RESIZE_ASPECT_TOLERANCE * max(sx, sy)
 

@@ -63,12 +63,13 @@ class PhotometricReference:
 def intensity_pyramid(color: np.ndarray, mask: np.ndarray | None, shapes: list[tuple[int, int]],
                       gradients: bool = False) -> list[IntensityLevel]:
     """Grey levels of an RGB uint8 image at each (height, width) of `shapes` (the depth pyramid's, finest first;
-    the first the depth image's: the colour is resized to it when of another size). mask: False where the colour has no sample (a registered image's holes). Black
-    pixels are samples here (the volume reads exact black as no colour, but tracking on the real tabletop box,
-    15 % of its pixels black, went from 1.00 to 1.53 cm when they were taken as holes: they are dark surfaces
-    there). A level's pixel is the mean of the samples it covers (NaN when none). gradients (a reference frame):
-    holes are filled with the mean of the samples within 2 px first (a hole would otherwise take every bilinear
-    sample and gradient near it with it), then the Sobel gradients (per pixel)."""
+    the first the depth image's: the colour is resized to it when of another size). mask: False where the colour
+    has no sample (a registered image's holes). Black pixels are samples here (the volume reads exact black as no
+    colour, but tracking on the real tabletop box, 15 % of its pixels black, went from 1.00 to 1.53 cm when they
+    were taken as holes: they are dark surfaces there). A level's pixel is the mean of the samples it covers (NaN
+    when none). gradients (a reference frame): holes are filled with the mean of the samples within 2 px first (a
+    hole would otherwise take every bilinear sample and gradient near it with it), then the Sobel gradients (per
+    pixel)."""
     import cv2  # heavy: only when tracking
 
     grey = cv2.cvtColor(np.ascontiguousarray(color), cv2.COLOR_RGB2GRAY)

@@ -237,8 +237,8 @@ class FrameToModelTracker:
         T_init: the initial pose, or a sequence of candidate poses (the first is tried with the normal
         pyramid; all of them with the re-localisation pyramid when that fails). T_ref: the last good pose
         and dt_s the seconds since it, for the speed check (default: the first candidate, per-frame limits).
-        color (RGB uint8, the depth image's pixels, at its size or resized) and color_mask (False: no sample): with a reference frame
-        (keep_reference) and photo_weight > 0, projective ICP adds the photometric term.
+        color (RGB uint8, the depth image's pixels, at its size or resized) and color_mask (False: no sample):
+        with a reference frame (keep_reference) and photo_weight > 0, projective ICP adds the photometric term.
         Lost: the first candidate pose is returned with lost=True and the reason.
         """
         inits = [np.asarray(T_init, dtype=np.float64)] if np.ndim(T_init) == 2 else \
