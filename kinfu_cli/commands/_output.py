@@ -25,12 +25,17 @@ def option_warnings() -> list[str]:
     return list(ctx.meta.get(OPTION_WARNINGS, ())) if ctx is not None else []
 
 
-def with_option_warnings(doc: dict) -> dict:
-    """`doc` (a result document with a "warnings" list) with the command line's warnings about options without
-    effect first in it: a report read later says which options the run did not use, as its stderr did."""
+def option_warnings_first(warnings: list[str]) -> list[str]:
+    """The command line's warnings about options without effect, then `warnings` (without those): a report read
+    later says which options the run did not use, as its stderr did."""
     said = option_warnings()
-    if said and isinstance(doc.get("warnings"), list):
-        doc["warnings"] = said + [w for w in doc["warnings"] if w not in said]
+    return said + [w for w in warnings if w not in said]
+
+
+def with_option_warnings(doc: dict) -> dict:
+    """`doc` (a result document with a "warnings" list) with option_warnings_first as its warnings."""
+    if isinstance(doc.get("warnings"), list):
+        doc["warnings"] = option_warnings_first(doc["warnings"])
     return doc
 
 

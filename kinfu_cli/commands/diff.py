@@ -13,7 +13,7 @@ from kinfu_cli.change.outputs import CHANGE_ENTRIES, write_change_outputs
 from kinfu_cli.evaluation.change_pois import score_pois_in_comparison
 from kinfu_cli.commands._options import (Inapplicable, OutputPath, check_inapplicable, claim_outputs, force_option,
                                          volume_file)
-from kinfu_cli.commands._output import print_warnings, with_option_warnings
+from kinfu_cli.commands._output import option_warnings_first, print_warnings
 from kinfu_cli.core.atomic import atomic_dir
 from kinfu_cli.core.checks import check_number
 from kinfu_cli.core.volume_file import MAX_COORDINATE_M
@@ -129,7 +129,7 @@ def command(before: Path, after: Path, outdir: Path, pois_path, match_radius, ma
                 score_pois_in_comparison(result, pois, radius=match_radius, source=str(pois_path))
                 result.warnings += poi_frame_warnings(pois_path, result.frame, "--pois")
         else:
-            result.warnings = with_option_warnings({"warnings": list(result.warnings)})["warnings"]
+            result.warnings = option_warnings_first(result.warnings)
             with atomic_dir(outdir, own=CHANGE_ENTRIES, force=force) as tmp:  # the folder appears whole or not at all
                 write_change_outputs(result, tmp)
     doc = result.to_json()

@@ -110,8 +110,7 @@ def check_color_size(reg: ColorRegistration, rec, color_topic: str,
         return reg
     if is_resized(size, reg.color_size):
         return reg
-    cw, ch = size
-    return replace(reg, mode="none", reason=color_size_reason(color_topic, (cw, ch), reg))
+    return replace(reg, mode="none", reason=color_size_reason(color_topic, size, reg))
 
 
 def _first_color_size(rec, color_topic: str) -> tuple[int, int] | None:

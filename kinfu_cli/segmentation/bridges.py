@@ -30,7 +30,7 @@ from scipy.spatial import cKDTree
 from kinfu_cli.core.errors import VolumeError
 from kinfu_cli.core.grid import EMPTY, UNKNOWN, TernaryGrid
 from kinfu_cli.core.point_pairs import bounded_pairs, check_pair_count, pair_components
-from kinfu_cli.segmentation.color_distances import chromaticity
+from kinfu_cli.segmentation.color_distances import color_distance
 
 PAIRS_PER_SEGMENT_PAIR = 5
 END_MARGIN = 1.5  # voxels: samples this close to either end lie in the measured surface's own band
@@ -149,7 +149,7 @@ def join_across_unknown(seg: np.ndarray, points: np.ndarray, normals: np.ndarray
     ok &= (np.abs(np.einsum("ij,ij->i", d, ni)) <= slope) & (np.abs(np.einsum("ij,ij->i", d, nj)) <= slope)
     if colors is not None:
         col = _local_means(points, colors, seg, ends)
-        ok &= np.linalg.norm(chromaticity(col[:len(i)]) - chromaticity(col[len(i):]), axis=1) <= params.max_colour
+        ok &= color_distance(col[:len(i)], col[len(i):], "chroma") <= params.max_colour
     empty, unknown = _gap_shares(points[i], points[j], space)
     ok &= (empty <= params.max_empty_share) & (unknown >= params.min_unknown_share)
     keys, inv = np.unique(key, return_inverse=True)
