@@ -228,7 +228,7 @@ class TernaryVolume:
 
     def prepare_depth(self, depth: np.ndarray) -> np.ndarray:
         """float32 depth with readings outside [min_depth, max_depth] (and NaN) set to 0."""
-        d = np.asarray(depth, dtype=np.float32)
+        d = np.ascontiguousarray(depth, dtype=np.float32)
         if d.ndim != 2:
             raise VolumeError(f"depth: expected a 2-D image in metres, got shape {d.shape}")
         return kn.clean_depth(d, self.min_depth, self.max_depth)

@@ -169,7 +169,7 @@ def contour_voxels(labels: np.ndarray, weights: np.ndarray | None = None, w_th: 
     sub = np.ascontiguousarray(state[box])
     idx = _contour_kernel(sub, _N6, _N18)
     if weights is None:
-        wdummy = np.zeros((1, 1, 1), dtype=np.float32)
+        wdummy = np.zeros((1, 1, 1), dtype=np.uint8)  # the fusion weights' type: one compiled kernel for both
         raw = _frontier_normals(sub, wdummy, False, float(w_th), idx, _N26)
     else:
         raw = _frontier_normals(sub, np.ascontiguousarray(np.asarray(weights)[box]), True, float(w_th), idx, _N26)

@@ -85,7 +85,7 @@ class RayVolume:
             raise ConfigError(f"expected a power of two from 1 to 16, got {block}", parameter="block")
         labels = np.ascontiguousarray(grid.labels, dtype=np.int8)
         kind = _block_kind(labels, block)
-        mixed = np.argwhere(kind == 3)
+        mixed = np.ascontiguousarray(np.argwhere(kind == 3))  # argwhere's order varies: one compiled kernel
         brick_of = np.where(kind == 3, 0, kind).astype(np.int32)
         brick_of[tuple(mixed.T)] = 3 + np.arange(len(mixed), dtype=np.int32)
         bricks = np.empty((3 + len(mixed)) * block ** 3, np.int8)
@@ -531,7 +531,8 @@ def cast_rays(vol: RayVolume, origins: np.ndarray, dirs: np.ndarray, *, min_rang
     unknown voxels outside S are taken as free (rays stop only on occupied voxels or unknown ones in S)."""
     dirs = np.ascontiguousarray(dirs, dtype=np.float64).reshape(-1, 3)
     dirs = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
-    origins = np.ascontiguousarray(np.broadcast_to(np.asarray(origins, dtype=np.float64), dirs.shape))
+    # a writable copy: a read-only view (broadcast_to's) is another type to numba, another 35 s compilation
+    origins = np.array(np.broadcast_to(np.asarray(origins, dtype=np.float64), dirs.shape), order="C")
     n = dirs.shape[0]
     cls = np.empty(n, np.int8)
     t = np.empty(n, np.float64)

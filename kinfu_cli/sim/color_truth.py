@@ -30,7 +30,7 @@ def surface_truth(scene: Scene | RaycastTarget, points: np.ndarray, viewpoint) -
     near = ans["points"].numpy().astype(np.float64)
     gid = ans["geometry_ids"].numpy().astype(np.int64)
     normals = ans["primitive_normals"].numpy().astype(np.float32)
-    vp = np.asarray(viewpoint, dtype=np.float64).reshape(3)
+    vp = np.ascontiguousarray(viewpoint, dtype=np.float64).reshape(3)
     n = len(pts)
     rgb = _shade_kernel(np.ones((n, 1), bool), gid.reshape(n, 1), np.ones((n, 1)), (near - vp).reshape(n, 1, 3),
                         normals.reshape(n, 1, 3), vp, target.albedo.astype(np.float32),

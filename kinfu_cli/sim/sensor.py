@@ -340,7 +340,7 @@ class DepthSensor:
     def _shade(self, target: RaycastTarget, hit: dict, rng: np.random.Generator,
                gain: np.ndarray | None = None) -> np.ndarray:
         rgb = _shade_kernel(hit["valid"], hit["gid"], hit["t"], hit["dir"], hit["normals"],
-                            np.asarray(hit["origin"], dtype=np.float64), target.albedo.astype(np.float32),
+                            np.ascontiguousarray(hit["origin"], dtype=np.float64), target.albedo.astype(np.float32),
                             target.textured.astype(np.int32), LIGHT_DIR.astype(np.float32),
                             BACKGROUND_RGB.astype(np.float32))
         if target.vertex_colours:  # plain mesh with vertex colours: barycentric interpolation (x Lambert term)

@@ -34,3 +34,10 @@ def connects(monkeypatch) -> list:
 
     monkeypatch.setattr("kinfu_cli.commands.batch.connect", spy)
     return calls
+
+
+@pytest.fixture
+def quick_refusal(monkeypatch):
+    """An unreachable scheduler refused after 0.5 s instead of batch.engine's 5 (tests wait for a closed port,
+    which no wait would open)."""
+    monkeypatch.setattr("kinfu_cli.batch.engine.CONNECT_TIMEOUT_S", 0.5)

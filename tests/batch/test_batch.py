@@ -158,7 +158,7 @@ def test_local_default_and_scheduler_give_the_same_manifest(first_run, recording
     assert _comparable(a, plan.parent) == _comparable(b, local.parent)
 
 
-def test_bad_input_is_one_line_before_any_work(recordings, tmp_path):
+def test_bad_input_is_one_line_before_any_work(recordings, tmp_path, quick_refusal):
     plan = _workspace(recordings, tmp_path)
     out = tmp_path / "out"
     for text, needles in ((PLAN.replace('"segment"]', '"segment", "teleport"]'), ["stages", "teleport"]),

@@ -94,7 +94,7 @@ def test_a_trial_error_reaches_the_caller_with_its_parameter(hand_dataset, sched
         engine.close()
 
 
-def test_bad_scheduler_is_one_line_before_any_work(hand_dataset, sample_dir, tmp_path):
+def test_bad_scheduler_is_one_line_before_any_work(hand_dataset, sample_dir, tmp_path, quick_refusal):
     out = tmp_path / "loop.json"
     nbv = ["eval", "nbv", str(sample_dir / "ground_truth"), "-o", str(out), *NBV]
     runner = CliRunner()
