@@ -51,6 +51,10 @@ TEXTURE_CODES = {"": 0, "stripes": 1}
 
 # Labels used in label images: 0 = nothing hit, 1 = floor, 2 = table, 3.. = objects in scene order.
 LABEL_NONE, LABEL_FLOOR, LABEL_TABLE = 0, 1, 2
+# a shape may bulge past its mesh's bounding box by the tessellation's chord height (mm for these meshes); 1 cm
+MESH_SLACK = 0.01
+# scene_label_cloud only compares distances with -1 mm and 1.5 mm: a part farther than this changes nothing
+LABEL_CLOUD_REACH = 0.005
 
 
 @dataclass(frozen=True)
@@ -277,6 +281,30 @@ class Scene:
                                                 np.asarray(extents) / 2)))
         parts.append((LABEL_TABLE, self.table.sdf(points)))
         parts += [(3 + i, o.sdf(points)) for i, o in enumerate(self.objects) if o.present]
+        return parts
+
+    def _part_distances_near(self, points: np.ndarray, reach: float) -> list[tuple[int, np.ndarray]]:
+        """_part_distances, exact where a part may lie within `reach` (m) of a point and +inf elsewhere: each part's
+        distance is evaluated only inside its mesh's bounding box grown by `reach` and MESH_SLACK (a 4 m floor
+        or a wall against every point of the scene was most of scene_label_cloud's time)."""
+        pts = np.asarray(points, dtype=np.float64)
+        sdfs = []
+        if self.floor:
+            extents, centre = self._floor_box()
+            half = np.asarray(extents) / 2
+            sdfs.append((LABEL_FLOOR, lambda q, c=np.asarray(centre), h=half: _box_sdf(q - c, h),
+                         np.asarray(centre) - half, np.asarray(centre) + half))
+        mesh = self.table.mesh()
+        sdfs.append((LABEL_TABLE, self.table.sdf, mesh.get_min_bound(), mesh.get_max_bound()))
+        sdfs += [(3 + i, o.sdf, o.mesh.get_min_bound(), o.mesh.get_max_bound())
+                 for i, o in enumerate(self.objects) if o.present]
+        parts = []
+        for label, sdf, lo, hi in sdfs:
+            grow = reach + MESH_SLACK
+            near = np.flatnonzero(np.all((pts >= np.asarray(lo) - grow) & (pts <= np.asarray(hi) + grow), axis=1))
+            d = np.full(len(pts), np.inf)
+            d[near] = sdf(pts[near])
+            parts.append((label, d))
         return parts
 
     def raycasting_scene(self) -> RaycastTarget:
@@ -599,7 +627,7 @@ def scene_label_cloud(scene: Scene, spacing: float = 0.004, seed: int = 0) -> tu
     pts = np.concatenate(pts_all)
     lab = np.concatenate(lab_all)
     # keep points on the union's outer surface: no part (their own included) reaches more than 1 mm beyond them
-    dist = scene._part_distances(pts)
+    dist = scene._part_distances_near(pts, reach=LABEL_CLOUD_REACH)
     inside = np.min([d for _, d in dist], axis=0) < -1e-3
     owner = np.asarray([0 if label in (LABEL_FLOOR, LABEL_TABLE) else label for label, _ in dist])
     # and not on another part's surface (touching faces): another part within 1.5 mm

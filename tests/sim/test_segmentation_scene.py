@@ -15,6 +15,22 @@ from kinfu_cli.sim.scene import (LABEL_FLOOR, LABEL_TABLE, make_tabletop_scene, 
                                  segmentation_scene)
 
 
+@pytest.mark.parametrize("scene", [segmentation_scene(0), make_scenario(1, width=32, height=24, frames=2,
+                                                                         layout="household").scene_after],
+                         ids=["objects0", "household1"])
+def test_part_distances_near_are_exact_wherever_a_part_is_near(scene):
+    # scene_label_cloud's distances are evaluated only near each part's mesh box: exact there, and where a part
+    # is left out (+inf) it is farther than the reach asked for (the household scene has a floor)
+    pts, _ = scene_label_cloud(scene, spacing=0.012)
+    pts = pts + np.random.default_rng(0).normal(scale=0.01, size=pts.shape)
+    near, full = dict(scene._part_distances_near(pts, reach=0.005)), dict(scene._part_distances(pts))
+    assert near.keys() == full.keys()
+    for label, d in near.items():
+        kept = np.isfinite(d)
+        assert np.array_equal(d[kept], full[label][kept]) and np.all(full[label][~kept] > 0.005), label
+        assert 0 < kept.sum() < len(pts), label  # each part is near some points and not all
+
+
 @pytest.mark.parametrize("scene", [segmentation_scene(0), segmentation_scene(5), make_tabletop_scene(2)],
                          ids=["objects0", "objects5", "tabletop2"])
 def test_label_cloud_agrees_with_the_exact_geometry(scene):
