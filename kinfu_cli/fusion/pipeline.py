@@ -40,10 +40,11 @@ from kinfu_cli.fusion.tracking import (LOSS_CHECKS, MAX_PHOTO_WEIGHT, MAX_SPEED_
                                        PHOTO_WEIGHT, POSE_MODES, FrameToModelTracker, TrackResult, predict_pose)
 from kinfu_cli.fusion.up import choose_up
 from kinfu_cli.fusion.volume import DEFAULT_TRUNCATION_M, MIN_TRUNCATION_VOXELS, TernaryVolume, load_volume
-from kinfu_cli.io.frames import (DROP_CHAIN_BROKEN, DROP_EMPTY, DROP_NO_POSE, DROP_NO_POSE_TOPIC, MAX_16BIT_MM,
-                                  FrameStats, RGBDFrame, check_window, iter_frames, window_depth_count)
+from kinfu_cli.io.frames import check_window, iter_frames, window_depth_count
 from kinfu_cli.io.messages import header_frame
 from kinfu_cli.io.recording import Recording, open_recording
+from kinfu_cli.io.rgbd_frame import (DROP_CHAIN_BROKEN, DROP_EMPTY, DROP_NO_POSE, DROP_NO_POSE_TOPIC, MAX_16BIT_MM,
+                                     FrameStats, RGBDFrame)
 from kinfu_cli.io.roles import Roles, detect_roles
 from kinfu_cli.io.tf_buffer import TfBuffer
 from kinfu_cli.io.world_up import read_world_up

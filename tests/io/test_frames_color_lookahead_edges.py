@@ -8,7 +8,7 @@ neighbour had been dropped."""
 from __future__ import annotations
 
 
-from kinfu_cli.io.frames import COLOR_LOOKAHEAD_NS
+from kinfu_cli.io.rgbd_frame import COLOR_LOOKAHEAD_NS
 from recordings import LATE_PERIOD, LATE_T0, read_frames, write_logged
 
 T0, PERIOD = LATE_T0, LATE_PERIOD

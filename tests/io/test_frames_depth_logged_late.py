@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import pytest
 
-from kinfu_cli.io.frames import COLOR_LOOKAHEAD_NS, _FramePairer, iter_frames
+from kinfu_cli.io.frame_pairing import FramePairer
+from kinfu_cli.io.frames import iter_frames
+from kinfu_cli.io.rgbd_frame import COLOR_LOOKAHEAD_NS
 from kinfu_cli.io.recording import open_recording
 from kinfu_cli.io.writers import RecordingWriter
 from recordings import LATE_H, LATE_K, LATE_PERIOD, LATE_T0, LATE_W, read_frames, write_logged
@@ -75,13 +77,13 @@ def test_colour_kept_for_depth_to_come_is_bounded(tmp_path, monkeypatch):
     # a depth stream that stops while colour goes on: colour is not hoarded beyond the look-ahead
     path = _recording(tmp_path / "s.mcap", 0, n_colour=150, depth_until=3)
     held = []
-    forget = _FramePairer._forget_colors
+    forget = FramePairer._forget_colors
 
     def counted(self, log_ns):
         forget(self, log_ns)
         held.append(len(self.colors))
 
-    monkeypatch.setattr(_FramePairer, "_forget_colors", counted)
+    monkeypatch.setattr(FramePairer, "_forget_colors", counted)
     frames, _ = read_frames(path)
     assert len(frames) == 1 and _colour_index(frames[0]) == 0
     assert len(held) == 150 and max(held) <= COLOR_LOOKAHEAD_NS // PERIOD + 2

@@ -12,7 +12,8 @@ from click.testing import CliRunner
 
 from kinfu_cli.cli import cli
 from kinfu_cli.core.errors import RecordingError
-from kinfu_cli.io.frames import DROP_NO_PIXELS, FrameStats, iter_frames
+from kinfu_cli.io.frames import FrameStats, iter_frames
+from kinfu_cli.io.rgbd_frame import DROP_NO_PIXELS
 from kinfu_cli.io.messages import decode_color, decode_depth
 from kinfu_cli.io.recording import open_recording
 from kinfu_cli.io.writers import RecordingWriter
