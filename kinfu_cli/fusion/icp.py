@@ -252,29 +252,17 @@ def _accumulate_rows(acc, vert, norm, v0, v1, R, t, model_v, model_n, R_cw, t_cw
 
 
 @njit(cache=True, parallel=True, fastmath=True)
-def _normal_equations(vert, norm, R, t, model_v, model_n, R_cw, t_cw, fx, fy, cx, cy, max_dist2, min_cos, nchunks):
-    """Sums of the point-to-plane normal equations over the data vertices with a projective correspondence.
+def _normal_equations(vert, norm, R, t, model_v, model_n, R_cw, t_cw, fx, fy, cx, cy, max_dist2, min_cos, gray,
+                      ref_gray, ref_gx, ref_gy, ref_depth, R_rw, t_rw, dfx, dfy, dcx, dcy, photo_stride, nchunks):
+    """Sums of the point-to-plane normal equations over the data vertices with a projective correspondence, and
+    after them the photometric term's (fusion.photometric; every photo_stride-th pixel and row; photo_stride 0:
+    none, zeros), in one parallel pass over row chunks (a pass each cost the coarse levels 2x). One kernel for
+    both: a depth-only twin was another 8 s of compilation at set-up.
 
     vert, norm: data maps (camera frame); R, t: the pose estimate (world <- camera); model maps (world) ray cast
     from the pose (R_cw, t_cw: model camera <- world) with intrinsics fx, fy, cx, cy. Per chunk of rows its own
-    N_SUMS partial sums (threads never share an accumulator), added up at the end.
+    partial sums (threads never share an accumulator), added up at the end.
     """
-    h = vert.shape[0]
-    out = np.zeros((nchunks, N_SUMS))
-    step = (h + nchunks - 1) // nchunks
-    for c in prange(nchunks):
-        acc = np.zeros(N_SUMS)
-        _accumulate_rows(acc, vert, norm, c * step, min(h, (c + 1) * step), R, t, model_v, model_n, R_cw, t_cw,
-                         fx, fy, cx, cy, max_dist2, min_cos)
-        out[c] = acc
-    return out.sum(axis=0)
-
-
-@njit(cache=True, parallel=True, fastmath=True)
-def _hybrid_equations(vert, norm, R, t, model_v, model_n, R_cw, t_cw, fx, fy, cx, cy, max_dist2, min_cos, gray,
-                      ref_gray, ref_gx, ref_gy, ref_depth, R_rw, t_rw, dfx, dfy, dcx, dcy, photo_stride, nchunks):
-    """_normal_equations' sums and, after them, the photometric term's (fusion.photometric; every photo_stride-th
-    pixel and row) in one parallel pass over row chunks."""
     h = vert.shape[0]
     out = np.zeros((nchunks, 2 * N_SUMS))
     step = (h + nchunks - 1) // nchunks
@@ -284,8 +272,9 @@ def _hybrid_equations(vert, norm, R, t, model_v, model_n, R_cw, t_cw, fx, fy, cx
         v0, v1 = c * step, min(h, (c + 1) * step)
         _accumulate_rows(acc, vert, norm, v0, v1, R, t, model_v, model_n, R_cw, t_cw, fx, fy, cx, cy, max_dist2,
                          min_cos)
-        photometric_rows(photo, vert, gray, v0, v1, R, t, ref_gray, ref_gx, ref_gy, ref_depth, R_rw, t_rw, dfx, dfy,
-                         dcx, dcy, photo_stride)
+        if photo_stride > 0:
+            photometric_rows(photo, vert, gray, v0, v1, R, t, ref_gray, ref_gx, ref_gy, ref_depth, R_rw, t_rw, dfx,
+                             dfy, dcx, dcy, photo_stride)
         out[c, :N_SUMS] = acc
         out[c, N_SUMS:] = photo
     return out.sum(axis=0)
@@ -342,14 +331,11 @@ def _icp_level(vert, norm, T, model_v, model_n, R_cw, t_cw, fx, fy, cx, cy, max_
     for it in range(iterations):
         R = np.ascontiguousarray(T[:3, :3])
         t = np.ascontiguousarray(T[:3, 3])
-        if photo_weight > 0.0:  # both terms in one parallel pass (a pass each cost the coarse levels 2x)
-            both = _hybrid_equations(vert, norm, R, t, model_v, model_n, R_cw, t_cw, fx, fy, cx, cy, max_dist2,
-                                     min_cos, gray, ref_gray, ref_gx, ref_gy, ref_depth, R_rw, t_rw, dfx, dfy, dcx,
-                                     dcy, 1 if vert.shape[1] <= PHOTO_FULL_WIDTH else 2, nchunks)
-            sums = both[:N_SUMS].copy()
-        else:
-            sums = _normal_equations(vert, norm, R, t, model_v, model_n, R_cw, t_cw, fx, fy, cx, cy, max_dist2,
-                                     min_cos, nchunks)
+        stride = 0 if photo_weight <= 0.0 else (1 if vert.shape[1] <= PHOTO_FULL_WIDTH else 2)
+        both = _normal_equations(vert, norm, R, t, model_v, model_n, R_cw, t_cw, fx, fy, cx, cy, max_dist2, min_cos,
+                                 gray, ref_gray, ref_gx, ref_gy, ref_depth, R_rw, t_rw, dfx, dfy, dcx, dcy, stride,
+                                 nchunks)
+        sums = both[:N_SUMS].copy()
         if sums[28] < min_correspondences:
             return it, False, sums
         A, b = _system(sums)
@@ -466,7 +452,8 @@ def projective_icp(levels: list[DataLevel], model_v: np.ndarray, model_n: np.nda
         t0 = time.perf_counter()
         sums = _normal_equations(levels[0].vertices, levels[0].normals, np.ascontiguousarray(T[:3, :3]),
                                  np.ascontiguousarray(T[:3, 3]), model_v, model_n, R_cw, t_cw, *cam,
-                                 max_distance[-1] ** 2, min_cos, 4 * numba.get_num_threads())
+                                 max_distance[-1] ** 2, min_cos, nothing, nothing, nothing, nothing, nothing, R_rw,
+                                 t_rw, *cam, 0, 4 * numba.get_num_threads())[:N_SUMS]
         _add(clock, f"icp {levels[0].depth.shape[1]}x{levels[0].depth.shape[0]}", time.perf_counter() - t0)
     A, _ = _system(sums)
     count = int(sums[28])
