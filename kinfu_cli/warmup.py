@@ -8,8 +8,9 @@ the bundled sample recording (a coarse grid: the kernels' argument types do not 
 processes side by side (fusion and tracking; planning, segmentation and evaluation), into a temporary folder it
 removes, and calls the library kernels no command reaches there (api_kernels, reader_kernels). A kernel called
 with other argument types (an int32 where it had an int64, a read-only or non-contiguous array) is compiled again:
-the callers pass one set of types. `make` runs it once after installing, and the test session before its workers start (tests/conftest.py),
-so that they load the kernels instead of each compiling them. It writes nothing but numba's cache.
+the callers pass one set of types. `make` runs it once after installing, and the test session before its workers
+start (tests/conftest.py), so that they load the kernels instead of each compiling them. It writes nothing but
+numba's cache.
 """
 
 from __future__ import annotations

@@ -56,8 +56,9 @@ class _PosePath:
             try:  # the checks of a TF transform: finite, unit quaternion, within reach
                 self.tf.add_quat(self.frame, "__camera__", message_stamp_ns(msg, log_ns), trans, quat)
             except TransformError as exc:
-                raise RecordingError(f"{rec.path}: pose topic {topic}: the pose at stamp {message_stamp_ns(msg, log_ns)} ns is "
-                                     f"refused ({exc.detail.split(': ', 1)[-1]})") from None
+                raise RecordingError(f"{rec.path}: pose topic {topic}: the pose at stamp "
+                                     f"{message_stamp_ns(msg, log_ns)} ns is refused "
+                                     f"({exc.detail.split(': ', 1)[-1]})") from None
         if self.frame is None:
             raise RecordingError(f"{rec.path}: pose topic {topic} has no messages" if not info.count else
                                  f"{rec.path}: pose topic {topic} lists {info.count} messages but none of a pose "
