@@ -19,7 +19,6 @@ from kinfu_cli.core.errors import ConfigError
 from kinfu_cli.fusion.outputs import OUTPUTS, fusion_report, write_fusion_outputs
 from kinfu_cli.fusion.pipeline import fuse_recording
 from kinfu_cli.fusion.tracking import PHOTO_WEIGHT
-from kinfu_cli.report.viewer import write_viewer
 from kinfu_cli.report.volume_plot import plot_slices
 
 # how report.json names the arguments that placed the grid or cleared spheres: by their options
@@ -234,6 +233,8 @@ def command(recording: Path, outdir: Path, voxel_size, resolution, size, origin,
         with_option_warnings(report)
         write_json(tmp / "report.json", report)
     if viz is not None:
+        from kinfu_cli.report.viewer import write_viewer  # protobuf and segmentation: only for --viz
+
         write_viewer(viz, fusion=result)
     print_warnings(report)
     if as_json:

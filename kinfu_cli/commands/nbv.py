@@ -21,7 +21,6 @@ from kinfu_cli.nbv.sensor import camera_from_options, camera_source, preset_warn
 from kinfu_cli.nbv.viewpoints import PAPER_SPHERE, SphereSpec, read_candidates
 from kinfu_cli.nbv.workflow import NbvOptions, rank_object_views, rank_poi_views
 from kinfu_cli.report.nbv_plot import plot_nbv
-from kinfu_cli.report.viewer import write_viewer
 
 
 def _table_z_option(value: str):
@@ -233,6 +232,8 @@ def command(volume, pois_path, mode, clear, gain, top, output, plot, candidates,
         doc["warnings"] = camera_warnings + doc["warnings"]
         doc["seconds"] = round(time.perf_counter() - t0, 3)
         if viz is not None:
+            from kinfu_cli.report.viewer import write_viewer  # protobuf and segmentation: only for --viz
+
             write_viewer(viz, views=planned, grid=planned.grid)
         emit(doc, output, as_json, objects_summary_lines, quiet)
         return
@@ -246,6 +247,8 @@ def command(volume, pois_path, mode, clear, gain, top, output, plot, candidates,
         plot_nbv(plot, ranked.grid, ranked.rankings, top=min(top or 5, 5), up=ranked.up)
         doc["plot"] = str(plot)
     if viz is not None:
+        from kinfu_cli.report.viewer import write_viewer  # protobuf and segmentation: only for --viz
+
         write_viewer(viz, views=ranked, grid=ranked.grid)
     doc["seconds"] = round(time.perf_counter() - t0, 3)
     emit(doc, output, as_json, summary_lines, quiet)

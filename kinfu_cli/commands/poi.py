@@ -15,7 +15,6 @@ from kinfu_cli.commands._options import (OutputPath, bag_folder, check_inapplica
 from kinfu_cli.commands._output import print_warnings, with_option_warnings
 from kinfu_cli.core.atomic import write_json
 from kinfu_cli.report.poi_plot import plot_pois, plot_task_pois
-from kinfu_cli.report.viewer import write_viewer
 
 
 # options of the detector --algorithm did not choose, or that --literal / the ZVC rule in force override
@@ -101,6 +100,8 @@ def command(source, algorithm, hand_topic, hand_frame, world_frame, workspace, s
             plot_task_pois(plot, found.trajectory, found.tasks, found.detectors, workspace=found.workspace,
                            title=title)
     if viz is not None:
+        from kinfu_cli.report.viewer import write_viewer  # protobuf and segmentation: only for --viz
+
         write_viewer(viz, pois=found)
     if as_json:
         click.echo(json.dumps(found.document, indent=2))
