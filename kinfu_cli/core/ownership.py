@@ -94,14 +94,14 @@ def _read_doc(folder: Path) -> dict:
 
 
 def _read_manifest(folder: Path) -> dict[str, dict]:
-    """name -> entry of `folder`'s manifest: a new dict the caller may change (the entries themselves are shared)."""
+    """name -> entry of `folder`'s manifest, shared with every reader of this version: copy it to change it."""
     files = _read_doc(folder).get("files")
-    return dict(files) if isinstance(files, dict) else {}
+    return files if isinstance(files, dict) else {}
 
 
 def manifest_files(folder: str | os.PathLike) -> dict[str, dict]:
     """The entries `folder`'s manifest records (name -> size, time, kind); {} when it has none."""
-    return _read_manifest(Path(folder))
+    return dict(_read_manifest(Path(folder)))
 
 
 def write_manifest_files(folder: str | os.PathLike, files: dict[str, dict], whole: bool | None = None) -> None:
@@ -130,7 +130,7 @@ def record_written(path: str | os.PathLike) -> None:
     path = Path(path)
     folder = path.parent if str(path.parent) else Path(".")
     with _manifest_lock(folder):
-        files = _read_manifest(folder)
+        files = dict(_read_manifest(folder))
         with contextlib.suppress(OSError):
             files[path.name] = _stat_entry(path)
             _write_manifest(folder, files)
@@ -184,7 +184,7 @@ def record_tree(folder: str | os.PathLike) -> None:
     folder = Path(folder)
     for sub in [p for p in folder.rglob("*") if p.is_dir() and not p.is_symlink()] + [folder]:
         with _manifest_lock(sub):
-            files = _read_manifest(sub)
+            files = dict(_read_manifest(sub))
             entries = [e for e in sub.iterdir() if e.name != MANIFEST and not e.name.startswith(f"{MANIFEST}.")]
             if (sub / MANIFEST).is_file() and all(e.name in files for e in entries):
                 continue  # (an empty folder gets a manifest too: it is kinfu's, not a user's)

@@ -20,6 +20,7 @@ boxes on a slab at z = 0 (fusion tests). Any other scene is `Scene(table, (resti
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -272,35 +273,33 @@ class Scene:
         labels = np.array([label for label, _ in parts])[idx]
         return np.where(dist.min(axis=-1) <= max_distance, labels, LABEL_NONE)
 
-    def _part_distances(self, points: np.ndarray) -> list[tuple[int, np.ndarray]]:
-        """(label, signed distance) of the floor (if any), the table and each present object."""
+    def _part_shapes(self) -> list[tuple[int, Callable[[np.ndarray], np.ndarray], Callable[[], tuple]]]:
+        """(label, signed distance function of (N, 3) float64 points, its mesh's (min, max) corners, built when
+        asked) of the floor (if any), the table and each present object."""
         parts = []
         if self.floor:
             extents, centre = self._floor_box()
-            parts.append((LABEL_FLOOR, _box_sdf(np.asarray(points, dtype=np.float64) - centre,
-                                                np.asarray(extents) / 2)))
-        parts.append((LABEL_TABLE, self.table.sdf(points)))
-        parts += [(3 + i, o.sdf(points)) for i, o in enumerate(self.objects) if o.present]
+            c, half = np.asarray(centre), np.asarray(extents) / 2
+            parts.append((LABEL_FLOOR, lambda q: _box_sdf(q - c, half), lambda: (c - half, c + half)))
+        table = self.table
+        parts.append((LABEL_TABLE, table.sdf, lambda: _mesh_bounds(table.mesh())))
+        parts += [(3 + i, o.sdf, lambda o=o: _mesh_bounds(o.mesh)) for i, o in enumerate(self.objects) if o.present]
         return parts
+
+    def _part_distances(self, points: np.ndarray) -> list[tuple[int, np.ndarray]]:
+        """(label, signed distance) of the floor (if any), the table and each present object."""
+        pts = np.asarray(points, dtype=np.float64)
+        return [(label, sdf(pts)) for label, sdf, _ in self._part_shapes()]
 
     def _part_distances_near(self, points: np.ndarray, reach: float) -> list[tuple[int, np.ndarray]]:
         """_part_distances, exact where a part may lie within `reach` (m) of a point and +inf elsewhere: each part's
         distance is evaluated only inside its mesh's bounding box grown by `reach` and MESH_SLACK (a 4 m floor
         or a wall against every point of the scene was most of scene_label_cloud's time)."""
         pts = np.asarray(points, dtype=np.float64)
-        sdfs = []
-        if self.floor:
-            extents, centre = self._floor_box()
-            half = np.asarray(extents) / 2
-            sdfs.append((LABEL_FLOOR, lambda q, c=np.asarray(centre), h=half: _box_sdf(q - c, h),
-                         np.asarray(centre) - half, np.asarray(centre) + half))
-        mesh = self.table.mesh()
-        sdfs.append((LABEL_TABLE, self.table.sdf, mesh.get_min_bound(), mesh.get_max_bound()))
-        sdfs += [(3 + i, o.sdf, o.mesh.get_min_bound(), o.mesh.get_max_bound())
-                 for i, o in enumerate(self.objects) if o.present]
+        grow = reach + MESH_SLACK
         parts = []
-        for label, sdf, lo, hi in sdfs:
-            grow = reach + MESH_SLACK
+        for label, sdf, bounds in self._part_shapes():
+            lo, hi = bounds()
             near = np.flatnonzero(np.all((pts >= np.asarray(lo) - grow) & (pts <= np.asarray(hi) + grow), axis=1))
             d = np.full(len(pts), np.inf)
             d[near] = sdf(pts[near])
@@ -648,6 +647,11 @@ def box_scene() -> Scene:
     objects = tuple(resting_object(f"box{i + 1}", "box", {"x": sx, "y": sy, "z": sz}, xy=xy, yaw=yaw,
                                    colour=PALETTE[i]) for i, (xy, (sx, sy, sz), yaw) in enumerate(boxes))
     return Scene(table, objects, floor=False)
+
+
+def _mesh_bounds(mesh: o3d.geometry.TriangleMesh) -> tuple[np.ndarray, np.ndarray]:
+    """The (min, max) corners of a mesh's axis-aligned bounding box."""
+    return mesh.get_min_bound(), mesh.get_max_bound()
 
 
 # ---- signed distances ---------------------------------------------------------------------------------
